@@ -1,0 +1,10 @@
+#![no_std]
+#![no_main]
+use defmt_rtt as _;
+use panic_probe as _;
+
+#[embassy_executor::main]
+async fn main(_spawner: embassy_executor::Spawner) {
+    let _p = embassy_stm32::init(Default::default());
+    defmt::info!("thermocomp on NUCLEO-F446RE");
+}

@@ -1,0 +1,4 @@
+//! tcomp: the desktop side of thermocomp. Every subcommand is a module here;
+//! `main.rs` only parses the command line and dispatches.
+
+pub mod runcsv;

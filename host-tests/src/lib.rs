@@ -1,0 +1,2 @@
+//! Test doubles for the board application: they implement the same narrow
+//! hardware traits the boards implement, so the real application code runs here.

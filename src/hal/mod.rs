@@ -1,0 +1,9 @@
+//! The narrow hardware traits the application is written against. Boards in
+//! `boards/` implement them; `host-tests` implements them with emulators and
+//! fault-injecting mocks. Nothing in this crate names a register.
+//!
+//! One file per device class, each owned by the part of the application that
+//! uses it:
+//! - [`clock`]: monotonic time for ages, timeouts and filter time steps.
+
+pub mod clock;

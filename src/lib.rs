@@ -1,0 +1,6 @@
+//! thermocomp: the compensator application, written once against the narrow
+//! hardware traits in [`hal`] and run unchanged on every board in `boards/`.
+#![no_std]
+
+pub mod hal;
+pub mod process_image;

@@ -1,0 +1,65 @@
+//! The process image: the one snapshot of everything the board knows, written
+//! by acquisition and compensation, read by the Modbus server. Kept as plain
+//! data so a reader copies it out under a short critical section and so always
+//! sees a consistent set (one sequence number for the whole block).
+
+/// Most temperature channels on one board (seed 000 uses 20 DS18B20 sensors).
+pub const MAX_CHANNELS: usize = 20;
+
+/// Why a channel's value can or cannot be used. A named state per channel, not
+/// a number: the register map exposes [`ChannelState::code`], the logs the name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum ChannelState {
+    /// No sensor mapped to this channel.
+    Unused,
+    /// Not read yet since boot.
+    Pending,
+    /// Last reading good.
+    Ok,
+    /// No presence pulse after reset: bus open or no device.
+    NoPresence,
+    /// Scratchpad CRC-8 mismatch.
+    CrcError,
+    /// Nine zero bytes (they pass the CRC; a shorted or stuck-low line).
+    AllZero,
+    /// 85.0 °C power-on value: the conversion did not run (power glitch).
+    PowerOnValue,
+    /// All ones (0xFF...): the device stopped answering mid-read.
+    Disconnected,
+    /// Outside the configured plausible range.
+    OutOfRange,
+    /// A step between two readings no real machine can make.
+    ImplausibleStep,
+    /// Identical raw value for longer than the configured stuck time while
+    /// other channels moved.
+    Stuck,
+}
+
+impl ChannelState {
+    /// Stable numeric code for the register map (documented in README.md).
+    pub const fn code(self) -> u16 {
+        match self {
+            ChannelState::Unused => 0,
+            ChannelState::Pending => 1,
+            ChannelState::Ok => 2,
+            ChannelState::NoPresence => 3,
+            ChannelState::CrcError => 4,
+            ChannelState::AllZero => 5,
+            ChannelState::PowerOnValue => 6,
+            ChannelState::Disconnected => 7,
+            ChannelState::OutOfRange => 8,
+            ChannelState::ImplausibleStep => 9,
+            ChannelState::Stuck => 10,
+        }
+    }
+
+    /// True for states that mean the value is a fault (not merely absent).
+    pub const fn is_fault(self) -> bool {
+        !matches!(
+            self,
+            ChannelState::Unused | ChannelState::Pending | ChannelState::Ok
+        )
+    }
+}
