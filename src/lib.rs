@@ -4,3 +4,4 @@
 
 pub mod hal;
 pub mod process_image;
+pub mod trace;

@@ -1,2 +1,4 @@
 //! Test doubles for the board application: they implement the same narrow
 //! hardware traits the boards implement, so the real application code runs here.
+
+pub mod qemu;

@@ -1,0 +1,66 @@
+//! The bench firmware under QEMU: it boots, runs embassy tasks on its own time
+//! driver, logs over semihosting and reports its verdict as QEMU's exit status.
+//! These need the firmware built for thumbv7em-none-eabihf and Debian's
+//! qemu-system-arm, so plain `cargo test` skips them; scripts/test.sh (the
+//! README's test command) runs them with --include-ignored.
+
+use std::time::Duration;
+
+use host_tests::qemu::run_firmware;
+
+const LIMIT: Duration = Duration::from_secs(60);
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn selftest_passes_and_exits_zero() {
+    let run = run_firmware(&["selftest"], LIMIT);
+    assert_eq!(run.status, Some(0), "stdout:\n{}\nstderr:\n{}", run.stdout, run.stderr);
+    assert!(run.stdout.contains("bench board (mps2-an386) up"), "{}", run.stdout);
+    assert!(run.stdout.contains("selftest timers:") && run.stdout.contains(": pass"), "{}", run.stdout);
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn failing_selfcheck_fails_the_exit_status() {
+    // A golden-vector file that does not exist cannot be checked: the
+    // self-test must count that as a failure and exit 1.
+    let run = run_firmware(&["selftest", "no/such/golden.bin"], LIMIT);
+    assert_eq!(run.status, Some(1), "stdout:\n{}", run.stdout);
+    assert!(run.stdout.contains("1 failure(s)"), "{}", run.stdout);
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn unknown_mode_is_refused_with_its_own_status() {
+    let run = run_firmware(&["frobnicate"], LIMIT);
+    assert_eq!(run.status, Some(2), "stdout:\n{}", run.stdout);
+    assert!(run.stdout.contains("unknown mode"), "{}", run.stdout);
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn replay_reads_every_sample_of_a_trace() {
+    let dir = tempdir();
+    let path = dir.join("trace.csv");
+    let mut csv = String::from("# run: boot-test\ntime_s,spindle_rpm,T01,T02,dx_um\n");
+    for i in 0..50 {
+        csv.push_str(&format!("{},{},{:.4},{:.4},0\n", i * 10, 1000 + i, 20.0 + i as f64 * 0.1, -5.0 + i as f64 * 0.05));
+    }
+    std::fs::write(&path, csv).unwrap();
+    let run = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);
+    assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
+    assert!(run.stdout.contains("replay done: 50 samples"), "{}", run.stdout);
+    // The 10th row: 20.9 °C = 334.4/16 -> 334 sixteenths.
+    assert!(run.stdout.contains("t=90000 ms T0=Some(334) rpm=Some(1009)"), "{}", run.stdout);
+
+    std::fs::write(&path, "time_s,T01\n0,20\n10,abc\n").unwrap();
+    let bad = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);
+    assert_eq!(bad.status, Some(3), "a bad trace must fail: {}", bad.stdout);
+    assert!(bad.stdout.contains("BadNumber"), "{}", bad.stdout);
+}
+
+fn tempdir() -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("thermocomp-qemu-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}

@@ -1,0 +1,43 @@
+# Sourced by the README's commands: installs what the project needs on a fresh
+# Debian machine, saying what it does; stops with a clear message otherwise.
+# Usage: source scripts/setup.sh; need_target; need_debian qemu-system-arm ...
+
+say() { printf '\033[1m==> %s\033[0m\n' "$*"; }
+die() { printf 'error: %s\n' "$*" >&2; exit 1; }
+
+need_target() {
+  if ! rustup target list --installed 2>/dev/null | grep -qx thumbv7em-none-eabihf; then
+    say "installing the Rust target thumbv7em-none-eabihf (rustup target add)"
+    rustup target add thumbv7em-none-eabihf || die "could not install thumbv7em-none-eabihf: run 'rustup target add thumbv7em-none-eabihf'"
+  fi
+}
+
+# need_debian CMD:PACKAGE ...  installs PACKAGE when CMD is not on PATH.
+need_debian() {
+  local missing=()
+  for pair in "$@"; do
+    command -v "${pair%%:*}" >/dev/null 2>&1 || missing+=("${pair#*:}")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  say "installing Debian packages: ${missing[*]}"
+  local sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  if ! { $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}" >/dev/null; }; then
+    die "could not install ${missing[*]}: install them with apt-get and run again"
+  fi
+}
+
+# need_python MODULE:PACKAGE ...  pip-installs PACKAGE when MODULE does not import.
+need_python() {
+  local missing=()
+  for pair in "$@"; do
+    python3 -c "import ${pair%%:*}" >/dev/null 2>&1 || missing+=("${pair#*:}")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  say "installing Python packages: ${missing[*]}"
+  python3 -m pip install -q "${missing[@]}" || die "could not pip install ${missing[*]}"
+}
+
+FW_TARGET=thumbv7em-none-eabihf
+QEMU_ELF="target/$FW_TARGET/release/board-qemu-mps2"
+STM32_ELF="target/$FW_TARGET/release/board-nucleo-f446re"
