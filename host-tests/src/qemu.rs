@@ -30,6 +30,11 @@ pub struct QemuRun {
 
 /// Boot the firmware with `args` as its command line; kill it after `limit`.
 pub fn run_firmware(args: &[&str], limit: Duration) -> QemuRun {
+    run_firmware_with(&[], args, limit)
+}
+
+/// As [`run_firmware`], with extra QEMU options (e.g. `-icount shift=0`).
+pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) -> QemuRun {
     let elf = firmware_elf();
     assert!(
         elf.exists(),
@@ -40,6 +45,7 @@ pub fn run_firmware(args: &[&str], limit: Duration) -> QemuRun {
         .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
         .args(["-semihosting-config", "enable=on,target=native"])
         .args(["-serial", "null", "-monitor", "none"])
+        .args(qemu_options)
         .arg("-kernel")
         .arg(&elf)
         .arg("-append")

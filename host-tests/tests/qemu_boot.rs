@@ -64,3 +64,20 @@ fn tempdir() -> std::path::PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn instruction_counting_method_measures_a_known_loop() {
+    // The bench mode's first figure is a loop of exactly 3000 instructions;
+    // the method (icount + SysTick, see boards/qemu-mps2/src/cycles.rs) must
+    // read it within 0.5 %.
+    let run = host_tests::qemu::run_firmware_with(&["-icount", "shift=0"], &["bench"], LIMIT);
+    assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
+    let line = run.stdout.lines().find(|l| l.starts_with('{')).expect("a JSON line");
+    let key = "\"known_loop_3000_insn_x100\":";
+    let at = line.find(key).expect("known loop figure") + key.len();
+    let digits: String = line[at..].chars().take_while(|c| c.is_ascii_digit()).collect();
+    let x100: f64 = digits.parse().unwrap();
+    let insns = x100 / 100.0;
+    assert!((insns - 3000.0).abs() < 15.0, "known loop measured {insns} instructions");
+}

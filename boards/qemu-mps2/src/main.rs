@@ -10,10 +10,13 @@
 //! - `selftest [golden.bin]`: executor, timers and the math core's golden
 //!   vectors; exits 0 when every check passes, 1 otherwise;
 //! - `replay <run.csv>`: compensate the whole trace, log each correction,
-//!   exit 0 at its end (non-zero on a bad trace).
+//!   exit 0 at its end (non-zero on a bad trace);
+//! - `bench`: instruction counts (run QEMU with `-icount shift=0`), printed
+//!   as one JSON line.
 #![no_std]
 #![no_main]
 
+mod cycles;
 mod executor;
 mod host_trace;
 mod semihost;
@@ -75,6 +78,10 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                 log!("replay needs a run CSV path");
                 semihost::exit(exit_code::BAD_COMMAND_LINE)
             }
+        },
+        "bench" => match bench() {
+            Ok(task) => spawner.spawn(task),
+            Err(_) => semihost::exit(exit_code::PANIC),
         },
         other => {
             log!("unknown mode {:?}; use selftest | replay <run.csv>", other);
@@ -178,4 +185,32 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
 fn panic(info: &core::panic::PanicInfo) -> ! {
     log!("panic: {}", info);
     semihost::exit(exit_code::PANIC)
+}
+
+/// A loop of exactly 1000 iterations of (nop, subs, bne): 3000 instructions
+/// plus a few for setup; it calibrates the counting method itself.
+#[inline(never)]
+fn known_loop() {
+    // SAFETY: only a register counter and nops.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "nop",
+            "subs {n}, {n}, #1",
+            "bne 2b",
+            n = inout(reg) 1000u32 => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+#[embassy_executor::task]
+async fn bench() {
+    const RUNS: u32 = 2000;
+    let known = cycles::instructions_x100(RUNS, known_loop);
+    log!(
+        "{{\"method\":\"qemu -icount shift=0, SysTick at 25 MHz = 40 insn/count, {} runs\",\"known_loop_3000_insn_x100\":{}}}",
+        RUNS, known
+    );
+    semihost::exit(exit_code::OK)
 }

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Instructions per full compensator evaluation on Cortex-M4, measured under
+# QEMU (-icount shift=0; method in boards/qemu-mps2/src/cycles.rs).
+# Usage: scripts/bench-firmware.sh [--json]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/setup.sh
+need_target >&2
+need_debian qemu-system-arm:qemu-system-arm >&2
+cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
+elf="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
+json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench | grep '^{' | tail -n 1)
+[ -n "$json" ] || die "the bench firmware printed no figures"
+if [ "${1:-}" = "--json" ]; then
+  echo "$json"
+else
+  python3 -c 'import json,sys; d=json.loads(sys.argv[1]); [print(f"{k:40s} {v}") for k,v in d.items()]' "$json"
+fi
