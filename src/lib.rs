@@ -2,6 +2,7 @@
 //! hardware traits in [`hal`] and run unchanged on every board in `boards/`.
 #![no_std]
 
+pub mod acquisition;
 pub mod hal;
 pub mod process_image;
 pub mod trace;

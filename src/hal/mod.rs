@@ -5,5 +5,9 @@
 //! One file per device class, each owned by the part of the application that
 //! uses it:
 //! - [`clock`]: monotonic time for ages, timeouts and filter time steps.
+//! - [`onewire`]: 1-Wire bus master at slot level (DS18B20 sensors).
+//! - [`adc`]: one ADC channel (the eddy-current probe).
 
+pub mod adc;
 pub mod clock;
+pub mod onewire;
