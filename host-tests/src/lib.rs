@@ -2,3 +2,4 @@
 //! hardware traits the boards implement, so the real application code runs here.
 
 pub mod qemu;
+pub mod onewire_emu;

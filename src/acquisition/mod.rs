@@ -1,6 +1,7 @@
 //! Sensor acquisition: DS18B20 temperature sensors on a 1-Wire bus and the
 //! eddy-current displacement probe on an ADC.
 //!
+//! - [`bitbang`]: the slot timing on an open-drain pin + busy delay.
 //! - [`crc`]: Dallas/Maxim CRC-8 (ROM codes, scratchpads, the channel map).
 //! - [`rom`]: 64-bit ROM codes and the ROM search.
 //! - [`ds18b20`]: DS18B20 commands, scratchpad decoding and the scratchpad
@@ -31,6 +32,7 @@
 //! implementation instead, where the board can use a cycle counter and mask
 //! interrupts for the few microseconds that matter.
 
+pub mod bitbang;
 pub mod channel_map;
 pub mod crc;
 pub mod ds18b20;

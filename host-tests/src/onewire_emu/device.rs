@@ -1,0 +1,333 @@
+//! One emulated DS18B20.
+
+use super::{MS, US};
+use thermocomp::acquisition::ds18b20::{self, Resolution, POWER_ON_RAW};
+use thermocomp::acquisition::rom::RomCode;
+
+/// Faults a test can inject into one device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    None,
+    /// Wire broken to this sensor: no presence pulse, never pulls the line
+    /// (reads as all ones).
+    Silent,
+    /// The next `n` scratchpad transmissions have one bit flipped
+    /// (`u32::MAX`: every one).
+    CorruptScratchpad(u32),
+    /// Pulls every read slot low: nine zero bytes (which pass the CRC).
+    AllZero,
+    /// Browned out: scratchpad back at its power-on contents (85.0 °C) and
+    /// Convert T is not executed.
+    PowerOn,
+    /// The converter stopped: the temperature register keeps its value.
+    Stuck,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    /// Deselected or idle: ignores slots until a reset.
+    Idle,
+    RomCommand {
+        byte: u8,
+        n: u8,
+    },
+    MatchRom {
+        n: u8,
+    },
+    Search {
+        bit: u8,
+        step: u8,
+    },
+    ReadRom {
+        n: u8,
+    },
+    Function {
+        byte: u8,
+        n: u8,
+    },
+    /// Sending bits of `tx` (Read Scratchpad).
+    Sending {
+        n: u8,
+    },
+    WriteScratchpad {
+        n: u8,
+    },
+    /// After Convert T: read slots return 0 while converting.
+    Converting,
+}
+
+/// A DS18B20 on the emulated line.
+#[derive(Clone, Debug)]
+pub struct Ds18b20 {
+    pub rom: RomCode,
+    /// The physical temperature, 1/16 °C (what the next conversion measures).
+    pub temperature: i16,
+    /// Scale of the conversion time (1.0 = datasheet maximum 750 ms at 12 bit;
+    /// real parts are usually faster).
+    pub conversion_scale_permille: u32,
+    pub fault: Fault,
+    register: i16,
+    th: u8,
+    tl: u8,
+    config: u8,
+    conversion: Option<(u64, i16)>,
+    phase: Phase,
+    tx: [u8; 9],
+    pulldown: Option<(u64, u64)>,
+    /// Reads of the scratchpad completed (for tests).
+    pub scratchpad_reads: u64,
+    pub conversions: u64,
+}
+
+impl Ds18b20 {
+    /// A device at power-on: register 85.0 °C, 12-bit.
+    pub fn new(rom: RomCode, temperature: i16) -> Ds18b20 {
+        Ds18b20 {
+            rom,
+            temperature,
+            conversion_scale_permille: 1000,
+            fault: Fault::None,
+            register: POWER_ON_RAW,
+            th: 0x4B,
+            tl: 0x46,
+            config: 0x7F,
+            conversion: None,
+            phase: Phase::Idle,
+            tx: [0xFF; 9],
+            pulldown: None,
+            scratchpad_reads: 0,
+            conversions: 0,
+        }
+    }
+
+    /// A DS18B20 ROM code (family 0x28) from a serial number, valid CRC.
+    pub fn rom_for(serial: u64) -> RomCode {
+        let s = serial.to_le_bytes();
+        RomCode::from_serial(ds18b20::FAMILY, [s[0], s[1], s[2], s[3], s[4], s[5]])
+    }
+
+    pub fn resolution(&self) -> Resolution {
+        Resolution::from_config(self.config)
+    }
+
+    pub fn set_fault(&mut self, fault: Fault) {
+        self.fault = fault;
+        if fault == Fault::PowerOn {
+            self.register = POWER_ON_RAW;
+            self.config = 0x7F;
+            self.th = 0x4B;
+            self.tl = 0x46;
+            self.conversion = None;
+        }
+    }
+
+    fn settle(&mut self, now: u64) {
+        if let Some((end, value)) = self.conversion {
+            if now >= end {
+                if self.fault != Fault::Stuck {
+                    self.register = value;
+                }
+                self.conversion = None;
+            }
+        }
+    }
+
+    fn rom_bit(&self, i: u8) -> bool {
+        self.rom.0[usize::from(i / 8)] & (1 << (i % 8)) != 0
+    }
+
+    /// The bit this device sends in the current slot, if it is sending.
+    fn tx_bit(&self, now: u64) -> Option<bool> {
+        match self.phase {
+            Phase::Search { bit, step: 0 } => Some(self.rom_bit(bit)),
+            Phase::Search { bit, step: 1 } => Some(!self.rom_bit(bit)),
+            Phase::ReadRom { n } => Some(self.rom_bit(n)),
+            Phase::Sending { n } => {
+                if n >= 72 {
+                    Some(true)
+                } else if self.fault == Fault::AllZero {
+                    Some(false)
+                } else {
+                    Some(self.tx[usize::from(n / 8)] & (1 << (n % 8)) != 0)
+                }
+            }
+            Phase::Converting => Some(match self.conversion {
+                Some((end, _)) => now >= end,
+                None => true,
+            }),
+            _ => None,
+        }
+    }
+
+    pub(crate) fn pulls_low(&self, now: u64) -> bool {
+        matches!(self.pulldown, Some((a, b)) if now >= a && now <= b)
+    }
+
+    pub(crate) fn on_fall(&mut self, now: u64) {
+        self.settle(now);
+        self.pulldown = None;
+        if self.fault == Fault::Silent {
+            return;
+        }
+        if self.tx_bit(now) == Some(false) {
+            // t_RDV: data valid for 15 µs after the falling edge.
+            self.pulldown = Some((now, now + 15 * US));
+        }
+    }
+
+    /// Returns true if this was an ambiguous write slot.
+    pub(crate) fn on_rise(&mut self, now: u64, low_ns: u64) -> bool {
+        self.settle(now);
+        if self.fault == Fault::Silent {
+            self.phase = Phase::Idle;
+            return false;
+        }
+        if low_ns >= 480 * US {
+            self.phase = Phase::RomCommand { byte: 0, n: 0 };
+            self.pulldown = Some((now + 30 * US, now + 150 * US));
+            return false;
+        }
+        let sending = self.tx_bit(now).is_some();
+        if sending {
+            // The pull-down scheduled at the fall lasts its 15 µs.
+            self.advance_tx();
+            return false;
+        }
+        // Receive: the device samples 30 µs after the fall.
+        let ambiguous = low_ns > 15 * US && !(60 * US..=120 * US).contains(&low_ns);
+        let bit = low_ns <= 30 * US;
+        if !matches!(self.phase, Phase::Idle) {
+            self.receive(bit, now);
+            return ambiguous;
+        }
+        false
+    }
+
+    fn advance_tx(&mut self) {
+        self.phase = match self.phase {
+            Phase::Search { bit, step } => Phase::Search {
+                bit,
+                step: step + 1,
+            },
+            Phase::ReadRom { n } if n + 1 >= 64 => Phase::Function { byte: 0, n: 0 },
+            Phase::ReadRom { n } => Phase::ReadRom { n: n + 1 },
+            Phase::Sending { n } => {
+                if n + 1 == 72 {
+                    self.scratchpad_reads += 1;
+                }
+                Phase::Sending {
+                    n: n.saturating_add(1).min(72),
+                }
+            }
+            p => p,
+        };
+    }
+
+    fn receive(&mut self, bit: bool, now: u64) {
+        self.phase = match self.phase {
+            Phase::RomCommand { byte, n } => {
+                let byte = byte | (u8::from(bit) << n);
+                if n < 7 {
+                    Phase::RomCommand { byte, n: n + 1 }
+                } else {
+                    match byte {
+                        0x33 => Phase::ReadRom { n: 0 },
+                        0x55 => Phase::MatchRom { n: 0 },
+                        0xCC => Phase::Function { byte: 0, n: 0 },
+                        0xF0 => Phase::Search { bit: 0, step: 0 },
+                        _ => Phase::Idle,
+                    }
+                }
+            }
+            Phase::MatchRom { n } => {
+                if bit != self.rom_bit(n) {
+                    Phase::Idle
+                } else if n == 63 {
+                    Phase::Function { byte: 0, n: 0 }
+                } else {
+                    Phase::MatchRom { n: n + 1 }
+                }
+            }
+            Phase::Search { bit: b, step: 2 } => {
+                if bit != self.rom_bit(b) {
+                    Phase::Idle
+                } else if b == 63 {
+                    Phase::Function { byte: 0, n: 0 }
+                } else {
+                    Phase::Search {
+                        bit: b + 1,
+                        step: 0,
+                    }
+                }
+            }
+            Phase::Function { byte, n } => {
+                let byte = byte | (u8::from(bit) << n);
+                if n < 7 {
+                    Phase::Function { byte, n: n + 1 }
+                } else {
+                    self.function(byte, now)
+                }
+            }
+            Phase::WriteScratchpad { n } => {
+                let target = match n / 8 {
+                    0 => &mut self.th,
+                    1 => &mut self.tl,
+                    _ => &mut self.config,
+                };
+                if n % 8 == 0 {
+                    *target = 0;
+                }
+                *target |= u8::from(bit) << (n % 8);
+                if n == 23 {
+                    self.config = (self.config & 0x60) | 0x1F;
+                    Phase::Idle
+                } else {
+                    Phase::WriteScratchpad { n: n + 1 }
+                }
+            }
+            p => p,
+        };
+    }
+
+    fn function(&mut self, command: u8, now: u64) -> Phase {
+        match command {
+            ds18b20::CONVERT_T => {
+                if self.fault == Fault::PowerOn {
+                    return Phase::Idle;
+                }
+                let res = self.resolution();
+                let t = u64::from(res.conversion_time_us()) * US;
+                let t = t * u64::from(self.conversion_scale_permille) / 1000;
+                let value = self.temperature & res.raw_mask();
+                self.conversion = Some((now + t, value));
+                self.conversions += 1;
+                Phase::Converting
+            }
+            ds18b20::READ_SCRATCHPAD => {
+                let res = self.resolution();
+                self.tx = ds18b20::encode(self.register, self.th, self.tl, res);
+                if self.fault == Fault::PowerOn {
+                    // Power-on contents: 50 05 4B 46 7F FF 0C 10 + CRC.
+                    self.tx = ds18b20::encode(POWER_ON_RAW, 0x4B, 0x46, Resolution::Bits12);
+                }
+                if let Fault::CorruptScratchpad(n) = self.fault {
+                    if n > 0 {
+                        self.tx[1] ^= 0x10;
+                        if n != u32::MAX {
+                            self.fault = Fault::CorruptScratchpad(n - 1);
+                        }
+                    }
+                }
+                Phase::Sending { n: 0 }
+            }
+            ds18b20::WRITE_SCRATCHPAD => Phase::WriteScratchpad { n: 0 },
+            _ => Phase::Idle,
+        }
+    }
+
+    /// Milliseconds left in a running conversion (for tests).
+    pub fn converting_ms(&self, now_ns: u64) -> u64 {
+        self.conversion
+            .map_or(0, |(end, _)| end.saturating_sub(now_ns) / MS)
+    }
+}
