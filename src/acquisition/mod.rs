@@ -18,11 +18,15 @@
 //! crates against the pin-level emulator:
 //! - `ds18b20` decodes the raw value as `u16` (−10.125 °C reads 4085.875 °C)
 //!   and divides again below 12 bits (23.5 °C at 9 bits reads 188 °C); its
-//!   CRC check accepts nine zero bytes (a shorted line reads as 0.0 °C).
+//!   `read_scratchpad` accepts nine zero bytes (they pass the CRC-8) and
+//!   `read_data` rejects them only by accident (config byte 0 is no
+//!   resolution) under the wrong name `CrcMismatch`; the 85.0 °C power-on
+//!   value comes back as a valid reading.
 //! - `one-wire-bus` samples a read slot at 6 + 9 µs = 15 µs after the falling
 //!   edge, exactly at the end of the window (tRDV = 15 µs); any delay overshoot
-//!   (a 1 µs pin/delay overhead in the emulator) reads the line after the
-//!   device has released it and the scratchpad fails its CRC.
+//!   (1 µs per delay call in the emulator) reads the line after the device has
+//!   released it and the reading is lost. Its slots (70 µs, reset 960 µs)
+//!   make a scratchpad read 11.6 ms against 10.4 ms here.
 //! - Both are blocking embedded-hal 0.2 code: the 750 ms conversion would
 //!   block the executor; there is no strong pull-up for parasite power.
 //!
