@@ -15,5 +15,6 @@ say "building the bench firmware for QEMU (release, $FW_TARGET)"
 cargo build -p board-qemu-mps2 --release --target "$FW_TARGET"
 
 say "running every test (host, then the firmware under qemu-system-arm)"
+# Host crates only (workspace default-members; boards build for the chip).
 # The QEMU tests are #[ignore]d for plain `cargo test`; here they run too.
-cargo test --workspace -- --include-ignored
+cargo test -- --include-ignored
