@@ -21,6 +21,7 @@
 //! - slots shorter than 60 µs or a recovery under 1 µs are violations.
 
 mod device;
+pub mod replay;
 
 pub use device::{Ds18b20, Fault};
 
