@@ -40,8 +40,8 @@ fn measured_spindle_run_comes_back_exactly() {
         }
         let mut d = bus.delay();
         block_on(acq.cycle(&mut m, &mut d, bus.now_ms()));
-        for k in 0..n {
-            let v = acq.value(channel[k], bus.now_ms());
+        for (k, &ch) in channel.iter().enumerate() {
+            let v = acq.value(ch, bus.now_ms());
             assert_eq!(
                 v.state,
                 ChannelState::Ok,
