@@ -123,3 +123,12 @@ fn crate_scratchpad_read_takes_longer_per_sensor() {
     assert!(crate_ns > own_ns, "crate {crate_ns} ns, own {own_ns} ns");
     println!("scratchpad read: one-wire-bus {crate_ns} ns, board {own_ns} ns");
 }
+
+#[test]
+fn without_a_strong_pull_up_parasite_sensors_read_85_through_the_crates() {
+    let bus = bus_with_sensors(1, 3, 400);
+    bus.with_device(0, |d| d.parasite = true);
+    // one-wire-bus has no strong pull-up: the conversion browns out and the
+    // crate reports the power-on value as a temperature.
+    assert_eq!(crate_read(&bus), Ok(85.0));
+}

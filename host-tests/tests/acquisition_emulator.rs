@@ -453,3 +453,30 @@ fn low_resolution_and_parasite_power() {
     assert_eq!(acq.value(channel_of(&acq, &bus, 0), bus.now_ms()).raw, -168);
     assert_eq!(acq.value(channel_of(&acq, &bus, 1), bus.now_ms()).raw, 376);
 }
+
+#[test]
+fn parasite_sensors_need_the_strong_pull_up() {
+    use thermocomp::acquisition::temperature::PowerMode;
+    let parasite = AcquisitionConfig {
+        power: PowerMode::Parasite,
+        ..AcquisitionConfig::default()
+    };
+    let (bus, mut acq) = setup(3, parasite);
+    for k in 0..3 {
+        bus.with_device(k, |d| d.parasite = true);
+    }
+    let report = cycle(&bus, &mut acq);
+    assert_eq!(report.ok, 3, "strong pull-up held through the conversion");
+    assert_eq!(report.conversion_wait_us, 750_000);
+    // Without it (polling read slots as for powered sensors) every
+    // conversion browns out: the 85.0 °C power-on value, named as such.
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), *acq.map());
+    bus.advance_ns(1_000 * MS);
+    cycle(&bus, &mut acq);
+    for k in 0..3 {
+        assert_eq!(
+            acq.state(channel_of(&acq, &bus, k)),
+            ChannelState::PowerOnValue
+        );
+    }
+}

@@ -66,6 +66,14 @@ pub struct Ds18b20 {
     /// real parts are usually faster).
     pub conversion_scale_permille: u32,
     pub fault: Fault,
+    /// Parasite-powered (V_DD grounded): a conversion needs the strong
+    /// pull-up within 10 µs of Convert T and until it ends, else the device
+    /// browns out (power-on contents, 85.0 °C).
+    pub parasite: bool,
+    /// Strong pull-up since (ns), if on.
+    strong_since: Option<u64>,
+    /// The running conversion lost its supply.
+    starved: bool,
     register: i16,
     th: u8,
     tl: u8,
@@ -87,6 +95,9 @@ impl Ds18b20 {
             temperature,
             conversion_scale_permille: 1000,
             fault: Fault::None,
+            parasite: false,
+            strong_since: None,
+            starved: false,
             register: POWER_ON_RAW,
             th: 0x4B,
             tl: 0x46,
@@ -124,12 +135,39 @@ impl Ds18b20 {
     fn settle(&mut self, now: u64) {
         if let Some((end, value)) = self.conversion {
             if now >= end {
-                if self.fault != Fault::Stuck {
+                if self.parasite && self.starved {
+                    self.register = POWER_ON_RAW;
+                    self.config = 0x7F;
+                } else if self.fault != Fault::Stuck {
                     self.register = value;
                 }
                 self.conversion = None;
+                self.starved = false;
             }
         }
+    }
+
+    /// The master switched the strong pull-up.
+    pub(crate) fn on_strong_pullup(&mut self, now: u64, on: bool) {
+        if on {
+            self.strong_since = Some(now);
+            if let Some((end, _)) = self.conversion {
+                // Too late: more than 10 µs after Convert T started.
+                let start = end.saturating_sub(self.conversion_ns());
+                self.starved = now > start + 10 * US;
+            }
+        } else {
+            self.settle(now);
+            self.strong_since = None;
+            if self.conversion.is_some() {
+                self.starved = true;
+            }
+        }
+    }
+
+    fn conversion_ns(&self) -> u64 {
+        let t = u64::from(self.resolution().conversion_time_us()) * US;
+        t * u64::from(self.conversion_scale_permille) / 1000
     }
 
     fn rom_bit(&self, i: u8) -> bool {
@@ -165,6 +203,10 @@ impl Ds18b20 {
 
     pub(crate) fn on_fall(&mut self, now: u64) {
         self.settle(now);
+        if self.parasite && self.conversion.is_some() {
+            // Line pulled low mid-conversion: no supply.
+            self.starved = true;
+        }
         self.pulldown = None;
         if self.fault == Fault::Silent {
             return;
@@ -296,10 +338,11 @@ impl Ds18b20 {
                     return Phase::Idle;
                 }
                 let res = self.resolution();
-                let t = u64::from(res.conversion_time_us()) * US;
-                let t = t * u64::from(self.conversion_scale_permille) / 1000;
+                let t = self.conversion_ns();
                 let value = self.temperature & res.raw_mask();
                 self.conversion = Some((now + t, value));
+                // Parasite: starved unless the strong pull-up comes in time.
+                self.starved = self.parasite;
                 self.conversions += 1;
                 Phase::Converting
             }

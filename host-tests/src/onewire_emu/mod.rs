@@ -102,8 +102,19 @@ impl Line {
         }
     }
 
+    fn set_strong(&mut self, on: bool) {
+        if self.strong_pullup == on {
+            return;
+        }
+        self.strong_pullup = on;
+        let now = self.now_ns;
+        for d in &mut self.devices {
+            d.on_strong_pullup(now, on);
+        }
+    }
+
     fn release(&mut self) {
-        self.strong_pullup = false;
+        self.set_strong(false);
         if !self.master_low {
             return;
         }
@@ -273,7 +284,7 @@ impl OpenDrainPin for EmuPin {
     fn drive_high(&mut self) -> Result<(), thermocomp::hal::onewire::BusError> {
         let mut l = self.bus.line.borrow_mut();
         l.release();
-        l.strong_pullup = true;
+        l.set_strong(true);
         Ok(())
     }
 }
