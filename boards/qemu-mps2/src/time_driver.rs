@@ -35,9 +35,9 @@ pub fn init(mut syst: SYST) {
     syst.set_reload(CORE_CLOCK_HZ / TICK_HZ - 1);
     syst.clear_current();
     syst.enable_interrupt();
+    // SysTick keeps running for the life of the firmware; the SYST token
+    // is dropped here (it owns nothing that stops the counter).
     syst.enable_counter();
-    // SysTick keeps running for the life of the firmware.
-    core::mem::forget(syst);
 }
 
 impl Driver for SysTickDriver {
