@@ -480,3 +480,33 @@ fn parasite_sensors_need_the_strong_pull_up() {
         );
     }
 }
+
+#[test]
+fn a_cycle_yields_to_the_executor_between_bytes() {
+    use std::future::Future;
+    use std::task::{Context, Waker};
+    let (bus, mut acq) = setup(20, AcquisitionConfig::default());
+    let mut m = master(&bus);
+    let mut d = bus.delay();
+    let now = bus.now_ms();
+    let mut fut = std::pin::pin!(acq.cycle(&mut m, &mut d, now));
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut pending = 0u32;
+    let mut longest_ns = 0u64;
+    let mut last = bus.stats().busy_ns;
+    loop {
+        let done = fut.as_mut().poll(&mut cx).is_ready();
+        // CPU held by busy-waits within this poll (async delays excluded).
+        let busy = bus.stats().busy_ns;
+        longest_ns = longest_ns.max(busy - last);
+        last = busy;
+        if done {
+            break;
+        }
+        pending += 1;
+    }
+    // Per sensor: reset + 10 bytes written + 9 read.
+    assert!(pending >= 20 * 20, "{pending}");
+    // No poll holds the CPU longer than a reset plus one byte (~1.5 ms).
+    assert!(longest_ns <= 1_500_000, "{longest_ns} ns");
+}

@@ -134,9 +134,55 @@ impl<P: OpenDrainPin, D: BusyDelay> BitBangBus<P, D> {
     }
 }
 
+/// Lets the executor run other tasks once (wakes itself, returns Pending
+/// once). Executor-agnostic.
+pub async fn yield_now() {
+    struct YieldNow(bool);
+    impl core::future::Future for YieldNow {
+        type Output = ();
+        fn poll(
+            mut self: core::pin::Pin<&mut Self>,
+            cx: &mut core::task::Context<'_>,
+        ) -> core::task::Poll<()> {
+            if self.0 {
+                core::task::Poll::Ready(())
+            } else {
+                self.0 = true;
+                cx.waker().wake_by_ref();
+                core::task::Poll::Pending
+            }
+        }
+    }
+    YieldNow(false).await
+}
+
+/// Slots are busy-waited, but the bus yields to the executor after every
+/// reset and every byte, so no other task waits more than ~1 ms (a reset)
+/// even during the ~210 ms of scratchpad reads of a 20-sensor cycle.
 impl<P: OpenDrainPin, D: BusyDelay> OneWireBus for BitBangBus<P, D> {
     async fn reset(&mut self) -> Result<bool, BusError> {
-        self.reset_blocking()
+        let r = self.reset_blocking();
+        yield_now().await;
+        r
+    }
+
+    async fn write_byte(&mut self, byte: u8) -> Result<(), BusError> {
+        for i in 0..8 {
+            self.write_bit_blocking(byte & (1 << i) != 0);
+        }
+        yield_now().await;
+        Ok(())
+    }
+
+    async fn read_byte(&mut self) -> Result<u8, BusError> {
+        let mut byte = 0u8;
+        for i in 0..8 {
+            if self.read_bit_blocking() {
+                byte |= 1 << i;
+            }
+        }
+        yield_now().await;
+        Ok(byte)
     }
 
     async fn write_bit(&mut self, bit: bool) -> Result<(), BusError> {

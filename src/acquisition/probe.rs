@@ -45,9 +45,9 @@ impl Calibration {
         // Round half away from zero.
         let half: i128 = 1 << 31;
         let y = if acc >= 0 {
-            (acc + half) >> 32
+            acc.checked_add(half)? >> 32
         } else {
-            -((-acc + half) >> 32)
+            -(acc.checked_neg()?.checked_add(half)? >> 32)
         };
         i32::try_from(y).ok()
     }

@@ -123,6 +123,10 @@ pub async fn search<B: OneWireBus, const N: usize>(
             };
             rom.set_bit(n - 1, dir);
             bus.write_bit(dir).await?;
+            if n % 8 == 0 {
+                // ~1.5 ms of slots per 8 bits: let other tasks run.
+                super::bitbang::yield_now().await;
+            }
         }
         if !rom.is_valid() {
             return Err(SearchError::Crc);

@@ -352,8 +352,10 @@ impl TemperatureAcquisition {
         }
         if let Some((last, at)) = ch.good {
             let dt_ms = now_ms.saturating_sub(at);
+            // dt is capped at ~12 days: the allowance saturates, never wraps.
+            let dt = i64::try_from(dt_ms.min(1 << 30)).unwrap_or(1 << 30);
             let allowed = i64::from(cfg.max_step_raw)
-                + i64::from(cfg.max_slope_raw_per_min) * (dt_ms.min(1 << 40) as i64) / 60_000;
+                .saturating_add(i64::from(cfg.max_slope_raw_per_min).saturating_mul(dt) / 60_000);
             let step = (i64::from(raw) - i64::from(last)).abs();
             if step > allowed {
                 let agreeing = match ch.candidate {

@@ -54,6 +54,8 @@ impl Violations {
 /// Line statistics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Stats {
+    /// Time spent in busy-wait delays (the CPU held), ns.
+    pub busy_ns: u64,
     pub resets: u64,
     pub slots: u64,
     pub violations: Violations,
@@ -268,6 +270,7 @@ impl EmuDelay {
         let mut l = self.bus.line.borrow_mut();
         let overhead = l.delay_overhead_ns;
         l.now_ns += ns + overhead;
+        l.stats.busy_ns += ns + overhead;
     }
 }
 
@@ -297,8 +300,9 @@ impl BusyDelay for EmuDelay {
 
 impl embedded_hal_async::delay::DelayNs for EmuDelay {
     async fn delay_ns(&mut self, ns: u32) {
-        // The executor would run other tasks here; the line is idle.
+        // A real timer suspends the task: other tasks run, the line idles.
         self.bus.advance_ns(u64::from(ns));
+        thermocomp::acquisition::bitbang::yield_now().await;
     }
 }
 
