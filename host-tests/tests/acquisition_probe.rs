@@ -184,3 +184,39 @@ fn calibration_overflow_and_adc_failure_are_named() {
         ProbeState::BadConfig
     );
 }
+
+#[test]
+fn measured_drift_run_through_the_probe_chain() {
+    // The five eddy-current channels of the measured FL_THERMAL run (µm),
+    // through a simulated probe (±1000 µm over 12 bits, ±2 codes of analog
+    // noise), 256× oversampling and the linear calibration.
+    let path = host_tests::qemu::workspace_root().join("../shared/data/caiviac-fl-thermal/run.csv");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        eprintln!("skipped: {} not present", path.display());
+        return;
+    };
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let cols: Vec<usize> = (0..header.len())
+        .filter(|&i| header[i].starts_with('d') && header[i].ends_with("_um"))
+        .collect();
+    assert_eq!(cols.len(), 5);
+    let mut worst = 0.0f64;
+    let mut n = 0;
+    for line in lines.step_by(10) {
+        let fields: Vec<&str> = line.split(',').collect();
+        for &c in &cols {
+            let um: f64 = fields[c].parse().unwrap();
+            let mut p = SimProbe::linear(um * 10.0, 2);
+            let r = block_on(measure(&mut p, &config(256)));
+            assert_eq!(r.state, ProbeState::Ok);
+            let err = (f64::from(r.tenth_um.unwrap()) - um * 10.0).abs();
+            worst = worst.max(err);
+            n += 1;
+        }
+    }
+    assert!(n > 5_000);
+    // Better than 0.2 µm everywhere (one ADC code is 0.49 µm).
+    assert!(worst <= 2.0, "worst error {worst} tenths of a µm");
+    println!("{n} probe readings, worst error {:.2} µm", worst / 10.0);
+}

@@ -131,7 +131,11 @@ pub async fn measure<A: ProbeAdc>(adc: &mut A, config: &ProbeConfig) -> ProbeRea
     }
     let full = adc.full_scale();
     let mut sum: u32 = 0;
-    for _ in 0..n {
+    for i in 0..n {
+        if i % 16 == 15 {
+            // A conversion is ~25 µs blocking: let other tasks in now and then.
+            super::bitbang::yield_now().await;
+        }
         match adc.sample().await {
             Ok(code) => {
                 let code = code.min(full);
