@@ -174,6 +174,30 @@ impl<P: OpenDrainPin, D: BusyDelay> OneWireBus for BitBangBus<P, D> {
         Ok(())
     }
 
+    async fn write_byte_then_strong_pullup(&mut self, byte: u8) -> Result<(), BusError> {
+        for i in 0..7 {
+            self.write_bit_blocking(byte & (1 << i) != 0);
+        }
+        // Last slot and the switch to the strong pull-up in one masked
+        // section (≤ 62 µs): the datasheet allows 10 µs between them.
+        let t = self.timing;
+        let low = if byte & 0x80 != 0 {
+            t.write1_low
+        } else {
+            t.write0_low
+        };
+        let delay = &mut self.delay;
+        let r = self.pin.critical(|pin| {
+            pin.set_low();
+            delay.delay_us(low);
+            pin.release();
+            delay.delay_us(t.slot.saturating_sub(low));
+            pin.drive_high()
+        });
+        yield_now().await;
+        r
+    }
+
     async fn read_byte(&mut self) -> Result<u8, BusError> {
         let mut byte = 0u8;
         for i in 0..8 {

@@ -288,16 +288,17 @@ impl TemperatureAcquisition {
         if !rom::select_all(bus).await? {
             return Ok(false);
         }
-        bus.write_byte(ds18b20::CONVERT_T).await?;
         let t_conv = self.config.resolution.conversion_time_us();
         match self.config.power {
             PowerMode::Parasite => {
-                bus.set_strong_pullup(true).await?;
+                bus.write_byte_then_strong_pullup(ds18b20::CONVERT_T)
+                    .await?;
                 delay.delay_us(t_conv).await;
                 bus.set_strong_pullup(false).await?;
                 report.conversion_wait_us = t_conv;
             }
             PowerMode::External => {
+                bus.write_byte(ds18b20::CONVERT_T).await?;
                 let poll_us = self.config.poll_ms.clamp(1, 100) * 1000;
                 let limit = t_conv + t_conv / 4;
                 let mut waited = 0u32;

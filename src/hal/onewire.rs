@@ -47,6 +47,15 @@ pub trait OneWireBus {
         Ok(())
     }
 
+    /// Writes `byte`, then turns the strong pull-up on within 10 µs of the
+    /// end of its last slot (parasite-powered Convert T). Implementations
+    /// that can yield between bytes must override this so nothing runs in
+    /// between.
+    async fn write_byte_then_strong_pullup(&mut self, byte: u8) -> Result<(), BusError> {
+        self.write_byte(byte).await?;
+        self.set_strong_pullup(true).await
+    }
+
     /// Eight write slots, least significant bit first.
     async fn write_byte(&mut self, byte: u8) -> Result<(), BusError> {
         for i in 0..8 {
@@ -82,6 +91,9 @@ impl<T: OneWireBus + ?Sized> OneWireBus for &mut T {
     }
     async fn write_byte(&mut self, byte: u8) -> Result<(), BusError> {
         (**self).write_byte(byte).await
+    }
+    async fn write_byte_then_strong_pullup(&mut self, byte: u8) -> Result<(), BusError> {
+        (**self).write_byte_then_strong_pullup(byte).await
     }
     async fn read_byte(&mut self) -> Result<u8, BusError> {
         (**self).read_byte().await
