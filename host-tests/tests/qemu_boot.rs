@@ -44,14 +44,21 @@ fn replay_reads_every_sample_of_a_trace() {
     let path = dir.join("trace.csv");
     let mut csv = String::from("# run: boot-test\ntime_s,spindle_rpm,T01,T02,dx_um\n");
     for i in 0..50 {
-        csv.push_str(&format!("{},{},{:.4},{:.4},0\n", i * 10, 1000 + i, 20.0 + i as f64 * 0.1, -5.0 + i as f64 * 0.05));
+        // Sensor T01 drops off the bus for rows 20..=21.
+        let t01 = if (20..22).contains(&i) { String::new() } else { format!("{:.4}", 20.0 + i as f64 * 0.1) };
+        csv.push_str(&format!("{},{},{},{:.4},0\n", i * 10, 1000 + i, t01, -5.0 + i as f64 * 0.05));
     }
     std::fs::write(&path, csv).unwrap();
     let run = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);
     assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
     assert!(run.stdout.contains("replay done: 50 samples"), "{}", run.stdout);
-    // The 10th row: 20.9 °C = 334.4/16 -> 334 sixteenths.
-    assert!(run.stdout.contains("t=90000 ms T0=Some(334) rpm=Some(1009)"), "{}", run.stdout);
+    // The board's real acquisition (ROM search, Match ROM, CRC) on the
+    // emulated bus. Row 10: 20.9 °C = 334.4 sixteenths -> 334, both sensors ok.
+    assert!(run.stdout.contains("t=90000 ms ok=2 faulty=0 T0=Some(334) Ok rpm=Some(1009)"), "{}", run.stdout);
+    // T01 gone: the read floats high -> Disconnected, last good value held
+    // (row 19: 21.9 °C = 350.4 -> 350); back on the bus -> Ok again.
+    assert!(run.stdout.contains("t=200000 ms ok=1 faulty=1 T0=Some(350) Disconnected"), "{}", run.stdout);
+    assert!(run.stdout.contains("t=220000 ms ok=2 faulty=0 T0=Some(355) Ok"), "{}", run.stdout);
 
     std::fs::write(&path, "time_s,T01\n0,20\n10,abc\n").unwrap();
     let bad = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);

@@ -17,6 +17,7 @@
 #![no_main]
 
 mod cycles;
+mod emulated_bus;
 mod executor;
 mod host_trace;
 mod semihost;
@@ -31,6 +32,9 @@ use cortex_m_rt::{entry, exception};
 use embassy_executor::Spawner;
 use embassy_time::{Duration, Instant, Timer};
 use static_cell::StaticCell;
+use thermocomp::acquisition::channel_map::ChannelMap;
+use thermocomp::acquisition::temperature::{AcquisitionConfig, CycleReport, TemperatureAcquisition};
+use thermocomp::trace::TraceSample;
 
 /// Exit codes of the bench firmware (the host tests check them).
 pub mod exit_code {
@@ -128,27 +132,21 @@ fn pass(ok: bool) -> &'static str {
 
 #[embassy_executor::task]
 async fn replay(path: &'static str) {
-    let mut path_nul = [0u8; 200];
-    let Some(dst) = path_nul.get_mut(..path.len()) else {
-        log!("trace path too long");
-        semihost::exit(exit_code::BAD_COMMAND_LINE)
-    };
-    dst.copy_from_slice(path.as_bytes());
-    let mut trace = match host_trace::HostTrace::open(&path_nul[..=path.len()]) {
-        Ok(t) => t,
-        Err(e) => {
-            log!("cannot open trace {}: {:?}", path, e);
-            semihost::exit(exit_code::TRACE_ERROR)
-        }
-    };
-    log!("replaying {} ({} temperature channels)", path, trace.header().channels());
+    let mut trace = open_trace(path);
+    let channels = trace.header().channels();
+    log!("replaying {} ({} temperature channels)", path, channels);
+    let mut sensors = Sensors::new(channels).await;
     let mut rows = 0u32;
     loop {
         match trace.next_sample() {
             Ok(Some(sample)) => {
                 rows += 1;
-                log!("t={} ms T0={:?} rpm={:?}", sample.time_ms, sample.temperatures[0], sample.spindle_rpm);
-                embassy_futures::yield_now().await;
+                let report = sensors.acquire(&sample).await;
+                let ch0 = sensors.acquisition.value(0, sample.time_ms);
+                log!(
+                    "t={} ms ok={} faulty={} T0={:?} {:?} rpm={:?}",
+                    sample.time_ms, report.ok, report.faulty, ch0.usable(), ch0.state, sample.spindle_rpm
+                );
             }
             Ok(None) => break,
             Err(e) => {
@@ -159,6 +157,69 @@ async fn replay(path: &'static str) {
     }
     log!("replay done: {} samples", rows);
     semihost::exit(exit_code::OK)
+}
+
+fn open_trace(path: &str) -> host_trace::HostTrace {
+    let mut path_nul = [0u8; 200];
+    let Some(dst) = path_nul.get_mut(..path.len()) else {
+        log!("trace path too long");
+        semihost::exit(exit_code::BAD_COMMAND_LINE)
+    };
+    dst.copy_from_slice(path.as_bytes());
+    match host_trace::HostTrace::open(&path_nul[..=path.len()]) {
+        Ok(t) => t,
+        Err(e) => {
+            log!("cannot open trace {}: {:?}", path, e);
+            semihost::exit(exit_code::TRACE_ERROR)
+        }
+    }
+}
+
+/// The emulated DS18B20 bus and the application's real acquisition on it.
+struct Sensors {
+    bus: emulated_bus::EmulatedBus,
+    acquisition: TemperatureAcquisition,
+}
+
+impl Sensors {
+    /// One emulated sensor per trace column, mapped to channels in column
+    /// order (the configured map, as the engineer would persist it), then a
+    /// ROM search that must find them all.
+    async fn new(channels: usize) -> Sensors {
+        let bus = emulated_bus::EmulatedBus::new(channels);
+        let mut map = ChannelMap::new();
+        for c in 0..channels {
+            if map.set(c, bus.rom(c)).is_err() {
+                log!("channel map refused channel {}", c);
+                semihost::exit(exit_code::SELFTEST_FAILED)
+            }
+        }
+        let mut sensors = Sensors { bus, acquisition: TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new()) };
+        match sensors.acquisition.discover(&mut sensors.bus).await {
+            Ok(n) if n == channels => {}
+            other => {
+                log!("ROM search found {:?} of {} sensors", other, channels);
+                semihost::exit(exit_code::SELFTEST_FAILED)
+            }
+        }
+        sensors.acquisition.set_map(map);
+        if !matches!(sensors.acquisition.configure(&mut sensors.bus).await, Ok(true)) {
+            log!("sensor configuration failed");
+            semihost::exit(exit_code::SELFTEST_FAILED)
+        }
+        sensors
+    }
+
+    /// Put the sample's temperatures on the emulated sensors and run one
+    /// acquisition cycle at the sample's time.
+    async fn acquire(&mut self, sample: &TraceSample) -> CycleReport {
+        for (c, t) in sample.temperatures.iter().enumerate() {
+            // A value outside i16 cannot come from a DS18B20: the sensor is
+            // treated as absent, and acquisition reports it.
+            self.bus.set_temperature(c, t.and_then(|v| i16::try_from(v).ok()));
+        }
+        self.acquisition.cycle(&mut self.bus, &mut embassy_time::Delay, sample.time_ms).await
+    }
 }
 
 mod golden {
