@@ -510,3 +510,34 @@ fn a_cycle_yields_to_the_executor_between_bytes() {
     // No poll holds the CPU longer than a reset plus one byte (~1.5 ms).
     assert!(longest_ns <= 1_500_000, "{longest_ns} ns");
 }
+
+#[test]
+fn search_separates_consecutive_serials() {
+    use host_tests::onewire_emu::Ds18b20;
+    // ROM codes that differ only in their low bits: the search branches at
+    // every level of the tree.
+    let bus = Bus::new();
+    for s in 0..16u64 {
+        bus.attach(Ds18b20::new(Ds18b20::rom_for(0x1000 + s), 0));
+    }
+    let mut found = heapless::Vec::<RomCode, MAX_CHANNELS>::new();
+    assert_eq!(block_on(search(&mut master(&bus), &mut found)), Ok(16));
+    let mut got: Vec<_> = found.to_vec();
+    got.sort();
+    got.dedup();
+    assert_eq!(got.len(), 16);
+}
+
+#[test]
+fn more_sensors_than_channels_maps_the_first_twenty() {
+    use thermocomp::acquisition::rom::SearchError;
+    let bus = bus_with_sensors(21, 99, 20 * 16);
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
+    assert_eq!(
+        block_on(acq.discover(&mut master(&bus))),
+        Err(SearchError::TooMany)
+    );
+    assert_eq!(acq.map().len(), MAX_CHANNELS);
+    let report = cycle(&bus, &mut acq);
+    assert_eq!(report.ok, 20);
+}

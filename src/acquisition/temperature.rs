@@ -195,18 +195,22 @@ impl TemperatureAcquisition {
     }
 
     /// Searches the bus and maps new sensors to free channels. Returns the
-    /// number of sensors found.
+    /// number of sensors found. With more than [`MAX_CHANNELS`] sensors on
+    /// the bus the first ones found are still mapped and the result is
+    /// `Err(SearchError::TooMany)`; a full map keeps its sensors.
     pub async fn discover<B: OneWireBus>(
         &mut self,
         bus: &mut B,
     ) -> Result<usize, super::rom::SearchError> {
         let mut found: heapless::Vec<rom::RomCode, MAX_CHANNELS> = heapless::Vec::new();
-        let n = rom::search(bus, &mut found).await?;
-        let mut map = self.map;
-        // Full map: the sensors already mapped keep working.
-        let _ = map.assign_new(&found);
-        self.set_map(map);
-        Ok(n)
+        let result = rom::search(bus, &mut found).await;
+        if matches!(result, Ok(_) | Err(rom::SearchError::TooMany)) {
+            let mut map = self.map;
+            // Full map: the sensors already mapped keep working.
+            let _ = map.assign_new(&found);
+            self.set_map(map);
+        }
+        result
     }
 
     /// Writes the configured resolution to every sensor (Skip ROM + Write
