@@ -6,13 +6,24 @@
 #![no_std]
 #![no_main]
 
-use defmt::info;
+mod onewire;
+mod probe_adc;
+
+use defmt::{info, warn};
 use embassy_executor::Spawner;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::Config;
-use embassy_time::{Duration, Timer};
+use embassy_time::{Duration, Instant, Timer};
+use thermocomp::acquisition::channel_map::ChannelMap;
+use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
+use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use {defmt_rtt as _, panic_probe as _};
+
+const SYSCLK_HZ: u32 = 168_000_000;
+/// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
+/// (BENCHMARKS.md, sensor acquisition).
+const CYCLE_PERIOD: Duration = Duration::from_secs(1);
 
 /// 168 MHz from the ST-LINK's 8 MHz MCO (HSE bypass). 180 MHz would need the
 /// regulator's over-drive mode for no gain the compensator needs.
@@ -43,9 +54,49 @@ async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clock_config());
     info!("thermocomp on NUCLEO-F446RE, 168 MHz");
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
-    match heartbeat(led) {
-        Ok(task) => spawner.spawn(task),
-        Err(_) => defmt::error!("heartbeat task could not be spawned"),
+    let bus = onewire::new_bus(p.PC7, SYSCLK_HZ);
+    let probe = probe_adc::ProbeInput::new(p.ADC1, p.PA0);
+    match (heartbeat(led), acquisition(bus, probe)) {
+        (Ok(t1), Ok(t2)) => {
+            spawner.spawn(t1);
+            spawner.spawn(t2);
+        }
+        _ => defmt::error!("tasks could not be spawned"),
+    }
+}
+
+type Bus = thermocomp::acquisition::bitbang::BitBangBus<onewire::DqPin<'static>, onewire::CycleDelay>;
+
+/// Sensors: discover, set 12-bit resolution, then one cycle per second with
+/// the probe read alongside.
+#[embassy_executor::task]
+async fn acquisition(mut bus: Bus, mut probe_input: probe_adc::ProbeInput<'static>) {
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
+    match acq.discover(&mut bus).await {
+        Ok(n) => info!("1-Wire: {} sensor(s) found", n),
+        Err(e) => warn!("1-Wire search failed: {}", e),
+    }
+    if !matches!(acq.configure(&mut bus).await, Ok(true)) {
+        warn!("1-Wire: could not set the resolution (no sensor answered)");
+    }
+    // Eddy-current probe: 2 mm range over 0..10 V -> 4096 codes after the divider.
+    let probe_config = Calibration::linear(0, 20_000, 4096).map(|calibration| ProbeConfig {
+        oversample: 64,
+        saturation_margin: 8,
+        calibration,
+        min_tenth_um: 0,
+        max_tenth_um: 20_000,
+    });
+    loop {
+        let start = Instant::now();
+        let now_ms = start.as_millis();
+        let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
+        info!("cycle: {} ok, {} faulty, {} retries", report.ok, report.faulty, report.retries);
+        if let Some(cfg) = &probe_config {
+            let reading = probe::measure(&mut probe_input, cfg).await;
+            info!("probe: {} {}", reading.state, reading.tenth_um);
+        }
+        Timer::at(start + CYCLE_PERIOD).await;
     }
 }
 
