@@ -184,7 +184,10 @@ mod tests {
         assert_eq!(decimal_scaled("", 16, 2), Ok(None));
         assert_eq!(decimal_scaled("1e3", 16, 2), Err(TraceError::BadNumber(2)));
         assert_eq!(decimal_scaled("-", 16, 2), Err(TraceError::BadNumber(2)));
-        assert_eq!(decimal_scaled("99999999999999999999", 16, 2), Err(TraceError::OutOfRange(2)));
+        assert_eq!(
+            decimal_scaled("99999999999999999999", 16, 2),
+            Err(TraceError::OutOfRange(2))
+        );
     }
 
     #[test]
@@ -196,8 +199,14 @@ mod tests {
         assert_eq!(s.spindle_rpm, Some(1250));
         assert_eq!(s.temperatures[0], Some(-8));
         assert_eq!(s.temperatures[1], None);
-        assert_eq!(TraceSample::parse(&h, "15,1250,1"), Err(TraceError::FieldCount));
-        assert_eq!(TraceSample::parse(&h, ",1,1,1,1"), Err(TraceError::MissingTime));
+        assert_eq!(
+            TraceSample::parse(&h, "15,1250,1"),
+            Err(TraceError::FieldCount)
+        );
+        assert_eq!(
+            TraceSample::parse(&h, ",1,1,1,1"),
+            Err(TraceError::MissingTime)
+        );
         assert_eq!(TraceHeader::parse("t,T1"), Err(TraceError::NoTimeColumn));
     }
 }

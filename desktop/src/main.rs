@@ -2,7 +2,11 @@
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "tcomp", version, about = "thermocomp desktop tools: record, select, fit, export, upload, simulate, diagnose")]
+#[command(
+    name = "tcomp",
+    version,
+    about = "thermocomp desktop tools: record, select, fit, export, upload, simulate, diagnose"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -27,7 +31,12 @@ fn main() -> anyhow::Result<()> {
                 let v = serde_json::json!({"rows": r.rows(), "columns": r.columns, "meta": r.meta_map()});
                 println!("{v}");
             } else {
-                println!("{}: {} rows, columns {}", run.display(), r.rows(), r.columns.join(","));
+                println!(
+                    "{}: {} rows, columns {}",
+                    run.display(),
+                    r.rows(),
+                    r.columns.join(",")
+                );
             }
         }
     }

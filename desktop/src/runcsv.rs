@@ -51,7 +51,10 @@ impl Run {
         };
         run.columns = header.split(',').map(|s| s.trim().to_string()).collect();
         if run.columns.first().map(String::as_str) != Some("time_s") {
-            bail!("line with header: first column must be `time_s`, found {:?}", run.columns.first());
+            bail!(
+                "line with header: first column must be `time_s`, found {:?}",
+                run.columns.first()
+            );
         }
         let mut seen = std::collections::HashSet::new();
         for c in &run.columns {
@@ -81,10 +84,20 @@ impl Run {
                     None
                 } else {
                     let v: f64 = f.parse().map_err(|_| {
-                        anyhow::anyhow!("line {}, column `{}`: cannot parse {:?} as a number", n + 1, run.columns[c], f)
+                        anyhow::anyhow!(
+                            "line {}, column `{}`: cannot parse {:?} as a number",
+                            n + 1,
+                            run.columns[c],
+                            f
+                        )
                     })?;
                     if !v.is_finite() {
-                        bail!("line {}, column `{}`: {:?} is not a finite number", n + 1, run.columns[c], f);
+                        bail!(
+                            "line {}, column `{}`: {:?} is not a finite number",
+                            n + 1,
+                            run.columns[c],
+                            f
+                        );
                     }
                     Some(v)
                 };
@@ -94,7 +107,11 @@ impl Run {
             match run.data[0][r] {
                 None => bail!("line {}: `time_s` is empty", n + 1),
                 Some(t) if r > 0 && run.data[0][r - 1].is_some_and(|p| t <= p) => {
-                    bail!("line {}: `time_s` {} is not after the previous row", n + 1, t)
+                    bail!(
+                        "line {}: `time_s` {} is not after the previous row",
+                        n + 1,
+                        t
+                    )
                 }
                 _ => {}
             }
@@ -139,7 +156,10 @@ impl Run {
     }
 
     pub fn meta(&self, key: &str) -> Option<&str> {
-        self.meta.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
     }
 
     pub fn set_meta(&mut self, key: &str, value: &str) {
@@ -155,7 +175,11 @@ impl Run {
             bail!("column `{name}` exists already");
         }
         if !self.data.is_empty() && values.len() != self.rows() {
-            bail!("column `{name}` has {} values, run has {} rows", values.len(), self.rows());
+            bail!(
+                "column `{name}` has {} values, run has {} rows",
+                values.len(),
+                self.rows()
+            );
         }
         self.columns.push(name.to_string());
         self.data.push(values);
@@ -213,7 +237,9 @@ impl Run {
 /// `T_<name>` or `T<digits>` (the format's two spellings of a temperature column).
 pub fn is_temperature_column(name: &str) -> bool {
     name.starts_with("T_")
-        || (name.len() > 1 && name.starts_with('T') && name[1..].bytes().all(|b| b.is_ascii_digit()))
+        || (name.len() > 1
+            && name.starts_with('T')
+            && name[1..].bytes().all(|b| b.is_ascii_digit()))
 }
 
 #[cfg(test)]
@@ -245,7 +271,9 @@ mod tests {
         let nan = "time_s,T01\n0,NaN\n";
         assert!(Run::from_reader(nan.as_bytes()).is_err());
         let back = "time_s,T01\n5,1\n5,2\n";
-        assert!(format!("{:#}", Run::from_reader(back.as_bytes()).unwrap_err()).contains("not after"));
+        assert!(
+            format!("{:#}", Run::from_reader(back.as_bytes()).unwrap_err()).contains("not after")
+        );
         let short = "time_s,T01\n0\n";
         assert!(Run::from_reader(short.as_bytes()).is_err());
     }

@@ -1,5 +1,5 @@
 //! Test doubles for the board application: they implement the same narrow
 //! hardware traits the boards implement, so the real application code runs here.
 
-pub mod qemu;
 pub mod onewire_emu;
+pub mod qemu;

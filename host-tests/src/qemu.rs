@@ -76,5 +76,9 @@ pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) 
     if let Some(mut e) = child.stderr.take() {
         let _ = e.read_to_string(&mut stderr);
     }
-    QemuRun { status, stdout, stderr }
+    QemuRun {
+        status,
+        stdout,
+        stderr,
+    }
 }

@@ -14,9 +14,23 @@ const LIMIT: Duration = Duration::from_secs(60);
 #[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
 fn selftest_passes_and_exits_zero() {
     let run = run_firmware(&["selftest"], LIMIT);
-    assert_eq!(run.status, Some(0), "stdout:\n{}\nstderr:\n{}", run.stdout, run.stderr);
-    assert!(run.stdout.contains("bench board (mps2-an386) up"), "{}", run.stdout);
-    assert!(run.stdout.contains("selftest timers:") && run.stdout.contains(": pass"), "{}", run.stdout);
+    assert_eq!(
+        run.status,
+        Some(0),
+        "stdout:\n{}\nstderr:\n{}",
+        run.stdout,
+        run.stderr
+    );
+    assert!(
+        run.stdout.contains("bench board (mps2-an386) up"),
+        "{}",
+        run.stdout
+    );
+    assert!(
+        run.stdout.contains("selftest timers:") && run.stdout.contains(": pass"),
+        "{}",
+        run.stdout
+    );
 }
 
 #[test]
@@ -45,20 +59,49 @@ fn replay_reads_every_sample_of_a_trace() {
     let mut csv = String::from("# run: boot-test\ntime_s,spindle_rpm,T01,T02,dx_um\n");
     for i in 0..50 {
         // Sensor T01 drops off the bus for rows 20..=21.
-        let t01 = if (20..22).contains(&i) { String::new() } else { format!("{:.4}", 20.0 + i as f64 * 0.1) };
-        csv.push_str(&format!("{},{},{},{:.4},0\n", i * 10, 1000 + i, t01, -5.0 + i as f64 * 0.05));
+        let t01 = if (20..22).contains(&i) {
+            String::new()
+        } else {
+            format!("{:.4}", 20.0 + i as f64 * 0.1)
+        };
+        csv.push_str(&format!(
+            "{},{},{},{:.4},0\n",
+            i * 10,
+            1000 + i,
+            t01,
+            -5.0 + i as f64 * 0.05
+        ));
     }
     std::fs::write(&path, csv).unwrap();
     let run = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);
     assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
-    assert!(run.stdout.contains("replay done: 50 samples"), "{}", run.stdout);
+    assert!(
+        run.stdout.contains("replay done: 50 samples"),
+        "{}",
+        run.stdout
+    );
     // The board's real acquisition (ROM search, Match ROM, CRC) on the
     // emulated bus. Row 10: 20.9 °C = 334.4 sixteenths -> 334, both sensors ok.
-    assert!(run.stdout.contains("t=90000 ms ok=2 faulty=0 T0=Some(334) Ok rpm=Some(1009)"), "{}", run.stdout);
+    assert!(
+        run.stdout
+            .contains("t=90000 ms ok=2 faulty=0 T0=Some(334) Ok rpm=Some(1009)"),
+        "{}",
+        run.stdout
+    );
     // T01 gone: the read floats high -> Disconnected, last good value held
     // (row 19: 21.9 °C = 350.4 -> 350); back on the bus -> Ok again.
-    assert!(run.stdout.contains("t=200000 ms ok=1 faulty=1 T0=Some(350) Disconnected"), "{}", run.stdout);
-    assert!(run.stdout.contains("t=220000 ms ok=2 faulty=0 T0=Some(355) Ok"), "{}", run.stdout);
+    assert!(
+        run.stdout
+            .contains("t=200000 ms ok=1 faulty=1 T0=Some(350) Disconnected"),
+        "{}",
+        run.stdout
+    );
+    assert!(
+        run.stdout
+            .contains("t=220000 ms ok=2 faulty=0 T0=Some(355) Ok"),
+        "{}",
+        run.stdout
+    );
 
     std::fs::write(&path, "time_s,T01\n0,20\n10,abc\n").unwrap();
     let bad = run_firmware(&["replay", path.to_str().unwrap()], LIMIT);
@@ -80,11 +123,21 @@ fn instruction_counting_method_measures_a_known_loop() {
     // read it within 0.5 %.
     let run = host_tests::qemu::run_firmware_with(&["-icount", "shift=0"], &["bench"], LIMIT);
     assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
-    let line = run.stdout.lines().find(|l| l.starts_with('{')).expect("a JSON line");
+    let line = run
+        .stdout
+        .lines()
+        .find(|l| l.starts_with('{'))
+        .expect("a JSON line");
     let key = "\"known_loop_3000_insn_x100\":";
     let at = line.find(key).expect("known loop figure") + key.len();
-    let digits: String = line[at..].chars().take_while(|c| c.is_ascii_digit()).collect();
+    let digits: String = line[at..]
+        .chars()
+        .take_while(|c| c.is_ascii_digit())
+        .collect();
     let x100: f64 = digits.parse().unwrap();
     let insns = x100 / 100.0;
-    assert!((insns - 3000.0).abs() < 15.0, "known loop measured {insns} instructions");
+    assert!(
+        (insns - 3000.0).abs() < 15.0,
+        "known loop measured {insns} instructions"
+    );
 }

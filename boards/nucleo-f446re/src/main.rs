@@ -65,7 +65,8 @@ async fn main(spawner: Spawner) {
     }
 }
 
-type Bus = thermocomp::acquisition::bitbang::BitBangBus<onewire::DqPin<'static>, onewire::CycleDelay>;
+type Bus =
+    thermocomp::acquisition::bitbang::BitBangBus<onewire::DqPin<'static>, onewire::CycleDelay>;
 
 /// Sensors: discover, set 12-bit resolution, then one cycle per second with
 /// the probe read alongside.
@@ -91,7 +92,10 @@ async fn acquisition(mut bus: Bus, mut probe_input: probe_adc::ProbeInput<'stati
         let start = Instant::now();
         let now_ms = start.as_millis();
         let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
-        info!("cycle: {} ok, {} faulty, {} retries", report.ok, report.faulty, report.retries);
+        info!(
+            "cycle: {} ok, {} faulty, {} retries",
+            report.ok, report.faulty, report.retries
+        );
         if let Some(cfg) = &probe_config {
             let reading = probe::measure(&mut probe_input, cfg).await;
             info!("probe: {} {}", reading.state, reading.tenth_um);

@@ -76,7 +76,13 @@ impl EmulatedBus {
                 selected: false,
             });
         }
-        EmulatedBus { devices, phase: Phase::Idle, shift: 0, bits: 0, write_buf: 0 }
+        EmulatedBus {
+            devices,
+            phase: Phase::Idle,
+            shift: 0,
+            bits: 0,
+            write_buf: 0,
+        }
     }
 
     pub fn rom(&self, index: usize) -> Option<RomCode> {
@@ -164,7 +170,11 @@ impl OneWireBus for EmulatedBus {
                         d.selected = false;
                     }
                 }
-                self.phase = if n == 63 { Phase::Function } else { Phase::Match(n + 1) };
+                self.phase = if n == 63 {
+                    Phase::Function
+                } else {
+                    Phase::Match(n + 1)
+                };
             }
             Phase::Search(n, 2) => {
                 for d in self.selected() {
@@ -172,7 +182,11 @@ impl OneWireBus for EmulatedBus {
                         d.selected = false;
                     }
                 }
-                self.phase = if n == 63 { Phase::Function } else { Phase::Search(n + 1, 0) };
+                self.phase = if n == 63 {
+                    Phase::Function
+                } else {
+                    Phase::Search(n + 1, 0)
+                };
             }
             Phase::WriteScratchpad(n) => {
                 self.write_buf |= u32::from(bit) << n;
@@ -208,14 +222,22 @@ impl OneWireBus for EmulatedBus {
                 for d in self.selected() {
                     line &= rom_bit(&d.rom, n);
                 }
-                self.phase = if n == 63 { Phase::Function } else { Phase::ReadRom(n + 1) };
+                self.phase = if n == 63 {
+                    Phase::Function
+                } else {
+                    Phase::ReadRom(n + 1)
+                };
             }
             Phase::ReadScratchpad(n) => {
                 for d in self.selected() {
                     let s = EmulatedBus::scratchpad(d);
                     line &= s[usize::from(n / 8)] & (1 << (n % 8)) != 0;
                 }
-                self.phase = if n == 71 { Phase::Idle } else { Phase::ReadScratchpad(n + 1) };
+                self.phase = if n == 71 {
+                    Phase::Idle
+                } else {
+                    Phase::ReadScratchpad(n + 1)
+                };
             }
             // Conversion done at the first poll; other slots read the pull-up.
             _ => {}

@@ -42,7 +42,9 @@ impl HostTrace {
         };
         loop {
             let mut line = [0u8; MAX_LINE];
-            let n = t.next_line(&mut line)?.ok_or(ReplayError::Parse(t.line_no, TraceError::NoTimeColumn))?;
+            let n = t
+                .next_line(&mut line)?
+                .ok_or(ReplayError::Parse(t.line_no, TraceError::NoTimeColumn))?;
             let text = core::str::from_utf8(&line[..n]).map_err(|_| ReplayError::NotText)?;
             if text.trim().is_empty() || text.starts_with('#') {
                 continue;
@@ -60,7 +62,9 @@ impl HostTrace {
     pub fn next_sample(&mut self) -> Result<Option<TraceSample>, ReplayError> {
         loop {
             let mut line = [0u8; MAX_LINE];
-            let Some(n) = self.next_line(&mut line)? else { return Ok(None) };
+            let Some(n) = self.next_line(&mut line)? else {
+                return Ok(None);
+            };
             let text = core::str::from_utf8(&line[..n]).map_err(|_| ReplayError::NotText)?;
             if text.trim().is_empty() || text.starts_with('#') {
                 continue;
@@ -77,9 +81,17 @@ impl HostTrace {
         loop {
             if self.start == self.end {
                 if self.eof {
-                    return Ok(if len > 0 { self.line_no += 1; Some(len) } else { None });
+                    return Ok(if len > 0 {
+                        self.line_no += 1;
+                        Some(len)
+                    } else {
+                        None
+                    });
                 }
-                let n = self.file.read(&mut self.buf).map_err(|_| ReplayError::Host)?;
+                let n = self
+                    .file
+                    .read(&mut self.buf)
+                    .map_err(|_| ReplayError::Host)?;
                 self.start = 0;
                 self.end = n;
                 if n == 0 {

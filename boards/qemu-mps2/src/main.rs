@@ -33,7 +33,9 @@ use embassy_executor::Spawner;
 use embassy_time::{Duration, Instant, Timer};
 use static_cell::StaticCell;
 use thermocomp::acquisition::channel_map::ChannelMap;
-use thermocomp::acquisition::temperature::{AcquisitionConfig, CycleReport, TemperatureAcquisition};
+use thermocomp::acquisition::temperature::{
+    AcquisitionConfig, CycleReport, TemperatureAcquisition,
+};
 use thermocomp::trace::TraceSample;
 
 /// Exit codes of the bench firmware (the host tests check them).
@@ -115,7 +117,12 @@ async fn selftest(golden_path: Option<&'static str>) {
     let elapsed = start.elapsed().as_millis();
     let ticks = TICKS_SEEN.load(Ordering::Relaxed);
     let timers_ok = (200..=210).contains(&elapsed) && (18..=21).contains(&ticks);
-    log!("selftest timers: {} ms elapsed, {} ticker periods: {}", elapsed, ticks, pass(timers_ok));
+    log!(
+        "selftest timers: {} ms elapsed, {} ticker periods: {}",
+        elapsed,
+        ticks,
+        pass(timers_ok)
+    );
     failures += u32::from(!timers_ok);
 
     // 2. The math core's golden vectors, produced on the host.
@@ -123,11 +130,19 @@ async fn selftest(golden_path: Option<&'static str>) {
         failures += u32::from(!golden::check_file(path));
     }
     log!("selftest: {} failure(s)", failures);
-    semihost::exit(if failures == 0 { exit_code::OK } else { exit_code::SELFTEST_FAILED })
+    semihost::exit(if failures == 0 {
+        exit_code::OK
+    } else {
+        exit_code::SELFTEST_FAILED
+    })
 }
 
 fn pass(ok: bool) -> &'static str {
-    if ok { "pass" } else { "FAIL" }
+    if ok {
+        "pass"
+    } else {
+        "FAIL"
+    }
 }
 
 #[embassy_executor::task]
@@ -145,7 +160,12 @@ async fn replay(path: &'static str) {
                 let ch0 = sensors.acquisition.value(0, sample.time_ms);
                 log!(
                     "t={} ms ok={} faulty={} T0={:?} {:?} rpm={:?}",
-                    sample.time_ms, report.ok, report.faulty, ch0.usable(), ch0.state, sample.spindle_rpm
+                    sample.time_ms,
+                    report.ok,
+                    report.faulty,
+                    ch0.usable(),
+                    ch0.state,
+                    sample.spindle_rpm
                 );
             }
             Ok(None) => break,
@@ -194,7 +214,13 @@ impl Sensors {
                 semihost::exit(exit_code::SELFTEST_FAILED)
             }
         }
-        let mut sensors = Sensors { bus, acquisition: TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new()) };
+        let mut sensors = Sensors {
+            bus,
+            acquisition: TemperatureAcquisition::new(
+                AcquisitionConfig::default(),
+                ChannelMap::new(),
+            ),
+        };
         match sensors.acquisition.discover(&mut sensors.bus).await {
             Ok(n) if n == channels => {}
             other => {
@@ -203,7 +229,10 @@ impl Sensors {
             }
         }
         sensors.acquisition.set_map(map);
-        if !matches!(sensors.acquisition.configure(&mut sensors.bus).await, Ok(true)) {
+        if !matches!(
+            sensors.acquisition.configure(&mut sensors.bus).await,
+            Ok(true)
+        ) {
             log!("sensor configuration failed");
             semihost::exit(exit_code::SELFTEST_FAILED)
         }
@@ -216,9 +245,12 @@ impl Sensors {
         for (c, t) in sample.temperatures.iter().enumerate() {
             // A value outside i16 cannot come from a DS18B20: the sensor is
             // treated as absent, and acquisition reports it.
-            self.bus.set_temperature(c, t.and_then(|v| i16::try_from(v).ok()));
+            self.bus
+                .set_temperature(c, t.and_then(|v| i16::try_from(v).ok()));
         }
-        self.acquisition.cycle(&mut self.bus, &mut embassy_time::Delay, sample.time_ms).await
+        self.acquisition
+            .cycle(&mut self.bus, &mut embassy_time::Delay, sample.time_ms)
+            .await
     }
 }
 

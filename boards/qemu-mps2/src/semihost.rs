@@ -41,7 +41,12 @@ pub fn command_line(buf: &mut [u8]) -> Option<&str> {
     let mut block = [buf.as_mut_ptr() as usize, buf.len()];
     // SAFETY: SYS_GET_CMDLINE writes at most block[1] bytes into buf and
     // stores the length it wrote in block[1].
-    let rc = unsafe { cortex_m_semihosting::syscall1(cortex_m_semihosting::nr::GET_CMDLINE, block.as_mut_ptr() as usize) };
+    let rc = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            block.as_mut_ptr() as usize,
+        )
+    };
     if rc != 0 {
         return None;
     }
@@ -61,8 +66,15 @@ impl HostFile {
             return None;
         }
         const MODE_READ_BINARY: usize = 1; // "rb"
-        // SAFETY: path is NUL-terminated; length excludes the NUL as the ABI asks.
-        let rc = unsafe { syscall!(OPEN, path_nul.as_ptr(), MODE_READ_BINARY, path_nul.len() - 1) };
+                                           // SAFETY: path is NUL-terminated; length excludes the NUL as the ABI asks.
+        let rc = unsafe {
+            syscall!(
+                OPEN,
+                path_nul.as_ptr(),
+                MODE_READ_BINARY,
+                path_nul.len() - 1
+            )
+        };
         if rc as isize == -1 {
             None
         } else {
