@@ -1,3 +1,27 @@
-//! thermocomp-core: the compensator's math, shared bit-exact by the firmware and
-//! the desktop tools. No hardware, no heap, no floats on the evaluation path.
-#![cfg_attr(not(any(test, feature = "std")), no_std)]
+//! thermocomp-core: the compensator's math, no_std, no hardware, no heap.
+//!
+//! One source of truth for the board and the desktop: the fixed-point
+//! evaluation here is what the firmware runs and what `tcomp` uses to predict
+//! the board's output, bit for bit.
+//!
+//! - [`image`]: the model image (binary blob with CRC-32) → validated [`image::Model`].
+//! - [`fixed`]: Q formats, the sigmoid table, normalisation, lag-filter decay.
+//! - [`eval`]: the network and the polynomial tables for one set of inputs.
+//! - [`compensator`]: the state machine around them (reference sample, lag
+//!   filters, training envelope, clamps, rate limit, status bits).
+//! - `float` (feature `std`): the same model in f64 and the quantizer.
+//! - [`golden`]: golden vectors checked on the board (generated on the host).
+#![cfg_attr(not(feature = "std"), no_std)]
+
+pub mod compensator;
+pub mod eval;
+pub mod fixed;
+#[cfg(feature = "std")]
+pub mod float;
+pub mod golden;
+pub mod image;
+pub mod limits;
+
+pub use compensator::{Compensator, StepInput, StepOutput};
+pub use image::{ImageError, Model};
+pub use limits::*;

@@ -1,0 +1,129 @@
+//! Fixed-point formats and primitives.
+//!
+//! | quantity                         | type | format                          |
+//! |----------------------------------|------|---------------------------------|
+//! | temperature (rise)               | i32  | 1/16 °C (DS18B20 LSB)           |
+//! | spindle speed                    | i32  | rpm                             |
+//! | axis position                    | i32  | µm (or 0.001°)                  |
+//! | lag-filter state                 | i64  | Q16 of the raw unit             |
+//! | filter decay exp(-step/τ)        | u32  | Q30, < 1                        |
+//! | normalised input / position      | i32  | Q24, in [-1, 1] after clamping  |
+//! | hidden weights W1, biases b1     | i32  | Q16 (|w| < 32768)               |
+//! | pre-activation z                 | i64  | Q40 accumulator → Q16           |
+//! | hidden activation h              | i32  | Q17, in [0, 1]                  |
+//! | output weights w2, b2, table coef| i32  | Q8 of 0.1 µm                    |
+//! | output accumulator               | i64  | Q25 (net) / Q32 (table) of 0.1 µm |
+//! | correction                       | i32  | 0.1 µm                          |
+//!
+//! Why nothing overflows: normalised values are clamped to [-1, 1] (|x| ≤ 2^24)
+//! before any product. A W1·x product is < 2^31·2^24 = 2^55 and at most
+//! MAX_NET_INPUTS = 8 of them plus the bias (< 2^55) sum below 2^59 < 2^63.
+//! h ≤ 2^17, so a w2·h product is < 2^48 and 17 of them stay below 2^53. A
+//! table term is a Q24 product of at most six factors each ≤ 1 (renormalised
+//! after every multiply, so ≤ 2^24) times a coefficient < 2^31: < 2^55, and
+//! MAX_TERMS = 32 of them stay below 2^60. Filter states are bounded by the
+//! inputs they follow (|raw| < 2^31, Q16 → < 2^47); the decay is < 1.
+
+include!(concat!(env!("OUT_DIR"), "/sigmoid_table.rs"));
+
+/// One in Q24 (normalised inputs and positions).
+pub const ONE_Q24: i32 = 1 << 24;
+/// One in Q17 (hidden activations).
+pub const ONE_Q17: i32 = 1 << 17;
+/// Table step of the sigmoid: 1/32 in Q16.
+const SIG_STEP_SHIFT: u32 = 11;
+/// Sigmoid input saturation: |z| ≥ 16 gives 0 or 1 (error < 1.2e-7, below the Q17 LSB).
+const SIG_Z_MAX_Q16: i64 = 16 << 16;
+
+/// Worst-case |sigmoid_q17(z)/2^17 − σ(z)| over all z, checked densely by a
+/// test: linear interpolation at step 1/32 (≤ h²/8·max|σ''| = 1.2e-5) plus
+/// the table's Q17 rounding (3.8e-6) and the interpolation's truncation (7.6e-6).
+pub const SIGMOID_MAX_ERROR: f64 = 2.5e-5;
+
+/// Logistic sigmoid of `z_q16` (Q16) in Q17, by table and linear interpolation.
+/// Symmetric: σ(−z) = 1 − σ(z). Total for every i64.
+#[inline]
+pub fn sigmoid_q17(z_q16: i64) -> i32 {
+    let mag = z_q16.unsigned_abs().min(SIG_Z_MAX_Q16 as u64) as u32;
+    let idx = (mag >> SIG_STEP_SHIFT) as usize;
+    let frac = (mag & ((1 << SIG_STEP_SHIFT) - 1)) as i32;
+    // idx ≤ 512; at idx == 512 frac is 0 and the next entry is not needed.
+    let lo = i32::from(SIGMOID_Q17[idx.min(512)]);
+    let hi = i32::from(SIGMOID_Q17[(idx + 1).min(512)]);
+    let v = lo + (((hi - lo) * frac) >> SIG_STEP_SHIFT);
+    if z_q16 >= 0 {
+        ONE_Q17 / 2 + v
+    } else {
+        ONE_Q17 / 2 - v
+    }
+}
+
+/// Q40 reciprocal gain mapping a raw span onto [-1, 1]: 2^41 / span, rounded.
+/// `span` ≥ 2 is guaranteed by image validation, so the gain is ≤ 2^40.
+#[inline]
+pub fn span_gain_q40(span: i64) -> i64 {
+    ((1i64 << 41) + span / 2) / span
+}
+
+/// Normalise a Q16 raw value to Q24 in [-1, 1]: x = 2(v − min)/(max − min) − 1,
+/// after clamping v to [min, max]. Returns (x, outside) where `outside` says
+/// the value had to be clamped (outside the training envelope).
+#[inline]
+pub fn normalise_q24(v_q16: i64, min: i32, max: i32, gain_q40: i64) -> (i32, bool) {
+    let lo = i64::from(min) << 16;
+    let hi = i64::from(max) << 16;
+    let outside = v_q16 < lo || v_q16 > hi;
+    let v = v_q16.clamp(lo, hi);
+    // (v − lo) ≤ span·2^16 < 2^48 and gain ≤ 2^40 / span·2: product ≤ 2^57.
+    let x = (((v - lo) * gain_q40 + (1 << 31)) >> 32) - i64::from(ONE_Q24);
+    (
+        x.clamp(-i64::from(ONE_Q24), i64::from(ONE_Q24)) as i32,
+        outside,
+    )
+}
+
+/// Multiply two Q24 values (both within [-1, 1]) to Q24, rounding to nearest.
+#[inline(always)]
+pub fn mul_q24(a: i32, b: i32) -> i32 {
+    ((i64::from(a) * i64::from(b) + (1 << 23)) >> 24) as i32
+}
+
+/// decay^n in Q30 for a decay in [0, 1) Q30, by square-and-multiply (exact
+/// integer steps, so the board and the host agree; n may be any gap length).
+pub fn decay_pow_q30(decay_q30: u32, mut n: u64) -> u32 {
+    let mut result: u64 = 1 << 30;
+    let mut base = u64::from(decay_q30);
+    while n > 0 && result != 0 {
+        if n & 1 == 1 {
+            result = (result * base + (1 << 29)) >> 30;
+        }
+        base = (base * base + (1 << 29)) >> 30;
+        n >>= 1;
+    }
+    result as u32
+}
+
+/// First-order lag with zero-order-hold input: after `n` filter steps at input
+/// `u`, y ← u + d^n (y − u). State and input in Q16 of the raw unit.
+#[inline]
+pub fn lag_update(y_q16: i64, u_q16: i64, decay_n_q30: u32) -> i64 {
+    let diff = y_q16 - u_q16;
+    u_q16 + mul_q30_i64(diff, decay_n_q30)
+}
+
+/// a · d / 2^30 for |a| < 2^62 and d ≤ 2^30 without overflow, rounding to
+/// nearest. Split as a = hi·2^30 + lo (0 ≤ lo < 2^30) so both partial products
+/// fit in i64; the result equals ⌊(a·d + 2^29) / 2^30⌋ exactly, no i128 needed.
+#[inline]
+fn mul_q30_i64(a: i64, d: u32) -> i64 {
+    let d = i64::from(d);
+    let hi = a >> 30;
+    let lo = a & ((1 << 30) - 1);
+    hi * d + ((lo * d + (1 << 29)) >> 30)
+}
+
+/// Round a Q-`shift` accumulator to an integer, to nearest (ties up).
+#[inline(always)]
+pub fn round_shift(acc: i64, shift: u32) -> i64 {
+    (acc + (1i64 << (shift - 1))) >> shift
+}

@@ -1,0 +1,722 @@
+//! The model image: one binary blob (little-endian) carrying everything the
+//! board needs to compensate, protected by a CRC-32. Parse → validate → use:
+//! [`Model::parse`] accepts only a fully valid image and never panics; any
+//! defect is an [`ImageError`].
+//!
+//! Layout (format version 1; every count is bounded by [`crate::limits`]):
+//!
+//! ```text
+//! header   32 B  "TCMI", format u16, flags u16, total_len u32, model_version u32,
+//!                step_ms u32, warmup_s u32, n_sensors u8, n_inputs u8, n_nets u8,
+//!                n_tables u8, n_directions u8, n_axes u8, units u8, reserved u8
+//! sensor   16 B  rom [8] (all zero: by channel), channel u8, 3 × 0, ref_temp i32 (1/16 °C)
+//! direction 16 B name [8] (ASCII, zero-padded), max_correction i32 (0.1 µm),
+//!                max_rate i32 (0.1 µm/s)
+//! axis     20 B  name [8], pos_min i32, pos_max i32, ref_pos i32 (µm or 0.001°)
+//! input    20 B  kind u8, a u8, b u8, lagged u8, tau_s u32, decay_q30 u32 (per step),
+//!                min i32, max i32 (raw units: 1/16 °C or rpm; the training envelope)
+//! net           n_in u8, n_hidden u8, direction u8, 0, input index × n_in,
+//!               W1 i32 × n_hidden·n_in (Q16, row per hidden), b1 i32 × n_hidden (Q16),
+//!               w2 i32 × n_hidden (Q8 of 0.1 µm), b2 i32 (Q8 of 0.1 µm)
+//! table         direction u8, axis u8 (0xFF: none), n_terms u8, 0,
+//!               term × n_terms: coef i32 (Q8 of 0.1 µm), input u8 (0xFF: none),
+//!               input_power u8, position_power u8, 0
+//! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
+//! ```
+
+use crate::fixed::span_gain_q40;
+use crate::limits::*;
+use heapless::Vec;
+
+pub const MAGIC: [u8; 4] = *b"TCMI";
+pub const FORMAT_VERSION: u16 = 1;
+/// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
+pub const UNITS_V1: u8 = 1;
+/// Flag: use the stored reference temperatures instead of the first valid sample.
+pub const FLAG_FIXED_REFERENCE: u16 = 1 << 0;
+pub const HEADER_LEN: usize = 32;
+/// "No input" / "no axis" marker in tables.
+pub const NONE: u8 = 0xFF;
+
+const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// CRC-32 of a byte string (the image's checksum, also shown over Modbus).
+pub fn crc32(bytes: &[u8]) -> u32 {
+    CRC32.checksum(bytes)
+}
+
+/// Why an image was refused. Every variant is a clean refusal; the board then
+/// keeps (or serves "no model" instead of) the refused image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageError {
+    /// Fewer bytes than the header or than `total_len` says.
+    TooShort {
+        needed: usize,
+        got: usize,
+    },
+    /// Larger than [`MAX_IMAGE_BYTES`].
+    TooLong {
+        len: usize,
+    },
+    BadMagic,
+    UnsupportedVersion(u16),
+    UnsupportedUnits(u8),
+    BadCrc {
+        stored: u32,
+        computed: u32,
+    },
+    /// A count above its fixed maximum (`what` names it).
+    TooMany {
+        what: &'static str,
+        count: usize,
+        max: usize,
+    },
+    /// A reference to a sensor, input, direction or axis that does not exist.
+    BadIndex {
+        what: &'static str,
+        index: u8,
+    },
+    /// A range whose minimum is not below its maximum (or narrower than 2 LSB).
+    NonMonotoneRange {
+        what: &'static str,
+        index: u8,
+    },
+    /// A field outside its documented domain.
+    BadValue {
+        what: &'static str,
+    },
+    /// The sections end before or after `total_len − 4`.
+    LengthMismatch,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EncodeError {
+    BufferTooSmall { needed: usize },
+}
+
+/// Sensor identity: a DS18B20 ROM code, or (ROM all zero) a channel index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SensorRef {
+    pub rom: [u8; 8],
+    pub channel: u8,
+    /// Reference temperature (1/16 °C) used with [`FLAG_FIXED_REFERENCE`].
+    pub ref_temp: i32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Direction {
+    pub name: [u8; 8],
+    /// Largest correction served, 0.1 µm (absolute value).
+    pub max_correction: i32,
+    /// Largest change of the served correction, 0.1 µm per second.
+    pub max_rate: i32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Axis {
+    pub name: [u8; 8],
+    pub pos_min: i32,
+    pub pos_max: i32,
+    /// Reference position of the offset/slope pair (TEMP_COMP style).
+    pub ref_pos: i32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum InputKind {
+    /// Temperature of sensor `a` minus its reference sample (1/16 °C).
+    SensorRise { a: u8 },
+    /// Temperature of sensor `a` minus sensor `b` (1/16 °C).
+    SensorDiff { a: u8, b: u8 },
+    /// Spindle speed written by the PLC (rpm).
+    Spindle,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct InputSpec {
+    pub kind: InputKind,
+    /// First-order lag: time constant (documentation and the quantizer's
+    /// source) and its per-step decay exp(−step/τ) in Q30. `None`: no lag.
+    pub lag: Option<Lag>,
+    /// Training envelope, raw units.
+    pub min: i32,
+    pub max: i32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Lag {
+    pub tau_s: u32,
+    pub decay_q30: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Net {
+    pub direction: u8,
+    pub inputs: Vec<u8, MAX_NET_INPUTS>,
+    pub n_hidden: u8,
+    pub w1: [[i32; MAX_NET_INPUTS]; MAX_HIDDEN],
+    pub b1: [i32; MAX_HIDDEN],
+    pub w2: [i32; MAX_HIDDEN],
+    pub b2: i32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Term {
+    pub coef: i32,
+    /// Index into the model's inputs, or [`NONE`].
+    pub input: u8,
+    pub input_power: u8,
+    pub position_power: u8,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Table {
+    pub direction: u8,
+    /// Axis whose position enters the terms, or [`NONE`].
+    pub axis: u8,
+    pub terms: Vec<Term, MAX_TERMS>,
+}
+
+/// A validated model. Every index inside is in range and every range is
+/// monotone, so evaluation needs no further checks.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Model {
+    pub flags: u16,
+    pub model_version: u32,
+    /// Lag-filter step (ms); the model was trained with this discretisation.
+    pub step_ms: u32,
+    /// The status bit "warming up" is set for this long after the reference sample.
+    pub warmup_s: u32,
+    pub sensors: Vec<SensorRef, MAX_SENSORS>,
+    pub directions: Vec<Direction, MAX_DIRECTIONS>,
+    pub axes: Vec<Axis, MAX_AXES>,
+    pub inputs: Vec<InputSpec, MAX_INPUTS>,
+    pub nets: Vec<Net, MAX_NETS>,
+    pub tables: Vec<Table, MAX_TABLES>,
+    /// Precomputed from the ranges at parse time (not stored in the image).
+    pub(crate) input_gain_q40: [i64; MAX_INPUTS],
+    pub(crate) axis_gain_q40: [i64; MAX_AXES],
+    /// CRC-32 of the image this model came from (set by parse/encode).
+    pub crc: u32,
+}
+
+impl Net {
+    pub fn new(direction: u8, inputs: &[u8], n_hidden: u8) -> Self {
+        let mut v = Vec::new();
+        for &i in inputs.iter().take(MAX_NET_INPUTS) {
+            let _ = v.push(i);
+        }
+        Net {
+            direction,
+            inputs: v,
+            n_hidden,
+            w1: [[0; MAX_NET_INPUTS]; MAX_HIDDEN],
+            b1: [0; MAX_HIDDEN],
+            w2: [0; MAX_HIDDEN],
+            b2: 0,
+        }
+    }
+}
+
+impl Model {
+    /// An empty model (no sensors, no outputs) to fill in and [`Model::encode`].
+    pub fn empty(model_version: u32, step_ms: u32) -> Self {
+        Model {
+            flags: 0,
+            model_version,
+            step_ms,
+            warmup_s: 0,
+            sensors: Vec::new(),
+            directions: Vec::new(),
+            axes: Vec::new(),
+            inputs: Vec::new(),
+            nets: Vec::new(),
+            tables: Vec::new(),
+            input_gain_q40: [0; MAX_INPUTS],
+            axis_gain_q40: [0; MAX_AXES],
+            crc: 0,
+        }
+    }
+
+    /// Parse and validate an image. `bytes` may be longer than the image (a
+    /// flash slot): only `total_len` bytes are read.
+    pub fn parse(bytes: &[u8]) -> Result<Model, ImageError> {
+        if bytes.len() < HEADER_LEN + 4 {
+            return Err(ImageError::TooShort {
+                needed: HEADER_LEN + 4,
+                got: bytes.len(),
+            });
+        }
+        let mut r = Reader { b: bytes, at: 0 };
+        if r.array::<4>()? != MAGIC {
+            return Err(ImageError::BadMagic);
+        }
+        let version = r.u16()?;
+        if version != FORMAT_VERSION {
+            return Err(ImageError::UnsupportedVersion(version));
+        }
+        let flags = r.u16()?;
+        let total_len = r.u32()? as usize;
+        if total_len > MAX_IMAGE_BYTES {
+            return Err(ImageError::TooLong { len: total_len });
+        }
+        if total_len < HEADER_LEN + 4 || bytes.len() < total_len {
+            return Err(ImageError::TooShort {
+                needed: total_len.max(HEADER_LEN + 4),
+                got: bytes.len(),
+            });
+        }
+        let body = &bytes[..total_len - 4];
+        let stored = u32::from_le_bytes([
+            bytes[total_len - 4],
+            bytes[total_len - 3],
+            bytes[total_len - 2],
+            bytes[total_len - 1],
+        ]);
+        let computed = crc32(body);
+        if stored != computed {
+            return Err(ImageError::BadCrc { stored, computed });
+        }
+        // From here on read only the body: a section running into the CRC is a length error.
+        let mut r = Reader { b: body, at: 12 };
+        let model_version = r.u32()?;
+        let step_ms = r.u32()?;
+        let warmup_s = r.u32()?;
+        let n_sensors = r.count("sensors", MAX_SENSORS)?;
+        let n_inputs = r.count("inputs", MAX_INPUTS)?;
+        let n_nets = r.count("nets", MAX_NETS)?;
+        let n_tables = r.count("tables", MAX_TABLES)?;
+        let n_directions = r.count("directions", MAX_DIRECTIONS)?;
+        let n_axes = r.count("axes", MAX_AXES)?;
+        let units = r.u8()?;
+        if units != UNITS_V1 {
+            return Err(ImageError::UnsupportedUnits(units));
+        }
+        let _reserved = r.u8()?;
+        if step_ms == 0 || step_ms > 3_600_000 {
+            return Err(ImageError::BadValue { what: "step_ms" });
+        }
+        if flags & !FLAG_FIXED_REFERENCE != 0 {
+            return Err(ImageError::BadValue { what: "flags" });
+        }
+        let mut m = Model::empty(model_version, step_ms);
+        m.flags = flags;
+        m.warmup_s = warmup_s;
+
+        for _ in 0..n_sensors {
+            let rom = r.array::<8>()?;
+            let channel = r.u8()?;
+            let _pad = r.array::<3>()?;
+            let ref_temp = r.i32()?;
+            push(
+                &mut m.sensors,
+                SensorRef {
+                    rom,
+                    channel,
+                    ref_temp,
+                },
+            )?;
+        }
+        for i in 0..n_directions {
+            let name = r.array::<8>()?;
+            let max_correction = r.i32()?;
+            let max_rate = r.i32()?;
+            if max_correction < 0 || max_rate < 0 {
+                return Err(ImageError::BadValue {
+                    what: "direction limits",
+                });
+            }
+            let _ = i;
+            push(
+                &mut m.directions,
+                Direction {
+                    name,
+                    max_correction,
+                    max_rate,
+                },
+            )?;
+        }
+        for i in 0..n_axes {
+            let name = r.array::<8>()?;
+            let pos_min = r.i32()?;
+            let pos_max = r.i32()?;
+            let ref_pos = r.i32()?;
+            if i64::from(pos_max) - i64::from(pos_min) < 2 || ref_pos < pos_min || ref_pos > pos_max
+            {
+                return Err(ImageError::NonMonotoneRange {
+                    what: "axis",
+                    index: i as u8,
+                });
+            }
+            m.axis_gain_q40[i] = span_gain_q40(i64::from(pos_max) - i64::from(pos_min));
+            push(
+                &mut m.axes,
+                Axis {
+                    name,
+                    pos_min,
+                    pos_max,
+                    ref_pos,
+                },
+            )?;
+        }
+        for i in 0..n_inputs {
+            let kind = r.u8()?;
+            let a = r.u8()?;
+            let b = r.u8()?;
+            let lagged = r.u8()?;
+            let tau_s = r.u32()?;
+            let decay_q30 = r.u32()?;
+            let min = r.i32()?;
+            let max = r.i32()?;
+            let kind = match kind {
+                0 => InputKind::SensorRise {
+                    a: sensor_index(a, n_sensors)?,
+                },
+                1 => InputKind::SensorDiff {
+                    a: sensor_index(a, n_sensors)?,
+                    b: sensor_index(b, n_sensors)?,
+                },
+                2 => InputKind::Spindle,
+                _ => return Err(ImageError::BadValue { what: "input kind" }),
+            };
+            let lag = match lagged {
+                0 => None,
+                1 if decay_q30 < (1 << 30) => Some(Lag { tau_s, decay_q30 }),
+                _ => return Err(ImageError::BadValue { what: "input lag" }),
+            };
+            if i64::from(max) - i64::from(min) < 2 {
+                return Err(ImageError::NonMonotoneRange {
+                    what: "input",
+                    index: i as u8,
+                });
+            }
+            m.input_gain_q40[i] = span_gain_q40(i64::from(max) - i64::from(min));
+            push(
+                &mut m.inputs,
+                InputSpec {
+                    kind,
+                    lag,
+                    min,
+                    max,
+                },
+            )?;
+        }
+        for _ in 0..n_nets {
+            let n_in = r.u8()? as usize;
+            let n_hidden = r.u8()? as usize;
+            let direction = r.u8()?;
+            let _pad = r.u8()?;
+            if n_in == 0 || n_in > MAX_NET_INPUTS {
+                return Err(ImageError::TooMany {
+                    what: "net inputs",
+                    count: n_in,
+                    max: MAX_NET_INPUTS,
+                });
+            }
+            if n_hidden == 0 || n_hidden > MAX_HIDDEN {
+                return Err(ImageError::TooMany {
+                    what: "hidden neurons",
+                    count: n_hidden,
+                    max: MAX_HIDDEN,
+                });
+            }
+            if usize::from(direction) >= n_directions {
+                return Err(ImageError::BadIndex {
+                    what: "net direction",
+                    index: direction,
+                });
+            }
+            let mut net = Net::new(direction, &[], n_hidden as u8);
+            for _ in 0..n_in {
+                let idx = r.u8()?;
+                if usize::from(idx) >= n_inputs {
+                    return Err(ImageError::BadIndex {
+                        what: "net input",
+                        index: idx,
+                    });
+                }
+                push(&mut net.inputs, idx)?;
+            }
+            for j in 0..n_hidden {
+                for i in 0..n_in {
+                    net.w1[j][i] = r.i32()?;
+                }
+            }
+            for j in 0..n_hidden {
+                net.b1[j] = r.i32()?;
+            }
+            for j in 0..n_hidden {
+                net.w2[j] = r.i32()?;
+            }
+            net.b2 = r.i32()?;
+            push(&mut m.nets, net)?;
+        }
+        for _ in 0..n_tables {
+            let direction = r.u8()?;
+            let axis = r.u8()?;
+            let n_terms = r.u8()? as usize;
+            let _pad = r.u8()?;
+            if usize::from(direction) >= n_directions {
+                return Err(ImageError::BadIndex {
+                    what: "table direction",
+                    index: direction,
+                });
+            }
+            if axis != NONE && usize::from(axis) >= n_axes {
+                return Err(ImageError::BadIndex {
+                    what: "table axis",
+                    index: axis,
+                });
+            }
+            if n_terms > MAX_TERMS {
+                return Err(ImageError::TooMany {
+                    what: "table terms",
+                    count: n_terms,
+                    max: MAX_TERMS,
+                });
+            }
+            let mut t = Table {
+                direction,
+                axis,
+                terms: Vec::new(),
+            };
+            for _ in 0..n_terms {
+                let coef = r.i32()?;
+                let input = r.u8()?;
+                let input_power = r.u8()?;
+                let position_power = r.u8()?;
+                let _pad = r.u8()?;
+                if input != NONE && usize::from(input) >= n_inputs {
+                    return Err(ImageError::BadIndex {
+                        what: "term input",
+                        index: input,
+                    });
+                }
+                if input_power > MAX_POWER || position_power > MAX_POWER {
+                    return Err(ImageError::BadValue { what: "term power" });
+                }
+                if (input == NONE && input_power != 0) || (axis == NONE && position_power != 0) {
+                    return Err(ImageError::BadValue {
+                        what: "term power without variable",
+                    });
+                }
+                push(
+                    &mut t.terms,
+                    Term {
+                        coef,
+                        input,
+                        input_power,
+                        position_power,
+                    },
+                )?;
+            }
+            push(&mut m.tables, t)?;
+        }
+        if r.at != body.len() {
+            return Err(ImageError::LengthMismatch);
+        }
+        m.crc = computed;
+        Ok(m)
+    }
+
+    /// Size of the encoded image in bytes.
+    pub fn encoded_len(&self) -> usize {
+        let mut n = HEADER_LEN + 4;
+        n += self.sensors.len() * 16 + self.directions.len() * 16 + self.axes.len() * 20;
+        n += self.inputs.len() * 20;
+        for net in &self.nets {
+            let (i, h) = (net.inputs.len(), usize::from(net.n_hidden));
+            n += 4 + i + 4 * (h * i + 2 * h + 1);
+        }
+        for t in &self.tables {
+            n += 4 + 8 * t.terms.len();
+        }
+        n
+    }
+
+    /// Write the image with its CRC into `out`; returns its length. Also
+    /// sets `self.crc`. (The desktop builds a model, encodes it and parses it
+    /// back, which is what validates it.)
+    pub fn encode(&mut self, out: &mut [u8]) -> Result<usize, EncodeError> {
+        let len = self.encoded_len();
+        if out.len() < len {
+            return Err(EncodeError::BufferTooSmall { needed: len });
+        }
+        let mut w = Writer { b: out, at: 0 };
+        w.put(&MAGIC);
+        w.put(&FORMAT_VERSION.to_le_bytes());
+        w.put(&self.flags.to_le_bytes());
+        w.put(&(len as u32).to_le_bytes());
+        w.put(&self.model_version.to_le_bytes());
+        w.put(&self.step_ms.to_le_bytes());
+        w.put(&self.warmup_s.to_le_bytes());
+        w.put(&[
+            self.sensors.len() as u8,
+            self.inputs.len() as u8,
+            self.nets.len() as u8,
+            self.tables.len() as u8,
+            self.directions.len() as u8,
+            self.axes.len() as u8,
+            UNITS_V1,
+            0,
+        ]);
+        for s in &self.sensors {
+            w.put(&s.rom);
+            w.put(&[s.channel, 0, 0, 0]);
+            w.put(&s.ref_temp.to_le_bytes());
+        }
+        for d in &self.directions {
+            w.put(&d.name);
+            w.put(&d.max_correction.to_le_bytes());
+            w.put(&d.max_rate.to_le_bytes());
+        }
+        for a in &self.axes {
+            w.put(&a.name);
+            w.put(&a.pos_min.to_le_bytes());
+            w.put(&a.pos_max.to_le_bytes());
+            w.put(&a.ref_pos.to_le_bytes());
+        }
+        for inp in &self.inputs {
+            let (kind, a, b) = match inp.kind {
+                InputKind::SensorRise { a } => (0, a, 0),
+                InputKind::SensorDiff { a, b } => (1, a, b),
+                InputKind::Spindle => (2, 0, 0),
+            };
+            let (lagged, tau, decay) = match inp.lag {
+                Some(l) => (1, l.tau_s, l.decay_q30),
+                None => (0, 0, 0),
+            };
+            w.put(&[kind, a, b, lagged]);
+            w.put(&tau.to_le_bytes());
+            w.put(&decay.to_le_bytes());
+            w.put(&inp.min.to_le_bytes());
+            w.put(&inp.max.to_le_bytes());
+        }
+        for net in &self.nets {
+            let h = usize::from(net.n_hidden);
+            w.put(&[net.inputs.len() as u8, net.n_hidden, net.direction, 0]);
+            w.put(&net.inputs);
+            for row in net.w1.iter().take(h) {
+                for v in row.iter().take(net.inputs.len()) {
+                    w.put(&v.to_le_bytes());
+                }
+            }
+            for v in net.b1.iter().take(h) {
+                w.put(&v.to_le_bytes());
+            }
+            for v in net.w2.iter().take(h) {
+                w.put(&v.to_le_bytes());
+            }
+            w.put(&net.b2.to_le_bytes());
+        }
+        for t in &self.tables {
+            w.put(&[t.direction, t.axis, t.terms.len() as u8, 0]);
+            for term in &t.terms {
+                w.put(&term.coef.to_le_bytes());
+                w.put(&[term.input, term.input_power, term.position_power, 0]);
+            }
+        }
+        let crc = crc32(&w.b[..w.at]);
+        w.put(&crc.to_le_bytes());
+        self.crc = crc;
+        Ok(w.at)
+    }
+
+    /// Directions' names as text (ASCII, zero padding dropped).
+    pub fn direction_name(&self, i: usize) -> &str {
+        self.directions
+            .get(i)
+            .map(|d| name_str(&d.name))
+            .unwrap_or("")
+    }
+
+    pub fn axis_name(&self, i: usize) -> &str {
+        self.axes.get(i).map(|a| name_str(&a.name)).unwrap_or("")
+    }
+}
+
+/// An 8-byte zero-padded ASCII name from text (longer names are cut at 8 bytes).
+pub fn name8(s: &str) -> [u8; 8] {
+    let mut n = [0u8; 8];
+    for (d, c) in n.iter_mut().zip(s.bytes()) {
+        *d = c;
+    }
+    n
+}
+
+fn name_str(n: &[u8; 8]) -> &str {
+    let end = n.iter().position(|&c| c == 0).unwrap_or(8);
+    core::str::from_utf8(&n[..end]).unwrap_or("?")
+}
+
+fn sensor_index(i: u8, n: usize) -> Result<u8, ImageError> {
+    if usize::from(i) < n {
+        Ok(i)
+    } else {
+        Err(ImageError::BadIndex {
+            what: "sensor",
+            index: i,
+        })
+    }
+}
+
+fn push<T, const N: usize>(v: &mut Vec<T, N>, x: T) -> Result<(), ImageError> {
+    v.push(x).map_err(|_| ImageError::TooMany {
+        what: "entries",
+        count: N + 1,
+        max: N,
+    })
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], ImageError> {
+        let end = self.at.checked_add(N).ok_or(ImageError::LengthMismatch)?;
+        let s = self.b.get(self.at..end).ok_or(ImageError::LengthMismatch)?;
+        let mut a = [0u8; N];
+        a.copy_from_slice(s);
+        self.at = end;
+        Ok(a)
+    }
+    fn u8(&mut self) -> Result<u8, ImageError> {
+        Ok(self.array::<1>()?[0])
+    }
+    fn u16(&mut self) -> Result<u16, ImageError> {
+        Ok(u16::from_le_bytes(self.array()?))
+    }
+    fn u32(&mut self) -> Result<u32, ImageError> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    fn i32(&mut self) -> Result<i32, ImageError> {
+        Ok(i32::from_le_bytes(self.array()?))
+    }
+    fn count(&mut self, what: &'static str, max: usize) -> Result<usize, ImageError> {
+        let n = usize::from(self.u8()?);
+        if n > max {
+            return Err(ImageError::TooMany {
+                what,
+                count: n,
+                max,
+            });
+        }
+        Ok(n)
+    }
+}
+
+struct Writer<'a> {
+    b: &'a mut [u8],
+    at: usize,
+}
+
+impl Writer<'_> {
+    /// Callers checked the total length first (`encoded_len`).
+    fn put(&mut self, s: &[u8]) {
+        self.b[self.at..self.at + s.len()].copy_from_slice(s);
+        self.at += s.len();
+    }
+}

@@ -1,0 +1,26 @@
+//! Fixed maximum sizes: every array in the core is bounded by these, so a
+//! parsed model has a known RAM footprint and no heap is needed. The image
+//! carries the actual sizes (5-11-1 is the default, not a limit).
+
+/// Temperature sensors a model may name (seed 000 uses 20).
+pub const MAX_SENSORS: usize = 20;
+/// Model inputs (features) computed by the board.
+pub const MAX_INPUTS: usize = 12;
+/// Networks in one image (one per compensated direction, typically).
+pub const MAX_NETS: usize = 4;
+/// Inputs of one network.
+pub const MAX_NET_INPUTS: usize = 8;
+/// Hidden neurons of one network.
+pub const MAX_HIDDEN: usize = 16;
+/// Polynomial tables (seed 001: per axis and error term).
+pub const MAX_TABLES: usize = 8;
+/// Terms of one polynomial table.
+pub const MAX_TERMS: usize = 32;
+/// Highest power of an input or a position in a table term.
+pub const MAX_POWER: u8 = 3;
+/// Compensated directions (X, Y, Z, and up to three more).
+pub const MAX_DIRECTIONS: usize = 6;
+/// Machine axes whose position the PLC writes.
+pub const MAX_AXES: usize = 6;
+/// Largest model image in bytes (bounds the staging area and flash slots).
+pub const MAX_IMAGE_BYTES: usize = 8192;

@@ -1,0 +1,90 @@
+//! Q-format primitives: sigmoid error bound, normalisation, lag decay, overflow.
+use proptest::prelude::*;
+use thermocomp_core::fixed::*;
+
+fn sigma(z: f64) -> f64 {
+    1.0 / (1.0 + (-z).exp())
+}
+
+#[test]
+fn sigmoid_error_is_within_the_stated_bound_everywhere() {
+    let mut worst = 0.0f64;
+    // Every 3rd Q16 value over [-20, 20] (past the ±16 saturation) plus the extremes.
+    let mut z = -20i64 << 16;
+    while z <= 20 << 16 {
+        let e = (f64::from(sigmoid_q17(z)) / 131072.0 - sigma(z as f64 / 65536.0)).abs();
+        worst = worst.max(e);
+        z += 3;
+    }
+    for z in [i64::MIN, i64::MAX, -(16 << 16), 16 << 16, 0] {
+        let e = (f64::from(sigmoid_q17(z)) / 131072.0 - sigma(z as f64 / 65536.0)).abs();
+        worst = worst.max(e);
+    }
+    assert!(worst <= SIGMOID_MAX_ERROR, "worst sigmoid error {worst:e}");
+    assert!(worst > 1e-7, "suspiciously exact: {worst:e}");
+}
+
+#[test]
+fn sigmoid_is_monotone_and_symmetric() {
+    let mut prev = -1;
+    for z in (-(17i64 << 16)..(17 << 16)).step_by(97) {
+        let s = sigmoid_q17(z);
+        assert!(s >= prev, "not monotone at {z}");
+        assert_eq!(s + sigmoid_q17(-z), ONE_Q17, "asymmetric at {z}");
+        prev = s;
+    }
+}
+
+#[test]
+fn normalise_maps_the_envelope_onto_minus_one_to_one_and_flags_outside() {
+    let g = span_gain_q40(480 - -16);
+    assert_eq!(normalise_q24(-16 << 16, -16, 480, g), (-ONE_Q24, false));
+    assert_eq!(normalise_q24(480 << 16, -16, 480, g), (ONE_Q24, false));
+    let (mid, out) = normalise_q24(232 << 16, -16, 480, g);
+    assert!(mid.abs() <= 1 && !out);
+    assert_eq!(normalise_q24(481 << 16, -16, 480, g), (ONE_Q24, true));
+    assert_eq!(normalise_q24(i64::MIN / 4, -16, 480, g), (-ONE_Q24, true));
+}
+
+#[test]
+fn lag_decay_matches_the_exponential() {
+    let tau = 1800.0f64;
+    let d = ((-1.0 / tau).exp() * (1u64 << 30) as f64).round() as u32;
+    for n in [1u64, 15, 60, 1800, 7200, 86_400, u64::MAX] {
+        let got = f64::from(decay_pow_q30(d, n)) / (1u64 << 30) as f64;
+        let want = (-(n as f64) / tau).exp();
+        assert!(
+            (got - want).abs() < 1e-6 * n.min(100_000) as f64 + 1e-8,
+            "n={n}: {got} vs {want}"
+        );
+    }
+    assert_eq!(decay_pow_q30(d, 0), 1 << 30);
+}
+
+#[test]
+fn lag_update_moves_towards_the_input() {
+    let y = lag_update(0, 1000 << 16, 1 << 29); // half way
+    assert_eq!(y, 500 << 16);
+    assert_eq!(lag_update(7 << 16, 3 << 16, 0), 3 << 16);
+}
+
+proptest! {
+    #[test]
+    fn normalise_never_overflows(v in any::<i64>(), a in any::<i32>(), span in 2i64..(1i64 << 32)) {
+        let b = (i64::from(a) + span).min(i64::from(i32::MAX));
+        prop_assume!(b - i64::from(a) >= 2);
+        let (x, _) = normalise_q24(v >> 8, a, b as i32, span_gain_q40(b - i64::from(a)));
+        prop_assert!((-ONE_Q24..=ONE_Q24).contains(&x));
+    }
+
+    #[test]
+    fn lag_update_stays_between_state_and_input(y in -(1i64 << 47)..(1i64 << 47), u in -(1i64 << 47)..(1i64 << 47), d in 0u32..(1 << 30)) {
+        let r = lag_update(y, u, d);
+        prop_assert!(r >= y.min(u) - 1 && r <= y.max(u) + 1);
+    }
+
+    #[test]
+    fn mul_q24_stays_in_range(a in -ONE_Q24..=ONE_Q24, b in -ONE_Q24..=ONE_Q24) {
+        prop_assert!(mul_q24(a, b).abs() <= ONE_Q24);
+    }
+}
