@@ -9,7 +9,9 @@ need_target >&2
 need_debian qemu-system-arm:qemu-system-arm >&2
 cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
 elf="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
-json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench | grep '^{' | tail -n 1)
+golden="${CARGO_TARGET_DIR:-target}/bench-golden.bin"
+cargo run -q -p tcomp --release -- golden -o "$golden" --steps 10 >&2
+json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench "$golden" | grep '^{' | tail -n 1)
 [ -n "$json" ] || die "the bench firmware printed no figures"
 if [ "${1:-}" = "--json" ]; then
   echo "$json"

@@ -39,5 +39,5 @@ need_python() {
 }
 
 FW_TARGET=thumbv7em-none-eabihf
-QEMU_ELF="target/$FW_TARGET/release/board-qemu-mps2"
+QEMU_ELF="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
 STM32_ELF="target/$FW_TARGET/release/board-nucleo-f446re"

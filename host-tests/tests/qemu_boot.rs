@@ -84,7 +84,7 @@ fn replay_reads_every_sample_of_a_trace() {
     // emulated bus. Row 10: 20.9 °C = 334.4 sixteenths -> 334, both sensors ok.
     assert!(
         run.stdout
-            .contains("t=90000 ms ok=2 faulty=0 T0=Some(334) Ok rpm=Some(1009)"),
+            .contains("t=90000 ms ok=2 faulty=0 T0=Some(334) Ok rpm=1009 |"),
         "{}",
         run.stdout
     );

@@ -26,6 +26,9 @@ use crate::fixed::{decay_pow_q30, lag_update};
 use crate::image::{InputKind, Model, FLAG_FIXED_REFERENCE};
 use crate::limits::*;
 
+/// Largest rate limit, 0.1 µm/s (100 mm/s: no thermal drift comes near it).
+pub const MAX_RATE: i32 = 1_000_000;
+
 /// Status bits (one Modbus register).
 pub mod status {
     /// The correction is computed from valid inputs by a valid model.
@@ -158,15 +161,19 @@ impl Compensator {
             return out;
         }
 
-        // Raw features (Q16 of 1/16 °C or rpm) before the lag filters.
-        let mut raw = [0i64; MAX_INPUTS];
+        // Features: Q16 of 1/16 °C or rpm, after the lag filters.
         let mut first = false;
         let reference_ms = match self.reference_ms {
             Some(t) => t,
             None => {
                 first = true;
-                for (i, s) in model.sensors.iter().enumerate() {
-                    self.reference[i] = if model.flags & FLAG_FIXED_REFERENCE != 0 {
+                for (i, (s, r)) in model
+                    .sensors
+                    .iter()
+                    .zip(self.reference.iter_mut())
+                    .enumerate()
+                {
+                    *r = if model.flags & FLAG_FIXED_REFERENCE != 0 {
                         s.ref_temp
                     } else {
                         temp(i as u8).unwrap_or(0)
@@ -177,30 +184,40 @@ impl Compensator {
                 input.now_ms
             }
         };
-        for (i, inp) in model.inputs.iter().enumerate() {
-            let t = |s: u8| i64::from(temp(s).unwrap_or(0));
-            raw[i] = match inp.kind {
-                InputKind::SensorRise { a } => t(a) - i64::from(self.reference[usize::from(a)]),
+        // Whole filter steps since the last update; u32 division (hardware
+        // UDIV) for any gap under 49 days, the 64-bit routine beyond.
+        let step_ms = u64::from(model.step_ms);
+        let elapsed = input.now_ms.saturating_sub(self.filter_clock_ms);
+        let steps = match u32::try_from(elapsed) {
+            Ok(e) => u64::from(e / model.step_ms),
+            Err(_) => elapsed / step_ms,
+        };
+        self.filter_clock_ms += steps * step_ms;
+        let t = |s: u8| i64::from(temp(s).unwrap_or(0));
+        let mut features = [0i64; MAX_INPUTS];
+        for (inp, (feature, filter)) in model
+            .inputs
+            .iter()
+            .zip(features.iter_mut().zip(self.filters_q16.iter_mut()))
+        {
+            let raw = match inp.kind {
+                InputKind::SensorRise { a } => {
+                    t(a) - i64::from(self.reference.get(usize::from(a)).copied().unwrap_or(0))
+                }
                 InputKind::SensorDiff { a, b } => t(a) - t(b),
                 InputKind::Spindle => i64::from(input.spindle_rpm),
             } << 16;
-        }
-        let steps = input.now_ms.saturating_sub(self.filter_clock_ms) / u64::from(model.step_ms);
-        self.filter_clock_ms += steps * u64::from(model.step_ms);
-        let mut features = [0i64; MAX_INPUTS];
-        for (i, inp) in model.inputs.iter().enumerate() {
-            features[i] = match inp.lag {
-                None => raw[i],
+            *feature = match inp.lag {
+                None => raw,
                 Some(_) if first => {
-                    self.filters_q16[i] = raw[i];
-                    raw[i]
+                    *filter = raw;
+                    raw
                 }
                 Some(lag) => {
                     if steps > 0 {
-                        let d = decay_pow_q30(lag.decay_q30, steps);
-                        self.filters_q16[i] = lag_update(self.filters_q16[i], raw[i], d);
+                        *filter = lag_update(*filter, raw, decay_pow_q30(lag.decay_q30, steps));
                     }
-                    self.filters_q16[i]
+                    *filter
                 }
             };
         }
@@ -212,22 +229,35 @@ impl Compensator {
         if input.now_ms.saturating_sub(reference_ms) < u64::from(model.warmup_s) * 1000 {
             out.status |= status::WARMING_UP;
         }
-        let dt_ms = input.now_ms.saturating_sub(self.last_step_ms);
-        for (d, dir) in model.directions.iter().enumerate() {
-            let (o_max, o_rate) = self.limit_override[d];
+        // Elapsed whole seconds and remaining ms in u32 so the rate limit needs
+        // no 64-bit division (max_rate ≤ MAX_RATE keeps rate·ms < 2^32).
+        let dt_ms = input
+            .now_ms
+            .saturating_sub(self.last_step_ms)
+            .min(u64::from(u32::MAX)) as u32;
+        let (dt_s, dt_rem) = (dt_ms / 1000, dt_ms % 1000);
+        let per_direction = self
+            .served
+            .iter_mut()
+            .zip(&self.limit_override)
+            .zip(&eval.corrections);
+        for (dir, ((served, &(o_max, o_rate)), &predicted)) in
+            model.directions.iter().zip(per_direction)
+        {
             let max_c = i64::from(dir.max_correction.min(o_max));
-            let max_step = (i64::from(dir.max_rate.min(o_rate)) * dt_ms as i64) / 1000;
-            let mut target = i64::from(eval.corrections[d]);
+            let rate = dir.max_rate.min(o_rate).clamp(0, MAX_RATE) as u32;
+            let max_step = i64::from(rate) * i64::from(dt_s) + i64::from(rate * dt_rem / 1000);
+            let mut target = i64::from(predicted);
             if target.abs() > max_c {
                 target = target.clamp(-max_c, max_c);
                 out.status |= status::CLAMPED;
             }
-            let prev = i64::from(self.served[d]);
+            let prev = i64::from(*served);
             if (target - prev).abs() > max_step {
                 target = prev + (target - prev).clamp(-max_step, max_step);
                 out.status |= status::RATE_LIMITED;
             }
-            self.served[d] = target as i32;
+            *served = target as i32;
         }
         self.last_step_ms = input.now_ms;
         self.last_eval = eval;

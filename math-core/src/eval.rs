@@ -3,7 +3,7 @@
 //! state (reference, filters, limits) around it.
 
 use crate::fixed::{mul_q24, normalise_q24, round_shift, sigmoid_q17, ONE_Q24};
-use crate::image::{Model, Net, Table, NONE};
+use crate::image::{Model, Net, Table};
 use crate::limits::*;
 
 /// The model's raw outputs before limits.
@@ -46,20 +46,20 @@ impl Model {
             p_ref: [0; MAX_AXES],
             outside: false,
         };
-        for (i, inp) in self.inputs.iter().enumerate() {
+        let per_input = n.x.iter_mut().zip(&self.input_gain_q40);
+        for (i, (inp, (x, &g))) in self.inputs.iter().zip(per_input).enumerate() {
             let v = features_q16.get(i).copied().unwrap_or(0);
-            let (x, out) = normalise_q24(v, inp.min, inp.max, self.input_gain_q40[i]);
-            n.x[i] = x;
+            let (xv, out) = normalise_q24(v, inp.min, inp.max, g);
+            *x = xv;
             n.outside |= out;
         }
-        for (a, axis) in self.axes.iter().enumerate() {
-            let g = self.axis_gain_q40[a];
+        n.p_ref = self.axis_ref_q24;
+        let per_axis = n.p.iter_mut().zip(&self.axis_gain_q40);
+        for (a, (axis, (p, &g))) in self.axes.iter().zip(per_axis).enumerate() {
             let pos = positions.get(a).copied().unwrap_or(axis.ref_pos);
-            let (p, out) = normalise_q24(i64::from(pos) << 16, axis.pos_min, axis.pos_max, g);
-            n.p[a] = p;
+            let (pv, out) = normalise_q24(i64::from(pos) << 16, axis.pos_min, axis.pos_max, g);
+            *p = pv;
             n.outside |= out;
-            n.p_ref[a] =
-                normalise_q24(i64::from(axis.ref_pos) << 16, axis.pos_min, axis.pos_max, g).0;
         }
         n
     }
@@ -75,31 +75,64 @@ impl Model {
         // each) and tables (Q32 → Q25, < 2^53 each) add without overflow.
         let mut acc = [0i64; MAX_DIRECTIONS];
         for net in &self.nets {
-            acc[usize::from(net.direction)] += eval_net_q25(net, &n.x);
+            if let Some(a) = acc.get_mut(usize::from(net.direction)) {
+                *a += eval_net_q25(net, &n.x);
+            }
         }
+        // Tables: one pass gives each table's value at the current position
+        // and, for the axis pair, its value and slope at the reference position.
+        let mut axis_off = [0i64; MAX_AXES];
+        let mut axis_der = [0i64; MAX_AXES];
+        let mut axis_any = [false; MAX_AXES];
         for t in &self.tables {
-            let p = if t.axis == NONE {
-                0
-            } else {
-                n.p[usize::from(t.axis)]
-            };
-            acc[usize::from(t.direction)] += round_shift(eval_table(t, &n.x, p, false), 7);
+            let a = usize::from(t.axis);
+            let p = n.p.get(a).copied().unwrap_or(0);
+            let p_ref = n.p_ref.get(a).copied().unwrap_or(0);
+            let (value, off, der) = eval_table(t, &n.x, p, p_ref);
+            if let Some(acc) = acc.get_mut(usize::from(t.direction)) {
+                *acc += round_shift(value, 7);
+            }
+            if let (Some(o), Some(d), Some(any)) = (
+                axis_off.get_mut(a),
+                axis_der.get_mut(a),
+                axis_any.get_mut(a),
+            ) {
+                *o += off;
+                *d += der;
+                *any = true;
+            }
         }
         for (c, a) in e.corrections.iter_mut().zip(acc) {
             *c = sat_i32(round_shift(a, 25));
         }
-        for (a, axis) in self.axes.iter().enumerate() {
-            let (mut off, mut der) = (0i64, 0i64);
-            for t in self.tables.iter().filter(|t| usize::from(t.axis) == a) {
-                off += eval_table(t, &n.x, n.p_ref[a], false);
-                der += eval_table(t, &n.x, n.p_ref[a], true);
+        if self.tables.is_empty() {
+            for (pair, axis) in e.axes.iter_mut().zip(&self.axes) {
+                pair.ref_pos = axis.ref_pos;
+            }
+            return e;
+        }
+        let per_axis = e
+            .axes
+            .iter_mut()
+            .zip(axis_off.iter().zip(&axis_der).zip(&axis_any));
+        for (axis, (pair, ((&off, &der), &any))) in self.axes.iter().zip(per_axis) {
+            if !any {
+                *pair = AxisPair {
+                    offset: 0,
+                    slope: 0,
+                    ref_pos: axis.ref_pos,
+                };
+                continue;
             }
             let span = i64::from(axis.pos_max) - i64::from(axis.pos_min);
             // dE/dp in Q8 of 0.1 µm per half span; slope = dE/dp · 0.1 µm / (span/2 µm)
             // in 0.01 µm/m = dE/dp · 2·10^7 / span. |der_q8| < 2^36, ·2·10^7 < 2^61.
+            // span ≥ 2 by validation; checked_div keeps the no-panic guarantee visible.
             let der_q8 = round_shift(der, 24);
-            let slope = (der_q8 * 20_000_000 + (span << 7)) / (span << 8);
-            e.axes[a] = AxisPair {
+            let slope = (der_q8 * 20_000_000 + (span << 7))
+                .checked_div(span << 8)
+                .unwrap_or(0);
+            *pair = AxisPair {
                 offset: sat_i32(round_shift(off, 32)),
                 slope: sat_i32(slope),
                 ref_pos: axis.ref_pos,
@@ -109,50 +142,57 @@ impl Model {
     }
 }
 
-/// One network: Q24 inputs → Q25 accumulator of 0.1 µm.
-#[inline]
+/// One network: Q24 inputs → Q25 accumulator of 0.1 µm. Kept out of line:
+/// its own register allocation keeps the inner loop at load-load-SMLAL.
+#[inline(never)]
 pub fn eval_net_q25(net: &Net, x: &[i32; MAX_INPUTS]) -> i64 {
-    let n_in = net.inputs.len();
+    // Gather the network's inputs once so the inner loop is load-load-SMLAL.
+    let n_in = net.inputs.len().min(MAX_NET_INPUTS);
+    let mut xs = [0i32; MAX_NET_INPUTS];
+    for (dst, &i) in xs.iter_mut().zip(net.inputs.iter()) {
+        *dst = x.get(usize::from(i)).copied().unwrap_or(0);
+    }
+    let xs = &xs[..n_in];
     let mut out: i64 = i64::from(net.b2) << 17;
-    for j in 0..usize::from(net.n_hidden).min(MAX_HIDDEN) {
-        let mut acc: i64 = i64::from(net.b1[j]) << 24;
-        for k in 0..n_in {
-            let xi = x[usize::from(net.inputs[k]) % MAX_INPUTS];
-            acc += i64::from(net.w1[j][k]) * i64::from(xi);
+    let h = usize::from(net.n_hidden).min(MAX_HIDDEN);
+    for ((row, &b1), &w2) in net.w1[..h].iter().zip(&net.b1[..h]).zip(&net.w2[..h]) {
+        let mut acc: i64 = i64::from(b1) << 24;
+        for (&w, &xi) in row[..n_in].iter().zip(xs) {
+            acc += i64::from(w) * i64::from(xi);
         }
         let h = sigmoid_q17(round_shift(acc, 24));
-        out += i64::from(net.w2[j]) * i64::from(h);
+        out += i64::from(w2) * i64::from(h);
     }
     out
 }
 
-/// One table's Q32 accumulator (0.1 µm) at position `p` (Q24). With
-/// `derivative`, d/dp of the table instead.
-fn eval_table(t: &Table, x: &[i32; MAX_INPUTS], p: i32, derivative: bool) -> i64 {
-    let mut acc = 0i64;
+/// One table's Q32 accumulators (0.1 µm): its value at position `p`, its
+/// value at `p_ref` and its derivative d/dp at `p_ref` (all Q24 positions).
+/// Powers of the positions are computed once per table, of the input once per term.
+fn eval_table(t: &Table, x: &[i32; MAX_INPUTS], p: i32, p_ref: i32) -> (i64, i64, i64) {
+    let pow = |v: i32| {
+        let v2 = mul_q24(v, v);
+        [ONE_Q24, v, v2, mul_q24(v2, v)]
+    };
+    let (pp, pr) = (pow(p), pow(p_ref));
+    let (mut value, mut off, mut der) = (0i64, 0i64, 0i64);
     for term in &t.terms {
-        let mut prod = ONE_Q24;
-        let mut coef = i64::from(term.coef);
-        let mut pp = term.position_power;
-        if derivative {
-            if pp == 0 {
-                continue;
-            }
-            coef *= i64::from(pp);
-            pp -= 1;
-        }
-        if term.input != NONE {
-            let xi = x[usize::from(term.input) % MAX_INPUTS];
+        let mut xpow = ONE_Q24;
+        if let Some(&xi) = x.get(usize::from(term.input)) {
             for _ in 0..term.input_power {
-                prod = mul_q24(prod, xi);
+                xpow = mul_q24(xpow, xi);
             }
         }
-        for _ in 0..pp {
-            prod = mul_q24(prod, p);
+        let k = usize::from(term.position_power).min(3);
+        let coef = i64::from(term.coef);
+        value += coef * i64::from(mul_q24(xpow, pp[k]));
+        off += coef * i64::from(mul_q24(xpow, pr[k]));
+        if k > 0 {
+            // k ≤ 3, so coef·k < 2^33 and the product < 2^57.
+            der += coef * k as i64 * i64::from(mul_q24(xpow, pr[k - 1]));
         }
-        acc += coef * i64::from(prod);
     }
-    acc
+    (value, off, der)
 }
 
 #[inline(always)]

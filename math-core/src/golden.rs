@@ -213,3 +213,13 @@ pub fn generate(n_steps: u32, seed: u64) -> Vec<u8> {
     }
     out
 }
+
+/// The model image inside a golden file (for benchmarks that need the model).
+pub fn image(bytes: &[u8]) -> Option<&[u8]> {
+    let mut c = Cursor { b: bytes, at: 0 };
+    if c.take(4).ok()? != MAGIC || c.u32().ok()? != 1 {
+        return None;
+    }
+    let n = c.u32().ok()? as usize;
+    c.take(n).ok()
+}

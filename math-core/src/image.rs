@@ -24,7 +24,7 @@
 //! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
 //! ```
 
-use crate::fixed::span_gain_q40;
+use crate::fixed::{normalise_q24, span_gain_q40};
 use crate::limits::*;
 use heapless::Vec;
 
@@ -197,6 +197,8 @@ pub struct Model {
     /// Precomputed from the ranges at parse time (not stored in the image).
     pub(crate) input_gain_q40: [i64; MAX_INPUTS],
     pub(crate) axis_gain_q40: [i64; MAX_AXES],
+    /// Each axis's reference position, normalised (Q24); constant per model.
+    pub(crate) axis_ref_q24: [i32; MAX_AXES],
     /// CRC-32 of the image this model came from (set by parse/encode).
     pub crc: u32,
 }
@@ -235,6 +237,7 @@ impl Model {
             tables: Vec::new(),
             input_gain_q40: [0; MAX_INPUTS],
             axis_gain_q40: [0; MAX_AXES],
+            axis_ref_q24: [0; MAX_AXES],
             crc: 0,
         }
     }
@@ -322,7 +325,7 @@ impl Model {
             let name = r.array::<8>()?;
             let max_correction = r.i32()?;
             let max_rate = r.i32()?;
-            if max_correction < 0 || max_rate < 0 {
+            if max_correction < 0 || !(0..=crate::compensator::MAX_RATE).contains(&max_rate) {
                 return Err(ImageError::BadValue {
                     what: "direction limits",
                 });
@@ -349,7 +352,9 @@ impl Model {
                     index: i as u8,
                 });
             }
-            m.axis_gain_q40[i] = span_gain_q40(i64::from(pos_max) - i64::from(pos_min));
+            let gain = span_gain_q40(i64::from(pos_max) - i64::from(pos_min));
+            m.axis_gain_q40[i] = gain;
+            m.axis_ref_q24[i] = normalise_q24(i64::from(ref_pos) << 16, pos_min, pos_max, gain).0;
             push(
                 &mut m.axes,
                 Axis {

@@ -9,10 +9,12 @@
 //! The command line (QEMU `-append`) picks what the firmware does:
 //! - `selftest [golden.bin]`: executor, timers and the math core's golden
 //!   vectors; exits 0 when every check passes, 1 otherwise;
-//! - `replay <run.csv>`: compensate the whole trace, log each correction,
-//!   exit 0 at its end (non-zero on a bad trace);
-//! - `bench`: instruction counts (run QEMU with `-icount shift=0`), printed
-//!   as one JSON line.
+//! - `replay <run.csv> [model.img]`: acquire every sample of the trace on the
+//!   emulated bus, compensate it with the model (none: "no model", zero
+//!   correction), log each correction, exit 0 at its end (3 on a bad trace);
+//! - `bench [golden.bin]`: instruction counts (run QEMU with `-icount
+//!   shift=0`) of the calibration loop and, with the golden file's model, of
+//!   one full evaluation and one compensator step, printed as one JSON line.
 #![no_std]
 #![no_main]
 
@@ -28,6 +30,7 @@ mod uart;
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use core::fmt::Write as _;
 use cortex_m_rt::{entry, exception};
 use embassy_executor::Spawner;
 use embassy_time::{Duration, Instant, Timer};
@@ -36,7 +39,10 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{
     AcquisitionConfig, CycleReport, TemperatureAcquisition,
 };
+use thermocomp::compensation::{Compensation, PlcInputs};
 use thermocomp::trace::TraceSample;
+use thermocomp_core::limits::{MAX_AXES, MAX_IMAGE_BYTES, MAX_SENSORS};
+use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
 
 /// Exit codes of the bench firmware (the host tests check them).
 pub mod exit_code {
@@ -79,7 +85,7 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
             }
             _ => semihost::exit(exit_code::PANIC),
         },
-        "replay" => match arg.map(replay) {
+        "replay" => match arg.map(|a| replay(a, words.next())) {
             Some(Ok(task)) => spawner.spawn(task),
             Some(Err(_)) => semihost::exit(exit_code::PANIC),
             None => {
@@ -87,12 +93,15 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                 semihost::exit(exit_code::BAD_COMMAND_LINE)
             }
         },
-        "bench" => match bench() {
+        "bench" => match bench(arg) {
             Ok(task) => spawner.spawn(task),
             Err(_) => semihost::exit(exit_code::PANIC),
         },
         other => {
-            log!("unknown mode {:?}; use selftest | replay <run.csv>", other);
+            log!(
+                "unknown mode {:?}; use selftest [golden.bin] | replay <run.csv> [model.img] | bench [golden.bin]",
+                other
+            );
             semihost::exit(exit_code::BAD_COMMAND_LINE)
         }
     }
@@ -146,26 +155,32 @@ fn pass(ok: bool) -> &'static str {
 }
 
 #[embassy_executor::task]
-async fn replay(path: &'static str) {
+async fn replay(path: &'static str, model_path: Option<&'static str>) {
     let mut trace = open_trace(path);
     let channels = trace.header().channels();
     log!("replaying {} ({} temperature channels)", path, channels);
     let mut sensors = Sensors::new(channels).await;
+    let model = model_path.and_then(load_model);
+    let mut compensation = Compensation::new(model, sensors.acquisition.map());
     let mut rows = 0u32;
     loop {
         match trace.next_sample() {
             Ok(Some(sample)) => {
                 rows += 1;
                 let report = sensors.acquire(&sample).await;
+                let plc = PlcInputs {
+                    spindle_rpm: sample.spindle_rpm.unwrap_or(0),
+                    ..PlcInputs::default()
+                };
+                let out = compensation.step(&sensors.acquisition, sample.time_ms, &plc);
                 let ch0 = sensors.acquisition.value(0, sample.time_ms);
-                log!(
-                    "t={} ms ok={} faulty={} T0={:?} {:?} rpm={:?}",
+                log_correction(
+                    &compensation,
                     sample.time_ms,
-                    report.ok,
-                    report.faulty,
-                    ch0.usable(),
-                    ch0.state,
-                    sample.spindle_rpm
+                    &report,
+                    (ch0.usable(), ch0.state),
+                    plc.spindle_rpm,
+                    &out,
                 );
             }
             Ok(None) => break,
@@ -177,6 +192,129 @@ async fn replay(path: &'static str) {
     }
     log!("replay done: {} samples", rows);
     semihost::exit(exit_code::OK)
+}
+
+/// One line per sample: time, sensors, each direction's served correction
+/// in µm (and the model's prediction when limits changed it), status bits.
+fn log_correction(
+    c: &Compensation,
+    t_ms: u64,
+    report: &CycleReport,
+    ch0: (Option<i16>, thermocomp::process_image::ChannelState),
+    rpm: i32,
+    out: &StepOutput,
+) {
+    let mut line: heapless::String<200> = heapless::String::new();
+    let _ = write!(
+        line,
+        "t={} ms ok={} faulty={} T0={:?} {:?} rpm={} |",
+        t_ms, report.ok, report.faulty, ch0.0, ch0.1, rpm
+    );
+    if let Some(m) = c.model() {
+        for d in 0..m.directions.len() {
+            let _ = write!(
+                line,
+                " {}={}",
+                m.direction_name(d),
+                Micrometres(out.corrections[d])
+            );
+            if out.corrections[d] != out.predicted[d] {
+                let _ = write!(line, "({})", Micrometres(out.predicted[d]));
+            }
+        }
+    }
+    log!(
+        "{} um status={:#06x}{}",
+        line,
+        out.status,
+        StatusNames(out.status)
+    );
+}
+
+/// 0.1 µm as a signed decimal µm value.
+struct Micrometres(i32);
+
+impl core::fmt::Display for Micrometres {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let sign = if self.0 < 0 { "-" } else { "+" };
+        let a = self.0.unsigned_abs();
+        write!(f, "{}{}.{}", sign, a / 10, a % 10)
+    }
+}
+
+struct StatusNames(u16);
+
+impl core::fmt::Display for StatusNames {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use thermocomp_core::compensator::status::*;
+        const NAMES: [(u16, &str); 8] = [
+            (VALID, "valid"),
+            (SENSOR_FAULT, "sensor-fault"),
+            (NO_MODEL, "no-model"),
+            (CLAMPED, "clamped"),
+            (WARMING_UP, "warming-up"),
+            (STALE_INPUTS, "stale"),
+            (OUT_OF_ENVELOPE, "out-of-envelope"),
+            (RATE_LIMITED, "rate-limited"),
+        ];
+        for (bit, name) in NAMES {
+            if self.0 & bit != 0 {
+                write!(f, " {}", name)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Read a whole host file into `buf`; None (logged) when it cannot.
+fn read_host_file<'a>(path: &str, buf: &'a mut [u8]) -> Option<&'a [u8]> {
+    let mut path_nul = [0u8; 200];
+    let dst = path_nul.get_mut(..path.len())?;
+    dst.copy_from_slice(path.as_bytes());
+    let Some(mut f) = semihost::HostFile::open(&path_nul[..=path.len()]) else {
+        log!("cannot open {}", path);
+        return None;
+    };
+    let mut n = 0;
+    loop {
+        let rest = buf.get_mut(n..)?;
+        if rest.is_empty() {
+            log!("{} is larger than {} bytes", path, n);
+            return None;
+        }
+        match f.read(rest) {
+            Ok(0) => return buf.get(..n),
+            Ok(k) => n += k,
+            Err(()) => {
+                log!("cannot read {}", path);
+                return None;
+            }
+        }
+    }
+}
+
+/// Load and validate a model image from the host; a bad image is logged and
+/// the board serves "no model".
+fn load_model(path: &str) -> Option<Model> {
+    static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
+    let buf = BUF.try_init([0; MAX_IMAGE_BYTES])?;
+    let bytes = read_host_file(path, buf)?;
+    match Model::parse(bytes) {
+        Ok(m) => {
+            log!(
+                "model {} loaded: version {}, crc {:#010x}, {} directions",
+                path,
+                m.model_version,
+                m.crc,
+                m.directions.len()
+            );
+            Some(m)
+        }
+        Err(e) => {
+            log!("model {} refused: {:?}; serving no model", path, e);
+            None
+        }
+    }
 }
 
 fn open_trace(path: &str) -> host_trace::HostTrace {
@@ -255,10 +393,37 @@ impl Sensors {
 }
 
 mod golden {
+    use static_cell::StaticCell;
+
+    /// Largest golden file the board reads.
+    const MAX_GOLDEN_BYTES: usize = 256 * 1024;
+    static BUF: StaticCell<[u8; MAX_GOLDEN_BYTES]> = StaticCell::new();
+
+    /// The golden file's bytes (read once).
+    pub fn load(path: &str) -> Option<&'static [u8]> {
+        let buf = BUF.try_init([0; MAX_GOLDEN_BYTES])?;
+        crate::read_host_file(path, buf)
+    }
+
     /// Run the math core's golden vectors from a host file; true when all pass.
     pub fn check_file(path: &str) -> bool {
-        crate::log!("golden vectors {}: not wired yet", path);
-        false
+        let Some(bytes) = load(path) else {
+            return false;
+        };
+        match thermocomp_core::golden::check(bytes) {
+            Ok(n) => {
+                crate::log!(
+                    "golden vectors {}: {} steps reproduced bit for bit: pass",
+                    path,
+                    n
+                );
+                true
+            }
+            Err(e) => {
+                crate::log!("golden vectors {}: {:?}: FAIL", path, e);
+                false
+            }
+        }
     }
 }
 
@@ -300,12 +465,68 @@ fn known_loop() {
 }
 
 #[embassy_executor::task]
-async fn bench() {
+async fn bench(golden_path: Option<&'static str>) {
     const RUNS: u32 = 2000;
     let known = cycles::instructions_x100(RUNS, known_loop);
-    log!(
-        "{{\"method\":\"qemu -icount shift=0, SysTick at 25 MHz = 40 insn/count, {} runs\",\"known_loop_3000_insn_x100\":{}}}",
+    let mut line: heapless::String<400> = heapless::String::new();
+    let _ = write!(
+        line,
+        "{{\"method\":\"qemu -icount shift=0, SysTick at 25 MHz = 40 insn/count, {} runs\",\"known_loop_3000_insn_x100\":{}",
         RUNS, known
     );
+    if let Some(model) = golden_path
+        .and_then(golden::load)
+        .and_then(thermocomp_core::golden::image)
+        .and_then(|b| Model::parse(b).ok())
+    {
+        // The seed's configuration (one 5-11-1 network and one position-
+        // dependent table), the network alone, then the whole demo model.
+        let mut seed_config = model.clone();
+        seed_config.nets.truncate(1);
+        seed_config.tables.truncate(1);
+        let mut net_only = seed_config.clone();
+        net_only.tables.clear();
+        let (net, _) = bench_model(net_only);
+        let (seed, _) = bench_model(seed_config);
+        let (eval, step) = bench_model(model);
+        let _ = write!(
+            line,
+            ",\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{}",
+            net, seed, eval, step
+        );
+    }
+    log!("{}}}", line);
     semihost::exit(exit_code::OK)
+}
+
+/// Instructions of one full evaluation (all networks and tables) and of one
+/// compensator step (features, lag filters for one step, evaluation, limits)
+/// at mid-range inputs, averaged over many calls.
+fn bench_model(model: Model) -> (u64, u64) {
+    const RUNS: u32 = 500;
+    let features: heapless::Vec<i64, 16> = model
+        .inputs
+        .iter()
+        .map(|i| (i64::from(i.min) + i64::from(i.max)) << 15)
+        .collect();
+    let positions = [0i32; MAX_AXES];
+    let eval = cycles::instructions_x100(RUNS, || {
+        core::hint::black_box(model.evaluate(core::hint::black_box(&features), &positions));
+    });
+    let temps = [Some(400i32); MAX_SENSORS];
+    let n = model.sensors.len();
+    let mut comp = Compensator::new(Some(model));
+    let mut now = 0u64;
+    let step = cycles::instructions_x100(RUNS, || {
+        now += 1000;
+        let input = StepInput {
+            now_ms: now,
+            temps: &temps[..n],
+            spindle_rpm: 6000,
+            positions: &positions,
+            stale: false,
+        };
+        core::hint::black_box(comp.step(core::hint::black_box(&input)));
+    });
+    (eval, step)
 }

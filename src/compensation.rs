@@ -1,0 +1,93 @@
+//! Application glue between acquisition and the math core: resolve the
+//! model's sensors to bus channels, hand the core fresh or held values (never
+//! a faulty one), and keep the compensator's state between cycles.
+
+use crate::acquisition::channel_map::ChannelMap;
+use crate::acquisition::rom::RomCode;
+use crate::acquisition::temperature::{TemperatureAcquisition, Validity};
+use crate::process_image::MAX_CHANNELS;
+use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
+use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
+
+/// Machine data the PLC writes (spindle speed, axis positions), with its age.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PlcInputs {
+    pub spindle_rpm: i32,
+    /// µm (or 0.001°), in the model's axis order.
+    pub positions: [i32; MAX_AXES],
+    /// The PLC has not written for longer than its timeout.
+    pub stale: bool,
+}
+
+pub struct Compensation {
+    compensator: Compensator,
+    /// Bus channel of each model sensor; `None` when the model names a ROM
+    /// code that is not on the bus (that input is then invalid).
+    channel_of: [Option<u8>; MAX_SENSORS],
+}
+
+impl Compensation {
+    pub fn new(model: Option<Model>, map: &ChannelMap) -> Self {
+        let mut c = Compensation {
+            compensator: Compensator::new(None),
+            channel_of: [None; MAX_SENSORS],
+        };
+        c.load(model, map);
+        c
+    }
+
+    /// Swap the model (after an upload) and resolve its sensors again.
+    pub fn load(&mut self, model: Option<Model>, map: &ChannelMap) {
+        self.channel_of = [None; MAX_SENSORS];
+        if let Some(m) = &model {
+            for (slot, s) in self.channel_of.iter_mut().zip(&m.sensors) {
+                *slot = if s.rom == [0; 8] {
+                    (usize::from(s.channel) < MAX_CHANNELS).then_some(s.channel)
+                } else {
+                    map.channel_of(&RomCode(s.rom))
+                        .and_then(|c| u8::try_from(c).ok())
+                };
+            }
+        }
+        self.compensator.load(model);
+    }
+
+    pub fn compensator(&mut self) -> &mut Compensator {
+        &mut self.compensator
+    }
+
+    pub fn model(&self) -> Option<&Model> {
+        self.compensator.model()
+    }
+
+    /// Bus channel feeding model sensor `i`.
+    pub fn channel_of(&self, i: usize) -> Option<u8> {
+        self.channel_of.get(i).copied().flatten()
+    }
+
+    /// One compensation step on the latest acquisition cycle.
+    pub fn step(
+        &mut self,
+        acq: &TemperatureAcquisition,
+        now_ms: u64,
+        plc: &PlcInputs,
+    ) -> StepOutput {
+        let mut temps = [None; MAX_SENSORS];
+        let mut stale = plc.stale;
+        let n = self.compensator.model().map_or(0, |m| m.sensors.len());
+        for (t, ch) in temps.iter_mut().zip(self.channel_of.iter()).take(n) {
+            if let Some(ch) = ch {
+                let v = acq.value(usize::from(*ch), now_ms);
+                stale |= v.validity == Validity::Held;
+                *t = v.usable().map(i32::from);
+            }
+        }
+        self.compensator.step(&StepInput {
+            now_ms,
+            temps: &temps[..n],
+            spindle_rpm: plc.spindle_rpm,
+            positions: &plc.positions,
+            stale,
+        })
+    }
+}
