@@ -1,4 +1,5 @@
 //! tcomp: the desktop side of thermocomp. Every subcommand is a module here;
 //! `main.rs` only parses the command line and dispatches.
 
+pub mod export;
 pub mod runcsv;

@@ -14,6 +14,27 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Quantize a model through the core's quantizer and write the board's model image.
+    Export {
+        /// Export the built-in demonstration model (random weights from --seed).
+        #[arg(long)]
+        demo: bool,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(short, long)]
+        out: std::path::PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write golden vectors (demo model, inputs, host outputs) for the board's self-test.
+    Golden {
+        #[arg(short, long)]
+        out: std::path::PathBuf,
+        #[arg(long, default_value_t = 2000)]
+        steps: u32,
+        #[arg(long, default_value_t = 99)]
+        seed: u64,
+    },
     /// Print a run file's summary (rows, columns, metadata).
     Info {
         run: std::path::PathBuf,
@@ -25,6 +46,15 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Export { demo, seed, out, json } => {
+            anyhow::ensure!(demo, "say what to export: --demo (fitted models: see `tcomp fit --out`)");
+            let summary = tcomp::export::export(&thermocomp_core::float::demo_model(seed), &out)?;
+            tcomp::export::print_summary(&summary, &out, json);
+        }
+        Command::Golden { out, steps, seed } => {
+            let n = tcomp::export::golden(&out, steps, seed)?;
+            println!("wrote {} ({n} bytes, {steps} steps)", out.display());
+        }
         Command::Info { run, json } => {
             let r = tcomp::runcsv::Run::read(&run)?;
             if json {
