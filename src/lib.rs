@@ -7,3 +7,5 @@ pub mod compensation;
 pub mod hal;
 pub mod process_image;
 pub mod trace;
+pub mod model_store;
+pub mod modbus;

@@ -1,0 +1,131 @@
+//! NOR flash double with power-cut injection: erase sets bytes to 0xFF,
+//! programming can only clear bits (as real NOR), writes must be aligned to
+//! `WRITE_SIZE`, and after `budget` word programs or sector erases the power
+//! "fails": that operation stops half way and every later one errors, until
+//! `power_on` (a reboot, flash contents kept).
+
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+
+pub const WRITE_SIZE: usize = 4;
+pub const ERASE_SIZE: usize = 1024;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MockError {
+    PowerLost,
+    NotAligned,
+    OutOfBounds,
+}
+
+impl NorFlashError for MockError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            MockError::NotAligned => NorFlashErrorKind::NotAligned,
+            MockError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            MockError::PowerLost => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+pub struct MockFlash {
+    pub bytes: Vec<u8>,
+    /// Operations (word programs, sector erases) left before the power fails.
+    pub budget: Option<u64>,
+    pub powered: bool,
+    pub operations: u64,
+}
+
+impl MockFlash {
+    pub fn new(size: usize) -> Self {
+        MockFlash { bytes: vec![0xFF; size], budget: None, powered: true, operations: 0 }
+    }
+
+    pub fn power_on(&mut self) {
+        self.powered = true;
+        self.budget = None;
+    }
+
+    fn spend(&mut self) -> Result<(), MockError> {
+        if !self.powered {
+            return Err(MockError::PowerLost);
+        }
+        self.operations += 1;
+        if let Some(b) = self.budget.as_mut() {
+            if *b == 0 {
+                self.powered = false;
+                return Err(MockError::PowerLost);
+            }
+            *b -= 1;
+        }
+        Ok(())
+    }
+}
+
+impl ErrorType for MockFlash {
+    type Error = MockError;
+}
+
+impl ReadNorFlash for MockFlash {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), MockError> {
+        let o = offset as usize;
+        let src = self.bytes.get(o..o + bytes.len()).ok_or(MockError::OutOfBounds)?;
+        bytes.copy_from_slice(src);
+        Ok(())
+    }
+    fn capacity(&self) -> usize {
+        self.bytes.len()
+    }
+}
+
+impl NorFlash for MockFlash {
+    const WRITE_SIZE: usize = WRITE_SIZE;
+    const ERASE_SIZE: usize = ERASE_SIZE;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), MockError> {
+        let (from, to) = (from as usize, to as usize);
+        if from % ERASE_SIZE != 0 || to % ERASE_SIZE != 0 {
+            return Err(MockError::NotAligned);
+        }
+        if to > self.bytes.len() || from > to {
+            return Err(MockError::OutOfBounds);
+        }
+        for sector in (from..to).step_by(ERASE_SIZE) {
+            if let Err(e) = self.spend() {
+                // Power lost mid-erase: the first half of the sector is erased.
+                if e == MockError::PowerLost {
+                    self.bytes[sector..sector + ERASE_SIZE / 2].fill(0xFF);
+                }
+                return Err(e);
+            }
+            self.bytes[sector..sector + ERASE_SIZE].fill(0xFF);
+        }
+        Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), MockError> {
+        let o = offset as usize;
+        if o % WRITE_SIZE != 0 || bytes.len() % WRITE_SIZE != 0 {
+            return Err(MockError::NotAligned);
+        }
+        if o + bytes.len() > self.bytes.len() {
+            return Err(MockError::OutOfBounds);
+        }
+        for (i, word) in bytes.chunks(WRITE_SIZE).enumerate() {
+            let at = o + i * WRITE_SIZE;
+            if let Err(e) = self.spend() {
+                if e == MockError::PowerLost {
+                    // Half a word programmed.
+                    self.bytes[at] &= word[0];
+                    self.bytes[at + 1] &= word[1];
+                }
+                return Err(e);
+            }
+            for (d, s) in self.bytes[at..at + WRITE_SIZE].iter_mut().zip(word) {
+                *d &= *s; // NOR: programming only clears bits
+            }
+        }
+        Ok(())
+    }
+}

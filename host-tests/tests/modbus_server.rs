@@ -1,0 +1,205 @@
+//! The Modbus RTU server on real frames: reads, writes, the unlock rule,
+//! model upload and commit, exceptions and silent discards per the spec,
+//! and random frames never panic it.
+use heapless::Vec as HVec;
+use proptest::prelude::*;
+use thermocomp::modbus::holding::*;
+use thermocomp::modbus::registers::*;
+use thermocomp::modbus::server::{crc16, MAX_FRAME};
+use thermocomp::modbus::{Action, Server, Snapshot};
+use thermocomp_core::float::demo_model;
+
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut f = body.to_vec();
+    f.extend_from_slice(&crc16(body).to_le_bytes());
+    f
+}
+
+fn read(unit: u8, fc: u8, addr: u16, count: u16) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = count.to_be_bytes();
+    frame(&[unit, fc, a, b, c, d])
+}
+
+fn write1(unit: u8, addr: u16, v: u16) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = v.to_be_bytes();
+    frame(&[unit, 6, a, b, c, d])
+}
+
+fn write_n(unit: u8, addr: u16, vals: &[u16]) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = (vals.len() as u16).to_be_bytes();
+    let mut body = vec![unit, 0x10, a, b, c, d, (vals.len() * 2) as u8];
+    for v in vals {
+        body.extend_from_slice(&v.to_be_bytes());
+    }
+    frame(&body)
+}
+
+struct Bench {
+    server: Server,
+    snap: Snapshot,
+    reply: HVec<u8, MAX_FRAME>,
+    now: u64,
+}
+
+impl Bench {
+    fn new() -> Self {
+        let mut snap = Snapshot::default();
+        snap.sequence = 77;
+        snap.corrections[0] = -123_456;
+        snap.axes[0].offset = 42;
+        snap.axes[0].slope = -7;
+        snap.temperatures[0] = Some(centidegrees(20 * 16 + 1));
+        Bench { server: Server::new(17, 115_200), snap, reply: HVec::new(), now: 1000 }
+    }
+    fn ask(&mut self, f: &[u8]) -> (Action, Vec<u8>) {
+        let a = self.server.handle(f, self.now, &self.snap, &mut self.reply);
+        if !self.reply.is_empty() {
+            let n = self.reply.len();
+            assert_eq!(crc16(&self.reply[..n - 2]).to_le_bytes(), [self.reply[n - 2], self.reply[n - 1]], "reply CRC");
+        }
+        (a, self.reply.to_vec())
+    }
+    fn words(&mut self, fc: u8, addr: u16, count: u16) -> Vec<u16> {
+        let (_, r) = self.ask(&read(17, fc, addr, count));
+        assert_eq!(r[1], fc, "reply {r:02x?}");
+        r[3..r.len() - 2].chunks(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()
+    }
+    fn exception_of(&mut self, f: &[u8]) -> u8 {
+        let (_, r) = self.ask(f);
+        assert_eq!(r.len(), 5, "a 5-byte exception reply: {r:02x?}");
+        assert_eq!(r[1], f[1] | 0x80);
+        r[2]
+    }
+}
+
+#[test]
+fn input_registers_give_the_snapshot_with_high_word_first() {
+    let mut b = Bench::new();
+    let w = b.words(4, 0, 4);
+    assert_eq!(w, vec![0x1234, 0x5678, MAP_VERSION, b.snap.status]);
+    let c = b.words(4, IR_CORRECTIONS, 2);
+    assert_eq!(((u32::from(c[0]) << 16) | u32::from(c[1])) as i32, -123_456);
+    let axis = b.words(4, IR_AXES, AXIS_BLOCK);
+    assert_eq!(axis, vec![0, 42, 0xFFFF, 0xFFF9, 0, 0, 0, 77], "offset, slope, ref, sequence");
+    let t = b.words(4, IR_TEMPERATURES, 2);
+    assert_eq!(t, vec![2006, NOT_AVAILABLE], "20.0625 °C -> 2006 (0.01 °C), then n/a");
+    // The whole map reads in one request of up to 125 registers.
+    assert_eq!(b.words(4, IR_LAST + 1 - 125, 125).len(), 125);
+}
+
+#[test]
+fn bad_frames_are_silent_and_the_next_good_one_is_answered() {
+    let mut b = Bench::new();
+    let mut f = read(17, 4, 0, 2);
+    f[3] ^= 1; // CRC now wrong
+    assert_eq!(b.ask(&f).1, Vec::<u8>::new());
+    assert_eq!(b.ask(&f[..5]).1, Vec::<u8>::new(), "truncated");
+    assert_eq!(b.ask(&[0u8; 300]).1, Vec::<u8>::new(), "oversize");
+    assert_eq!(b.ask(&read(18, 4, 0, 2)).1, Vec::<u8>::new(), "another unit");
+    assert_eq!(b.ask(&read(0, 4, 0, 2)).1, Vec::<u8>::new(), "broadcast read");
+    assert_eq!(b.words(4, 0, 2), vec![0x1234, 0x5678]);
+    assert_eq!(b.server.counters.crc_errors, 2, "the corrupted and the truncated frame");
+}
+
+#[test]
+fn exceptions_follow_the_specification() {
+    let mut b = Bench::new();
+    assert_eq!(b.exception_of(&frame(&[17, 0x2B, 0, 0])), 0x01, "unknown function");
+    assert_eq!(b.exception_of(&frame(&[17, 0x84, 0, 0])), 0x01, "function code with the high bit");
+    assert_eq!(b.exception_of(&read(17, 1, 0, 8)), 0x01, "coils are not served");
+    assert_eq!(b.exception_of(&read(17, 4, 0, 0)), 0x03, "count 0");
+    assert_eq!(b.exception_of(&read(17, 4, 0, 126)), 0x03, "count above 125");
+    assert_eq!(b.exception_of(&read(17, 4, IR_LAST, 2)), 0x02, "past the map");
+    assert_eq!(b.exception_of(&read(17, 3, 9000, 1)), 0x02, "holding past the map");
+    assert_eq!(b.exception_of(&write1(17, HR_RESULT, 0)), 0x02, "read-only register");
+    assert_eq!(b.exception_of(&write1(17, HR_UNIT, 5)), 0x01, "locked");
+    let mut bad_count = write_n(17, HR_POSITIONS, &[1, 2]);
+    bad_count[6] = 3; // byte count disagrees
+    let n = bad_count.len();
+    let crc = crc16(&bad_count[..n - 2]).to_le_bytes();
+    bad_count[n - 2..].copy_from_slice(&crc);
+    assert_eq!(b.exception_of(&bad_count), 0x03);
+}
+
+#[test]
+fn plc_writes_positions_and_speed_without_unlock() {
+    let mut b = Bench::new();
+    let (a, r) = b.ask(&write_n(17, HR_SPINDLE, &[6000, 0xFFFF, 0xFC18]));
+    assert_eq!(a, Action::None);
+    assert_eq!(r.len(), 8, "FC16 echo reply");
+    assert_eq!(b.server.holding.spindle_rpm, 6000);
+    assert_eq!(b.server.holding.positions[0], -1000);
+    assert_eq!(b.server.holding.plc_written_ms, Some(1000));
+    // Broadcast write: done, no reply.
+    let (_, r) = b.ask(&write1(0, HR_SPINDLE, 1200));
+    assert!(r.is_empty());
+    assert_eq!(b.server.holding.spindle_rpm, 1200);
+}
+
+#[test]
+fn unlock_then_configure_and_the_lock_expires() {
+    let mut b = Bench::new();
+    assert_eq!(b.ask(&write1(17, HR_UNLOCK, 0x1111)).1.len(), 8);
+    assert_eq!(b.exception_of(&write1(17, HR_CLAMP, 100)), 0x01, "wrong code keeps it locked");
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    assert_eq!(b.words(3, HR_UNLOCK, 1), vec![1]);
+    assert_eq!(b.ask(&write1(17, HR_CLAMP, 100)).0, Action::LimitsChanged);
+    assert_eq!(b.exception_of(&write1(17, HR_BAUD, 1234)), 0x03, "no such baud rate");
+    assert_eq!(b.ask(&write1(17, HR_BAUD, 96)).0, Action::LinkChanged);
+    assert_eq!(b.server.holding.baud, 9600);
+    b.now += UNLOCK_MS;
+    assert_eq!(b.exception_of(&write1(17, HR_CLAMP, 50)), 0x01, "expired");
+    assert_eq!(b.server.holding.clamp[0], 100);
+}
+
+fn upload(b: &mut Bench, image: &[u8]) {
+    let mut padded = image.to_vec();
+    padded.resize(image.len().div_ceil(2) * 2, 0);
+    let words: Vec<u16> = padded.chunks(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect();
+    for (i, chunk) in words.chunks(100).enumerate() {
+        let (_, r) = b.ask(&write_n(17, HR_STAGING + (i * 100) as u16, chunk));
+        assert_eq!(r[1], 0x10, "{r:02x?}");
+    }
+    b.ask(&write1(17, HR_STAGED_LEN, image.len() as u16));
+}
+
+#[test]
+fn model_upload_commits_only_a_valid_image() {
+    let (mut m, _) = demo_model(3).quantize().unwrap();
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    let mut b = Bench::new();
+    // Locked: staging writes refused.
+    assert_eq!(b.exception_of(&write_n(17, HR_STAGING, &[1, 2])), 0x01);
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    let mut corrupt = img.clone();
+    corrupt[40] ^= 0xFF;
+    upload(&mut b, &corrupt);
+    assert_eq!(b.exception_of(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL)), 0x04);
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_IMAGE]);
+    upload(&mut b, &img);
+    assert_eq!(b.words(3, HR_STAGING, 2), vec![u16::from_be_bytes([img[0], img[1]]), u16::from_be_bytes([img[2], img[3]])]);
+    let (a, r) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
+    assert_eq!(r.len(), 8);
+    assert_eq!(a, Action::CommitModel { len: img.len() });
+    assert_eq!(b.server.holding.staged(), &img[..]);
+    assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a commit locks again");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(5000))]
+    #[test]
+    fn random_frames_never_panic(body in proptest::collection::vec(any::<u8>(), 0..260), fix_crc in any::<bool>(), unit in prop_oneof![Just(17u8), Just(0u8), any::<u8>()]) {
+        let mut b = Bench::new();
+        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+        let mut f = body.clone();
+        if !f.is_empty() { f[0] = unit; }
+        if fix_crc && f.len() >= 2 { f = frame(&f[..f.len() - 2]); }
+        let (_, r) = b.ask(&f);
+        prop_assert!(r.len() <= MAX_FRAME);
+        if !r.is_empty() { prop_assert_eq!(r[0], 17); }
+    }
+}

@@ -1,0 +1,277 @@
+//! Holding registers (FC03 read, FC06/FC16 write): what the PLC writes
+//! (spindle speed, axis positions), configuration and limits behind the
+//! unlock code, commands, and the model staging area.
+//!
+//! Every write request is checked as a whole before any register changes:
+//! a refused request leaves everything as it was.
+
+use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_IMAGE_BYTES};
+use thermocomp_core::Model;
+
+pub const HR_UNLOCK: u16 = 0;
+pub const HR_COMMAND: u16 = 1;
+pub const HR_RESULT: u16 = 2;
+pub const HR_UNIT: u16 = 3;
+pub const HR_BAUD: u16 = 4;
+pub const HR_SPINDLE: u16 = 5;
+/// Axis positions, int32 µm (or 0.001°), high word first, 2 registers each.
+pub const HR_POSITIONS: u16 = 6;
+/// Per-direction clamp override, 0.1 µm (0xFFFF: none, the image's limit).
+pub const HR_CLAMP: u16 = 20;
+/// Per-direction rate-limit override, 0.1 µm/s (0xFFFF: none).
+pub const HR_RATE: u16 = 26;
+/// Length in bytes of the staged model image.
+pub const HR_STAGED_LEN: u16 = 32;
+pub const HR_LAST_PLAIN: u16 = HR_STAGED_LEN;
+/// Model staging area: 2 bytes per register (first byte in the high half).
+pub const HR_STAGING: u16 = 1000;
+pub const STAGING_REGS: u16 = (MAX_IMAGE_BYTES / 2) as u16;
+
+/// Write this to HR_UNLOCK to allow configuration and model writes for 60 s.
+pub const UNLOCK_CODE: u16 = 0xA5C3;
+pub const UNLOCK_MS: u64 = 60_000;
+
+pub const CMD_COMMIT_MODEL: u16 = 1;
+pub const CMD_REREFERENCE: u16 = 2;
+pub const CMD_CLEAR_STAGING: u16 = 3;
+pub const CMD_LOCK: u16 = 4;
+
+/// Command results (HR_RESULT).
+pub mod result {
+    pub const OK: u16 = 0;
+    pub const NONE: u16 = 1;
+    /// Staged length outside 1..=MAX_IMAGE_BYTES.
+    pub const BAD_LENGTH: u16 = 2;
+    /// The staged image does not parse (CRC, version, sizes, ranges).
+    pub const BAD_IMAGE: u16 = 3;
+    /// Writing the model to flash failed; the previous model still serves.
+    pub const STORE_FAILED: u16 = 4;
+}
+
+/// Baud rates the board accepts (HR_BAUD holds baud / 100).
+pub const BAUD_RATES: [u32; 6] = [9_600, 19_200, 38_400, 57_600, 115_200, 230_400];
+
+/// Why a write was refused (mapped to a Modbus exception by the server).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WriteError {
+    /// Not a writable holding register (ILLEGAL DATA ADDRESS).
+    Address,
+    /// Value outside its range (ILLEGAL DATA VALUE).
+    Value,
+    /// Needs the unlock code first (ILLEGAL FUNCTION: wrong state).
+    Locked,
+    /// The staged model was refused (SERVER DEVICE FAILURE); HR_RESULT says why.
+    ModelRefused,
+}
+
+/// What the application must do after a write was accepted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Command {
+    None,
+    /// The staged image (this long) parsed: store it and swap it in.
+    CommitModel { len: usize },
+    Rereference,
+    /// Limits changed: apply them to the compensator.
+    LimitsChanged,
+    /// Unit address or baud rate changed: apply after the reply is sent.
+    LinkChanged,
+}
+
+pub struct Holding {
+    pub unit: u8,
+    pub baud: u32,
+    pub spindle_rpm: u16,
+    pub positions: [i32; MAX_AXES],
+    /// ms time of the PLC's last write of speed or positions.
+    pub plc_written_ms: Option<u64>,
+    pub clamp: [u16; MAX_DIRECTIONS],
+    pub rate: [u16; MAX_DIRECTIONS],
+    pub result: u16,
+    unlocked_until_ms: Option<u64>,
+    staged_len: u16,
+    staging: [u8; MAX_IMAGE_BYTES],
+}
+
+impl Holding {
+    pub fn new(unit: u8, baud: u32) -> Self {
+        Holding {
+            unit,
+            baud,
+            spindle_rpm: 0,
+            positions: [0; MAX_AXES],
+            plc_written_ms: None,
+            clamp: [u16::MAX; MAX_DIRECTIONS],
+            rate: [u16::MAX; MAX_DIRECTIONS],
+            result: result::NONE,
+            unlocked_until_ms: None,
+            staged_len: 0,
+            staging: [0; MAX_IMAGE_BYTES],
+        }
+    }
+
+    pub fn unlocked(&self, now_ms: u64) -> bool {
+        self.unlocked_until_ms.is_some_and(|t| now_ms < t)
+    }
+
+    /// The staged image bytes.
+    pub fn staged(&self) -> &[u8] {
+        &self.staging[..usize::from(self.staged_len).min(MAX_IMAGE_BYTES)]
+    }
+
+    /// Scratch buffer (the staging area) for reading a stored image at boot.
+    pub fn scratch(&mut self) -> &mut [u8; MAX_IMAGE_BYTES] {
+        &mut self.staging
+    }
+
+    pub fn read(&self, addr: u16, now_ms: u64) -> Option<u16> {
+        let pos = |a: u16| -> Option<u16> {
+            let k = a.checked_sub(HR_POSITIONS)?;
+            let v = *self.positions.get(usize::from(k / 2))? as u32;
+            Some(if k % 2 == 0 { (v >> 16) as u16 } else { v as u16 })
+        };
+        Some(match addr {
+            HR_UNLOCK => u16::from(self.unlocked(now_ms)),
+            HR_COMMAND => 0,
+            HR_RESULT => self.result,
+            HR_UNIT => u16::from(self.unit),
+            HR_BAUD => (self.baud / 100) as u16,
+            HR_SPINDLE => self.spindle_rpm,
+            a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => pos(a)?,
+            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => self.clamp[usize::from(a - HR_CLAMP)],
+            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => self.rate[usize::from(a - HR_RATE)],
+            HR_STAGED_LEN => self.staged_len,
+            a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
+                let i = usize::from(a - HR_STAGING) * 2;
+                u16::from_be_bytes([self.staging[i], self.staging[i + 1]])
+            }
+            a if a <= HR_LAST_PLAIN => 0, // reserved
+            _ => return None,
+        })
+    }
+
+    /// Write `values` to consecutive registers from `addr`, all or nothing.
+    pub fn write(&mut self, addr: u16, values: &[u16], now_ms: u64) -> Result<Command, WriteError> {
+        let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
+        let end = addr.checked_add(n).ok_or(WriteError::Address)?;
+        // A command is written alone (FC06 or a one-register FC16), so that a
+        // refused command cannot leave half a request applied.
+        if n > 1 && addr <= HR_COMMAND && end > HR_COMMAND {
+            return Err(WriteError::Value);
+        }
+        // Check every register first.
+        for (i, &v) in values.iter().enumerate() {
+            let a = addr + i as u16;
+            self.check(a, v, now_ms)?;
+        }
+        let mut command = Command::None;
+        for (i, &v) in values.iter().enumerate() {
+            let a = addr + i as u16;
+            let c = self.apply(a, v, now_ms)?;
+            if c != Command::None {
+                command = c;
+            }
+        }
+        if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&addr) || addr <= HR_SPINDLE && end > HR_SPINDLE {
+            self.plc_written_ms = Some(now_ms);
+        }
+        Ok(command)
+    }
+
+    fn protected(a: u16) -> bool {
+        !(a == HR_UNLOCK || a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a))
+    }
+
+    fn check(&self, a: u16, v: u16, now_ms: u64) -> Result<(), WriteError> {
+        let writable = matches!(a, HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN)
+            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+            || (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a)
+            || (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
+            || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
+        if !writable {
+            return Err(WriteError::Address);
+        }
+        if Self::protected(a) && !self.unlocked(now_ms) {
+            return Err(WriteError::Locked);
+        }
+        let ok = match a {
+            HR_COMMAND => matches!(v, CMD_COMMIT_MODEL | CMD_REREFERENCE | CMD_CLEAR_STAGING | CMD_LOCK),
+            HR_UNIT => (1..=247).contains(&v),
+            HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
+            HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
+            _ => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(WriteError::Value)
+        }
+    }
+
+    fn apply(&mut self, a: u16, v: u16, now_ms: u64) -> Result<Command, WriteError> {
+        match a {
+            HR_UNLOCK => {
+                self.unlocked_until_ms = (v == UNLOCK_CODE).then_some(now_ms + UNLOCK_MS);
+            }
+            HR_COMMAND => return self.command(v),
+            HR_UNIT => {
+                self.unit = v as u8;
+                return Ok(Command::LinkChanged);
+            }
+            HR_BAUD => {
+                self.baud = u32::from(v) * 100;
+                return Ok(Command::LinkChanged);
+            }
+            HR_SPINDLE => self.spindle_rpm = v,
+            HR_STAGED_LEN => self.staged_len = v,
+            a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => {
+                let k = usize::from(a - HR_POSITIONS);
+                let p = &mut self.positions[k / 2];
+                let u = *p as u32;
+                *p = if k % 2 == 0 { ((u & 0xFFFF) | (u32::from(v) << 16)) as i32 } else { ((u & 0xFFFF_0000) | u32::from(v)) as i32 };
+            }
+            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
+                self.clamp[usize::from(a - HR_CLAMP)] = v;
+                return Ok(Command::LimitsChanged);
+            }
+            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => {
+                self.rate[usize::from(a - HR_RATE)] = v;
+                return Ok(Command::LimitsChanged);
+            }
+            a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
+                let i = usize::from(a - HR_STAGING) * 2;
+                self.staging[i..i + 2].copy_from_slice(&v.to_be_bytes());
+            }
+            _ => return Err(WriteError::Address),
+        }
+        Ok(Command::None)
+    }
+
+    fn command(&mut self, v: u16) -> Result<Command, WriteError> {
+        match v {
+            CMD_COMMIT_MODEL => {
+                let len = usize::from(self.staged_len);
+                if len == 0 || len > MAX_IMAGE_BYTES {
+                    self.result = result::BAD_LENGTH;
+                    return Err(WriteError::ModelRefused);
+                }
+                if Model::parse(&self.staging[..len]).is_err() {
+                    self.result = result::BAD_IMAGE;
+                    return Err(WriteError::ModelRefused);
+                }
+                self.unlocked_until_ms = None;
+                self.result = result::OK;
+                Ok(Command::CommitModel { len })
+            }
+            CMD_REREFERENCE => Ok(Command::Rereference),
+            CMD_CLEAR_STAGING => {
+                self.staging.fill(0);
+                self.staged_len = 0;
+                Ok(Command::None)
+            }
+            _ => {
+                self.unlocked_until_ms = None;
+                Ok(Command::None)
+            }
+        }
+    }
+}

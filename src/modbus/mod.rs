@@ -1,0 +1,12 @@
+//! Modbus RTU server: the register map (documented in README.md), holding
+//! registers with the unlock rule and the model staging area, and the frame
+//! handler. Framing, CRC-16 and exception replies come from `rmodbus`; this
+//! module decides what each register means.
+
+pub mod holding;
+pub mod registers;
+pub mod server;
+
+pub use holding::Holding;
+pub use registers::Snapshot;
+pub use server::{Action, Server};

@@ -1,0 +1,179 @@
+//! Input registers (FC04): one [`Snapshot`] of everything the board reports.
+//! A request is answered from one snapshot, so every 32-bit value and every
+//! axis block in it is consistent; the sequence number (also inside each
+//! axis block) tells a PLC whether two requests saw the same snapshot.
+//! 32-bit values: high word first (register n = bits 31..16).
+
+use thermocomp_core::eval::AxisPair;
+use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
+
+use crate::process_image::MAX_CHANNELS;
+
+/// Version of this register map (input register 2).
+pub const MAP_VERSION: u16 = 1;
+pub const TEST_PATTERN: u32 = 0x1234_5678;
+/// "Not available" for 16-bit measurements.
+pub const NOT_AVAILABLE: u16 = 0x8000;
+
+pub const IR_TEST_PATTERN: u16 = 0;
+pub const IR_MAP_VERSION: u16 = 2;
+pub const IR_STATUS: u16 = 3;
+pub const IR_SEQUENCE: u16 = 4;
+pub const IR_HEARTBEAT: u16 = 6;
+pub const IR_UPTIME: u16 = 8;
+pub const IR_SAMPLE_TIME: u16 = 10;
+pub const IR_MODEL_VERSION: u16 = 12;
+pub const IR_MODEL_CRC: u16 = 14;
+pub const IR_N_DIRECTIONS: u16 = 16;
+pub const IR_N_AXES: u16 = 17;
+pub const IR_N_SENSORS: u16 = 18;
+pub const IR_PROBE: u16 = 20;
+pub const IR_PROBE_STATE: u16 = 22;
+/// Served correction per direction, int32 0.1 µm, 2 registers each.
+pub const IR_CORRECTIONS: u16 = 30;
+/// Model prediction before clamp/rate limit, int32 0.1 µm, 2 registers each.
+pub const IR_PREDICTIONS: u16 = 42;
+/// Axis blocks: offset int32 0.1 µm, slope int32 0.01 µm/m, reference
+/// position int32 µm, sequence u32: 8 registers each.
+pub const IR_AXES: u16 = 60;
+pub const AXIS_BLOCK: u16 = 8;
+/// Sensor temperatures, int16 0.01 °C (0x8000: not available).
+pub const IR_TEMPERATURES: u16 = 110;
+/// Sensor states ([`crate::process_image::ChannelState::code`]).
+pub const IR_STATES: u16 = 130;
+/// Last input register.
+pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Snapshot {
+    pub sequence: u32,
+    pub status: u16,
+    pub heartbeat: u32,
+    pub uptime_s: u32,
+    /// Time of the compensated sample, s (board uptime, or trace time on the bench).
+    pub sample_time_s: u32,
+    pub model_version: u32,
+    pub model_crc: u32,
+    pub n_directions: u16,
+    pub n_axes: u16,
+    pub n_sensors: u16,
+    /// Probe reading, 0.1 µm, and its state code.
+    pub probe: i32,
+    pub probe_state: u16,
+    pub corrections: [i32; MAX_DIRECTIONS],
+    pub predictions: [i32; MAX_DIRECTIONS],
+    pub axes: [AxisPair; MAX_AXES],
+    /// 0.01 °C, `None` where no valid value.
+    pub temperatures: [Option<i16>; MAX_CHANNELS],
+    pub states: [u8; MAX_CHANNELS],
+}
+
+impl Default for Snapshot {
+    fn default() -> Self {
+        Snapshot {
+            sequence: 0,
+            status: thermocomp_core::compensator::status::NO_MODEL,
+            heartbeat: 0,
+            uptime_s: 0,
+            sample_time_s: 0,
+            model_version: 0,
+            model_crc: 0,
+            n_directions: 0,
+            n_axes: 0,
+            n_sensors: 0,
+            probe: 0,
+            probe_state: 0,
+            corrections: [0; MAX_DIRECTIONS],
+            predictions: [0; MAX_DIRECTIONS],
+            axes: [AxisPair::default(); MAX_AXES],
+            temperatures: [None; MAX_CHANNELS],
+            states: [0; MAX_CHANNELS],
+        }
+    }
+}
+
+/// 1/16 °C → 0.01 °C (×6.25, rounded half away from zero), saturating.
+pub fn centidegrees(sixteenths: i16) -> i16 {
+    let v = i32::from(sixteenths) * 25;
+    let r = if v >= 0 { (v + 2) / 4 } else { (v - 2) / 4 };
+    r.clamp(i32::from(i16::MIN) + 1, i32::from(i16::MAX)) as i16
+}
+
+fn hi(v: u32) -> u16 {
+    (v >> 16) as u16
+}
+
+fn lo(v: u32) -> u16 {
+    v as u16
+}
+
+/// Word `k` (0: high) of a 32-bit value starting at `base`, if `addr` is in it.
+fn word32(addr: u16, base: u16, v: u32) -> Option<u16> {
+    match addr.checked_sub(base)? {
+        0 => Some(hi(v)),
+        1 => Some(lo(v)),
+        _ => None,
+    }
+}
+
+impl Snapshot {
+    /// The value of input register `addr`, or `None` past the end of the map
+    /// (the server answers ILLEGAL DATA ADDRESS). Reserved gaps read 0.
+    pub fn input_register(&self, addr: u16) -> Option<u16> {
+        if addr > IR_LAST {
+            return None;
+        }
+        let in_block = |base: u16, n: u16| addr >= base && addr < base + n;
+        let v = if let Some(w) = word32(addr, IR_TEST_PATTERN, TEST_PATTERN) {
+            w
+        } else if addr == IR_MAP_VERSION {
+            MAP_VERSION
+        } else if addr == IR_STATUS {
+            self.status
+        } else if let Some(w) = word32(addr, IR_SEQUENCE, self.sequence) {
+            w
+        } else if let Some(w) = word32(addr, IR_HEARTBEAT, self.heartbeat) {
+            w
+        } else if let Some(w) = word32(addr, IR_UPTIME, self.uptime_s) {
+            w
+        } else if let Some(w) = word32(addr, IR_SAMPLE_TIME, self.sample_time_s) {
+            w
+        } else if let Some(w) = word32(addr, IR_MODEL_VERSION, self.model_version) {
+            w
+        } else if let Some(w) = word32(addr, IR_MODEL_CRC, self.model_crc) {
+            w
+        } else if addr == IR_N_DIRECTIONS {
+            self.n_directions
+        } else if addr == IR_N_AXES {
+            self.n_axes
+        } else if addr == IR_N_SENSORS {
+            self.n_sensors
+        } else if let Some(w) = word32(addr, IR_PROBE, self.probe as u32) {
+            w
+        } else if addr == IR_PROBE_STATE {
+            self.probe_state
+        } else if in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS as u16) {
+            let k = addr - IR_CORRECTIONS;
+            let v = self.corrections[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
+            if k % 2 == 0 { hi(v) } else { lo(v) }
+        } else if in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS as u16) {
+            let k = addr - IR_PREDICTIONS;
+            let v = self.predictions[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
+            if k % 2 == 0 { hi(v) } else { lo(v) }
+        } else if in_block(IR_AXES, AXIS_BLOCK * MAX_AXES as u16) {
+            let k = addr - IR_AXES;
+            let a = self.axes[usize::from(k / AXIS_BLOCK) % MAX_AXES];
+            let field = [a.offset as u32, a.slope as u32, a.ref_pos as u32, self.sequence];
+            let v = field[usize::from((k % AXIS_BLOCK) / 2)];
+            if k % 2 == 0 { hi(v) } else { lo(v) }
+        } else if in_block(IR_TEMPERATURES, MAX_CHANNELS as u16) {
+            let t = self.temperatures[usize::from(addr - IR_TEMPERATURES) % MAX_CHANNELS];
+            t.map_or(NOT_AVAILABLE, |v| v as u16)
+        } else if in_block(IR_STATES, MAX_CHANNELS as u16) {
+            u16::from(self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS])
+        } else {
+            0
+        };
+        Some(v)
+    }
+}

@@ -1,0 +1,184 @@
+//! One Modbus RTU request in, at most one reply out.
+//!
+//! Order of checks (Modbus over serial line spec, §2.4 and the application
+//! protocol's exception rules):
+//! 1. shorter than 4 bytes, longer than 256, or a wrong CRC-16 → discarded
+//!    silently (a corrupted frame may not even be for us);
+//! 2. another unit's address → ignored; broadcast (0) → writes done, no reply;
+//! 3. unknown function → exception 01; count 0 or above the limit, or a byte
+//!    count that does not match → 03; an address outside the map → 02; a
+//!    protected write while locked → 01 (wrong state); a refused model → 04.
+//!
+//! `rmodbus` parses the request and builds replies and exceptions. Two
+//! pre-checks keep it away from u8 overflows found by the proptest below
+//! (host-tests/tests/modbus_server.rs): its `7 + bytes` sum for FC15/16 and
+//! `function + 0x80` for request function codes ≥ 0x80.
+
+use heapless::Vec;
+use rmodbus::server::{ModbusFrame, Read, Write};
+use rmodbus::{ErrorKind, ModbusProto};
+
+use super::holding::{Command, Holding, WriteError};
+use super::registers::Snapshot;
+
+/// Largest RTU frame (address + PDU 253 + CRC).
+pub const MAX_FRAME: usize = 256;
+
+const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
+
+/// CRC-16/MODBUS of `bytes` (sent low byte first).
+pub fn crc16(bytes: &[u8]) -> u16 {
+    CRC16.checksum(bytes)
+}
+
+/// What the application must do after handling a request.
+pub type Action = Command;
+
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Counters {
+    pub frames: u32,
+    pub crc_errors: u32,
+    pub broken: u32,
+    pub exceptions: u32,
+    pub replies: u32,
+}
+
+pub struct Server {
+    pub holding: Holding,
+    pub counters: Counters,
+}
+
+impl Server {
+    pub fn new(unit: u8, baud: u32) -> Self {
+        Server { holding: Holding::new(unit, baud), counters: Counters::default() }
+    }
+
+    /// Handle one received frame. `reply` is cleared and, when the request
+    /// deserves an answer, filled with the complete RTU reply (CRC included).
+    pub fn handle(&mut self, frame: &[u8], now_ms: u64, snapshot: &Snapshot, reply: &mut Vec<u8, MAX_FRAME>) -> Action {
+        reply.clear();
+        self.counters.frames = self.counters.frames.wrapping_add(1);
+        let n = frame.len();
+        if !(4..=MAX_FRAME).contains(&n) {
+            self.counters.broken += 1;
+            return Action::None;
+        }
+        let crc = u16::from_le_bytes([frame[n - 2], frame[n - 1]]);
+        if crc16(&frame[..n - 2]) != crc {
+            self.counters.crc_errors += 1;
+            return Action::None;
+        }
+        let unit = self.holding.unit;
+        let addressed = frame[0] == unit || frame[0] == 0;
+        if !addressed {
+            return Action::None;
+        }
+        // A function code with the high bit set is never a request; rmodbus
+        // would add 0x80 to it in a u8 (overflow), so answer it here.
+        if frame[1] & 0x80 != 0 {
+            if frame[0] != 0 {
+                exception(frame, 0x01, reply);
+                self.counters.exceptions += 1;
+            }
+            return Action::None;
+        }
+        // FC15/16: the byte count must match the frame and the register count.
+        if matches!(frame[1], 0x0F | 0x10) {
+            let consistent = n >= 9 && usize::from(frame[6]) + 9 == n && (frame[1] != 0x10 || u16::from_be_bytes([frame[4], frame[5]]) * 2 == u16::from(frame[6]));
+            if !consistent {
+                if frame[0] != 0 {
+                    exception(frame, 0x03, reply);
+                    self.counters.exceptions += 1;
+                }
+                return Action::None;
+            }
+        }
+        // Count 0 is not a valid read (rmodbus only checks the upper limit).
+        if matches!(frame[1], 0x01..=0x04) && n == 8 && frame[4] == 0 && frame[5] == 0 {
+            if frame[0] != 0 {
+                exception(frame, 0x03, reply);
+                self.counters.exceptions += 1;
+            }
+            return Action::None;
+        }
+        let mut action = Action::None;
+        let mut mf = ModbusFrame::new(unit, frame, ModbusProto::Rtu, reply);
+        if mf.parse().is_err() {
+            self.counters.broken += 1;
+            mf.response.clear();
+            return Action::None;
+        }
+        if mf.processing_required {
+            let processed = if mf.readonly {
+                let func = mf.func;
+                let result = match mf.get_external_read() {
+                    Ok(Read::Words(w)) => {
+                        let input = func == rmodbus::consts::ModbusFunction::GetInputs;
+                        fill_words(w.address, w.count, w.buf, |a| if input { snapshot.input_register(a) } else { self.holding.read(a, now_ms) })
+                    }
+                    Ok(Read::Bits(_)) => Err(ErrorKind::IllegalFunction),
+                    Err(e) => Err(e),
+                };
+                mf.process_external_read(result)
+            } else {
+                let result = match mf.get_external_write() {
+                    Ok(Write::Words(w)) => {
+                        let mut values: Vec<u16, 125> = Vec::new();
+                        for pair in w.data.chunks_exact(2) {
+                            let _ = values.push(u16::from_be_bytes([pair[0], pair[1]]));
+                        }
+                        match self.holding.write(w.address, &values, now_ms) {
+                            Ok(c) => {
+                                action = c;
+                                Ok(())
+                            }
+                            Err(WriteError::Address) => Err(ErrorKind::IllegalDataAddress),
+                            Err(WriteError::Value) => Err(ErrorKind::IllegalDataValue),
+                            Err(WriteError::Locked) => Err(ErrorKind::IllegalFunction),
+                            Err(WriteError::ModelRefused) => Err(ErrorKind::SlaveDeviceFailure),
+                        }
+                    }
+                    Ok(Write::Bits(_)) => Err(ErrorKind::IllegalFunction),
+                    Err(e) => Err(e),
+                };
+                mf.process_external_write(result)
+            };
+            if processed.is_err() {
+                // Only a full reply buffer gets here; say so rather than send half a reply.
+                let _ = mf.set_modbus_error_if_unset(&ErrorKind::SlaveDeviceFailure);
+            }
+        }
+        if mf.response_required {
+            if mf.error.is_some() {
+                self.counters.exceptions += 1;
+            }
+            if mf.finalize_response().is_err() {
+                mf.response.clear();
+            } else {
+                self.counters.replies += 1;
+            }
+        } else {
+            mf.response.clear();
+        }
+        action
+    }
+}
+
+/// Fill a read reply's data area; an address outside the map refuses the
+/// whole request (ILLEGAL DATA ADDRESS), as the specification asks.
+fn fill_words(start: u16, count: u16, buf: &mut [u8], value: impl Fn(u16) -> Option<u16>) -> Result<(), ErrorKind> {
+    for (i, out) in buf.chunks_exact_mut(2).take(usize::from(count)).enumerate() {
+        let a = start.checked_add(i as u16).ok_or(ErrorKind::IllegalDataAddress)?;
+        let v = value(a).ok_or(ErrorKind::IllegalDataAddress)?;
+        out.copy_from_slice(&v.to_be_bytes());
+    }
+    Ok(())
+}
+
+/// An exception reply built here (before rmodbus parses) for malformed counts.
+fn exception(frame: &[u8], code: u8, reply: &mut Vec<u8, MAX_FRAME>) {
+    reply.clear();
+    let _ = reply.extend_from_slice(&[frame[0], frame[1] | 0x80, code]);
+    let crc = crc16(reply);
+    let _ = reply.extend_from_slice(&crc.to_le_bytes());
+}
