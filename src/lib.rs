@@ -3,6 +3,7 @@
 #![no_std]
 
 pub mod acquisition;
+pub mod app;
 pub mod compensation;
 pub mod hal;
 pub mod process_image;

@@ -2,4 +2,9 @@
 //! `main.rs` only parses the command line and dispatches.
 
 pub mod export;
+pub mod replay;
 pub mod runcsv;
+pub mod sim;
+pub mod diagnose;
+pub mod fit;
+pub mod select;

@@ -35,6 +35,14 @@ enum Command {
         #[arg(long, default_value_t = 99)]
         seed: u64,
     },
+    /// Temperature-sensitive points: K-means++ groups, correlation scores, best sensor per group.
+    Select(tcomp::select::SelectArgs),
+    /// Fit MLR and GA-BPN models per channel; validate on held-out runs or time blocks.
+    Fit(tcomp::fit::cli::FitArgs),
+    /// Simulate a machine's thermal behaviour under a duty cycle into a run CSV.
+    Sim(tcomp::sim::cli::SimArgs),
+    /// Diagnose the sim-to-real gap of measured runs against a nominal machine model.
+    Diagnose(tcomp::diagnose::cli::DiagnoseArgs),
     /// Print a run file's summary (rows, columns, metadata).
     Info {
         run: std::path::PathBuf,
@@ -55,6 +63,10 @@ fn main() -> anyhow::Result<()> {
             let n = tcomp::export::golden(&out, steps, seed)?;
             println!("wrote {} ({n} bytes, {steps} steps)", out.display());
         }
+        Command::Select(args) => tcomp::select::main(args)?,
+        Command::Fit(args) => tcomp::fit::cli::main(args)?,
+        Command::Sim(args) => tcomp::sim::cli::main(args)?,
+        Command::Diagnose(args) => tcomp::diagnose::cli::main(args)?,
         Command::Info { run, json } => {
             let r = tcomp::runcsv::Run::read(&run)?;
             if json {

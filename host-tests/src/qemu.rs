@@ -82,3 +82,82 @@ pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) 
         stderr,
     }
 }
+
+/// The bench firmware running in the background with its UART0 on a host
+/// character device (`tcp:…` or `pty`), for Modbus masters to talk to.
+/// Killed when dropped.
+pub struct BenchBoard {
+    child: std::process::Child,
+    log: std::sync::Arc<std::sync::Mutex<String>>,
+}
+
+impl BenchBoard {
+    pub fn start(serial: &str, args: &[&str]) -> BenchBoard {
+        let elf = firmware_elf();
+        assert!(elf.exists(), "bench firmware {} not built: run scripts/test.sh", elf.display());
+        let mut child = Command::new("qemu-system-arm")
+            .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
+            .args(["-semihosting-config", "enable=on,target=native"])
+            .args(["-serial", serial, "-monitor", "none"])
+            .arg("-kernel")
+            .arg(&elf)
+            .arg("-append")
+            .arg(args.join(" "))
+            .current_dir(workspace_root())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("qemu-system-arm not found: apt-get install qemu-system-arm");
+        let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        for stream in [
+            child.stdout.take().map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+            child.stderr.take().map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            let log = log.clone();
+            std::thread::spawn(move || {
+                use std::io::BufRead;
+                for line in std::io::BufReader::new(stream).lines().map_while(Result::ok) {
+                    if let Ok(mut l) = log.lock() {
+                        l.push_str(&line);
+                        l.push('\n');
+                    }
+                }
+            });
+        }
+        BenchBoard { child, log }
+    }
+
+    pub fn log(&self) -> String {
+        self.log.lock().map(|l| l.clone()).unwrap_or_default()
+    }
+
+    /// Wait until the log contains `needle`; false after `limit`.
+    pub fn wait_for(&self, needle: &str, limit: Duration) -> bool {
+        let start = Instant::now();
+        while start.elapsed() < limit {
+            if self.log().contains(needle) {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+}
+
+impl Drop for BenchBoard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A TCP port free at the time of the call (bind to 0, read, release).
+pub fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free local TCP port")
+}

@@ -7,7 +7,11 @@
 //! - [`clock`]: monotonic time for ages, timeouts and filter time steps.
 //! - [`onewire`]: 1-Wire bus master at slot level (DS18B20 sensors).
 //! - [`adc`]: one ADC channel (the eddy-current probe).
+//! - [`serial`]: the RS-485 Modbus port, one RTU frame at a time.
+//! - parameter storage: `embedded_storage::nor_flash::NorFlash` (the model
+//!   slots, [`crate::model_store`]).
 
 pub mod adc;
 pub mod clock;
 pub mod onewire;
+pub mod serial;

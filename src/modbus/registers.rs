@@ -65,7 +65,7 @@ pub struct Snapshot {
     pub axes: [AxisPair; MAX_AXES],
     /// 0.01 °C, `None` where no valid value.
     pub temperatures: [Option<i16>; MAX_CHANNELS],
-    pub states: [u8; MAX_CHANNELS],
+    pub states: [u16; MAX_CHANNELS],
 }
 
 impl Default for Snapshot {
@@ -170,7 +170,7 @@ impl Snapshot {
             let t = self.temperatures[usize::from(addr - IR_TEMPERATURES) % MAX_CHANNELS];
             t.map_or(NOT_AVAILABLE, |v| v as u16)
         } else if in_block(IR_STATES, MAX_CHANNELS as u16) {
-            u16::from(self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS])
+            self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS]
         } else {
             0
         };

@@ -12,6 +12,10 @@
 //! - `replay <run.csv> [model.img]`: acquire every sample of the trace on the
 //!   emulated bus, compensate it with the model (none: "no model", zero
 //!   correction), log each correction, exit 0 at its end (3 on a bad trace);
+//! - `serve <run.csv> [model.img|-] [pace_ms]`: the Modbus RTU bench. The
+//!   trace is acquired and compensated one sample every `pace_ms` (default
+//!   100) while UART0 serves the register map; after the last sample the
+//!   board keeps serving (a host test or the demo script stops QEMU).
 //! - `bench [golden.bin]`: instruction counts (run QEMU with `-icount
 //!   shift=0`) of the calibration loop and, with the golden file's model, of
 //!   one full evaluation and one compensator step, printed as one JSON line.
@@ -21,16 +25,22 @@
 mod cycles;
 mod emulated_bus;
 mod executor;
+mod flash;
+mod rtu_port;
 mod host_trace;
 mod semihost;
 mod time_driver;
-// The Modbus port (issue 4) is wired next; until then the driver is unused.
-#[allow(dead_code)]
 mod uart;
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use core::cell::RefCell;
 use core::fmt::Write as _;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
+use thermocomp::app::{App, LinkChange};
+use thermocomp::hal::serial::RtuPort;
+use thermocomp::modbus::server::MAX_FRAME;
 use cortex_m_rt::{entry, exception};
 use embassy_executor::Spawner;
 use embassy_time::{Duration, Instant, Timer};
@@ -93,6 +103,21 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                 semihost::exit(exit_code::BAD_COMMAND_LINE)
             }
         },
+        "serve" => {
+            let Some(trace) = arg else {
+                log!("serve needs a run CSV path");
+                semihost::exit(exit_code::BAD_COMMAND_LINE)
+            };
+            let model = words.next().filter(|m| *m != "-");
+            let pace_ms = words.next().and_then(|p| p.parse().ok()).unwrap_or(100);
+            match (serve_measure(trace, model, pace_ms), serve_modbus()) {
+                (Ok(t1), Ok(t2)) => {
+                    spawner.spawn(t1);
+                    spawner.spawn(t2);
+                }
+                _ => semihost::exit(exit_code::PANIC),
+            }
+        }
         "bench" => match bench(arg) {
             Ok(task) => spawner.spawn(task),
             Err(_) => semihost::exit(exit_code::PANIC),
@@ -313,6 +338,88 @@ fn load_model(path: &str) -> Option<Model> {
         Err(e) => {
             log!("model {} refused: {:?}; serving no model", path, e);
             None
+        }
+    }
+}
+
+/// The application state both serve tasks share (never locked across an await).
+type BenchApp = App<flash::RamNor>;
+static APP: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<BenchApp>>> =
+    BlockingMutex::new(RefCell::new(None));
+
+/// Modbus unit address and baud rate the bench board starts with.
+const UNIT: u8 = 1;
+const BAUD: u32 = 115_200;
+
+#[embassy_executor::task]
+async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pace_ms: u64) {
+    let mut trace = open_trace(path);
+    let channels = trace.header().channels();
+    let mut sensors = Sensors::new(channels).await;
+    let Some(flash) = flash::RamNor::take() else {
+        semihost::exit(exit_code::PANIC)
+    };
+    let mut app = App::new(flash, flash::SLOT_SIZE, UNIT, BAUD, *sensors.acquisition.map());
+    if let Some(p) = model_path {
+        static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
+        let Some(buf) = BUF.try_init([0; MAX_IMAGE_BYTES]) else {
+            semihost::exit(exit_code::PANIC)
+        };
+        match read_host_file(p, buf).map(|img| app.program(img)) {
+            Some(Ok(())) => log!("model {} programmed into the flash slots", p),
+            other => log!("model {} not programmed ({:?}); serving what the slots hold", p, other),
+        }
+    }
+    log!(
+        "serving Modbus RTU on UART0: unit {}, {} baud, model version {} crc {:#010x}; replaying {} ({} channels), one sample per {} ms",
+        UNIT, BAUD, app.snapshot.model_version, app.snapshot.model_crc, path, channels, pace_ms
+    );
+    APP.lock(|a| *a.borrow_mut() = Some(app));
+    let mut rows = 0u32;
+    loop {
+        match trace.next_sample() {
+            Ok(Some(sample)) => {
+                rows += 1;
+                let report = sensors.acquire(&sample).await;
+                let uptime = Instant::now().as_millis();
+                let out = APP.lock(|a| {
+                    a.borrow_mut().as_mut().map(|app| app.cycle(&sensors.acquisition, sample.time_ms, uptime, sample.spindle_rpm))
+                });
+                if let (Some(out), true) = (out, rows % 50 == 1) {
+                    let ch0 = sensors.acquisition.value(0, sample.time_ms);
+                    APP.lock(|a| {
+                        if let Some(app) = a.borrow().as_ref() {
+                            log_correction(&app.compensation, sample.time_ms, &report, (ch0.usable(), ch0.state), sample.spindle_rpm.unwrap_or(0), &out);
+                        }
+                    });
+                }
+                Timer::after(Duration::from_millis(pace_ms)).await;
+            }
+            Ok(None) => break,
+            Err(e) => {
+                log!("trace error: {:?}", e);
+                semihost::exit(exit_code::TRACE_ERROR)
+            }
+        }
+    }
+    log!("trace done: {} samples; still serving", rows);
+}
+
+#[embassy_executor::task]
+async fn serve_modbus() {
+    let mut port = rtu_port::QemuRtuPort::new(BAUD);
+    let mut frame = [0u8; 300];
+    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
+    loop {
+        let Ok(n) = port.read_frame(&mut frame).await else { continue };
+        let Some(request) = frame.get(..n) else { continue };
+        let uptime = Instant::now().as_millis();
+        let change = APP.lock(|a| a.borrow_mut().as_mut().map(|app| app.request(request, uptime, &mut reply)));
+        if !reply.is_empty() {
+            port.write_frame(&reply).await;
+        }
+        if let Some(LinkChange::Reconfigure { baud }) = change {
+            port.set_baud(baud);
         }
     }
 }

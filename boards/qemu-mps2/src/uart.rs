@@ -66,9 +66,6 @@ impl Uart0 {
         uart
     }
 
-    pub fn baud(&self) -> u32 {
-        self.baud
-    }
 
     pub fn set_baud(&mut self, baud: u32) {
         // QEMU refuses divisors below 16; timing on the socket is not modelled.
@@ -93,15 +90,7 @@ impl Uart0 {
         .await
     }
 
-    /// Drop whatever is buffered (after a frame error).
-    pub fn discard_input(&mut self) {
-        critical_section::with(|cs| RX.borrow(cs).borrow_mut().clear());
-    }
 
-    /// Bytes lost because the ring was full.
-    pub fn overruns(&self) -> u32 {
-        critical_section::with(|cs| RX_OVERRUNS.borrow(cs).get())
-    }
 
     pub fn write_all(&mut self, bytes: &[u8]) {
         for &b in bytes {

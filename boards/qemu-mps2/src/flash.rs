@@ -1,0 +1,87 @@
+//! The model slots on the bench board: the MODEL_SLOTS region of memory.x
+//! (SSRAM on mps2-an386, so it keeps its contents only while QEMU runs),
+//! behind the same NorFlash trait as the real board's flash, with NOR rules:
+//! erase sets 0xFF, programming only clears bits, aligned writes.
+
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
+
+extern "C" {
+    static mut __model_slots_start: u8;
+}
+
+pub const SLOTS_BYTES: usize = 128 * 1024;
+pub const SLOT_SIZE: u32 = (SLOTS_BYTES / 2) as u32;
+
+#[derive(Debug, Clone, Copy)]
+pub enum RamNorError {
+    NotAligned,
+    OutOfBounds,
+}
+
+impl NorFlashError for RamNorError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            RamNorError::NotAligned => NorFlashErrorKind::NotAligned,
+            RamNorError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+        }
+    }
+}
+
+pub struct RamNor {
+    mem: &'static mut [u8],
+}
+
+impl RamNor {
+    /// Take the region; call once.
+    pub fn take() -> Option<RamNor> {
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        if TAKEN.swap(true, core::sync::atomic::Ordering::AcqRel) {
+            return None;
+        }
+        // SAFETY: the linker reserves MODEL_SLOTS for this alone, and TAKEN
+        // hands it out once.
+        let mem = unsafe { core::slice::from_raw_parts_mut(core::ptr::addr_of_mut!(__model_slots_start), SLOTS_BYTES) };
+        Some(RamNor { mem })
+    }
+}
+
+impl ErrorType for RamNor {
+    type Error = RamNorError;
+}
+
+impl ReadNorFlash for RamNor {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamNorError> {
+        let o = offset as usize;
+        let src = self.mem.get(o..o + bytes.len()).ok_or(RamNorError::OutOfBounds)?;
+        bytes.copy_from_slice(src);
+        Ok(())
+    }
+    fn capacity(&self) -> usize {
+        SLOTS_BYTES
+    }
+}
+
+impl NorFlash for RamNor {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = 4096;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), RamNorError> {
+        let (from, to) = (from as usize, to as usize);
+        if from % Self::ERASE_SIZE != 0 || to % Self::ERASE_SIZE != 0 {
+            return Err(RamNorError::NotAligned);
+        }
+        self.mem.get_mut(from..to).ok_or(RamNorError::OutOfBounds)?.fill(0xFF);
+        Ok(())
+    }
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamNorError> {
+        let o = offset as usize;
+        if o % Self::WRITE_SIZE != 0 || bytes.len() % Self::WRITE_SIZE != 0 {
+            return Err(RamNorError::NotAligned);
+        }
+        let dst = self.mem.get_mut(o..o + bytes.len()).ok_or(RamNorError::OutOfBounds)?;
+        for (d, s) in dst.iter_mut().zip(bytes) {
+            *d &= *s;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,211 @@
+//! Blind check of the diagnoser: generated "measured" runs with withheld
+//! effects (singles, pairs, none) at random strengths and duty cycles.
+
+use anyhow::Result;
+use serde_json::{json, Value};
+
+use super::{diagnose, Options};
+use crate::sim::{sim_run, Duty, Effect, Gauss, Machine, SimOptions, EFFECT_NAMES};
+
+/// A random 8 h (or `hours`) duty: segments of 10–60 min.
+pub fn random_duty(g: &mut Gauss, n_max: f64, hours: f64) -> Duty {
+    let mut d = Duty {
+        name: "random".into(),
+        ..Default::default()
+    };
+    let mut t = 0.0;
+    // start at rest for 10–30 min
+    let rest = 600.0 + 300.0 * (g.uniform() * 4.0).floor();
+    let push = |d: &mut Duty, t: f64, rpm: f64, feed: f64, cool: f64| {
+        d.t.push(t);
+        d.rpm.push(rpm);
+        d.feed.push(feed);
+        d.coolant.push(cool);
+        d.ambient.push(None);
+    };
+    push(&mut d, t, 0.0, 0.0, 0.0);
+    t += rest;
+    while t < hours * 3600.0 {
+        let dur = 600.0 * (1.0 + (g.uniform() * 6.0).floor());
+        let running = g.uniform() > 0.25;
+        let rpm = if running {
+            (n_max * (0.15 + 0.85 * g.uniform()) / 500.0).round() * 500.0
+        } else {
+            0.0
+        };
+        let feed = if running { (g.uniform() * 100.0).round() / 100.0 } else { 0.0 };
+        let cool = if running && g.uniform() < 0.6 { 1.0 } else { 0.0 };
+        push(&mut d, t, rpm, feed, cool);
+        t += dur;
+    }
+    d.end_s = hours * 3600.0;
+    d
+}
+
+fn lu(g: &mut Gauss, a: f64, b: f64) -> f64 {
+    a + (b - a) * g.uniform()
+}
+
+/// An effect of `kind` at a random strength visible above sensor noise.
+pub fn random_effect(g: &mut Gauss, m: &Machine, kind: &str) -> Effect {
+    let sign = if g.uniform() < 0.5 { -1.0 } else { 1.0 };
+    match kind {
+        "convection" => Effect::Convection { h_w_per_m2k: lu(g, 4.0, 20.0) },
+        "ambient_drift" => Effect::AmbientDrift {
+            amp_c: lu(g, 0.8, 3.0),
+            phase_h: lu(g, 0.0, 24.0),
+            rate_c_per_h: lu(g, -0.3, 0.3),
+            period_h: 24.0,
+        },
+        "sensor_lag" => Effect::SensorLag { tau_s: (lu(g, 60f64.ln(), 400f64.ln())).exp() },
+        "bearing_nonlinear" => Effect::BearingNonlinear { k_w: lu(g, 20.0, 80.0), p: lu(g, 1.5, 2.0) },
+        "coolant" => Effect::Coolant {
+            g_w_per_k: (lu(g, 5f64.ln(), 40f64.ln())).exp(),
+            offset_c: lu(g, -4.0, -1.0),
+            amp_c: lu(g, 0.2, 1.0),
+            period_s: lu(g, 600.0, 1800.0),
+        },
+        "ballscrew" => Effect::Ballscrew { k_w: lu(g, 30.0, 150.0) },
+        "bending" => Effect::Bending { k_um_per_k: sign * lu(g, 0.5, 3.0) },
+        _ => {
+            let i = ((g.uniform() * m.sensor_cols.len() as f64) as usize).min(m.sensor_cols.len() - 1);
+            Effect::SensorOffset { sensor: m.sensor_cols[i].clone(), offset_c: sign * lu(g, 0.3, 1.5) }
+        }
+    }
+}
+
+pub struct BenchConfig {
+    pub cases: usize,
+    pub seed: u64,
+    pub hours: f64,
+    pub sample_period_s: f64,
+    pub threads: usize,
+    pub verbose: bool,
+}
+
+/// Run the blind check; returns the summary JSON.
+pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
+    let mut g = Gauss::new(cfg.seed);
+    let n = cfg.cases.max(3);
+    let n_clean = (n / 6).max(1);
+    let n_pair = (n / 6).max(1);
+    let n_single = n - n_clean - n_pair;
+    let mut plan: Vec<Vec<&str>> = Vec::new();
+    for i in 0..n_single {
+        plan.push(vec![EFFECT_NAMES[i % EFFECT_NAMES.len()]]);
+    }
+    for _ in 0..n_pair {
+        let a = (g.uniform() * 8.0) as usize % 8;
+        let mut b = (g.uniform() * 8.0) as usize % 8;
+        if b == a {
+            b = (a + 1 + (g.uniform() * 7.0) as usize % 7) % 8;
+        }
+        plan.push(vec![EFFECT_NAMES[a], EFFECT_NAMES[b]]);
+    }
+    for _ in 0..n_clean {
+        plan.push(vec![]);
+    }
+    let opt = Options { threads: cfg.threads, ..Options::default() };
+    let (mut ok_single, mut ok_pair, mut n_s, mut n_p, mut false_alarms) = (0, 0, 0, 0, 0);
+    let mut shrinks = Vec::new();
+    let mut shrinks_um = Vec::new();
+    let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+    let mut misses = Vec::new();
+    let t_all = std::time::Instant::now();
+    let mut diag_times = Vec::new();
+    for (ci, kinds) in plan.iter().enumerate() {
+        let m = &machines[ci % machines.len()];
+        let duty = random_duty(&mut g, m.spec.n_max_rpm, cfg.hours);
+        let effects: Vec<Effect> = kinds.iter().map(|k| random_effect(&mut g, m, k)).collect();
+        let seed = 1000 + ci as u64;
+        let run = sim_run(
+            m,
+            &duty,
+            &SimOptions {
+                effects: effects.clone(),
+                seed,
+                hours: Some(cfg.hours),
+                sample_period_s: Some(cfg.sample_period_s),
+                noise: true,
+            },
+        )?;
+        let d = diagnose(m, &[(format!("case{ci}"), run)], &opt)?;
+        diag_times.push(d.seconds);
+        let top = d.findings.first();
+        let mut truth: Vec<&str> = kinds.clone();
+        truth.sort();
+        let got: Vec<String> = top.map(|f| {
+            let mut v: Vec<String> = f.name.split('+').map(String::from).collect();
+            v.sort();
+            v
+        }).unwrap_or_default();
+        let correct = got.iter().map(String::as_str).eq(truth.iter().copied());
+        let label = if kinds.is_empty() { "clean".to_string() } else { kinds.join("+") };
+        match kinds.len() {
+            0 => {
+                if !d.findings.is_empty() {
+                    false_alarms += 1;
+                }
+            }
+            1 => {
+                n_s += 1;
+                ok_single += correct as usize;
+                let e = per.entry(kinds[0].to_string()).or_default();
+                e.0 += 1;
+                e.1 += correct as usize;
+            }
+            _ => {
+                n_p += 1;
+                ok_pair += correct as usize;
+            }
+        }
+        if !kinds.is_empty() {
+            let s = top.map_or(0.0, |f| 1.0 - (f.m_after / f.m_before).sqrt());
+            shrinks.push(s);
+            if let (Some(f), Some((b, _))) = (top, d.nominal_gap_um) {
+                if let Some((_, (a, _))) = f.gap_um {
+                    if b > 1.0 {
+                        shrinks_um.push(1.0 - a / b);
+                    }
+                }
+            }
+        }
+        if !correct && !kinds.is_empty() || kinds.is_empty() && !d.findings.is_empty() {
+            misses.push(json!({
+                "case": ci, "machine": m.spec.name, "truth": effects.iter().map(|e| e.to_spec()).collect::<Vec<_>>(),
+                "got": d.findings.iter().map(|f| f.name.clone()).collect::<Vec<_>>(),
+            }));
+        }
+        if cfg.verbose {
+            eprintln!(
+                "case {ci:3} {:18} truth {:36} got {:36} {} ({:.2} s)",
+                m.spec.name,
+                label,
+                d.findings.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(","),
+                if kinds.is_empty() { if d.findings.is_empty() { "ok" } else { "FALSE ALARM" } } else if correct { "ok" } else { "MISS" },
+                d.seconds
+            );
+        }
+    }
+    let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
+    let identified = ok_single + ok_pair;
+    Ok(json!({
+        "cases": plan.len(),
+        "effect_cases": n_s + n_p,
+        "single_cases": n_s,
+        "pair_cases": n_p,
+        "clean_cases": n_clean,
+        "top1_rate": identified as f64 / (n_s + n_p).max(1) as f64,
+        "top1_single_rate": ok_single as f64 / n_s.max(1) as f64,
+        "top1_pair_rate": ok_pair as f64 / n_p.max(1) as f64,
+        "mean_heldout_gap_shrink": mean(&shrinks),
+        "mean_heldout_gap_shrink_um": mean(&shrinks_um),
+        "false_alarms": false_alarms,
+        "per_effect": per.iter().map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok}))).collect::<serde_json::Map<_, _>>(),
+        "misses": misses,
+        "hours_per_case": cfg.hours,
+        "sample_period_s": cfg.sample_period_s,
+        "mean_diagnosis_seconds": mean(&diag_times),
+        "total_seconds": t_all.elapsed().as_secs_f64(),
+    }))
+}

@@ -1,0 +1,810 @@
+//! Sim-to-real gap diagnosis: re-simulate measured runs with the nominal
+//! machine model, locate the residual (per sensor, direction, operating
+//! phase, frequency band), fit each candidate effect on the fit part and
+//! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
+
+pub mod bench;
+pub mod cli;
+pub mod fit;
+pub mod nominal;
+pub mod prep;
+
+use anyhow::{bail, Result};
+use serde_json::{json, Value};
+
+use crate::runcsv::Run;
+use crate::sim::{Effect, Machine, EFFECT_NAMES};
+use fit::{fit_cands, Cand, Evaluator, FitResult, Stats};
+use prep::{prepare, Kind, Prepared};
+
+/// Settings of a diagnosis.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Fraction of each run's time used to fit (single run or `time_split`).
+    pub fit_fraction: f64,
+    /// Decimate runs above this many rows.
+    pub max_rows: usize,
+    /// BIC improvement required to claim an effect.
+    pub min_dbic: f64,
+    /// Relative held-out reduction required (0..1).
+    pub min_rel: f64,
+    /// Absolute held-out reduction required (noise-variance units).
+    pub min_abs: f64,
+    /// Nelder–Mead evaluations per single candidate.
+    pub budget: usize,
+    /// Try at most 2× this many pairs (best single + another candidate).
+    pub pair_top: usize,
+    /// Threads for fitting candidates in parallel.
+    pub threads: usize,
+    /// Restrict the candidates (empty = all applicable).
+    pub only: Vec<String>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            fit_fraction: 0.6,
+            max_rows: 3000,
+            min_dbic: 10.0,
+            min_rel: 0.15,
+            min_abs: 0.5,
+            budget: 45,
+            pair_top: 8,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()).min(8),
+            only: Vec::new(),
+        }
+    }
+}
+
+/// One supported effect (or combination) of the diagnosis.
+#[derive(Clone, Debug)]
+pub struct Finding {
+    pub name: String,
+    pub effects: Vec<Effect>,
+    pub dbic: f64,
+    pub m_before: f64,
+    pub m_after: f64,
+    pub gap_um: Option<((f64, f64), (f64, f64))>,
+    pub gap_c: Option<((f64, f64), (f64, f64))>,
+    pub evidence: Value,
+}
+
+impl Finding {
+    pub fn params_json(&self) -> Value {
+        if self.effects.len() == 1 {
+            self.effects[0].params_json()
+        } else {
+            let mut o = serde_json::Map::new();
+            for e in &self.effects {
+                o.insert(e.name().to_string(), e.params_json());
+            }
+            Value::Object(o)
+        }
+    }
+
+    pub fn to_json(&self) -> Value {
+        json!({
+            "name": self.name,
+            "params": self.params_json(),
+            "gap_before_um": self.gap_um.map(|g| g.0 .0),
+            "gap_after_um": self.gap_um.map(|g| g.1 .0),
+            "evidence": self.evidence,
+        })
+    }
+}
+
+/// Everything a diagnosis found.
+#[derive(Clone, Debug)]
+pub struct Diagnosis {
+    pub machine: String,
+    pub findings: Vec<Finding>,
+    /// All single candidates tried (for the report), supported or not.
+    pub tried: Vec<Finding>,
+    pub where_: Value,
+    pub nominal_m_held: f64,
+    pub nominal_gap_um: Option<(f64, f64)>,
+    pub nominal_gap_c: Option<(f64, f64)>,
+    pub notes: Vec<String>,
+    pub seconds: f64,
+    pub sims: usize,
+}
+
+impl Diagnosis {
+    pub fn to_json(&self) -> Value {
+        json!({
+            "effects": self.findings.iter().map(Finding::to_json).collect::<Vec<_>>(),
+            "where": self.where_,
+        })
+    }
+}
+
+/// Prepare runs and choose the fit/held-out split: with several runs the
+/// last ⌈40 %⌉ are held out entirely; with one run, the last (1 − f) of its time.
+pub fn prepare_all(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Vec<Prepared>> {
+    if runs.is_empty() {
+        bail!("no runs given");
+    }
+    let mut ps = runs
+        .iter()
+        .map(|(n, r)| prepare(m, r, n, opt.max_rows))
+        .collect::<Result<Vec<_>>>()?;
+    let r = ps.len();
+    if r >= 2 {
+        let held = ((r as f64) * (1.0 - opt.fit_fraction)).ceil().max(1.0) as usize;
+        for (i, p) in ps.iter_mut().enumerate() {
+            p.split = if i + held >= r { 0 } else { p.rows() };
+        }
+    } else {
+        let p = &mut ps[0];
+        p.split = ((p.rows() as f64) * opt.fit_fraction).round() as usize;
+    }
+    Ok(ps)
+}
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let pairs: Vec<(f64, f64)> = a
+        .iter()
+        .zip(b)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .map(|(x, y)| (*x, *y))
+        .collect();
+    let n = pairs.len() as f64;
+    if n < 3.0 {
+        return 0.0;
+    }
+    let ma = pairs.iter().map(|p| p.0).sum::<f64>() / n;
+    let mb = pairs.iter().map(|p| p.1).sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in &pairs {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        return 0.0;
+    }
+    sab / (saa * sbb).sqrt()
+}
+
+/// Centered moving average with window `w` rows (NaN-aware).
+fn moving_avg(v: &[f64], w: usize) -> Vec<f64> {
+    let n = v.len();
+    let h = w / 2;
+    let mut cs = vec![0.0; n + 1];
+    let mut cn = vec![0usize; n + 1];
+    for i in 0..n {
+        let ok = v[i].is_finite();
+        cs[i + 1] = cs[i] + if ok { v[i] } else { 0.0 };
+        cn[i + 1] = cn[i] + ok as usize;
+    }
+    (0..n)
+        .map(|i| {
+            let a = i.saturating_sub(h);
+            let b = (i + h + 1).min(n);
+            let c = cn[b] - cn[a];
+            if c == 0 {
+                f64::NAN
+            } else {
+                (cs[b] - cs[a]) / c as f64
+            }
+        })
+        .collect()
+}
+
+fn first_order(v: &[f64], dt: f64, tau: f64) -> Vec<f64> {
+    let e = (-dt / tau).exp();
+    let mut y = 0.0;
+    v.iter()
+        .map(|x| {
+            y = e * y + (1.0 - e) * x;
+            y
+        })
+        .collect()
+}
+
+/// Operating phase of each row from the spindle speed.
+pub fn phases(rpm: &[f64], dt: f64) -> Vec<&'static str> {
+    let mut out = Vec::with_capacity(rpm.len());
+    let mut ran = false;
+    let mut since_start = f64::INFINITY;
+    let mut since_change = f64::INFINITY;
+    let mut prev = rpm.first().copied().unwrap_or(0.0);
+    if prev > 0.0 {
+        since_start = 0.0;
+    }
+    for &r in rpm {
+        if (r - prev).abs() > 50.0 {
+            if prev <= 0.0 && r > 0.0 {
+                since_start = 0.0;
+            } else if prev > 0.0 && r > 0.0 {
+                since_change = 0.0;
+            }
+        }
+        prev = r;
+        let ph = if r > 0.0 {
+            ran = true;
+            if since_change < 600.0 {
+                "speed_change"
+            } else if since_start < 3600.0 {
+                "warm_up"
+            } else {
+                "steady"
+            }
+        } else if ran {
+            "cool_down"
+        } else {
+            "idle"
+        };
+        out.push(ph);
+        since_start += dt;
+        since_change += dt;
+    }
+    out
+}
+
+fn rms_of(vals: impl Iterator<Item = f64>) -> (f64, f64, usize) {
+    let (mut s, mut pk, mut n) = (0.0, 0.0f64, 0usize);
+    for v in vals.filter(|v| v.is_finite()) {
+        s += v * v;
+        pk = pk.max(v.abs());
+        n += 1;
+    }
+    if n == 0 {
+        (f64::NAN, f64::NAN, 0)
+    } else {
+        ((s / n as f64).sqrt(), pk, n)
+    }
+}
+
+fn r4(x: f64) -> Value {
+    if x.is_finite() {
+        json!((x * 1e4).round() / 1e4)
+    } else {
+        Value::Null
+    }
+}
+
+/// Where the nominal model's gap lies (all rows of all runs).
+fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
+    let mut sensors = serde_json::Map::new();
+    let mut dirs = serde_json::Map::new();
+    // channel name → pooled residuals over runs
+    let mut names: Vec<(String, bool)> = Vec::new();
+    for p in ps {
+        for c in &p.channels {
+            let e = (c.name.clone(), matches!(c.kind, Kind::Disp(_)));
+            if !names.contains(&e) {
+                names.push(e);
+            }
+        }
+    }
+    for (name, disp) in &names {
+        let vals: Vec<f64> = ps
+            .iter()
+            .zip(res)
+            .flat_map(|(p, rr)| {
+                p.channels
+                    .iter()
+                    .zip(rr)
+                    .filter(|(c, _)| &c.name == name)
+                    .flat_map(|(_, r)| r.iter().copied())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let (rms, pk, n) = rms_of(vals.iter().copied());
+        let mean = vals.iter().filter(|v| v.is_finite()).sum::<f64>() / n.max(1) as f64;
+        let o = json!({"rms": r4(rms), "peak": r4(pk), "mean": r4(mean)});
+        if *disp {
+            dirs.insert(name.clone(), o);
+        } else {
+            sensors.insert(name.clone(), o);
+        }
+    }
+    // phases
+    let mut ph_t: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
+    let mut ph_d: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
+    let mut ph_rows: std::collections::BTreeMap<&str, usize> = Default::default();
+    let mut bands_t = [(0.0, 0usize); 3];
+    let mut bands_d = [(0.0, 0usize); 3];
+    for (p, rr) in ps.iter().zip(res) {
+        let ph = phases(&p.inputs.rpm, p.inputs.dt);
+        for x in &ph {
+            *ph_rows.entry(x).or_default() += 1;
+        }
+        let w10 = ((600.0 / p.inputs.dt).round() as usize).max(1);
+        let w60 = ((3600.0 / p.inputs.dt).round() as usize).max(1);
+        for (c, r) in p.channels.iter().zip(rr) {
+            let disp = matches!(c.kind, Kind::Disp(_));
+            let tgt = if disp { &mut ph_d } else { &mut ph_t };
+            for (k, v) in r.iter().enumerate() {
+                if v.is_finite() {
+                    let e = tgt.entry(ph[k]).or_default();
+                    e.0 += v * v;
+                    e.1 += 1;
+                }
+            }
+            let slow = moving_avg(r, w60);
+            let mid10 = moving_avg(r, w10);
+            let b = if disp { &mut bands_d } else { &mut bands_t };
+            for k in 0..r.len() {
+                if !r[k].is_finite() {
+                    continue;
+                }
+                let parts = [slow[k], mid10[k] - slow[k], r[k] - mid10[k]];
+                for (bi, x) in parts.iter().enumerate() {
+                    if x.is_finite() {
+                        b[bi].0 += x * x;
+                        b[bi].1 += 1;
+                    }
+                }
+            }
+        }
+    }
+    let rm = |e: Option<&(f64, usize)>| match e {
+        Some((s, n)) if *n > 0 => r4((s / *n as f64).sqrt()),
+        _ => Value::Null,
+    };
+    let mut phase = serde_json::Map::new();
+    for (k, rows) in &ph_rows {
+        phase.insert(
+            k.to_string(),
+            json!({"rows": rows, "rms_c": rm(ph_t.get(k)), "rms_um": rm(ph_d.get(k))}),
+        );
+    }
+    let band_names = ["slow_gt_1h", "mid_10min_1h", "fast_lt_10min"];
+    let mut bands = serde_json::Map::new();
+    for (i, bn) in band_names.iter().enumerate() {
+        bands.insert(
+            bn.to_string(),
+            json!({"rms_c": rm(Some(&bands_t[i])), "rms_um": rm(Some(&bands_d[i]))}),
+        );
+    }
+    json!({"sensors": sensors, "directions": dirs, "phases": phase, "bands": bands})
+}
+
+/// Evidence: signature correlation (nominal residual vs the effect's change
+/// of the prediction, noise-normalised, held-out rows) and the correlation of
+/// the most affected channel's residual with the effect's physical driver.
+fn evidence(
+    ev: &Evaluator,
+    res0: &[Vec<Vec<f64>>],
+    fr: &FitResult,
+    st0: &Stats,
+    st1: &Stats,
+    dbic: f64,
+) -> Value {
+    let Ok(res1) = ev.residuals(&fr.effects) else {
+        return json!({});
+    };
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for (pi, p) in ev.runs.iter().enumerate() {
+        for (ci, c) in p.channels.iter().enumerate() {
+            for k in 0..p.rows() {
+                let r0 = res0[pi][ci][k];
+                let r1 = res1[pi][ci][k];
+                if k >= p.split || p.split == p.rows() {
+                    a.push(r0 / c.s);
+                    b.push((r0 - r1) / c.s);
+                }
+            }
+        }
+    }
+    let sig = corr(&a, &b);
+    // most affected channel
+    let mut best = (0usize, 0usize, f64::MIN);
+    for (c0, c1) in st0.ch.iter().zip(&st1.ch) {
+        let n = (c0.n_fit + c0.n_held).max(1) as f64;
+        let gain = (c0.sse_fit + c0.sse_held - c1.sse_fit - c1.sse_held) / n / (c0.s * c0.s);
+        if gain > best.2 {
+            best = (c0.run, c0.ch, gain);
+        }
+    }
+    let (pi, ci) = (best.0, best.1);
+    let p = &ev.runs[pi];
+    let ch = &p.channels[ci];
+    let dt = p.inputs.dt;
+    let kind = fr.cands.iter().map(|c| c.kind).next().unwrap_or("");
+    let (driver_name, driver): (&str, Vec<f64>) = match kind {
+        "convection" => ("mean predicted rise above ambient", {
+            let out = crate::sim::simulate(ev.m, &p.inputs, &[], 1).ok();
+            match out {
+                Some(o) => (0..p.rows())
+                    .map(|k| o.temps.iter().map(|s| s[k]).sum::<f64>() / o.temps.len().max(1) as f64 - p.inputs.ambient[k])
+                    .collect(),
+                None => vec![],
+            }
+        }),
+        "ambient_drift" => ("time", (0..p.rows()).map(|k| p.inputs.time(k)).collect()),
+        "sensor_lag" => ("rate of change of the predicted reading", {
+            let out = crate::sim::simulate(ev.m, &p.inputs, &[], 1).ok();
+            match (out, ch.kind) {
+                (Some(o), Kind::Temp(i)) => {
+                    let s = &o.temps[i];
+                    (0..s.len()).map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / dt }).collect()
+                }
+                _ => vec![],
+            }
+        }),
+        "bearing_nonlinear" => (
+            "spindle speed² (lagged 20 min)",
+            first_order(&p.inputs.rpm.iter().map(|r| r * r).collect::<Vec<_>>(), dt, 1200.0),
+        ),
+        "coolant" => ("coolant_on (lagged 20 min)", first_order(&p.inputs.coolant, dt, 1200.0)),
+        "ballscrew" => ("feed_activity (lagged 1 h)", first_order(&p.inputs.feed, dt, 3600.0)),
+        "bending" => ("predicted temperature gradient of the bending pair", {
+            let d0 = crate::sim::simulate(ev.m, &p.inputs, &[Effect::Bending { k_um_per_k: 1.0 }], 1);
+            let d1 = crate::sim::simulate(ev.m, &p.inputs, &[], 1);
+            match (d0, d1, ev.m.bending) {
+                (Ok(a), Ok(b), Some((_, _, di))) => a.disp[di].iter().zip(&b.disp[di]).map(|(x, y)| x - y).collect(),
+                _ => vec![],
+            }
+        }),
+        _ => ("constant (a bias)", vec![1.0; p.rows()]),
+    };
+    let r = &res0[pi][ci];
+    let driver_corr = if kind == "sensor_offset" {
+        let (rms, _, _) = rms_of(r.iter().copied());
+        let mean = r.iter().filter(|v| v.is_finite()).sum::<f64>() / r.iter().filter(|v| v.is_finite()).count().max(1) as f64;
+        if rms > 0.0 {
+            mean / rms
+        } else {
+            0.0
+        }
+    } else {
+        corr(r, &driver)
+    };
+    json!({
+        "signature_corr": r4(sig),
+        "channel": ch.name,
+        "driver": driver_name,
+        "driver_corr": r4(driver_corr),
+        "delta_bic": (dbic * 10.0).round() / 10.0,
+        "held_out_norm_gap_before": r4(st0.m_held().sqrt()),
+        "held_out_norm_gap_after": r4(st1.m_held().sqrt()),
+        "gap_before_c": st0.gap_held(false).map(|g| r4(g.0)),
+        "gap_after_c": st1.gap_held(false).map(|g| r4(g.0)),
+        "peak_before_um": st0.gap_held(true).map(|g| r4(g.1)),
+        "peak_after_um": st1.gap_held(true).map(|g| r4(g.1)),
+    })
+}
+
+/// Candidates applicable to this machine and these runs.
+fn candidates(m: &Machine, ps: &[Prepared], res0: &[Vec<Vec<f64>>], opt: &Options) -> Vec<Cand> {
+    let has_disp = ps.iter().any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
+    let has_temp = ps.iter().any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
+    let mut out = Vec::new();
+    for &k in EFFECT_NAMES.iter() {
+        if !opt.only.is_empty() && !opt.only.iter().any(|o| o == k) {
+            continue;
+        }
+        let ok = match k {
+            "coolant" => !m.coolant_nodes.is_empty() && ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5)),
+            "ballscrew" => !m.ballscrew_nodes.is_empty() && ps.iter().any(|p| p.inputs.feed.iter().any(|f| *f > 0.0)),
+            "bending" => m.bending.is_some() && has_disp,
+            "sensor_lag" | "sensor_offset" => has_temp,
+            "bearing_nonlinear" => !m.bearing_nodes.is_empty(),
+            "convection" => m.area.iter().any(|a| *a > 0.0),
+            _ => true,
+        };
+        if !ok {
+            continue;
+        }
+        if k == "sensor_offset" {
+            // the sensor whose fit-rows mean residual explains most of its SSE
+            let mut best: Option<(String, f64)> = None;
+            let mut acc: std::collections::BTreeMap<String, (f64, f64, usize)> = Default::default();
+            for (p, rr) in ps.iter().zip(res0) {
+                for (c, r) in p.channels.iter().zip(rr) {
+                    if let Kind::Temp(_) = c.kind {
+                        let e = acc.entry(c.name.clone()).or_default();
+                        for v in r[..p.split].iter().filter(|v| v.is_finite()) {
+                            e.0 += v;
+                            e.1 += v * v;
+                            e.2 += 1;
+                        }
+                    }
+                }
+            }
+            for (name, (s, ss, n)) in acc {
+                if n == 0 || ss <= 0.0 {
+                    continue;
+                }
+                let mean = s / n as f64;
+                let frac = n as f64 * mean * mean / ss;
+                let score = -(n as f64) * (1.0 - frac).max(1e-9).ln();
+                if best.as_ref().is_none_or(|b| score > b.1) {
+                    best = Some((name, score));
+                }
+            }
+            if let Some((sensor, _)) = best {
+                out.push(Cand { kind: k, sensor });
+            }
+        } else {
+            out.push(Cand {
+                kind: k,
+                sensor: String::new(),
+            });
+        }
+    }
+    out
+}
+
+/// Run `f` over `items` on up to `threads` threads, keeping the order.
+fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync>(items: &[T], threads: usize, f: F) -> Vec<R> {
+    let threads = threads.max(1).min(items.len().max(1));
+    if threads <= 1 {
+        return items.iter().map(&f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: std::sync::Mutex<Vec<Option<R>>> = std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if i >= items.len() {
+                    break;
+                }
+                let r = f(&items[i]);
+                if let Ok(mut g) = results.lock() {
+                    g[i] = Some(r);
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap_or_default()
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// Diagnose prepared runs against the nominal machine.
+pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
+    let t0 = std::time::Instant::now();
+    let ev = Evaluator { m, runs: ps };
+    let res0 = ev.residuals(&[])?;
+    let st0 = ev.stats_of(&res0);
+    let j0 = st0.j_fit();
+    let m0 = st0.m_held();
+    let lnn = (st0.n_fit().max(2) as f64).ln();
+    let where_ = where_analysis(ps, &res0);
+    let cands = candidates(m, ps, &res0, opt);
+    let mut sims = 1usize;
+    let singles: Vec<FitResult> = par_map(&cands, opt.threads, |c| {
+        let d = fit::params_of(c.kind).len();
+        fit_cands(&ev, std::slice::from_ref(c), None, opt.budget + 15 * d)
+    });
+    sims += singles.iter().map(|f| f.evals).sum::<usize>();
+    let mk = |fr: &FitResult, dbic: f64| -> Result<(Finding, Stats)> {
+        let st = ev.stats(&fr.effects)?;
+        let ev_json = evidence(&ev, &res0, fr, &st0, &st, dbic);
+        Ok((
+            Finding {
+                name: fr.cands.iter().map(|c| c.kind).collect::<Vec<_>>().join("+"),
+                effects: fr.effects.clone(),
+                dbic,
+                m_before: m0,
+                m_after: st.m_held(),
+                gap_um: st0.gap_held(true).zip(st.gap_held(true)),
+                gap_c: st0.gap_held(false).zip(st.gap_held(false)),
+                evidence: ev_json,
+            },
+            st,
+        ))
+    };
+    let supported = |f: &Finding, m_ref: f64| -> bool {
+        f.dbic <= -opt.min_dbic
+            && f.m_after.is_finite()
+            && f.m_after <= m_ref * (1.0 - opt.min_rel)
+            && m_ref - f.m_after >= opt.min_abs
+    };
+    let mut tried = Vec::new();
+    for fr in &singles {
+        let dbic = fr.j - j0 + fr.k as f64 * lnn;
+        tried.push((mk(fr, dbic)?.0, fr.clone()));
+    }
+    let mut singles_ok: Vec<Finding> = tried.iter().filter(|(f, _)| supported(f, m0)).map(|(f, _)| f.clone()).collect();
+    singles_ok.sort_by(|a, b| a.m_after.total_cmp(&b.m_after));
+    let best_single = singles_ok.first().cloned();
+    // pairs: the best single plus each other candidate (forward step),
+    // skipped when the best single already leaves only noise
+    let floor = opt.min_abs / opt.min_rel.max(1e-6);
+    let base_idx = match &best_single {
+        Some(b) => tried.iter().position(|t| t.0.name == b.name),
+        None => (0..tried.len())
+            .filter(|&i| tried[i].0.dbic <= -opt.min_dbic)
+            .min_by(|&a, &b| tried[a].0.dbic.total_cmp(&tried[b].0.dbic)),
+    };
+    let need_pairs = best_single.as_ref().is_none_or(|b| b.m_after > floor.max(opt.min_abs + 1.0));
+    let mut pairs = Vec::new();
+    if let (true, Some(bi)) = (need_pairs, base_idx) {
+        for j in 0..tried.len() {
+            if j != bi {
+                pairs.push((bi, j));
+            }
+        }
+        pairs.truncate(opt.pair_top.max(1) * 2);
+    }
+    let pair_fits: Vec<FitResult> = par_map(&pairs, opt.threads, |&(a, b)| {
+        let fa = &tried[a].1;
+        let fb = &tried[b].1;
+        fit::fit_added(&ev, fa, &fb.cands[0], opt.budget + 15 * (fa.u.len() + fb.u.len()))
+    });
+    sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
+    let mut best_pair: Option<(Finding, usize, usize)> = None;
+    for (fr, &(a, b)) in pair_fits.iter().zip(&pairs) {
+        let dbic = fr.j - j0 + fr.k as f64 * lnn;
+        let (f, _) = mk(fr, dbic)?;
+        // a pair must beat every single (the best one by held-out gap and
+        // both of its members by BIC) by the same margins
+        let ref_m = best_single.as_ref().map_or(m0, |b| b.m_after);
+        let ref_bic = tried[a].0.dbic.min(tried[b].0.dbic).min(best_single.as_ref().map_or(0.0, |b| b.dbic));
+        if f.dbic <= ref_bic - opt.min_dbic
+            && supported(&f, m0)
+            && f.m_after <= ref_m * (1.0 - opt.min_rel)
+            && ref_m - f.m_after >= opt.min_abs
+            && best_pair.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
+        {
+            best_pair = Some((f, a, b));
+        }
+    }
+    // the selected explanation first (a pair, then its members), then the
+    // single effects that are supported on their own as alternatives
+    let mut findings: Vec<Finding> = Vec::new();
+    if let Some((f, a, b)) = best_pair {
+        findings.push(f);
+        for i in [a, b] {
+            let mut g = tried[i].0.clone();
+            if let Some(o) = g.evidence.as_object_mut() {
+                o.insert("role".into(), json!("member of the selected combination, fitted alone"));
+            }
+            findings.push(g);
+        }
+    } else if let Some(b) = &best_single {
+        let mut g = b.clone();
+        if let Some(o) = g.evidence.as_object_mut() {
+            o.insert("role".into(), json!("selected"));
+        }
+        findings.push(g);
+    }
+    for f in singles_ok.iter() {
+        if findings.iter().any(|g| g.name == f.name) {
+            continue;
+        }
+        let mut g = f.clone();
+        if let Some(o) = g.evidence.as_object_mut() {
+            o.insert("role".into(), json!("alternative: supported alone but explains less than the selected effect"));
+        }
+        findings.push(g);
+    }
+    let mut notes: Vec<String> = ps.iter().flat_map(|p| p.notes.clone()).collect();
+    if ps.iter().any(|p| p.decimation > 1) {
+        notes.push(format!(
+            "runs decimated by {} for fitting (inputs block-averaged)",
+            ps.iter().map(|p| p.decimation).max().unwrap_or(1)
+        ));
+    }
+    Ok(Diagnosis {
+        machine: m.spec.name.clone(),
+        findings,
+        tried: tried.into_iter().map(|t| t.0).collect(),
+        where_,
+        nominal_m_held: m0,
+        nominal_gap_um: st0.gap_held(true),
+        nominal_gap_c: st0.gap_held(false),
+        notes,
+        seconds: t0.elapsed().as_secs_f64(),
+        sims,
+    })
+}
+
+/// Diagnose runs (name, run) against the nominal machine.
+pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
+    let t0 = std::time::Instant::now();
+    let ps = prepare_all(m, runs, opt)?;
+    let mut d = diagnose_prepared(m, &ps, opt)?;
+    d.seconds = t0.elapsed().as_secs_f64();
+    Ok(d)
+}
+
+fn f2(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "–".into()
+    }
+}
+
+/// Markdown report.
+pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "# Sim-to-real gap diagnosis — machine `{}`\n", d.machine);
+    let _ = writeln!(s, "Runs: {}\n", run_names.join(", "));
+    let _ = writeln!(
+        s,
+        "Nominal model, held-out data: RMS gap {} µm (peak {}), {} °C (peak {}); normalised gap {} (1 ≈ sensor noise).\n",
+        d.nominal_gap_um.map_or("–".into(), |g| f2(g.0)),
+        d.nominal_gap_um.map_or("–".into(), |g| f2(g.1)),
+        d.nominal_gap_c.map_or("–".into(), |g| f2(g.0)),
+        d.nominal_gap_c.map_or("–".into(), |g| f2(g.1)),
+        f2(d.nominal_m_held.sqrt())
+    );
+    let _ = writeln!(s, "## Which effect\n");
+    if d.findings.is_empty() {
+        let _ = writeln!(s, "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n");
+    } else {
+        let _ = writeln!(s, "| rank | effect | params | held-out gap µm before → after | °C before → after | ΔBIC | signature r | driver r |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+        for (i, f) in d.findings.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "| {} | **{}** | `{}` | {} → {} | {} → {} | {:.1} | {} | {} |",
+                i + 1,
+                f.name,
+                f.params_json(),
+                f.gap_um.map_or("–".into(), |g| f2(g.0 .0)),
+                f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
+                f.gap_c.map_or("–".into(), |g| f2(g.0 .0)),
+                f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
+                f.dbic,
+                f.evidence.get("signature_corr").cloned().unwrap_or(Value::Null),
+                f.evidence.get("driver_corr").cloned().unwrap_or(Value::Null),
+            );
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(s, "### All single candidates tried\n");
+    let _ = writeln!(s, "| effect | fitted params | ΔBIC (fit part) | held-out norm. gap before → after | µm after | °C after |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for f in &d.tried {
+        let _ = writeln!(
+            s,
+            "| {} | `{}` | {:.1} | {} → {} | {} | {} |",
+            f.name,
+            f.params_json(),
+            f.dbic,
+            f2(f.m_before.sqrt()),
+            f2(f.m_after.sqrt()),
+            f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
+            f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
+        );
+    }
+    let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
+    let w = &d.where_;
+    for (title, key, unit) in [("Per sensor", "sensors", "°C"), ("Per direction", "directions", "µm")] {
+        if let Some(o) = w.get(key).and_then(|v| v.as_object()) {
+            if o.is_empty() {
+                continue;
+            }
+            let _ = writeln!(s, "### {title} ({unit})\n\n| channel | RMS | peak | mean |\n|---|---|---|---|");
+            for (k, v) in o {
+                let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rms"], v["peak"], v["mean"]);
+            }
+            let _ = writeln!(s);
+        }
+    }
+    if let Some(o) = w.get("phases").and_then(|v| v.as_object()) {
+        let _ = writeln!(s, "### Per operating phase\n\n| phase | rows | RMS °C | RMS µm |\n|---|---|---|---|");
+        for (k, v) in o {
+            let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rows"], v["rms_c"], v["rms_um"]);
+        }
+        let _ = writeln!(s);
+    }
+    if let Some(o) = w.get("bands").and_then(|v| v.as_object()) {
+        let _ = writeln!(s, "### Per frequency band (moving-average split)\n\n| band | RMS °C | RMS µm |\n|---|---|---|");
+        for (k, v) in o {
+            let _ = writeln!(s, "| {k} | {} | {} |", v["rms_c"], v["rms_um"]);
+        }
+        let _ = writeln!(s);
+    }
+    if !d.notes.is_empty() {
+        let _ = writeln!(s, "## Notes\n");
+        for n in &d.notes {
+            let _ = writeln!(s, "- {n}");
+        }
+    }
+    let _ = writeln!(s, "\n_{} simulations in {:.2} s._", d.sims, d.seconds);
+    s
+}

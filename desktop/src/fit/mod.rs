@@ -1,0 +1,597 @@
+//! `tcomp fit`: MLR baseline and the GA-BPN network (genetic search of the
+//! initial weights, then Levenberg–Marquardt refinement), with the board's
+//! model semantics: temperatures quantized to 1/16 °C, inputs that are sensor
+//! rises / differences / spindle speed, optional first-order lags,
+//! normalization of each input to [−1, 1] by its training range.
+//!
+//! Validation is always on held-out runs or later time blocks — never a random
+//! row split.
+
+pub mod cli;
+pub mod linalg;
+pub mod net;
+pub mod rng;
+pub mod run;
+
+use std::ops::Range;
+
+use anyhow::{bail, Context, Result};
+
+use serde::{Deserialize, Serialize};
+
+use crate::runcsv::Run;
+
+// ---------------------------------------------------------------- model types
+
+/// What an input measures (before the optional lag).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum FeatureKind {
+    /// `T_i(t) − T_i(t_ref)`, `t_ref` = first row of the run (column name).
+    SensorRise(String),
+    /// `T_a − T_b` (column names).
+    SensorDiff(String, String),
+    /// Spindle speed, rpm.
+    Spindle,
+}
+
+/// One network / MLR input: kind, optional first-order lag, training range.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FeatureSpec {
+    pub kind: FeatureKind,
+    /// First-order lag time constant in seconds (`None`: no lag).
+    pub tau_s: Option<f64>,
+    /// Training range: inputs are clamped to it and mapped to [−1, 1].
+    pub min: f64,
+    pub max: f64,
+}
+
+/// The n_in–n_hidden–1 network of one displacement channel:
+/// `h_j = sigmoid(b1_j + Σ_i W1[j][i]·xn_i)`, `y_um = b2 + Σ_j w2_j·h_j`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NetParams {
+    pub features: Vec<FeatureSpec>,
+    /// `w1[j][i]`: hidden unit j, input i.
+    pub w1: Vec<Vec<f64>>,
+    pub b1: Vec<f64>,
+    pub w2: Vec<f64>,
+    pub b2: f64,
+    /// Displacement column this network predicts (e.g. `dch3_um`).
+    pub channel: String,
+}
+
+/// Multiple linear regression of one channel: `y_um = c0 + Σ c_i·xn_i`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MlrParams {
+    pub features: Vec<FeatureSpec>,
+    pub c0: f64,
+    pub coef: Vec<f64>,
+    pub channel: String,
+}
+
+/// What `fit --out` writes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ModelFile {
+    pub mlr: Vec<MlrParams>,
+    pub nets: Vec<NetParams>,
+}
+
+impl FeatureKind {
+    pub fn columns(&self) -> Vec<&str> {
+        match self {
+            FeatureKind::SensorRise(a) => vec![a],
+            FeatureKind::SensorDiff(a, b) => vec![a, b],
+            FeatureKind::Spindle => vec!["spindle_rpm"],
+        }
+    }
+}
+
+/// Short name: `rise(T_t3)`, `T_t3-T_t5`, `rpm`, with `@<tau>s` for a lag.
+pub fn feature_name(kind: &FeatureKind, tau_s: Option<f64>) -> String {
+    let base = match kind {
+        FeatureKind::SensorRise(a) => a.clone(),
+        FeatureKind::SensorDiff(a, b) => format!("{a}-{b}"),
+        FeatureKind::Spindle => "rpm".to_string(),
+    };
+    match tau_s {
+        Some(t) => format!("{base}@{t}"),
+        None => base,
+    }
+}
+
+/// Parse `T_t3`, `T_t3@3600`, `T_t3-T_t5@1800`, `rpm@600` (lag in seconds;
+/// `@0` means no lag).
+pub fn parse_feature(s: &str) -> Result<(FeatureKind, Option<f64>)> {
+    let s = s.trim();
+    let (base, tau) = match s.split_once('@') {
+        Some((b, t)) => {
+            let v: f64 =
+                t.trim().trim_end_matches('s').parse().with_context(|| {
+                    format!("feature `{s}`: lag `{t}` is not a number of seconds")
+                })?;
+            if !(v >= 0.0 && v.is_finite()) {
+                bail!("feature `{s}`: lag must be ≥ 0 s");
+            }
+            (b.trim(), if v > 0.0 { Some(v) } else { None })
+        }
+        None => (s, None),
+    };
+    let kind = if base == "rpm" || base == "spindle_rpm" || base == "spindle" {
+        FeatureKind::Spindle
+    } else if let Some((a, b)) = base.split_once('-') {
+        FeatureKind::SensorDiff(a.trim().to_string(), b.trim().to_string())
+    } else if base.is_empty() {
+        bail!("empty feature name");
+    } else {
+        FeatureKind::SensorRise(base.to_string())
+    };
+    Ok((kind, tau))
+}
+
+impl FeatureSpec {
+    pub fn name(&self) -> String {
+        feature_name(&self.kind, self.tau_s)
+    }
+    /// Clamp to [min, max] and map to [−1, 1].
+    #[inline]
+    pub fn normalize(&self, x: f64) -> f64 {
+        let span = self.max - self.min;
+        if span <= 0.0 {
+            return 0.0;
+        }
+        2.0 * (x.clamp(self.min, self.max) - self.min) / span - 1.0
+    }
+}
+
+/// A fitted model of one channel: MLR or network.
+pub trait Model {
+    fn features(&self) -> &[FeatureSpec];
+    fn channel(&self) -> &str;
+    /// Prediction in µm from normalized inputs.
+    fn predict_norm(&self, xn: &[f64]) -> f64;
+    /// Prediction in µm from raw (un-normalized) inputs.
+    fn predict_raw(&self, x: &[f64]) -> f64 {
+        let xn: Vec<f64> = self
+            .features()
+            .iter()
+            .zip(x)
+            .map(|(f, &v)| f.normalize(v))
+            .collect();
+        self.predict_norm(&xn)
+    }
+    /// Predict a whole run (features computed from the run's own first row).
+    fn predict_run(&self, run: &Run) -> Result<Vec<f64>> {
+        let kinds: Vec<_> = self
+            .features()
+            .iter()
+            .map(|f| (f.kind.clone(), f.tau_s))
+            .collect();
+        let cols = feature_columns(run, &kinds)?;
+        Ok((0..run.rows())
+            .map(|r| {
+                let x: Vec<f64> = cols.iter().map(|c| c[r]).collect();
+                self.predict_raw(&x)
+            })
+            .collect())
+    }
+}
+
+impl Model for MlrParams {
+    fn features(&self) -> &[FeatureSpec] {
+        &self.features
+    }
+    fn channel(&self) -> &str {
+        &self.channel
+    }
+    fn predict_norm(&self, xn: &[f64]) -> f64 {
+        self.c0 + self.coef.iter().zip(xn).map(|(c, x)| c * x).sum::<f64>()
+    }
+}
+
+impl Model for NetParams {
+    fn features(&self) -> &[FeatureSpec] {
+        &self.features
+    }
+    fn channel(&self) -> &str {
+        &self.channel
+    }
+    fn predict_norm(&self, xn: &[f64]) -> f64 {
+        let mut y = self.b2;
+        for j in 0..self.b1.len() {
+            let z = self.b1[j] + self.w1[j].iter().zip(xn).map(|(w, x)| w * x).sum::<f64>();
+            y += self.w2[j] * net::sigmoid(z);
+        }
+        y
+    }
+}
+
+// ------------------------------------------------------------------ features
+
+/// A DS18B20 reading: round to 1/16 °C.
+#[inline]
+pub fn quantize_temp(t: f64) -> f64 {
+    (t * 16.0).round() / 16.0
+}
+
+/// First-order lag: `y_0 = u_0`, then `y ← u + exp(−dt/tau)·(y − u)`.
+pub fn lag_filter(time_s: &[f64], u: &[f64], tau_s: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(u.len());
+    let mut y = match u.first() {
+        Some(&v) => v,
+        None => return out,
+    };
+    out.push(y);
+    for k in 1..u.len() {
+        let dt = time_s[k] - time_s[k - 1];
+        let a = (-dt / tau_s).exp();
+        y = u[k] + a * (y - u[k]);
+        out.push(y);
+    }
+    out
+}
+
+/// Column values with gaps filled by the last value (leading gaps by the
+/// first value).
+fn filled(run: &Run, name: &str) -> Result<Vec<f64>> {
+    let col = run.col(name).with_context(|| {
+        format!(
+            "run has no column `{name}` (columns: {})",
+            run.columns.join(",")
+        )
+    })?;
+    let first = col
+        .iter()
+        .flatten()
+        .next()
+        .copied()
+        .with_context(|| format!("column `{name}` has no values"))?;
+    let mut last = first;
+    Ok(col
+        .iter()
+        .map(|v| {
+            if let Some(v) = v {
+                last = *v;
+            }
+            last
+        })
+        .collect())
+}
+
+/// The raw (un-normalized) input series of one feature over a whole run.
+pub fn feature_series(run: &Run, kind: &FeatureKind, tau_s: Option<f64>) -> Result<Vec<f64>> {
+    let u: Vec<f64> = match kind {
+        FeatureKind::SensorRise(a) => {
+            let t: Vec<f64> = filled(run, a)?.into_iter().map(quantize_temp).collect();
+            let t0 = t[0];
+            t.into_iter().map(|v| v - t0).collect()
+        }
+        FeatureKind::SensorDiff(a, b) => {
+            let ta = filled(run, a)?;
+            let tb = filled(run, b)?;
+            ta.iter()
+                .zip(&tb)
+                .map(|(x, y)| quantize_temp(*x) - quantize_temp(*y))
+                .collect()
+        }
+        FeatureKind::Spindle => filled(run, "spindle_rpm")?,
+    };
+    Ok(match tau_s {
+        Some(tau) if tau > 0.0 => lag_filter(&run.time_s(), &u, tau),
+        _ => u,
+    })
+}
+
+/// Several features' series over a run: `out[feature][row]`.
+pub fn feature_columns(run: &Run, kinds: &[(FeatureKind, Option<f64>)]) -> Result<Vec<Vec<f64>>> {
+    kinds
+        .iter()
+        .map(|(k, t)| feature_series(run, k, *t))
+        .collect()
+}
+
+// -------------------------------------------------------------------- splits
+
+/// Rows `[start, end)` of run `run` (an index into the runs list).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Segment {
+    pub run: usize,
+    pub start: usize,
+    pub end: usize,
+}
+
+/// Chronological split of `n` rows at fractions `a < b`: train `[0, ⌊a·n⌋)`,
+/// validation `[⌊a·n⌋, ⌊b·n⌋)` (the FL_THERMAL protocol).
+pub fn chrono_split(n: usize, a: f64, b: f64) -> Result<(Range<usize>, Range<usize>)> {
+    if !(0.0 < a && a < b && b <= 1.0) {
+        bail!("--split-chrono a,b needs 0 < a < b ≤ 1, got {a},{b}");
+    }
+    let i = (a * n as f64).floor() as usize;
+    let j = ((b * n as f64).floor() as usize).min(n);
+    if i == 0 || j <= i {
+        bail!("--split-chrono {a},{b}: an empty part on {n} rows");
+    }
+    Ok((0..i, i..j))
+}
+
+/// Split a training segment by time: the first `1 − frac` of its time span
+/// for fitting, the last `frac` for early stopping / selection.
+pub fn time_block_split(run: &Run, seg: Segment, frac: f64) -> (Segment, Segment) {
+    let t = run.time_s();
+    if seg.end <= seg.start + 1 {
+        return (
+            seg,
+            Segment {
+                start: seg.end,
+                ..seg
+            },
+        );
+    }
+    let t0 = t[seg.start];
+    let t1 = t[seg.end - 1];
+    let cut_t = t0 + (1.0 - frac) * (t1 - t0);
+    let cut = (seg.start..seg.end)
+        .find(|&r| t[r] > cut_t)
+        .unwrap_or(seg.end);
+    (Segment { end: cut, ..seg }, Segment { start: cut, ..seg })
+}
+
+// ------------------------------------------------------------------- samples
+
+/// Rows gathered from segments: raw inputs, target (µm) and where they came from.
+#[derive(Clone, Debug, Default)]
+pub struct Samples {
+    pub x: Vec<Vec<f64>>,
+    pub y: Vec<f64>,
+    /// (run index, row index) of each sample.
+    pub rows: Vec<(usize, usize)>,
+}
+
+/// Precomputed input series: `series[feature][run][row]`.
+pub struct SeriesCache {
+    pub kinds: Vec<(FeatureKind, Option<f64>)>,
+    pub series: Vec<Vec<Vec<f64>>>,
+}
+
+impl SeriesCache {
+    pub fn new(runs: &[Run], kinds: Vec<(FeatureKind, Option<f64>)>) -> Result<SeriesCache> {
+        let series = kinds
+            .iter()
+            .map(|(k, t)| {
+                runs.iter()
+                    .map(|r| feature_series(r, k, *t))
+                    .collect::<Result<Vec<_>>>()
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(SeriesCache { kinds, series })
+    }
+
+    /// Samples of features `idx` over the segments; rows without a target are skipped.
+    pub fn samples(
+        &self,
+        runs: &[Run],
+        segs: &[Segment],
+        idx: &[usize],
+        channel: &str,
+    ) -> Result<Samples> {
+        let mut s = Samples::default();
+        for seg in segs {
+            let y = runs[seg.run]
+                .col(channel)
+                .with_context(|| format!("run {} has no column `{channel}`", seg.run + 1))?;
+            for r in seg.start..seg.end {
+                if let Some(t) = y[r] {
+                    s.x.push(idx.iter().map(|&f| self.series[f][seg.run][r]).collect());
+                    s.y.push(t);
+                    s.rows.push((seg.run, r));
+                }
+            }
+        }
+        Ok(s)
+    }
+}
+
+/// Feature specs with ranges from the training samples.
+pub fn ranged_specs(kinds: &[(FeatureKind, Option<f64>)], train: &Samples) -> Vec<FeatureSpec> {
+    kinds
+        .iter()
+        .enumerate()
+        .map(|(i, (k, t))| {
+            let mut min = f64::INFINITY;
+            let mut max = f64::NEG_INFINITY;
+            for r in &train.x {
+                min = min.min(r[i]);
+                max = max.max(r[i]);
+            }
+            if !min.is_finite() {
+                (min, max) = (0.0, 1.0);
+            }
+            FeatureSpec {
+                kind: k.clone(),
+                tau_s: *t,
+                min,
+                max,
+            }
+        })
+        .collect()
+}
+
+pub fn normalize_rows(specs: &[FeatureSpec], x: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    x.iter()
+        .map(|r| specs.iter().zip(r).map(|(f, &v)| f.normalize(v)).collect())
+        .collect()
+}
+
+// ----------------------------------------------------------------------- MLR
+
+/// Least-squares MLR on normalized inputs.
+pub fn fit_mlr(specs: Vec<FeatureSpec>, train: &Samples, channel: &str) -> MlrParams {
+    let xn = normalize_rows(&specs, &train.x);
+    let c = linalg::least_squares(&xn, &train.y, true, 1e-9 * train.y.len() as f64);
+    MlrParams {
+        features: specs,
+        c0: c[0],
+        coef: c[1..].to_vec(),
+        channel: channel.to_string(),
+    }
+}
+
+// ------------------------------------------------------------------- metrics
+
+/// Validation figures of one channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    pub mae_um: f64,
+    pub rms_um: f64,
+    pub peak_um: f64,
+    /// 100·(1 − RMS residual / RMS raw error).
+    pub reduction_pct: f64,
+    pub raw_rms_um: f64,
+    pub n: usize,
+}
+
+pub fn metrics(y: &[f64], pred: &[f64]) -> Metrics {
+    let n = y.len();
+    if n == 0 {
+        return Metrics::default();
+    }
+    let (mut sa, mut s2, mut peak, mut r2) = (0.0, 0.0, 0.0f64, 0.0);
+    for (&t, &p) in y.iter().zip(pred) {
+        let e = t - p;
+        sa += e.abs();
+        s2 += e * e;
+        peak = peak.max(e.abs());
+        r2 += t * t;
+    }
+    let rms = (s2 / n as f64).sqrt();
+    let raw = (r2 / n as f64).sqrt();
+    Metrics {
+        mae_um: sa / n as f64,
+        rms_um: rms,
+        peak_um: peak,
+        reduction_pct: if raw > 0.0 {
+            100.0 * (1.0 - rms / raw)
+        } else {
+            0.0
+        },
+        raw_rms_um: raw,
+        n,
+    }
+}
+
+// ------------------------------------------------------------ feature choice
+
+/// Blocked K-fold over the training time span: each training segment is cut
+/// into `k` consecutive time blocks; fold `f` validates on block `f` of every
+/// segment and fits on the other blocks. Returns `(fit, validate)` per fold.
+pub fn blocked_folds(
+    runs: &[Run],
+    train: &[Segment],
+    k: usize,
+) -> Vec<(Vec<Segment>, Vec<Segment>)> {
+    let k = k.max(2);
+    let mut folds = vec![(Vec::new(), Vec::new()); k];
+    for seg in train {
+        let t = runs[seg.run].time_s();
+        if seg.end <= seg.start {
+            continue;
+        }
+        let (t0, t1) = (t[seg.start], t[seg.end - 1]);
+        let mut cuts = vec![seg.start];
+        for f in 1..k {
+            let ct = t0 + (t1 - t0) * f as f64 / k as f64;
+            let c = (seg.start..seg.end).find(|&r| t[r] > ct).unwrap_or(seg.end);
+            cuts.push(c.max(*cuts.last().unwrap_or(&seg.start)));
+        }
+        cuts.push(seg.end);
+        for f in 0..k {
+            for g in 0..k {
+                let s = Segment {
+                    run: seg.run,
+                    start: cuts[g],
+                    end: cuts[g + 1],
+                };
+                if s.end > s.start {
+                    if g == f {
+                        folds[f].1.push(s);
+                    } else {
+                        folds[f].0.push(s);
+                    }
+                }
+            }
+        }
+    }
+    folds
+}
+
+/// Mean squared error of an MLR on `idx`, fitted on `fit`, scored on `val`.
+fn mlr_block_sse(
+    cache: &SeriesCache,
+    runs: &[Run],
+    fit: &[Segment],
+    val: &[Segment],
+    idx: &[usize],
+    channel: &str,
+) -> Result<(f64, usize)> {
+    let tr = cache.samples(runs, fit, idx, channel)?;
+    let va = cache.samples(runs, val, idx, channel)?;
+    if tr.y.is_empty() || va.y.is_empty() {
+        return Ok((0.0, 0));
+    }
+    let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+    let m = fit_mlr(ranged_specs(&kinds, &tr), &tr, channel);
+    let xn = normalize_rows(&m.features, &va.x);
+    let sse = xn
+        .iter()
+        .zip(&va.y)
+        .map(|(r, t)| (m.predict_norm(r) - t).powi(2))
+        .sum::<f64>();
+    Ok((sse, va.y.len()))
+}
+
+/// Greedy forward selection: add the candidate that lowers the MLR error on
+/// held-out time blocks of the training data the most (summed over `folds`);
+/// stop at `max_inputs` or when the gain is below 1 %. Returns candidate
+/// indices and their cross-validated mean squared error (µm²).
+pub fn greedy_select(
+    cache: &SeriesCache,
+    runs: &[Run],
+    folds: &[(Vec<Segment>, Vec<Segment>)],
+    channel: &str,
+    max_inputs: usize,
+) -> Result<(Vec<usize>, f64)> {
+    let mut chosen: Vec<usize> = Vec::new();
+    let mut best_err = f64::INFINITY;
+    while chosen.len() < max_inputs {
+        let mut round_best: Option<(usize, f64)> = None;
+        for c in 0..cache.kinds.len() {
+            if chosen.contains(&c) {
+                continue;
+            }
+            let mut idx = chosen.clone();
+            idx.push(c);
+            let (mut sse, mut n) = (0.0, 0usize);
+            for (fit, val) in folds {
+                let (s, k) = mlr_block_sse(cache, runs, fit, val, &idx, channel)?;
+                sse += s;
+                n += k;
+            }
+            if n == 0 {
+                bail!("channel {channel}: no rows with a value to select features on");
+            }
+            let err = sse / n as f64;
+            if round_best.is_none_or(|(_, e)| err < e) {
+                round_best = Some((c, err));
+            }
+        }
+        match round_best {
+            Some((c, e)) if e < best_err * 0.99 => {
+                chosen.push(c);
+                best_err = e;
+            }
+            _ => break,
+        }
+    }
+    if chosen.is_empty() {
+        bail!("channel {channel}: no usable input found");
+    }
+    Ok((chosen, best_err))
+}

@@ -1,0 +1,431 @@
+//! The n_in–n_hidden–1 network (logistic hidden layer, linear output) and
+//! its training: a genetic algorithm searches the hidden-layer weights
+//! (fitness = training MSE, the output layer solved by least squares for each
+//! genome), then Levenberg–Marquardt refines all weights on the full batch
+//! with early stopping on a time-block validation set.
+
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+
+use super::linalg::{least_squares, solve_spd_robust};
+use super::rng::Rng;
+
+/// Bound on |W1| and |b1| (the fixed-point core's range).
+pub const W1_BOUND: f64 = 1999.0;
+
+/// Training options for the GA + gradient network.
+#[derive(Clone, Debug)]
+pub struct NetOpts {
+    pub hidden: usize,
+    pub seed: u64,
+    pub population: usize,
+    pub generations: usize,
+    pub tournament: usize,
+    pub elites: usize,
+    pub mutation_rate: f64,
+    /// Rows used for GA fitness (evenly strided subsample of the training rows).
+    pub ga_rows: usize,
+    pub lm_iters: usize,
+    /// Early stopping: accepted LM steps without improvement on the validation block.
+    pub patience: usize,
+    /// L2 penalty on all weights (normalized target units).
+    pub l2: f64,
+    /// After early stopping, retrain from the GA's weights on all training rows
+    /// for the best number of steps (otherwise keep the early-stopped weights).
+    pub refit_full: bool,
+    /// Independent trainings (seeds `seed..seed+restarts`); best early-stopping error kept.
+    pub restarts: usize,
+}
+
+impl Default for NetOpts {
+    fn default() -> Self {
+        NetOpts {
+            hidden: 11,
+            seed: 3,
+            population: 40,
+            generations: 40,
+            tournament: 3,
+            elites: 2,
+            mutation_rate: 0.15,
+            ga_rows: 2500,
+            lm_iters: 300,
+            patience: 30,
+            l2: 1e-5,
+            refit_full: true,
+            restarts: 1,
+        }
+    }
+}
+
+/// Flat parameter layout: for each hidden unit j, `[W1[j][0..n_in], b1[j]]`,
+/// then `w2[0..nh]`, then `b2`.
+#[derive(Clone, Debug)]
+pub struct Net {
+    pub n_in: usize,
+    pub nh: usize,
+    pub theta: Vec<f64>,
+}
+
+#[inline]
+pub fn sigmoid(z: f64) -> f64 {
+    1.0 / (1.0 + (-z).exp())
+}
+
+impl Net {
+    pub fn n_params(n_in: usize, nh: usize) -> usize {
+        nh * (n_in + 1) + nh + 1
+    }
+    pub fn zeros(n_in: usize, nh: usize) -> Net {
+        Net {
+            n_in,
+            nh,
+            theta: vec![0.0; Net::n_params(n_in, nh)],
+        }
+    }
+    fn out_off(&self) -> usize {
+        self.nh * (self.n_in + 1)
+    }
+    #[inline]
+    pub fn forward(&self, x: &[f64]) -> f64 {
+        forward(&self.theta, self.n_in, self.nh, x)
+    }
+    /// Split into (w1, b1, w2, b2).
+    pub fn unpack(&self) -> (Vec<Vec<f64>>, Vec<f64>, Vec<f64>, f64) {
+        let k = self.n_in + 1;
+        let w1 = (0..self.nh)
+            .map(|j| self.theta[j * k..j * k + self.n_in].to_vec())
+            .collect();
+        let b1 = (0..self.nh)
+            .map(|j| self.theta[j * k + self.n_in])
+            .collect();
+        let o = self.out_off();
+        (
+            w1,
+            b1,
+            self.theta[o..o + self.nh].to_vec(),
+            self.theta[o + self.nh],
+        )
+    }
+    fn clamp_hidden(&mut self) {
+        let o = self.out_off();
+        for v in &mut self.theta[..o] {
+            *v = v.clamp(-W1_BOUND, W1_BOUND);
+        }
+    }
+}
+
+#[inline]
+fn forward(theta: &[f64], n_in: usize, nh: usize, x: &[f64]) -> f64 {
+    let k = n_in + 1;
+    let o = nh * k;
+    let mut y = theta[o + nh];
+    for j in 0..nh {
+        let w = &theta[j * k..j * k + k];
+        let mut z = w[n_in];
+        for i in 0..n_in {
+            z += w[i] * x[i];
+        }
+        y += theta[o + j] * sigmoid(z);
+    }
+    y
+}
+
+fn mse(net: &Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
+    if y.is_empty() {
+        return 0.0;
+    }
+    x.par_iter()
+        .zip(y.par_iter())
+        .map(|(r, &t)| {
+            let e = net.forward(r) - t;
+            e * e
+        })
+        .sum::<f64>()
+        / y.len() as f64
+}
+
+/// Set the output layer of `net` to the least-squares fit given its hidden
+/// layer; returns the training MSE.
+fn solve_output(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
+    let (n_in, nh) = (net.n_in, net.nh);
+    let k = n_in + 1;
+    let h: Vec<Vec<f64>> = x
+        .iter()
+        .map(|r| {
+            (0..nh)
+                .map(|j| {
+                    let w = &net.theta[j * k..j * k + k];
+                    let mut z = w[n_in];
+                    for i in 0..n_in {
+                        z += w[i] * r[i];
+                    }
+                    sigmoid(z)
+                })
+                .collect()
+        })
+        .collect();
+    let c = least_squares(&h, y, true, 1e-6 * y.len() as f64);
+    let o = net.out_off();
+    net.theta[o + nh] = c[0];
+    net.theta[o..o + nh].copy_from_slice(&c[1..]);
+    let mut s = 0.0;
+    for (hr, &t) in h.iter().zip(y) {
+        let mut p = c[0];
+        for j in 0..nh {
+            p += c[1 + j] * hr[j];
+        }
+        s += (p - t) * (p - t);
+    }
+    s / y.len().max(1) as f64
+}
+
+/// Genetic search of the hidden-layer weights. Returns the best network
+/// (output layer least-squares fitted) and its fitness history.
+pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) -> (Net, Vec<f64>) {
+    let n_in = x.first().map_or(0, Vec::len);
+    let nh = opts.hidden;
+    let genes = nh * (n_in + 1);
+    let mut rng = Rng::new(opts.seed);
+    // Strided subsample for fitness.
+    let stride = x.len().div_ceil(opts.ga_rows.max(1)).max(1);
+    let xs: Vec<Vec<f64>> = x.iter().step_by(stride).cloned().collect();
+    let ys: Vec<f64> = y.iter().step_by(stride).copied().collect();
+
+    let new_net = |rng: &mut Rng| {
+        let mut n = Net::zeros(n_in, nh);
+        for g in 0..genes {
+            n.theta[g] = rng.range(-4.0, 4.0);
+        }
+        n
+    };
+    let mut pop: Vec<(Net, f64)> = (0..opts.population.max(2))
+        .map(|_| (new_net(&mut rng), f64::INFINITY))
+        .collect();
+    pop.par_iter_mut()
+        .for_each(|(n, f)| *f = solve_output(n, &xs, &ys));
+    let mut history = Vec::new();
+    for gen in 0..opts.generations {
+        pop.sort_by(|a, b| a.1.total_cmp(&b.1));
+        history.push(pop[0].1);
+        let sigma = 0.6 * (1.0 - gen as f64 / opts.generations.max(1) as f64) + 0.05;
+        let mut next: Vec<(Net, f64)> = pop.iter().take(opts.elites).cloned().collect();
+        let tour = |rng: &mut Rng, pop: &[(Net, f64)]| {
+            let mut best = rng.below(pop.len());
+            for _ in 1..opts.tournament.max(1) {
+                let c = rng.below(pop.len());
+                if pop[c].1 < pop[best].1 {
+                    best = c;
+                }
+            }
+            best
+        };
+        while next.len() < pop.len() {
+            let a = tour(&mut rng, &pop);
+            let b = tour(&mut rng, &pop);
+            let mut child = Net::zeros(n_in, nh);
+            for g in 0..genes {
+                // Blend crossover (BLX-0.5).
+                let (p, q) = (pop[a].0.theta[g], pop[b].0.theta[g]);
+                let (lo, hi) = (p.min(q), p.max(q));
+                let d = hi - lo;
+                let mut v = rng.range(lo - 0.5 * d, hi + 0.5 * d);
+                if rng.uniform() < opts.mutation_rate {
+                    v += sigma * rng.normal() * (1.0 + v.abs() * 0.25);
+                }
+                child.theta[g] = v.clamp(-50.0, 50.0);
+            }
+            next.push((child, f64::INFINITY));
+        }
+        next[opts.elites..]
+            .par_iter_mut()
+            .for_each(|(n, f)| *f = solve_output(n, &xs, &ys));
+        pop = next;
+        pb.inc(1);
+    }
+    pop.sort_by(|a, b| a.1.total_cmp(&b.1));
+    history.push(pop[0].1);
+    let mut best = pop.swap_remove(0).0;
+    // Output layer on all training rows.
+    solve_output(&mut best, x, y);
+    (best, history)
+}
+
+/// Gauss–Newton pieces over all rows: (JᵀJ/N, Jᵀr/N, mse).
+fn normal_eqs(net: &Net, x: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
+    let p = net.theta.len();
+    let (n_in, nh) = (net.n_in, net.nh);
+    let k = n_in + 1;
+    let o = nh * k;
+    let chunk = (x.len() / 16).max(256);
+    let (mut jtj, mut jtr, sse) = x
+        .par_chunks(chunk)
+        .zip(y.par_chunks(chunk))
+        .map(|(xc, yc)| {
+            let mut jtj = vec![0.0; p * p];
+            let mut jtr = vec![0.0; p];
+            let mut g = vec![0.0; p];
+            let mut sse = 0.0;
+            for (r, &t) in xc.iter().zip(yc) {
+                let th = &net.theta;
+                let mut out = th[o + nh];
+                for j in 0..nh {
+                    let w = &th[j * k..j * k + k];
+                    let mut z = w[n_in];
+                    for i in 0..n_in {
+                        z += w[i] * r[i];
+                    }
+                    let h = sigmoid(z);
+                    out += th[o + j] * h;
+                    g[o + j] = h;
+                    let d = th[o + j] * h * (1.0 - h);
+                    for i in 0..n_in {
+                        g[j * k + i] = d * r[i];
+                    }
+                    g[j * k + n_in] = d;
+                }
+                g[o + nh] = 1.0;
+                let e = out - t;
+                sse += e * e;
+                for a in 0..p {
+                    let ga = g[a];
+                    jtr[a] += ga * e;
+                    let row = &mut jtj[a * p..a * p + a + 1];
+                    for (b, v) in row.iter_mut().enumerate() {
+                        *v += ga * g[b];
+                    }
+                }
+            }
+            (jtj, jtr, sse)
+        })
+        .reduce(
+            || (vec![0.0; p * p], vec![0.0; p], 0.0),
+            |mut a, b| {
+                for (u, v) in a.0.iter_mut().zip(&b.0) {
+                    *u += v;
+                }
+                for (u, v) in a.1.iter_mut().zip(&b.1) {
+                    *u += v;
+                }
+                (a.0, a.1, a.2 + b.2)
+            },
+        );
+    let n = x.len().max(1) as f64;
+    for a in 0..p {
+        for b in 0..=a {
+            jtj[a * p + b] /= n;
+            jtj[b * p + a] = jtj[a * p + b];
+        }
+        jtr[a] /= n;
+    }
+    (jtj, jtr, sse / n)
+}
+
+/// Result of Levenberg–Marquardt training.
+pub struct LmResult {
+    pub net: Net,
+    /// Accepted steps at the best validation error (or all steps without validation).
+    pub best_iter: usize,
+    pub iters: usize,
+    pub train_mse: f64,
+    pub val_mse: Option<f64>,
+}
+
+/// Levenberg–Marquardt on the full batch. With a validation set, keeps the
+/// weights of the best validation error and stops after `patience` accepted
+/// steps without improvement. `max_iters` bounds the accepted steps.
+pub fn train_lm(
+    start: &Net,
+    x: &[Vec<f64>],
+    y: &[f64],
+    val: Option<(&[Vec<f64>], &[f64])>,
+    max_iters: usize,
+    opts: &NetOpts,
+    pb: &ProgressBar,
+) -> LmResult {
+    let mut net = start.clone();
+    let p = net.theta.len();
+    let l2 = opts.l2;
+    let obj = |n: &Net, m: f64| m + l2 * n.theta.iter().map(|v| v * v).sum::<f64>();
+    let val_mse = |n: &Net| {
+        val.filter(|v| !v.1.is_empty())
+            .map(|(vx, vy)| mse(n, vx, vy))
+    };
+    let mut lambda = 1e-3;
+    let (mut jtj, mut jtr, mut cur_mse) = normal_eqs(&net, x, y);
+    let mut best = (net.clone(), val_mse(&net).unwrap_or(f64::INFINITY), 0usize);
+    let mut accepted = 0usize;
+    let mut since_best = 0usize;
+    let mut stall = 0usize;
+    'outer: while accepted < max_iters {
+        let e0 = obj(&net, cur_mse);
+        let grad: Vec<f64> = (0..p).map(|a| jtr[a] + l2 * net.theta[a]).collect();
+        loop {
+            let mut a = jtj.clone();
+            for i in 0..p {
+                a[i * p + i] += l2 + lambda * (jtj[i * p + i] + 1e-9);
+            }
+            let neg: Vec<f64> = grad.iter().map(|g| -g).collect();
+            let d = solve_spd_robust(&a, &neg, p);
+            let mut cand = net.clone();
+            for (t, dv) in cand.theta.iter_mut().zip(&d) {
+                *t += dv;
+            }
+            cand.clamp_hidden();
+            let m = mse(&cand, x, y);
+            let e1 = obj(&cand, m);
+            if e1.is_finite() && e1 < e0 {
+                net = cand;
+                lambda = (lambda / 3.0).max(1e-12);
+                accepted += 1;
+                pb.inc(1);
+                stall = if (e0 - e1) < 1e-10 * e0.max(1e-300) {
+                    stall + 1
+                } else {
+                    0
+                };
+                break;
+            }
+            lambda *= 4.0;
+            if lambda > 1e10 {
+                break 'outer;
+            }
+        }
+        if let Some(v) = val_mse(&net) {
+            if v < best.1 {
+                best = (net.clone(), v, accepted);
+                since_best = 0;
+            } else {
+                since_best += 1;
+                if since_best >= opts.patience {
+                    break;
+                }
+            }
+        }
+        if stall >= 5 {
+            break;
+        }
+        let ne = normal_eqs(&net, x, y);
+        jtj = ne.0;
+        jtr = ne.1;
+        cur_mse = ne.2;
+    }
+    if val.is_some_and(|v| !v.1.is_empty()) {
+        let train_mse = mse(&best.0, x, y);
+        LmResult {
+            net: best.0,
+            best_iter: best.2,
+            iters: accepted,
+            train_mse,
+            val_mse: Some(best.1),
+        }
+    } else {
+        let train_mse = mse(&net, x, y);
+        LmResult {
+            net,
+            best_iter: accepted,
+            iters: accepted,
+            train_mse,
+            val_mse: None,
+        }
+    }
+}

@@ -1,0 +1,594 @@
+//! The `fit` pipeline: plan the chronological / held-out split, choose the
+//! inputs, fit MLR and GA-BPN per channel, validate on held-out rows only.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use super::net::{self, Net, NetOpts};
+use super::*;
+use crate::runcsv::Run;
+use crate::select::{self, Selection};
+
+/// How the inputs are chosen.
+#[derive(Clone, Debug)]
+pub enum FeatureChoice {
+    /// Greedy forward selection (MLR on a training time block) among rises of
+    /// the candidate sensors and the spindle speed, each at every lag.
+    Auto,
+    /// Exactly these inputs.
+    List(Vec<(FeatureKind, Option<f64>)>),
+}
+
+/// Which sensors `auto` may use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Candidates {
+    /// The sensors `select` chooses on the training rows.
+    Selected,
+    /// Every temperature column.
+    All,
+}
+
+#[derive(Clone, Debug)]
+pub struct FitConfig {
+    pub split_chrono: Option<(f64, f64)>,
+    pub features: FeatureChoice,
+    /// Candidate lags for `auto`, seconds (0 = no lag).
+    pub lags: Vec<f64>,
+    pub max_inputs: usize,
+    pub candidates: Candidates,
+    pub groups: usize,
+    /// Channels to fit (default: every `d..._um` column).
+    pub channels: Option<Vec<String>>,
+    pub net: NetOpts,
+    /// Fraction of the training time span used for early stopping / selection.
+    pub es_frac: f64,
+    /// Time blocks for the blocked cross-validation of `auto` (1 = the
+    /// early-stopping block only).
+    pub select_folds: usize,
+    pub progress: bool,
+    pub skip_net: bool,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            split_chrono: None,
+            features: FeatureChoice::Auto,
+            lags: vec![0.0, 1800.0, 3600.0, 7200.0, 10800.0, 21600.0],
+            max_inputs: 5,
+            candidates: Candidates::Selected,
+            groups: 5,
+            channels: None,
+            net: NetOpts::default(),
+            es_frac: 0.15,
+            select_folds: 5,
+            progress: false,
+            skip_net: false,
+        }
+    }
+}
+
+/// Runs and the segments used for training and validation.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub runs: Vec<Run>,
+    pub labels: Vec<String>,
+    pub train: Vec<Segment>,
+    pub val: Vec<Segment>,
+}
+
+impl Plan {
+    /// The first `n_train` runs train; the rest validate whole. With a
+    /// chronological split `a,b`, each training run contributes `[0,a)` to
+    /// training and `[a,b)` to validation.
+    pub fn new(
+        runs: Vec<Run>,
+        labels: Vec<String>,
+        n_train: usize,
+        split: Option<(f64, f64)>,
+    ) -> Result<Plan> {
+        if n_train == 0 {
+            bail!("fit: no training runs given");
+        }
+        let mut train = Vec::new();
+        let mut val = Vec::new();
+        for (i, r) in runs.iter().enumerate() {
+            let n = r.rows();
+            if i < n_train {
+                match split {
+                    Some((a, b)) => {
+                        let (tr, va) =
+                            chrono_split(n, a, b).with_context(|| format!("run {}", labels[i]))?;
+                        train.push(Segment {
+                            run: i,
+                            start: tr.start,
+                            end: tr.end,
+                        });
+                        val.push(Segment {
+                            run: i,
+                            start: va.start,
+                            end: va.end,
+                        });
+                    }
+                    None => train.push(Segment {
+                        run: i,
+                        start: 0,
+                        end: n,
+                    }),
+                }
+            } else {
+                val.push(Segment {
+                    run: i,
+                    start: 0,
+                    end: n,
+                });
+            }
+        }
+        if val.is_empty() {
+            bail!("fit: nothing to validate on: give --validate <runs> or --split-chrono a,b");
+        }
+        Ok(Plan {
+            runs,
+            labels,
+            train,
+            val,
+        })
+    }
+
+    /// Training segments split by time into (fit part, early-stopping block).
+    pub fn inner_block(&self, frac: f64) -> (Vec<Segment>, Vec<Segment>) {
+        let mut inner = Vec::new();
+        let mut block = Vec::new();
+        for s in &self.train {
+            let (a, b) = time_block_split(&self.runs[s.run], *s, frac);
+            inner.push(a);
+            block.push(b);
+        }
+        (inner, block)
+    }
+}
+
+/// Per-run figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunMetrics {
+    pub run: String,
+    pub channel: String,
+    #[serde(flatten)]
+    pub metrics: Metrics,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelReport {
+    pub name: String,
+    /// Pooled over all validation rows, per channel.
+    pub channels: BTreeMap<String, Metrics>,
+    pub per_run: Vec<RunMetrics>,
+}
+
+/// What the network training did on one channel.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct NetInfo {
+    pub ga_best_mse_norm: f64,
+    pub lm_iters: usize,
+    pub best_iter: usize,
+    pub es_val_mse_norm: Option<f64>,
+    pub ga_s: f64,
+    pub lm_s: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelInfo {
+    pub channel: String,
+    pub features: Vec<String>,
+    pub train_rows: usize,
+    pub val_rows: usize,
+    /// Blocked cross-validation RMS of the MLR on the chosen inputs (training rows only).
+    pub cv_rms_um: Option<f64>,
+    pub net: Option<NetInfo>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FitReport {
+    pub models: Vec<ModelReport>,
+    pub inputs: Vec<ChannelInfo>,
+    pub selection: Option<Selection>,
+    pub train_segments: Vec<Segment>,
+    pub val_segments: Vec<Segment>,
+    #[serde(skip)]
+    pub model_file: ModelFile,
+}
+
+fn progress_bar(show: bool, len: u64, msg: String) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{msg:>18} [{bar:40}] {pos}/{len} {elapsed}") {
+        pb.set_style(style.progress_chars("=> "));
+    }
+    pb.set_message(msg);
+    pb
+}
+
+/// Train one channel's network: GA on the fit part, LM with early stopping on
+/// the time block, then (optionally) LM on all training rows for the best
+/// number of steps from the same GA start. Inputs are raw; `specs` carry the
+/// training ranges.
+fn train_gabpn_once(
+    specs: &[FeatureSpec],
+    channel: &str,
+    inner: &Samples,
+    block: &Samples,
+    full: &Samples,
+    opts: &NetOpts,
+    pb: &ProgressBar,
+) -> (NetParams, NetInfo) {
+    let n = full.y.len().max(1) as f64;
+    let mean = full.y.iter().sum::<f64>() / n;
+    let sd = (full.y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n)
+        .sqrt()
+        .max(1e-9);
+    let prep = |s: &Samples| -> (Vec<Vec<f64>>, Vec<f64>) {
+        (
+            normalize_rows(specs, &s.x),
+            s.y.iter().map(|v| (v - mean) / sd).collect(),
+        )
+    };
+    let (xi, yi) = prep(inner);
+    let (xb, yb) = prep(block);
+    let (xf, yf) = prep(full);
+    let mut info = NetInfo::default();
+    let t0 = Instant::now();
+    let (ga_net, hist) = net::ga_search(&xi, &yi, opts, pb);
+    info.ga_best_mse_norm = hist.last().copied().unwrap_or(f64::NAN);
+    info.ga_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let val = if yb.is_empty() {
+        None
+    } else {
+        Some((xb.as_slice(), yb.as_slice()))
+    };
+    let es = net::train_lm(&ga_net, &xi, &yi, val, opts.lm_iters, opts, pb);
+    info.best_iter = es.best_iter;
+    info.es_val_mse_norm = es.val_mse;
+    let final_net: Net = if opts.refit_full && val.is_some() {
+        let r = net::train_lm(&ga_net, &xf, &yf, None, es.best_iter.max(1), opts, pb);
+        info.lm_iters = es.iters + r.iters;
+        r.net
+    } else {
+        info.lm_iters = es.iters;
+        es.net
+    };
+    info.lm_s = t1.elapsed().as_secs_f64();
+    let (w1, b1, w2, b2) = final_net.unpack();
+    let params = NetParams {
+        features: specs.to_vec(),
+        w1,
+        b1,
+        w2: w2.iter().map(|w| w * sd).collect(),
+        b2: b2 * sd + mean,
+        channel: channel.to_string(),
+    };
+    (params, info)
+}
+
+/// Train one channel's network (`opts.restarts` independent trainings, the
+/// one with the lowest early-stopping block error kept).
+pub fn train_gabpn(
+    specs: &[FeatureSpec],
+    channel: &str,
+    inner: &Samples,
+    block: &Samples,
+    full: &Samples,
+    opts: &NetOpts,
+    pb: &ProgressBar,
+) -> (NetParams, NetInfo) {
+    let mut best: Option<(NetParams, NetInfo)> = None;
+    for k in 0..opts.restarts.max(1) {
+        let o = NetOpts {
+            seed: opts.seed + k as u64,
+            ..opts.clone()
+        };
+        let (p, i) = train_gabpn_once(specs, channel, inner, block, full, &o, pb);
+        let score = i.es_val_mse_norm.unwrap_or(0.0);
+        if best
+            .as_ref()
+            .is_none_or(|b| score < b.1.es_val_mse_norm.unwrap_or(0.0))
+        {
+            best = Some((p, i));
+        }
+    }
+    best.expect("at least one training")
+}
+
+fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetrics>) -> Metrics {
+    let pred: Vec<f64> = s.x.iter().map(|r| m.predict_raw(r)).collect();
+    for (ri, label) in plan.labels.iter().enumerate() {
+        let (y, p): (Vec<f64>, Vec<f64>) = s
+            .rows
+            .iter()
+            .zip(s.y.iter().zip(&pred))
+            .filter(|((r, _), _)| *r == ri)
+            .map(|(_, (y, p))| (*y, *p))
+            .unzip();
+        if !y.is_empty() {
+            per_run.push(RunMetrics {
+                run: label.clone(),
+                channel: m.channel().to_string(),
+                metrics: metrics(&y, &p),
+            });
+        }
+    }
+    metrics(&s.y, &pred)
+}
+
+/// Candidate inputs for `auto`.
+pub fn candidates(
+    sensors: &[String],
+    lags: &[f64],
+    with_spindle: bool,
+) -> Vec<(FeatureKind, Option<f64>)> {
+    let tau = |l: f64| if l > 0.0 { Some(l) } else { None };
+    let mut out = Vec::new();
+    for s in sensors {
+        for &l in lags {
+            out.push((FeatureKind::SensorRise(s.clone()), tau(l)));
+        }
+    }
+    if with_spindle {
+        for &l in lags {
+            out.push((FeatureKind::Spindle, tau(l)));
+        }
+    }
+    out
+}
+
+/// Read runs and fit.
+pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
+    let mut runs = Vec::new();
+    let mut labels = Vec::new();
+    for p in train.iter().chain(validate_runs) {
+        runs.push(Run::read(p)?);
+        labels.push(p.display().to_string());
+    }
+    let plan = Plan::new(runs, labels, train.len(), cfg.split_chrono)?;
+    fit_plan(&plan, cfg)
+}
+
+/// Fit on a planned split.
+pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
+    let first = &plan.runs[plan.train[0].run];
+    let channels: Vec<String> = match &cfg.channels {
+        Some(c) => c.clone(),
+        None => first
+            .error_columns()
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+    };
+    if channels.is_empty() {
+        bail!("fit: the training run has no error columns (d<name>_um)");
+    }
+    if cfg.max_inputs == 0 || cfg.max_inputs > 8 {
+        bail!(
+            "fit: the board takes 1..=8 inputs, asked for {}",
+            cfg.max_inputs
+        );
+    }
+    if cfg.net.hidden == 0 || cfg.net.hidden > 16 {
+        bail!("fit: --hidden must be 1..=16, got {}", cfg.net.hidden);
+    }
+    let (inner, block) = plan.inner_block(cfg.es_frac);
+    let folds = if cfg.select_folds <= 1 {
+        vec![(inner.clone(), block.clone())]
+    } else {
+        blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
+    };
+    // Sensor selection on training rows only.
+    let selection = if matches!(cfg.features, FeatureChoice::Auto) {
+        let slices: Vec<Run> = plan
+            .train
+            .iter()
+            .map(|s| plan.runs[s.run].slice_rows(s.start, s.end))
+            .collect();
+        let groups = cfg.groups.min(first.temperature_columns().len());
+        Some(select::select(&slices, groups, 0)?)
+    } else {
+        None
+    };
+    let has_spindle = first.col("spindle_rpm").is_some();
+    let mut mlr_static = ModelReport {
+        name: "mlr-static".into(),
+        channels: BTreeMap::new(),
+        per_run: vec![],
+    };
+    let mut mlr_rep = ModelReport {
+        name: "mlr".into(),
+        channels: BTreeMap::new(),
+        per_run: vec![],
+    };
+    let mut net_rep = ModelReport {
+        name: "ga-bpn".into(),
+        channels: BTreeMap::new(),
+        per_run: vec![],
+    };
+    let mut inputs = Vec::new();
+    let mut file = ModelFile::default();
+
+    // Candidate cache shared by all channels.
+    let (cache, static_idx): (SeriesCache, Vec<usize>) = match (&cfg.features, &selection) {
+        (FeatureChoice::Auto, Some(sel)) => {
+            let sensors: Vec<String> = match cfg.candidates {
+                Candidates::Selected => sel.chosen.clone(),
+                Candidates::All => sel.sensors.clone(),
+            };
+            let kinds = candidates(&sensors, &cfg.lags, has_spindle);
+            let static_idx = sel
+                .chosen
+                .iter()
+                .filter_map(|s| {
+                    kinds
+                        .iter()
+                        .position(|k| *k == (FeatureKind::SensorRise(s.clone()), None))
+                })
+                .collect();
+            (SeriesCache::new(&plan.runs, kinds)?, static_idx)
+        }
+        (FeatureChoice::List(kinds), _) => {
+            if kinds.is_empty() || kinds.len() > 8 {
+                bail!("fit: --features needs 1..=8 inputs, got {}", kinds.len());
+            }
+            (SeriesCache::new(&plan.runs, kinds.clone())?, vec![])
+        }
+        (FeatureChoice::Auto, None) => bail!("internal: no selection"),
+    };
+
+    for ch in &channels {
+        if first.col(ch).is_none() {
+            bail!("fit: training run has no column `{ch}`");
+        }
+        let (idx, cv_mse) = match cfg.features {
+            FeatureChoice::Auto => {
+                let (i, e) = greedy_select(&cache, &plan.runs, &folds, ch, cfg.max_inputs)?;
+                (i, Some(e))
+            }
+            FeatureChoice::List(_) => ((0..cache.kinds.len()).collect(), None),
+        };
+        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
+        let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
+        if full.y.is_empty() || val.y.is_empty() {
+            bail!("fit: channel {ch} has no values in the training or validation rows");
+        }
+        let specs = ranged_specs(&kinds, &full);
+        let mlr = fit_mlr(specs.clone(), &full, ch);
+        mlr_rep
+            .channels
+            .insert(ch.clone(), validate(&mlr, &val, plan, &mut mlr_rep.per_run));
+
+        if !static_idx.is_empty() {
+            let fs = cache.samples(&plan.runs, &plan.train, &static_idx, ch)?;
+            let vs = cache.samples(&plan.runs, &plan.val, &static_idx, ch)?;
+            let sk: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+            let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch);
+            mlr_static
+                .channels
+                .insert(ch.clone(), validate(&m, &vs, plan, &mut mlr_static.per_run));
+        }
+
+        let mut info = ChannelInfo {
+            channel: ch.clone(),
+            features: specs.iter().map(FeatureSpec::name).collect(),
+            train_rows: full.y.len(),
+            val_rows: val.y.len(),
+            cv_rms_um: cv_mse.map(f64::sqrt),
+            net: None,
+        };
+        if !cfg.skip_net {
+            let inner_s = cache.samples(&plan.runs, &inner, &idx, ch)?;
+            let block_s = cache.samples(&plan.runs, &block, &idx, ch)?;
+            let lm_len = cfg.net.lm_iters as u64 * if cfg.net.refit_full { 2 } else { 1 };
+            let pb = progress_bar(
+                cfg.progress,
+                (cfg.net.generations as u64 + lm_len) * cfg.net.restarts.max(1) as u64,
+                format!("GA-BPN {ch}"),
+            );
+            let (np, ni) = train_gabpn(&specs, ch, &inner_s, &block_s, &full, &cfg.net, &pb);
+            pb.finish_and_clear();
+            net_rep
+                .channels
+                .insert(ch.clone(), validate(&np, &val, plan, &mut net_rep.per_run));
+            info.net = Some(ni);
+            file.nets.push(np);
+        }
+        inputs.push(info);
+        file.mlr.push(mlr);
+    }
+    let mut models = Vec::new();
+    if !mlr_static.channels.is_empty() {
+        models.push(mlr_static);
+    }
+    models.push(mlr_rep);
+    if !cfg.skip_net {
+        models.push(net_rep);
+    }
+    Ok(FitReport {
+        models,
+        inputs,
+        selection,
+        train_segments: plan.train.clone(),
+        val_segments: plan.val.clone(),
+        model_file: file,
+    })
+}
+
+/// Plain-text report.
+pub fn print_report(r: &FitReport) {
+    if let Some(s) = &r.selection {
+        println!("selected sensors (training rows): {}", s.chosen.join(","));
+    }
+    for i in &r.inputs {
+        print!(
+            "{}: inputs {} ({} train rows, {} validation rows)",
+            i.channel,
+            i.features.join(", "),
+            i.train_rows,
+            i.val_rows
+        );
+        if let Some(cv) = i.cv_rms_um {
+            print!("; training CV RMS {cv:.2} µm");
+        }
+        if let Some(n) = &i.net {
+            print!(
+                "; GA {:.1} s, LM {} steps (best {}) {:.1} s",
+                n.ga_s, n.lm_iters, n.best_iter, n.lm_s
+            );
+        }
+        println!();
+    }
+    println!();
+    println!(
+        "{:<11} {:<10} {:>9} {:>9} {:>9} {:>9} {:>10}",
+        "model", "channel", "MAE µm", "RMS µm", "peak µm", "raw RMS", "reduction"
+    );
+    for m in &r.models {
+        for (ch, x) in &m.channels {
+            println!(
+                "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%",
+                m.name, ch, x.mae_um, x.rms_um, x.peak_um, x.raw_rms_um, x.reduction_pct
+            );
+        }
+    }
+    let runs: std::collections::BTreeSet<&str> = r
+        .models
+        .iter()
+        .flat_map(|m| m.per_run.iter().map(|p| p.run.as_str()))
+        .collect();
+    if runs.len() > 1 {
+        println!("\nper held-out run:");
+        for m in &r.models {
+            for p in &m.per_run {
+                println!(
+                    "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%  {}",
+                    m.name,
+                    p.channel,
+                    p.metrics.mae_um,
+                    p.metrics.rms_um,
+                    p.metrics.peak_um,
+                    p.metrics.reduction_pct,
+                    p.run
+                );
+            }
+        }
+    }
+}
+
+/// `{"models": [{"name", "channels": {...}}], ...}` (validation figures only).
+pub fn report_json(r: &FitReport) -> serde_json::Value {
+    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
+}

@@ -1,0 +1,210 @@
+//! The candidate unmodelled effects: switchable physics terms with named
+//! parameters, parsed from `NAME=k1:v1,k2:v2`.
+
+use anyhow::{anyhow, bail, Result};
+use serde_json::{json, Value};
+
+/// All effect names, in the order the diagnoser tries them.
+pub const EFFECT_NAMES: [&str; 8] = [
+    "convection",
+    "ambient_drift",
+    "sensor_lag",
+    "bearing_nonlinear",
+    "coolant",
+    "ballscrew",
+    "bending",
+    "sensor_offset",
+];
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Effect {
+    /// Free convection to air: extra conductance h·A on every node with an area.
+    Convection { h_w_per_m2k: f64 },
+    /// Ambient deviates from the nominal: amp·(sin(2πt/P + φ) − sin φ) + rate·t.
+    AmbientDrift {
+        amp_c: f64,
+        phase_h: f64,
+        rate_c_per_h: f64,
+        period_h: f64,
+    },
+    /// First-order lag on every sensor reading.
+    SensorLag { tau_s: f64 },
+    /// Extra bearing heat k·(n/n_max)^p on every bearing node.
+    BearingNonlinear { k_w: f64, p: f64 },
+    /// Coolant loop on the coolant nodes while `coolant_on`: conductance g to
+    /// the coolant at ambient + offset + chiller sawtooth (amp, period).
+    Coolant {
+        g_w_per_k: f64,
+        offset_c: f64,
+        amp_c: f64,
+        period_s: f64,
+    },
+    /// Ball-screw / axis-drive heat k·feed_activity on the ball-screw nodes.
+    Ballscrew { k_w: f64 },
+    /// Bending: k·(T_a − T_b) added to the configured direction.
+    Bending { k_um_per_k: f64 },
+    /// Constant bias on one sensor.
+    SensorOffset { sensor: String, offset_c: f64 },
+}
+
+fn num(kv: &[(String, String)], key: &str, default: Option<f64>, spec: &str) -> Result<f64> {
+    match kv.iter().find(|(k, _)| k == key) {
+        Some((_, v)) => v
+            .parse::<f64>()
+            .map_err(|_| anyhow!("effect `{spec}`: `{key}` must be a number, got `{v}`")),
+        None => default.ok_or_else(|| anyhow!("effect `{spec}`: missing parameter `{key}`")),
+    }
+}
+
+impl Effect {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::Convection { .. } => "convection",
+            Effect::AmbientDrift { .. } => "ambient_drift",
+            Effect::SensorLag { .. } => "sensor_lag",
+            Effect::BearingNonlinear { .. } => "bearing_nonlinear",
+            Effect::Coolant { .. } => "coolant",
+            Effect::Ballscrew { .. } => "ballscrew",
+            Effect::Bending { .. } => "bending",
+            Effect::SensorOffset { .. } => "sensor_offset",
+        }
+    }
+
+    /// Parse `NAME=k1:v1,k2:v2` (or bare `NAME` for the defaults).
+    pub fn parse(spec: &str) -> Result<Effect> {
+        let (name, rest) = match spec.split_once('=') {
+            Some((n, r)) => (n.trim(), r.trim()),
+            None => (spec.trim(), ""),
+        };
+        let mut kv = Vec::new();
+        for part in rest.split(',').filter(|p| !p.trim().is_empty()) {
+            let (k, v) = part
+                .split_once(':')
+                .ok_or_else(|| anyhow!("effect `{spec}`: parameter `{part}` is not key:value"))?;
+            kv.push((k.trim().to_string(), v.trim().to_string()));
+        }
+        let allowed: &[&str] = match name {
+            "convection" => &["h"],
+            "ambient_drift" => &["amp_c", "phase_h", "rate_c_per_h", "period_h"],
+            "sensor_lag" => &["tau_s"],
+            "bearing_nonlinear" => &["k_w", "p"],
+            "coolant" => &["g_w_per_k", "offset_c", "amp_c", "period_s"],
+            "ballscrew" => &["k_w"],
+            "bending" => &["k_um_per_k"],
+            "sensor_offset" => &["sensor", "offset_c"],
+            _ => bail!(
+                "unknown effect `{name}` (known: {})",
+                EFFECT_NAMES.join(", ")
+            ),
+        };
+        for (k, _) in &kv {
+            if !allowed.contains(&k.as_str()) {
+                bail!(
+                    "effect `{name}`: unknown parameter `{k}` (known: {})",
+                    allowed.join(", ")
+                );
+            }
+        }
+        let e = match name {
+            "convection" => Effect::Convection {
+                h_w_per_m2k: num(&kv, "h", Some(10.0), spec)?,
+            },
+            "ambient_drift" => Effect::AmbientDrift {
+                amp_c: num(&kv, "amp_c", Some(1.0), spec)?,
+                phase_h: num(&kv, "phase_h", Some(0.0), spec)?,
+                rate_c_per_h: num(&kv, "rate_c_per_h", Some(0.0), spec)?,
+                period_h: num(&kv, "period_h", Some(24.0), spec)?,
+            },
+            "sensor_lag" => Effect::SensorLag {
+                tau_s: num(&kv, "tau_s", Some(120.0), spec)?,
+            },
+            "bearing_nonlinear" => Effect::BearingNonlinear {
+                k_w: num(&kv, "k_w", Some(30.0), spec)?,
+                p: num(&kv, "p", Some(2.0), spec)?,
+            },
+            "coolant" => Effect::Coolant {
+                g_w_per_k: num(&kv, "g_w_per_k", Some(15.0), spec)?,
+                offset_c: num(&kv, "offset_c", Some(-1.0), spec)?,
+                amp_c: num(&kv, "amp_c", Some(0.5), spec)?,
+                period_s: num(&kv, "period_s", Some(900.0), spec)?,
+            },
+            "ballscrew" => Effect::Ballscrew {
+                k_w: num(&kv, "k_w", Some(50.0), spec)?,
+            },
+            "bending" => Effect::Bending {
+                k_um_per_k: num(&kv, "k_um_per_k", Some(1.0), spec)?,
+            },
+            "sensor_offset" => Effect::SensorOffset {
+                sensor: kv
+                    .iter()
+                    .find(|(k, _)| k == "sensor")
+                    .map(|(_, v)| v.clone())
+                    .ok_or_else(|| anyhow!("effect `{spec}`: missing parameter `sensor`"))?,
+                offset_c: num(&kv, "offset_c", Some(0.5), spec)?,
+            },
+            _ => unreachable!(),
+        };
+        e.validate()?;
+        Ok(e)
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |what: &str| Err(anyhow!("effect `{}`: {what}", self.name()));
+        match self {
+            Effect::SensorLag { tau_s } if !(*tau_s >= 0.0) => bad("tau_s must be ≥ 0"),
+            Effect::AmbientDrift { period_h, .. } if !(*period_h > 0.0) => {
+                bad("period_h must be > 0")
+            }
+            Effect::Coolant {
+                g_w_per_k,
+                period_s,
+                ..
+            } if !(*g_w_per_k >= 0.0) || !(*period_s > 0.0) => {
+                bad("g_w_per_k must be ≥ 0 and period_s > 0")
+            }
+            Effect::Convection { h_w_per_m2k } if !(*h_w_per_m2k >= 0.0) => bad("h must be ≥ 0"),
+            _ => Ok(()),
+        }
+    }
+
+    /// Parameters as a JSON object.
+    pub fn params_json(&self) -> Value {
+        match self {
+            Effect::Convection { h_w_per_m2k } => json!({ "h": h_w_per_m2k }),
+            Effect::AmbientDrift {
+                amp_c,
+                phase_h,
+                rate_c_per_h,
+                period_h,
+            } => json!({"amp_c": amp_c, "phase_h": phase_h, "rate_c_per_h": rate_c_per_h, "period_h": period_h}),
+            Effect::SensorLag { tau_s } => json!({ "tau_s": tau_s }),
+            Effect::BearingNonlinear { k_w, p } => json!({"k_w": k_w, "p": p}),
+            Effect::Coolant {
+                g_w_per_k,
+                offset_c,
+                amp_c,
+                period_s,
+            } => json!({"g_w_per_k": g_w_per_k, "offset_c": offset_c, "amp_c": amp_c, "period_s": period_s}),
+            Effect::Ballscrew { k_w } => json!({ "k_w": k_w }),
+            Effect::Bending { k_um_per_k } => json!({ "k_um_per_k": k_um_per_k }),
+            Effect::SensorOffset { sensor, offset_c } => {
+                json!({"sensor": sensor, "offset_c": offset_c})
+            }
+        }
+    }
+
+    /// The `--effect` spelling of this effect (round-trips through `parse`).
+    pub fn to_spec(&self) -> String {
+        let p = self.params_json();
+        let mut parts = Vec::new();
+        if let Some(o) = p.as_object() {
+            for (k, v) in o {
+                match v {
+                    Value::String(s) => parts.push(format!("{k}:{s}")),
+                    other => parts.push(format!("{k}:{other}")),
+                }
+            }
+        }
+        format!("{}={}", self.name(), parts.join(","))
+    }
+}

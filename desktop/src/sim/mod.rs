@@ -1,0 +1,427 @@
+//! Machine thermal simulator: a lumped thermal network (heat capacities,
+//! conductances, motor loss and Palmgren bearing heat) with a 1-D
+//! finite-difference spindle shaft, stepped with the exact zero-order-hold
+//! discretisation (`x ← Φx + Ψb`, stable for any step), thermal expansion
+//! mapped to displacement per direction, DS18B20 quantisation and seeded
+//! noise, and switchable candidate effects (`effects.rs`).
+
+pub mod cli;
+pub mod duty;
+pub mod effects;
+pub mod linalg;
+pub mod machine;
+
+use anyhow::{bail, Result};
+use rand_chacha::ChaCha8Rng;
+use rand_core::{RngCore, SeedableRng};
+
+pub use duty::{Duty, Inputs};
+pub use effects::{Effect, EFFECT_NAMES};
+pub use machine::{Machine, Probe};
+
+use linalg::{discretize, solve, Mat};
+
+/// Noise-free simulator output at the output samples.
+#[derive(Clone, Debug)]
+pub struct SimOut {
+    /// Per sensor (machine order), per sample [°C].
+    pub temps: Vec<Vec<f64>>,
+    /// Per direction (machine order), per sample [µm].
+    pub disp: Vec<Vec<f64>>,
+    /// Sample times [s].
+    pub t: Vec<f64>,
+}
+
+/// Effects pre-digested for the stepping loop.
+#[derive(Default)]
+struct Active {
+    h: f64,
+    drift: Vec<(f64, f64, f64, f64)>,
+    lag: Option<f64>,
+    bnl: Vec<(f64, f64)>,
+    cool: Option<(f64, f64, f64, f64)>,
+    screw: f64,
+    bend: f64,
+    offsets: Vec<(usize, f64)>,
+}
+
+fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
+    let mut a = Active::default();
+    for e in effects {
+        e.validate()?;
+        match e {
+            Effect::Convection { h_w_per_m2k } => a.h += h_w_per_m2k,
+            Effect::AmbientDrift {
+                amp_c,
+                phase_h,
+                rate_c_per_h,
+                period_h,
+            } => a.drift.push((*amp_c, *phase_h, *rate_c_per_h, *period_h)),
+            Effect::SensorLag { tau_s } => a.lag = Some(a.lag.unwrap_or(0.0) + tau_s),
+            Effect::BearingNonlinear { k_w, p } => a.bnl.push((*k_w, *p)),
+            Effect::Coolant {
+                g_w_per_k,
+                offset_c,
+                amp_c,
+                period_s,
+            } => {
+                if m.coolant_nodes.is_empty() {
+                    bail!("effect coolant: machine `{}` names no effects.coolant_nodes", m.spec.name);
+                }
+                a.cool = Some((*g_w_per_k, *offset_c, *amp_c, *period_s));
+            }
+            Effect::Ballscrew { k_w } => {
+                if m.ballscrew_nodes.is_empty() {
+                    bail!("effect ballscrew: machine `{}` names no effects.ballscrew_nodes", m.spec.name);
+                }
+                a.screw += k_w
+            }
+            Effect::Bending { k_um_per_k } => {
+                if m.bending.is_none() {
+                    bail!("effect bending: machine `{}` has no [effects.bending]", m.spec.name);
+                }
+                a.bend += k_um_per_k
+            }
+            Effect::SensorOffset { sensor, offset_c } => {
+                let col = machine::sensor_column(sensor);
+                let i = m
+                    .sensor_cols
+                    .iter()
+                    .position(|c| *c == col || c == sensor)
+                    .ok_or_else(|| anyhow::anyhow!("effect sensor_offset: unknown sensor `{sensor}`"))?;
+                a.offsets.push((i, *offset_c));
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// Ambient deviation of the drift terms at time `t` [s].
+fn drift_at(d: &[(f64, f64, f64, f64)], t: f64) -> f64 {
+    d.iter()
+        .map(|&(amp, ph, rate, per)| {
+            let w = 2.0 * std::f64::consts::PI / (per * 3600.0);
+            let phi = 2.0 * std::f64::consts::PI * ph / per;
+            amp * ((w * t + phi).sin() - phi.sin()) + rate * t / 3600.0
+        })
+        .sum()
+}
+
+/// Chiller sawtooth in [-amp/2, amp/2).
+fn saw(t: f64, amp: f64, period: f64) -> f64 {
+    amp * ((t / period).rem_euclid(1.0) - 0.5)
+}
+
+/// The state matrix `A` (dx/dt = A x + b) for the given ambient and
+/// coolant conductances.
+fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> Mat {
+    let mut a = Mat::zeros(m.n);
+    for &(i, j, g) in &m.links {
+        a.add(i, i, -g / m.c[i]);
+        a.add(j, j, -g / m.c[j]);
+        a.add(i, j, g / m.c[i]);
+        a.add(j, i, g / m.c[j]);
+    }
+    for i in 0..m.n {
+        a.add(i, i, -(g_amb[i] + g_cool[i]) / m.c[i]);
+    }
+    a
+}
+
+/// Steady state of the network for heat `q` [W] and ambient `ta`
+/// (coolant off): solves `(L + diag g) T = q + g (ta + offset)`.
+pub fn steady_state(m: &Machine, q: &[f64], ta: f64, effects: &[Effect]) -> Result<Vec<f64>> {
+    let act = activate(m, effects)?;
+    let g_amb: Vec<f64> = (0..m.n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
+    let mut l = Mat::zeros(m.n);
+    for &(i, j, g) in &m.links {
+        l.add(i, i, g);
+        l.add(j, j, g);
+        l.add(i, j, -g);
+        l.add(j, i, -g);
+    }
+    let mut rhs = vec![0.0; m.n];
+    for i in 0..m.n {
+        l.add(i, i, g_amb[i]);
+        rhs[i] = q[i] + g_amb[i] * (ta + m.amb_offset[i]);
+    }
+    solve(&l, &rhs).ok_or_else(|| anyhow::anyhow!("thermal network is singular (a node without a path to ambient?)"))
+}
+
+/// Simulate without noise. Output every `stride`-th step, starting at row 0.
+/// The machine starts in equilibrium with the first ambient at rest.
+pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) -> Result<SimOut> {
+    let stride = stride.max(1);
+    let act = activate(m, effects)?;
+    let n = m.n;
+    let dt = inp.dt;
+    let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
+    let zeros = vec![0.0; n];
+    let (phi0, psi0) = discretize(&state_matrix(m, &g_amb, &zeros), dt);
+    let mut g_cool = vec![0.0; n];
+    let cool_mats = if let Some((g, ..)) = act.cool {
+        for &i in &m.coolant_nodes {
+            g_cool[i] += g / m.coolant_nodes.len() as f64;
+        }
+        Some(discretize(&state_matrix(m, &g_amb, &g_cool), dt))
+    } else {
+        None
+    };
+    // initial equilibrium at rest
+    let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
+    let mut x = {
+        let mut l = Mat::zeros(n);
+        for &(i, j, g) in &m.links {
+            l.add(i, i, g);
+            l.add(j, j, g);
+            l.add(i, j, -g);
+            l.add(j, i, -g);
+        }
+        let mut rhs = vec![0.0; n];
+        for i in 0..n {
+            l.add(i, i, g_amb[i]);
+            rhs[i] = g_amb[i] * (ta0 + m.amb_offset[i]);
+        }
+        solve(&l, &rhs).ok_or_else(|| anyhow::anyhow!("thermal network is singular"))?
+    };
+    let x0 = x.clone();
+    let k_total = inp.len();
+    let n_out = k_total.div_ceil(stride);
+    let ns = m.sensor_cols.len();
+    let nd = m.dir_cols.len();
+    let mut temps = vec![Vec::with_capacity(n_out); ns];
+    let mut disp = vec![Vec::with_capacity(n_out); nd];
+    let mut ts = Vec::with_capacity(n_out);
+    let mut q = vec![0.0; n];
+    let mut b = vec![0.0; n];
+    let mut tmp = vec![0.0; n];
+    let mut tmp2 = vec![0.0; n];
+    let n_max = m.spec.n_max_rpm;
+    let n_screw = m.ballscrew_nodes.len().max(1) as f64;
+    let mut last_rpm = f64::NAN;
+    for k in 0..k_total {
+        let t = inp.time(k);
+        if k % stride == 0 {
+            let amb_now = inp.ambient[k] + drift_at(&act.drift, t);
+            ts.push(t);
+            for (s, probe) in m.sensor_probe.iter().enumerate() {
+                temps[s].push(match probe {
+                    Probe::Node(i) => x[*i],
+                    Probe::Ambient => amb_now,
+                });
+            }
+            for (d, terms) in m.dir_terms.iter().enumerate() {
+                let mut v = 0.0;
+                for &(i, al) in terms {
+                    v += al * (x[i] - x0[i]);
+                }
+                if let Some((a, bn, di)) = m.bending {
+                    if di == d {
+                        v += act.bend * ((x[a] - x0[a]) - (x[bn] - x0[bn]));
+                    }
+                }
+                disp[d].push(v);
+            }
+        }
+        if k + 1 == k_total {
+            break;
+        }
+        let tm = t + 0.5 * dt;
+        let rpm = inp.rpm[k];
+        if rpm != last_rpm {
+            m.heat_nominal(rpm, &mut q);
+            if rpm > 0.0 {
+                for &(kw, p) in &act.bnl {
+                    let extra = kw * (rpm / n_max).powf(p);
+                    for &bn in &m.bearing_nodes {
+                        q[bn] += extra;
+                    }
+                }
+            }
+            last_rpm = rpm;
+        }
+        let ta = inp.ambient[k] + drift_at(&act.drift, tm);
+        for i in 0..n {
+            b[i] = (q[i] + g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
+        }
+        if act.screw != 0.0 && inp.feed[k] != 0.0 {
+            for &i in &m.ballscrew_nodes {
+                b[i] += act.screw * inp.feed[k] / n_screw / m.c[i];
+            }
+        }
+        let (phi, psi) = match (&cool_mats, act.cool) {
+            (Some((pc, sc)), Some((_, off, amp, per))) if inp.coolant[k] > 0.5 => {
+                let tc = ta + off + saw(tm, amp, per);
+                for &i in &m.coolant_nodes {
+                    b[i] += g_cool[i] * tc / m.c[i];
+                }
+                (pc, sc)
+            }
+            _ => (&phi0, &psi0),
+        };
+        phi.mul_vec_into(&x, &mut tmp);
+        psi.mul_vec_into(&b, &mut tmp2);
+        for i in 0..n {
+            x[i] = tmp[i] + tmp2[i];
+        }
+    }
+    // sensor lag (first-order, exact for a signal linear between samples)
+    if let Some(tau) = act.lag {
+        if tau > 0.0 {
+            let h = dt * stride as f64;
+            let e = (-h / tau).exp();
+            let c = 1.0 - tau / h * (1.0 - e);
+            for s in temps.iter_mut() {
+                let mut y = s[0];
+                let mut xp = s[0];
+                for v in s.iter_mut() {
+                    let xn = *v;
+                    y = e * y + (1.0 - e) * xp + (xn - xp) * c;
+                    xp = xn;
+                    *v = y;
+                }
+            }
+        }
+    }
+    for &(i, off) in &act.offsets {
+        for v in temps[i].iter_mut() {
+            *v += off;
+        }
+    }
+    Ok(SimOut { temps, disp, t: ts })
+}
+
+/// Seeded Gaussian source (ChaCha8 + Box–Muller).
+pub struct Gauss {
+    rng: ChaCha8Rng,
+    spare: Option<f64>,
+}
+
+impl Gauss {
+    pub fn new(seed: u64) -> Gauss {
+        Gauss {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            spare: None,
+        }
+    }
+    pub fn uniform(&mut self) -> f64 {
+        (self.rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    pub fn normal(&mut self) -> f64 {
+        if let Some(s) = self.spare.take() {
+            return s;
+        }
+        let u1 = self.uniform().max(1e-300);
+        let u2 = self.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let th = 2.0 * std::f64::consts::PI * u2;
+        self.spare = Some(r * th.sin());
+        r * th.cos()
+    }
+}
+
+/// Round to the DS18B20 step (1/16 °C by default).
+pub fn quantize(v: f64, step: f64) -> f64 {
+    if step > 0.0 {
+        (v / step).round() * step
+    } else {
+        v
+    }
+}
+
+/// Add the machine's sensor noise and quantisation (deterministic for `seed`).
+pub fn add_noise(m: &Machine, out: &mut SimOut, seed: u64) {
+    let mut g = Gauss::new(seed);
+    let nz = &m.spec.noise;
+    for s in out.temps.iter_mut() {
+        for v in s.iter_mut() {
+            *v = quantize(*v + nz.temp_c * g.normal(), nz.quant_c);
+        }
+    }
+    for d in out.disp.iter_mut() {
+        for v in d.iter_mut() {
+            *v = ((*v + nz.disp_um * g.normal()) * 1e4).round() / 1e4;
+        }
+    }
+}
+
+/// Build a run file from inputs and output (output sampled every `stride`).
+pub fn to_run(
+    m: &Machine,
+    inp: &Inputs,
+    out: &SimOut,
+    stride: usize,
+    meta: &[(&str, String)],
+) -> Result<crate::runcsv::Run> {
+    let stride = stride.max(1);
+    let mut run = crate::runcsv::Run {
+        meta: Vec::new(),
+        columns: Vec::new(),
+        data: Vec::new(),
+    };
+    run.set_meta("machine", &m.spec.name);
+    run.set_meta("source", "simulated");
+    run.set_meta("sample_period_s", &format!("{}", inp.dt * stride as f64));
+    for (k, v) in meta {
+        run.set_meta(k, v);
+    }
+    let pick = |v: &[f64]| -> Vec<Option<f64>> { v.iter().step_by(stride).map(|x| Some(*x)).collect() };
+    run.push_column("time_s", out.t.iter().map(|t| Some(*t)).collect())?;
+    run.push_column("spindle_rpm", pick(&inp.rpm))?;
+    run.push_column("feed_activity", pick(&inp.feed))?;
+    run.push_column("coolant_on", pick(&inp.coolant))?;
+    for (c, v) in m.sensor_cols.iter().zip(&out.temps) {
+        run.push_column(c, v.iter().map(|x| Some(*x)).collect())?;
+    }
+    for (c, v) in m.dir_cols.iter().zip(&out.disp) {
+        run.push_column(c, v.iter().map(|x| Some(*x)).collect())?;
+    }
+    Ok(run)
+}
+
+/// Options of `tcomp sim`.
+pub struct SimOptions {
+    pub effects: Vec<Effect>,
+    pub seed: u64,
+    pub hours: Option<f64>,
+    /// Output sample period [s] (a multiple of the 1 s step).
+    pub sample_period_s: Option<f64>,
+    pub noise: bool,
+}
+
+/// Simulate a machine under a duty cycle into a run file (what `tcomp sim` does).
+pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<crate::runcsv::Run> {
+    let dt = 1.0;
+    let period = opt
+        .sample_period_s
+        .or(duty.sample_period_s)
+        .unwrap_or(1.0)
+        .max(1.0);
+    let stride = (period / dt).round().max(1.0) as usize;
+    if ((stride as f64) * dt - period).abs() > 1e-9 {
+        bail!("sample period {period} s is not a multiple of the 1 s step");
+    }
+    let inp = duty.inputs(dt, opt.hours.map(|h| h * 3600.0), m.spec.ambient_c);
+    let mut out = simulate(m, &inp, &opt.effects, stride)?;
+    if opt.noise {
+        add_noise(m, &mut out, opt.seed);
+    }
+    let eff = if opt.effects.is_empty() {
+        "none".to_string()
+    } else {
+        opt.effects.iter().map(|e| e.to_spec()).collect::<Vec<_>>().join(" ")
+    };
+    to_run(
+        m,
+        &inp,
+        &out,
+        stride,
+        &[
+            ("run", format!("{}-{}-seed{}", m.spec.name, duty.name, opt.seed)),
+            ("duty", duty.name.clone()),
+            ("seed", opt.seed.to_string()),
+            ("effects", eff),
+            ("ambient", format!("{} °C nominal", m.spec.ambient_c)),
+        ],
+    )
+}

@@ -1,0 +1,197 @@
+//! MLR recovery, lag filter, feature semantics, GA-BPN vs MLR on held-out blocks.
+
+use tcomp::fit::net::NetOpts;
+use tcomp::fit::run::{fit_plan, FeatureChoice, FitConfig, Plan};
+use tcomp::fit::*;
+use tcomp::runcsv::Run;
+
+fn run_from(cols: Vec<(&str, Vec<f64>)>) -> Run {
+    Run {
+        meta: vec![],
+        columns: cols.iter().map(|c| c.0.to_string()).collect(),
+        data: cols
+            .into_iter()
+            .map(|c| c.1.into_iter().map(Some).collect())
+            .collect(),
+    }
+}
+
+#[test]
+fn mlr_recovers_known_coefficients() {
+    let n = 500;
+    let x1: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin() * 5.0).collect();
+    let x2: Vec<f64> = (0..n)
+        .map(|i| (i as f64 * 0.11).cos() * 3.0 + 1.0)
+        .collect();
+    let y: Vec<f64> = x1
+        .iter()
+        .zip(&x2)
+        .map(|(a, b)| 3.0 + 2.0 * a - 1.5 * b)
+        .collect();
+    let s = Samples {
+        x: x1.iter().zip(&x2).map(|(a, b)| vec![*a, *b]).collect(),
+        y: y.clone(),
+        rows: (0..n).map(|r| (0, r)).collect(),
+    };
+    let kinds = vec![
+        (FeatureKind::SensorRise("T_a".into()), None),
+        (FeatureKind::SensorRise("T_b".into()), None),
+    ];
+    let specs = ranged_specs(&kinds, &s);
+    let m = fit_mlr(specs, &s, "dx_um");
+    // Slopes in raw units: c_i · 2 / (max − min).
+    let slope = |i: usize| m.coef[i] * 2.0 / (m.features[i].max - m.features[i].min);
+    assert!((slope(0) - 2.0).abs() < 1e-8, "{}", slope(0));
+    assert!((slope(1) + 1.5).abs() < 1e-8, "{}", slope(1));
+    for (r, t) in s.x.iter().zip(&y) {
+        assert!(
+            (m.predict_raw(r) - t).abs() < 1e-6,
+            "{} vs {t}",
+            m.predict_raw(r)
+        );
+    }
+    // JSON round trip of the parameters.
+    let j = serde_json::to_string(&m).unwrap();
+    let back: MlrParams = serde_json::from_str(&j).unwrap();
+    assert_eq!(back, m);
+}
+
+#[test]
+fn lag_matches_first_order_step_response() {
+    let tau = 600.0;
+    // Uniform and non-uniform sampling; step from 0 to 1 right after t=0.
+    for times in [
+        (0..400).map(|k| k as f64 * 15.0).collect::<Vec<f64>>(),
+        (0..400)
+            .map(|k| (k as f64).powf(1.3) * 5.0)
+            .collect::<Vec<f64>>(),
+    ] {
+        let u: Vec<f64> = times
+            .iter()
+            .enumerate()
+            .map(|(k, _)| if k == 0 { 0.0 } else { 1.0 })
+            .collect();
+        let y = lag_filter(&times, &u, tau);
+        assert_eq!(y[0], 0.0);
+        for k in 1..times.len() {
+            // The input is 1 from sample 1 on (zero-order hold ending at the sample):
+            // y(t_k) = 1 − exp(−(t_k − t_0)/tau).
+            let expect = 1.0 - (-(times[k] - times[0]) / tau).exp();
+            assert!((y[k] - expect).abs() < 1e-12, "k={k}: {} vs {expect}", y[k]);
+        }
+    }
+}
+
+#[test]
+fn features_quantize_rise_and_diff() {
+    let run = run_from(vec![
+        ("time_s", vec![0.0, 10.0, 20.0]),
+        ("spindle_rpm", vec![0.0, 1000.0, 1000.0]),
+        ("T_a", vec![20.03, 21.0, 22.51]),
+        ("T_b", vec![19.0, 19.0, 19.97]),
+        ("dx_um", vec![0.0, 1.0, 2.0]),
+    ]);
+    let rise = feature_series(&run, &FeatureKind::SensorRise("T_a".into()), None).unwrap();
+    // 20.03 → 20.0 (1/16 steps), 21.0 → 21.0, 22.51 → 22.5.
+    assert_eq!(rise, vec![0.0, 1.0, 2.5]);
+    let diff = feature_series(
+        &run,
+        &FeatureKind::SensorDiff("T_a".into(), "T_b".into()),
+        None,
+    )
+    .unwrap();
+    assert_eq!(diff, vec![1.0, 2.0, 2.5]);
+    let rpm = feature_series(&run, &FeatureKind::Spindle, Some(10.0)).unwrap();
+    assert_eq!(rpm[0], 0.0);
+    assert!((rpm[1] - 1000.0 * (1.0 - (-1.0f64).exp())).abs() < 1e-9);
+    assert!(feature_series(&run, &FeatureKind::SensorRise("T_zz".into()), None).is_err());
+    let (k, t) = parse_feature("T_a-T_b@1800").unwrap();
+    assert_eq!(k, FeatureKind::SensorDiff("T_a".into(), "T_b".into()));
+    assert_eq!(t, Some(1800.0));
+    assert_eq!(
+        parse_feature("rpm@0").unwrap(),
+        (FeatureKind::Spindle, None)
+    );
+    assert!(parse_feature("T_a@x").is_err());
+    let spec = FeatureSpec {
+        kind: FeatureKind::Spindle,
+        tau_s: None,
+        min: 0.0,
+        max: 10.0,
+    };
+    assert_eq!(spec.normalize(-5.0), -1.0);
+    assert_eq!(spec.normalize(5.0), 0.0);
+    assert_eq!(spec.normalize(50.0), 1.0);
+}
+
+/// Heating/cooling cycles with a target that saturates nonlinearly in a lagged rise.
+pub fn synthetic_nonlinear() -> Run {
+    let n = 3000;
+    let dt = 20.0;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let mut temp = vec![20.0];
+    let mut rpm = vec![0.0];
+    for k in 1..n {
+        // Alternate speeds; periods of various lengths.
+        let phase = (k / 250) % 4;
+        let s = [3000.0, 0.0, 6000.0, 1500.0][phase];
+        rpm.push(s);
+        let target = 20.0 + s / 400.0;
+        let prev = temp[k - 1];
+        temp.push(target + (-dt / 2500.0f64).exp() * (prev - target));
+    }
+    let rise: Vec<f64> = temp
+        .iter()
+        .map(|v| quantize_temp(*v) - quantize_temp(temp[0]))
+        .collect();
+    let lagged = lag_filter(&t, &rise, 1500.0);
+    let y: Vec<f64> = lagged
+        .iter()
+        .map(|r| 40.0 * (r / 6.0).tanh() - 0.8 * r)
+        .collect();
+    run_from(vec![
+        ("time_s", t),
+        ("spindle_rpm", rpm),
+        ("T_a", temp),
+        ("dx_um", y),
+    ])
+}
+
+#[test]
+fn gabpn_beats_mlr_on_nonlinear_lagged_target() {
+    let run = synthetic_nonlinear();
+    let n = run.rows();
+    let plan = Plan::new(vec![run], vec!["syn".into()], 1, Some((0.7, 1.0))).unwrap();
+    assert_eq!(plan.val[0].end, n);
+    let cfg = FitConfig {
+        split_chrono: Some((0.7, 1.0)),
+        features: FeatureChoice::List(vec![(FeatureKind::SensorRise("T_a".into()), Some(1500.0))]),
+        net: NetOpts {
+            hidden: 5,
+            population: 16,
+            generations: 10,
+            lm_iters: 100,
+            ..NetOpts::default()
+        },
+        ..FitConfig::default()
+    };
+    let rep = fit_plan(&plan, &cfg).unwrap();
+    let get = |name: &str| rep.models.iter().find(|m| m.name == name).unwrap().channels["dx_um"];
+    let (mlr, net) = (get("mlr"), get("ga-bpn"));
+    assert!(
+        net.rms_um < 0.5 * mlr.rms_um,
+        "net {:?} vs mlr {:?}",
+        net,
+        mlr
+    );
+    assert!(net.reduction_pct > 90.0, "{net:?}");
+    // The exported network predicts exactly what was validated.
+    let np = &rep.model_file.nets[0];
+    assert_eq!(np.w1.len(), 5);
+    assert!(np
+        .w1
+        .iter()
+        .flatten()
+        .chain(&np.b1)
+        .all(|w| w.abs() < 2000.0));
+}

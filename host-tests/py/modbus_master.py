@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""A real Modbus RTU master (pymodbus) for the QEMU bench board.
+
+The board's UART0 is a TCP socket carrying RTU frames (QEMU -serial tcp:...),
+so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
+
+  read     --port P                      snapshot: sequence, sample time, status, corrections
+  upload   --port P --image F [--corrupt] stage, commit; report the commit's outcome
+  badcrc   --port P                      a corrupted frame, then a good one
+  rate     --port P [--n N]              requests per second and latency
+"""
+import argparse
+import json
+import socket
+import struct
+import sys
+import time
+
+from pymodbus import FramerType
+from pymodbus.client import ModbusTcpClient
+
+UNIT = 1
+IR_SEQUENCE, IR_SAMPLE_TIME, IR_MODEL_VERSION = 4, 10, 12
+IR_CORRECTIONS = 30
+HR_UNLOCK, HR_COMMAND, HR_RESULT, HR_STAGED_LEN, HR_STAGING = 0, 1, 2, 32, 1000
+UNLOCK_CODE, CMD_COMMIT = 0xA5C3, 1
+
+
+def s32(hi, lo):
+    return struct.unpack(">i", struct.pack(">HH", hi, lo))[0]
+
+
+def u32(hi, lo):
+    return (hi << 16) | lo
+
+
+def client(port):
+    c = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU, timeout=2, retries=1)
+    if not c.connect():
+        sys.exit(f"cannot connect to 127.0.0.1:{port}")
+    return c
+
+
+def snapshot(c):
+    # One request from the status register to the last prediction: one snapshot.
+    r = c.read_input_registers(0, count=54, device_id=UNIT)
+    if r.isError():
+        return {"error": str(r)}
+    w = r.registers
+    return {
+        "pattern": u32(w[0], w[1]),
+        "status": w[3],
+        "sequence": u32(w[IR_SEQUENCE], w[IR_SEQUENCE + 1]),
+        "sample_time_s": u32(w[IR_SAMPLE_TIME], w[IR_SAMPLE_TIME + 1]),
+        "model_version": u32(w[IR_MODEL_VERSION], w[IR_MODEL_VERSION + 1]),
+        "model_crc": u32(w[14], w[15]),
+        "n_directions": w[16],
+        "corrections": [s32(w[IR_CORRECTIONS + 2 * d], w[IR_CORRECTIONS + 2 * d + 1]) for d in range(6)],
+        "predictions": [s32(w[42 + 2 * d], w[43 + 2 * d]) for d in range(6)],
+    }
+
+
+def cmd_read(a):
+    c = client(a.port)
+    out = [snapshot(c) for _ in range(a.samples)]
+    c.close()
+    print(json.dumps(out))
+
+
+def cmd_upload(a):
+    image = open(a.image, "rb").read()
+    if a.corrupt:
+        image = bytearray(image)
+        image[len(image) // 2] ^= 0xFF
+        image = bytes(image)
+    c = client(a.port)
+    out = {"bytes": len(image)}
+    c.write_register(HR_UNLOCK, UNLOCK_CODE, device_id=UNIT)
+    padded = image + b"\0" * (len(image) % 2)
+    words = [int.from_bytes(padded[i:i + 2], "big") for i in range(0, len(padded), 2)]
+    for i in range(0, len(words), 100):
+        r = c.write_registers(HR_STAGING + i, words[i:i + 100], device_id=UNIT)
+        if r.isError():
+            out["staging_error"] = str(r)
+    c.write_register(HR_STAGED_LEN, len(image), device_id=UNIT)
+    r = c.write_register(HR_COMMAND, CMD_COMMIT, device_id=UNIT)
+    out["commit_exception"] = getattr(r, "exception_code", None) if r.isError() else None
+    res = c.read_holding_registers(HR_RESULT, count=1, device_id=UNIT)
+    out["result"] = None if res.isError() else res.registers[0]
+    time.sleep(0.3)
+    out["after"] = snapshot(c)
+    c.close()
+    print(json.dumps(out))
+
+
+def crc16(data):
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
+
+
+def cmd_badcrc(a):
+    # Raw bytes on the socket: pymodbus would not send a frame with a wrong CRC.
+    s = socket.create_connection(("127.0.0.1", a.port), timeout=2)
+    req = bytes([UNIT, 4, 0, 0, 0, 2])
+    good = req + struct.pack("<H", crc16(req))
+    bad = req + struct.pack("<H", crc16(req) ^ 0x5555)
+
+    def answer(frame):
+        s.sendall(frame)
+        s.settimeout(0.5)
+        try:
+            return s.recv(256)
+        except socket.timeout:
+            return b""
+
+    out = {"bad": answer(bad).hex()}
+    time.sleep(0.05)
+    out["good"] = answer(good).hex()
+    s.close()
+    print(json.dumps(out))
+
+
+def cmd_rate(a):
+    c = client(a.port)
+    lat = []
+    t0 = time.perf_counter()
+    for _ in range(a.n):
+        t = time.perf_counter()
+        r = c.read_input_registers(0, count=54, device_id=UNIT)
+        lat.append(time.perf_counter() - t)
+        if r.isError():
+            sys.exit(f"read failed: {r}")
+    total = time.perf_counter() - t0
+    c.close()
+    lat.sort()
+    print(json.dumps({
+        "requests": a.n,
+        "registers_per_request": 54,
+        "requests_per_s": round(a.n / total, 1),
+        "latency_ms_median": round(1000 * lat[len(lat) // 2], 3),
+        "latency_ms_p99": round(1000 * lat[int(len(lat) * 0.99) - 1], 3),
+    }))
+
+
+def main():
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("read"); r.add_argument("--port", type=int, required=True); r.add_argument("--samples", type=int, default=1)
+    u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
+    b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)
+    q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
+    a = p.parse_args()
+    {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate}[a.cmd](a)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,148 @@
+//! The QEMU bench with real Modbus masters nobody here wrote: pymodbus (RTU
+//! framing over QEMU's TCP serial socket) and mbpoll (RTU on a pty).
+use std::process::Command;
+use std::time::Duration;
+
+use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use serde_json::Value;
+
+const BOOT: Duration = Duration::from_secs(60);
+
+fn python(args: &[&str]) -> Value {
+    let script = workspace_root().join("host-tests/py/modbus_master.py");
+    let out = Command::new("python3").arg(script).args(args).output().expect("python3");
+    assert!(out.status.success(), "modbus_master.py {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("thermocomp-modbus-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn demo_image(seed: u64, version: u32, path: &std::path::Path) -> Vec<u8> {
+    let mut fm = thermocomp_core::float::demo_model(seed);
+    fm.model_version = version;
+    tcomp::export::export(&fm, path).unwrap();
+    std::fs::read(path).unwrap()
+}
+
+/// A short warm-up trace (6 sensors, 15 s samples).
+fn trace(path: &std::path::Path, rows: u32) {
+    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
+    for i in 0..rows {
+        let rpm = if i < 10 { 0 } else { 6000 };
+        csv += &format!("{},{rpm}", i * 15);
+        for c in 0..6 {
+            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.02);
+        }
+        csv += "\n";
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
+fn boot(port: u16, trace: &std::path::Path, model: &std::path::Path, pace_ms: u32) -> BenchBoard {
+    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
+    let pace = pace_ms.to_string();
+    let board = BenchBoard::start(&serial, &["serve", trace.to_str().unwrap(), model.to_str().unwrap(), &pace]);
+    assert!(board.wait_for("serving Modbus RTU", BOOT), "{}", board.log());
+    board
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
+    let dir = scratch("bitexact");
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    trace(&t, 200);
+    demo_image(1, 1, &m);
+    let expected = tcomp::replay::replay_files(&t, &m).unwrap();
+    let port = free_tcp_port();
+    let board = boot(port, &t, &m, 20);
+    let mut compared = std::collections::BTreeSet::new();
+    for _ in 0..40 {
+        let snaps = python(&["read", "--port", &port.to_string(), "--samples", "5"]);
+        for s in snaps.as_array().unwrap() {
+            assert_eq!(s["pattern"], 0x1234_5678, "{s}");
+            let t_s = s["sample_time_s"].as_u64().unwrap();
+            let Some(row) = expected.iter().find(|r| r.time_ms / 1000 == t_s) else { continue };
+            for d in 0..6 {
+                assert_eq!(s["corrections"][d].as_i64().unwrap(), i64::from(row.out.corrections[d]), "t={t_s} s dir {d}: {s}");
+                assert_eq!(s["predictions"][d].as_i64().unwrap(), i64::from(row.out.predicted[d]), "t={t_s} s dir {d}: {s}");
+            }
+            assert_eq!(s["status"].as_u64().unwrap(), u64::from(row.out.status), "t={t_s}: {s}");
+            compared.insert(t_s);
+        }
+        if compared.len() >= 20 {
+            break;
+        }
+    }
+    assert!(compared.len() >= 20, "compared only {compared:?}\n{}", board.log());
+    // Corrections really vary over the compared samples.
+    let distinct: std::collections::BTreeSet<i32> = expected.iter().filter(|r| compared.contains(&(r.time_ms / 1000))).map(|r| r.out.corrections[0]).collect();
+    assert!(distinct.len() > 3, "{distinct:?}");
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
+    let dir = scratch("upload");
+    let (t, m1, m2) = (dir.join("trace.csv"), dir.join("v1.img"), dir.join("v2.img"));
+    trace(&t, 2000);
+    demo_image(1, 1, &m1);
+    let v2 = demo_image(2, 2, &m2);
+    let port = free_tcp_port();
+    let board = boot(port, &t, &m1, 50);
+    let p = port.to_string();
+    let before = &python(&["read", "--port", &p])[0];
+    assert_eq!(before["model_version"], 1);
+    // Corrupted: the commit gets exception 04, result "bad image", v1 still serves.
+    let bad = python(&["upload", "--port", &p, "--image", m2.to_str().unwrap(), "--corrupt"]);
+    assert_eq!(bad["commit_exception"], 4, "{bad}");
+    assert_eq!(bad["result"], 3, "{bad}");
+    assert_eq!(bad["after"]["model_version"], 1, "{bad}");
+    // Good: committed, version and CRC of v2 served, corrections from v2.
+    let good = python(&["upload", "--port", &p, "--image", m2.to_str().unwrap()]);
+    assert_eq!(good["commit_exception"], Value::Null, "{good}\n{}", board.log());
+    assert_eq!(good["result"], 0, "{good}");
+    let crc = u32::from_le_bytes(v2[v2.len() - 4..].try_into().unwrap());
+    assert_eq!(good["after"]["model_version"], 2, "{good}");
+    assert_eq!(good["after"]["model_crc"], crc, "{good}");
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
+    let dir = scratch("crc");
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    trace(&t, 100);
+    demo_image(1, 1, &m);
+    let port = free_tcp_port();
+    let _board = boot(port, &t, &m, 50);
+    let r = python(&["badcrc", "--port", &port.to_string()]);
+    assert_eq!(r["bad"], "", "{r}");
+    let good = r["good"].as_str().unwrap();
+    assert!(good.starts_with("010404") && good.contains("12345678"), "{r}");
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and mbpoll: scripts/test.sh"]
+fn mbpoll_reads_the_test_pattern_over_a_pty() {
+    let dir = scratch("mbpoll");
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    trace(&t, 100);
+    demo_image(1, 1, &m);
+    let board = BenchBoard::start("pty", &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"]);
+    assert!(board.wait_for("serving Modbus RTU", BOOT), "{}", board.log());
+    let log = board.log();
+    let pty = log.split_whitespace().find(|w| w.starts_with("/dev/pts/")).expect("QEMU names the pty").to_string();
+    let out = Command::new("mbpoll")
+        .args(["-m", "rtu", "-a", "1", "-b", "115200", "-P", "none", "-t", "3:hex", "-r", "1", "-c", "3", "-1", "-o", "2"])
+        .arg(&pty)
+        .output()
+        .expect("mbpoll (apt-get install mbpoll)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("[1]: \t0x1234") && text.contains("[2]: \t0x5678") && text.contains("[3]: \t0x0001"), "{text}");
+}
