@@ -10,11 +10,11 @@ use thermocomp_core::{Model, StepOutput};
 use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::compensation::{Compensation, PlcInputs};
-use crate::model_store::ModelStore;
 use crate::modbus::holding::{result, Command};
 use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
+use crate::model_store::ModelStore;
 use crate::process_image::MAX_CHANNELS;
 
 /// PLC registers older than this make the inputs "stale".
@@ -33,7 +33,9 @@ pub struct App<F: NorFlash> {
 pub enum LinkChange {
     None,
     /// New unit address and/or baud rate: reconfigure the port.
-    Reconfigure { baud: u32 },
+    Reconfigure {
+        baud: u32,
+    },
 }
 
 impl<F: NorFlash> App<F> {
@@ -42,7 +44,13 @@ impl<F: NorFlash> App<F> {
         let mut server = Server::new(unit, baud);
         let mut store = ModelStore::new(flash, slot_size);
         let model = store.load(server.holding.scratch());
-        let mut app = App { server, snapshot: Snapshot::default(), compensation: Compensation::new(None, &map), store, map };
+        let mut app = App {
+            server,
+            snapshot: Snapshot::default(),
+            compensation: Compensation::new(None, &map),
+            store,
+            map,
+        };
         app.install(model);
         app
     }
@@ -59,7 +67,13 @@ impl<F: NorFlash> App<F> {
         self.compensation.load(model, &self.map);
         self.apply_limits();
         let (v, crc, nd, na, ns) = match self.compensation.model() {
-            Some(m) => (m.model_version, m.crc, m.directions.len(), m.axes.len(), m.sensors.len()),
+            Some(m) => (
+                m.model_version,
+                m.crc,
+                m.directions.len(),
+                m.axes.len(),
+                m.sensors.len(),
+            ),
             None => (0, 0, 0, 0, 0),
         };
         self.snapshot.model_version = v;
@@ -73,8 +87,16 @@ impl<F: NorFlash> App<F> {
         let h = &self.server.holding;
         let (clamp, rate) = (h.clamp, h.rate);
         for d in 0..MAX_DIRECTIONS {
-            let c = if clamp[d] == u16::MAX { i32::MAX } else { i32::from(clamp[d]) };
-            let r = if rate[d] == u16::MAX { i32::MAX } else { i32::from(rate[d]) };
+            let c = if clamp[d] == u16::MAX {
+                i32::MAX
+            } else {
+                i32::from(clamp[d])
+            };
+            let r = if rate[d] == u16::MAX {
+                i32::MAX
+            } else {
+                i32::from(rate[d])
+            };
             self.compensation.compensator().set_limit_override(d, c, r);
         }
     }
@@ -82,12 +104,24 @@ impl<F: NorFlash> App<F> {
     /// One measurement cycle: compensate the latest acquisition and publish a
     /// new snapshot. `spindle_override` replaces the PLC's register (the bench
     /// replays the trace's recorded speed).
-    pub fn cycle(&mut self, acq: &TemperatureAcquisition, now_ms: u64, uptime_ms: u64, spindle_override: Option<i32>) -> StepOutput {
+    pub fn cycle(
+        &mut self,
+        acq: &TemperatureAcquisition,
+        now_ms: u64,
+        uptime_ms: u64,
+        spindle_override: Option<i32>,
+    ) -> StepOutput {
         let h = &self.server.holding;
-        let plc_stale = spindle_override.is_none() && h.plc_written_ms.is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
+        let plc_stale = spindle_override.is_none()
+            && h.plc_written_ms
+                .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
         let mut positions = [0i32; MAX_AXES];
         positions.copy_from_slice(&h.positions);
-        let plc = PlcInputs { spindle_rpm: spindle_override.unwrap_or(i32::from(h.spindle_rpm)), positions, stale: plc_stale };
+        let plc = PlcInputs {
+            spindle_rpm: spindle_override.unwrap_or(i32::from(h.spindle_rpm)),
+            positions,
+            stale: plc_stale,
+        };
         let out = self.compensation.step(acq, now_ms, &plc);
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
@@ -107,12 +141,18 @@ impl<F: NorFlash> App<F> {
     }
 
     /// Handle one request frame; `reply` gets the answer (empty: stay silent).
-    pub fn request(&mut self, frame: &[u8], uptime_ms: u64, reply: &mut heapless::Vec<u8, MAX_FRAME>) -> LinkChange {
+    pub fn request(
+        &mut self,
+        frame: &[u8],
+        uptime_ms: u64,
+        reply: &mut heapless::Vec<u8, MAX_FRAME>,
+    ) -> LinkChange {
         match self.server.handle(frame, uptime_ms, &self.snapshot, reply) {
             Command::None => LinkChange::None,
             Command::CommitModel { len } => {
                 // The server validated the image; store it in the other slot, then swap.
-                let staged = &self.server.holding.staged()[..len.min(self.server.holding.staged().len())];
+                let staged =
+                    &self.server.holding.staged()[..len.min(self.server.holding.staged().len())];
                 let outcome = Model::parse(staged).map(|m| (m, self.store.commit(staged)));
                 match outcome {
                     Ok((m, Ok(()))) => {
@@ -131,7 +171,9 @@ impl<F: NorFlash> App<F> {
                 self.apply_limits();
                 LinkChange::None
             }
-            Command::LinkChanged => LinkChange::Reconfigure { baud: self.server.holding.baud },
+            Command::LinkChanged => LinkChange::Reconfigure {
+                baud: self.server.holding.baud,
+            },
         }
     }
 }

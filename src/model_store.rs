@@ -43,7 +43,12 @@ struct Header {
 impl<F: NorFlash> ModelStore<F> {
     /// `slot_size` must be a multiple of the erase size; slots at 0 and `slot_size`.
     pub fn new(flash: F, slot_size: u32) -> Self {
-        ModelStore { flash, slots: [0, slot_size], slot_size, active: None }
+        ModelStore {
+            flash,
+            slots: [0, slot_size],
+            slot_size,
+            active: None,
+        }
     }
 
     pub fn flash(&mut self) -> &mut F {
@@ -88,7 +93,11 @@ impl<F: NorFlash> ModelStore<F> {
             return None;
         }
         let word = |i: usize| u32::from_le_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
-        let header = Header { generation: word(4), len: word(8), crc: word(12) };
+        let header = Header {
+            generation: word(4),
+            len: word(8),
+            crc: word(12),
+        };
         let len = header.len as usize;
         if len == 0 || len > MAX_IMAGE_BYTES || header.len + HEADER > self.slot_size {
             return None;
@@ -111,7 +120,9 @@ impl<F: NorFlash> ModelStore<F> {
             None => (0, 1),
         };
         let base = self.slots[target];
-        self.flash.erase(base, base + self.slot_size).map_err(|_| StoreError::Flash)?;
+        self.flash
+            .erase(base, base + self.slot_size)
+            .map_err(|_| StoreError::Flash)?;
         // Program the image in write-size-aligned chunks (the tail padded with 0xFF).
         let ws = F::WRITE_SIZE.max(1);
         let mut chunk = [0xFFu8; 64];
@@ -122,7 +133,9 @@ impl<F: NorFlash> ModelStore<F> {
             let padded = n.div_ceil(ws) * ws;
             chunk[..padded].fill(0xFF);
             chunk[..n].copy_from_slice(&image[off..off + n]);
-            self.flash.write(base + HEADER + off as u32, &chunk[..padded]).map_err(|_| StoreError::Flash)?;
+            self.flash
+                .write(base + HEADER + off as u32, &chunk[..padded])
+                .map_err(|_| StoreError::Flash)?;
             off += n;
         }
         let mut h = [0u8; HEADER as usize];
@@ -132,10 +145,16 @@ impl<F: NorFlash> ModelStore<F> {
         h[12..16].copy_from_slice(&crc32(image).to_le_bytes());
         // The magic goes last (write sizes up to 4 bytes; larger ones write the header at once).
         if ws <= 4 {
-            self.flash.write(base + 4, &h[4..]).map_err(|_| StoreError::Flash)?;
-            self.flash.write(base, &h[..4]).map_err(|_| StoreError::Flash)?;
+            self.flash
+                .write(base + 4, &h[4..])
+                .map_err(|_| StoreError::Flash)?;
+            self.flash
+                .write(base, &h[..4])
+                .map_err(|_| StoreError::Flash)?;
         } else {
-            self.flash.write(base, &h[..ws.min(16)]).map_err(|_| StoreError::Flash)?;
+            self.flash
+                .write(base, &h[..ws.min(16)])
+                .map_err(|_| StoreError::Flash)?;
         }
         self.active = Some((target, generation));
         Ok(())

@@ -77,3 +77,234 @@ pub fn golden(out: &Path, steps: u32, seed: u64) -> Result<usize> {
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
     Ok(bytes.len())
 }
+
+/// Which fitted model of a channel goes on the board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Choice {
+    Net,
+    Mlr,
+}
+
+/// Board limits and identity for an exported model.
+#[derive(Debug, Clone)]
+pub struct ExportOptions {
+    pub model_version: u32,
+    pub max_correction_um: f64,
+    pub max_rate_um_per_s: f64,
+    pub warmup_s: u32,
+    /// Per channel (e.g. `dch5_um`) net or MLR; channels not named use `default`.
+    pub choices: Vec<(String, Choice)>,
+    pub default: Choice,
+}
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        ExportOptions {
+            model_version: 1,
+            max_correction_um: 200.0,
+            max_rate_um_per_s: 1.0,
+            warmup_s: 1800,
+            choices: vec![],
+            default: Choice::Net,
+        }
+    }
+}
+
+/// Build the board's float model from `tcomp fit --out` parameters.
+///
+/// Temperatures become 1/16 °C, the training envelope is widened to whole
+/// raw units (the image stores integers) and the normalisation change is
+/// folded into the first-layer weights and biases (MLR: into its terms), so
+/// the float model computes exactly what the fitted one did inside the
+/// original envelope. `temperature_columns` is the board's channel order
+/// (the run's `T_…` columns, as the bench maps them).
+pub fn float_model_from_fit(
+    file: &crate::fit::ModelFile,
+    temperature_columns: &[String],
+    opts: &ExportOptions,
+) -> Result<FloatModel> {
+    use crate::fit::{FeatureKind, FeatureSpec};
+    use thermocomp_core::float::{FloatDirection, FloatInput, FloatNet, FloatTable, FloatTerm};
+    use thermocomp_core::image::{InputKind, SensorRef};
+
+    let mut channels: Vec<String> = file
+        .nets
+        .iter()
+        .map(|n| n.channel.clone())
+        .chain(file.mlr.iter().map(|m| m.channel.clone()))
+        .collect();
+    channels.sort();
+    channels.dedup();
+    let mut model = FloatModel {
+        model_version: opts.model_version,
+        step_ms: 1000,
+        warmup_s: opts.warmup_s,
+        fixed_reference: false,
+        sensors: vec![],
+        directions: vec![],
+        axes: vec![],
+        inputs: vec![],
+        nets: vec![],
+        tables: vec![],
+    };
+    let sensor_of = |name: &str, model: &mut FloatModel| -> Result<u8> {
+        let ch = temperature_columns
+            .iter()
+            .position(|c| c == name)
+            .ok_or_else(|| {
+                anyhow::anyhow!("sensor column {name} is not in the run's temperature columns")
+            })?;
+        if let Some(i) = model
+            .sensors
+            .iter()
+            .position(|s| usize::from(s.channel) == ch)
+        {
+            return Ok(i as u8);
+        }
+        model.sensors.push(SensorRef {
+            rom: [0; 8],
+            channel: ch as u8,
+            ref_temp: 0,
+        });
+        Ok((model.sensors.len() - 1) as u8)
+    };
+    // One model input per distinct (kind, lag); returns its index and the fold (a, c).
+    let input_of = |f: &FeatureSpec, model: &mut FloatModel| -> Result<(u8, f64, f64)> {
+        let (kind, scale) = match &f.kind {
+            FeatureKind::SensorRise(a) => (
+                InputKind::SensorRise {
+                    a: sensor_of(a, model)?,
+                },
+                16.0,
+            ),
+            FeatureKind::SensorDiff(a, b) => (
+                InputKind::SensorDiff {
+                    a: sensor_of(a, model)?,
+                    b: sensor_of(b, model)?,
+                },
+                16.0,
+            ),
+            FeatureKind::Spindle => (InputKind::Spindle, 1.0),
+        };
+        anyhow::ensure!(
+            f.max > f.min,
+            "feature {:?} has an empty training range",
+            f.kind
+        );
+        let (lo, hi) = (f.min * scale, f.max * scale);
+        let mut lo2 = lo.floor();
+        let mut hi2 = hi.ceil();
+        if hi2 - lo2 < 2.0 {
+            lo2 -= 1.0;
+            hi2 += 1.0;
+        }
+        let a = (hi2 - lo2) / (hi - lo);
+        let c = (lo2 + hi2 - lo - hi) / (hi - lo);
+        let spec = FloatInput {
+            kind,
+            tau_s: f.tau_s.filter(|t| *t > 0.0),
+            min: lo2,
+            max: hi2,
+        };
+        let idx = match model.inputs.iter().position(|i| *i == spec) {
+            Some(i) => i,
+            None => {
+                model.inputs.push(spec);
+                model.inputs.len() - 1
+            }
+        };
+        Ok((idx as u8, a, c))
+    };
+    for ch in &channels {
+        let choice = opts
+            .choices
+            .iter()
+            .find(|(c, _)| c == ch)
+            .map(|(_, k)| *k)
+            .unwrap_or(opts.default);
+        let d = model.directions.len() as u8;
+        let name = ch.trim_start_matches('d').trim_end_matches("_um");
+        model.directions.push(FloatDirection {
+            name: name.to_string(),
+            max_correction_um: opts.max_correction_um,
+            max_rate_um_per_s: opts.max_rate_um_per_s,
+        });
+        let net = file.nets.iter().find(|n| &n.channel == ch);
+        let mlr = file.mlr.iter().find(|m| &m.channel == ch);
+        match (choice, net, mlr) {
+            (Choice::Net, Some(n), _) | (Choice::Mlr, Some(n), None) => {
+                let mut inputs = vec![];
+                let mut folds = vec![];
+                for f in &n.features {
+                    let (i, a, c) = input_of(f, &mut model)?;
+                    inputs.push(i);
+                    folds.push((a, c));
+                }
+                let w1: Vec<Vec<f64>> =
+                    n.w1.iter()
+                        .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
+                        .collect();
+                let b1 =
+                    n.w1.iter()
+                        .zip(&n.b1)
+                        .map(|(row, b)| {
+                            b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
+                        })
+                        .collect();
+                model.nets.push(FloatNet {
+                    direction: d,
+                    inputs,
+                    w1,
+                    b1,
+                    w2: n.w2.clone(),
+                    b2: n.b2,
+                });
+            }
+            (_, _, Some(m)) => {
+                let mut terms = vec![];
+                let mut c0 = m.c0;
+                for (f, coef) in m.features.iter().zip(&m.coef) {
+                    let (i, a, c) = input_of(f, &mut model)?;
+                    c0 += coef * c;
+                    terms.push(FloatTerm {
+                        coef_um: coef * a,
+                        input: Some(i),
+                        input_power: 1,
+                        position_power: 0,
+                    });
+                }
+                terms.push(FloatTerm {
+                    coef_um: c0,
+                    input: None,
+                    input_power: 0,
+                    position_power: 0,
+                });
+                model.tables.push(FloatTable {
+                    direction: d,
+                    axis: None,
+                    terms,
+                });
+            }
+            _ => anyhow::bail!("no fitted model for channel {ch}"),
+        }
+    }
+    Ok(model)
+}
+
+/// Parse `dch5_um=mlr,dch3_um=net`.
+pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
+    s.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| {
+            let (ch, k) = p
+                .split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("expected CHANNEL=net|mlr, got {p}"))?;
+            let k = match k.trim() {
+                "net" => Choice::Net,
+                "mlr" => Choice::Mlr,
+                other => anyhow::bail!("unknown model kind {other} (net or mlr)"),
+            };
+            Ok((ch.trim().to_string(), k))
+        })
+        .collect()
+}

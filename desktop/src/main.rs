@@ -19,10 +19,38 @@ enum Command {
         /// Export the built-in demonstration model (random weights from --seed).
         #[arg(long)]
         demo: bool,
+        /// Fitted parameters written by `tcomp fit --out`.
+        #[arg(long, conflicts_with = "demo")]
+        model: Option<std::path::PathBuf>,
+        /// A run CSV whose T_ columns give the board's channel order.
+        #[arg(long, requires = "model")]
+        run: Option<std::path::PathBuf>,
+        /// Per channel net or MLR, e.g. dch5_um=mlr (others: net).
+        #[arg(long, default_value = "")]
+        r#use: String,
+        #[arg(long, default_value_t = 200.0)]
+        max_correction_um: f64,
+        #[arg(long, default_value_t = 1.0)]
+        max_rate_um_per_s: f64,
+        #[arg(long, default_value_t = 1)]
+        model_version: u32,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         #[arg(short, long)]
         out: std::path::PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// The board's output for a run, computed by the desktop core (bit-exact
+    /// with the firmware), and its error against the measured channels.
+    Replay {
+        run: std::path::PathBuf,
+        image: std::path::PathBuf,
+        /// Score rows from this fraction of the run (e.g. 0.6 for the FL_THERMAL test block).
+        #[arg(long, default_value_t = 0.0)]
+        from: f64,
+        #[arg(long, default_value_t = 1.0)]
+        to: f64,
         #[arg(long)]
         json: bool,
     },
@@ -54,10 +82,80 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Export { demo, seed, out, json } => {
-            anyhow::ensure!(demo, "say what to export: --demo (fitted models: see `tcomp fit --out`)");
-            let summary = tcomp::export::export(&thermocomp_core::float::demo_model(seed), &out)?;
+        Command::Export {
+            demo,
+            model,
+            run,
+            r#use,
+            max_correction_um,
+            max_rate_um_per_s,
+            model_version,
+            seed,
+            out,
+            json,
+        } => {
+            let float = match (demo, model) {
+                (true, _) => thermocomp_core::float::demo_model(seed),
+                (false, Some(path)) => {
+                    let text = std::fs::read_to_string(&path)
+                        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+                    let file: tcomp::fit::ModelFile = serde_json::from_str(&text)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+                    let run = run.ok_or_else(|| {
+                        anyhow::anyhow!("--run <csv> gives the board's channel order")
+                    })?;
+                    let columns: Vec<String> = tcomp::runcsv::Run::read(&run)?
+                        .temperature_columns()
+                        .iter()
+                        .map(|c| c.to_string())
+                        .collect();
+                    let opts = tcomp::export::ExportOptions {
+                        model_version,
+                        max_correction_um,
+                        max_rate_um_per_s,
+                        choices: tcomp::export::parse_choices(&r#use)?,
+                        ..Default::default()
+                    };
+                    tcomp::export::float_model_from_fit(&file, &columns, &opts)?
+                }
+                (false, None) => {
+                    anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
+                }
+            };
+            let summary = tcomp::export::export(&float, &out)?;
             tcomp::export::print_summary(&summary, &out, json);
+        }
+        Command::Replay {
+            run,
+            image,
+            from,
+            to,
+            json,
+        } => {
+            let rows = tcomp::replay::replay_files(&run, &image)?;
+            let model = thermocomp_core::Model::parse(&std::fs::read(&image)?)
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            let table = tcomp::runcsv::Run::read(&run)?;
+            let n = rows.len();
+            let (a, b) = (
+                (from.clamp(0.0, 1.0) * n as f64) as usize,
+                (to.clamp(0.0, 1.0) * n as f64) as usize,
+            );
+            let res = tcomp::replay::residuals(&table, &rows, &model, a, b);
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({"rows": n, "scored_rows": [a, b], "channels": res})
+                );
+            } else {
+                println!("{} samples compensated; scored rows {a}..{b}", n);
+                for r in &res {
+                    println!(
+                        "  {}: MAE {:.2} µm, RMS {:.2} µm, peak {:.2} µm, RMS reduction {:.1} %",
+                        r.column, r.mae_um, r.rms_um, r.peak_um, r.reduction_pct
+                    );
+                }
+            }
         }
         Command::Golden { out, steps, seed } => {
             let n = tcomp::export::golden(&out, steps, seed)?;

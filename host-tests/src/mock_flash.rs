@@ -38,7 +38,12 @@ pub struct MockFlash {
 
 impl MockFlash {
     pub fn new(size: usize) -> Self {
-        MockFlash { bytes: vec![0xFF; size], budget: None, powered: true, operations: 0 }
+        MockFlash {
+            bytes: vec![0xFF; size],
+            budget: None,
+            powered: true,
+            operations: 0,
+        }
     }
 
     pub fn power_on(&mut self) {
@@ -70,7 +75,10 @@ impl ReadNorFlash for MockFlash {
     const READ_SIZE: usize = 1;
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), MockError> {
         let o = offset as usize;
-        let src = self.bytes.get(o..o + bytes.len()).ok_or(MockError::OutOfBounds)?;
+        let src = self
+            .bytes
+            .get(o..o + bytes.len())
+            .ok_or(MockError::OutOfBounds)?;
         bytes.copy_from_slice(src);
         Ok(())
     }

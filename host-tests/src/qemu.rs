@@ -94,7 +94,11 @@ pub struct BenchBoard {
 impl BenchBoard {
     pub fn start(serial: &str, args: &[&str]) -> BenchBoard {
         let elf = firmware_elf();
-        assert!(elf.exists(), "bench firmware {} not built: run scripts/test.sh", elf.display());
+        assert!(
+            elf.exists(),
+            "bench firmware {} not built: run scripts/test.sh",
+            elf.display()
+        );
         let mut child = Command::new("qemu-system-arm")
             .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
             .args(["-semihosting-config", "enable=on,target=native"])
@@ -110,8 +114,14 @@ impl BenchBoard {
             .expect("qemu-system-arm not found: apt-get install qemu-system-arm");
         let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
         for stream in [
-            child.stdout.take().map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
-            child.stderr.take().map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+            child
+                .stdout
+                .take()
+                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+            child
+                .stderr
+                .take()
+                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
         ]
         .into_iter()
         .flatten()
@@ -119,7 +129,10 @@ impl BenchBoard {
             let log = log.clone();
             std::thread::spawn(move || {
                 use std::io::BufRead;
-                for line in std::io::BufReader::new(stream).lines().map_while(Result::ok) {
+                for line in std::io::BufReader::new(stream)
+                    .lines()
+                    .map_while(Result::ok)
+                {
                     if let Ok(mut l) = log.lock() {
                         l.push_str(&line);
                         l.push('\n');

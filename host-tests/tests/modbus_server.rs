@@ -52,20 +52,32 @@ impl Bench {
         snap.axes[0].offset = 42;
         snap.axes[0].slope = -7;
         snap.temperatures[0] = Some(centidegrees(20 * 16 + 1));
-        Bench { server: Server::new(17, 115_200), snap, reply: HVec::new(), now: 1000 }
+        Bench {
+            server: Server::new(17, 115_200),
+            snap,
+            reply: HVec::new(),
+            now: 1000,
+        }
     }
     fn ask(&mut self, f: &[u8]) -> (Action, Vec<u8>) {
         let a = self.server.handle(f, self.now, &self.snap, &mut self.reply);
         if !self.reply.is_empty() {
             let n = self.reply.len();
-            assert_eq!(crc16(&self.reply[..n - 2]).to_le_bytes(), [self.reply[n - 2], self.reply[n - 1]], "reply CRC");
+            assert_eq!(
+                crc16(&self.reply[..n - 2]).to_le_bytes(),
+                [self.reply[n - 2], self.reply[n - 1]],
+                "reply CRC"
+            );
         }
         (a, self.reply.to_vec())
     }
     fn words(&mut self, fc: u8, addr: u16, count: u16) -> Vec<u16> {
         let (_, r) = self.ask(&read(17, fc, addr, count));
         assert_eq!(r[1], fc, "reply {r:02x?}");
-        r[3..r.len() - 2].chunks(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect()
+        r[3..r.len() - 2]
+            .chunks(2)
+            .map(|c| u16::from_be_bytes([c[0], c[1]]))
+            .collect()
     }
     fn exception_of(&mut self, f: &[u8]) -> u8 {
         let (_, r) = self.ask(f);
@@ -83,9 +95,17 @@ fn input_registers_give_the_snapshot_with_high_word_first() {
     let c = b.words(4, IR_CORRECTIONS, 2);
     assert_eq!(((u32::from(c[0]) << 16) | u32::from(c[1])) as i32, -123_456);
     let axis = b.words(4, IR_AXES, AXIS_BLOCK);
-    assert_eq!(axis, vec![0, 42, 0xFFFF, 0xFFF9, 0, 0, 0, 77], "offset, slope, ref, sequence");
+    assert_eq!(
+        axis,
+        vec![0, 42, 0xFFFF, 0xFFF9, 0, 0, 0, 77],
+        "offset, slope, ref, sequence"
+    );
     let t = b.words(4, IR_TEMPERATURES, 2);
-    assert_eq!(t, vec![2006, NOT_AVAILABLE], "20.0625 °C -> 2006 (0.01 °C), then n/a");
+    assert_eq!(
+        t,
+        vec![2006, NOT_AVAILABLE],
+        "20.0625 °C -> 2006 (0.01 °C), then n/a"
+    );
     // The whole map reads in one request of up to 125 registers.
     assert_eq!(b.words(4, IR_LAST + 1 - 125, 125).len(), 125);
 }
@@ -98,23 +118,62 @@ fn bad_frames_are_silent_and_the_next_good_one_is_answered() {
     assert_eq!(b.ask(&f).1, Vec::<u8>::new());
     assert_eq!(b.ask(&f[..5]).1, Vec::<u8>::new(), "truncated");
     assert_eq!(b.ask(&[0u8; 300]).1, Vec::<u8>::new(), "oversize");
-    assert_eq!(b.ask(&read(18, 4, 0, 2)).1, Vec::<u8>::new(), "another unit");
-    assert_eq!(b.ask(&read(0, 4, 0, 2)).1, Vec::<u8>::new(), "broadcast read");
+    assert_eq!(
+        b.ask(&read(18, 4, 0, 2)).1,
+        Vec::<u8>::new(),
+        "another unit"
+    );
+    assert_eq!(
+        b.ask(&read(0, 4, 0, 2)).1,
+        Vec::<u8>::new(),
+        "broadcast read"
+    );
     assert_eq!(b.words(4, 0, 2), vec![0x1234, 0x5678]);
-    assert_eq!(b.server.counters.crc_errors, 2, "the corrupted and the truncated frame");
+    assert_eq!(
+        b.server.counters.crc_errors, 2,
+        "the corrupted and the truncated frame"
+    );
 }
 
 #[test]
 fn exceptions_follow_the_specification() {
     let mut b = Bench::new();
-    assert_eq!(b.exception_of(&frame(&[17, 0x2B, 0, 0])), 0x01, "unknown function");
-    assert_eq!(b.exception_of(&frame(&[17, 0x84, 0, 0])), 0x01, "function code with the high bit");
-    assert_eq!(b.exception_of(&read(17, 1, 0, 8)), 0x01, "coils are not served");
+    assert_eq!(
+        b.exception_of(&frame(&[17, 0x2B, 0, 0])),
+        0x01,
+        "unknown function"
+    );
+    assert_eq!(
+        b.exception_of(&frame(&[17, 0x84, 0, 0])),
+        0x01,
+        "function code with the high bit"
+    );
+    assert_eq!(
+        b.exception_of(&read(17, 1, 0, 8)),
+        0x01,
+        "coils are not served"
+    );
     assert_eq!(b.exception_of(&read(17, 4, 0, 0)), 0x03, "count 0");
-    assert_eq!(b.exception_of(&read(17, 4, 0, 126)), 0x03, "count above 125");
-    assert_eq!(b.exception_of(&read(17, 4, IR_LAST, 2)), 0x02, "past the map");
-    assert_eq!(b.exception_of(&read(17, 3, 9000, 1)), 0x02, "holding past the map");
-    assert_eq!(b.exception_of(&write1(17, HR_RESULT, 0)), 0x02, "read-only register");
+    assert_eq!(
+        b.exception_of(&read(17, 4, 0, 126)),
+        0x03,
+        "count above 125"
+    );
+    assert_eq!(
+        b.exception_of(&read(17, 4, IR_LAST, 2)),
+        0x02,
+        "past the map"
+    );
+    assert_eq!(
+        b.exception_of(&read(17, 3, 9000, 1)),
+        0x02,
+        "holding past the map"
+    );
+    assert_eq!(
+        b.exception_of(&write1(17, HR_RESULT, 0)),
+        0x02,
+        "read-only register"
+    );
     assert_eq!(b.exception_of(&write1(17, HR_UNIT, 5)), 0x01, "locked");
     let mut bad_count = write_n(17, HR_POSITIONS, &[1, 2]);
     bad_count[6] = 3; // byte count disagrees
@@ -143,11 +202,19 @@ fn plc_writes_positions_and_speed_without_unlock() {
 fn unlock_then_configure_and_the_lock_expires() {
     let mut b = Bench::new();
     assert_eq!(b.ask(&write1(17, HR_UNLOCK, 0x1111)).1.len(), 8);
-    assert_eq!(b.exception_of(&write1(17, HR_CLAMP, 100)), 0x01, "wrong code keeps it locked");
+    assert_eq!(
+        b.exception_of(&write1(17, HR_CLAMP, 100)),
+        0x01,
+        "wrong code keeps it locked"
+    );
     b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![1]);
     assert_eq!(b.ask(&write1(17, HR_CLAMP, 100)).0, Action::LimitsChanged);
-    assert_eq!(b.exception_of(&write1(17, HR_BAUD, 1234)), 0x03, "no such baud rate");
+    assert_eq!(
+        b.exception_of(&write1(17, HR_BAUD, 1234)),
+        0x03,
+        "no such baud rate"
+    );
     assert_eq!(b.ask(&write1(17, HR_BAUD, 96)).0, Action::LinkChanged);
     assert_eq!(b.server.holding.baud, 9600);
     b.now += UNLOCK_MS;
@@ -158,7 +225,10 @@ fn unlock_then_configure_and_the_lock_expires() {
 fn upload(b: &mut Bench, image: &[u8]) {
     let mut padded = image.to_vec();
     padded.resize(image.len().div_ceil(2) * 2, 0);
-    let words: Vec<u16> = padded.chunks(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect();
+    let words: Vec<u16> = padded
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
     for (i, chunk) in words.chunks(100).enumerate() {
         let (_, r) = b.ask(&write_n(17, HR_STAGING + (i * 100) as u16, chunk));
         assert_eq!(r[1], 0x10, "{r:02x?}");
@@ -178,10 +248,19 @@ fn model_upload_commits_only_a_valid_image() {
     let mut corrupt = img.clone();
     corrupt[40] ^= 0xFF;
     upload(&mut b, &corrupt);
-    assert_eq!(b.exception_of(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL)), 0x04);
+    assert_eq!(
+        b.exception_of(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL)),
+        0x04
+    );
     assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_IMAGE]);
     upload(&mut b, &img);
-    assert_eq!(b.words(3, HR_STAGING, 2), vec![u16::from_be_bytes([img[0], img[1]]), u16::from_be_bytes([img[2], img[3]])]);
+    assert_eq!(
+        b.words(3, HR_STAGING, 2),
+        vec![
+            u16::from_be_bytes([img[0], img[1]]),
+            u16::from_be_bytes([img[2], img[3]])
+        ]
+    );
     let (a, r) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
     assert_eq!(r.len(), 8);
     assert_eq!(a, Action::CommitModel { len: img.len() });

@@ -10,9 +10,18 @@ const BOOT: Duration = Duration::from_secs(60);
 
 fn python(args: &[&str]) -> Value {
     let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3").arg(script).args(args).output().expect("python3");
-    assert!(out.status.success(), "modbus_master.py {args:?}: {}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+    let out = Command::new("python3")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "modbus_master.py {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
 }
 
 fn scratch(name: &str) -> std::path::PathBuf {
@@ -45,8 +54,20 @@ fn trace(path: &std::path::Path, rows: u32) {
 fn boot(port: u16, trace: &std::path::Path, model: &std::path::Path, pace_ms: u32) -> BenchBoard {
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
     let pace = pace_ms.to_string();
-    let board = BenchBoard::start(&serial, &["serve", trace.to_str().unwrap(), model.to_str().unwrap(), &pace]);
-    assert!(board.wait_for("serving Modbus RTU", BOOT), "{}", board.log());
+    let board = BenchBoard::start(
+        &serial,
+        &[
+            "serve",
+            trace.to_str().unwrap(),
+            model.to_str().unwrap(),
+            &pace,
+        ],
+    );
+    assert!(
+        board.wait_for("serving Modbus RTU", BOOT),
+        "{}",
+        board.log()
+    );
     board
 }
 
@@ -66,21 +87,43 @@ fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
         for s in snaps.as_array().unwrap() {
             assert_eq!(s["pattern"], 0x1234_5678, "{s}");
             let t_s = s["sample_time_s"].as_u64().unwrap();
-            let Some(row) = expected.iter().find(|r| r.time_ms / 1000 == t_s) else { continue };
+            let Some(row) = expected.iter().find(|r| r.time_ms / 1000 == t_s) else {
+                continue;
+            };
             for d in 0..6 {
-                assert_eq!(s["corrections"][d].as_i64().unwrap(), i64::from(row.out.corrections[d]), "t={t_s} s dir {d}: {s}");
-                assert_eq!(s["predictions"][d].as_i64().unwrap(), i64::from(row.out.predicted[d]), "t={t_s} s dir {d}: {s}");
+                assert_eq!(
+                    s["corrections"][d].as_i64().unwrap(),
+                    i64::from(row.out.corrections[d]),
+                    "t={t_s} s dir {d}: {s}"
+                );
+                assert_eq!(
+                    s["predictions"][d].as_i64().unwrap(),
+                    i64::from(row.out.predicted[d]),
+                    "t={t_s} s dir {d}: {s}"
+                );
             }
-            assert_eq!(s["status"].as_u64().unwrap(), u64::from(row.out.status), "t={t_s}: {s}");
+            assert_eq!(
+                s["status"].as_u64().unwrap(),
+                u64::from(row.out.status),
+                "t={t_s}: {s}"
+            );
             compared.insert(t_s);
         }
         if compared.len() >= 20 {
             break;
         }
     }
-    assert!(compared.len() >= 20, "compared only {compared:?}\n{}", board.log());
+    assert!(
+        compared.len() >= 20,
+        "compared only {compared:?}\n{}",
+        board.log()
+    );
     // Corrections really vary over the compared samples.
-    let distinct: std::collections::BTreeSet<i32> = expected.iter().filter(|r| compared.contains(&(r.time_ms / 1000))).map(|r| r.out.corrections[0]).collect();
+    let distinct: std::collections::BTreeSet<i32> = expected
+        .iter()
+        .filter(|r| compared.contains(&(r.time_ms / 1000)))
+        .map(|r| r.out.corrections[0])
+        .collect();
     assert!(distinct.len() > 3, "{distinct:?}");
 }
 
@@ -88,7 +131,11 @@ fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
     let dir = scratch("upload");
-    let (t, m1, m2) = (dir.join("trace.csv"), dir.join("v1.img"), dir.join("v2.img"));
+    let (t, m1, m2) = (
+        dir.join("trace.csv"),
+        dir.join("v1.img"),
+        dir.join("v2.img"),
+    );
     trace(&t, 2000);
     demo_image(1, 1, &m1);
     let v2 = demo_image(2, 2, &m2);
@@ -98,13 +145,25 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
     let before = &python(&["read", "--port", &p])[0];
     assert_eq!(before["model_version"], 1);
     // Corrupted: the commit gets exception 04, result "bad image", v1 still serves.
-    let bad = python(&["upload", "--port", &p, "--image", m2.to_str().unwrap(), "--corrupt"]);
+    let bad = python(&[
+        "upload",
+        "--port",
+        &p,
+        "--image",
+        m2.to_str().unwrap(),
+        "--corrupt",
+    ]);
     assert_eq!(bad["commit_exception"], 4, "{bad}");
     assert_eq!(bad["result"], 3, "{bad}");
     assert_eq!(bad["after"]["model_version"], 1, "{bad}");
     // Good: committed, version and CRC of v2 served, corrections from v2.
     let good = python(&["upload", "--port", &p, "--image", m2.to_str().unwrap()]);
-    assert_eq!(good["commit_exception"], Value::Null, "{good}\n{}", board.log());
+    assert_eq!(
+        good["commit_exception"],
+        Value::Null,
+        "{good}\n{}",
+        board.log()
+    );
     assert_eq!(good["result"], 0, "{good}");
     let crc = u32::from_le_bytes(v2[v2.len() - 4..].try_into().unwrap());
     assert_eq!(good["after"]["model_version"], 2, "{good}");
@@ -123,7 +182,10 @@ fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
     let r = python(&["badcrc", "--port", &port.to_string()]);
     assert_eq!(r["bad"], "", "{r}");
     let good = r["good"].as_str().unwrap();
-    assert!(good.starts_with("010404") && good.contains("12345678"), "{r}");
+    assert!(
+        good.starts_with("010404") && good.contains("12345678"),
+        "{r}"
+    );
 }
 
 #[test]
@@ -133,16 +195,39 @@ fn mbpoll_reads_the_test_pattern_over_a_pty() {
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
     demo_image(1, 1, &m);
-    let board = BenchBoard::start("pty", &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"]);
-    assert!(board.wait_for("serving Modbus RTU", BOOT), "{}", board.log());
+    let board = BenchBoard::start(
+        "pty",
+        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
+    );
+    assert!(
+        board.wait_for("serving Modbus RTU", BOOT),
+        "{}",
+        board.log()
+    );
     let log = board.log();
-    let pty = log.split_whitespace().find(|w| w.starts_with("/dev/pts/")).expect("QEMU names the pty").to_string();
+    let pty = log
+        .split_whitespace()
+        .find(|w| w.starts_with("/dev/pts/"))
+        .expect("QEMU names the pty")
+        .to_string();
     let out = Command::new("mbpoll")
-        .args(["-m", "rtu", "-a", "1", "-b", "115200", "-P", "none", "-t", "3:hex", "-r", "1", "-c", "3", "-1", "-o", "2"])
+        .args([
+            "-m", "rtu", "-a", "1", "-b", "115200", "-P", "none", "-t", "3:hex", "-r", "1", "-c",
+            "3", "-1", "-o", "2",
+        ])
         .arg(&pty)
         .output()
         .expect("mbpoll (apt-get install mbpoll)");
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
-    assert!(text.contains("[1]: \t0x1234") && text.contains("[2]: \t0x5678") && text.contains("[3]: \t0x0001"), "{text}");
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("[1]: \t0x1234")
+            && text.contains("[2]: \t0x5678")
+            && text.contains("[3]: \t0x0001"),
+        "{text}"
+    );
 }

@@ -69,7 +69,9 @@ pub enum WriteError {
 pub enum Command {
     None,
     /// The staged image (this long) parsed: store it and swap it in.
-    CommitModel { len: usize },
+    CommitModel {
+        len: usize,
+    },
     Rereference,
     /// Limits changed: apply them to the compensator.
     LimitsChanged,
@@ -127,7 +129,11 @@ impl Holding {
         let pos = |a: u16| -> Option<u16> {
             let k = a.checked_sub(HR_POSITIONS)?;
             let v = *self.positions.get(usize::from(k / 2))? as u32;
-            Some(if k % 2 == 0 { (v >> 16) as u16 } else { v as u16 })
+            Some(if k % 2 == 0 {
+                (v >> 16) as u16
+            } else {
+                v as u16
+            })
         };
         Some(match addr {
             HR_UNLOCK => u16::from(self.unlocked(now_ms)),
@@ -137,8 +143,12 @@ impl Holding {
             HR_BAUD => (self.baud / 100) as u16,
             HR_SPINDLE => self.spindle_rpm,
             a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => pos(a)?,
-            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => self.clamp[usize::from(a - HR_CLAMP)],
-            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => self.rate[usize::from(a - HR_RATE)],
+            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
+                self.clamp[usize::from(a - HR_CLAMP)]
+            }
+            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => {
+                self.rate[usize::from(a - HR_RATE)]
+            }
             HR_STAGED_LEN => self.staged_len,
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
@@ -171,19 +181,25 @@ impl Holding {
                 command = c;
             }
         }
-        if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&addr) || addr <= HR_SPINDLE && end > HR_SPINDLE {
+        if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&addr)
+            || addr <= HR_SPINDLE && end > HR_SPINDLE
+        {
             self.plc_written_ms = Some(now_ms);
         }
         Ok(command)
     }
 
     fn protected(a: u16) -> bool {
-        !(a == HR_UNLOCK || a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a))
+        !(a == HR_UNLOCK
+            || a == HR_SPINDLE
+            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a))
     }
 
     fn check(&self, a: u16, v: u16, now_ms: u64) -> Result<(), WriteError> {
-        let writable = matches!(a, HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN)
-            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+        let writable = matches!(
+            a,
+            HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN
+        ) || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
             || (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
@@ -194,7 +210,10 @@ impl Holding {
             return Err(WriteError::Locked);
         }
         let ok = match a {
-            HR_COMMAND => matches!(v, CMD_COMMIT_MODEL | CMD_REREFERENCE | CMD_CLEAR_STAGING | CMD_LOCK),
+            HR_COMMAND => matches!(
+                v,
+                CMD_COMMIT_MODEL | CMD_REREFERENCE | CMD_CLEAR_STAGING | CMD_LOCK
+            ),
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
@@ -227,7 +246,11 @@ impl Holding {
                 let k = usize::from(a - HR_POSITIONS);
                 let p = &mut self.positions[k / 2];
                 let u = *p as u32;
-                *p = if k % 2 == 0 { ((u & 0xFFFF) | (u32::from(v) << 16)) as i32 } else { ((u & 0xFFFF_0000) | u32::from(v)) as i32 };
+                *p = if k % 2 == 0 {
+                    ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
+                } else {
+                    ((u & 0xFFFF_0000) | u32::from(v)) as i32
+                };
             }
             a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
                 self.clamp[usize::from(a - HR_CLAMP)] = v;

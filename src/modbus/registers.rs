@@ -155,17 +155,34 @@ impl Snapshot {
         } else if in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS as u16) {
             let k = addr - IR_CORRECTIONS;
             let v = self.corrections[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k % 2 == 0 { hi(v) } else { lo(v) }
+            if k % 2 == 0 {
+                hi(v)
+            } else {
+                lo(v)
+            }
         } else if in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS as u16) {
             let k = addr - IR_PREDICTIONS;
             let v = self.predictions[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k % 2 == 0 { hi(v) } else { lo(v) }
+            if k % 2 == 0 {
+                hi(v)
+            } else {
+                lo(v)
+            }
         } else if in_block(IR_AXES, AXIS_BLOCK * MAX_AXES as u16) {
             let k = addr - IR_AXES;
             let a = self.axes[usize::from(k / AXIS_BLOCK) % MAX_AXES];
-            let field = [a.offset as u32, a.slope as u32, a.ref_pos as u32, self.sequence];
+            let field = [
+                a.offset as u32,
+                a.slope as u32,
+                a.ref_pos as u32,
+                self.sequence,
+            ];
             let v = field[usize::from((k % AXIS_BLOCK) / 2)];
-            if k % 2 == 0 { hi(v) } else { lo(v) }
+            if k % 2 == 0 {
+                hi(v)
+            } else {
+                lo(v)
+            }
         } else if in_block(IR_TEMPERATURES, MAX_CHANNELS as u16) {
             let t = self.temperatures[usize::from(addr - IR_TEMPERATURES) % MAX_CHANNELS];
             t.map_or(NOT_AVAILABLE, |v| v as u16)

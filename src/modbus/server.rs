@@ -50,12 +50,21 @@ pub struct Server {
 
 impl Server {
     pub fn new(unit: u8, baud: u32) -> Self {
-        Server { holding: Holding::new(unit, baud), counters: Counters::default() }
+        Server {
+            holding: Holding::new(unit, baud),
+            counters: Counters::default(),
+        }
     }
 
     /// Handle one received frame. `reply` is cleared and, when the request
     /// deserves an answer, filled with the complete RTU reply (CRC included).
-    pub fn handle(&mut self, frame: &[u8], now_ms: u64, snapshot: &Snapshot, reply: &mut Vec<u8, MAX_FRAME>) -> Action {
+    pub fn handle(
+        &mut self,
+        frame: &[u8],
+        now_ms: u64,
+        snapshot: &Snapshot,
+        reply: &mut Vec<u8, MAX_FRAME>,
+    ) -> Action {
         reply.clear();
         self.counters.frames = self.counters.frames.wrapping_add(1);
         let n = frame.len();
@@ -84,7 +93,10 @@ impl Server {
         }
         // FC15/16: the byte count must match the frame and the register count.
         if matches!(frame[1], 0x0F | 0x10) {
-            let consistent = n >= 9 && usize::from(frame[6]) + 9 == n && (frame[1] != 0x10 || u16::from_be_bytes([frame[4], frame[5]]) * 2 == u16::from(frame[6]));
+            let consistent = n >= 9
+                && usize::from(frame[6]) + 9 == n
+                && (frame[1] != 0x10
+                    || u16::from_be_bytes([frame[4], frame[5]]) * 2 == u16::from(frame[6]));
             if !consistent {
                 if frame[0] != 0 {
                     exception(frame, 0x03, reply);
@@ -114,7 +126,13 @@ impl Server {
                 let result = match mf.get_external_read() {
                     Ok(Read::Words(w)) => {
                         let input = func == rmodbus::consts::ModbusFunction::GetInputs;
-                        fill_words(w.address, w.count, w.buf, |a| if input { snapshot.input_register(a) } else { self.holding.read(a, now_ms) })
+                        fill_words(w.address, w.count, w.buf, |a| {
+                            if input {
+                                snapshot.input_register(a)
+                            } else {
+                                self.holding.read(a, now_ms)
+                            }
+                        })
                     }
                     Ok(Read::Bits(_)) => Err(ErrorKind::IllegalFunction),
                     Err(e) => Err(e),
@@ -166,9 +184,16 @@ impl Server {
 
 /// Fill a read reply's data area; an address outside the map refuses the
 /// whole request (ILLEGAL DATA ADDRESS), as the specification asks.
-fn fill_words(start: u16, count: u16, buf: &mut [u8], value: impl Fn(u16) -> Option<u16>) -> Result<(), ErrorKind> {
+fn fill_words(
+    start: u16,
+    count: u16,
+    buf: &mut [u8],
+    value: impl Fn(u16) -> Option<u16>,
+) -> Result<(), ErrorKind> {
     for (i, out) in buf.chunks_exact_mut(2).take(usize::from(count)).enumerate() {
-        let a = start.checked_add(i as u16).ok_or(ErrorKind::IllegalDataAddress)?;
+        let a = start
+            .checked_add(i as u16)
+            .ok_or(ErrorKind::IllegalDataAddress)?;
         let v = value(a).ok_or(ErrorKind::IllegalDataAddress)?;
         out.copy_from_slice(&v.to_be_bytes());
     }

@@ -3,7 +3,9 @@
 //! behind the same NorFlash trait as the real board's flash, with NOR rules:
 //! erase sets 0xFF, programming only clears bits, aligned writes.
 
-use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
+use embedded_storage::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
 
 extern "C" {
     static mut __model_slots_start: u8;
@@ -40,7 +42,12 @@ impl RamNor {
         }
         // SAFETY: the linker reserves MODEL_SLOTS for this alone, and TAKEN
         // hands it out once.
-        let mem = unsafe { core::slice::from_raw_parts_mut(core::ptr::addr_of_mut!(__model_slots_start), SLOTS_BYTES) };
+        let mem = unsafe {
+            core::slice::from_raw_parts_mut(
+                core::ptr::addr_of_mut!(__model_slots_start),
+                SLOTS_BYTES,
+            )
+        };
         Some(RamNor { mem })
     }
 }
@@ -53,7 +60,10 @@ impl ReadNorFlash for RamNor {
     const READ_SIZE: usize = 1;
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), RamNorError> {
         let o = offset as usize;
-        let src = self.mem.get(o..o + bytes.len()).ok_or(RamNorError::OutOfBounds)?;
+        let src = self
+            .mem
+            .get(o..o + bytes.len())
+            .ok_or(RamNorError::OutOfBounds)?;
         bytes.copy_from_slice(src);
         Ok(())
     }
@@ -70,7 +80,10 @@ impl NorFlash for RamNor {
         if from % Self::ERASE_SIZE != 0 || to % Self::ERASE_SIZE != 0 {
             return Err(RamNorError::NotAligned);
         }
-        self.mem.get_mut(from..to).ok_or(RamNorError::OutOfBounds)?.fill(0xFF);
+        self.mem
+            .get_mut(from..to)
+            .ok_or(RamNorError::OutOfBounds)?
+            .fill(0xFF);
         Ok(())
     }
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamNorError> {
@@ -78,7 +91,10 @@ impl NorFlash for RamNor {
         if o % Self::WRITE_SIZE != 0 || bytes.len() % Self::WRITE_SIZE != 0 {
             return Err(RamNorError::NotAligned);
         }
-        let dst = self.mem.get_mut(o..o + bytes.len()).ok_or(RamNorError::OutOfBounds)?;
+        let dst = self
+            .mem
+            .get_mut(o..o + bytes.len())
+            .ok_or(RamNorError::OutOfBounds)?;
         for (d, s) in dst.iter_mut().zip(bytes) {
             *d &= *s;
         }

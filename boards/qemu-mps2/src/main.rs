@@ -26,8 +26,8 @@ mod cycles;
 mod emulated_bus;
 mod executor;
 mod flash;
-mod rtu_port;
 mod host_trace;
+mod rtu_port;
 mod semihost;
 mod time_driver;
 mod uart;
@@ -36,20 +36,20 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use core::cell::RefCell;
 use core::fmt::Write as _;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
-use thermocomp::app::{App, LinkChange};
-use thermocomp::hal::serial::RtuPort;
-use thermocomp::modbus::server::MAX_FRAME;
 use cortex_m_rt::{entry, exception};
 use embassy_executor::Spawner;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_time::{Duration, Instant, Timer};
 use static_cell::StaticCell;
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{
     AcquisitionConfig, CycleReport, TemperatureAcquisition,
 };
+use thermocomp::app::{App, LinkChange};
 use thermocomp::compensation::{Compensation, PlcInputs};
+use thermocomp::hal::serial::RtuPort;
+use thermocomp::modbus::server::MAX_FRAME;
 use thermocomp::trace::TraceSample;
 use thermocomp_core::limits::{MAX_AXES, MAX_IMAGE_BYTES, MAX_SENSORS};
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
@@ -359,7 +359,13 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
     let Some(flash) = flash::RamNor::take() else {
         semihost::exit(exit_code::PANIC)
     };
-    let mut app = App::new(flash, flash::SLOT_SIZE, UNIT, BAUD, *sensors.acquisition.map());
+    let mut app = App::new(
+        flash,
+        flash::SLOT_SIZE,
+        UNIT,
+        BAUD,
+        *sensors.acquisition.map(),
+    );
     if let Some(p) = model_path {
         static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
         let Some(buf) = BUF.try_init([0; MAX_IMAGE_BYTES]) else {
@@ -367,7 +373,11 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
         };
         match read_host_file(p, buf).map(|img| app.program(img)) {
             Some(Ok(())) => log!("model {} programmed into the flash slots", p),
-            other => log!("model {} not programmed ({:?}); serving what the slots hold", p, other),
+            other => log!(
+                "model {} not programmed ({:?}); serving what the slots hold",
+                p,
+                other
+            ),
         }
     }
     log!(
@@ -383,13 +393,27 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
                 let report = sensors.acquire(&sample).await;
                 let uptime = Instant::now().as_millis();
                 let out = APP.lock(|a| {
-                    a.borrow_mut().as_mut().map(|app| app.cycle(&sensors.acquisition, sample.time_ms, uptime, sample.spindle_rpm))
+                    a.borrow_mut().as_mut().map(|app| {
+                        app.cycle(
+                            &sensors.acquisition,
+                            sample.time_ms,
+                            uptime,
+                            sample.spindle_rpm,
+                        )
+                    })
                 });
                 if let (Some(out), true) = (out, rows % 50 == 1) {
                     let ch0 = sensors.acquisition.value(0, sample.time_ms);
                     APP.lock(|a| {
                         if let Some(app) = a.borrow().as_ref() {
-                            log_correction(&app.compensation, sample.time_ms, &report, (ch0.usable(), ch0.state), sample.spindle_rpm.unwrap_or(0), &out);
+                            log_correction(
+                                &app.compensation,
+                                sample.time_ms,
+                                &report,
+                                (ch0.usable(), ch0.state),
+                                sample.spindle_rpm.unwrap_or(0),
+                                &out,
+                            );
                         }
                     });
                 }
@@ -411,10 +435,18 @@ async fn serve_modbus() {
     let mut frame = [0u8; 300];
     let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
     loop {
-        let Ok(n) = port.read_frame(&mut frame).await else { continue };
-        let Some(request) = frame.get(..n) else { continue };
+        let Ok(n) = port.read_frame(&mut frame).await else {
+            continue;
+        };
+        let Some(request) = frame.get(..n) else {
+            continue;
+        };
         let uptime = Instant::now().as_millis();
-        let change = APP.lock(|a| a.borrow_mut().as_mut().map(|app| app.request(request, uptime, &mut reply)));
+        let change = APP.lock(|a| {
+            a.borrow_mut()
+                .as_mut()
+                .map(|app| app.request(request, uptime, &mut reply))
+        });
         if !reply.is_empty() {
             port.write_frame(&reply).await;
         }

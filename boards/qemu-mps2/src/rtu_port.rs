@@ -14,13 +14,20 @@ pub struct QemuRtuPort {
 
 /// 3.5 characters of 11 bits at `baud`, at least 1.75 ms, in whole ms.
 fn frame_gap(baud: u32) -> Duration {
-    let us = if baud > 19_200 { 1_750 } else { 38_500_000 / u64::from(baud.max(1)) };
+    let us = if baud > 19_200 {
+        1_750
+    } else {
+        38_500_000 / u64::from(baud.max(1))
+    };
     Duration::from_millis(us.div_ceil(1000))
 }
 
 impl QemuRtuPort {
     pub fn new(baud: u32) -> Self {
-        QemuRtuPort { uart: Uart0::new(baud), gap: frame_gap(baud) }
+        QemuRtuPort {
+            uart: Uart0::new(baud),
+            gap: frame_gap(baud),
+        }
     }
 }
 

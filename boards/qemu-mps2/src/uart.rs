@@ -66,7 +66,6 @@ impl Uart0 {
         uart
     }
 
-
     pub fn set_baud(&mut self, baud: u32) {
         // QEMU refuses divisors below 16; timing on the socket is not modelled.
         let div = (crate::time_driver::CORE_CLOCK_HZ / baud.max(1)).max(16);
@@ -89,8 +88,6 @@ impl Uart0 {
         })
         .await
     }
-
-
 
     pub fn write_all(&mut self, bytes: &[u8]) {
         for &b in bytes {

@@ -34,11 +34,21 @@ fn main() -> Result<()> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut v = run_bench(
         &machines,
-        &BenchConfig { cases, seed, hours: 8.0, sample_period_s: 10.0, threads, verbose },
+        &BenchConfig {
+            cases,
+            seed,
+            hours: 8.0,
+            sample_period_s: 10.0,
+            threads,
+            verbose,
+        },
     )?;
     // full diagnosis of one 8 h run sampled at 1 s, all candidates
     let m = &machines[1];
-    let duty = Duty::load(&PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/duty/production-mixed.toml")))?;
+    let duty = Duty::load(&PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/duty/production-mixed.toml"
+    )))?;
     let run = sim_run(
         m,
         &duty,
@@ -51,7 +61,14 @@ fn main() -> Result<()> {
         },
     )?;
     let t = std::time::Instant::now();
-    let d = diagnose(m, &[("8h-1s".into(), run)], &Options { threads, ..Options::default() })?;
+    let d = diagnose(
+        m,
+        &[("8h-1s".into(), run)],
+        &Options {
+            threads,
+            ..Options::default()
+        },
+    )?;
     let secs = t.elapsed().as_secs_f64();
     v["full_diagnosis_8h_1s_seconds"] = serde_json::json!(secs);
     v["full_diagnosis_8h_1s_top"] = serde_json::json!(d.findings.first().map(|f| f.name.clone()));

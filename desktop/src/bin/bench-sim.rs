@@ -11,7 +11,13 @@ fn main() -> Result<()> {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--json" => json = true,
-            "--repeat" => repeat = args.next().context("--repeat N")?.parse().context("--repeat N")?,
+            "--repeat" => {
+                repeat = args
+                    .next()
+                    .context("--repeat N")?
+                    .parse()
+                    .context("--repeat N")?
+            }
             other => anyhow::bail!("unknown argument `{other}` (--json, --repeat N)"),
         }
     }
@@ -28,10 +34,20 @@ fn main() -> Result<()> {
                 "all-effects",
                 vec![
                     Effect::Convection { h_w_per_m2k: 8.0 },
-                    Effect::AmbientDrift { amp_c: 1.0, phase_h: 3.0, rate_c_per_h: 0.1, period_h: 24.0 },
+                    Effect::AmbientDrift {
+                        amp_c: 1.0,
+                        phase_h: 3.0,
+                        rate_c_per_h: 0.1,
+                        period_h: 24.0,
+                    },
                     Effect::SensorLag { tau_s: 120.0 },
                     Effect::BearingNonlinear { k_w: 40.0, p: 1.8 },
-                    Effect::Coolant { g_w_per_k: 15.0, offset_c: -2.0, amp_c: 0.5, period_s: 900.0 },
+                    Effect::Coolant {
+                        g_w_per_k: 15.0,
+                        offset_c: -2.0,
+                        amp_c: 0.5,
+                        period_s: 900.0,
+                    },
                     Effect::Ballscrew { k_w: 60.0 },
                     Effect::Bending { k_um_per_k: 1.0 },
                 ],
@@ -51,18 +67,30 @@ fn main() -> Result<()> {
             }));
         }
     }
-    let worst = results.iter().filter_map(|r| r["seconds"].as_f64()).fold(0.0, f64::max);
+    let worst = results
+        .iter()
+        .filter_map(|r| r["seconds"].as_f64())
+        .fold(0.0, f64::max);
     if json {
-        println!("{}", serde_json::json!({"bench": "sim-8h-1s", "worst_seconds": worst, "pass": worst < 1.0, "runs": results}));
+        println!(
+            "{}",
+            serde_json::json!({"bench": "sim-8h-1s", "worst_seconds": worst, "pass": worst < 1.0, "runs": results})
+        );
     } else {
         for r in &results {
             println!(
                 "bench-sim: {} ({} nodes, {}) 8 h at 1 s = {} steps in {:.4} s",
-                r["machine"].as_str().unwrap_or(""), r["nodes"], r["effects"].as_str().unwrap_or(""), r["steps"],
+                r["machine"].as_str().unwrap_or(""),
+                r["nodes"],
+                r["effects"].as_str().unwrap_or(""),
+                r["steps"],
                 r["seconds"].as_f64().unwrap_or(f64::NAN)
             );
         }
-        println!("bench-sim: worst {worst:.4} s (target < 1 s): {}", if worst < 1.0 { "PASS" } else { "FAIL" });
+        println!(
+            "bench-sim: worst {worst:.4} s (target < 1 s): {}",
+            if worst < 1.0 { "PASS" } else { "FAIL" }
+        );
     }
     Ok(())
 }

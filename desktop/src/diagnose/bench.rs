@@ -33,8 +33,16 @@ pub fn random_duty(g: &mut Gauss, n_max: f64, hours: f64) -> Duty {
         } else {
             0.0
         };
-        let feed = if running { (g.uniform() * 100.0).round() / 100.0 } else { 0.0 };
-        let cool = if running && g.uniform() < 0.6 { 1.0 } else { 0.0 };
+        let feed = if running {
+            (g.uniform() * 100.0).round() / 100.0
+        } else {
+            0.0
+        };
+        let cool = if running && g.uniform() < 0.6 {
+            1.0
+        } else {
+            0.0
+        };
         push(&mut d, t, rpm, feed, cool);
         t += dur;
     }
@@ -50,26 +58,41 @@ fn lu(g: &mut Gauss, a: f64, b: f64) -> f64 {
 pub fn random_effect(g: &mut Gauss, m: &Machine, kind: &str) -> Effect {
     let sign = if g.uniform() < 0.5 { -1.0 } else { 1.0 };
     match kind {
-        "convection" => Effect::Convection { h_w_per_m2k: lu(g, 4.0, 20.0) },
+        "convection" => Effect::Convection {
+            h_w_per_m2k: lu(g, 4.0, 20.0),
+        },
         "ambient_drift" => Effect::AmbientDrift {
             amp_c: lu(g, 0.8, 3.0),
             phase_h: lu(g, 0.0, 24.0),
             rate_c_per_h: lu(g, -0.3, 0.3),
             period_h: 24.0,
         },
-        "sensor_lag" => Effect::SensorLag { tau_s: (lu(g, 60f64.ln(), 400f64.ln())).exp() },
-        "bearing_nonlinear" => Effect::BearingNonlinear { k_w: lu(g, 20.0, 80.0), p: lu(g, 1.5, 2.0) },
+        "sensor_lag" => Effect::SensorLag {
+            tau_s: (lu(g, 60f64.ln(), 400f64.ln())).exp(),
+        },
+        "bearing_nonlinear" => Effect::BearingNonlinear {
+            k_w: lu(g, 20.0, 80.0),
+            p: lu(g, 1.5, 2.0),
+        },
         "coolant" => Effect::Coolant {
             g_w_per_k: (lu(g, 5f64.ln(), 40f64.ln())).exp(),
             offset_c: lu(g, -4.0, -1.0),
             amp_c: lu(g, 0.2, 1.0),
             period_s: lu(g, 600.0, 1800.0),
         },
-        "ballscrew" => Effect::Ballscrew { k_w: lu(g, 30.0, 150.0) },
-        "bending" => Effect::Bending { k_um_per_k: sign * lu(g, 0.5, 3.0) },
+        "ballscrew" => Effect::Ballscrew {
+            k_w: lu(g, 30.0, 150.0),
+        },
+        "bending" => Effect::Bending {
+            k_um_per_k: sign * lu(g, 0.5, 3.0),
+        },
         _ => {
-            let i = ((g.uniform() * m.sensor_cols.len() as f64) as usize).min(m.sensor_cols.len() - 1);
-            Effect::SensorOffset { sensor: m.sensor_cols[i].clone(), offset_c: sign * lu(g, 0.3, 1.5) }
+            let i =
+                ((g.uniform() * m.sensor_cols.len() as f64) as usize).min(m.sensor_cols.len() - 1);
+            Effect::SensorOffset {
+                sensor: m.sensor_cols[i].clone(),
+                offset_c: sign * lu(g, 0.3, 1.5),
+            }
         }
     }
 }
@@ -105,7 +128,10 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
     for _ in 0..n_clean {
         plan.push(vec![]);
     }
-    let opt = Options { threads: cfg.threads, ..Options::default() };
+    let opt = Options {
+        threads: cfg.threads,
+        ..Options::default()
+    };
     let (mut ok_single, mut ok_pair, mut n_s, mut n_p, mut false_alarms) = (0, 0, 0, 0, 0);
     let mut shrinks = Vec::new();
     let mut shrinks_um = Vec::new();
@@ -134,13 +160,19 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
         let top = d.findings.first();
         let mut truth: Vec<&str> = kinds.clone();
         truth.sort();
-        let got: Vec<String> = top.map(|f| {
-            let mut v: Vec<String> = f.name.split('+').map(String::from).collect();
-            v.sort();
-            v
-        }).unwrap_or_default();
+        let got: Vec<String> = top
+            .map(|f| {
+                let mut v: Vec<String> = f.name.split('+').map(String::from).collect();
+                v.sort();
+                v
+            })
+            .unwrap_or_default();
         let correct = got.iter().map(String::as_str).eq(truth.iter().copied());
-        let label = if kinds.is_empty() { "clean".to_string() } else { kinds.join("+") };
+        let label = if kinds.is_empty() {
+            "clean".to_string()
+        } else {
+            kinds.join("+")
+        };
         match kinds.len() {
             0 => {
                 if !d.findings.is_empty() {
@@ -181,13 +213,33 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
                 "case {ci:3} {:18} truth {:36} got {:36} {} ({:.2} s)",
                 m.spec.name,
                 label,
-                d.findings.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(","),
-                if kinds.is_empty() { if d.findings.is_empty() { "ok" } else { "FALSE ALARM" } } else if correct { "ok" } else { "MISS" },
+                d.findings
+                    .iter()
+                    .map(|f| f.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(","),
+                if kinds.is_empty() {
+                    if d.findings.is_empty() {
+                        "ok"
+                    } else {
+                        "FALSE ALARM"
+                    }
+                } else if correct {
+                    "ok"
+                } else {
+                    "MISS"
+                },
                 d.seconds
             );
         }
     }
-    let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
     let identified = ok_single + ok_pair;
     Ok(json!({
         "cases": plan.len(),

@@ -55,7 +55,8 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     let machine = if a.machine == "fit" {
         let m = nominal::fit_nominal(&runs[0].1, a.nominal_fraction)?;
         if let Some(p) = &a.save_nominal {
-            std::fs::write(p, m.to_toml()?).with_context(|| format!("cannot write {}", p.display()))?;
+            std::fs::write(p, m.to_toml()?)
+                .with_context(|| format!("cannot write {}", p.display()))?;
         }
         // The nominal part lies inside the effect-fit part (first
         // --fit-fraction); the held-out rest was used for neither.
@@ -84,7 +85,8 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     let d = diagnose(&machine, &runs, &opt)?;
     let names: Vec<String> = runs.iter().map(|r| r.0.clone()).collect();
     if let Some(p) = &a.report {
-        std::fs::write(p, report_md(&d, &names)).with_context(|| format!("cannot write {}", p.display()))?;
+        std::fs::write(p, report_md(&d, &names))
+            .with_context(|| format!("cannot write {}", p.display()))?;
     }
     if a.json {
         println!("{}", d.to_json());

@@ -60,7 +60,11 @@ impl Stats {
 
     /// Held-out RMS and peak over the displacement (`true`) or temperature channels.
     pub fn gap_held(&self, disp: bool) -> Option<(f64, f64)> {
-        let cs: Vec<&ChStats> = self.ch.iter().filter(|c| c.is_disp == disp && c.n_held > 0).collect();
+        let cs: Vec<&ChStats> = self
+            .ch
+            .iter()
+            .filter(|c| c.is_disp == disp && c.n_held > 0)
+            .collect();
         if cs.is_empty() {
             return None;
         }
@@ -179,7 +183,10 @@ pub fn params_of(kind: &str) -> Vec<Param> {
         ],
         "sensor_lag" => vec![p("tau_s", 3.0, 2000.0, true)],
         "bearing_nonlinear" => vec![p("k_w", 0.5, 400.0, true), p("p", 1.1, 3.5, false)],
-        "coolant" => vec![p("g_w_per_k", 0.3, 150.0, true), p("offset_c", -10.0, 5.0, false)],
+        "coolant" => vec![
+            p("g_w_per_k", 0.3, 150.0, true),
+            p("offset_c", -10.0, 5.0, false),
+        ],
         "ballscrew" => vec![p("k_w", 1.0, 2000.0, true)],
         "bending" => vec![p("k_um_per_k", -20.0, 20.0, false)],
         "sensor_offset" => vec![p("offset_c", -5.0, 5.0, false)],
@@ -227,7 +234,11 @@ pub fn effects_of(cands: &[Cand], u: &[f64]) -> Vec<Effect> {
     let mut i = 0;
     for c in cands {
         let ps = params_of(c.kind);
-        let v: Vec<f64> = ps.iter().enumerate().map(|(j, p)| p.from_u(u[i + j])).collect();
+        let v: Vec<f64> = ps
+            .iter()
+            .enumerate()
+            .map(|(j, p)| p.from_u(u[i + j]))
+            .collect();
         i += ps.len();
         out.push(build(c.kind, &v, &c.sensor));
     }
@@ -246,7 +257,11 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
     let mut pts: Vec<Vec<f64>> = vec![x0.to_vec()];
     for i in 0..d {
         let mut x = x0.to_vec();
-        x[i] = if x[i] + step <= 1.0 { x[i] + step } else { x[i] - step };
+        x[i] = if x[i] + step <= 1.0 {
+            x[i] + step
+        } else {
+            x[i] - step
+        };
         pts.push(x);
     }
     let mut evals = 0;
@@ -264,7 +279,10 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
         vals = idx.iter().map(|&i| vals[i]).collect();
         if (vals[d] - vals[0]).abs() < 1e-6 * (1.0 + vals[0].abs()) {
             let spread = (0..d)
-                .map(|j| pts.iter().map(|p| p[j]).fold(f64::MIN, f64::max) - pts.iter().map(|p| p[j]).fold(f64::MAX, f64::min))
+                .map(|j| {
+                    pts.iter().map(|p| p[j]).fold(f64::MIN, f64::max)
+                        - pts.iter().map(|p| p[j]).fold(f64::MAX, f64::min)
+                })
                 .fold(0.0, f64::max);
             if spread < 1e-4 {
                 break;
@@ -320,7 +338,9 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
             }
         }
     }
-    let best = (0..=d).min_by(|&a, &b| vals[a].total_cmp(&vals[b])).unwrap_or(0);
+    let best = (0..=d)
+        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
+        .unwrap_or(0);
     (pts[best].clone(), vals[best], evals)
 }
 
@@ -337,7 +357,12 @@ pub struct FitResult {
 
 /// Fit candidates jointly: a coarse grid (when no start is given) then
 /// Nelder–Mead, minimising the fit-rows criterion.
-pub fn fit_cands(ev: &Evaluator, cands: &[Cand], start: Option<Vec<f64>>, budget: usize) -> FitResult {
+pub fn fit_cands(
+    ev: &Evaluator,
+    cands: &[Cand],
+    start: Option<Vec<f64>>,
+    budget: usize,
+) -> FitResult {
     let d: usize = cands.iter().map(|c| params_of(c.kind).len()).sum();
     let mut obj = |u: &[f64]| -> f64 {
         let eff = effects_of(cands, u);
@@ -410,7 +435,9 @@ pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) ->
             })
             .collect();
         let u: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
-        let v = ev.stats(&effects_of(&cands, &u)).map_or(f64::INFINITY, |s| s.j_fit());
+        let v = ev
+            .stats(&effects_of(&cands, &u))
+            .map_or(f64::INFINITY, |s| s.j_fit());
         evals += 1;
         if v < best.1 {
             best = (ua, v);

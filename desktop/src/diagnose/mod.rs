@@ -50,7 +50,9 @@ impl Default for Options {
             min_abs: 0.5,
             budget: 45,
             pair_top: 8,
-            threads: std::thread::available_parallelism().map_or(1, |n| n.get()).min(8),
+            threads: std::thread::available_parallelism()
+                .map_or(1, |n| n.get())
+                .min(8),
             only: Vec::new(),
         }
     }
@@ -409,7 +411,10 @@ fn evidence(
             let out = crate::sim::simulate(ev.m, &p.inputs, &[], 1).ok();
             match out {
                 Some(o) => (0..p.rows())
-                    .map(|k| o.temps.iter().map(|s| s[k]).sum::<f64>() / o.temps.len().max(1) as f64 - p.inputs.ambient[k])
+                    .map(|k| {
+                        o.temps.iter().map(|s| s[k]).sum::<f64>() / o.temps.len().max(1) as f64
+                            - p.inputs.ambient[k]
+                    })
                     .collect(),
                 None => vec![],
             }
@@ -420,22 +425,39 @@ fn evidence(
             match (out, ch.kind) {
                 (Some(o), Kind::Temp(i)) => {
                     let s = &o.temps[i];
-                    (0..s.len()).map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / dt }).collect()
+                    (0..s.len())
+                        .map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / dt })
+                        .collect()
                 }
                 _ => vec![],
             }
         }),
         "bearing_nonlinear" => (
             "spindle speed² (lagged 20 min)",
-            first_order(&p.inputs.rpm.iter().map(|r| r * r).collect::<Vec<_>>(), dt, 1200.0),
+            first_order(
+                &p.inputs.rpm.iter().map(|r| r * r).collect::<Vec<_>>(),
+                dt,
+                1200.0,
+            ),
         ),
-        "coolant" => ("coolant_on (lagged 20 min)", first_order(&p.inputs.coolant, dt, 1200.0)),
-        "ballscrew" => ("feed_activity (lagged 1 h)", first_order(&p.inputs.feed, dt, 3600.0)),
+        "coolant" => (
+            "coolant_on (lagged 20 min)",
+            first_order(&p.inputs.coolant, dt, 1200.0),
+        ),
+        "ballscrew" => (
+            "feed_activity (lagged 1 h)",
+            first_order(&p.inputs.feed, dt, 3600.0),
+        ),
         "bending" => ("predicted temperature gradient of the bending pair", {
-            let d0 = crate::sim::simulate(ev.m, &p.inputs, &[Effect::Bending { k_um_per_k: 1.0 }], 1);
+            let d0 =
+                crate::sim::simulate(ev.m, &p.inputs, &[Effect::Bending { k_um_per_k: 1.0 }], 1);
             let d1 = crate::sim::simulate(ev.m, &p.inputs, &[], 1);
             match (d0, d1, ev.m.bending) {
-                (Ok(a), Ok(b), Some((_, _, di))) => a.disp[di].iter().zip(&b.disp[di]).map(|(x, y)| x - y).collect(),
+                (Ok(a), Ok(b), Some((_, _, di))) => a.disp[di]
+                    .iter()
+                    .zip(&b.disp[di])
+                    .map(|(x, y)| x - y)
+                    .collect(),
                 _ => vec![],
             }
         }),
@@ -444,7 +466,8 @@ fn evidence(
     let r = &res0[pi][ci];
     let driver_corr = if kind == "sensor_offset" {
         let (rms, _, _) = rms_of(r.iter().copied());
-        let mean = r.iter().filter(|v| v.is_finite()).sum::<f64>() / r.iter().filter(|v| v.is_finite()).count().max(1) as f64;
+        let mean = r.iter().filter(|v| v.is_finite()).sum::<f64>()
+            / r.iter().filter(|v| v.is_finite()).count().max(1) as f64;
         if rms > 0.0 {
             mean / rms
         } else {
@@ -470,16 +493,26 @@ fn evidence(
 
 /// Candidates applicable to this machine and these runs.
 fn candidates(m: &Machine, ps: &[Prepared], res0: &[Vec<Vec<f64>>], opt: &Options) -> Vec<Cand> {
-    let has_disp = ps.iter().any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
-    let has_temp = ps.iter().any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
+    let has_disp = ps
+        .iter()
+        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
+    let has_temp = ps
+        .iter()
+        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
     let mut out = Vec::new();
     for &k in EFFECT_NAMES.iter() {
         if !opt.only.is_empty() && !opt.only.iter().any(|o| o == k) {
             continue;
         }
         let ok = match k {
-            "coolant" => !m.coolant_nodes.is_empty() && ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5)),
-            "ballscrew" => !m.ballscrew_nodes.is_empty() && ps.iter().any(|p| p.inputs.feed.iter().any(|f| *f > 0.0)),
+            "coolant" => {
+                !m.coolant_nodes.is_empty()
+                    && ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5))
+            }
+            "ballscrew" => {
+                !m.ballscrew_nodes.is_empty()
+                    && ps.iter().any(|p| p.inputs.feed.iter().any(|f| *f > 0.0))
+            }
             "bending" => m.bending.is_some() && has_disp,
             "sensor_lag" | "sensor_offset" => has_temp,
             "bearing_nonlinear" => !m.bearing_nodes.is_empty(),
@@ -536,7 +569,8 @@ fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync>(items: &[T], threads: usize,
         return items.iter().map(&f).collect();
     }
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: std::sync::Mutex<Vec<Option<R>>> = std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
+    let results: std::sync::Mutex<Vec<Option<R>>> =
+        std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
     std::thread::scope(|s| {
         for _ in 0..threads {
             s.spawn(|| loop {
@@ -581,7 +615,12 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         let ev_json = evidence(&ev, &res0, fr, &st0, &st, dbic);
         Ok((
             Finding {
-                name: fr.cands.iter().map(|c| c.kind).collect::<Vec<_>>().join("+"),
+                name: fr
+                    .cands
+                    .iter()
+                    .map(|c| c.kind)
+                    .collect::<Vec<_>>()
+                    .join("+"),
                 effects: fr.effects.clone(),
                 dbic,
                 m_before: m0,
@@ -604,7 +643,11 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         let dbic = fr.j - j0 + fr.k as f64 * lnn;
         tried.push((mk(fr, dbic)?.0, fr.clone()));
     }
-    let mut singles_ok: Vec<Finding> = tried.iter().filter(|(f, _)| supported(f, m0)).map(|(f, _)| f.clone()).collect();
+    let mut singles_ok: Vec<Finding> = tried
+        .iter()
+        .filter(|(f, _)| supported(f, m0))
+        .map(|(f, _)| f.clone())
+        .collect();
     singles_ok.sort_by(|a, b| a.m_after.total_cmp(&b.m_after));
     let best_single = singles_ok.first().cloned();
     // pairs: the best single plus each other candidate (forward step),
@@ -616,7 +659,9 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
             .filter(|&i| tried[i].0.dbic <= -opt.min_dbic)
             .min_by(|&a, &b| tried[a].0.dbic.total_cmp(&tried[b].0.dbic)),
     };
-    let need_pairs = best_single.as_ref().is_none_or(|b| b.m_after > floor.max(opt.min_abs + 1.0));
+    let need_pairs = best_single
+        .as_ref()
+        .is_none_or(|b| b.m_after > floor.max(opt.min_abs + 1.0));
     let mut pairs = Vec::new();
     if let (true, Some(bi)) = (need_pairs, base_idx) {
         for j in 0..tried.len() {
@@ -629,7 +674,12 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     let pair_fits: Vec<FitResult> = par_map(&pairs, opt.threads, |&(a, b)| {
         let fa = &tried[a].1;
         let fb = &tried[b].1;
-        fit::fit_added(&ev, fa, &fb.cands[0], opt.budget + 15 * (fa.u.len() + fb.u.len()))
+        fit::fit_added(
+            &ev,
+            fa,
+            &fb.cands[0],
+            opt.budget + 15 * (fa.u.len() + fb.u.len()),
+        )
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
     let mut best_pair: Option<(Finding, usize, usize)> = None;
@@ -639,7 +689,11 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         // a pair must beat every single (the best one by held-out gap and
         // both of its members by BIC) by the same margins
         let ref_m = best_single.as_ref().map_or(m0, |b| b.m_after);
-        let ref_bic = tried[a].0.dbic.min(tried[b].0.dbic).min(best_single.as_ref().map_or(0.0, |b| b.dbic));
+        let ref_bic = tried[a]
+            .0
+            .dbic
+            .min(tried[b].0.dbic)
+            .min(best_single.as_ref().map_or(0.0, |b| b.dbic));
         if f.dbic <= ref_bic - opt.min_dbic
             && supported(&f, m0)
             && f.m_after <= ref_m * (1.0 - opt.min_rel)
@@ -657,7 +711,10 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         for i in [a, b] {
             let mut g = tried[i].0.clone();
             if let Some(o) = g.evidence.as_object_mut() {
-                o.insert("role".into(), json!("member of the selected combination, fitted alone"));
+                o.insert(
+                    "role".into(),
+                    json!("member of the selected combination, fitted alone"),
+                );
             }
             findings.push(g);
         }
@@ -674,7 +731,10 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         }
         let mut g = f.clone();
         if let Some(o) = g.evidence.as_object_mut() {
-            o.insert("role".into(), json!("alternative: supported alone but explains less than the selected effect"));
+            o.insert(
+                "role".into(),
+                json!("alternative: supported alone but explains less than the selected effect"),
+            );
         }
         findings.push(g);
     }
@@ -733,7 +793,10 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
     );
     let _ = writeln!(s, "## Which effect\n");
     if d.findings.is_empty() {
-        let _ = writeln!(s, "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n");
+        let _ = writeln!(
+            s,
+            "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n"
+        );
     } else {
         let _ = writeln!(s, "| rank | effect | params | held-out gap µm before → after | °C before → after | ΔBIC | signature r | driver r |");
         let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
@@ -749,8 +812,14 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
                 f.gap_c.map_or("–".into(), |g| f2(g.0 .0)),
                 f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
                 f.dbic,
-                f.evidence.get("signature_corr").cloned().unwrap_or(Value::Null),
-                f.evidence.get("driver_corr").cloned().unwrap_or(Value::Null),
+                f.evidence
+                    .get("signature_corr")
+                    .cloned()
+                    .unwrap_or(Value::Null),
+                f.evidence
+                    .get("driver_corr")
+                    .cloned()
+                    .unwrap_or(Value::Null),
             );
         }
         let _ = writeln!(s);
@@ -773,12 +842,18 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
     }
     let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
     let w = &d.where_;
-    for (title, key, unit) in [("Per sensor", "sensors", "°C"), ("Per direction", "directions", "µm")] {
+    for (title, key, unit) in [
+        ("Per sensor", "sensors", "°C"),
+        ("Per direction", "directions", "µm"),
+    ] {
         if let Some(o) = w.get(key).and_then(|v| v.as_object()) {
             if o.is_empty() {
                 continue;
             }
-            let _ = writeln!(s, "### {title} ({unit})\n\n| channel | RMS | peak | mean |\n|---|---|---|---|");
+            let _ = writeln!(
+                s,
+                "### {title} ({unit})\n\n| channel | RMS | peak | mean |\n|---|---|---|---|"
+            );
             for (k, v) in o {
                 let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rms"], v["peak"], v["mean"]);
             }
@@ -786,9 +861,16 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
         }
     }
     if let Some(o) = w.get("phases").and_then(|v| v.as_object()) {
-        let _ = writeln!(s, "### Per operating phase\n\n| phase | rows | RMS °C | RMS µm |\n|---|---|---|---|");
+        let _ = writeln!(
+            s,
+            "### Per operating phase\n\n| phase | rows | RMS °C | RMS µm |\n|---|---|---|---|"
+        );
         for (k, v) in o {
-            let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rows"], v["rms_c"], v["rms_um"]);
+            let _ = writeln!(
+                s,
+                "| {k} | {} | {} | {} |",
+                v["rows"], v["rms_c"], v["rms_um"]
+            );
         }
         let _ = writeln!(s);
     }

@@ -16,7 +16,8 @@ use anyhow::{bail, Result};
 use crate::runcsv::Run;
 use crate::sim::linalg::lstsq_cols;
 use crate::sim::machine::{
-    BendingSite, DirectionSpec, EffectSites, MachineSpec, Noise, NodeSpec, SensorSpec, SourceSpec, TermSpec,
+    BendingSite, DirectionSpec, EffectSites, MachineSpec, NodeSpec, Noise, SensorSpec, SourceSpec,
+    TermSpec,
 };
 use crate::sim::Machine;
 
@@ -40,7 +41,11 @@ pub fn fit_nominal(run: &Run, fraction: f64) -> Result<Machine> {
         .map(|v| v.unwrap_or(0.0))
         .collect();
     let n_max = rpm.iter().copied().fold(0.0, f64::max).max(1.0);
-    let tcols: Vec<String> = run.temperature_columns().iter().map(|s| s.to_string()).collect();
+    let tcols: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     if tcols.is_empty() {
         bail!("run has no temperature columns");
     }
@@ -57,7 +62,12 @@ pub fn fit_nominal(run: &Run, fraction: f64) -> Result<Machine> {
             .collect()
     };
     let start = |v: &[f64]| -> f64 {
-        let f: Vec<f64> = v.iter().take(5).copied().filter(|x| x.is_finite()).collect();
+        let f: Vec<f64> = v
+            .iter()
+            .take(5)
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
         f.iter().sum::<f64>() / f.len().max(1) as f64
     };
     let temps: Vec<Vec<f64>> = tcols.iter().map(|c| series(c)).collect();
@@ -77,11 +87,20 @@ pub fn fit_nominal(run: &Run, fraction: f64) -> Result<Machine> {
             let x1: Vec<f64> = (0..n - 1).map(|k| -(v[k] - t0[i])).collect();
             let x2: Vec<f64> = (0..n - 1).map(|k| (rpm[k] / n_max).powf(e)).collect();
             let y: Vec<f64> = (0..n - 1).map(|k| (v[k + 1] - v[k]) / dt).collect();
-            let ok: Vec<usize> = (0..n - 1).filter(|&k| x1[k].is_finite() && y[k].is_finite()).collect();
-            let cols = vec![ok.iter().map(|&k| x1[k]).collect::<Vec<_>>(), ok.iter().map(|&k| x2[k]).collect()];
+            let ok: Vec<usize> = (0..n - 1)
+                .filter(|&k| x1[k].is_finite() && y[k].is_finite())
+                .collect();
+            let cols = vec![
+                ok.iter().map(|&k| x1[k]).collect::<Vec<_>>(),
+                ok.iter().map(|&k| x2[k]).collect(),
+            ];
             let yy: Vec<f64> = ok.iter().map(|&k| y[k]).collect();
             if let Some(w) = lstsq_cols(&cols, &yy, 1e-9) {
-                let sse: f64 = ok.iter().enumerate().map(|(j, &k)| (yy[j] - w[0] * x1[k] - w[1] * x2[k]).powi(2)).sum();
+                let sse: f64 = ok
+                    .iter()
+                    .enumerate()
+                    .map(|(j, &k)| (yy[j] - w[0] * x1[k] - w[1] * x2[k]).powi(2))
+                    .sum();
                 if best.is_none_or(|b| sse < b.0) {
                     best = Some((sse, w[0], w[1], e));
                 }
@@ -96,9 +115,16 @@ pub fn fit_nominal(run: &Run, fraction: f64) -> Result<Machine> {
             area_m2: 1.0,
             amb_offset_c: t0[i] - ambient,
         });
-        sources.push(SourceSpec { node: name.clone(), w_at_nmax: beta.max(0.0) * C_NODE, exponent: e });
+        sources.push(SourceSpec {
+            node: name.clone(),
+            w_at_nmax: beta.max(0.0) * C_NODE,
+            exponent: e,
+        });
         rise.push((beta.max(0.0) / lam, name.clone()));
-        sensors.push(SensorSpec { name: name.clone(), node: name.clone() });
+        sensors.push(SensorSpec {
+            name: name.clone(),
+            node: name.clone(),
+        });
     }
     // directions from the measured temperatures of the first part
     let alpha = crate::sim::machine::ALPHA_STEEL;
@@ -106,28 +132,45 @@ pub fn fit_nominal(run: &Run, fraction: f64) -> Result<Machine> {
     for c in run.error_columns() {
         let d = series(c);
         let d0 = start(&d);
-        let ok: Vec<usize> = (0..n).filter(|&k| d[k].is_finite() && temps.iter().all(|v| v[k].is_finite())).collect();
+        let ok: Vec<usize> = (0..n)
+            .filter(|&k| d[k].is_finite() && temps.iter().all(|v| v[k].is_finite()))
+            .collect();
         let cols: Vec<Vec<f64>> = temps
             .iter()
             .zip(&t0)
             .map(|(v, z)| ok.iter().map(|&k| alpha * 1e3 * (v[k] - z)).collect())
             .collect();
         let y: Vec<f64> = ok.iter().map(|&k| d[k] - d0).collect();
-        let scale: f64 = cols.iter().map(|c| c.iter().map(|x| x * x).sum::<f64>()).sum::<f64>() / cols.len() as f64;
+        let scale: f64 = cols
+            .iter()
+            .map(|c| c.iter().map(|x| x * x).sum::<f64>())
+            .sum::<f64>()
+            / cols.len() as f64;
         let l = lstsq_cols(&cols, &y, 1e-3 * scale.max(1e-12)).unwrap_or(vec![0.0; cols.len()]);
-        let name = c.strip_prefix('d').and_then(|s| s.strip_suffix("_um")).unwrap_or(c).to_string();
+        let name = c
+            .strip_prefix('d')
+            .and_then(|s| s.strip_suffix("_um"))
+            .unwrap_or(c)
+            .to_string();
         directions.push(DirectionSpec {
             name,
             terms: tcols
                 .iter()
                 .zip(&l)
-                .map(|(tc, li)| TermSpec { node: tc.strip_prefix("T_").unwrap_or(tc).to_string(), length_mm: (li * 10.0).round() / 10.0 })
+                .map(|(tc, li)| TermSpec {
+                    node: tc.strip_prefix("T_").unwrap_or(tc).to_string(),
+                    length_mm: (li * 10.0).round() / 10.0,
+                })
                 .collect(),
         });
     }
     rise.sort_by(|a, b| b.0.total_cmp(&a.0));
     let bending = match (rise.first(), rise.last(), directions.last()) {
-        (Some(a), Some(b), Some(d)) if a.1 != b.1 => Some(BendingSite { a: a.1.clone(), b: b.1.clone(), direction: d.name.clone() }),
+        (Some(a), Some(b), Some(d)) if a.1 != b.1 => Some(BendingSite {
+            a: a.1.clone(),
+            b: b.1.clone(),
+            direction: d.name.clone(),
+        }),
         _ => None,
     };
     let spec = MachineSpec {

@@ -105,14 +105,20 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
         dt: dt * f as f64,
         rpm: avg(&full.rpm),
         feed: avg(&full.feed),
-        coolant: avg(&full.coolant).into_iter().map(|c| if c >= 0.5 { 1.0 } else { 0.0 }).collect(),
+        coolant: avg(&full.coolant)
+            .into_iter()
+            .map(|c| if c >= 0.5 { 1.0 } else { 0.0 })
+            .collect(),
         ambient: avg(&full.ambient),
     };
     let mut channels = Vec::new();
     for (i, col) in m.sensor_cols.iter().enumerate() {
         if let Some(c) = run.col(col) {
             let meas: Vec<f64> = rows.iter().map(|&r| c[r].unwrap_or(f64::NAN)).collect();
-            let s = noise_scale(&c.iter().map(|v| v.unwrap_or(f64::NAN)).collect::<Vec<_>>(), 0.018);
+            let s = noise_scale(
+                &c.iter().map(|v| v.unwrap_or(f64::NAN)).collect::<Vec<_>>(),
+                0.018,
+            );
             channels.push(Channel {
                 name: col.clone(),
                 kind: Kind::Temp(i),
@@ -124,7 +130,12 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
     for (i, col) in m.dir_cols.iter().enumerate() {
         if let Some(c) = run.col(col) {
             let raw: Vec<f64> = c.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
-            let first: Vec<f64> = raw.iter().take(5).copied().filter(|v| v.is_finite()).collect();
+            let first: Vec<f64> = raw
+                .iter()
+                .take(5)
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect();
             let z = if first.is_empty() {
                 0.0
             } else {

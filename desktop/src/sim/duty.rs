@@ -112,10 +112,16 @@ impl Duty {
                 let dur = match (s.duration_s, s.duration_min) {
                     (Some(x), None) => x,
                     (None, Some(m)) => m * 60.0,
-                    _ => bail!("segment {}: give exactly one of duration_s, duration_min", i + 1),
+                    _ => bail!(
+                        "segment {}: give exactly one of duration_s, duration_min",
+                        i + 1
+                    ),
                 };
                 if !(dur > 0.0) || s.rpm < 0.0 || !(0.0..=1.0).contains(&s.feed) {
-                    bail!("segment {}: need duration > 0, rpm ≥ 0, 0 ≤ feed ≤ 1", i + 1);
+                    bail!(
+                        "segment {}: need duration > 0, rpm ≥ 0, 0 ≤ feed ≤ 1",
+                        i + 1
+                    );
                 }
                 d.t.push(t);
                 d.rpm.push(s.rpm);
@@ -142,8 +148,8 @@ impl Duty {
             bail!("duty needs at least two rows");
         }
         let pick = |names: &[&str]| names.iter().find_map(|n| run.col(n));
-        let rpm = pick(&["spindle_rpm", "rpm"])
-            .ok_or_else(|| anyhow!("no `spindle_rpm` column"))?;
+        let rpm =
+            pick(&["spindle_rpm", "rpm"]).ok_or_else(|| anyhow!("no `spindle_rpm` column"))?;
         let fill = |c: Option<&[Option<f64>]>, dflt: f64| -> Vec<f64> {
             let mut last = dflt;
             (0..t.len())
@@ -165,7 +171,9 @@ impl Duty {
             ambient: match amb_col {
                 Some(c) => {
                     let f = fill(Some(c), f64::NAN);
-                    f.into_iter().map(|v| if v.is_nan() { None } else { Some(v) }).collect()
+                    f.into_iter()
+                        .map(|v| if v.is_nan() { None } else { Some(v) })
+                        .collect()
                 }
                 None => vec![None; t.len()],
             },
@@ -187,7 +195,11 @@ impl Duty {
             rpm: self.rpm.clone(),
             feed: self.feed.clone(),
             coolant: self.coolant.clone(),
-            ambient: self.ambient.iter().map(|a| a.unwrap_or(ambient_c)).collect(),
+            ambient: self
+                .ambient
+                .iter()
+                .map(|a| a.unwrap_or(ambient_c))
+                .collect(),
         }
     }
 

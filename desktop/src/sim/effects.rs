@@ -176,7 +176,9 @@ impl Effect {
                 phase_h,
                 rate_c_per_h,
                 period_h,
-            } => json!({"amp_c": amp_c, "phase_h": phase_h, "rate_c_per_h": rate_c_per_h, "period_h": period_h}),
+            } => {
+                json!({"amp_c": amp_c, "phase_h": phase_h, "rate_c_per_h": rate_c_per_h, "period_h": period_h})
+            }
             Effect::SensorLag { tau_s } => json!({ "tau_s": tau_s }),
             Effect::BearingNonlinear { k_w, p } => json!({"k_w": k_w, "p": p}),
             Effect::Coolant {
@@ -184,7 +186,9 @@ impl Effect {
                 offset_c,
                 amp_c,
                 period_s,
-            } => json!({"g_w_per_k": g_w_per_k, "offset_c": offset_c, "amp_c": amp_c, "period_s": period_s}),
+            } => {
+                json!({"g_w_per_k": g_w_per_k, "offset_c": offset_c, "amp_c": amp_c, "period_s": period_s})
+            }
             Effect::Ballscrew { k_w } => json!({ "k_w": k_w }),
             Effect::Bending { k_um_per_k } => json!({ "k_um_per_k": k_um_per_k }),
             Effect::SensorOffset { sensor, offset_c } => {

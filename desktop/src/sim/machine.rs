@@ -453,8 +453,14 @@ impl Machine {
                     .directions
                     .iter()
                     .position(|d| d.name == b.direction)
-                    .ok_or_else(|| anyhow!("effects.bending: unknown direction `{}`", b.direction))?;
-                Some((find(&b.a, "effects.bending.a")?, find(&b.b, "effects.bending.b")?, di))
+                    .ok_or_else(|| {
+                        anyhow!("effects.bending: unknown direction `{}`", b.direction)
+                    })?;
+                Some((
+                    find(&b.a, "effects.bending.a")?,
+                    find(&b.b, "effects.bending.b")?,
+                    di,
+                ))
             }
             None => None,
         };

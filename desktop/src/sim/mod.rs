@@ -66,19 +66,28 @@ fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
                 period_s,
             } => {
                 if m.coolant_nodes.is_empty() {
-                    bail!("effect coolant: machine `{}` names no effects.coolant_nodes", m.spec.name);
+                    bail!(
+                        "effect coolant: machine `{}` names no effects.coolant_nodes",
+                        m.spec.name
+                    );
                 }
                 a.cool = Some((*g_w_per_k, *offset_c, *amp_c, *period_s));
             }
             Effect::Ballscrew { k_w } => {
                 if m.ballscrew_nodes.is_empty() {
-                    bail!("effect ballscrew: machine `{}` names no effects.ballscrew_nodes", m.spec.name);
+                    bail!(
+                        "effect ballscrew: machine `{}` names no effects.ballscrew_nodes",
+                        m.spec.name
+                    );
                 }
                 a.screw += k_w
             }
             Effect::Bending { k_um_per_k } => {
                 if m.bending.is_none() {
-                    bail!("effect bending: machine `{}` has no [effects.bending]", m.spec.name);
+                    bail!(
+                        "effect bending: machine `{}` has no [effects.bending]",
+                        m.spec.name
+                    );
                 }
                 a.bend += k_um_per_k
             }
@@ -88,7 +97,9 @@ fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
                     .sensor_cols
                     .iter()
                     .position(|c| *c == col || c == sensor)
-                    .ok_or_else(|| anyhow::anyhow!("effect sensor_offset: unknown sensor `{sensor}`"))?;
+                    .ok_or_else(|| {
+                        anyhow::anyhow!("effect sensor_offset: unknown sensor `{sensor}`")
+                    })?;
                 a.offsets.push((i, *offset_c));
             }
         }
@@ -145,7 +156,9 @@ pub fn steady_state(m: &Machine, q: &[f64], ta: f64, effects: &[Effect]) -> Resu
         l.add(i, i, g_amb[i]);
         rhs[i] = q[i] + g_amb[i] * (ta + m.amb_offset[i]);
     }
-    solve(&l, &rhs).ok_or_else(|| anyhow::anyhow!("thermal network is singular (a node without a path to ambient?)"))
+    solve(&l, &rhs).ok_or_else(|| {
+        anyhow::anyhow!("thermal network is singular (a node without a path to ambient?)")
+    })
 }
 
 /// Simulate without noise. Output every `stride`-th step, starting at row 0.
@@ -365,7 +378,8 @@ pub fn to_run(
     for (k, v) in meta {
         run.set_meta(k, v);
     }
-    let pick = |v: &[f64]| -> Vec<Option<f64>> { v.iter().step_by(stride).map(|x| Some(*x)).collect() };
+    let pick =
+        |v: &[f64]| -> Vec<Option<f64>> { v.iter().step_by(stride).map(|x| Some(*x)).collect() };
     run.push_column("time_s", out.t.iter().map(|t| Some(*t)).collect())?;
     run.push_column("spindle_rpm", pick(&inp.rpm))?;
     run.push_column("feed_activity", pick(&inp.feed))?;
@@ -409,7 +423,11 @@ pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<crate::runc
     let eff = if opt.effects.is_empty() {
         "none".to_string()
     } else {
-        opt.effects.iter().map(|e| e.to_spec()).collect::<Vec<_>>().join(" ")
+        opt.effects
+            .iter()
+            .map(|e| e.to_spec())
+            .collect::<Vec<_>>()
+            .join(" ")
     };
     to_run(
         m,
@@ -417,7 +435,10 @@ pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<crate::runc
         &out,
         stride,
         &[
-            ("run", format!("{}-{}-seed{}", m.spec.name, duty.name, opt.seed)),
+            (
+                "run",
+                format!("{}-{}-seed{}", m.spec.name, duty.name, opt.seed),
+            ),
             ("duty", duty.name.clone()),
             ("seed", opt.seed.to_string()),
             ("effects", eff),
