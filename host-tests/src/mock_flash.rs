@@ -114,7 +114,7 @@ impl NorFlash for MockFlash {
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), MockError> {
         let o = offset as usize;
-        if o % WRITE_SIZE != 0 || bytes.len() % WRITE_SIZE != 0 {
+        if !o.is_multiple_of(WRITE_SIZE) || !bytes.len().is_multiple_of(WRITE_SIZE) {
             return Err(MockError::NotAligned);
         }
         if o + bytes.len() > self.bytes.len() {

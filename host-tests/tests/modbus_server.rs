@@ -46,8 +46,10 @@ struct Bench {
 
 impl Bench {
     fn new() -> Self {
-        let mut snap = Snapshot::default();
-        snap.sequence = 77;
+        let mut snap = Snapshot {
+            sequence: 77,
+            ..Snapshot::default()
+        };
         snap.corrections[0] = -123_456;
         snap.axes[0].offset = 42;
         snap.axes[0].slope = -7;

@@ -155,7 +155,7 @@ impl Snapshot {
         } else if in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS as u16) {
             let k = addr - IR_CORRECTIONS;
             let v = self.corrections[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 hi(v)
             } else {
                 lo(v)
@@ -163,7 +163,7 @@ impl Snapshot {
         } else if in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS as u16) {
             let k = addr - IR_PREDICTIONS;
             let v = self.predictions[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 hi(v)
             } else {
                 lo(v)
@@ -178,7 +178,7 @@ impl Snapshot {
                 self.sequence,
             ];
             let v = field[usize::from((k % AXIS_BLOCK) / 2)];
-            if k % 2 == 0 {
+            if k.is_multiple_of(2) {
                 hi(v)
             } else {
                 lo(v)

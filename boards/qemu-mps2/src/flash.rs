@@ -88,7 +88,7 @@ impl NorFlash for RamNor {
     }
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamNorError> {
         let o = offset as usize;
-        if o % Self::WRITE_SIZE != 0 || bytes.len() % Self::WRITE_SIZE != 0 {
+        if !o.is_multiple_of(Self::WRITE_SIZE) || !bytes.len().is_multiple_of(Self::WRITE_SIZE) {
             return Err(RamNorError::NotAligned);
         }
         let dst = self
