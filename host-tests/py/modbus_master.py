@@ -35,7 +35,7 @@ def u32(hi, lo):
 
 
 def client(port):
-    c = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU, timeout=2, retries=1)
+    c = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU, timeout=3, retries=3)
     if not c.connect():
         sys.exit(f"cannot connect to 127.0.0.1:{port}")
     return c
@@ -109,17 +109,24 @@ def cmd_badcrc(a):
     good = req + struct.pack("<H", crc16(req))
     bad = req + struct.pack("<H", crc16(req) ^ 0x5555)
 
-    def answer(frame):
+    def answer(frame, expect):
+        # Collect until `expect` bytes or 3 s: the reply may arrive byte by
+        # byte, and a loaded host slows QEMU down.
         s.sendall(frame)
-        s.settimeout(0.5)
+        s.settimeout(3.0)
+        got = b""
         try:
-            return s.recv(256)
+            while len(got) < expect:
+                chunk = s.recv(256)
+                if not chunk:
+                    break
+                got += chunk
         except socket.timeout:
-            return b""
+            pass
+        return got
 
-    out = {"bad": answer(bad).hex()}
-    time.sleep(0.05)
-    out["good"] = answer(good).hex()
+    out = {"bad": answer(bad, 1).hex()}
+    out["good"] = answer(good, 9).hex()
     s.close()
     print(json.dumps(out))
 

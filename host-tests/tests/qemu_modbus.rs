@@ -51,6 +51,14 @@ fn trace(path: &std::path::Path, rows: u32) {
     std::fs::write(path, csv).unwrap();
 }
 
+/// One bench board at a time: QEMU hands the guest one UART byte per
+/// main-loop turn, so parallel boards on a 2-core host stretch frames.
+static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn boot(port: u16, trace: &std::path::Path, model: &std::path::Path, pace_ms: u32) -> BenchBoard {
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
     let pace = pace_ms.to_string();
@@ -74,15 +82,18 @@ fn boot(port: u16, trace: &std::path::Path, model: &std::path::Path, pace_ms: u3
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
+    let _one = serial();
     let dir = scratch("bitexact");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
-    trace(&t, 200);
+    // Long enough (1500 samples, 30 ms each) that a loaded CI host still
+    // sees many distinct samples; the test stops as soon as it has 20.
+    trace(&t, 1500);
     demo_image(1, 1, &m);
     let expected = tcomp::replay::replay_files(&t, &m).unwrap();
     let port = free_tcp_port();
-    let board = boot(port, &t, &m, 20);
+    let board = boot(port, &t, &m, 30);
     let mut compared = std::collections::BTreeSet::new();
-    for _ in 0..40 {
+    for _ in 0..60 {
         let snaps = python(&["read", "--port", &port.to_string(), "--samples", "5"]);
         for s in snaps.as_array().unwrap() {
             assert_eq!(s["pattern"], 0x1234_5678, "{s}");
@@ -130,6 +141,7 @@ fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
+    let _one = serial();
     let dir = scratch("upload");
     let (t, m1, m2) = (
         dir.join("trace.csv"),
@@ -173,6 +185,7 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
+    let _one = serial();
     let dir = scratch("crc");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
@@ -191,6 +204,7 @@ fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and mbpoll: scripts/test.sh"]
 fn mbpoll_reads_the_test_pattern_over_a_pty() {
+    let _one = serial();
     let dir = scratch("mbpoll");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
@@ -210,14 +224,24 @@ fn mbpoll_reads_the_test_pattern_over_a_pty() {
         .find(|w| w.starts_with("/dev/pts/"))
         .expect("QEMU names the pty")
         .to_string();
-    let out = Command::new("mbpoll")
-        .args([
-            "-m", "rtu", "-a", "1", "-b", "115200", "-P", "none", "-t", "3:hex", "-r", "1", "-c",
-            "3", "-1", "-o", "2",
-        ])
-        .arg(&pty)
-        .output()
-        .expect("mbpoll (apt-get install mbpoll)");
+    // mbpoll gives up after its timeout; on a loaded host allow two more tries.
+    let poll = || {
+        Command::new("mbpoll")
+            .args([
+                "-m", "rtu", "-a", "1", "-b", "115200", "-P", "none", "-t", "3:hex", "-r", "1",
+                "-c", "3", "-1", "-o", "3",
+            ])
+            .arg(&pty)
+            .output()
+            .expect("mbpoll (apt-get install mbpoll)")
+    };
+    let mut out = poll();
+    for _ in 0..2 {
+        if out.status.success() {
+            break;
+        }
+        out = poll();
+    }
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
