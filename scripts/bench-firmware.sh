@@ -6,13 +6,17 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 need_target >&2
-need_debian qemu-system-arm:qemu-system-arm >&2
+need_debian qemu-system-arm:qemu-system-arm arm-none-eabi-nm:binutils-arm-none-eabi >&2
 cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
 elf="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
 golden="${CARGO_TARGET_DIR:-target}/bench-golden.bin"
 cargo run -q -p tcomp --release -- golden -o "$golden" --steps 10 >&2
 json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench "$golden" | grep '^{' | tail -n 1)
 [ -n "$json" ] || die "the bench firmware printed no figures"
+# Flash taken by the math core: the symbols LTO left under its name in the
+# bench image (its step, evaluation, parser, sigmoid table; inlined callers excluded).
+core_flash=$(arm-none-eabi-nm -S --size-sort -C "$elf" | awk '/thermocomp_core/ && $3 ~ /^[tTrR]$/ {s += strtonum("0x"$2)} END {print s+0}')
+json="${json%\}},\"core_flash_bytes_qemu_image\":$core_flash}"
 if [ "${1:-}" = "--json" ]; then
   echo "$json"
 else

@@ -6,21 +6,45 @@
 #![no_std]
 #![no_main]
 
+mod model_flash;
 mod onewire;
 mod probe_adc;
+mod rtu_port;
 
+use core::cell::RefCell;
 use defmt::{info, warn};
 use embassy_executor::Spawner;
+use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::time::Hertz;
-use embassy_stm32::Config;
+use embassy_stm32::usart::{self, Uart};
+use embassy_stm32::{bind_interrupts, dma, peripherals, Config};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
 use embassy_time::{Duration, Instant, Timer};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
+use thermocomp::app::{App, LinkChange};
+use thermocomp::hal::serial::RtuPort;
+use thermocomp::modbus::server::MAX_FRAME;
 use {defmt_rtt as _, panic_probe as _};
 
 const SYSCLK_HZ: u32 = 168_000_000;
+/// Modbus unit address and baud rate at power-on.
+const UNIT: u8 = 1;
+const BAUD: u32 = 115_200;
+
+bind_interrupts!(struct Irqs {
+    USART1 => usart::InterruptHandler<peripherals::USART1>;
+    DMA2_STREAM7 => dma::InterruptHandler<peripherals::DMA2_CH7>;
+    DMA2_STREAM2 => dma::InterruptHandler<peripherals::DMA2_CH2>;
+});
+
+/// The application state shared by the measurement and Modbus tasks (never
+/// locked across an await).
+static APP: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<App<model_flash::SlotFlash>>>> =
+    BlockingMutex::new(RefCell::new(None));
 /// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
 /// (BENCHMARKS.md, sensor acquisition).
 const CYCLE_PERIOD: Duration = Duration::from_secs(1);
@@ -56,12 +80,60 @@ async fn main(spawner: Spawner) {
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
     let bus = onewire::new_bus(p.PC7, SYSCLK_HZ);
     let probe = probe_adc::ProbeInput::new(p.ADC1, p.PA0);
-    match (heartbeat(led), acquisition(bus, probe)) {
-        (Ok(t1), Ok(t2)) => {
+    let flash = model_flash::SlotFlash::new(Flash::new_blocking(p.FLASH));
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = BAUD;
+    let uart = match Uart::new(
+        p.USART1,
+        p.PA10,
+        p.PA9,
+        p.DMA2_CH7,
+        p.DMA2_CH2,
+        Irqs,
+        uart_config,
+    ) {
+        Ok(u) => u,
+        Err(e) => {
+            defmt::error!("USART1 configuration refused: {}", e);
+            return;
+        }
+    };
+    let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
+    let port = rtu_port::Rs485Port::new(uart, driver_enable);
+    match (heartbeat(led), acquisition(bus, probe, flash), modbus(port)) {
+        (Ok(t1), Ok(t2), Ok(t3)) => {
             spawner.spawn(t1);
             spawner.spawn(t2);
+            spawner.spawn(t3);
         }
         _ => defmt::error!("tasks could not be spawned"),
+    }
+}
+
+/// Modbus RTU server: one request, one reply, from the shared app state.
+#[embassy_executor::task]
+async fn modbus(mut port: rtu_port::Rs485Port) {
+    let mut frame = [0u8; MAX_FRAME + 1];
+    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
+    loop {
+        let Ok(n) = port.read_frame(&mut frame).await else {
+            continue;
+        };
+        let Some(request) = frame.get(..n) else {
+            continue;
+        };
+        let uptime = Instant::now().as_millis();
+        let change = APP.lock(|a| {
+            a.borrow_mut()
+                .as_mut()
+                .map(|app| app.request(request, uptime, &mut reply))
+        });
+        if !reply.is_empty() {
+            port.write_frame(&reply).await;
+        }
+        if let Some(LinkChange::Reconfigure { baud }) = change {
+            port.set_baud(baud);
+        }
     }
 }
 
@@ -71,7 +143,11 @@ type Bus =
 /// Sensors: discover, set 12-bit resolution, then one cycle per second with
 /// the probe read alongside.
 #[embassy_executor::task]
-async fn acquisition(mut bus: Bus, mut probe_input: probe_adc::ProbeInput<'static>) {
+async fn acquisition(
+    mut bus: Bus,
+    mut probe_input: probe_adc::ProbeInput<'static>,
+    flash: model_flash::SlotFlash,
+) {
     let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
     match acq.discover(&mut bus).await {
         Ok(n) => info!("1-Wire: {} sensor(s) found", n),
@@ -80,6 +156,12 @@ async fn acquisition(mut bus: Bus, mut probe_input: probe_adc::ProbeInput<'stati
     if !matches!(acq.configure(&mut bus).await, Ok(true)) {
         warn!("1-Wire: could not set the resolution (no sensor answered)");
     }
+    let app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, *acq.map());
+    info!(
+        "model: version {} crc {:x}",
+        app.snapshot.model_version, app.snapshot.model_crc
+    );
+    APP.lock(|a| *a.borrow_mut() = Some(app));
     // Eddy-current probe: 2 mm range over 0..10 V -> 4096 codes after the divider.
     let probe_config = Calibration::linear(0, 20_000, 4096).map(|calibration| ProbeConfig {
         oversample: 64,
@@ -92,9 +174,18 @@ async fn acquisition(mut bus: Bus, mut probe_input: probe_adc::ProbeInput<'stati
         let start = Instant::now();
         let now_ms = start.as_millis();
         let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
+        let out = APP.lock(|a| {
+            a.borrow_mut()
+                .as_mut()
+                .map(|app| app.cycle(&acq, now_ms, now_ms, None))
+        });
         info!(
-            "cycle: {} ok, {} faulty, {} retries",
-            report.ok, report.faulty, report.retries
+            "cycle: {} ok, {} faulty, {} retries; status {:x} corrections {}",
+            report.ok,
+            report.faulty,
+            report.retries,
+            out.map(|o| o.status),
+            out.map(|o| o.corrections)
         );
         if let Some(cfg) = &probe_config {
             let reading = probe::measure(&mut probe_input, cfg).await;

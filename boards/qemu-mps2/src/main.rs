@@ -630,8 +630,8 @@ async fn bench(golden_path: Option<&'static str>) {
         let (eval, step) = bench_model(model);
         let _ = write!(
             line,
-            ",\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{}",
-            net, seed, eval, step
+            ",\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
+            net, seed, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
         );
     }
     log!("{}}}", line);
