@@ -15,7 +15,10 @@ json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench "$golden" | gr
 [ -n "$json" ] || die "the bench firmware printed no figures"
 # Flash taken by the math core: the symbols LTO left under its name in the
 # bench image (its step, evaluation, parser, sigmoid table; inlined callers excluded).
-core_flash=$(arm-none-eabi-nm -S --size-sort -C "$elf" | awk '/thermocomp_core/ && $3 ~ /^[tTrR]$/ {s += strtonum("0x"$2)} END {print s+0}')
+core_flash=0
+while read -r _ size kind name; do
+  case "$kind:$name" in [tTrR]:*thermocomp_core*) core_flash=$((core_flash + 16#$size)) ;; esac
+done < <(arm-none-eabi-nm -S --size-sort -C "$elf")
 json="${json%\}},\"core_flash_bytes_qemu_image\":$core_flash}"
 if [ "${1:-}" = "--json" ]; then
   echo "$json"

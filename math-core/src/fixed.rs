@@ -72,14 +72,19 @@ pub fn span_gain_q40(span: i64) -> i64 {
 pub fn normalise_q24(v_q16: i64, min: i32, max: i32, gain_q40: i64) -> (i32, bool) {
     let lo = i64::from(min) << 16;
     let hi = i64::from(max) << 16;
-    let outside = v_q16 < lo || v_q16 > hi;
-    let v = v_q16.clamp(lo, hi);
-    // (v − lo) ≤ span·2^16 < 2^48 and gain ≤ 2^40 / span·2: product ≤ 2^57.
-    let x = (((v - lo) * gain_q40 + (1 << 31)) >> 32) - i64::from(ONE_Q24);
-    (
-        x.clamp(-i64::from(ONE_Q24), i64::from(ONE_Q24)) as i32,
-        outside,
-    )
+    // Branches rather than `clamp`, which carries a panic path for lo > hi
+    // (validation already guarantees lo < hi).
+    let (v, outside) = if v_q16 < lo {
+        (lo, true)
+    } else if v_q16 > hi {
+        (hi, true)
+    } else {
+        (v_q16, false)
+    };
+    // (v − lo) ≤ span·2^16 < 2^48 and gain ≤ 2^41 / span: product ≤ 2^57,
+    // and after the shift ≤ 2^25 + 1, which fits i32.
+    let x = ((((v - lo) * gain_q40) + (1 << 31)) >> 32) as i32 - ONE_Q24;
+    (x.clamp(-ONE_Q24, ONE_Q24), outside)
 }
 
 /// Multiply two Q24 values (both within [-1, 1]) to Q24, rounding to nearest.

@@ -625,13 +625,13 @@ async fn bench(golden_path: Option<&'static str>) {
         seed_config.tables.truncate(1);
         let mut net_only = seed_config.clone();
         net_only.tables.clear();
-        let (net, _) = bench_model(net_only);
-        let (seed, _) = bench_model(seed_config);
-        let (eval, step) = bench_model(model);
+        let (net, _, norm) = bench_model(net_only);
+        let (seed, _, _) = bench_model(seed_config);
+        let (eval, step, _) = bench_model(model);
         let _ = write!(
             line,
-            ",\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
-            net, seed, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
+            ",\"normalise_5_inputs_1_axis_insn_x100\":{},\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
+            norm, net, seed, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
         );
     }
     log!("{}}}", line);
@@ -641,7 +641,7 @@ async fn bench(golden_path: Option<&'static str>) {
 /// Instructions of one full evaluation (all networks and tables) and of one
 /// compensator step (features, lag filters for one step, evaluation, limits)
 /// at mid-range inputs, averaged over many calls.
-fn bench_model(model: Model) -> (u64, u64) {
+fn bench_model(model: Model) -> (u64, u64, u64) {
     const RUNS: u32 = 500;
     let features: heapless::Vec<i64, 16> = model
         .inputs
@@ -652,6 +652,10 @@ fn bench_model(model: Model) -> (u64, u64) {
     let eval = cycles::instructions_x100(RUNS, || {
         core::hint::black_box(model.evaluate(core::hint::black_box(&features), &positions));
     });
+    let norm = cycles::instructions_x100(RUNS, || {
+        core::hint::black_box(model.normalise(core::hint::black_box(&features), &positions));
+    });
+
     let temps = [Some(400i32); MAX_SENSORS];
     let n = model.sensors.len();
     let mut comp = Compensator::new(Some(model));
@@ -667,5 +671,5 @@ fn bench_model(model: Model) -> (u64, u64) {
         };
         core::hint::black_box(comp.step(core::hint::black_box(&input)));
     });
-    (eval, step)
+    (eval, step, norm)
 }
