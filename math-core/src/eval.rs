@@ -2,7 +2,9 @@
 //! one set of feature values. Stateless; the [`crate::compensator`] keeps the
 //! state (reference, filters, limits) around it.
 
-use crate::fixed::{mul_q24, normalise_q24, round_shift, sigmoid_q17, ONE_Q24};
+use crate::fixed::{
+    mul_q24, normalise_q16_range, normalise_q24, round_shift, sigmoid_q17, ONE_Q24,
+};
 use crate::image::{Model, Net, Table};
 use crate::limits::*;
 
@@ -46,13 +48,20 @@ impl Model {
             p_ref: [0; MAX_AXES],
             outside: false,
         };
-        let per_input = n.x.iter_mut().zip(&self.input_gain_q40);
-        for (i, (inp, (x, &g))) in self.inputs.iter().zip(per_input).enumerate() {
-            let v = features_q16.get(i).copied().unwrap_or(0);
-            let (xv, out) = normalise_q24(v, inp.min, inp.max, g);
+        // Struct-of-arrays over exactly the model's inputs: a tight loop.
+        // (A missing feature leaves its input at the envelope's centre.)
+        let k = self.inputs.len().min(MAX_INPUTS).min(features_q16.len());
+        let limits = self.input_lo_q16[..k]
+            .iter()
+            .zip(&self.input_hi_q16[..k])
+            .zip(&self.input_gain_q40[..k]);
+        let mut outside = false;
+        for ((x, &v), ((&lo, &hi), &g)) in n.x[..k].iter_mut().zip(&features_q16[..k]).zip(limits) {
+            let (xv, out) = normalise_q16_range(v, lo, hi, g);
             *x = xv;
-            n.outside |= out;
+            outside |= out;
         }
+        n.outside = outside;
         n.p_ref = self.axis_ref_q24;
         let per_axis = n.p.iter_mut().zip(&self.axis_gain_q40);
         for (a, (axis, (p, &g))) in self.axes.iter().zip(per_axis).enumerate() {
@@ -102,7 +111,8 @@ impl Model {
                 *any = true;
             }
         }
-        for (c, a) in e.corrections.iter_mut().zip(acc) {
+        let n_dir = self.directions.len().min(MAX_DIRECTIONS);
+        for (c, &a) in e.corrections[..n_dir].iter_mut().zip(&acc[..n_dir]) {
             *c = sat_i32(round_shift(a, 25));
         }
         if self.tables.is_empty() {

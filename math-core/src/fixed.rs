@@ -70,8 +70,12 @@ pub fn span_gain_q40(span: i64) -> i64 {
 /// the value had to be clamped (outside the training envelope).
 #[inline]
 pub fn normalise_q24(v_q16: i64, min: i32, max: i32, gain_q40: i64) -> (i32, bool) {
-    let lo = i64::from(min) << 16;
-    let hi = i64::from(max) << 16;
+    normalise_q16_range(v_q16, i64::from(min) << 16, i64::from(max) << 16, gain_q40)
+}
+
+/// [`normalise_q24`] with the limits already in Q16 (precomputed per model input).
+#[inline(always)]
+pub fn normalise_q16_range(v_q16: i64, lo: i64, hi: i64, gain_q40: i64) -> (i32, bool) {
     // Branches rather than `clamp`, which carries a panic path for lo > hi
     // (validation already guarantees lo < hi).
     let (v, outside) = if v_q16 < lo {
@@ -96,6 +100,9 @@ pub fn mul_q24(a: i32, b: i32) -> i32 {
 /// decay^n in Q30 for a decay in [0, 1) Q30, by square-and-multiply (exact
 /// integer steps, so the board and the host agree; n may be any gap length).
 pub fn decay_pow_q30(decay_q30: u32, mut n: u64) -> u32 {
+    if n == 1 {
+        return decay_q30; // the common case: one step per sample
+    }
     let mut result: u64 = 1 << 30;
     let mut base = u64::from(decay_q30);
     while n > 0 && result != 0 {

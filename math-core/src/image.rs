@@ -196,6 +196,9 @@ pub struct Model {
     pub tables: Vec<Table, MAX_TABLES>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     pub(crate) input_gain_q40: [i64; MAX_INPUTS],
+    /// Each input's envelope in Q16 of its raw unit.
+    pub(crate) input_lo_q16: [i64; MAX_INPUTS],
+    pub(crate) input_hi_q16: [i64; MAX_INPUTS],
     pub(crate) axis_gain_q40: [i64; MAX_AXES],
     /// Each axis's reference position, normalised (Q24); constant per model.
     pub(crate) axis_ref_q24: [i32; MAX_AXES],
@@ -236,6 +239,8 @@ impl Model {
             nets: Vec::new(),
             tables: Vec::new(),
             input_gain_q40: [0; MAX_INPUTS],
+            input_lo_q16: [0; MAX_INPUTS],
+            input_hi_q16: [0; MAX_INPUTS],
             axis_gain_q40: [0; MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
             crc: 0,
@@ -397,6 +402,8 @@ impl Model {
                 });
             }
             m.input_gain_q40[i] = span_gain_q40(i64::from(max) - i64::from(min));
+            m.input_lo_q16[i] = i64::from(min) << 16;
+            m.input_hi_q16[i] = i64::from(max) << 16;
             push(
                 &mut m.inputs,
                 InputSpec {

@@ -118,7 +118,7 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                 _ => semihost::exit(exit_code::PANIC),
             }
         }
-        "bench" => match bench(arg) {
+        "bench" => match bench(arg, words.next()) {
             Ok(task) => spawner.spawn(task),
             Err(_) => semihost::exit(exit_code::PANIC),
         },
@@ -604,10 +604,10 @@ fn known_loop() {
 }
 
 #[embassy_executor::task]
-async fn bench(golden_path: Option<&'static str>) {
+async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static str>) {
     const RUNS: u32 = 2000;
     let known = cycles::instructions_x100(RUNS, known_loop);
-    let mut line: heapless::String<400> = heapless::String::new();
+    let mut line: heapless::String<600> = heapless::String::new();
     let _ = write!(
         line,
         "{{\"method\":\"qemu -icount shift=0, SysTick at 25 MHz = 40 insn/count, {} runs\",\"known_loop_3000_insn_x100\":{}",
@@ -632,6 +632,15 @@ async fn bench(golden_path: Option<&'static str>) {
             line,
             ",\"normalise_5_inputs_1_axis_insn_x100\":{},\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
             norm, net, seed, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
+        );
+    }
+    // A fitted model exported by tcomp (e.g. the FL_THERMAL demo model).
+    if let Some(model) = model_path.and_then(load_model) {
+        let (eval, step, _) = bench_model(model);
+        let _ = write!(
+            line,
+            ",\"image_model_evaluate_insn_x100\":{},\"image_model_step_insn_x100\":{}",
+            eval, step
         );
     }
     log!("{}}}", line);
