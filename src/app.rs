@@ -140,6 +140,12 @@ impl<F: NorFlash> App<F> {
         out
     }
 
+    /// Publish the eddy-current probe's latest reading (0.1 µm and state code).
+    pub fn set_probe(&mut self, reading: &crate::acquisition::probe::ProbeReading) {
+        self.snapshot.probe = reading.tenth_um.unwrap_or(0);
+        self.snapshot.probe_state = reading.state.code();
+    }
+
     /// Handle one request frame; `reply` gets the answer (empty: stay silent).
     pub fn request(
         &mut self,

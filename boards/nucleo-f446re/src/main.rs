@@ -189,6 +189,11 @@ async fn acquisition(
         );
         if let Some(cfg) = &probe_config {
             let reading = probe::measure(&mut probe_input, cfg).await;
+            APP.lock(|a| {
+                if let Some(app) = a.borrow_mut().as_mut() {
+                    app.set_probe(&reading);
+                }
+            });
             info!("probe: {} {}", reading.state, reading.tenth_um);
         }
         Timer::at(start + CYCLE_PERIOD).await;
