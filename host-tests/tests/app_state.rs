@@ -1,0 +1,136 @@
+//! The application state both board tasks share: a model committed over
+//! Modbus lands in the flash slots and serves; a refused one changes
+//! nothing; the probe reading reaches its registers; a reboot finds the model.
+use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use thermocomp::acquisition::channel_map::ChannelMap;
+use thermocomp::acquisition::probe::{ProbeReading, ProbeState};
+use thermocomp::app::App;
+use thermocomp::modbus::holding::*;
+use thermocomp::modbus::registers::*;
+use thermocomp::modbus::server::{crc16, MAX_FRAME};
+
+const SLOT: u32 = (8 * ERASE_SIZE) as u32;
+
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut f = body.to_vec();
+    f.extend_from_slice(&crc16(body).to_le_bytes());
+    f
+}
+
+fn write1(addr: u16, v: u16) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = v.to_be_bytes();
+    frame(&[1, 6, a, b, c, d])
+}
+
+fn write_n(addr: u16, vals: &[u16]) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let mut body = vec![1, 0x10, a, b, 0, vals.len() as u8, (vals.len() * 2) as u8];
+    for v in vals {
+        body.extend_from_slice(&v.to_be_bytes());
+    }
+    frame(&body)
+}
+
+fn image(version: u32) -> Vec<u8> {
+    let mut fm = thermocomp_core::float::demo_model(u64::from(version));
+    fm.model_version = version;
+    let (mut m, _) = fm.quantize().unwrap();
+    let mut b = vec![0u8; m.encoded_len()];
+    m.encode(&mut b).unwrap();
+    b
+}
+
+fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
+    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    app.request(&write1(HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    let mut padded = img.to_vec();
+    padded.resize(img.len().div_ceil(2) * 2, 0);
+    let words: Vec<u16> = padded
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    for (i, chunk) in words.chunks(100).enumerate() {
+        app.request(
+            &write_n(HR_STAGING + (i * 100) as u16, chunk),
+            0,
+            &mut reply,
+        );
+    }
+    app.request(&write1(HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
+    app.request(&write1(HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
+    reply.to_vec()
+}
+
+#[test]
+fn commit_over_modbus_serves_and_survives_a_reboot() {
+    let mut app = App::new(
+        MockFlash::new(2 * SLOT as usize),
+        SLOT,
+        1,
+        115_200,
+        ChannelMap::new(),
+    );
+    assert_eq!(app.snapshot.model_version, 0, "blank flash: no model");
+    let v2 = image(2);
+    let reply = upload(&mut app, &v2);
+    assert_eq!(reply[1], 6, "commit acknowledged: {reply:02x?}");
+    assert_eq!(app.snapshot.model_version, 2);
+    assert_eq!(
+        app.snapshot.model_crc,
+        u32::from_le_bytes(v2[v2.len() - 4..].try_into().unwrap())
+    );
+    assert_eq!(app.server.holding.result, result::OK);
+    // A corrupted image: exception 04, v2 keeps serving.
+    let mut bad = image(3);
+    bad[50] ^= 1;
+    let reply = upload(&mut app, &bad);
+    assert_eq!((reply[1], reply[2]), (0x86, 0x04), "{reply:02x?}");
+    assert_eq!(app.snapshot.model_version, 2);
+    // Reboot: the flash still holds v2.
+    let flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
+    let rebooted = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    assert_eq!(rebooted.snapshot.model_version, 2);
+}
+
+#[test]
+fn a_failing_flash_reports_store_failed_and_keeps_the_old_model() {
+    let mut app = App::new(
+        MockFlash::new(2 * SLOT as usize),
+        SLOT,
+        1,
+        115_200,
+        ChannelMap::new(),
+    );
+    upload(&mut app, &image(2));
+    app.store.flash().budget = Some(3); // power fails during the next commit
+    upload(&mut app, &image(4));
+    assert_eq!(app.server.holding.result, result::STORE_FAILED);
+    assert_eq!(app.snapshot.model_version, 2);
+}
+
+#[test]
+fn probe_reading_reaches_its_registers() {
+    let mut app = App::new(
+        MockFlash::new(2 * SLOT as usize),
+        SLOT,
+        1,
+        115_200,
+        ChannelMap::new(),
+    );
+    let r = ProbeReading {
+        state: ProbeState::Ok,
+        tenth_um: Some(-12_345),
+        mean_x16: 0,
+        min_code: 0,
+        max_code: 0,
+    };
+    app.set_probe(&r);
+    let hi = app.snapshot.input_register(IR_PROBE).unwrap();
+    let lo = app.snapshot.input_register(IR_PROBE + 1).unwrap();
+    assert_eq!(((u32::from(hi) << 16) | u32::from(lo)) as i32, -12_345);
+    assert_eq!(
+        app.snapshot.input_register(IR_PROBE_STATE),
+        Some(ProbeState::Ok.code())
+    );
+}
