@@ -183,3 +183,45 @@ impl<F: NorFlash> App<F> {
         }
     }
 }
+
+/// The app state as the boards share it between their two tasks.
+pub type SharedApp<M, F> =
+    embassy_sync::blocking_mutex::Mutex<M, core::cell::RefCell<Option<App<F>>>>;
+
+/// The Modbus task of every board: one frame in, at most one reply out, from
+/// the shared app state (locked only between awaits). A frame that arrives
+/// before the app is set up gets no answer, as from a board still booting.
+pub async fn serve_modbus<P, F, M>(
+    port: &mut P,
+    shared: &SharedApp<M, F>,
+    uptime_ms: impl Fn() -> u64,
+) -> !
+where
+    P: crate::hal::serial::RtuPort,
+    F: NorFlash,
+    M: embassy_sync::blocking_mutex::raw::RawMutex,
+{
+    let mut frame = [0u8; MAX_FRAME + 1];
+    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
+    loop {
+        let Ok(n) = port.read_frame(&mut frame).await else {
+            continue;
+        };
+        let Some(request) = frame.get(..n) else {
+            continue;
+        };
+        let now = uptime_ms();
+        reply.clear();
+        let change = shared.lock(|a| {
+            a.borrow_mut()
+                .as_mut()
+                .map(|app| app.request(request, now, &mut reply))
+        });
+        if !reply.is_empty() {
+            port.write_frame(&reply).await;
+        }
+        if let Some(LinkChange::Reconfigure { baud }) = change {
+            port.set_baud(baud);
+        }
+    }
+}

@@ -25,9 +25,7 @@ use embassy_time::{Duration, Instant, Timer};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
-use thermocomp::app::{App, LinkChange};
-use thermocomp::hal::serial::RtuPort;
-use thermocomp::modbus::server::MAX_FRAME;
+use thermocomp::app::App;
 use {defmt_rtt as _, panic_probe as _};
 
 const SYSCLK_HZ: u32 = 168_000_000;
@@ -110,31 +108,10 @@ async fn main(spawner: Spawner) {
     }
 }
 
-/// Modbus RTU server: one request, one reply, from the shared app state.
+/// Modbus RTU server: the application's loop on this board's port.
 #[embassy_executor::task]
 async fn modbus(mut port: rtu_port::Rs485Port) {
-    let mut frame = [0u8; MAX_FRAME + 1];
-    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
-    loop {
-        let Ok(n) = port.read_frame(&mut frame).await else {
-            continue;
-        };
-        let Some(request) = frame.get(..n) else {
-            continue;
-        };
-        let uptime = Instant::now().as_millis();
-        let change = APP.lock(|a| {
-            a.borrow_mut()
-                .as_mut()
-                .map(|app| app.request(request, uptime, &mut reply))
-        });
-        if !reply.is_empty() {
-            port.write_frame(&reply).await;
-        }
-        if let Some(LinkChange::Reconfigure { baud }) = change {
-            port.set_baud(baud);
-        }
-    }
+    thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
 }
 
 type Bus =

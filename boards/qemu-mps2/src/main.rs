@@ -46,10 +46,8 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{
     AcquisitionConfig, CycleReport, TemperatureAcquisition,
 };
-use thermocomp::app::{App, LinkChange};
+use thermocomp::app::App;
 use thermocomp::compensation::{Compensation, PlcInputs};
-use thermocomp::hal::serial::RtuPort;
-use thermocomp::modbus::server::MAX_FRAME;
 use thermocomp::trace::TraceSample;
 use thermocomp_core::limits::{MAX_AXES, MAX_IMAGE_BYTES, MAX_SENSORS};
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
@@ -432,28 +430,7 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
 #[embassy_executor::task]
 async fn serve_modbus() {
     let mut port = rtu_port::QemuRtuPort::new(BAUD);
-    let mut frame = [0u8; 300];
-    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
-    loop {
-        let Ok(n) = port.read_frame(&mut frame).await else {
-            continue;
-        };
-        let Some(request) = frame.get(..n) else {
-            continue;
-        };
-        let uptime = Instant::now().as_millis();
-        let change = APP.lock(|a| {
-            a.borrow_mut()
-                .as_mut()
-                .map(|app| app.request(request, uptime, &mut reply))
-        });
-        if !reply.is_empty() {
-            port.write_frame(&reply).await;
-        }
-        if let Some(LinkChange::Reconfigure { baud }) = change {
-            port.set_baud(baud);
-        }
-    }
+    thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
 }
 
 fn open_trace(path: &str) -> host_trace::HostTrace {
