@@ -54,6 +54,28 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Send a model image to a board over Modbus RTU and check it serves it.
+    Upload {
+        image: std::path::PathBuf,
+        #[command(flatten)]
+        link: LinkArgs,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Poll a board over Modbus RTU and write (or extend) a run CSV.
+    Record {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[arg(short, long)]
+        out: std::path::PathBuf,
+        #[arg(long, default_value_t = 1.0)]
+        interval_s: f64,
+        #[arg(long, default_value_t = 10)]
+        samples: usize,
+        /// Continue an existing file (same board, same columns).
+        #[arg(long)]
+        append: bool,
+    },
     /// Write golden vectors (demo model, inputs, host outputs) for the board's self-test.
     Golden {
         #[arg(short, long)]
@@ -77,6 +99,33 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// Where the board is: a serial port or a TCP socket carrying RTU frames.
+#[derive(clap::Args)]
+struct LinkArgs {
+    /// RTU over TCP, e.g. 127.0.0.1:5502 (the QEMU bench board).
+    #[arg(long, conflicts_with = "serial")]
+    tcp: Option<String>,
+    /// Serial port of an RS-485 adapter, e.g. /dev/ttyUSB0.
+    #[arg(long)]
+    serial: Option<String>,
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    #[arg(long, default_value_t = 1)]
+    unit: u8,
+}
+
+impl LinkArgs {
+    fn open(&self) -> anyhow::Result<tcomp::board_link::BoardLink> {
+        match (&self.tcp, &self.serial) {
+            (Some(a), _) => tcomp::board_link::BoardLink::tcp(a, self.unit),
+            (None, Some(p)) => tcomp::board_link::BoardLink::serial(p, self.baud, self.unit),
+            (None, None) => {
+                anyhow::bail!("say where the board is: --tcp HOST:PORT or --serial PATH")
+            }
+        }
+    }
 }
 
 fn main() -> anyhow::Result<()> {
@@ -156,6 +205,39 @@ fn main() -> anyhow::Result<()> {
                     );
                 }
             }
+        }
+        Command::Upload { image, link, json } => {
+            let bytes = std::fs::read(&image)
+                .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
+            let s = tcomp::board_link::upload(&mut link.open()?, &bytes)?;
+            if json {
+                println!("{}", serde_json::to_string(&s)?);
+            } else {
+                println!(
+                    "uploaded {} bytes; the board serves model version {} crc {}",
+                    s.bytes, s.model_version, s.model_crc
+                );
+            }
+        }
+        Command::Record {
+            link,
+            out,
+            interval_s,
+            samples,
+            append,
+        } => {
+            anyhow::ensure!(
+                interval_s > 0.0 && interval_s.is_finite(),
+                "--interval-s must be positive"
+            );
+            let n = tcomp::board_link::record(
+                &mut link.open()?,
+                &out,
+                std::time::Duration::from_secs_f64(interval_s),
+                samples,
+                append,
+            )?;
+            println!("recorded {n} samples to {}", out.display());
         }
         Command::Golden { out, steps, seed } => {
             let n = tcomp::export::golden(&out, steps, seed)?;
