@@ -76,6 +76,21 @@ enum Command {
         #[arg(long)]
         append: bool,
     },
+    /// SVG plots: temperatures, measured error vs the board's correction,
+    /// residual before/after, and the sensor clusters.
+    Report {
+        run: std::path::PathBuf,
+        /// Model image: adds the error and residual plots (the board's output, via replay).
+        #[arg(long)]
+        image: Option<std::path::PathBuf>,
+        /// Add the K-means++ cluster map of `select`.
+        #[arg(long)]
+        select: bool,
+        #[arg(short, long)]
+        out: std::path::PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
     /// Write golden vectors (demo model, inputs, host outputs) for the board's self-test.
     Golden {
         #[arg(short, long)]
@@ -238,6 +253,22 @@ fn main() -> anyhow::Result<()> {
                 append,
             )?;
             println!("recorded {n} samples to {}", out.display());
+        }
+        Command::Report {
+            run,
+            image,
+            select,
+            out,
+            json,
+        } => {
+            let files = tcomp::plots::report(&run, image.as_deref(), select, &out)?;
+            if json {
+                println!("{}", serde_json::json!({ "files": files }));
+            } else {
+                for f in &files {
+                    println!("wrote {}", f.display());
+                }
+            }
         }
         Command::Golden { out, steps, seed } => {
             let n = tcomp::export::golden(&out, steps, seed)?;
