@@ -106,6 +106,11 @@ pub fn on_rx_interrupt() {
         let mut rx = RX.borrow(cs).borrow_mut();
         // SAFETY: MMIO access to UART0 from its own interrupt.
         unsafe {
+            // Clear first, then drain: a byte that lands after the last
+            // check raises the interrupt again. (Draining first and clearing
+            // after lost that byte's interrupt, and with RX full the UART
+            // never took another byte: the port went deaf.)
+            write_volatile(INTSTATUS_CLEAR, INT_RX);
             while read_volatile(STATE) & STATE_RX_FULL != 0 {
                 let b = (read_volatile(DATA) & 0xFF) as u8;
                 if rx.push_back(b).is_err() {
@@ -113,7 +118,6 @@ pub fn on_rx_interrupt() {
                     n.set(n.get().saturating_add(1));
                 }
             }
-            write_volatile(INTSTATUS_CLEAR, INT_RX);
         }
     });
     RX_WAKER.wake();
