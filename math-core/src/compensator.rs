@@ -22,7 +22,7 @@
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
 
 use crate::eval::{AxisPair, Evaluation};
-use crate::fixed::{decay_pow_q30, lag_update};
+use crate::fixed::{decay_pow_q30, lag_update, FEATURE_FRAC_BITS};
 use crate::image::{InputKind, Model, FLAG_FIXED_REFERENCE};
 use crate::limits::*;
 
@@ -194,7 +194,7 @@ impl Compensator {
         };
         self.filter_clock_ms += steps * step_ms;
         let t = |s: u8| i64::from(temp(s).unwrap_or(0));
-        let mut features = [0i64; MAX_INPUTS];
+        let mut features = [0i32; MAX_INPUTS];
         for (inp, (feature, filter)) in model
             .inputs
             .iter()
@@ -207,7 +207,7 @@ impl Compensator {
                 InputKind::SensorDiff { a, b } => t(a) - t(b),
                 InputKind::Spindle => i64::from(input.spindle_rpm),
             } << 16;
-            *feature = match inp.lag {
+            let value_q16 = match inp.lag {
                 None => raw,
                 Some(_) if first => {
                     *filter = raw;
@@ -220,6 +220,10 @@ impl Compensator {
                     *filter
                 }
             };
+            // Filters run in Q16 (i64); the model takes Q8 in an i32, saturated
+            // (the envelope, within ±2^23 raw, then holds it at its edge).
+            *feature = (value_q16 >> (16 - FEATURE_FRAC_BITS))
+                .clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
         }
         let positions = input.positions;
         let eval = model.evaluate(&features[..model.inputs.len()], positions);

@@ -2,10 +2,8 @@
 //! one set of feature values. Stateless; the [`crate::compensator`] keeps the
 //! state (reference, filters, limits) around it.
 
-use crate::fixed::{
-    mul_q24, normalise_q16_range, normalise_q24, round_shift, sigmoid_q17, ONE_Q24,
-};
-use crate::image::{Model, Net, Table};
+use crate::fixed::{mul_q24, round_shift, sigmoid_q17, ONE_Q24};
+use crate::image::{Model, Net, Table, NONE};
 use crate::limits::*;
 
 /// The model's raw outputs before limits.
@@ -38,44 +36,48 @@ pub struct Normalised {
 }
 
 impl Model {
-    /// Normalise feature values (Q16 of raw units, one per model input) and
+    /// Normalise feature values (Q8 of raw units, one per model input) and
     /// axis positions (µm, one per model axis; missing ones count as the
     /// reference position).
-    pub fn normalise(&self, features_q16: &[i64], positions: &[i32]) -> Normalised {
+    pub fn normalise(&self, features_q8: &[i32], positions: &[i32]) -> Normalised {
         let mut n = Normalised {
             x: [0; MAX_INPUTS],
             p: [0; MAX_AXES],
-            p_ref: [0; MAX_AXES],
+            p_ref: self.axis_ref_q24,
             outside: false,
         };
-        // Struct-of-arrays over exactly the model's inputs: a tight loop.
-        // (A missing feature leaves its input at the envelope's centre.)
-        let k = self.inputs.len().min(MAX_INPUTS).min(features_q16.len());
-        let limits = self.input_lo_q16[..k]
-            .iter()
-            .zip(&self.input_hi_q16[..k])
-            .zip(&self.input_gain_q40[..k]);
+        // Over exactly the model's inputs: a tight loop. (A missing feature
+        // leaves its input at the envelope's centre.)
+        let k = self.inputs.len().min(MAX_INPUTS).min(features_q8.len());
         let mut outside = false;
-        for ((x, &v), ((&lo, &hi), &g)) in n.x[..k].iter_mut().zip(&features_q16[..k]).zip(limits) {
-            let (xv, out) = normalise_q16_range(v, lo, hi, g);
+        for ((x, &v), span) in n.x[..k]
+            .iter_mut()
+            .zip(&features_q8[..k])
+            .zip(&self.input_span[..k])
+        {
+            let (xv, out) = span.normalise(v);
             *x = xv;
             outside |= out;
         }
-        n.outside = outside;
-        n.p_ref = self.axis_ref_q24;
-        let per_axis = n.p.iter_mut().zip(&self.axis_gain_q40);
-        for (a, (axis, (p, &g))) in self.axes.iter().zip(per_axis).enumerate() {
+        let a_n = self.axes.len().min(MAX_AXES);
+        for (a, ((p, span), axis)) in n.p[..a_n]
+            .iter_mut()
+            .zip(&self.axis_span[..a_n])
+            .zip(&self.axes)
+            .enumerate()
+        {
             let pos = positions.get(a).copied().unwrap_or(axis.ref_pos);
-            let (pv, out) = normalise_q24(i64::from(pos) << 16, axis.pos_min, axis.pos_max, g);
+            let (pv, out) = span.normalise(pos);
             *p = pv;
-            n.outside |= out;
+            outside |= out;
         }
+        n.outside = outside;
         n
     }
 
     /// Evaluate every network and table (see [`crate::fixed`] for the Q formats).
-    pub fn evaluate(&self, features_q16: &[i64], positions: &[i32]) -> Evaluation {
-        let n = self.normalise(features_q16, positions);
+    pub fn evaluate(&self, features_q8: &[i32], positions: &[i32]) -> Evaluation {
+        let n = self.normalise(features_q8, positions);
         let mut e = Evaluation {
             out_of_envelope: n.outside,
             ..Evaluation::default()
@@ -95,6 +97,13 @@ impl Model {
         let mut axis_any = [false; MAX_AXES];
         for t in &self.tables {
             let a = usize::from(t.axis);
+            if t.axis == NONE {
+                // No position: no offset/slope pair, only the value.
+                if let Some(acc) = acc.get_mut(usize::from(t.direction)) {
+                    *acc += round_shift(eval_table_static(t, &n.x), 7);
+                }
+                continue;
+            }
             let p = n.p.get(a).copied().unwrap_or(0);
             let p_ref = n.p_ref.get(a).copied().unwrap_or(0);
             let (value, off, der) = eval_table(t, &n.x, p, p_ref);
@@ -125,7 +134,9 @@ impl Model {
             .axes
             .iter_mut()
             .zip(axis_off.iter().zip(&axis_der).zip(&axis_any));
-        for (axis, (pair, ((&off, &der), &any))) in self.axes.iter().zip(per_axis) {
+        for ((axis, span), (pair, ((&off, &der), &any))) in
+            self.axes.iter().zip(&self.axis_span).zip(per_axis)
+        {
             if !any {
                 *pair = AxisPair {
                     offset: 0,
@@ -134,14 +145,12 @@ impl Model {
                 };
                 continue;
             }
-            let span = i64::from(axis.pos_max) - i64::from(axis.pos_min);
             // dE/dp in Q8 of 0.1 µm per half span; slope = dE/dp · 0.1 µm / (span/2 µm)
-            // in 0.01 µm/m = dE/dp · 2·10^7 / span. |der_q8| < 2^36, ·2·10^7 < 2^61.
-            // span ≥ 2 by validation; checked_div keeps the no-panic guarantee visible.
+            // in 0.01 µm/m = dE/dp · 2·10^7 / span = der_q8 · 78125 / span
+            // (|der_q8| < 2^36, so the numerator < 2^53), divided by
+            // multiplying with the span's reciprocal (no 64-bit division).
             let der_q8 = round_shift(der, 24);
-            let slope = (der_q8 * 20_000_000 + (span << 7))
-                .checked_div(span << 8)
-                .unwrap_or(0);
+            let slope = span.divide(der_q8 * 78_125);
             *pair = AxisPair {
                 offset: sat_i32(round_shift(off, 32)),
                 slope: sat_i32(slope),
@@ -174,6 +183,27 @@ pub fn eval_net_q25(net: &Net, x: &[i32; MAX_INPUTS]) -> i64 {
         out += i64::from(w2) * i64::from(h);
     }
     out
+}
+
+/// A table without a position (every term's position power is 0): its Q32
+/// accumulator (0.1 µm).
+fn eval_table_static(t: &Table, x: &[i32; MAX_INPUTS]) -> i64 {
+    let mut value = 0i64;
+    for term in &t.terms {
+        let xpow = match (x.get(usize::from(term.input)), term.input_power) {
+            (Some(&xi), 1) => xi,
+            (Some(&xi), k) => {
+                let mut v = ONE_Q24;
+                for _ in 0..k {
+                    v = mul_q24(v, xi);
+                }
+                v
+            }
+            (None, _) => ONE_Q24,
+        };
+        value += i64::from(term.coef) * i64::from(xpow);
+    }
+    value
 }
 
 /// One table's Q32 accumulators (0.1 µm): its value at position `p`, its

@@ -7,6 +7,7 @@
 //! | axis position                    | i32  | µm (or 0.001°)                  |
 //! | lag-filter state                 | i64  | Q16 of the raw unit             |
 //! | filter decay exp(-step/τ)        | u32  | Q30, < 1                        |
+//! | model input feature              | i32  | Q8 of the raw unit (±2^23 raw)  |
 //! | normalised input / position      | i32  | Q24, in [-1, 1] after clamping  |
 //! | hidden weights W1, biases b1     | i32  | Q16 (|w| < 32768)               |
 //! | pre-activation z                 | i64  | Q40 accumulator → Q16           |
@@ -22,7 +23,11 @@
 //! table term is a Q24 product of at most six factors each ≤ 1 (renormalised
 //! after every multiply, so ≤ 2^24) times a coefficient < 2^31: < 2^55, and
 //! MAX_TERMS = 32 of them stay below 2^60. Filter states are bounded by the
-//! inputs they follow (|raw| < 2^31, Q16 → < 2^47); the decay is < 1.
+//! inputs they follow (|raw| < 2^31, Q16 → < 2^47); the decay is < 1. The
+//! filtered feature is handed to the model as Q8 in an i32, saturated; the
+//! image limits every input's envelope to ±2^23 raw units, so the clamp to
+//! the envelope happens before anything saturates matters. The envelope
+//! mapping ([`Span`]) multiplies a value < 2^32 by a gain ≤ 2^26.
 
 include!(concat!(env!("OUT_DIR"), "/sigmoid_table.rs"));
 
@@ -58,38 +63,69 @@ pub fn sigmoid_q17(z_q16: i64) -> i32 {
     }
 }
 
-/// Q40 reciprocal gain mapping a raw span onto [-1, 1]: 2^41 / span, rounded.
-/// `span` ≥ 2 is guaranteed by image validation, so the gain is ≤ 2^40.
-#[inline]
-pub fn span_gain_q40(span: i64) -> i64 {
-    ((1i64 << 41) + span / 2) / span
+/// A training range [lo, hi] mapped onto Q24 [-1, 1] in 32-bit
+/// arithmetic: x = 2(v − lo)/(hi − lo) − 1. With L the span's bit length,
+/// d = v − lo (after clamping) is first scaled to d' = d << (32 − L) < 2^32,
+/// then x + 1 = (d' · gain + 2^31) >> 32 with gain = 2^(25+L)/span in
+/// (2^25, 2^26]: one UMULL, the high word is the result (≤ 2^25 + 1). The
+/// gain's rounding (relative 2^-26) costs at most half an LSB of Q24. The
+/// constants are computed once when the model is parsed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Span {
+    pub lo: i32,
+    pub hi: i32,
+    gain: u32,
+    pre_shift: u32,
 }
 
-/// Normalise a Q16 raw value to Q24 in [-1, 1]: x = 2(v − min)/(max − min) − 1,
-/// after clamping v to [min, max]. Returns (x, outside) where `outside` says
-/// the value had to be clamped (outside the training envelope).
-#[inline]
-pub fn normalise_q24(v_q16: i64, min: i32, max: i32, gain_q40: i64) -> (i32, bool) {
-    normalise_q16_range(v_q16, i64::from(min) << 16, i64::from(max) << 16, gain_q40)
+impl Span {
+    /// `None` unless hi − lo ≥ 2.
+    pub fn new(lo: i32, hi: i32) -> Option<Span> {
+        let span = i64::from(hi) - i64::from(lo);
+        if span < 2 {
+            return None;
+        }
+        let span = span as u64; // < 2^32
+        let bits = 64 - span.leading_zeros(); // 2..=32
+        let gain = ((1u64 << (25 + bits)) + span / 2) / span; // in (2^25, 2^26]
+        Some(Span {
+            lo,
+            hi,
+            gain: gain as u32,
+            pre_shift: 32 - bits,
+        })
+    }
+
+    /// `a / (hi − lo)` rounded, for |a| < 2^56, by the reciprocal: a · gain
+    /// / 2^(25+L) (the gain's relative error 2^-26 stays far below 1 for
+    /// the slopes this serves).
+    pub fn divide(&self, a: i64) -> i64 {
+        let bits = 32 - self.pre_shift; // L
+        let shift = 25 + bits; // ≤ 57
+        let p = i128::from(a) * i128::from(self.gain);
+        ((p + (1i128 << (shift - 1))) >> shift) as i64
+    }
+
+    /// Normalise `v` to Q24 in [-1, 1]; `true` when `v` was outside [lo, hi]
+    /// (held at the edge: the training-envelope rule).
+    #[inline(always)]
+    pub fn normalise(&self, v: i32) -> (i32, bool) {
+        let (c, outside) = if v < self.lo {
+            (self.lo, true)
+        } else if v > self.hi {
+            (self.hi, true)
+        } else {
+            (v, false)
+        };
+        let d = (c.wrapping_sub(self.lo) as u32) << self.pre_shift; // < 2^32
+        let x = ((u64::from(d) * u64::from(self.gain) + (1 << 31)) >> 32) as i32 - ONE_Q24;
+        (x.clamp(-ONE_Q24, ONE_Q24), outside)
+    }
 }
 
-/// [`normalise_q24`] with the limits already in Q16 (precomputed per model input).
-#[inline(always)]
-pub fn normalise_q16_range(v_q16: i64, lo: i64, hi: i64, gain_q40: i64) -> (i32, bool) {
-    // Branches rather than `clamp`, which carries a panic path for lo > hi
-    // (validation already guarantees lo < hi).
-    let (v, outside) = if v_q16 < lo {
-        (lo, true)
-    } else if v_q16 > hi {
-        (hi, true)
-    } else {
-        (v_q16, false)
-    };
-    // (v − lo) ≤ span·2^16 < 2^48 and gain ≤ 2^41 / span: product ≤ 2^57,
-    // and after the shift ≤ 2^25 + 1, which fits i32.
-    let x = ((((v - lo) * gain_q40) + (1 << 31)) >> 32) as i32 - ONE_Q24;
-    (x.clamp(-ONE_Q24, ONE_Q24), outside)
-}
+/// Fractional bits of model input features (Q8 of the raw unit): 1/4096 °C
+/// for temperatures, 1/256 rpm; raw values stay within ±2^23.
+pub const FEATURE_FRAC_BITS: u32 = 8;
 
 /// Multiply two Q24 values (both within [-1, 1]) to Q24, rounding to nearest.
 #[inline(always)]

@@ -316,7 +316,7 @@ impl FloatModel {
     /// Worst |fixed − float| over the admissible inputs: every corner of the
     /// input box, sweeps of each input across its range with the others at
     /// the centre, and seeded random interior points; each sample lies on the
-    /// Q16 grid so both sides see the very same input.
+    /// board's Q8 grid so both sides see the very same input.
     pub fn deviation(&self, model: &Model) -> QuantReport {
         let n_in = self.inputs.len();
         let n_ax = self.axes.len();
@@ -376,13 +376,13 @@ impl FloatModel {
         };
         let mut worst = -1.0;
         for p in &points {
-            // Features on the Q16 grid; positions whole µm.
-            let fq: Vec<i64> = p[..n_in]
+            // Features on the board's Q8 grid; positions whole µm.
+            let fq: Vec<i32> = p[..n_in]
                 .iter()
-                .map(|v| (v * 65536.0).round() as i64)
+                .map(|v| (v * 256.0).round() as i32)
                 .collect();
             let pos: Vec<i32> = p[n_in..].iter().map(|v| v.round() as i32).collect();
-            let ff: Vec<f64> = fq.iter().map(|&v| v as f64 / 65536.0).collect();
+            let ff: Vec<f64> = fq.iter().map(|&v| f64::from(v) / 256.0).collect();
             let pf: Vec<f64> = pos.iter().map(|&v| f64::from(v)).collect();
             let fixed = model.evaluate(&fq, &pos);
             let float = self.evaluate_um(&ff, &pf);

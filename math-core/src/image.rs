@@ -24,7 +24,7 @@
 //! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
 //! ```
 
-use crate::fixed::{normalise_q24, span_gain_q40};
+use crate::fixed::{Span, FEATURE_FRAC_BITS};
 use crate::limits::*;
 use heapless::Vec;
 
@@ -195,11 +195,9 @@ pub struct Model {
     pub nets: Vec<Net, MAX_NETS>,
     pub tables: Vec<Table, MAX_TABLES>,
     /// Precomputed from the ranges at parse time (not stored in the image).
-    pub(crate) input_gain_q40: [i64; MAX_INPUTS],
-    /// Each input's envelope in Q16 of its raw unit.
-    pub(crate) input_lo_q16: [i64; MAX_INPUTS],
-    pub(crate) input_hi_q16: [i64; MAX_INPUTS],
-    pub(crate) axis_gain_q40: [i64; MAX_AXES],
+    /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
+    pub(crate) input_span: [Span; MAX_INPUTS],
+    pub(crate) axis_span: [Span; MAX_AXES],
     /// Each axis's reference position, normalised (Q24); constant per model.
     pub(crate) axis_ref_q24: [i32; MAX_AXES],
     /// CRC-32 of the image this model came from (set by parse/encode).
@@ -238,10 +236,8 @@ impl Model {
             inputs: Vec::new(),
             nets: Vec::new(),
             tables: Vec::new(),
-            input_gain_q40: [0; MAX_INPUTS],
-            input_lo_q16: [0; MAX_INPUTS],
-            input_hi_q16: [0; MAX_INPUTS],
-            axis_gain_q40: [0; MAX_AXES],
+            input_span: [Span::default(); MAX_INPUTS],
+            axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
             crc: 0,
         }
@@ -357,9 +353,12 @@ impl Model {
                     index: i as u8,
                 });
             }
-            let gain = span_gain_q40(i64::from(pos_max) - i64::from(pos_min));
-            m.axis_gain_q40[i] = gain;
-            m.axis_ref_q24[i] = normalise_q24(i64::from(ref_pos) << 16, pos_min, pos_max, gain).0;
+            let span = Span::new(pos_min, pos_max).ok_or(ImageError::NonMonotoneRange {
+                what: "axis",
+                index: i as u8,
+            })?;
+            m.axis_span[i] = span;
+            m.axis_ref_q24[i] = span.normalise(ref_pos).0;
             push(
                 &mut m.axes,
                 Axis {
@@ -401,9 +400,19 @@ impl Model {
                     index: i as u8,
                 });
             }
-            m.input_gain_q40[i] = span_gain_q40(i64::from(max) - i64::from(min));
-            m.input_lo_q16[i] = i64::from(min) << 16;
-            m.input_hi_q16[i] = i64::from(max) << 16;
+            // Features are Q8 of the raw unit in an i32: raw values within ±2^23.
+            const RAW_LIMIT: i32 = 1 << (31 - FEATURE_FRAC_BITS);
+            if min <= -RAW_LIMIT || max >= RAW_LIMIT {
+                return Err(ImageError::BadValue {
+                    what: "input range beyond ±2^23 raw units",
+                });
+            }
+            m.input_span[i] = Span::new(min << FEATURE_FRAC_BITS, max << FEATURE_FRAC_BITS).ok_or(
+                ImageError::NonMonotoneRange {
+                    what: "input",
+                    index: i as u8,
+                },
+            )?;
             push(
                 &mut m.inputs,
                 InputSpec {

@@ -50,12 +50,8 @@ fn large_weights_still_quantize_within_a_tenth() {
 #[test]
 fn inputs_outside_the_envelope_hold_the_edge_value_and_say_so() {
     let (m, _) = demo_model(5).quantize().unwrap();
-    let edge: Vec<i64> = m.inputs.iter().map(|i| i64::from(i.max) << 16).collect();
-    let far: Vec<i64> = m
-        .inputs
-        .iter()
-        .map(|i| (i64::from(i.max) + 5000) << 16)
-        .collect();
+    let edge: Vec<i32> = m.inputs.iter().map(|i| i.max << 8).collect();
+    let far: Vec<i32> = m.inputs.iter().map(|i| (i.max + 5000) << 8).collect();
     let a = m.evaluate(&edge, &[0]);
     let b = m.evaluate(&far, &[0]);
     assert!(!a.out_of_envelope && b.out_of_envelope);
@@ -79,7 +75,7 @@ fn axis_offset_and_slope_match_the_float_reference() {
             .iter()
             .map(|i| i.min + (i.max - i.min) * f64::from(k) / 49.0)
             .collect();
-        let fq: Vec<i64> = f.iter().map(|v| (v * 65536.0).round() as i64).collect();
+        let fq: Vec<i32> = f.iter().map(|v| (v * 256.0).round() as i32).collect();
         let e = m.evaluate(&fq, &[0]);
         let (off, slope) = fm.axis_pairs(&f)[0];
         assert!(

@@ -36,14 +36,38 @@ fn sigmoid_is_monotone_and_symmetric() {
 }
 
 #[test]
-fn normalise_maps_the_envelope_onto_minus_one_to_one_and_flags_outside() {
-    let g = span_gain_q40(480 - -16);
-    assert_eq!(normalise_q24(-16 << 16, -16, 480, g), (-ONE_Q24, false));
-    assert_eq!(normalise_q24(480 << 16, -16, 480, g), (ONE_Q24, false));
-    let (mid, out) = normalise_q24(232 << 16, -16, 480, g);
+fn span_maps_the_envelope_onto_minus_one_to_one_and_flags_outside() {
+    let sp = Span::new(-16 << 8, 480 << 8).unwrap();
+    assert_eq!(sp.normalise(-16 << 8), (-ONE_Q24, false));
+    assert_eq!(sp.normalise(480 << 8), (ONE_Q24, false));
+    let (mid, out) = sp.normalise(232 << 8);
     assert!(mid.abs() <= 1 && !out);
-    assert_eq!(normalise_q24(481 << 16, -16, 480, g), (ONE_Q24, true));
-    assert_eq!(normalise_q24(i64::MIN / 4, -16, 480, g), (-ONE_Q24, true));
+    assert_eq!(sp.normalise(481 << 8), (ONE_Q24, true));
+    assert_eq!(sp.normalise(i32::MIN), (-ONE_Q24, true));
+    assert!(Span::new(5, 6).is_none() && Span::new(7, 5).is_none());
+    // The widest span, and exactness against the real mapping everywhere.
+    let wide = Span::new(i32::MIN, i32::MAX).unwrap();
+    assert_eq!(wide.normalise(i32::MAX).0, ONE_Q24);
+    for (lo, hi) in [
+        (-16i32 << 8, 480 << 8),
+        (0, 12_000 << 8),
+        (-3, 2),
+        (-1_000_000, 3_000_000),
+    ] {
+        let sp = Span::new(lo, hi).unwrap();
+        let step = ((hi as i64 - lo as i64) / 997).max(1);
+        let mut v = lo as i64;
+        while v <= hi as i64 {
+            let want = (2.0 * (v - lo as i64) as f64 / (hi as i64 - lo as i64) as f64 - 1.0)
+                * f64::from(ONE_Q24);
+            let got = f64::from(sp.normalise(v as i32).0);
+            assert!(
+                (got - want).abs() <= 1.0,
+                "[{lo},{hi}] at {v}: {got} vs {want}"
+            );
+            v += step;
+        }
+    }
 }
 
 #[test]
@@ -70,11 +94,12 @@ fn lag_update_moves_towards_the_input() {
 
 proptest! {
     #[test]
-    fn normalise_never_overflows(v in any::<i64>(), a in any::<i32>(), span in 2i64..(1i64 << 32)) {
-        let b = (i64::from(a) + span).min(i64::from(i32::MAX));
-        prop_assume!(b - i64::from(a) >= 2);
-        let (x, _) = normalise_q24(v >> 8, a, b as i32, span_gain_q40(b - i64::from(a)));
-        prop_assert!((-ONE_Q24..=ONE_Q24).contains(&x));
+    fn span_never_overflows(v in any::<i32>(), lo in any::<i32>(), hi in any::<i32>()) {
+        if let Some(sp) = Span::new(lo.min(hi), lo.max(hi)) {
+            let (x, out) = sp.normalise(v);
+            prop_assert!((-ONE_Q24..=ONE_Q24).contains(&x));
+            prop_assert_eq!(out, v < lo.min(hi) || v > lo.max(hi));
+        }
     }
 
     #[test]

@@ -629,11 +629,9 @@ async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static st
 /// at mid-range inputs, averaged over many calls.
 fn bench_model(model: Model) -> (u64, u64, u64) {
     const RUNS: u32 = 500;
-    let features: heapless::Vec<i64, 16> = model
-        .inputs
-        .iter()
-        .map(|i| (i64::from(i.min) + i64::from(i.max)) << 15)
-        .collect();
+    // Mid-range features, Q8 of the raw unit as the compensator hands them.
+    let features: heapless::Vec<i32, 16> =
+        model.inputs.iter().map(|i| (i.min + i.max) << 7).collect();
     let positions = [0i32; MAX_AXES];
     let eval = cycles::instructions_x100(RUNS, || {
         core::hint::black_box(model.evaluate(core::hint::black_box(&features), &positions));
