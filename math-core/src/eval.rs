@@ -75,9 +75,24 @@ impl Model {
         n
     }
 
-    /// Evaluate every network and table (see [`crate::fixed`] for the Q formats).
+    /// Evaluate every network and table (see [`crate::fixed`] for the Q
+    /// formats), and each axis's TEMP_COMP offset/slope pair.
     pub fn evaluate(&self, features_q8: &[i32], positions: &[i32]) -> Evaluation {
         let n = self.normalise(features_q8, positions);
+        let mut e = self.corrections_at(&n);
+        if self.tables.iter().any(|t| t.axis != NONE) {
+            self.axis_pairs(&n, &mut e.axes);
+        }
+        e
+    }
+
+    /// The corrections only (networks and all tables at the current
+    /// positions), without the offset/slope pairs.
+    pub fn evaluate_corrections(&self, features_q8: &[i32], positions: &[i32]) -> Evaluation {
+        self.corrections_at(&self.normalise(features_q8, positions))
+    }
+
+    fn corrections_at(&self, n: &Normalised) -> Evaluation {
         let mut e = Evaluation {
             out_of_envelope: n.outside,
             ..Evaluation::default()
@@ -90,59 +105,45 @@ impl Model {
                 *a += eval_net_q25(net, &n.x);
             }
         }
-        // Tables: one pass gives each table's value at the current position
-        // and, for the axis pair, its value and slope at the reference position.
-        let mut axis_off = [0i64; MAX_AXES];
-        let mut axis_der = [0i64; MAX_AXES];
-        let mut axis_any = [false; MAX_AXES];
         for t in &self.tables {
-            let a = usize::from(t.axis);
-            if t.axis == NONE {
-                // No position: no offset/slope pair, only the value.
-                if let Some(acc) = acc.get_mut(usize::from(t.direction)) {
-                    *acc += round_shift(eval_table_static(t, &n.x), 7);
-                }
-                continue;
-            }
-            let p = n.p.get(a).copied().unwrap_or(0);
-            let p_ref = n.p_ref.get(a).copied().unwrap_or(0);
-            let (value, off, der) = eval_table(t, &n.x, p, p_ref);
+            let p = n.p.get(usize::from(t.axis)).copied();
+            let value = match (t.axis == NONE, p) {
+                (false, Some(p)) => eval_table_at(t, &n.x, p),
+                _ => eval_table_static(t, &n.x),
+            };
             if let Some(acc) = acc.get_mut(usize::from(t.direction)) {
                 *acc += round_shift(value, 7);
-            }
-            if let (Some(o), Some(d), Some(any)) = (
-                axis_off.get_mut(a),
-                axis_der.get_mut(a),
-                axis_any.get_mut(a),
-            ) {
-                *o += off;
-                *d += der;
-                *any = true;
             }
         }
         let n_dir = self.directions.len().min(MAX_DIRECTIONS);
         for (c, &a) in e.corrections[..n_dir].iter_mut().zip(&acc[..n_dir]) {
             *c = sat_i32(round_shift(a, 25));
         }
-        if self.tables.is_empty() {
-            for (pair, axis) in e.axes.iter_mut().zip(&self.axes) {
-                pair.ref_pos = axis.ref_pos;
-            }
-            return e;
+        for (pair, axis) in e.axes.iter_mut().zip(&self.axes) {
+            pair.ref_pos = axis.ref_pos;
         }
-        let per_axis = e
+        e
+    }
+
+    /// Per axis, the TEMP_COMP pair of its position-dependent tables: the
+    /// value at the reference position (offset) and d/dp there (slope).
+    fn axis_pairs(&self, n: &Normalised, axes: &mut [AxisPair; MAX_AXES]) {
+        for (a, ((axis, span), pair)) in self
             .axes
-            .iter_mut()
-            .zip(axis_off.iter().zip(&axis_der).zip(&axis_any));
-        for ((axis, span), (pair, ((&off, &der), &any))) in
-            self.axes.iter().zip(&self.axis_span).zip(per_axis)
+            .iter()
+            .zip(&self.axis_span)
+            .zip(axes.iter_mut())
+            .enumerate()
         {
+            let p_ref = n.p_ref.get(a).copied().unwrap_or(0);
+            let (mut off, mut der, mut any) = (0i64, 0i64, false);
+            for t in self.tables.iter().filter(|t| usize::from(t.axis) == a) {
+                let (o, d) = eval_table_pair(t, &n.x, p_ref);
+                off += o;
+                der += d;
+                any = true;
+            }
             if !any {
-                *pair = AxisPair {
-                    offset: 0,
-                    slope: 0,
-                    ref_pos: axis.ref_pos,
-                };
                 continue;
             }
             // dE/dp in Q8 of 0.1 µm per half span; slope = dE/dp · 0.1 µm / (span/2 µm)
@@ -150,14 +151,12 @@ impl Model {
             // (|der_q8| < 2^36, so the numerator < 2^53), divided by
             // multiplying with the span's reciprocal (no 64-bit division).
             let der_q8 = round_shift(der, 24);
-            let slope = span.divide(der_q8 * 78_125);
             *pair = AxisPair {
                 offset: sat_i32(round_shift(off, 32)),
-                slope: sat_i32(slope),
+                slope: sat_i32(span.divide(der_q8 * 78_125)),
                 ref_pos: axis.ref_pos,
             };
         }
-        e
     }
 }
 
@@ -206,33 +205,49 @@ fn eval_table_static(t: &Table, x: &[i32; MAX_INPUTS]) -> i64 {
     value
 }
 
-/// One table's Q32 accumulators (0.1 µm): its value at position `p`, its
-/// value at `p_ref` and its derivative d/dp at `p_ref` (all Q24 positions).
-/// Powers of the positions are computed once per table, of the input once per term.
-fn eval_table(t: &Table, x: &[i32; MAX_INPUTS], p: i32, p_ref: i32) -> (i64, i64, i64) {
-    let pow = |v: i32| {
-        let v2 = mul_q24(v, v);
-        [ONE_Q24, v, v2, mul_q24(v2, v)]
-    };
-    let (pp, pr) = (pow(p), pow(p_ref));
-    let (mut value, mut off, mut der) = (0i64, 0i64, 0i64);
-    for term in &t.terms {
-        let mut xpow = ONE_Q24;
-        if let Some(&xi) = x.get(usize::from(term.input)) {
-            for _ in 0..term.input_power {
-                xpow = mul_q24(xpow, xi);
-            }
+/// Powers 0..=3 of a Q24 value.
+fn powers(v: i32) -> [i32; 4] {
+    let v2 = mul_q24(v, v);
+    [ONE_Q24, v, v2, mul_q24(v2, v)]
+}
+
+/// A term's input power (Q24).
+fn input_power(term: &crate::image::Term, x: &[i32; MAX_INPUTS]) -> i32 {
+    let mut xpow = ONE_Q24;
+    if let Some(&xi) = x.get(usize::from(term.input)) {
+        for _ in 0..term.input_power {
+            xpow = mul_q24(xpow, xi);
         }
+    }
+    xpow
+}
+
+/// One position-dependent table's Q32 accumulator (0.1 µm) at position `p` (Q24).
+fn eval_table_at(t: &Table, x: &[i32; MAX_INPUTS], p: i32) -> i64 {
+    let pp = powers(p);
+    let mut value = 0i64;
+    for term in &t.terms {
+        let k = usize::from(term.position_power).min(3);
+        value += i64::from(term.coef) * i64::from(mul_q24(input_power(term, x), pp[k]));
+    }
+    value
+}
+
+/// A table's value and d/dp at `p_ref` (Q32 accumulators).
+fn eval_table_pair(t: &Table, x: &[i32; MAX_INPUTS], p_ref: i32) -> (i64, i64) {
+    let pr = powers(p_ref);
+    let (mut off, mut der) = (0i64, 0i64);
+    for term in &t.terms {
+        let xpow = input_power(term, x);
         let k = usize::from(term.position_power).min(3);
         let coef = i64::from(term.coef);
-        value += coef * i64::from(mul_q24(xpow, pp[k]));
         off += coef * i64::from(mul_q24(xpow, pr[k]));
         if k > 0 {
             // k ≤ 3, so coef·k < 2^33 and the product < 2^57.
             der += coef * k as i64 * i64::from(mul_q24(xpow, pr[k - 1]));
         }
     }
-    (value, off, der)
+    (off, der)
 }
 
 #[inline(always)]

@@ -602,18 +602,18 @@ async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static st
         seed_config.tables.truncate(1);
         let mut net_only = seed_config.clone();
         net_only.tables.clear();
-        let (net, _, norm) = bench_model(net_only);
-        let (seed, _, _) = bench_model(seed_config);
-        let (eval, step, _) = bench_model(model);
+        let (net, _, norm, _) = bench_model(net_only);
+        let (seed, _, _, seed_corrections) = bench_model(seed_config);
+        let (eval, step, _, _) = bench_model(model);
         let _ = write!(
             line,
-            ",\"normalise_5_inputs_1_axis_insn_x100\":{},\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
-            norm, net, seed, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
+            ",\"normalise_5_inputs_1_axis_insn_x100\":{},\"net_5_11_1_insn_x100\":{},\"net_plus_table_insn_x100\":{},\"net_plus_table_corrections_only_insn_x100\":{},\"demo_evaluate_insn_x100\":{},\"demo_step_insn_x100\":{},\"compensator_ram_bytes\":{},\"model_ram_bytes\":{}",
+            norm, net, seed, seed_corrections, eval, step, core::mem::size_of::<Compensator>(), core::mem::size_of::<Model>()
         );
     }
     // A fitted model exported by tcomp (e.g. the FL_THERMAL demo model).
     if let Some(model) = model_path.and_then(load_model) {
-        let (eval, step, _) = bench_model(model);
+        let (eval, step, _, _) = bench_model(model);
         let _ = write!(
             line,
             ",\"image_model_evaluate_insn_x100\":{},\"image_model_step_insn_x100\":{}",
@@ -627,7 +627,7 @@ async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static st
 /// Instructions of one full evaluation (all networks and tables) and of one
 /// compensator step (features, lag filters for one step, evaluation, limits)
 /// at mid-range inputs, averaged over many calls.
-fn bench_model(model: Model) -> (u64, u64, u64) {
+fn bench_model(model: Model) -> (u64, u64, u64, u64) {
     const RUNS: u32 = 500;
     // Mid-range features, Q8 of the raw unit as the compensator hands them.
     let features: heapless::Vec<i32, 16> =
@@ -638,6 +638,11 @@ fn bench_model(model: Model) -> (u64, u64, u64) {
     });
     let norm = cycles::instructions_x100(RUNS, || {
         core::hint::black_box(model.normalise(core::hint::black_box(&features), &positions));
+    });
+    let corrections = cycles::instructions_x100(RUNS, || {
+        core::hint::black_box(
+            model.evaluate_corrections(core::hint::black_box(&features), &positions),
+        );
     });
 
     let temps = [Some(400i32); MAX_SENSORS];
@@ -655,5 +660,5 @@ fn bench_model(model: Model) -> (u64, u64, u64) {
         };
         core::hint::black_box(comp.step(core::hint::black_box(&input)));
     });
-    (eval, step, norm)
+    (eval, step, norm, corrections)
 }
