@@ -1,10 +1,10 @@
 //! RTU framing on the bench board's UART0. A frame ends when its length is
 //! complete (known from the function code) or, failing that, at a silent gap.
 //! On a real line the gap is 3.5 characters (1.75 ms above 19200 baud); QEMU
-//! does not model line timing: it hands the guest one byte per main-loop
-//! iteration, and on a loaded host those can be milliseconds apart. So the
-//! bench waits `BENCH_GAP` of silence for frames whose length it cannot know
-//! (garbage, unknown functions), and answers complete frames at once.
+//! does not model line timing (bytes arrive as fast as the guest takes them,
+//! or in bursts when the host is busy), so a millisecond gap means nothing
+//! here: complete frames are answered at once and only frames of unknown
+//! length (garbage, unknown functions) wait for `BENCH_GAP` of silence.
 
 use embassy_time::{with_timeout, Duration};
 use thermocomp::hal::serial::{Overrun, RtuPort};
