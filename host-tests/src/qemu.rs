@@ -28,23 +28,19 @@ pub struct QemuRun {
     pub stderr: String,
 }
 
-/// Boot the firmware with `args` as its command line; kill it after `limit`.
-pub fn run_firmware(args: &[&str], limit: Duration) -> QemuRun {
-    run_firmware_with(&[], args, limit)
-}
-
-/// As [`run_firmware`], with extra QEMU options (e.g. `-icount shift=0`).
-pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) -> QemuRun {
+/// Start qemu-system-arm (mps2-an386, semihosting) on the bench firmware with
+/// UART0 on `serial`, extra QEMU options and `args` as the firmware's command line.
+fn spawn_qemu(serial: &str, qemu_options: &[&str], args: &[&str]) -> std::process::Child {
     let elf = firmware_elf();
     assert!(
         elf.exists(),
         "bench firmware {} not built: run scripts/test.sh (or cargo build -p board-qemu-mps2 --release --target thumbv7em-none-eabihf)",
         elf.display()
     );
-    let mut child = Command::new("qemu-system-arm")
+    Command::new("qemu-system-arm")
         .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
         .args(["-semihosting-config", "enable=on,target=native"])
-        .args(["-serial", "null", "-monitor", "none"])
+        .args(["-serial", serial, "-monitor", "none"])
         .args(qemu_options)
         .arg("-kernel")
         .arg(&elf)
@@ -54,7 +50,17 @@ pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) 
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("qemu-system-arm not found: apt-get install qemu-system-arm");
+        .expect("qemu-system-arm not found: apt-get install qemu-system-arm")
+}
+
+/// Boot the firmware with `args` as its command line; kill it after `limit`.
+pub fn run_firmware(args: &[&str], limit: Duration) -> QemuRun {
+    run_firmware_with(&[], args, limit)
+}
+
+/// As [`run_firmware`], with extra QEMU options (e.g. `-icount shift=0`).
+pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) -> QemuRun {
+    let mut child = spawn_qemu("null", qemu_options, args);
     let start = Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().expect("wait for qemu") {
@@ -93,25 +99,7 @@ pub struct BenchBoard {
 
 impl BenchBoard {
     pub fn start(serial: &str, args: &[&str]) -> BenchBoard {
-        let elf = firmware_elf();
-        assert!(
-            elf.exists(),
-            "bench firmware {} not built: run scripts/test.sh",
-            elf.display()
-        );
-        let mut child = Command::new("qemu-system-arm")
-            .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
-            .args(["-semihosting-config", "enable=on,target=native"])
-            .args(["-serial", serial, "-monitor", "none"])
-            .arg("-kernel")
-            .arg(&elf)
-            .arg("-append")
-            .arg(args.join(" "))
-            .current_dir(workspace_root())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("qemu-system-arm not found: apt-get install qemu-system-arm");
+        let mut child = spawn_qemu(serial, &[], args);
         let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
         for stream in [
             child
