@@ -186,32 +186,23 @@ async fn replay(path: &'static str, model_path: Option<&'static str>) {
     let model = model_path.and_then(load_model);
     let mut compensation = Compensation::new(model, sensors.acquisition.map());
     let mut rows = 0u32;
-    loop {
-        match trace.next_sample() {
-            Ok(Some(sample)) => {
-                rows += 1;
-                let report = sensors.acquire(&sample).await;
-                let plc = PlcInputs {
-                    spindle_rpm: sample.spindle_rpm.unwrap_or(0),
-                    ..PlcInputs::default()
-                };
-                let out = compensation.step(&sensors.acquisition, sample.time_ms, &plc);
-                let ch0 = sensors.acquisition.value(0, sample.time_ms);
-                log_correction(
-                    &compensation,
-                    sample.time_ms,
-                    &report,
-                    (ch0.usable(), ch0.state),
-                    plc.spindle_rpm,
-                    &out,
-                );
-            }
-            Ok(None) => break,
-            Err(e) => {
-                log!("trace error: {:?}", e);
-                semihost::exit(exit_code::TRACE_ERROR)
-            }
-        }
+    while let Some(sample) = next_sample_or_exit(&mut trace) {
+        rows += 1;
+        let report = sensors.acquire(&sample).await;
+        let plc = PlcInputs {
+            spindle_rpm: sample.spindle_rpm.unwrap_or(0),
+            ..PlcInputs::default()
+        };
+        let out = compensation.step(&sensors.acquisition, sample.time_ms, &plc);
+        let ch0 = sensors.acquisition.value(0, sample.time_ms);
+        log_correction(
+            &compensation,
+            sample.time_ms,
+            &report,
+            (ch0.usable(), ch0.state),
+            plc.spindle_rpm,
+            &out,
+        );
     }
     log!("replay done: {} samples", rows);
     semihost::exit(exit_code::OK)
@@ -384,45 +375,36 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
     );
     APP.lock(|a| *a.borrow_mut() = Some(app));
     let mut rows = 0u32;
-    loop {
-        match trace.next_sample() {
-            Ok(Some(sample)) => {
-                rows += 1;
-                let report = sensors.acquire(&sample).await;
-                let uptime = Instant::now().as_millis();
-                let out = APP.lock(|a| {
-                    a.borrow_mut().as_mut().map(|app| {
-                        app.cycle(
-                            &sensors.acquisition,
-                            sample.time_ms,
-                            uptime,
-                            sample.spindle_rpm,
-                        )
-                    })
-                });
-                if let (Some(out), true) = (out, rows % 50 == 1) {
-                    let ch0 = sensors.acquisition.value(0, sample.time_ms);
-                    APP.lock(|a| {
-                        if let Some(app) = a.borrow().as_ref() {
-                            log_correction(
-                                &app.compensation,
-                                sample.time_ms,
-                                &report,
-                                (ch0.usable(), ch0.state),
-                                sample.spindle_rpm.unwrap_or(0),
-                                &out,
-                            );
-                        }
-                    });
+    while let Some(sample) = next_sample_or_exit(&mut trace) {
+        rows += 1;
+        let report = sensors.acquire(&sample).await;
+        let uptime = Instant::now().as_millis();
+        let out = APP.lock(|a| {
+            a.borrow_mut().as_mut().map(|app| {
+                app.cycle(
+                    &sensors.acquisition,
+                    sample.time_ms,
+                    uptime,
+                    sample.spindle_rpm,
+                )
+            })
+        });
+        if let (Some(out), true) = (out, rows % 50 == 1) {
+            let ch0 = sensors.acquisition.value(0, sample.time_ms);
+            APP.lock(|a| {
+                if let Some(app) = a.borrow().as_ref() {
+                    log_correction(
+                        &app.compensation,
+                        sample.time_ms,
+                        &report,
+                        (ch0.usable(), ch0.state),
+                        sample.spindle_rpm.unwrap_or(0),
+                        &out,
+                    );
                 }
-                Timer::after(Duration::from_millis(pace_ms)).await;
-            }
-            Ok(None) => break,
-            Err(e) => {
-                log!("trace error: {:?}", e);
-                semihost::exit(exit_code::TRACE_ERROR)
-            }
+            });
         }
+        Timer::after(Duration::from_millis(pace_ms)).await;
     }
     log!("trace done: {} samples; still serving", rows);
 }
@@ -431,6 +413,18 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
 async fn serve_modbus() {
     let mut port = rtu_port::QemuRtuPort::new(BAUD);
     thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
+}
+
+/// The next sample of a host trace; `None` at its end. A malformed line
+/// ends the firmware with TRACE_ERROR (the host tests check the status).
+fn next_sample_or_exit(trace: &mut host_trace::HostTrace) -> Option<TraceSample> {
+    match trace.next_sample() {
+        Ok(sample) => sample,
+        Err(e) => {
+            log!("trace error: {:?}", e);
+            semihost::exit(exit_code::TRACE_ERROR)
+        }
+    }
 }
 
 fn open_trace(path: &str) -> host_trace::HostTrace {
