@@ -23,6 +23,13 @@ pub struct ExportSummary {
 /// is written, so only a valid image reaches the disk.
 pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
     let (mut fixed, report) = model.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let len = fixed.encoded_len();
+    if len > thermocomp_core::limits::MAX_IMAGE_BYTES {
+        anyhow::bail!(
+            "the image would be {len} bytes; the board's upload staging area holds {} (MAX_IMAGE_BYTES)",
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
     let bytes = encode(&mut fixed)?;
     Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e:?}"))?;
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
@@ -81,8 +88,23 @@ pub fn golden(out: &Path, steps: u32, seed: u64) -> Result<usize> {
 /// Which fitted model of a channel goes on the board.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Choice {
+    /// The GA-BPN ensemble (`ga-bpn`, alias `net`).
     Net,
+    /// The lagged MLR (`mlr`).
     Mlr,
+    /// The static MLR on the selected sensors (`mlr-static`).
+    MlrStatic,
+}
+
+impl Choice {
+    pub fn parse(s: &str) -> Result<Choice> {
+        Ok(match s.trim() {
+            "net" | "ga-bpn" => Choice::Net,
+            "mlr" => Choice::Mlr,
+            "mlr-static" => Choice::MlrStatic,
+            other => anyhow::bail!("unknown model `{other}` (ga-bpn, mlr or mlr-static)"),
+        })
+    }
 }
 
 /// Board limits and identity for an exported model.
@@ -92,9 +114,8 @@ pub struct ExportOptions {
     pub max_correction_um: f64,
     pub max_rate_um_per_s: f64,
     pub warmup_s: u32,
-    /// Per channel (e.g. `dch5_um`) net or MLR; channels not named use `default`.
+    /// Per channel (e.g. `dch5_um`) overrides of the fit's choice.
     pub choices: Vec<(String, Choice)>,
-    pub default: Choice,
 }
 
 impl Default for ExportOptions {
@@ -105,8 +126,19 @@ impl Default for ExportOptions {
             max_rate_um_per_s: 1.0,
             warmup_s: 1800,
             choices: vec![],
-            default: Choice::Net,
         }
+    }
+}
+
+/// The model a channel ships: the `--use` override, else the fit's
+/// cross-validated choice, else (an old fit file without one) the lagged MLR.
+pub fn choice_for(file: &crate::fit::ModelFile, opts: &ExportOptions, ch: &str) -> Result<Choice> {
+    if let Some((_, c)) = opts.choices.iter().find(|(c, _)| c == ch) {
+        return Ok(*c);
+    }
+    match file.chosen.get(ch) {
+        Some(name) => Choice::parse(name),
+        None => Ok(Choice::Mlr),
     }
 }
 
@@ -132,6 +164,7 @@ pub fn float_model_from_fit(
         .iter()
         .map(|n| n.channel.clone())
         .chain(file.mlr.iter().map(|m| m.channel.clone()))
+        .chain(file.mlr_static.iter().map(|m| m.channel.clone()))
         .collect();
     channels.sort();
     channels.dedup();
@@ -147,6 +180,15 @@ pub fn float_model_from_fit(
         nets: vec![],
         tables: vec![],
     };
+    use thermocomp_core::limits::{
+        MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS, MAX_TABLES, MAX_TERMS,
+    };
+    if channels.len() > MAX_DIRECTIONS {
+        anyhow::bail!(
+            "the model has {} channels; the board serves at most {MAX_DIRECTIONS} directions (MAX_DIRECTIONS)",
+            channels.len()
+        );
+    }
     let sensor_of = |name: &str, model: &mut FloatModel| -> Result<u8> {
         let ch = temperature_columns
             .iter()
@@ -154,6 +196,12 @@ pub fn float_model_from_fit(
             .ok_or_else(|| {
                 anyhow::anyhow!("sensor column {name} is not in the run's temperature columns")
             })?;
+        if ch >= MAX_SENSORS {
+            anyhow::bail!(
+                "sensor {name} is board channel {ch}; the board reads channels 0..={} (MAX_SENSORS = {MAX_SENSORS})",
+                MAX_SENSORS - 1
+            );
+        }
         if let Some(i) = model
             .sensors
             .iter()
@@ -209,6 +257,11 @@ pub fn float_model_from_fit(
         let idx = match model.inputs.iter().position(|i| *i == spec) {
             Some(i) => i,
             None => {
+                if model.inputs.len() >= MAX_INPUTS {
+                    anyhow::bail!(
+                        "the model needs more than {MAX_INPUTS} distinct inputs, the most a board image holds (MAX_INPUTS)"
+                    );
+                }
                 model.inputs.push(spec);
                 model.inputs.len() - 1
             }
@@ -216,12 +269,7 @@ pub fn float_model_from_fit(
         Ok((idx as u8, a, c))
     };
     for ch in &channels {
-        let choice = opts
-            .choices
-            .iter()
-            .find(|(c, _)| c == ch)
-            .map(|(_, k)| *k)
-            .unwrap_or(opts.default);
+        let choice = choice_for(file, opts, ch)?;
         let d = model.directions.len() as u8;
         let name = ch.trim_start_matches('d').trim_end_matches("_um");
         model.directions.push(FloatDirection {
@@ -229,38 +277,68 @@ pub fn float_model_from_fit(
             max_correction_um: opts.max_correction_um,
             max_rate_um_per_s: opts.max_rate_um_per_s,
         });
-        let net = file.nets.iter().find(|n| &n.channel == ch);
-        let mlr = file.mlr.iter().find(|m| &m.channel == ch);
-        match (choice, net, mlr) {
-            (Choice::Net, Some(n), _) | (Choice::Mlr, Some(n), None) => {
-                let mut inputs = vec![];
-                let mut folds = vec![];
-                for f in &n.features {
-                    let (i, a, c) = input_of(f, &mut model)?;
-                    inputs.push(i);
-                    folds.push((a, c));
+        let members: Vec<_> = file.nets.iter().filter(|n| &n.channel == ch).collect();
+        let mlr = match choice {
+            Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
+            _ => file.mlr.iter().find(|m| &m.channel == ch),
+        };
+        match choice {
+            Choice::Net => {
+                if members.is_empty() {
+                    anyhow::bail!("no fitted network for channel {ch} (fit without --mlr-only)");
                 }
-                let w1: Vec<Vec<f64>> =
-                    n.w1.iter()
-                        .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
-                        .collect();
-                let b1 =
-                    n.w1.iter()
-                        .zip(&n.b1)
-                        .map(|(row, b)| {
-                            b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
-                        })
-                        .collect();
-                model.nets.push(FloatNet {
-                    direction: d,
-                    inputs,
-                    w1,
-                    b1,
-                    w2: n.w2.clone(),
-                    b2: n.b2,
-                });
+                if model.nets.len() + members.len() > MAX_NETS {
+                    anyhow::bail!(
+                        "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
+                        members.len()
+                    );
+                }
+                // The ensemble's mean: each member's output layer scaled by 1/k.
+                let k = members.len() as f64;
+                for n in members {
+                    if n.features.len() > MAX_NET_INPUTS {
+                        anyhow::bail!(
+                            "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
+                            n.features.len()
+                        );
+                    }
+                    let mut inputs = vec![];
+                    let mut folds = vec![];
+                    for f in &n.features {
+                        let (i, a, c) = input_of(f, &mut model)?;
+                        inputs.push(i);
+                        folds.push((a, c));
+                    }
+                    let w1: Vec<Vec<f64>> =
+                        n.w1.iter()
+                            .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
+                            .collect();
+                    let b1 =
+                        n.w1.iter()
+                            .zip(&n.b1)
+                            .map(|(row, b)| {
+                                b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
+                            })
+                            .collect();
+                    model.nets.push(FloatNet {
+                        direction: d,
+                        inputs,
+                        w1,
+                        b1,
+                        w2: n.w2.iter().map(|w| w / k).collect(),
+                        b2: n.b2 / k,
+                    });
+                }
             }
-            (_, _, Some(m)) => {
+            Choice::Mlr | Choice::MlrStatic => {
+                let Some(m) = mlr else {
+                    anyhow::bail!("no fitted {choice:?} model for channel {ch}");
+                };
+                if model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
+                    anyhow::bail!(
+                        "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
+                    );
+                }
                 let mut terms = vec![];
                 let mut c0 = m.c0;
                 for (f, coef) in m.features.iter().zip(&m.coef) {
@@ -285,26 +363,20 @@ pub fn float_model_from_fit(
                     terms,
                 });
             }
-            _ => anyhow::bail!("no fitted model for channel {ch}"),
         }
     }
     Ok(model)
 }
 
-/// Parse `dch5_um=mlr,dch3_um=net`.
+/// Parse `dch5_um=mlr,dch3_um=ga-bpn` (`net` is an alias of `ga-bpn`).
 pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
     s.split(',')
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
             let (ch, k) = p
                 .split_once('=')
-                .ok_or_else(|| anyhow::anyhow!("expected CHANNEL=net|mlr, got {p}"))?;
-            let k = match k.trim() {
-                "net" => Choice::Net,
-                "mlr" => Choice::Mlr,
-                other => anyhow::bail!("unknown model kind {other} (net or mlr)"),
-            };
-            Ok((ch.trim().to_string(), k))
+                .ok_or_else(|| anyhow::anyhow!("expected CHANNEL=ga-bpn|mlr|mlr-static, got {p}"))?;
+            Ok((ch.trim().to_string(), Choice::parse(k)?))
         })
         .collect()
 }

@@ -197,6 +197,22 @@ impl Run {
         }
     }
 
+    /// The run without the temperature columns not named in `keep`.
+    pub fn keep_temperatures(self, keep: &[String]) -> Run {
+        let (mut columns, mut data) = (Vec::new(), Vec::new());
+        for (c, d) in self.columns.into_iter().zip(self.data) {
+            if !is_temperature_column(&c) || keep.contains(&c) {
+                columns.push(c);
+                data.push(d);
+            }
+        }
+        Run {
+            meta: self.meta,
+            columns,
+            data,
+        }
+    }
+
     pub fn write(&self, path: &Path) -> Result<()> {
         let file = std::fs::File::create(path)
             .with_context(|| format!("cannot create {}", path.display()))?;

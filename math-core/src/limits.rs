@@ -7,7 +7,7 @@ pub const MAX_SENSORS: usize = 20;
 /// Model inputs (features) computed by the board.
 pub const MAX_INPUTS: usize = 12;
 /// Networks in one image (one per compensated direction, typically).
-pub const MAX_NETS: usize = 4;
+pub const MAX_NETS: usize = 8;
 /// Inputs of one network.
 pub const MAX_NET_INPUTS: usize = 8;
 /// Hidden neurons of one network.

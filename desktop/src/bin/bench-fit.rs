@@ -5,7 +5,7 @@
 //!     FL_THERMAL, 24–28 h, interpolated to 1 Hz) against scikit-learn's
 //!     MLPRegressor(11, logistic) on the same inputs and split.
 //!
-//! Usage: bench-fit [--json] [--data run.csv] [--restarts N] [--no-sklearn]
+//! Usage: bench-fit [--json] [--data run.csv] [--ensemble N] [--no-sklearn]
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -13,7 +13,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use indicatif::ProgressBar;
 use tcomp::fit::net::NetOpts;
-use tcomp::fit::run::{fit_plan, train_gabpn, FitConfig, Plan};
+use tcomp::fit::run::{fit_plan, train_ensemble, FitConfig, Plan};
 use tcomp::fit::*;
 use tcomp::runcsv::Run;
 
@@ -74,11 +74,11 @@ fn main() -> Result<()> {
     let data = opt("--data")
         .map(PathBuf::from)
         .unwrap_or_else(default_data);
-    let restarts: usize = opt("--restarts")
+    let ensemble: usize = opt("--ensemble")
         .map(|s| s.parse())
         .transpose()
-        .context("--restarts")?
-        .unwrap_or(1);
+        .context("--ensemble")?
+        .unwrap_or(NetOpts::default().ensemble);
     let run = Run::read(&data).with_context(|| "FL_THERMAL data (give --data <run.csv>)")?;
 
     // (a) FL_THERMAL chronological 60/20.
@@ -93,7 +93,7 @@ fn main() -> Result<()> {
         split_chrono: Some((0.6, 0.8)),
         channels: Some(PUBLISHED.iter().map(|p| p.0.to_string()).collect()),
         net: NetOpts {
-            restarts,
+            ensemble,
             ..NetOpts::default()
         },
         progress: !json,
@@ -142,7 +142,7 @@ fn main() -> Result<()> {
     let specs = ranged_specs(&kinds, &full);
     let opts = NetOpts::default();
     let t_b = Instant::now();
-    let (np, info) = train_gabpn(
+    let (members, infos) = train_ensemble(
         &specs,
         ch,
         &inner,
@@ -152,6 +152,10 @@ fn main() -> Result<()> {
         &ProgressBar::hidden(),
     );
     let ours_s = t_b.elapsed().as_secs_f64();
+    let info = infos.into_iter().next().unwrap_or_default();
+    let np = NetEnsemble {
+        members: members.iter().collect(),
+    };
     let pred: Vec<f64> = test.x.iter().map(|r| np.predict_raw(r)).collect();
     let ours = metrics(&test.y, &pred);
 

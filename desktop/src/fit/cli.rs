@@ -54,10 +54,14 @@ pub struct FitArgs {
     /// L2 weight penalty (normalized units).
     #[arg(long, default_value_t = 1e-5)]
     pub l2: f64,
-    /// Independent GA-BPN trainings per channel (seeds seed, seed+1, ...); the
-    /// one with the lowest error on the early-stopping block is kept.
-    #[arg(long, default_value_t = 1)]
-    pub restarts: usize,
+    /// GA-BPN ensemble size per channel (seeds seed, seed+1, ...): the board
+    /// serves the members' mean (all channels' networks share the board's limit).
+    #[arg(long, default_value_t = 4)]
+    pub ensemble: usize,
+    /// A simpler model is chosen when its cross-validated RMS is within this
+    /// fraction of the best.
+    #[arg(long, default_value_t = 0.02)]
+    pub choice_margin: f64,
     /// Keep the early-stopped weights instead of refitting on all training rows.
     #[arg(long)]
     pub no_refit: bool,
@@ -126,9 +130,13 @@ impl FitArgs {
             lm_iters: self.lm_iters,
             refit_full: !self.no_refit,
             l2: self.l2,
-            restarts: self.restarts.max(1),
+            ensemble: self.ensemble.max(1),
             ..NetOpts::default()
         };
+        if !(self.choice_margin >= 0.0 && self.choice_margin < 1.0) {
+            bail!("--choice-margin must be in [0, 1), got {}", self.choice_margin);
+        }
+        cfg.choice_margin = self.choice_margin;
         cfg.progress = !self.json;
         cfg.skip_net = self.mlr_only;
         Ok(cfg)

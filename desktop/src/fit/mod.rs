@@ -8,7 +8,6 @@
 //! row split.
 
 pub mod cli;
-pub mod linalg;
 pub mod net;
 pub mod rng;
 pub mod run;
@@ -71,8 +70,47 @@ pub struct MlrParams {
 /// What `fit --out` writes.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ModelFile {
+    /// Lagged MLR per channel (model name `mlr`).
     pub mlr: Vec<MlrParams>,
+    /// Ensemble members per channel (model name `ga-bpn`): the channel's
+    /// prediction is the mean of its members.
     pub nets: Vec<NetParams>,
+    /// Static MLR on the selected sensors per channel (model name `mlr-static`).
+    #[serde(default)]
+    pub mlr_static: Vec<MlrParams>,
+    /// The model blocked cross-validation on the training rows chose per
+    /// channel (`mlr-static`, `mlr` or `ga-bpn`); what `export` ships by default.
+    #[serde(default)]
+    pub chosen: std::collections::BTreeMap<String, String>,
+}
+
+/// Model names, simplest first (the order ties are broken in).
+pub const MODEL_NAMES: [&str; 3] = ["mlr-static", "mlr", "ga-bpn"];
+
+/// The networks of one channel, averaged: the ensemble that goes on the board.
+pub struct NetEnsemble<'a> {
+    pub members: Vec<&'a NetParams>,
+}
+
+impl<'a> NetEnsemble<'a> {
+    /// The members fitted for `channel` (None if there are none).
+    pub fn of(nets: &'a [NetParams], channel: &str) -> Option<Self> {
+        let members: Vec<&NetParams> = nets.iter().filter(|n| n.channel == channel).collect();
+        (!members.is_empty()).then_some(NetEnsemble { members })
+    }
+}
+
+impl Model for NetEnsemble<'_> {
+    fn features(&self) -> &[FeatureSpec] {
+        &self.members[0].features
+    }
+    fn channel(&self) -> &str {
+        &self.members[0].channel
+    }
+    fn predict_norm(&self, xn: &[f64]) -> f64 {
+        let k = self.members.len() as f64;
+        self.members.iter().map(|m| m.predict_norm(xn)).sum::<f64>() / k
+    }
 }
 
 impl FeatureKind {
@@ -389,6 +427,23 @@ impl SeriesCache {
     }
 }
 
+impl Samples {
+    /// Every k-th row so that at most `max_rows` remain (thermal runs are
+    /// sampled far faster than their time constants: an evenly strided
+    /// subset carries nearly all the information at a fraction of the cost).
+    pub fn strided(&self, max_rows: usize) -> Samples {
+        let stride = self.y.len().div_ceil(max_rows.max(1)).max(1);
+        if stride == 1 {
+            return self.clone();
+        }
+        Samples {
+            x: self.x.iter().step_by(stride).cloned().collect(),
+            y: self.y.iter().step_by(stride).copied().collect(),
+            rows: self.rows.iter().step_by(stride).copied().collect(),
+        }
+    }
+}
+
 /// Feature specs with ranges from the training samples.
 pub fn ranged_specs(kinds: &[(FeatureKind, Option<f64>)], train: &Samples) -> Vec<FeatureSpec> {
     kinds
@@ -423,15 +478,16 @@ pub fn normalize_rows(specs: &[FeatureSpec], x: &[Vec<f64>]) -> Vec<Vec<f64>> {
 // ----------------------------------------------------------------------- MLR
 
 /// Least-squares MLR on normalized inputs.
-pub fn fit_mlr(specs: Vec<FeatureSpec>, train: &Samples, channel: &str) -> MlrParams {
+pub fn fit_mlr(specs: Vec<FeatureSpec>, train: &Samples, channel: &str) -> Result<MlrParams> {
     let xn = normalize_rows(&specs, &train.x);
-    let c = linalg::least_squares(&xn, &train.y, true, 1e-9 * train.y.len() as f64);
-    MlrParams {
+    let c = crate::linalg::least_squares(&xn, &train.y, true, 1e-9 * train.y.len() as f64)
+        .with_context(|| format!("channel {channel}: linear fit"))?;
+    Ok(MlrParams {
         features: specs,
         c0: c[0],
         coef: c[1..].to_vec(),
         channel: channel.to_string(),
-    }
+    })
 }
 
 // ------------------------------------------------------------------- metrics
@@ -537,7 +593,7 @@ fn mlr_block_sse(
         return Ok((0.0, 0));
     }
     let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-    let m = fit_mlr(ranged_specs(&kinds, &tr), &tr, channel);
+    let m = fit_mlr(ranged_specs(&kinds, &tr), &tr, channel)?;
     let xn = normalize_rows(&m.features, &va.x);
     let sse = xn
         .iter()
@@ -551,19 +607,25 @@ fn mlr_block_sse(
 /// held-out time blocks of the training data the most (summed over `folds`);
 /// stop at `max_inputs` or when the gain is below 1 %. Returns candidate
 /// indices and their cross-validated mean squared error (µm²).
+///
+/// `in_use` are candidates other channels already put on the board (free to
+/// share); any other candidate costs one of `new_budget` board inputs.
 pub fn greedy_select(
     cache: &SeriesCache,
     runs: &[Run],
     folds: &[(Vec<Segment>, Vec<Segment>)],
     channel: &str,
     max_inputs: usize,
+    in_use: &[usize],
+    new_budget: usize,
 ) -> Result<(Vec<usize>, f64)> {
     let mut chosen: Vec<usize> = Vec::new();
     let mut best_err = f64::INFINITY;
     while chosen.len() < max_inputs {
         let mut round_best: Option<(usize, f64)> = None;
+        let new_used = chosen.iter().filter(|c| !in_use.contains(c)).count();
         for c in 0..cache.kinds.len() {
-            if chosen.contains(&c) {
+            if chosen.contains(&c) || (!in_use.contains(&c) && new_used >= new_budget) {
                 continue;
             }
             let mut idx = chosen.clone();
@@ -591,7 +653,10 @@ pub fn greedy_select(
         }
     }
     if chosen.is_empty() {
-        bail!("channel {channel}: no usable input found");
+        bail!(
+            "channel {channel}: no usable input found within the board's {} inputs",
+            thermocomp_core::limits::MAX_INPUTS
+        );
     }
     Ok((chosen, best_err))
 }

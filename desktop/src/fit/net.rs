@@ -7,7 +7,7 @@
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 
-use super::linalg::{least_squares, solve_spd_robust};
+use crate::linalg::{least_squares, solve_spd};
 use super::rng::Rng;
 
 /// Bound on |W1| and |b1| (the fixed-point core's range).
@@ -33,8 +33,11 @@ pub struct NetOpts {
     /// After early stopping, retrain from the GA's weights on all training rows
     /// for the best number of steps (otherwise keep the early-stopped weights).
     pub refit_full: bool,
-    /// Independent trainings (seeds `seed..seed+restarts`); best early-stopping error kept.
-    pub restarts: usize,
+    /// Ensemble size: independent trainings (seeds `seed..seed+ensemble`)
+    /// whose outputs are averaged (one network's result moves with its seed).
+    pub ensemble: usize,
+    /// Rows the Levenberg–Marquardt steps see at most (evenly strided).
+    pub max_rows: usize,
 }
 
 impl Default for NetOpts {
@@ -52,7 +55,8 @@ impl Default for NetOpts {
             patience: 30,
             l2: 1e-5,
             refit_full: true,
-            restarts: 1,
+            ensemble: 4,
+            max_rows: 3000,
         }
     }
 }
@@ -164,7 +168,10 @@ fn solve_output(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
                 .collect()
         })
         .collect();
-    let c = least_squares(&h, y, true, 1e-6 * y.len() as f64);
+    // A hidden layer the solver cannot use is an unfit genome, not zeros.
+    let Ok(c) = least_squares(&h, y, true, 1e-6 * y.len() as f64) else {
+        return f64::INFINITY;
+    };
     let o = net.out_off();
     net.theta[o + nh] = c[0];
     net.theta[o..o + nh].copy_from_slice(&c[1..]);
@@ -365,7 +372,14 @@ pub fn train_lm(
                 a[i * p + i] += l2 + lambda * (jtj[i * p + i] + 1e-9);
             }
             let neg: Vec<f64> = grad.iter().map(|g| -g).collect();
-            let d = solve_spd_robust(&a, &neg, p);
+            // A damped system that is not positive definite: damp harder.
+            let Ok(d) = solve_spd(&a, &neg, p) else {
+                lambda *= 4.0;
+                if lambda > 1e10 {
+                    break 'outer;
+                }
+                continue;
+            };
             let mut cand = net.clone();
             for (t, dv) in cand.theta.iter_mut().zip(&d) {
                 *t += dv;

@@ -52,6 +52,8 @@ pub struct FitConfig {
     pub select_folds: usize,
     pub progress: bool,
     pub skip_net: bool,
+    /// A simpler model is chosen when its CV RMS is within this fraction of the best.
+    pub choice_margin: f64,
 }
 
 impl Default for FitConfig {
@@ -69,6 +71,7 @@ impl Default for FitConfig {
             select_folds: 5,
             progress: false,
             skip_net: false,
+            choice_margin: 0.02,
         }
     }
 }
@@ -189,12 +192,18 @@ pub struct ChannelInfo {
     pub val_rows: usize,
     /// Blocked cross-validation RMS of the MLR on the chosen inputs (training rows only).
     pub cv_rms_um: Option<f64>,
+    /// Blocked cross-validation per candidate model (training rows only): what chose it.
+    pub cv: BTreeMap<String, CvScore>,
     pub net: Option<NetInfo>,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct FitReport {
     pub models: Vec<ModelReport>,
+    /// Per channel, the model cross-validation chose (what `export` ships).
+    pub chosen: BTreeMap<String, String>,
+    /// What the board's limits ruled out.
+    pub notes: Vec<String>,
     pub inputs: Vec<ChannelInfo>,
     pub selection: Option<Selection>,
     pub train_segments: Vec<Segment>,
@@ -277,9 +286,10 @@ fn train_gabpn_once(
     (params, info)
 }
 
-/// Train one channel's network (`opts.restarts` independent trainings, the
-/// one with the lowest early-stopping block error kept).
-pub fn train_gabpn(
+/// Train one channel's ensemble: `opts.ensemble` networks from seeds
+/// `seed, seed+1, …`, trained in parallel; the board serves their mean.
+/// Rows are strided to `opts.max_rows` for the gradient steps.
+pub fn train_ensemble(
     specs: &[FeatureSpec],
     channel: &str,
     inner: &Samples,
@@ -287,23 +297,21 @@ pub fn train_gabpn(
     full: &Samples,
     opts: &NetOpts,
     pb: &ProgressBar,
-) -> (NetParams, NetInfo) {
-    let mut best: Option<(NetParams, NetInfo)> = None;
-    for k in 0..opts.restarts.max(1) {
-        let o = NetOpts {
-            seed: opts.seed + k as u64,
-            ..opts.clone()
-        };
-        let (p, i) = train_gabpn_once(specs, channel, inner, block, full, &o, pb);
-        let score = i.es_val_mse_norm.unwrap_or(0.0);
-        if best
-            .as_ref()
-            .is_none_or(|b| score < b.1.es_val_mse_norm.unwrap_or(0.0))
-        {
-            best = Some((p, i));
-        }
-    }
-    best.expect("at least one training")
+) -> (Vec<NetParams>, Vec<NetInfo>) {
+    use rayon::prelude::*;
+    let inner = inner.strided(opts.max_rows);
+    let block = block.strided(opts.max_rows / 2);
+    let full = full.strided(opts.max_rows);
+    (0..opts.ensemble.max(1))
+        .into_par_iter()
+        .map(|k| {
+            let o = NetOpts {
+                seed: opts.seed.wrapping_add(k as u64),
+                ..opts.clone()
+            };
+            train_gabpn_once(specs, channel, &inner, &block, &full, &o, pb)
+        })
+        .unzip()
 }
 
 fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetrics>) -> Metrics {
@@ -360,8 +368,150 @@ pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) ->
     fit_plan(&plan, cfg)
 }
 
+/// Cross-validated figures of one model on one channel (training rows only).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct CvScore {
+    /// Pooled over the held-out blocks of every fold.
+    pub rms_um: f64,
+    pub mae_um: f64,
+    pub rows: usize,
+    pub fold_rms_um: Vec<f64>,
+}
+
+/// Errors collected over folds.
+#[derive(Default)]
+struct CvAcc {
+    sq: f64,
+    abs: f64,
+    n: usize,
+    folds: Vec<f64>,
+}
+
+impl CvAcc {
+    fn add_fold(&mut self, y: &[f64], pred: &[f64]) {
+        let (mut sq, mut n) = (0.0, 0usize);
+        for (t, p) in y.iter().zip(pred) {
+            let e = t - p;
+            sq += e * e;
+            self.abs += e.abs();
+            n += 1;
+        }
+        if n > 0 {
+            self.sq += sq;
+            self.n += n;
+            self.folds.push((sq / n as f64).sqrt());
+        }
+    }
+    fn score(&self) -> Option<CvScore> {
+        (self.n > 0).then(|| CvScore {
+            rms_um: (self.sq / self.n as f64).sqrt(),
+            mae_um: self.abs / self.n as f64,
+            rows: self.n,
+            fold_rms_um: self.folds.clone(),
+        })
+    }
+}
+
+/// Each fit segment split by time into (fit part, early-stopping block).
+fn split_blocks(plan: &Plan, segs: &[Segment], frac: f64) -> (Vec<Segment>, Vec<Segment>) {
+    segs.iter()
+        .map(|s| time_block_split(&plan.runs[s.run], *s, frac))
+        .unzip()
+}
+
+/// Blocked time cross-validation of every candidate model of one channel on
+/// the training rows: each fold refits the model on the other blocks and
+/// scores it on its own block. Validation rows are never touched.
+#[allow(clippy::too_many_arguments)]
+fn cross_validate(
+    cache: &SeriesCache,
+    plan: &Plan,
+    folds: &[(Vec<Segment>, Vec<Segment>)],
+    idx: &[usize],
+    static_idx: &[usize],
+    ch: &str,
+    cfg: &FitConfig,
+    with_net: bool,
+) -> Result<BTreeMap<String, CvScore>> {
+    let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+    let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+    let (mut acc_static, mut acc_mlr, mut acc_net) =
+        (CvAcc::default(), CvAcc::default(), CvAcc::default());
+    for (fit, val) in folds {
+        let tr = cache.samples(&plan.runs, fit, idx, ch)?;
+        let va = cache.samples(&plan.runs, val, idx, ch)?;
+        if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
+            continue;
+        }
+        let specs = ranged_specs(&kinds, &tr);
+        let m = fit_mlr(specs.clone(), &tr, ch)?;
+        let p: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
+        acc_mlr.add_fold(&va.y, &p);
+        if !static_idx.is_empty() {
+            let trs = cache.samples(&plan.runs, fit, static_idx, ch)?;
+            let vas = cache.samples(&plan.runs, val, static_idx, ch)?;
+            let ms = fit_mlr(ranged_specs(&skinds, &trs), &trs, ch)?;
+            let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
+            acc_static.add_fold(&vas.y, &p);
+        }
+        if with_net {
+            let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
+            let inner_s = cache.samples(&plan.runs, &inner, idx, ch)?;
+            let block_s = cache.samples(&plan.runs, &block, idx, ch)?;
+            let (members, _) = train_ensemble(
+                &specs,
+                ch,
+                &inner_s,
+                &block_s,
+                &tr,
+                &cfg.net,
+                &ProgressBar::hidden(),
+            );
+            let ens = NetEnsemble {
+                members: members.iter().collect(),
+            };
+            let p: Vec<f64> = va.x.iter().map(|r| ens.predict_raw(r)).collect();
+            acc_net.add_fold(&va.y, &p);
+        }
+    }
+    let mut out = BTreeMap::new();
+    for (name, acc) in [
+        ("mlr-static", acc_static),
+        ("mlr", acc_mlr),
+        ("ga-bpn", acc_net),
+    ] {
+        if let Some(sc) = acc.score() {
+            out.insert(name.to_string(), sc);
+        }
+    }
+    Ok(out)
+}
+
+/// The simplest model whose cross-validated RMS is within `margin` of the
+/// best (a network must earn its place by more than fold noise).
+pub fn choose_model(cv: &BTreeMap<String, CvScore>, margin: f64) -> Option<String> {
+    let best = cv.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
+    MODEL_NAMES
+        .iter()
+        .find(|n| cv.get(**n).is_some_and(|s| s.rms_um <= best * (1.0 + margin)))
+        .map(|n| n.to_string())
+}
+
+/// Time span of the longest training segment, seconds.
+fn training_span_s(plan: &Plan) -> f64 {
+    plan.train
+        .iter()
+        .filter(|s| s.end > s.start)
+        .map(|s| {
+            let t = plan.runs[s.run].time_s();
+            t[s.end - 1] - t[s.start]
+        })
+        .fold(0.0, f64::max)
+}
+
 /// Fit on a planned split.
 pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
+    use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS};
     let first = &plan.runs[plan.train[0].run];
     let channels: Vec<String> = match &cfg.channels {
         Some(c) => c.clone(),
@@ -374,49 +524,83 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     if channels.is_empty() {
         bail!("fit: the training run has no error columns (d<name>_um)");
     }
-    if cfg.max_inputs == 0 || cfg.max_inputs > 8 {
+    if channels.len() > MAX_DIRECTIONS {
         bail!(
-            "fit: the board takes 1..=8 inputs, asked for {}",
+            "fit: {} error channels, the board serves at most {MAX_DIRECTIONS} directions: choose them with --channels",
+            channels.len()
+        );
+    }
+    if cfg.max_inputs == 0 || cfg.max_inputs > MAX_NET_INPUTS {
+        bail!(
+            "fit: the board takes 1..={MAX_NET_INPUTS} inputs per model, asked for {}",
             cfg.max_inputs
         );
     }
     if cfg.net.hidden == 0 || cfg.net.hidden > 16 {
         bail!("fit: --hidden must be 1..=16, got {}", cfg.net.hidden);
     }
-    let (inner, block) = plan.inner_block(cfg.es_frac);
+    let ens = cfg.net.ensemble.max(1);
+    if ens > MAX_NETS {
+        bail!("fit: --ensemble {ens} exceeds the board's {MAX_NETS} networks");
+    }
     let folds = if cfg.select_folds <= 1 {
-        vec![(inner.clone(), block.clone())]
+        let (inner, block) = plan.inner_block(cfg.es_frac);
+        vec![(inner, block)]
     } else {
         blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
     };
-    // Sensor selection on training rows only.
+    // The board reads temperature channels 0..MAX_SENSORS in the run's
+    // column order: sensors beyond are never candidates.
+    let board_sensors: Vec<String> = first
+        .temperature_columns()
+        .iter()
+        .take(MAX_SENSORS)
+        .map(|s| s.to_string())
+        .collect();
+    let beyond = first.temperature_columns().len().saturating_sub(MAX_SENSORS);
+    let mut notes = Vec::new();
+    if beyond > 0 {
+        notes.push(format!(
+            "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates"
+        ));
+    }
+    let span = training_span_s(plan);
+    let lags: Vec<f64> = cfg.lags.iter().copied().filter(|&l| l <= span).collect();
+    if lags.len() < cfg.lags.len() {
+        notes.push(format!(
+            "lags longer than the training span ({:.1} h) are not candidates",
+            span / 3600.0
+        ));
+    }
+    if lags.is_empty() {
+        bail!("fit: every candidate lag is longer than the training span ({span:.0} s)");
+    }
+    // Sensor selection on training rows only, among the board's channels.
     let selection = if matches!(cfg.features, FeatureChoice::Auto) {
         let slices: Vec<Run> = plan
             .train
             .iter()
-            .map(|s| plan.runs[s.run].slice_rows(s.start, s.end))
+            .map(|s| plan.runs[s.run].slice_rows(s.start, s.end).keep_temperatures(&board_sensors))
             .collect();
-        let groups = cfg.groups.min(first.temperature_columns().len());
+        let groups = cfg.groups.min(board_sensors.len());
         Some(select::select(&slices, groups, 0)?)
     } else {
         None
     };
     let has_spindle = first.col("spindle_rpm").is_some();
-    let mut mlr_static = ModelReport {
-        name: "mlr-static".into(),
-        channels: BTreeMap::new(),
-        per_run: vec![],
-    };
-    let mut mlr_rep = ModelReport {
-        name: "mlr".into(),
-        channels: BTreeMap::new(),
-        per_run: vec![],
-    };
-    let mut net_rep = ModelReport {
-        name: "ga-bpn".into(),
-        channels: BTreeMap::new(),
-        per_run: vec![],
-    };
+    let mut reports: BTreeMap<&str, ModelReport> = MODEL_NAMES
+        .iter()
+        .map(|n| {
+            (
+                *n,
+                ModelReport {
+                    name: n.to_string(),
+                    channels: BTreeMap::new(),
+                    per_run: vec![],
+                },
+            )
+        })
+        .collect();
     let mut inputs = Vec::new();
     let mut file = ModelFile::default();
 
@@ -427,7 +611,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                 Candidates::Selected => sel.chosen.clone(),
                 Candidates::All => sel.sensors.clone(),
             };
-            let kinds = candidates(&sensors, &cfg.lags, has_spindle);
+            let kinds = candidates(&sensors, &lags, has_spindle);
             let static_idx = sel
                 .chosen
                 .iter()
@@ -436,25 +620,48 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                         .iter()
                         .position(|k| *k == (FeatureKind::SensorRise(s.clone()), None))
                 })
+                .take(MAX_NET_INPUTS)
                 .collect();
             (SeriesCache::new(&plan.runs, kinds)?, static_idx)
         }
         (FeatureChoice::List(kinds), _) => {
-            if kinds.is_empty() || kinds.len() > 8 {
-                bail!("fit: --features needs 1..=8 inputs, got {}", kinds.len());
+            if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
+                bail!(
+                    "fit: --features needs 1..={MAX_NET_INPUTS} inputs, got {}",
+                    kinds.len()
+                );
+            }
+            for (k, _) in kinds {
+                for c in k.columns() {
+                    if c != "spindle_rpm" && !board_sensors.iter().any(|s| s == c) {
+                        bail!("fit: feature column {c} is not one of the board's {MAX_SENSORS} temperature channels");
+                    }
+                }
             }
             (SeriesCache::new(&plan.runs, kinds.clone())?, vec![])
         }
         (FeatureChoice::Auto, None) => bail!("internal: no selection"),
     };
 
+    // Board resources shared by the channels: inputs and networks.
+    let mut in_use: Vec<usize> = Vec::new();
+    let mut nets_left = MAX_NETS;
     for ch in &channels {
         if first.col(ch).is_none() {
             bail!("fit: training run has no column `{ch}`");
         }
+        let budget = MAX_INPUTS.saturating_sub(in_use.len());
         let (idx, cv_mse) = match cfg.features {
             FeatureChoice::Auto => {
-                let (i, e) = greedy_select(&cache, &plan.runs, &folds, ch, cfg.max_inputs)?;
+                let (i, e) = greedy_select(
+                    &cache,
+                    &plan.runs,
+                    &folds,
+                    ch,
+                    cfg.max_inputs,
+                    &in_use,
+                    budget,
+                )?;
                 (i, Some(e))
             }
             FeatureChoice::List(_) => ((0..cache.kinds.len()).collect(), None),
@@ -465,20 +672,44 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         if full.y.is_empty() || val.y.is_empty() {
             bail!("fit: channel {ch} has no values in the training or validation rows");
         }
-        let specs = ranged_specs(&kinds, &full);
-        let mlr = fit_mlr(specs.clone(), &full, ch);
-        mlr_rep
-            .channels
-            .insert(ch.clone(), validate(&mlr, &val, plan, &mut mlr_rep.per_run));
+        // Static inputs the board can still take.
+        let static_ok: Vec<usize> = static_idx
+            .iter()
+            .copied()
+            .filter(|i| in_use.contains(i) || idx.contains(i))
+            .chain(
+                static_idx
+                    .iter()
+                    .copied()
+                    .filter(|i| !in_use.contains(i) && !idx.contains(i))
+                    .take(budget.saturating_sub(idx.iter().filter(|i| !in_use.contains(i)).count())),
+            )
+            .collect();
+        let with_net = !cfg.skip_net;
+        let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
+        let cv = if folds.len() > 1 {
+            cross_validate(&cache, plan, &folds, &idx, &static_ok, ch, cfg, with_net)?
+        } else {
+            BTreeMap::new()
+        };
+        pb.finish_and_clear();
 
-        if !static_idx.is_empty() {
-            let fs = cache.samples(&plan.runs, &plan.train, &static_idx, ch)?;
-            let vs = cache.samples(&plan.runs, &plan.val, &static_idx, ch)?;
-            let sk: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-            let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch);
-            mlr_static
-                .channels
-                .insert(ch.clone(), validate(&m, &vs, plan, &mut mlr_static.per_run));
+        let specs = ranged_specs(&kinds, &full);
+        let mlr = fit_mlr(specs.clone(), &full, ch)?;
+        if let Some(r) = reports.get_mut("mlr") {
+            r.channels
+                .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
+        }
+        if !static_ok.is_empty() {
+            let fs = cache.samples(&plan.runs, &plan.train, &static_ok, ch)?;
+            let vs = cache.samples(&plan.runs, &plan.val, &static_ok, ch)?;
+            let sk: Vec<_> = static_ok.iter().map(|&i| cache.kinds[i].clone()).collect();
+            let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch)?;
+            if let Some(r) = reports.get_mut("mlr-static") {
+                r.channels
+                    .insert(ch.clone(), validate(&m, &vs, plan, &mut r.per_run));
+            }
+            file.mlr_static.push(m);
         }
 
         let mut info = ChannelInfo {
@@ -487,39 +718,59 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             train_rows: full.y.len(),
             val_rows: val.y.len(),
             cv_rms_um: cv_mse.map(f64::sqrt),
+            cv: cv.clone(),
             net: None,
         };
-        if !cfg.skip_net {
+        if with_net {
+            let (inner, block) = plan.inner_block(cfg.es_frac);
             let inner_s = cache.samples(&plan.runs, &inner, &idx, ch)?;
             let block_s = cache.samples(&plan.runs, &block, &idx, ch)?;
-            let lm_len = cfg.net.lm_iters as u64 * if cfg.net.refit_full { 2 } else { 1 };
-            let pb = progress_bar(
-                cfg.progress,
-                (cfg.net.generations as u64 + lm_len) * cfg.net.restarts.max(1) as u64,
-                format!("GA-BPN {ch}"),
-            );
-            let (np, ni) = train_gabpn(&specs, ch, &inner_s, &block_s, &full, &cfg.net, &pb);
+            let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
+            let (members, infos) =
+                train_ensemble(&specs, ch, &inner_s, &block_s, &full, &cfg.net, &pb);
             pb.finish_and_clear();
-            net_rep
-                .channels
-                .insert(ch.clone(), validate(&np, &val, plan, &mut net_rep.per_run));
-            info.net = Some(ni);
-            file.nets.push(np);
+            let ens = NetEnsemble {
+                members: members.iter().collect(),
+            };
+            if let Some(r) = reports.get_mut("ga-bpn") {
+                r.channels
+                    .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
+            }
+            info.net = infos.into_iter().next();
+            file.nets.extend(members);
         }
+        // The choice: cross-validated on training rows, within the board's networks.
+        let mut admissible = cv.clone();
+        if admissible.contains_key("ga-bpn") && nets_left < ens {
+            admissible.remove("ga-bpn");
+            notes.push(format!(
+                "{ch}: the network is not admissible (the board holds {MAX_NETS} networks, {} in use)",
+                MAX_NETS - nets_left
+            ));
+        }
+        let chosen = choose_model(&admissible, cfg.choice_margin).unwrap_or_else(|| "mlr".into());
+        if chosen == "ga-bpn" {
+            nets_left -= ens;
+        }
+        let used_idx: &[usize] = if chosen == "mlr-static" { &static_ok } else { &idx };
+        for &i in used_idx {
+            if !in_use.contains(&i) {
+                in_use.push(i);
+            }
+        }
+        file.chosen.insert(ch.clone(), chosen);
         inputs.push(info);
         file.mlr.push(mlr);
     }
-    let mut models = Vec::new();
-    if !mlr_static.channels.is_empty() {
-        models.push(mlr_static);
-    }
-    models.push(mlr_rep);
-    if !cfg.skip_net {
-        models.push(net_rep);
-    }
+    let models = reports
+        .into_values()
+        .filter(|r| !r.channels.is_empty())
+        .collect();
     Ok(FitReport {
         models,
         inputs,
+        chosen: file.chosen.clone(),
+        notes,
         selection,
         train_segments: plan.train.clone(),
         val_segments: plan.val.clone(),

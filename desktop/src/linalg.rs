@@ -1,0 +1,151 @@
+//! The desktop's one linear-algebra entry point, on `nalgebra`: least squares
+//! by SVD (never the normal equations: lagged temperature features are
+//! nearly collinear), SPD solves by Cholesky for the Levenberg–Marquardt
+//! step, and the matrix exponential for the simulator's exact step.
+//! A solver that cannot give an answer returns an error, never zeros.
+
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+
+/// Relative singular-value cut-off: directions weaker than this (times the
+/// largest singular value) carry only rounding noise and are dropped.
+const SVD_RCOND: f64 = 1e-12;
+
+/// `min |X w − y|² + ridge·|w|²` for the rows of `X`; with `intercept` a
+/// leading column of ones is added (never penalised). Returns `[c0, c1..]`
+/// with an intercept, `[c1..]` without.
+pub fn least_squares(rows: &[Vec<f64>], y: &[f64], intercept: bool, ridge: f64) -> Result<Vec<f64>> {
+    let p = rows.first().map_or(0, Vec::len);
+    let off = usize::from(intercept);
+    let n = rows.len().min(y.len());
+    if n == 0 || p + off == 0 {
+        bail!("least squares: no rows to fit");
+    }
+    let cols = p + off;
+    let penalised = if ridge > 0.0 { p } else { 0 };
+    // Ridge as extra rows sqrt(ridge)·I under the data: one SVD solves both.
+    let mut a = DMatrix::<f64>::zeros(n + penalised, cols);
+    let mut b = DVector::<f64>::zeros(n + penalised);
+    for (i, (r, &t)) in rows.iter().zip(y).enumerate().take(n) {
+        if intercept {
+            a[(i, 0)] = 1.0;
+        }
+        for (j, v) in r.iter().enumerate() {
+            a[(i, off + j)] = *v;
+        }
+        b[i] = t;
+    }
+    let s = ridge.max(0.0).sqrt();
+    for j in 0..penalised {
+        a[(n + j, off + j)] = s;
+    }
+    solve_svd(a, &b)
+}
+
+/// Least squares on column vectors: `min |Σ_j w_j·cols[j] − y|² + λ|w|²`.
+pub fn least_squares_cols(cols: &[Vec<f64>], y: &[f64], ridge: f64) -> Result<Vec<f64>> {
+    let n = y.len();
+    let rows: Vec<Vec<f64>> = (0..n)
+        .map(|i| cols.iter().map(|c| c.get(i).copied().unwrap_or(0.0)).collect())
+        .collect();
+    least_squares(&rows, y, false, ridge)
+}
+
+fn solve_svd(a: DMatrix<f64>, b: &DVector<f64>) -> Result<Vec<f64>> {
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        bail!("least squares: the data hold a non-finite value");
+    }
+    let svd = a.svd(true, true);
+    let smax = svd.singular_values.max();
+    if smax <= 0.0 {
+        bail!("least squares: every column is zero");
+    }
+    match svd.solve(b, smax * SVD_RCOND) {
+        Ok(x) => Ok(x.iter().copied().collect()),
+        Err(e) => bail!("least squares: SVD failed ({e})"),
+    }
+}
+
+/// Solve `A x = b` for a symmetric positive definite `A` (row-major n×n).
+/// A matrix that is not positive definite is an error.
+pub fn solve_spd(a: &[f64], b: &[f64], n: usize) -> Result<Vec<f64>> {
+    if a.len() != n * n || b.len() != n {
+        bail!("SPD solve: sizes do not match ({}×{n} vs {})", a.len(), b.len());
+    }
+    let m = DMatrix::from_row_slice(n, n, a);
+    match m.cholesky() {
+        Some(c) => Ok(c.solve(&DVector::from_column_slice(b)).iter().copied().collect()),
+        None => bail!("SPD solve: matrix is not positive definite"),
+    }
+}
+
+/// `exp(A)` for a square matrix (row-major n×n), by nalgebra's Padé scaling
+/// and squaring.
+pub fn expm(a: &[f64], n: usize) -> Vec<f64> {
+    let m = DMatrix::from_row_slice(n, n, a);
+    row_major(&m.exp())
+}
+
+/// Row-major copy of a matrix.
+pub fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+    let mut out = Vec::with_capacity(m.nrows() * m.ncols());
+    for i in 0..m.nrows() {
+        for j in 0..m.ncols() {
+            out.push(m[(i, j)]);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn least_squares_recovers_a_plane_with_collinear_columns() {
+        // y = 2 + 3·a − b, with a third column that copies a (rank-deficient):
+        // the minimum-norm solution splits a's weight between the two copies.
+        let rows: Vec<Vec<f64>> = (0..50)
+            .map(|i| {
+                let a = i as f64 * 0.1;
+                let b = (i as f64 * 0.37).sin();
+                vec![a, b, a]
+            })
+            .collect();
+        let y: Vec<f64> = rows.iter().map(|r| 2.0 + 3.0 * r[0] - r[1]).collect();
+        let c = least_squares(&rows, &y, true, 0.0).unwrap();
+        assert!((c[0] - 2.0).abs() < 1e-9, "{c:?}");
+        assert!((c[1] + c[3] - 3.0).abs() < 1e-9, "{c:?}");
+        assert!((c[1] - c[3]).abs() < 1e-9, "{c:?}");
+        assert!((c[2] + 1.0).abs() < 1e-9, "{c:?}");
+    }
+
+    #[test]
+    fn ridge_shrinks_but_leaves_the_intercept_alone() {
+        let rows: Vec<Vec<f64>> = (0..20).map(|i| vec![i as f64]).collect();
+        let y: Vec<f64> = rows.iter().map(|r| 10.0 + r[0]).collect();
+        let plain = least_squares(&rows, &y, true, 0.0).unwrap();
+        let shrunk = least_squares(&rows, &y, true, 1e4).unwrap();
+        assert!(shrunk[1].abs() < plain[1].abs());
+        assert!(shrunk[0] > plain[0], "the intercept takes up the mean");
+    }
+
+    #[test]
+    fn failures_are_errors_not_zeros() {
+        assert!(least_squares(&[], &[], true, 0.0).is_err());
+        assert!(least_squares(&[vec![f64::NAN]], &[1.0], true, 0.0).is_err());
+        assert!(solve_spd(&[1.0, 2.0, 2.0, 1.0], &[1.0, 1.0], 2).is_err());
+        let x = solve_spd(&[4.0, 1.0, 1.0, 3.0], &[1.0, 2.0], 2).unwrap();
+        assert!((4.0 * x[0] + x[1] - 1.0).abs() < 1e-12);
+        assert!((x[0] + 3.0 * x[1] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn expm_of_a_diagonal_and_a_rotation() {
+        let e = expm(&[1.0, 0.0, 0.0, -2.0], 2);
+        assert!((e[0] - 1f64.exp()).abs() < 1e-12 && (e[3] - (-2f64).exp()).abs() < 1e-12);
+        let t = 0.7;
+        let r = expm(&[0.0, -t, t, 0.0], 2);
+        assert!((r[0] - t.cos()).abs() < 1e-12 && (r[2] - t.sin()).abs() < 1e-12);
+    }
+}
