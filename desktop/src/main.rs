@@ -8,6 +8,9 @@ use clap::{Parser, Subcommand};
     about = "thermocomp desktop tools: record, select, fit, export, upload, simulate, diagnose"
 )]
 struct Cli {
+    /// On an error, print the full chain and the stack trace (also TCOMP_BACKTRACE=1).
+    #[arg(long, global = true)]
+    debug: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -143,8 +146,42 @@ impl LinkArgs {
     }
 }
 
-fn main() -> anyhow::Result<()> {
+/// Errors are one line (`error: what: because`) and exit 1; the stack trace
+/// is for developers and only shown with `--debug` or `TCOMP_BACKTRACE=1`,
+/// whatever `RUST_BACKTRACE` says (anyhow would otherwise print it with every
+/// refused input file).
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    let debug = cli.debug || std::env::var_os("TCOMP_BACKTRACE").is_some_and(|v| v == "1");
+    // anyhow decides at the first error whether to capture a backtrace, from
+    // these variables: capture exactly when it will be printed.
+    std::env::set_var("RUST_LIB_BACKTRACE", if debug { "1" } else { "0" });
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) if debug => {
+            eprintln!("error: {e:?}");
+            std::process::ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes on one line, `outer: inner: root`; line breaks
+/// inside a message (some parsers' snippets) become spaces.
+fn one_line(e: &anyhow::Error) -> String {
+    let text = format!("{e:#}");
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect();
+    lines.join(" ")
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Export {
             demo,
