@@ -24,7 +24,7 @@ pub struct ExportSummary {
 pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
     let (mut fixed, report) = model.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
     let bytes = encode(&mut fixed)?;
-    Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e:?}"))?;
+    Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e}"))?;
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
     Ok(summary(&fixed, &bytes, &report))
 }
@@ -33,7 +33,7 @@ pub fn encode(model: &mut Model) -> Result<Vec<u8>> {
     let mut bytes = vec![0u8; model.encoded_len()];
     let n = model
         .encode(&mut bytes)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     bytes.truncate(n);
     Ok(bytes)
 }

@@ -1,4 +1,5 @@
 //! `tcomp`: from calibration runs to a model image on the board.
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -233,10 +234,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             to,
             json,
         } => {
-            let rows = tcomp::replay::replay_files(&run, &image)?;
-            let model = thermocomp_core::Model::parse(&std::fs::read(&image)?)
-                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            // Run file first, then image: each refusal names its own file.
             let table = tcomp::runcsv::Run::read(&run)?;
+            let bytes = std::fs::read(&image)
+                .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
+            let model = thermocomp_core::Model::parse(&bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", image.display()))?;
+            let rows = tcomp::replay::replay_files(&run, &image)
+                .with_context(|| format!("in run file {}", run.display()))?;
             let n = rows.len();
             let (a, b) = (
                 (from.clamp(0.0, 1.0) * n as f64) as usize,

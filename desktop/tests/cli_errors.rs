@@ -65,3 +65,78 @@ fn errors_are_one_line_without_a_backtrace_unless_asked() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("Stack backtrace"), "{stderr}");
 }
+
+/// A valid demo image (6 sensors on channels 0-5) written by `tcomp export --demo`.
+fn demo_image(dir: &Path) -> PathBuf {
+    let out = tcomp(dir, &["export", "--demo", "-o", "demo.img"]);
+    assert!(out.status.success(), "{out:?}");
+    dir.join("demo.img")
+}
+
+fn small_run(dir: &Path, name: &str) -> PathBuf {
+    let mut s = String::from("time_s,spindle_rpm,T_a,T_b,T_c,T_d,T_e,T_f,dx_um\n");
+    for k in 0..20 {
+        let t = 20.0 + 0.1 * k as f64;
+        s.push_str(&format!("{},3000,{t},{t},{t},{t},{t},{t},{}\n", k * 10, k));
+    }
+    write(dir, name, &s)
+}
+
+/// A stored error (not Debug output such as `BadCrc { stored: … }` or `BadNumber(2)`).
+fn assert_no_debug_form(line: &str) {
+    for debug in ["BadCrc", "BadNumber", "BadMagic", "TooShort", "{ ", "(2)"] {
+        assert!(!line.contains(debug), "Debug form in {line:?}");
+    }
+}
+
+#[test]
+fn image_errors_are_messages_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = demo_image(dir.path());
+    let run = small_run(dir.path(), "run.csv");
+    let mut bytes = std::fs::read(&image).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    std::fs::write(dir.path().join("corrupt.img"), &bytes).unwrap();
+    std::fs::write(
+        dir.path().join("text.img"),
+        b"time_s,T_a\n0,20.00\n10,21.00\n20,22.00\n30,23.00\n",
+    )
+    .unwrap();
+    assert!(run.exists());
+
+    for sub in [
+        vec!["replay", "run.csv", "corrupt.img"],
+        vec!["report", "run.csv", "--image", "corrupt.img", "-o", "plots"],
+    ] {
+        let line = refuses(dir.path(), &sub, &["corrupt.img", "CRC-32 mismatch"]);
+        assert_no_debug_form(&line);
+    }
+    assert!(
+        !dir.path().join("plots").exists(),
+        "report wrote plots for a refused image"
+    );
+    let line = refuses(
+        dir.path(),
+        &["replay", "run.csv", "text.img"],
+        &["text.img", "not a model image"],
+    );
+    assert_no_debug_form(&line);
+}
+
+#[test]
+fn trace_parser_errors_are_messages_naming_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    demo_image(dir.path());
+    // An exponent is a number for the CSV reader but not for the board's
+    // plain-decimal trace parser, which `replay` uses to be bit-exact.
+    let mut text = std::fs::read_to_string(small_run(dir.path(), "run.csv")).unwrap();
+    text = text.replacen("\n10,3000,20.1,", "\n10,3000,2.01e1,", 1);
+    write(dir.path(), "exp.csv", &text);
+    let line = refuses(
+        dir.path(),
+        &["replay", "exp.csv", "demo.img"],
+        &["exp.csv", "line 3", "column 3", "plain decimal"],
+    );
+    assert_no_debug_form(&line);
+}
