@@ -182,6 +182,27 @@ fn one_line(e: &anyhow::Error) -> String {
     lines.join(" ")
 }
 
+/// A model channel the run has no temperature column for would be a
+/// permanently failed sensor: the replay would show nothing of the model.
+fn check_channels(
+    model: &thermocomp_core::Model,
+    run: &tcomp::runcsv::Run,
+    image: &std::path::Path,
+    run_path: &std::path::Path,
+) -> anyhow::Result<()> {
+    let columns = run.temperature_columns().len();
+    for s in model.sensors.iter().filter(|s| s.rom == [0; 8]) {
+        anyhow::ensure!(
+            usize::from(s.channel) < columns,
+            "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
+            image.display(),
+            s.channel,
+            run_path.display()
+        );
+    }
+    Ok(())
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Export {
@@ -206,7 +227,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     let run = run.ok_or_else(|| {
                         anyhow::anyhow!("--run <csv> gives the board's channel order")
                     })?;
-                    let columns: Vec<String> = tcomp::runcsv::Run::read(&run)?
+                    let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(&run)?
                         .temperature_columns()
                         .iter()
                         .map(|c| c.to_string())
@@ -235,11 +256,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             json,
         } => {
             // Run file first, then image: each refusal names its own file.
-            let table = tcomp::runcsv::Run::read(&run)?;
+            let table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
             let bytes = std::fs::read(&image)
                 .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
             let model = thermocomp_core::Model::parse(&bytes)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", image.display()))?;
+            check_channels(&model, &table, &image, &run)?;
             let rows = tcomp::replay::replay_files(&run, &image)
                 .with_context(|| format!("in run file {}", run.display()))?;
             let n = rows.len();

@@ -91,7 +91,7 @@ pub fn report(
     clusters: bool,
     dir: &Path,
 ) -> Result<Vec<PathBuf>> {
-    let run = Run::read(run_path)?;
+    let run = Run::read_with_temperatures(run_path)?;
     // Every input is checked before the first file is written.
     let replayed = match image {
         Some(image) => {

@@ -116,6 +116,29 @@ impl Run {
                 _ => {}
             }
         }
+        if run.rows() == 0 {
+            bail!("no data rows (only a header)");
+        }
+        Ok(run)
+    }
+
+    /// Refuse a run without temperature columns: the tools that model or
+    /// compensate temperatures have nothing to work on.
+    pub fn require_temperatures(&self) -> Result<()> {
+        if self.temperature_columns().is_empty() {
+            bail!(
+                "no temperature columns (T_<name>) among {}",
+                self.columns.join(",")
+            );
+        }
+        Ok(())
+    }
+
+    /// [`Run::read`] and [`Run::require_temperatures`], errors naming the file.
+    pub fn read_with_temperatures(path: &Path) -> Result<Run> {
+        let run = Run::read(path)?;
+        run.require_temperatures()
+            .with_context(|| format!("in run file {}", path.display()))?;
         Ok(run)
     }
 

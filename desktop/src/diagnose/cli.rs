@@ -46,11 +46,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     let runs = a
         .runs
         .iter()
-        .map(|p| {
-            Run::read(p)
-                .with_context(|| format!("reading run {}", p.display()))
-                .map(|r| (p.display().to_string(), r))
-        })
+        .map(|p| Run::read_with_temperatures(p).map(|r| (p.display().to_string(), r)))
         .collect::<Result<Vec<_>>>()?;
     let machine = if a.machine == "fit" {
         let m = nominal::fit_nominal(&runs[0].1, a.nominal_fraction)?;
