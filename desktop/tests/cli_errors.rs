@@ -210,3 +210,55 @@ fn replay_refuses_a_model_reading_channels_the_run_lacks() {
         &["demo.img", "two.csv", "channel 2", "2 temperature columns"],
     );
 }
+
+/// A physically impossible or non-numeric cell is refused by every
+/// subcommand that reads runs, naming the file, the line and the column.
+#[test]
+fn impossible_cells_are_refused_by_every_subcommand() {
+    let dir = tempfile::tempdir().unwrap();
+    demo_image(dir.path());
+    let good = std::fs::read_to_string(small_run(dir.path(), "good.csv")).unwrap();
+    // Line 5 is the fourth data row; T_c is the fifth column.
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    let cell = |line: &str, value: &str| {
+        let mut f: Vec<&str> = line.split(',').collect();
+        f[4] = value;
+        f.join(",")
+    };
+    let fit_json = repo_file("../demo/fl-thermal-fit.json");
+    let machine = repo_file("machines/turning-center-16.toml");
+    let original = lines[4].clone();
+    for (value, why) in [
+        ("1e300", "outside"),
+        ("250", "outside"),
+        ("-80.5", "outside"),
+        ("NaN", "not a finite number"),
+        ("inf", "not a finite number"),
+        ("twenty", "cannot parse"),
+    ] {
+        lines[4] = cell(&original, value);
+        write(dir.path(), "bad.csv", &(lines.join("\n") + "\n"));
+        for args in [
+            vec!["info", "bad.csv"],
+            vec!["select", "bad.csv"],
+            vec!["replay", "bad.csv", "demo.img"],
+            vec!["fit", "bad.csv", "--split-chrono", "0.6,0.8"],
+            vec![
+                "export", "--model", &fit_json, "--run", "bad.csv", "-o", "x.img",
+            ],
+            vec!["report", "bad.csv", "-o", "plots"],
+            vec!["diagnose", &machine, "bad.csv"],
+        ] {
+            refuses(
+                dir.path(),
+                &args,
+                &["bad.csv", "line 5", "column `T_c`", value, why],
+            );
+        }
+    }
+    // The same file with a possible value in that cell is read.
+    lines[4] = cell(&original, "35.5");
+    write(dir.path(), "fine.csv", &(lines.join("\n") + "\n"));
+    let out = tcomp(dir.path(), &["replay", "fine.csv", "demo.img"]);
+    assert!(out.status.success(), "{out:?}");
+}
