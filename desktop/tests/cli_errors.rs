@@ -262,3 +262,167 @@ fn impossible_cells_are_refused_by_every_subcommand() {
     let out = tcomp(dir.path(), &["replay", "fine.csv", "demo.img"]);
     assert!(out.status.success(), "{out:?}");
 }
+
+/// The shipped machine with the first occurrence of `from` replaced by `to`.
+fn machine_with(dir: &Path, name: &str, from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(repo_file("machines/turning-center-16.toml")).unwrap();
+    assert!(text.contains(from), "{from}");
+    write(dir, name, &text.replacen(from, to, 1));
+    name.to_string()
+}
+
+fn duty_with(dir: &Path, name: &str, from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(repo_file("duty/warmup-steps.toml")).unwrap();
+    assert!(text.contains(from), "{from}");
+    write(dir, name, &text.replacen(from, to, 1));
+    name.to_string()
+}
+
+/// Machine files, duty files and options of `sim` and `diagnose`: every
+/// impossible value and every unbounded size is refused in one line naming
+/// the file, the key and the allowed range.
+#[test]
+fn sim_and_diagnose_refuse_impossible_machines_duties_and_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let machine = repo_file("machines/turning-center-16.toml");
+    let duty = repo_file("duty/warmup-steps.toml");
+    let short = repo_file("duty/short-steps.csv");
+    let out = tcomp(d, &["sim", &machine, "--duty", &short, "-o", "run.csv"]);
+    assert!(out.status.success(), "{out:?}");
+
+    let bad_machines = [
+        // 100000 slices once asked for an 80 GB matrix and aborted.
+        (
+            "segments = 10",
+            "segments = 100000",
+            "rod.segments",
+            "2..=100",
+        ),
+        ("c_j_per_k = 2300.0", "c_j_per_k = nan", "c_j_per_k", "NaN"),
+        (
+            "g_amb_w_per_k = 0.2",
+            "g_amb_w_per_k = -inf",
+            "g_amb_w_per_k",
+            "-inf",
+        ),
+        ("g_w_per_k = 15.0", "g_w_per_k = -15.0", "g_w_per_k", "-15"),
+        (
+            "n_max_rpm = 10000.0",
+            "n_max_rpm = 0",
+            "n_max_rpm",
+            "above 0",
+        ),
+        (
+            "motor_node = \"motor\"",
+            "motor_node = \"motor\"\nalpha_per_k = -11.5e-6",
+            "alpha_per_k",
+            "0..=",
+        ),
+        ("quant_c = 0.0625", "quant_c = inf", "noise.quant_c", "inf"),
+        (
+            "diameter_mm = ",
+            "diameter_mm = -1 #",
+            "rod.diameter_mm",
+            "above 0",
+        ),
+        (
+            "c_j_per_k = 2300.0",
+            "c_j_per_k = 2300.0\nmass_kg = 5",
+            "line 33, column 1",
+            "unknown field `mass_kg`",
+        ),
+    ];
+    for (i, (from, to, key, range)) in bad_machines.into_iter().enumerate() {
+        let file = machine_with(d, &format!("m{i}.toml"), from, to);
+        let needles = [file.as_str(), key, range];
+        refuses(d, &["sim", &file, "--duty", &duty, "-o", "x.csv"], &needles);
+        refuses(d, &["diagnose", &file, "run.csv"], &needles);
+    }
+    assert!(!d.join("x.csv").exists());
+
+    let bad_duties = [
+        ("rpm = 6000", "rpm = -6000", "segment 3: rpm", "0..=100000"),
+        ("rpm = 6000", "rpm = 6e9", "segment 3: rpm", "0..=100000"),
+        ("rpm = 6000", "rpm = nan", "segment 3: rpm", "NaN"),
+        ("feed = 0.2", "feed = 2", "segment 2: feed", "0..=1"),
+        (
+            "duration_min = 90",
+            "duration_min = inf",
+            "duration_min",
+            "inf",
+        ),
+        (
+            "sample_period_s = 1",
+            "sample_period_s = 0",
+            "sample_period_s",
+            "1..=3600",
+        ),
+        (
+            "sample_period_s = 1",
+            "sample_period_s = 1\nrepeat = 10000000000",
+            "repeat",
+            "1..=",
+        ),
+    ];
+    for (i, (from, to, key, range)) in bad_duties.into_iter().enumerate() {
+        let file = duty_with(d, &format!("d{i}.toml"), from, to);
+        refuses(
+            d,
+            &["sim", &machine, "--duty", &file, "-o", "x.csv"],
+            &[file.as_str(), key, range],
+        );
+    }
+    let mut csv_duty = std::fs::read_to_string(&short).unwrap();
+    csv_duty = csv_duty.replacen("600,4000,", "600,-4000,", 1);
+    write(d, "neg.csv", &csv_duty);
+    refuses(
+        d,
+        &["sim", &machine, "--duty", "neg.csv", "-o", "x.csv"],
+        &["neg.csv", "spindle_rpm", "-4000"],
+    );
+
+    for (option, needles) in [
+        (
+            vec!["--sample-period", "0"],
+            ["--sample-period", "1..=3600"],
+        ),
+        (
+            vec!["--sample-period", "NaN"],
+            ["--sample-period", "1..=3600"],
+        ),
+        (vec!["--hours=-1"], ["--hours", "720"]),
+        (vec!["--hours", "1e9"], ["--hours", "720"]),
+        (vec!["--hours", "100"], ["rows", "200000"]),
+        (
+            vec!["--effect", "convection=h:nan"],
+            ["h = NaN", "0..=1000"],
+        ),
+        (vec!["--effect", "ballscrew=k_w:-5"], ["k_w = -5", "0..="]),
+    ] {
+        let mut args = vec![
+            "sim",
+            machine.as_str(),
+            "--duty",
+            duty.as_str(),
+            "-o",
+            "x.csv",
+        ];
+        args.extend(option);
+        refuses(d, &args, &needles);
+    }
+    for (option, needles) in [
+        (vec!["--threads", "0"], ["--threads", "1..=1024"]),
+        (vec!["--fit-fraction", "NaN"], ["--fit-fraction", "0.05"]),
+    ] {
+        let mut args = vec!["diagnose", machine.as_str(), "run.csv"];
+        args.extend(option);
+        refuses(d, &args, &needles);
+    }
+    refuses(
+        d,
+        &["diagnose", "fit", "run.csv", "--nominal-fraction=-1"],
+        &["--nominal-fraction", "0.05"],
+    );
+    assert!(!d.join("x.csv").exists());
+}
