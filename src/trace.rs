@@ -27,6 +27,29 @@ pub enum TraceError {
     MissingTime,
 }
 
+/// One line for the desktop and the bench log; columns are counted from 1,
+/// as a spreadsheet or `cut -f` would.
+impl core::fmt::Display for TraceError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            TraceError::NoTimeColumn => {
+                write!(f, "the first column of the header must be `time_s`")
+            }
+            TraceError::TooManyColumns => write!(f, "more than {MAX_COLUMNS} columns"),
+            TraceError::FieldCount => write!(f, "the number of fields differs from the header's"),
+            TraceError::BadNumber(c) => write!(
+                f,
+                "column {}: not a plain decimal number (e.g. 20.06; no exponent, no NaN)",
+                u16::from(c) + 1
+            ),
+            TraceError::OutOfRange(c) => {
+                write!(f, "column {}: value out of range", u16::from(c) + 1)
+            }
+            TraceError::MissingTime => write!(f, "`time_s` is empty"),
+        }
+    }
+}
+
 /// Which columns feed which input.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TraceHeader {

@@ -249,7 +249,7 @@ pub struct UploadSummary {
 /// Validate locally, stage, commit, and check that the board now serves it.
 pub fn upload(link: &mut BoardLink, image: &[u8]) -> Result<UploadSummary> {
     let model = thermocomp_core::Model::parse(image)
-        .map_err(|e| anyhow!("the image is not valid, not sent: {e:?}"))?;
+        .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
     link.write_one(map::HR_UNLOCK, map::UNLOCK_CODE)
         .context("unlocking")?;
     let mut padded = image.to_vec();

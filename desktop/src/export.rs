@@ -31,7 +31,7 @@ pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
         );
     }
     let bytes = encode(&mut fixed)?;
-    Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e:?}"))?;
+    Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e}"))?;
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
     Ok(summary(&fixed, &bytes, &report))
 }
@@ -40,7 +40,7 @@ pub fn encode(model: &mut Model) -> Result<Vec<u8>> {
     let mut bytes = vec![0u8; model.encoded_len()];
     let n = model
         .encode(&mut bytes)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     bytes.truncate(n);
     Ok(bytes)
 }

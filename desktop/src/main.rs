@@ -1,4 +1,5 @@
 //! `tcomp`: from calibration runs to a model image on the board.
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -8,6 +9,9 @@ use clap::{Parser, Subcommand};
     about = "thermocomp desktop tools: record, select, fit, export, upload, simulate, diagnose"
 )]
 struct Cli {
+    /// On an error, print the full chain and the stack trace (also TCOMP_BACKTRACE=1).
+    #[arg(long, global = true)]
+    debug: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -143,8 +147,63 @@ impl LinkArgs {
     }
 }
 
-fn main() -> anyhow::Result<()> {
+/// Errors are one line (`error: what: because`) and exit 1; the stack trace
+/// is for developers and only shown with `--debug` or `TCOMP_BACKTRACE=1`,
+/// whatever `RUST_BACKTRACE` says (anyhow would otherwise print it with every
+/// refused input file).
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    let debug = cli.debug || std::env::var_os("TCOMP_BACKTRACE").is_some_and(|v| v == "1");
+    // anyhow decides at the first error whether to capture a backtrace, from
+    // these variables: capture exactly when it will be printed.
+    std::env::set_var("RUST_LIB_BACKTRACE", if debug { "1" } else { "0" });
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) if debug => {
+            eprintln!("error: {e:?}");
+            std::process::ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes on one line, `outer: inner: root`; line breaks
+/// inside a message (some parsers' snippets) become spaces.
+fn one_line(e: &anyhow::Error) -> String {
+    let text = format!("{e:#}");
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect();
+    lines.join(" ")
+}
+
+/// A model channel the run has no temperature column for would be a
+/// permanently failed sensor: the replay would show nothing of the model.
+fn check_channels(
+    model: &thermocomp_core::Model,
+    run: &tcomp::runcsv::Run,
+    image: &std::path::Path,
+    run_path: &std::path::Path,
+) -> anyhow::Result<()> {
+    let columns = run.temperature_columns().len();
+    for s in model.sensors.iter().filter(|s| s.rom == [0; 8]) {
+        anyhow::ensure!(
+            usize::from(s.channel) < columns,
+            "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
+            image.display(),
+            s.channel,
+            run_path.display()
+        );
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Export {
             demo,
@@ -168,7 +227,7 @@ fn main() -> anyhow::Result<()> {
                     let run = run.ok_or_else(|| {
                         anyhow::anyhow!("--run <csv> gives the board's channel order")
                     })?;
-                    let columns: Vec<String> = tcomp::runcsv::Run::read(&run)?
+                    let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(&run)?
                         .temperature_columns()
                         .iter()
                         .map(|c| c.to_string())
@@ -196,10 +255,15 @@ fn main() -> anyhow::Result<()> {
             to,
             json,
         } => {
-            let rows = tcomp::replay::replay_files(&run, &image)?;
-            let model = thermocomp_core::Model::parse(&std::fs::read(&image)?)
-                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-            let table = tcomp::runcsv::Run::read(&run)?;
+            // Run file first, then image: each refusal names its own file.
+            let table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
+            let bytes = std::fs::read(&image)
+                .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
+            let model = thermocomp_core::Model::parse(&bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", image.display()))?;
+            check_channels(&model, &table, &image, &run)?;
+            let rows = tcomp::replay::replay_files(&run, &image)
+                .with_context(|| format!("in run file {}", run.display()))?;
             let n = rows.len();
             let (a, b) = (
                 (from.clamp(0.0, 1.0) * n as f64) as usize,

@@ -91,7 +91,20 @@ pub fn report(
     clusters: bool,
     dir: &Path,
 ) -> Result<Vec<PathBuf>> {
-    let run = Run::read(run_path)?;
+    let run = Run::read_with_temperatures(run_path)?;
+    // Every input is checked before the first file is written.
+    let replayed = match image {
+        Some(image) => {
+            let bytes =
+                std::fs::read(image).with_context(|| format!("reading {}", image.display()))?;
+            let model = thermocomp_core::Model::parse(&bytes)
+                .map_err(|e| anyhow!("{}: {e}", image.display()))?;
+            let rows = crate::replay::replay_files(run_path, image)
+                .with_context(|| format!("in run file {}", run_path.display()))?;
+            Some((model, rows))
+        }
+        None => None,
+    };
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let hours: Vec<f64> = run.time_s().iter().map(|t| t / 3600.0).collect();
     let mut files = vec![];
@@ -103,11 +116,7 @@ pub fn report(
     let p = dir.join("temperatures.svg");
     line_chart(&p, "Temperatures", "°C", &temps)?;
     files.push(p);
-    if let Some(image) = image {
-        let rows = crate::replay::replay_files(run_path, image)?;
-        let bytes = std::fs::read(image)?;
-        let model = thermocomp_core::Model::parse(&bytes)
-            .map_err(|e| anyhow!("{}: {e:?}", image.display()))?;
+    if let Some((model, rows)) = replayed {
         for d in 0..model.directions.len() {
             let col = format!("d{}_um", model.direction_name(d));
             let measured = series(&run, &col, &hours);

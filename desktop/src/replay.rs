@@ -22,7 +22,7 @@ pub fn replay(csv: &str, model: Model) -> Result<Vec<ReplayRow>> {
         .enumerate()
         .filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
     let (_, head) = lines.next().ok_or_else(|| anyhow!("empty trace"))?;
-    let header = TraceHeader::parse(head).map_err(|e| anyhow!("header: {e:?}"))?;
+    let header = TraceHeader::parse(head).map_err(|e| anyhow!("header: {e}"))?;
     let channels: Vec<Option<usize>> = model
         .sensors
         .iter()
@@ -31,7 +31,7 @@ pub fn replay(csv: &str, model: Model) -> Result<Vec<ReplayRow>> {
     let mut comp = Compensator::new(Some(model));
     let mut rows = Vec::new();
     for (n, line) in lines {
-        let s = TraceSample::parse(&header, line).map_err(|e| anyhow!("line {}: {e:?}", n + 1))?;
+        let s = TraceSample::parse(&header, line).map_err(|e| anyhow!("line {}: {e}", n + 1))?;
         let mut temps = [None; MAX_SENSORS];
         for (t, ch) in temps.iter_mut().zip(&channels) {
             // The board reads i16 from a DS18B20; anything else is no sensor.
@@ -59,7 +59,7 @@ pub fn replay_files(trace: &std::path::Path, image: &std::path::Path) -> Result<
     let csv =
         std::fs::read_to_string(trace).with_context(|| format!("reading {}", trace.display()))?;
     let bytes = std::fs::read(image).with_context(|| format!("reading {}", image.display()))?;
-    let model = Model::parse(&bytes).map_err(|e| anyhow!("{}: {e:?}", image.display()))?;
+    let model = Model::parse(&bytes).map_err(|e| anyhow!("{}: {e}", image.display()))?;
     replay(&csv, model)
 }
 

@@ -1,6 +1,10 @@
 //! Run files: the CSV exchanged between the board, the desktop tools and users
 //! (`../shared/formats/run-csv.md`). Readers keep unknown columns; missing
 //! values are empty fields; anything unparsable is reported by row and column.
+//!
+//! Values of the format's columns must be physically possible, so that a
+//! typo or a corrupted export (a `1e300` °C cell) is refused by line and
+//! column instead of poisoning a fit: see [`plausible_range`].
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -63,6 +67,7 @@ impl Run {
             }
         }
         run.data = vec![Vec::new(); run.columns.len()];
+        let ranges: Vec<_> = run.columns.iter().map(|c| plausible_range(c)).collect();
         for (n, line) in lines {
             let line = line.with_context(|| format!("line {}: not UTF-8 text", n + 1))?;
             let t = line.trim();
@@ -93,11 +98,20 @@ impl Run {
                     })?;
                     if !v.is_finite() {
                         bail!(
-                            "line {}, column `{}`: {:?} is not a finite number",
+                            "line {}, column `{}`: {:?} is not a finite number (a missing value is an empty field)",
                             n + 1,
                             run.columns[c],
                             f
                         );
+                    }
+                    if let Some((lo, hi, unit)) = ranges[c] {
+                        if !(lo..=hi).contains(&v) {
+                            bail!(
+                                "line {}, column `{}`: {f} {unit} is outside the possible {lo}..={hi} {unit}",
+                                n + 1,
+                                run.columns[c],
+                            );
+                        }
                     }
                     Some(v)
                 };
@@ -116,6 +130,29 @@ impl Run {
                 _ => {}
             }
         }
+        if run.rows() == 0 {
+            bail!("no data rows (only a header)");
+        }
+        Ok(run)
+    }
+
+    /// Refuse a run without temperature columns: the tools that model or
+    /// compensate temperatures have nothing to work on.
+    pub fn require_temperatures(&self) -> Result<()> {
+        if self.temperature_columns().is_empty() {
+            bail!(
+                "no temperature columns (T_<name>) among {}",
+                self.columns.join(",")
+            );
+        }
+        Ok(())
+    }
+
+    /// [`Run::read`] and [`Run::require_temperatures`], errors naming the file.
+    pub fn read_with_temperatures(path: &Path) -> Result<Run> {
+        let run = Run::read(path)?;
+        run.require_temperatures()
+            .with_context(|| format!("in run file {}", path.display()))?;
         Ok(run)
     }
 
@@ -150,7 +187,7 @@ impl Run {
     pub fn error_columns(&self) -> Vec<&str> {
         self.columns
             .iter()
-            .filter(|c| c.starts_with('d') && c.ends_with("_um") && c.len() > 4)
+            .filter(|c| is_error_column(c))
             .map(String::as_str)
             .collect()
     }
@@ -250,6 +287,45 @@ impl Run {
     }
 }
 
+/// Coldest and hottest temperature a run may hold, °C: beyond any machine
+/// shop (and the DS18B20's −55…125 °C), short of what a unit mix-up gives.
+pub const TEMPERATURE_RANGE_C: (f64, f64) = (-60.0, 200.0);
+/// Fastest spindle, rpm (high-speed spindles reach about 60 000).
+pub const MAX_SPINDLE_RPM: f64 = 100_000.0;
+/// Largest thermal error or probe reading, µm (0.1 m; real ones are < 1 mm).
+pub const MAX_ERROR_UM: f64 = 100_000.0;
+/// Largest axis position, mm or degrees.
+pub const MAX_POSITION: f64 = 1.0e6;
+/// Longest run, s (30 years).
+pub const MAX_TIME_S: f64 = 1.0e9;
+
+/// The values a column of the run format can physically hold (inclusive)
+/// and their unit; `None` for columns the format does not define (kept as
+/// they are, only required to be finite).
+pub fn plausible_range(column: &str) -> Option<(f64, f64, &'static str)> {
+    let (lo, hi) = TEMPERATURE_RANGE_C;
+    if column == "time_s" {
+        Some((0.0, MAX_TIME_S, "s"))
+    } else if column == "spindle_rpm" {
+        Some((0.0, MAX_SPINDLE_RPM, "rpm"))
+    } else if column == "feed_activity" || column == "coolant_on" {
+        Some((0.0, 1.0, ""))
+    } else if is_temperature_column(column) {
+        Some((lo, hi, "°C"))
+    } else if is_error_column(column) {
+        Some((-MAX_ERROR_UM, MAX_ERROR_UM, "µm"))
+    } else if column.starts_with("pos_") {
+        Some((-MAX_POSITION, MAX_POSITION, "mm or °"))
+    } else {
+        None
+    }
+}
+
+/// `d<name>_um`: a measured thermal error.
+pub fn is_error_column(name: &str) -> bool {
+    name.starts_with('d') && name.ends_with("_um") && name.len() > 4
+}
+
 /// `T_<name>` or `T<digits>` (the format's two spellings of a temperature column).
 pub fn is_temperature_column(name: &str) -> bool {
     name.starts_with("T_")
@@ -292,5 +368,34 @@ mod tests {
         );
         let short = "time_s,T01\n0\n";
         assert!(Run::from_reader(short.as_bytes()).is_err());
+    }
+
+    #[test]
+    fn refuses_impossible_values_of_the_format_columns_only() {
+        let err = |text: &str| format!("{:#}", Run::from_reader(text.as_bytes()).unwrap_err());
+        for (text, col) in [
+            ("time_s,T_a\n0,20\n1,1e300\n", "T_a"),
+            ("time_s,T_a\n0,-61\n", "T_a"),
+            ("time_s,T07\n0,200.5\n", "T07"),
+            ("time_s,spindle_rpm\n0,-3000\n", "spindle_rpm"),
+            ("time_s,spindle_rpm\n0,1e6\n", "spindle_rpm"),
+            ("time_s,coolant_on\n0,2\n", "coolant_on"),
+            ("time_s,feed_activity\n0,-0.1\n", "feed_activity"),
+            ("time_s,dx_um\n0,2e5\n", "dx_um"),
+            ("time_s,pos_x\n0,-1e7\n", "pos_x"),
+            ("time_s,T_a\n-5,20\n", "time_s"),
+        ] {
+            let e = err(text);
+            assert!(
+                e.contains(&format!("column `{col}`")) && e.contains("outside"),
+                "{e}"
+            );
+        }
+        assert!(err("time_s,T_a\n0,20\n1,1e300\n").contains("line 3"));
+        assert!(err("time_s,T_a\n0,inf\n").contains("not a finite number"));
+        // The limits themselves, and unknown columns, are accepted.
+        let ok = "time_s,T_a,spindle_rpm,coolant_on,dch5_um,pos_c,state\n0,-60,0,0,-100000,-1e6,1e300\n1,200,100000,1,100000,1e6,-1e300\n";
+        let run = Run::from_reader(ok.as_bytes()).unwrap();
+        assert_eq!(run.col("state").unwrap()[0], Some(1e300));
     }
 }

@@ -90,9 +90,60 @@ pub enum ImageError {
     LengthMismatch,
 }
 
+impl core::fmt::Display for ImageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            ImageError::TooShort { needed, got } => {
+                write!(f, "image too short: {got} bytes, needs {needed}")
+            }
+            ImageError::TooLong { len } => write!(
+                f,
+                "image too long: {len} bytes, the board takes at most {MAX_IMAGE_BYTES}"
+            ),
+            ImageError::BadMagic => write!(f, "not a model image (it does not start with TCMI)"),
+            ImageError::UnsupportedVersion(v) => write!(
+                f,
+                "image format version {v} not supported (this build reads {FORMAT_VERSION})"
+            ),
+            ImageError::UnsupportedUnits(u) => write!(
+                f,
+                "units code {u} not supported (this build reads {UNITS_V1})"
+            ),
+            ImageError::BadCrc { stored, computed } => write!(
+                f,
+                "CRC-32 mismatch: stored {stored:#010x}, computed {computed:#010x} (image corrupted)"
+            ),
+            ImageError::TooMany { what, count, max } => {
+                write!(f, "{count} {what}, at most {max} allowed")
+            }
+            ImageError::BadIndex { what, index } => {
+                write!(f, "{what} index {index} refers to nothing in the image")
+            }
+            ImageError::NonMonotoneRange { what, index } => write!(
+                f,
+                "{what} {index}: range minimum is not at least 2 below its maximum"
+            ),
+            ImageError::BadValue { what } => write!(f, "invalid {what}"),
+            ImageError::LengthMismatch => {
+                write!(f, "the image's sections do not fill its length exactly")
+            }
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EncodeError {
     BufferTooSmall { needed: usize },
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            EncodeError::BufferTooSmall { needed } => {
+                write!(f, "image buffer too small: the image needs {needed} bytes")
+            }
+        }
+    }
 }
 
 /// Sensor identity: a DS18B20 ROM code, or (ROM all zero) a channel index.

@@ -41,16 +41,27 @@ pub struct DiagnoseArgs {
 pub fn main(a: DiagnoseArgs) -> Result<()> {
     anyhow::ensure!(
         a.fit_fraction > 0.05 && a.fit_fraction < 0.95,
-        "--fit-fraction must be between 0.05 and 0.95"
+        "--fit-fraction = {}: allowed between 0.05 and 0.95",
+        a.fit_fraction
     );
+    if a.machine == "fit" {
+        // Checked before the fit: the nominal part lies inside the
+        // effect-fit part (first --fit-fraction); the held-out rest was
+        // used for neither.
+        anyhow::ensure!(
+            a.nominal_fraction >= 0.05 && a.nominal_fraction <= a.fit_fraction,
+            "--nominal-fraction = {}: allowed 0.05..=--fit-fraction ({})",
+            a.nominal_fraction,
+            a.fit_fraction
+        );
+    }
+    if let Some(t) = a.threads {
+        anyhow::ensure!((1..=1024).contains(&t), "--threads = {t}: allowed 1..=1024");
+    }
     let runs = a
         .runs
         .iter()
-        .map(|p| {
-            Run::read(p)
-                .with_context(|| format!("reading run {}", p.display()))
-                .map(|r| (p.display().to_string(), r))
-        })
+        .map(|p| Run::read_with_temperatures(p).map(|r| (p.display().to_string(), r)))
         .collect::<Result<Vec<_>>>()?;
     let machine = if a.machine == "fit" {
         let m = nominal::fit_nominal(&runs[0].1, a.nominal_fraction)?;
@@ -58,12 +69,6 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
             std::fs::write(p, m.to_toml()?)
                 .with_context(|| format!("cannot write {}", p.display()))?;
         }
-        // The nominal part lies inside the effect-fit part (first
-        // --fit-fraction); the held-out rest was used for neither.
-        anyhow::ensure!(
-            a.nominal_fraction <= a.fit_fraction,
-            "--nominal-fraction must not exceed --fit-fraction"
-        );
         m
     } else {
         Machine::load(std::path::Path::new(&a.machine))?

@@ -307,7 +307,7 @@ pub fn main(args: SelectArgs) -> Result<()> {
     let runs = args
         .runs
         .iter()
-        .map(|p| Run::read(p))
+        .map(|p| Run::read_with_temperatures(p))
         .collect::<Result<Vec<_>>>()?;
     let s = select(&runs, args.groups, args.seed)?;
     if args.json {

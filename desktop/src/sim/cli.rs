@@ -1,6 +1,6 @@
 //! `tcomp sim <machine.toml> --duty <cycle> [--effect NAME=PARAMS ...] [--seed N] [--hours H] -o run.csv`
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 
 use super::{sim_run, Duty, Effect, Machine, SimOptions};
@@ -38,7 +38,7 @@ pub fn main(a: SimArgs) -> Result<()> {
     let effects = a
         .effects
         .iter()
-        .map(|s| Effect::parse(s).with_context(|| format!("in --effect {s}")))
+        .map(|s| Effect::parse(s))
         .collect::<Result<Vec<_>>>()?;
     let t = std::time::Instant::now();
     let run = sim_run(

@@ -7,6 +7,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::Deserialize;
 use std::path::Path;
 
+use super::limits;
+
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
 struct DutyFile {
@@ -79,9 +81,13 @@ impl Inputs {
 
 impl Duty {
     pub fn load(path: &Path) -> Result<Duty> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read duty file {}", path.display()))?;
         let is_toml = path.extension().and_then(|e| e.to_str()) == Some("toml");
+        let text = if is_toml {
+            super::limits::read_toml_text(path, "duty file")?
+        } else {
+            std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read duty file {}", path.display()))?
+        };
         let name = path
             .file_stem()
             .and_then(|s| s.to_str())
@@ -96,10 +102,48 @@ impl Duty {
     }
 
     pub fn from_toml(text: &str, default_name: &str) -> Result<Duty> {
-        let f: DutyFile = toml::from_str(text).map_err(|e| anyhow!("{e}"))?;
+        let f: DutyFile = toml::from_str(text).map_err(|e| limits::toml_error(text, &e))?;
         let _ = &f.description;
         if f.segments.is_empty() {
             bail!("no [[segment]]");
+        }
+        let repeat = f.repeat.unwrap_or(1);
+        if !(1..=limits::MAX_DUTY_SEGMENTS).contains(&repeat) {
+            bail!(
+                "repeat = {repeat}: allowed 1..={}",
+                limits::MAX_DUTY_SEGMENTS
+            );
+        }
+        limits::count(
+            "segments with repeat",
+            f.segments.len().saturating_mul(repeat),
+            limits::MAX_DUTY_SEGMENTS,
+        )?;
+        if let Some(p) = f.sample_period_s {
+            limits::within("sample_period_s", p, 1.0, limits::MAX_SAMPLE_PERIOD_S, "s")?;
+        }
+        let (t_lo, t_hi) = crate::runcsv::TEMPERATURE_RANGE_C;
+        let max_s = limits::MAX_SIM_HOURS * 3600.0;
+        for (i, s) in f.segments.iter().enumerate() {
+            let key = |k: &str| format!("segment {}: {k}", i + 1);
+            if let Some(d) = s.duration_s {
+                limits::positive(key("duration_s"), d, max_s, "s")?;
+            }
+            if let Some(m) = s.duration_min {
+                limits::positive(key("duration_min"), m, max_s / 60.0, "min")?;
+            }
+            limits::within(
+                key("rpm"),
+                s.rpm,
+                0.0,
+                crate::runcsv::MAX_SPINDLE_RPM,
+                "rpm",
+            )?;
+            limits::within(key("feed"), s.feed, 0.0, 1.0, "")?;
+            limits::within(key("coolant"), s.coolant, 0.0, 1.0, "")?;
+            if let Some(a) = s.ambient_c {
+                limits::within(key("ambient_c"), a, t_lo, t_hi, "°C")?;
+            }
         }
         let mut d = Duty {
             name: f.name.unwrap_or_else(|| default_name.to_string()),
@@ -107,7 +151,7 @@ impl Duty {
             ..Default::default()
         };
         let mut t = 0.0;
-        for _ in 0..f.repeat.unwrap_or(1).max(1) {
+        for _ in 0..repeat {
             for (i, s) in f.segments.iter().enumerate() {
                 let dur = match (s.duration_s, s.duration_min) {
                     (Some(x), None) => x,
@@ -132,6 +176,13 @@ impl Duty {
             }
         }
         d.end_s = t;
+        if t > max_s {
+            bail!(
+                "the duty lasts {:.1} h: at most {} h",
+                t / 3600.0,
+                limits::MAX_SIM_HOURS
+            );
+        }
         Ok(d)
     }
 
@@ -161,6 +212,27 @@ impl Duty {
                 })
                 .collect()
         };
+        // The run reader checks the format's own columns; the duty's short
+        // spellings are checked here.
+        let (t_lo, t_hi) = crate::runcsv::TEMPERATURE_RANGE_C;
+        for (col, lo, hi, unit) in [
+            ("rpm", 0.0, crate::runcsv::MAX_SPINDLE_RPM, "rpm"),
+            ("feed", 0.0, 1.0, ""),
+            ("coolant", 0.0, 1.0, ""),
+            ("ambient_c", t_lo, t_hi, "°C"),
+        ] {
+            for (r, v) in run.col(col).unwrap_or(&[]).iter().enumerate() {
+                if let Some(v) = v {
+                    limits::within(
+                        format_args!("row {}, column `{col}`", r + 1),
+                        *v,
+                        lo,
+                        hi,
+                        unit,
+                    )?;
+                }
+            }
+        }
         let amb_col = pick(&["ambient_c", "T_ambient"]);
         let dt_last = t[t.len() - 1] - t[t.len() - 2];
         Ok(Duty {

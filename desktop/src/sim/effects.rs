@@ -48,11 +48,36 @@ pub enum Effect {
 }
 
 fn num(kv: &[(String, String)], key: &str, default: Option<f64>, spec: &str) -> Result<f64> {
-    match kv.iter().find(|(k, _)| k == key) {
+    let v = match kv.iter().find(|(k, _)| k == key) {
         Some((_, v)) => v
             .parse::<f64>()
-            .map_err(|_| anyhow!("effect `{spec}`: `{key}` must be a number, got `{v}`")),
-        None => default.ok_or_else(|| anyhow!("effect `{spec}`: missing parameter `{key}`")),
+            .map_err(|_| anyhow!("effect `{spec}`: `{key}` must be a number, got `{v}`"))?,
+        None => default.ok_or_else(|| anyhow!("effect `{spec}`: missing parameter `{key}`"))?,
+    };
+    let name = spec.split_once('=').map_or(spec, |(n, _)| n).trim();
+    let (lo, hi, unit) = param_range(name, key);
+    super::limits::within(format_args!("effect `{spec}`: {key}"), v, lo, hi, unit)?;
+    Ok(v)
+}
+
+/// What a user may ask of an effect parameter on the command line: finite
+/// and of a physically possible size (listed in desktop/machines/README.md).
+fn param_range(effect: &str, key: &str) -> (f64, f64, &'static str) {
+    match (effect, key) {
+        ("convection", "h") => (0.0, 1e3, "W/(m²·K)"),
+        ("ambient_drift", "amp_c") => (-50.0, 50.0, "°C"),
+        ("ambient_drift", "phase_h") => (-1e4, 1e4, "h"),
+        ("ambient_drift", "rate_c_per_h") => (-50.0, 50.0, "°C/h"),
+        ("ambient_drift", "period_h") => (1e-3, 1e4, "h"),
+        ("sensor_lag", "tau_s") => (0.0, 1e5, "s"),
+        ("bearing_nonlinear", "k_w") | ("ballscrew", "k_w") => (0.0, 1e5, "W"),
+        ("bearing_nonlinear", "p") => (0.0, 10.0, ""),
+        ("coolant", "g_w_per_k") => (0.0, 1e6, "W/K"),
+        ("coolant", "offset_c") | ("coolant", "amp_c") => (-100.0, 100.0, "°C"),
+        ("coolant", "period_s") => (1.0, 1e6, "s"),
+        ("bending", "k_um_per_k") => (-1e3, 1e3, "µm/K"),
+        ("sensor_offset", "offset_c") => (-100.0, 100.0, "°C"),
+        _ => (f64::MIN, f64::MAX, ""),
     }
 }
 

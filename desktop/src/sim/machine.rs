@@ -5,6 +5,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+use super::limits;
+
 /// Linear expansion coefficient of steel [1/K].
 pub const ALPHA_STEEL: f64 = 11.5e-6;
 
@@ -249,6 +251,121 @@ pub struct MachineSpec {
     pub effects: EffectSites,
 }
 
+impl MachineSpec {
+    /// Sizes that set allocations (the dense network is n × n).
+    fn check_sizes(&self) -> Result<()> {
+        let segments = self.rod.as_ref().map_or(0, |r| r.segments);
+        if let Some(rod) = &self.rod {
+            if !(2..=limits::MAX_ROD_SEGMENTS).contains(&rod.segments) {
+                bail!(
+                    "rod.segments = {}: allowed 2..={}",
+                    rod.segments,
+                    limits::MAX_ROD_SEGMENTS
+                );
+            }
+        }
+        limits::count(
+            "network nodes ([[node]] and rod.segments)",
+            self.nodes.len() + segments,
+            limits::MAX_NODES,
+        )?;
+        limits::count("[[link]]", self.links.len(), limits::MAX_LINKS)?;
+        limits::count("[[bearing]]", self.bearings.len(), limits::MAX_BEARINGS)?;
+        limits::count("[[source]]", self.sources.len(), limits::MAX_SOURCES)?;
+        limits::count("[[sensor]]", self.sensors.len(), limits::MAX_SENSORS)?;
+        limits::count(
+            "[[direction]]",
+            self.directions.len(),
+            limits::MAX_DIRECTIONS,
+        )?;
+        for d in &self.directions {
+            limits::count(
+                format_args!("terms in [[direction]] `{}`", d.name),
+                d.terms.len(),
+                limits::MAX_TERMS,
+            )?;
+        }
+        limits::count(
+            "effects.coolant_nodes",
+            self.effects.coolant_nodes.len(),
+            limits::MAX_NODES,
+        )?;
+        limits::count(
+            "effects.ballscrew_nodes",
+            self.effects.ballscrew_nodes.len(),
+            limits::MAX_NODES,
+        )?;
+        Ok(())
+    }
+
+    /// Every number of a hand-written description must be finite, of the
+    /// right sign and of a magnitude a machine tool can have; the bounds are
+    /// generous (a 2000 t casting, a 1 MW spindle) and listed in
+    /// `desktop/machines/README.md`. Errors name the key and the range.
+    pub fn validate(&self) -> Result<()> {
+        use limits::{positive, within};
+        let (t_lo, t_hi) = crate::runcsv::TEMPERATURE_RANGE_C;
+        self.check_sizes()?;
+        within("ambient_c", self.ambient_c, t_lo, t_hi, "°C")?;
+        positive(
+            "n_max_rpm",
+            self.n_max_rpm,
+            crate::runcsv::MAX_SPINDLE_RPM,
+            "rpm",
+        )?;
+        within("rated_power_w", self.rated_power_w, 0.0, 1e6, "W")?;
+        within("motor_loss_frac", self.motor_loss_frac, 0.0, 1.0, "")?;
+        within("alpha_per_k", self.alpha_per_k, 0.0, 1e-4, "1/K")?;
+        within("noise.temp_c", self.noise.temp_c, 0.0, 10.0, "°C")?;
+        within("noise.quant_c", self.noise.quant_c, 0.0, 10.0, "°C")?;
+        within("noise.disp_um", self.noise.disp_um, 0.0, 1e3, "µm")?;
+        for n in &self.nodes {
+            let key = |k: &str| format!("[[node]] `{}`: {k}", n.name);
+            positive(key("c_j_per_k"), n.c_j_per_k, 1e9, "J/K")?;
+            within(key("g_amb_w_per_k"), n.g_amb_w_per_k, 0.0, 1e6, "W/K")?;
+            within(key("area_m2"), n.area_m2, 0.0, 1e4, "m²")?;
+            within(key("amb_offset_c"), n.amb_offset_c, -100.0, 100.0, "°C")?;
+        }
+        for l in &self.links {
+            let key = format!("[[link]] `{}`–`{}`: g_w_per_k", l.a, l.b);
+            within(key, l.g_w_per_k, 0.0, 1e6, "W/K")?;
+        }
+        for b in &self.bearings {
+            let key = |k: &str| format!("[[bearing]] on `{}`: {k}", b.node);
+            positive(key("dm_mm"), b.dm_mm, 2_000.0, "mm")?;
+            within(key("f0"), b.f0, 0.0, 10.0, "")?;
+            within(key("f1"), b.f1, 0.0, 1.0, "")?;
+            within(key("load_n"), b.load_n, 0.0, 1e7, "N")?;
+            within(key("nu_cst"), b.nu_cst, 0.0, 1e5, "mm²/s")?;
+        }
+        for s in &self.sources {
+            let key = |k: &str| format!("[[source]] on `{}`: {k}", s.node);
+            within(key("w_at_nmax"), s.w_at_nmax, 0.0, 1e6, "W")?;
+            within(key("exponent"), s.exponent, 0.0, 10.0, "")?;
+        }
+        if let Some(r) = &self.rod {
+            positive("rod.length_mm", r.length_mm, 1e4, "mm")?;
+            positive("rod.diameter_mm", r.diameter_mm, 2_000.0, "mm")?;
+            positive("rod.k_w_per_mk", r.k_w_per_mk, 1_000.0, "W/(m·K)")?;
+            positive("rod.rho_kg_m3", r.rho_kg_m3, 25_000.0, "kg/m³")?;
+            positive("rod.cp_j_per_kgk", r.cp_j_per_kgk, 5_000.0, "J/(kg·K)")?;
+            within("rod.g_amb_w_per_k", r.g_amb_w_per_k, 0.0, 1e6, "W/K")?;
+            for (end, e) in [("rod.front", &r.front), ("rod.rear", &r.rear)] {
+                if let Some(e) = e {
+                    within(format!("{end}.g_w_per_k"), e.g_w_per_k, 0.0, 1e6, "W/K")?;
+                }
+            }
+        }
+        for d in &self.directions {
+            for t in &d.terms {
+                let key = format!("[[direction]] `{}`: length_mm of `{}`", d.name, t.node);
+                within(key, t.length_mm, -1e5, 1e5, "mm")?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Where a sensor reads.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Probe {
@@ -294,13 +411,15 @@ pub fn sensor_column(name: &str) -> String {
 
 impl Machine {
     pub fn load(path: &Path) -> Result<Machine> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read machine file {}", path.display()))?;
+        let text = limits::read_toml_text(path, "machine file")?;
         Machine::from_toml(&text).with_context(|| format!("in machine file {}", path.display()))
     }
 
+    /// Parse, check every value against its physical range (see
+    /// [`MachineSpec::validate`]) and compile.
     pub fn from_toml(text: &str) -> Result<Machine> {
-        let spec: MachineSpec = toml::from_str(text).map_err(|e| anyhow!("{e}"))?;
+        let spec: MachineSpec = toml::from_str(text).map_err(|e| limits::toml_error(text, &e))?;
+        spec.validate()?;
         Machine::compile(spec)
     }
 
@@ -312,6 +431,7 @@ impl Machine {
         if spec.nodes.is_empty() {
             bail!("machine `{}` has no [[node]]", spec.name);
         }
+        spec.check_sizes()?;
         let mut names: Vec<String> = spec.nodes.iter().map(|n| n.name.clone()).collect();
         for (i, n) in names.iter().enumerate() {
             if names[..i].contains(n) {
@@ -329,9 +449,6 @@ impl Machine {
         let mut links = Vec::new();
         let mut rod_range = n_lumped..n_lumped;
         if let Some(rod) = &spec.rod {
-            if rod.segments < 2 {
-                bail!("rod.segments must be at least 2");
-            }
             let ns = rod.segments;
             let l = rod.length_mm * 1e-3;
             let d = rod.diameter_mm * 1e-3;

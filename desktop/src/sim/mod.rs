@@ -8,6 +8,7 @@
 pub mod cli;
 pub mod duty;
 pub mod effects;
+pub mod limits;
 pub mod linalg;
 pub mod machine;
 
@@ -406,14 +407,41 @@ pub struct SimOptions {
 /// Simulate a machine under a duty cycle into a run file (what `tcomp sim` does).
 pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<crate::runcsv::Run> {
     let dt = 1.0;
+    if let Some(p) = opt.sample_period_s {
+        limits::within("--sample-period", p, 1.0, limits::MAX_SAMPLE_PERIOD_S, "s")?;
+    }
+    if let Some(h) = opt.hours {
+        limits::positive("--hours", h, limits::MAX_SIM_HOURS, "h")?;
+    }
+    let duration_s = opt
+        .hours
+        .map_or(duty.end_s - duty.t.first().copied().unwrap_or(0.0), |h| {
+            h * 3600.0
+        });
+    if !(duration_s <= limits::MAX_SIM_HOURS * 3600.0) {
+        bail!(
+            "duty `{}` lasts {:.1} h: at most {} h (give --hours)",
+            duty.name,
+            duration_s / 3600.0,
+            limits::MAX_SIM_HOURS
+        );
+    }
+    // A period taken from a duty CSV's sampling (not asked for) is only raised to the step.
     let period = opt
         .sample_period_s
         .or(duty.sample_period_s)
         .unwrap_or(1.0)
-        .max(1.0);
+        .clamp(1.0, limits::MAX_SAMPLE_PERIOD_S);
     let stride = (period / dt).round().max(1.0) as usize;
     if ((stride as f64) * dt - period).abs() > 1e-9 {
         bail!("sample period {period} s is not a multiple of the 1 s step");
+    }
+    let rows = (duration_s / dt).ceil() as usize / stride;
+    if rows > limits::MAX_SIM_ROWS {
+        bail!(
+            "{rows} output rows at {period} s: at most {} (raise --sample-period or lower --hours)",
+            limits::MAX_SIM_ROWS
+        );
     }
     let inp = duty.inputs(dt, opt.hours.map(|h| h * 3600.0), m.spec.ambient_c);
     let mut out = simulate(m, &inp, &opt.effects, stride)?;
