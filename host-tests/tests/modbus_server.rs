@@ -185,6 +185,51 @@ fn exceptions_follow_the_specification() {
     assert_eq!(b.exception_of(&bad_count), 0x03);
 }
 
+/// An FC16 header with any register count and a byte count that matches the
+/// frame (the data bytes that follow), so only the count can be wrong.
+fn write_n_raw(unit: u8, addr: u16, count: u16, data: &[u8]) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = count.to_be_bytes();
+    let mut body = vec![unit, 0x10, a, b, c, d, data.len() as u8];
+    body.extend_from_slice(data);
+    frame(&body)
+}
+
+#[test]
+fn fc16_with_count_zero_is_exception_03_and_writes_nothing() {
+    let mut b = Bench::new();
+    for addr in [HR_POSITIONS, HR_SPINDLE, 9000] {
+        assert_eq!(
+            b.exception_of(&write_n_raw(17, addr, 0, &[])),
+            0x03,
+            "count 0 at {addr}"
+        );
+    }
+    assert_eq!(
+        b.server.holding.plc_written_ms, None,
+        "nothing was written, so the PLC inputs stay stale"
+    );
+    // Broadcast: no reply, and still nothing written.
+    assert!(b.ask(&write_n_raw(0, HR_POSITIONS, 0, &[])).1.is_empty());
+    assert_eq!(b.server.holding.plc_written_ms, None);
+}
+
+#[test]
+fn fc16_count_of_0x8000_or_more_is_refused_without_overflow() {
+    let mut b = Bench::new();
+    // 0x8000 * 2 and 0x8001 * 2 wrap to the byte counts 0 and 2 in a u16.
+    assert_eq!(
+        b.exception_of(&write_n_raw(17, HR_SPINDLE, 0x8000, &[])),
+        0x03
+    );
+    assert_eq!(
+        b.exception_of(&write_n_raw(17, HR_SPINDLE, 0x8001, &[0x12, 0x34])),
+        0x03
+    );
+    assert_eq!(b.server.holding.spindle_rpm, 0);
+    assert_eq!(b.server.holding.plc_written_ms, None);
+}
+
 #[test]
 fn plc_writes_positions_and_speed_without_unlock() {
     let mut b = Bench::new();
@@ -282,5 +327,19 @@ proptest! {
         let (_, r) = b.ask(&f);
         prop_assert!(r.len() <= MAX_FRAME);
         if !r.is_empty() { prop_assert_eq!(r[0], 17); }
+    }
+
+    /// FC16 headers of every count with a frame-consistent byte count: the
+    /// count is checked without overflow, and a wrong count writes nothing.
+    #[test]
+    fn fc16_of_any_count_never_panics_and_a_wrong_count_writes_nothing(count in any::<u16>(), data in proptest::collection::vec(any::<u8>(), 0..=247)) {
+        let mut b = Bench::new();
+        let (_, r) = b.ask(&write_n_raw(17, HR_SPINDLE, count, &data));
+        prop_assert!(!r.is_empty());
+        let valid = (1..=123).contains(&count) && usize::from(count) * 2 == data.len();
+        if !valid {
+            prop_assert_eq!(&r[1..3], &[0x90u8, 0x03][..]);
+            prop_assert_eq!(b.server.holding.plc_written_ms, None);
+        }
     }
 }

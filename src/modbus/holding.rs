@@ -162,6 +162,10 @@ impl Holding {
     /// Write `values` to consecutive registers from `addr`, all or nothing.
     pub fn write(&mut self, addr: u16, values: &[u16], now_ms: u64) -> Result<Command, WriteError> {
         let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
+        // An empty write changes nothing and must not count as a PLC write.
+        if n == 0 {
+            return Err(WriteError::Value);
+        }
         let end = addr.checked_add(n).ok_or(WriteError::Address)?;
         // A command is written alone (FC06 or a one-register FC16), so that a
         // refused command cannot leave half a request applied.
