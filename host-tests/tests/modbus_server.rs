@@ -269,6 +269,66 @@ fn unlock_then_configure_and_the_lock_expires() {
     assert_eq!(b.server.holding.clamp[0], 100);
 }
 
+#[test]
+fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
+    let mut b = Bench::new();
+    // Unlock by broadcast: refused (every board on the bus would open at once).
+    assert!(b.ask(&write1(0, HR_UNLOCK, UNLOCK_CODE)).1.is_empty());
+    assert!(!b.server.holding.unlocked(b.now), "broadcast unlocked");
+    assert!(b.ask(&write_n(0, HR_UNLOCK, &[UNLOCK_CODE])).1.is_empty());
+    assert!(!b.server.holding.unlocked(b.now), "FC16 broadcast unlocked");
+    // Even while this board is unlocked by its own address, a broadcast does
+    // not change its unit, baud, limits or staging area, nor run a command.
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    assert!(b.server.holding.unlocked(b.now));
+    for (addr, value) in [
+        (HR_UNIT, 5),
+        (HR_BAUD, 96),
+        (HR_CLAMP, 10),
+        (HR_RATE, 10),
+        (HR_STAGED_LEN, 4),
+        (HR_STAGING, 0xBEEF),
+        (HR_COMMAND, CMD_LOCK),
+        (HR_COMMAND, CMD_REREFERENCE),
+    ] {
+        let (action, reply) = b.ask(&write1(0, addr, value));
+        assert!(reply.is_empty());
+        assert_eq!(action, Action::None, "broadcast write of {addr}");
+    }
+    let (action, _) = b.ask(&write_n(0, HR_UNIT, &[5, 96]));
+    assert_eq!(action, Action::None);
+    let h = &b.server.holding;
+    assert_eq!((h.unit, h.baud), (17, 115_200));
+    assert_eq!((h.clamp[0], h.rate[0]), (u16::MAX, u16::MAX));
+    assert!(
+        h.unlocked(b.now),
+        "a broadcast lock command was carried out"
+    );
+    assert_eq!(b.words(3, HR_STAGED_LEN, 1), vec![0]);
+    assert_eq!(b.words(3, HR_STAGING, 1), vec![0]);
+    // The PLC's registers still take broadcasts (one speed for every board).
+    b.ask(&write_n(0, HR_SPINDLE, &[3000, 0, 7]));
+    assert_eq!(b.server.holding.spindle_rpm, 3000);
+    assert_eq!(b.server.holding.positions[0], 7);
+}
+
+#[test]
+fn a_broadcast_commit_does_not_commit_a_valid_staged_model() {
+    let (mut m, _) = demo_model(3).quantize().unwrap();
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    let mut b = Bench::new();
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    upload(&mut b, &img);
+    let (action, reply) = b.ask(&write1(0, HR_COMMAND, CMD_COMMIT_MODEL));
+    assert!(reply.is_empty());
+    assert_eq!(action, Action::None);
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::NONE]);
+    // The same image committed by address goes through.
+    let (action, _) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
+    assert_eq!(action, Action::CommitModel { len: img.len() });
+}
+
 fn upload(b: &mut Bench, image: &[u8]) {
     let mut padded = image.to_vec();
     padded.resize(image.len().div_ceil(2) * 2, 0);

@@ -64,6 +64,18 @@ pub enum WriteError {
     ModelRefused,
 }
 
+/// How a write request was addressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Addressing {
+    /// To this board's unit address: every register the map allows.
+    Unit,
+    /// To unit 0, every board on the bus at once and with no reply: only the
+    /// PLC's registers (spindle speed, axis positions). Unlocking, commands
+    /// (commit, lock, re-reference), unit, baud, limits and staging are
+    /// refused, so that one frame can never reconfigure or reload every board.
+    Broadcast,
+}
+
 /// What the application must do after a write was accepted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Command {
@@ -160,7 +172,13 @@ impl Holding {
     }
 
     /// Write `values` to consecutive registers from `addr`, all or nothing.
-    pub fn write(&mut self, addr: u16, values: &[u16], now_ms: u64) -> Result<Command, WriteError> {
+    pub fn write(
+        &mut self,
+        addr: u16,
+        values: &[u16],
+        now_ms: u64,
+        addressing: Addressing,
+    ) -> Result<Command, WriteError> {
         let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
         // An empty write changes nothing and must not count as a PLC write.
         if n == 0 {
@@ -176,6 +194,9 @@ impl Holding {
         for (i, &v) in values.iter().enumerate() {
             let a = addr + i as u16;
             self.check(a, v, now_ms)?;
+            if addressing == Addressing::Broadcast && !Self::plc_register(a) {
+                return Err(WriteError::Locked);
+            }
         }
         let mut command = Command::None;
         for (i, &v) in values.iter().enumerate() {
@@ -193,10 +214,13 @@ impl Holding {
         Ok(command)
     }
 
+    /// Registers the PLC writes in normal operation (spindle speed, positions).
+    fn plc_register(a: u16) -> bool {
+        a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+    }
+
     fn protected(a: u16) -> bool {
-        !(a == HR_UNLOCK
-            || a == HR_SPINDLE
-            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a))
+        !(a == HR_UNLOCK || Self::plc_register(a))
     }
 
     fn check(&self, a: u16, v: u16, now_ms: u64) -> Result<(), WriteError> {

@@ -4,7 +4,8 @@
 //! protocol's exception rules):
 //! 1. shorter than 4 bytes, longer than 256, or a wrong CRC-16 → discarded
 //!    silently (a corrupted frame may not even be for us);
-//! 2. another unit's address → ignored; broadcast (0) → writes done, no reply;
+//! 2. another unit's address → ignored; broadcast (0) → writes to the PLC's
+//!    registers done, every other write refused (`holding::Addressing`), no reply;
 //! 3. unknown function → exception 01; count 0 or above the limit (reads
 //!    125, FC16 123), or a byte count that does not match → 03; an address outside the map → 02; a
 //!    protected write while locked → 01 (wrong state); a refused model → 04.
@@ -18,7 +19,7 @@ use heapless::Vec;
 use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
 
-use super::holding::{Command, Holding, WriteError};
+use super::holding::{Addressing, Command, Holding, WriteError};
 use super::registers::Snapshot;
 
 /// Largest RTU frame (address + PDU 253 + CRC).
@@ -164,7 +165,12 @@ impl Server {
                         for pair in w.data.chunks_exact(2) {
                             let _ = values.push(u16::from_be_bytes([pair[0], pair[1]]));
                         }
-                        match self.holding.write(w.address, &values, now_ms) {
+                        let addressing = if frame[0] == 0 {
+                            Addressing::Broadcast
+                        } else {
+                            Addressing::Unit
+                        };
+                        match self.holding.write(w.address, &values, now_ms, addressing) {
                             Ok(c) => {
                                 action = c;
                                 Ok(())
