@@ -248,7 +248,7 @@ fn plc_writes_positions_and_speed_without_unlock() {
 #[test]
 fn unlock_then_configure_and_the_lock_expires() {
     let mut b = Bench::new();
-    assert_eq!(b.ask(&write1(17, HR_UNLOCK, 0x1111)).1.len(), 8);
+    assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
     assert_eq!(
         b.exception_of(&write1(17, HR_CLAMP, 100)),
         0x01,
@@ -327,6 +327,32 @@ fn a_broadcast_commit_does_not_commit_a_valid_staged_model() {
     // The same image committed by address goes through.
     let (action, _) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
     assert_eq!(action, Action::CommitModel { len: img.len() });
+}
+
+#[test]
+fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
+    let mut b = Bench::new();
+    for key in [0x0000, 0x1111, UNLOCK_CODE ^ 1, 0xFFFF] {
+        assert_eq!(
+            b.exception_of(&write1(17, HR_UNLOCK, key)),
+            0x03,
+            "FC06 {key:#x}"
+        );
+        assert_eq!(
+            b.exception_of(&write_n(17, HR_UNLOCK, &[key])),
+            0x03,
+            "FC16 {key:#x}"
+        );
+        assert!(!b.server.holding.unlocked(b.now));
+    }
+    // The right key is echoed; a wrong one afterwards is refused and leaves
+    // the board as it was (unlocked: the lock command is CMD_LOCK).
+    assert_eq!(
+        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE)).1,
+        write1(17, HR_UNLOCK, UNLOCK_CODE)
+    );
+    assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
+    assert!(b.server.holding.unlocked(b.now));
 }
 
 fn upload(b: &mut Bench, image: &[u8]) {

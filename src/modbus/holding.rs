@@ -238,6 +238,9 @@ impl Holding {
             return Err(WriteError::Locked);
         }
         let ok = match a {
+            // A wrong key is refused, not echoed: the master must see that the
+            // board stayed locked.
+            HR_UNLOCK => v == UNLOCK_CODE,
             HR_COMMAND => matches!(
                 v,
                 CMD_COMMIT_MODEL | CMD_REREFERENCE | CMD_CLEAR_STAGING | CMD_LOCK
@@ -257,7 +260,8 @@ impl Holding {
     fn apply(&mut self, a: u16, v: u16, now_ms: u64) -> Result<Command, WriteError> {
         match a {
             HR_UNLOCK => {
-                self.unlocked_until_ms = (v == UNLOCK_CODE).then_some(now_ms + UNLOCK_MS);
+                // check() let only the unlock code through.
+                self.unlocked_until_ms = Some(now_ms + UNLOCK_MS);
             }
             HR_COMMAND => return self.command(v),
             HR_UNIT => {
