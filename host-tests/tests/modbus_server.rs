@@ -385,7 +385,7 @@ fn model_upload_commits_only_a_valid_image() {
         b.exception_of(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL)),
         0x04
     );
-    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_IMAGE]);
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_CRC]);
     upload(&mut b, &img);
     assert_eq!(
         b.words(3, HR_STAGING, 2),
@@ -399,6 +399,119 @@ fn model_upload_commits_only_a_valid_image() {
     assert_eq!(a, Action::CommitModel { len: img.len() });
     assert_eq!(b.server.holding.staged(), &img[..]);
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a commit locks again");
+}
+
+/// Stage `image` (padded to whole registers) with `staged_len`, then send `command`.
+fn stage_and_send(b: &mut Bench, image: &[u8], staged_len: usize, command: u16) -> Vec<u8> {
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_COMMAND, CMD_CLEAR_STAGING));
+    upload(b, image);
+    b.ask(&write1(17, HR_STAGED_LEN, staged_len as u16));
+    b.ask(&write1(17, HR_COMMAND, command)).1
+}
+
+fn encoded(mut m: thermocomp_core::Model) -> Vec<u8> {
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    img
+}
+
+#[test]
+fn each_image_refusal_has_its_own_result_code() {
+    let (good, _) = demo_model(3).quantize().unwrap();
+    let with = |edit: &dyn Fn(&mut thermocomp_core::Model)| {
+        let mut m = good.clone();
+        edit(&mut m);
+        encoded(m)
+    };
+    let mut corrupt = encoded(good.clone());
+    corrupt[40] ^= 0xFF;
+    let mut heavy = good.clone();
+    for t in heavy.tables.iter_mut().filter(|t| t.axis == 0) {
+        for term in t.terms.iter_mut() {
+            term.coef = i32::MAX;
+            term.position_power = 3;
+        }
+        while t.terms.len() < thermocomp_core::MAX_TERMS {
+            let last = *t.terms.last().unwrap();
+            t.terms.push(last).unwrap();
+        }
+    }
+    while heavy.tables.len() < thermocomp_core::MAX_TABLES {
+        let axis_table = heavy.tables.iter().find(|t| t.axis == 0).unwrap().clone();
+        heavy.tables.push(axis_table).unwrap();
+    }
+    let cases: Vec<(&str, Vec<u8>, usize, u16)> = vec![
+        ("bad CRC", corrupt.clone(), corrupt.len(), result::BAD_CRC),
+        (
+            "sensor channel 99",
+            with(&|m| m.sensors[1].channel = 99),
+            0,
+            result::SENSOR_CHANNEL,
+        ),
+        (
+            "model version 0",
+            with(&|m| m.model_version = 0),
+            0,
+            result::ZERO_MODEL_VERSION,
+        ),
+        (
+            "max_rate 0",
+            with(&|m| m.directions[0].max_rate = 0),
+            0,
+            result::MAX_RATE,
+        ),
+        (
+            "max_correction 0x7fffffff",
+            with(&|m| m.directions[0].max_correction = i32::MAX),
+            0,
+            result::MAX_CORRECTION,
+        ),
+        (
+            "overflowing tables",
+            encoded(heavy),
+            0,
+            result::TABLE_SUM_TOO_LARGE,
+        ),
+    ];
+    let mut seen = vec![];
+    for (what, img, staged, code) in cases {
+        let mut b = Bench::new();
+        let staged = if staged == 0 { img.len() } else { staged };
+        let r = stage_and_send(&mut b, &img, staged, CMD_COMMIT_MODEL);
+        assert_eq!(&r[1..3], &[0x86, 0x04], "{what}: {r:02x?}");
+        assert_eq!(b.words(3, HR_RESULT, 1), vec![code], "{what}");
+        seen.push(code);
+    }
+    // Trailing garbage after a valid sealed image.
+    let img = encoded(good.clone());
+    let mut tail = img.clone();
+    tail.extend_from_slice(&[0xAB, 0xCD]);
+    let mut b = Bench::new();
+    let r = stage_and_send(&mut b, &tail, tail.len(), CMD_COMMIT_MODEL);
+    assert_eq!(&r[1..3], &[0x86, 0x04], "{r:02x?}");
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::TRAILING_BYTES]);
+    seen.push(result::TRAILING_BYTES);
+    seen.extend([
+        result::OK,
+        result::NONE,
+        result::BAD_LENGTH,
+        result::STORE_FAILED,
+    ]);
+    seen.push(result::NOT_NEWER);
+    let mut distinct = seen.clone();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), seen.len(), "codes not distinct: {seen:?}");
+    // Every ImageError maps to a named code other than OK/NONE.
+    for e in [
+        thermocomp_core::ImageError::BadMagic,
+        thermocomp_core::ImageError::LengthMismatch,
+        thermocomp_core::ImageError::UnsupportedVersion(2),
+    ] {
+        let code = result::of_image_error(&e);
+        assert!(!matches!(code, result::OK | result::NONE), "{e}");
+    }
 }
 
 proptest! {
