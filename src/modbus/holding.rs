@@ -87,6 +87,35 @@ pub mod result {
     /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
     pub const NOT_NEWER: u16 = 21;
 
+    /// The name of a result code (as in the README's table), for messages.
+    pub fn name(code: u16) -> &'static str {
+        match code {
+            OK => "OK",
+            NONE => "NONE",
+            BAD_LENGTH => "BAD_LENGTH",
+            BAD_CRC => "BAD_CRC",
+            STORE_FAILED => "STORE_FAILED",
+            TOO_SHORT => "TOO_SHORT",
+            TOO_LONG => "TOO_LONG",
+            BAD_MAGIC => "BAD_MAGIC",
+            UNSUPPORTED_FORMAT => "UNSUPPORTED_FORMAT",
+            UNSUPPORTED_UNITS => "UNSUPPORTED_UNITS",
+            TOO_MANY => "TOO_MANY",
+            BAD_INDEX => "BAD_INDEX",
+            BAD_RANGE => "BAD_RANGE",
+            BAD_VALUE => "BAD_VALUE",
+            LENGTH_MISMATCH => "LENGTH_MISMATCH",
+            TRAILING_BYTES => "TRAILING_BYTES",
+            SENSOR_CHANNEL => "SENSOR_CHANNEL",
+            ZERO_MODEL_VERSION => "ZERO_MODEL_VERSION",
+            MAX_CORRECTION => "MAX_CORRECTION",
+            MAX_RATE => "MAX_RATE",
+            TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
+            NOT_NEWER => "NOT_NEWER",
+            _ => "unknown",
+        }
+    }
+
     /// The result code of an image refusal.
     pub fn of_image_error(e: &ImageError) -> u16 {
         match e {
