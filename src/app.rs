@@ -57,7 +57,7 @@ impl<F: NorFlash> App<F> {
 
     /// Store an image (factory programming, or the bench's initial model) and use it.
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
-        let model = Model::parse(image).map_err(|_| result::BAD_IMAGE)?;
+        let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
         self.store.commit(image).map_err(|_| result::STORE_FAILED)?;
         self.install(Some(model));
         Ok(())
@@ -77,6 +77,7 @@ impl<F: NorFlash> App<F> {
             None => (0, 0, 0, 0, 0),
         };
         self.snapshot.model_version = v;
+        self.server.holding.running_version = v;
         self.snapshot.model_crc = crc;
         self.snapshot.n_directions = nd as u16;
         self.snapshot.n_axes = na as u16;

@@ -15,22 +15,28 @@ use anyhow::{anyhow, bail, Context, Result};
 use rmodbus::client::ModbusRequest;
 use rmodbus::{ErrorKind, ModbusProto};
 
-/// Register addresses (README.md, "Modbus register map").
-pub mod map {
-    pub const IR_SNAPSHOT: u16 = 0;
-    pub const IR_SNAPSHOT_LEN: u16 = 54;
-    pub const IR_TEMPERATURES: u16 = 110;
-    pub const CHANNELS: u16 = 20;
-    pub const HR_UNLOCK: u16 = 0;
-    pub const HR_COMMAND: u16 = 1;
-    pub const HR_RESULT: u16 = 2;
-    pub const HR_SPINDLE: u16 = 5;
-    pub const HR_STAGED_LEN: u16 = 32;
-    pub const HR_STAGING: u16 = 1000;
-    pub const UNLOCK_CODE: u16 = 0xA5C3;
-    pub const CMD_COMMIT: u16 = 1;
-    pub const NOT_AVAILABLE: u16 = 0x8000;
-}
+// The register map comes from the board's own crate (README.md, "Modbus
+// register map"), so master and server cannot disagree on an address.
+use thermocomp::acquisition::probe::ProbeState;
+use thermocomp::modbus::holding::{
+    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_RESULT, HR_SPINDLE,
+    HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, STAGING_REGS, UNLOCK_CODE,
+};
+use thermocomp::modbus::registers::{
+    IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS, IR_PREDICTIONS, IR_PROBE,
+    IR_PROBE_STATE, IR_SAMPLE_TIME, IR_STATES, IR_TEMPERATURES, NOT_AVAILABLE,
+};
+use thermocomp::modbus::server::MAX_WRITE_REGISTERS;
+use thermocomp::process_image::{ChannelState, MAX_CHANNELS};
+use thermocomp_core::limits::MAX_DIRECTIONS;
+
+/// Input registers 0 up to the predictions: one request, one snapshot.
+const SNAPSHOT_LEN: u16 = IR_PREDICTIONS + 2 * MAX_DIRECTIONS as u16;
+/// Temperatures and channel states, adjacent: one request.
+const CHANNEL_BLOCK: u16 = IR_STATES + MAX_CHANNELS as u16 - IR_TEMPERATURES;
+/// Registers per staging write (≤ the FC16 maximum).
+const STAGING_CHUNK: usize = 100;
+const _: () = assert!(STAGING_CHUNK <= MAX_WRITE_REGISTERS);
 
 enum Transport {
     Tcp(std::net::TcpStream),
@@ -233,7 +239,10 @@ fn read_some(t: &mut Transport, byte: &mut [u8; 1], wait: Duration) -> Result<bo
     }
 }
 
-fn u32_of(w: &[u16], at: usize) -> u32 {
+/// A 32-bit register pair (high word first) at register address `at` of a
+/// block read from address 0.
+fn u32_of(w: &[u16], at: u16) -> u32 {
+    let at = usize::from(at);
     (u32::from(w[at]) << 16) | u32::from(w[at + 1])
 }
 
@@ -246,11 +255,49 @@ pub struct UploadSummary {
     pub result: u16,
 }
 
-/// Validate locally, stage, commit, and check that the board now serves it.
-pub fn upload(link: &mut BoardLink, image: &[u8]) -> Result<UploadSummary> {
+/// Which commit command an upload ends with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Commit {
+    /// The board refuses a version not newer than the one it runs.
+    NewerOnly,
+    /// Go back to an older (or the same) version on purpose.
+    Rollback,
+}
+
+/// Validate locally, check the size, stage, commit, and check that the board
+/// now serves it. Any failure after the unlock relocks the board, so a
+/// failed upload never leaves it open to configuration writes.
+pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<UploadSummary> {
+    let staging_bytes = usize::from(STAGING_REGS) * 2;
+    if image.len() > staging_bytes {
+        bail!(
+            "the image is {} bytes; the board's staging area holds {staging_bytes}: not sent",
+            image.len()
+        );
+    }
     let model = thermocomp_core::Model::parse(image)
         .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
-    link.write_one(map::HR_UNLOCK, map::UNLOCK_CODE)
+    match stage_and_commit(link, image, commit) {
+        Ok(result) => verify(link, image, &model, result),
+        Err(e) => {
+            // A commit locks the board itself; everything else needs a lock.
+            // (A board already locked answers exception 01: nothing to do.)
+            match link.write_one(HR_COMMAND, CMD_LOCK) {
+                Ok(()) => Err(e.context("upload failed; the board is locked again")),
+                Err(lock) if lock.to_string().contains("exception 01") => {
+                    Err(e.context("upload failed; the board is locked"))
+                }
+                Err(lock) => Err(e.context(format!(
+                    "upload failed, and relocking failed too ({lock}); the board relocks itself 60 s after the unlock"
+                ))),
+            }
+        }
+    }
+}
+
+/// Unlock, stage, commit; the result register's value on success.
+fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<u16> {
+    link.write_one(HR_UNLOCK, UNLOCK_CODE)
         .context("unlocking")?;
     let mut padded = image.to_vec();
     padded.resize(image.len().div_ceil(2) * 2, 0);
@@ -258,22 +305,47 @@ pub fn upload(link: &mut BoardLink, image: &[u8]) -> Result<UploadSummary> {
         .chunks(2)
         .map(|c| u16::from_be_bytes([c[0], c[1]]))
         .collect();
-    for (i, chunk) in words.chunks(100).enumerate() {
-        let addr = map::HR_STAGING + (i * 100) as u16;
+    for (i, chunk) in words.chunks(STAGING_CHUNK).enumerate() {
+        let addr = HR_STAGING + (i * STAGING_CHUNK) as u16;
         link.write_many(addr, chunk)
             .with_context(|| format!("staging registers {addr}…"))?;
     }
-    link.write_one(map::HR_STAGED_LEN, image.len() as u16)
+    // image.len() ≤ the staging area (8192), so it fits the u16 register.
+    link.write_one(HR_STAGED_LEN, image.len() as u16)
         .context("writing the staged length")?;
-    let commit = link.write_one(map::HR_COMMAND, map::CMD_COMMIT);
-    let result = link
-        .read_holdings(map::HR_RESULT, 1)?
-        .first()
-        .copied()
-        .unwrap_or(u16::MAX);
-    commit.with_context(|| format!("commit refused, result register {result}"))?;
-    let snap = link.read_inputs(map::IR_SNAPSHOT, 16)?;
-    let (version, crc) = (u32_of(&snap, 12), u32_of(&snap, 14));
+    let command = match commit {
+        Commit::NewerOnly => CMD_COMMIT_MODEL,
+        Commit::Rollback => CMD_ROLLBACK_MODEL,
+    };
+    let committed = link.write_one(HR_COMMAND, command);
+    let code = link
+        .read_holdings(HR_RESULT, 1)
+        .ok()
+        .and_then(|r| r.first().copied());
+    match (committed, code) {
+        (Ok(()), Some(code)) => Ok(code),
+        (Ok(()), None) => bail!("committed, but the result register could not be read"),
+        (Err(e), Some(result::NOT_NEWER)) => Err(e.context(format!(
+            "commit refused: result {} NOT_NEWER, the board runs this or a newer model version; pass --rollback to go back on purpose",
+            result::NOT_NEWER
+        ))),
+        (Err(e), Some(code)) => Err(e.context(format!(
+            "commit refused: result {code} {}",
+            result::name(code)
+        ))),
+        (Err(e), None) => Err(e.context("commit refused")),
+    }
+}
+
+/// The board must now serve the uploaded model.
+fn verify(
+    link: &mut BoardLink,
+    image: &[u8],
+    model: &thermocomp_core::Model,
+    result: u16,
+) -> Result<UploadSummary> {
+    let snap = link.read_inputs(0, IR_MODEL_CRC + 2)?;
+    let (version, crc) = (u32_of(&snap, IR_MODEL_VERSION), u32_of(&snap, IR_MODEL_CRC));
     if version != model.model_version || crc != model.crc {
         bail!(
             "the board serves version {version} crc {crc:#010x}, not the uploaded {} {:#010x}",
@@ -302,12 +374,13 @@ pub fn record(
     samples: usize,
     append: bool,
 ) -> Result<usize> {
-    let snap = link.read_inputs(map::IR_SNAPSHOT, map::IR_SNAPSHOT_LEN)?;
-    let temps = link.read_inputs(map::IR_TEMPERATURES, 2 * map::CHANNELS)?;
-    let n_dir = usize::from(snap[16]).min(6);
-    // Channels in use: any state but "unused" (0).
-    let channels: Vec<usize> = (0..map::CHANNELS as usize)
-        .filter(|&c| temps[20 + c] != 0)
+    let snap = link.read_inputs(0, SNAPSHOT_LEN)?;
+    let block = link.read_inputs(IR_TEMPERATURES, CHANNEL_BLOCK)?;
+    let state_of = |block: &[u16], c: usize| block[usize::from(IR_STATES - IR_TEMPERATURES) + c];
+    let n_dir = usize::from(snap[usize::from(IR_N_DIRECTIONS)]).min(MAX_DIRECTIONS);
+    // Channels in use: any state but "unused".
+    let channels: Vec<usize> = (0..MAX_CHANNELS)
+        .filter(|&c| state_of(&block, c) != ChannelState::Unused.code())
         .collect();
     let mut header = vec![
         "time_s".to_string(),
@@ -342,8 +415,16 @@ pub fn record(
         let mut f =
             std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
         writeln!(f, "# source: recorded")?;
-        writeln!(f, "# board_model_version: {}", u32_of(&snap, 12))?;
-        writeln!(f, "# board_model_crc: {:#010x}", u32_of(&snap, 14))?;
+        writeln!(
+            f,
+            "# board_model_version: {}",
+            u32_of(&snap, IR_MODEL_VERSION)
+        )?;
+        writeln!(
+            f,
+            "# board_model_crc: {:#010x}",
+            u32_of(&snap, IR_MODEL_CRC)
+        )?;
         writeln!(f, "{header_line}")?;
         f
     };
@@ -354,17 +435,17 @@ pub fn record(
             std::thread::sleep(wait);
         }
         let t = t0 + start.elapsed().as_secs_f64();
-        let snap = link.read_inputs(map::IR_SNAPSHOT, map::IR_SNAPSHOT_LEN)?;
-        let temps = link.read_inputs(map::IR_TEMPERATURES, 2 * map::CHANNELS)?;
-        let rpm = link.read_holdings(map::HR_SPINDLE, 1)?[0];
+        let snap = link.read_inputs(0, SNAPSHOT_LEN)?;
+        let block = link.read_inputs(IR_TEMPERATURES, CHANNEL_BLOCK)?;
+        let rpm = link.read_holdings(HR_SPINDLE, 1)?[0];
         let mut row = vec![
             format!("{t:.3}"),
-            u32_of(&snap, 10).to_string(),
+            u32_of(&snap, IR_SAMPLE_TIME).to_string(),
             rpm.to_string(),
         ];
         for &c in &channels {
-            let v = temps[c];
-            row.push(if v == map::NOT_AVAILABLE {
+            let v = block[c];
+            row.push(if v == NOT_AVAILABLE {
                 String::new()
             } else {
                 format!("{:.2}", f64::from(v as i16) / 100.0)
@@ -373,15 +454,17 @@ pub fn record(
         for d in 0..n_dir {
             row.push(format!(
                 "{:.1}",
-                f64::from(u32_of(&snap, 30 + 2 * d) as i32) / 10.0
+                f64::from(u32_of(&snap, IR_CORRECTIONS + 2 * d as u16) as i32) / 10.0
             ));
         }
-        row.push(if snap[22] == 2 {
-            format!("{:.1}", f64::from(u32_of(&snap, 20) as i32) / 10.0)
-        } else {
-            String::new()
-        });
-        row.extend(channels.iter().map(|&c| temps[20 + c].to_string()));
+        row.push(
+            if snap[usize::from(IR_PROBE_STATE)] == ProbeState::Ok.code() {
+                format!("{:.1}", f64::from(u32_of(&snap, IR_PROBE) as i32) / 10.0)
+            } else {
+                String::new()
+            },
+        );
+        row.extend(channels.iter().map(|&c| state_of(&block, c).to_string()));
         writeln!(file, "{}", row.join(","))?;
         file.flush()?;
     }

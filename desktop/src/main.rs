@@ -63,6 +63,9 @@ enum Command {
         image: std::path::PathBuf,
         #[command(flatten)]
         link: LinkArgs,
+        /// Commit even if the board runs this or a newer model version (going back on purpose).
+        #[arg(long)]
+        rollback: bool,
         #[arg(long)]
         json: bool,
     },
@@ -285,10 +288,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
         }
-        Command::Upload { image, link, json } => {
+        Command::Upload {
+            image,
+            link,
+            rollback,
+            json,
+        } => {
             let bytes = std::fs::read(&image)
                 .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
-            let s = tcomp::board_link::upload(&mut link.open()?, &bytes)?;
+            let commit = if rollback {
+                tcomp::board_link::Commit::Rollback
+            } else {
+                tcomp::board_link::Commit::NewerOnly
+            };
+            let s = tcomp::board_link::upload(&mut link.open()?, &bytes, commit)?;
             if json {
                 println!("{}", serde_json::to_string(&s)?);
             } else {

@@ -42,6 +42,10 @@ fn image(version: u32) -> Vec<u8> {
 }
 
 fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
+    upload_with(app, img, CMD_COMMIT_MODEL)
+}
+
+fn upload_with(app: &mut App<MockFlash>, img: &[u8], command: u16) -> Vec<u8> {
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     app.request(&write1(HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
     let mut padded = img.to_vec();
@@ -58,7 +62,7 @@ fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
         );
     }
     app.request(&write1(HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
-    app.request(&write1(HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
+    app.request(&write1(HR_COMMAND, command), 0, &mut reply);
     reply.to_vec()
 }
 
@@ -91,6 +95,44 @@ fn commit_over_modbus_serves_and_survives_a_reboot() {
     let flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
     let rebooted = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
     assert_eq!(rebooted.snapshot.model_version, 2);
+}
+
+#[test]
+fn a_version_not_newer_is_refused_unless_the_rollback_command_commits_it() {
+    let mut app = App::new(
+        MockFlash::new(2 * SLOT as usize),
+        SLOT,
+        1,
+        115_200,
+        ChannelMap::new(),
+    );
+    assert_eq!(upload(&mut app, &image(3))[1], 6);
+    assert_eq!(app.snapshot.model_version, 3);
+    for older_or_same in [2, 3] {
+        let reply = upload(&mut app, &image(older_or_same));
+        assert_eq!((reply[1], reply[2]), (0x86, 0x04), "{reply:02x?}");
+        assert_eq!(app.server.holding.result, result::NOT_NEWER);
+        assert_eq!(app.snapshot.model_version, 3);
+    }
+    // The rollback command commits the older model (after every other check).
+    let mut broken = image(2);
+    broken[60] ^= 1;
+    let reply = upload_with(&mut app, &broken, CMD_ROLLBACK_MODEL);
+    assert_eq!((reply[1], reply[2]), (0x86, 0x04));
+    assert_eq!(app.server.holding.result, result::BAD_CRC);
+    let reply = upload_with(&mut app, &image(2), CMD_ROLLBACK_MODEL);
+    assert_eq!(reply[1], 6, "{reply:02x?}");
+    assert_eq!(app.server.holding.result, result::OK);
+    assert_eq!(app.snapshot.model_version, 2);
+    // After a reboot v2 serves (the newer slot), and v2 again is not newer.
+    let flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
+    let mut rebooted = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    assert_eq!(rebooted.snapshot.model_version, 2);
+    let reply = upload(&mut rebooted, &image(2));
+    assert_eq!((reply[1], reply[2]), (0x86, 0x04));
+    assert_eq!(rebooted.server.holding.result, result::NOT_NEWER);
+    assert_eq!(upload(&mut rebooted, &image(4))[1], 6);
+    assert_eq!(rebooted.snapshot.model_version, 4);
 }
 
 #[test]

@@ -4,9 +4,14 @@ use std::io::{Read, Write};
 use std::net::TcpListener;
 use std::time::Duration;
 
+use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use host_tests::qemu::{free_tcp_port, BenchBoard};
-use tcomp::board_link::{record, upload, BoardLink};
-use thermocomp::modbus::server::{expected_request_len, MAX_FRAME};
+use std::sync::{Arc, Mutex};
+use tcomp::board_link::{record, upload, BoardLink, Commit};
+use thermocomp::acquisition::channel_map::ChannelMap;
+use thermocomp::app::App;
+use thermocomp::modbus::holding::*;
+use thermocomp::modbus::server::{crc16, expected_request_len, MAX_FRAME};
 use thermocomp::modbus::{Server, Snapshot};
 
 /// The board's frame handler behind a TCP socket (one client), in a thread.
@@ -48,8 +53,147 @@ fn reads_writes_and_exceptions_round_trip_through_the_real_server() {
     assert!(e.contains("exception 01"), "{e}");
     let e = link.read_inputs(400, 1).unwrap_err().to_string();
     assert!(e.contains("exception 02"), "{e}");
-    let e = upload(&mut link, b"not an image").unwrap_err().to_string();
+    let e = upload(&mut link, b"not an image", Commit::NewerOnly)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("not valid, not sent"), "{e}");
+}
+
+/// The board's application (server, model store on a mock flash) behind a
+/// socket, its state shared with the test: every request is logged, and
+/// request number `fault_at` (0-based) gets exception 04 instead of being
+/// carried out (a board failing mid-upload).
+struct SharedBoard {
+    app: App<MockFlash>,
+    requests: Vec<Vec<u8>>,
+    fault_at: Option<usize>,
+}
+
+fn inspectable_board(
+    running: Option<&[u8]>,
+    fault_at: Option<usize>,
+) -> (String, Arc<Mutex<SharedBoard>>) {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap().to_string();
+    let slot = (8 * ERASE_SIZE) as u32;
+    let mut app = App::new(
+        MockFlash::new(2 * slot as usize),
+        slot,
+        1,
+        115_200,
+        ChannelMap::new(),
+    );
+    if let Some(image) = running {
+        app.program(image).unwrap();
+    }
+    let board = Arc::new(Mutex::new(SharedBoard {
+        app,
+        requests: vec![],
+        fault_at,
+    }));
+    let shared = board.clone();
+    std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+        let mut buf = Vec::new();
+        let mut byte = [0u8; 1];
+        while s.read_exact(&mut byte).is_ok() {
+            buf.push(byte[0]);
+            if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
+                let mut b = shared.lock().unwrap();
+                let k = b.requests.len();
+                b.requests.push(buf.clone());
+                if b.fault_at == Some(k) {
+                    let mut e = vec![buf[0], buf[1] | 0x80, 4];
+                    e.extend_from_slice(&crc16(&e).to_le_bytes());
+                    s.write_all(&e).unwrap();
+                } else {
+                    b.app.request(&buf, 0, &mut reply);
+                    s.write_all(&reply).unwrap();
+                }
+                buf.clear();
+            }
+        }
+    });
+    (addr, board)
+}
+
+fn unlocked(board: &Arc<Mutex<SharedBoard>>) -> bool {
+    board.lock().unwrap().app.server.holding.unlocked(0)
+}
+
+fn demo_image_bytes(version: u32) -> Vec<u8> {
+    let mut fm = thermocomp_core::float::demo_model(u64::from(version));
+    fm.model_version = version;
+    let (mut m, _) = fm.quantize().unwrap();
+    let mut b = vec![0u8; m.encoded_len()];
+    m.encode(&mut b).unwrap();
+    b
+}
+
+#[test]
+fn an_image_larger_than_the_staging_area_is_refused_before_anything_is_sent() {
+    let (addr, board) = inspectable_board(None, None);
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    // A valid image followed by padding up to beyond the staging area.
+    let mut big = demo_image_bytes(2);
+    big.resize(STAGING_REGS as usize * 2 + 2, 0);
+    let e = upload(&mut link, &big, Commit::NewerOnly)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("staging area"), "{e}");
+    assert!(board.lock().unwrap().requests.is_empty(), "nothing sent");
+}
+
+#[test]
+fn a_failed_upload_relocks_the_board() {
+    let image = demo_image_bytes(2);
+    // Unlock is request 0, staging 1.., then the length and the commit: fail
+    // each of them in turn; the board must end locked and keep its staging
+    // from being committed by anyone else.
+    let n_staging = (image.len().div_ceil(2)).div_ceil(100);
+    for fault_at in 1..=n_staging + 2 {
+        let (addr, board) = inspectable_board(None, Some(fault_at));
+        let mut link = BoardLink::tcp(&addr, 1).unwrap();
+        let e = format!(
+            "{:#}",
+            upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+        );
+        assert!(e.contains("exception 04"), "{e}");
+        assert!(
+            !unlocked(&board),
+            "unlocked after a failure at request {fault_at}: {e}"
+        );
+        let b = board.lock().unwrap();
+        let last = b.requests.last().unwrap();
+        assert_eq!(
+            &last[1..6],
+            &[6, 0, HR_COMMAND as u8, 0, CMD_LOCK as u8],
+            "relock sent last"
+        );
+        assert_eq!(b.app.snapshot.model_version, 0, "nothing committed");
+    }
+}
+
+#[test]
+fn a_refused_commit_names_the_reason_and_relocks_and_rollback_commits() {
+    // The board runs version 5: version 2 is not newer.
+    let (addr, board) = inspectable_board(Some(&demo_image_bytes(5)), None);
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    let image = demo_image_bytes(2);
+    let e = format!(
+        "{:#}",
+        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+    );
+    assert!(e.contains("NOT_NEWER") && e.contains("--rollback"), "{e}");
+    assert!(!unlocked(&board));
+    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 5);
+    // The rollback commits it on purpose.
+    let s = upload(&mut link, &image, Commit::Rollback).unwrap();
+    assert_eq!(s.model_version, 2);
+    assert_eq!(s.result, result::OK);
+    assert!(!unlocked(&board));
+    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
 }
 
 #[test]
@@ -105,7 +249,7 @@ fn upload_and_record_against_the_bench_board() {
         board.log()
     );
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
-    let s = upload(&mut link, &std::fs::read(&v2).unwrap()).unwrap();
+    let s = upload(&mut link, &std::fs::read(&v2).unwrap(), Commit::NewerOnly).unwrap();
     assert_eq!(s.model_version, 2);
     // Record five samples, then two more appended to the same file.
     let out = dir.join("recorded.csv");

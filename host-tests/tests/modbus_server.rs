@@ -185,6 +185,51 @@ fn exceptions_follow_the_specification() {
     assert_eq!(b.exception_of(&bad_count), 0x03);
 }
 
+/// An FC16 header with any register count and a byte count that matches the
+/// frame (the data bytes that follow), so only the count can be wrong.
+fn write_n_raw(unit: u8, addr: u16, count: u16, data: &[u8]) -> Vec<u8> {
+    let [a, b] = addr.to_be_bytes();
+    let [c, d] = count.to_be_bytes();
+    let mut body = vec![unit, 0x10, a, b, c, d, data.len() as u8];
+    body.extend_from_slice(data);
+    frame(&body)
+}
+
+#[test]
+fn fc16_with_count_zero_is_exception_03_and_writes_nothing() {
+    let mut b = Bench::new();
+    for addr in [HR_POSITIONS, HR_SPINDLE, 9000] {
+        assert_eq!(
+            b.exception_of(&write_n_raw(17, addr, 0, &[])),
+            0x03,
+            "count 0 at {addr}"
+        );
+    }
+    assert_eq!(
+        b.server.holding.plc_written_ms, None,
+        "nothing was written, so the PLC inputs stay stale"
+    );
+    // Broadcast: no reply, and still nothing written.
+    assert!(b.ask(&write_n_raw(0, HR_POSITIONS, 0, &[])).1.is_empty());
+    assert_eq!(b.server.holding.plc_written_ms, None);
+}
+
+#[test]
+fn fc16_count_of_0x8000_or_more_is_refused_without_overflow() {
+    let mut b = Bench::new();
+    // 0x8000 * 2 and 0x8001 * 2 wrap to the byte counts 0 and 2 in a u16.
+    assert_eq!(
+        b.exception_of(&write_n_raw(17, HR_SPINDLE, 0x8000, &[])),
+        0x03
+    );
+    assert_eq!(
+        b.exception_of(&write_n_raw(17, HR_SPINDLE, 0x8001, &[0x12, 0x34])),
+        0x03
+    );
+    assert_eq!(b.server.holding.spindle_rpm, 0);
+    assert_eq!(b.server.holding.plc_written_ms, None);
+}
+
 #[test]
 fn plc_writes_positions_and_speed_without_unlock() {
     let mut b = Bench::new();
@@ -203,7 +248,7 @@ fn plc_writes_positions_and_speed_without_unlock() {
 #[test]
 fn unlock_then_configure_and_the_lock_expires() {
     let mut b = Bench::new();
-    assert_eq!(b.ask(&write1(17, HR_UNLOCK, 0x1111)).1.len(), 8);
+    assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
     assert_eq!(
         b.exception_of(&write1(17, HR_CLAMP, 100)),
         0x01,
@@ -222,6 +267,92 @@ fn unlock_then_configure_and_the_lock_expires() {
     b.now += UNLOCK_MS;
     assert_eq!(b.exception_of(&write1(17, HR_CLAMP, 50)), 0x01, "expired");
     assert_eq!(b.server.holding.clamp[0], 100);
+}
+
+#[test]
+fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
+    let mut b = Bench::new();
+    // Unlock by broadcast: refused (every board on the bus would open at once).
+    assert!(b.ask(&write1(0, HR_UNLOCK, UNLOCK_CODE)).1.is_empty());
+    assert!(!b.server.holding.unlocked(b.now), "broadcast unlocked");
+    assert!(b.ask(&write_n(0, HR_UNLOCK, &[UNLOCK_CODE])).1.is_empty());
+    assert!(!b.server.holding.unlocked(b.now), "FC16 broadcast unlocked");
+    // Even while this board is unlocked by its own address, a broadcast does
+    // not change its unit, baud, limits or staging area, nor run a command.
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    assert!(b.server.holding.unlocked(b.now));
+    for (addr, value) in [
+        (HR_UNIT, 5),
+        (HR_BAUD, 96),
+        (HR_CLAMP, 10),
+        (HR_RATE, 10),
+        (HR_STAGED_LEN, 4),
+        (HR_STAGING, 0xBEEF),
+        (HR_COMMAND, CMD_LOCK),
+        (HR_COMMAND, CMD_REREFERENCE),
+    ] {
+        let (action, reply) = b.ask(&write1(0, addr, value));
+        assert!(reply.is_empty());
+        assert_eq!(action, Action::None, "broadcast write of {addr}");
+    }
+    let (action, _) = b.ask(&write_n(0, HR_UNIT, &[5, 96]));
+    assert_eq!(action, Action::None);
+    let h = &b.server.holding;
+    assert_eq!((h.unit, h.baud), (17, 115_200));
+    assert_eq!((h.clamp[0], h.rate[0]), (u16::MAX, u16::MAX));
+    assert!(
+        h.unlocked(b.now),
+        "a broadcast lock command was carried out"
+    );
+    assert_eq!(b.words(3, HR_STAGED_LEN, 1), vec![0]);
+    assert_eq!(b.words(3, HR_STAGING, 1), vec![0]);
+    // The PLC's registers still take broadcasts (one speed for every board).
+    b.ask(&write_n(0, HR_SPINDLE, &[3000, 0, 7]));
+    assert_eq!(b.server.holding.spindle_rpm, 3000);
+    assert_eq!(b.server.holding.positions[0], 7);
+}
+
+#[test]
+fn a_broadcast_commit_does_not_commit_a_valid_staged_model() {
+    let (mut m, _) = demo_model(3).quantize().unwrap();
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    let mut b = Bench::new();
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    upload(&mut b, &img);
+    let (action, reply) = b.ask(&write1(0, HR_COMMAND, CMD_COMMIT_MODEL));
+    assert!(reply.is_empty());
+    assert_eq!(action, Action::None);
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::NONE]);
+    // The same image committed by address goes through.
+    let (action, _) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
+    assert_eq!(action, Action::CommitModel { len: img.len() });
+}
+
+#[test]
+fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
+    let mut b = Bench::new();
+    for key in [0x0000, 0x1111, UNLOCK_CODE ^ 1, 0xFFFF] {
+        assert_eq!(
+            b.exception_of(&write1(17, HR_UNLOCK, key)),
+            0x03,
+            "FC06 {key:#x}"
+        );
+        assert_eq!(
+            b.exception_of(&write_n(17, HR_UNLOCK, &[key])),
+            0x03,
+            "FC16 {key:#x}"
+        );
+        assert!(!b.server.holding.unlocked(b.now));
+    }
+    // The right key is echoed; a wrong one afterwards is refused and leaves
+    // the board as it was (unlocked: the lock command is CMD_LOCK).
+    assert_eq!(
+        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE)).1,
+        write1(17, HR_UNLOCK, UNLOCK_CODE)
+    );
+    assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
+    assert!(b.server.holding.unlocked(b.now));
 }
 
 fn upload(b: &mut Bench, image: &[u8]) {
@@ -254,7 +385,7 @@ fn model_upload_commits_only_a_valid_image() {
         b.exception_of(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL)),
         0x04
     );
-    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_IMAGE]);
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_CRC]);
     upload(&mut b, &img);
     assert_eq!(
         b.words(3, HR_STAGING, 2),
@@ -270,6 +401,119 @@ fn model_upload_commits_only_a_valid_image() {
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a commit locks again");
 }
 
+/// Stage `image` (padded to whole registers) with `staged_len`, then send `command`.
+fn stage_and_send(b: &mut Bench, image: &[u8], staged_len: usize, command: u16) -> Vec<u8> {
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_COMMAND, CMD_CLEAR_STAGING));
+    upload(b, image);
+    b.ask(&write1(17, HR_STAGED_LEN, staged_len as u16));
+    b.ask(&write1(17, HR_COMMAND, command)).1
+}
+
+fn encoded(mut m: thermocomp_core::Model) -> Vec<u8> {
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    img
+}
+
+#[test]
+fn each_image_refusal_has_its_own_result_code() {
+    let (good, _) = demo_model(3).quantize().unwrap();
+    let with = |edit: &dyn Fn(&mut thermocomp_core::Model)| {
+        let mut m = good.clone();
+        edit(&mut m);
+        encoded(m)
+    };
+    let mut corrupt = encoded(good.clone());
+    corrupt[40] ^= 0xFF;
+    let mut heavy = good.clone();
+    for t in heavy.tables.iter_mut().filter(|t| t.axis == 0) {
+        for term in t.terms.iter_mut() {
+            term.coef = i32::MAX;
+            term.position_power = 3;
+        }
+        while t.terms.len() < thermocomp_core::MAX_TERMS {
+            let last = *t.terms.last().unwrap();
+            t.terms.push(last).unwrap();
+        }
+    }
+    while heavy.tables.len() < thermocomp_core::MAX_TABLES {
+        let axis_table = heavy.tables.iter().find(|t| t.axis == 0).unwrap().clone();
+        heavy.tables.push(axis_table).unwrap();
+    }
+    let cases: Vec<(&str, Vec<u8>, usize, u16)> = vec![
+        ("bad CRC", corrupt.clone(), corrupt.len(), result::BAD_CRC),
+        (
+            "sensor channel 99",
+            with(&|m| m.sensors[1].channel = 99),
+            0,
+            result::SENSOR_CHANNEL,
+        ),
+        (
+            "model version 0",
+            with(&|m| m.model_version = 0),
+            0,
+            result::ZERO_MODEL_VERSION,
+        ),
+        (
+            "max_rate 0",
+            with(&|m| m.directions[0].max_rate = 0),
+            0,
+            result::MAX_RATE,
+        ),
+        (
+            "max_correction 0x7fffffff",
+            with(&|m| m.directions[0].max_correction = i32::MAX),
+            0,
+            result::MAX_CORRECTION,
+        ),
+        (
+            "overflowing tables",
+            encoded(heavy),
+            0,
+            result::TABLE_SUM_TOO_LARGE,
+        ),
+    ];
+    let mut seen = vec![];
+    for (what, img, staged, code) in cases {
+        let mut b = Bench::new();
+        let staged = if staged == 0 { img.len() } else { staged };
+        let r = stage_and_send(&mut b, &img, staged, CMD_COMMIT_MODEL);
+        assert_eq!(&r[1..3], &[0x86, 0x04], "{what}: {r:02x?}");
+        assert_eq!(b.words(3, HR_RESULT, 1), vec![code], "{what}");
+        seen.push(code);
+    }
+    // Trailing garbage after a valid sealed image.
+    let img = encoded(good.clone());
+    let mut tail = img.clone();
+    tail.extend_from_slice(&[0xAB, 0xCD]);
+    let mut b = Bench::new();
+    let r = stage_and_send(&mut b, &tail, tail.len(), CMD_COMMIT_MODEL);
+    assert_eq!(&r[1..3], &[0x86, 0x04], "{r:02x?}");
+    assert_eq!(b.words(3, HR_RESULT, 1), vec![result::TRAILING_BYTES]);
+    seen.push(result::TRAILING_BYTES);
+    seen.extend([
+        result::OK,
+        result::NONE,
+        result::BAD_LENGTH,
+        result::STORE_FAILED,
+    ]);
+    seen.push(result::NOT_NEWER);
+    let mut distinct = seen.clone();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), seen.len(), "codes not distinct: {seen:?}");
+    // Every ImageError maps to a named code other than OK/NONE.
+    for e in [
+        thermocomp_core::ImageError::BadMagic,
+        thermocomp_core::ImageError::LengthMismatch,
+        thermocomp_core::ImageError::UnsupportedVersion(2),
+    ] {
+        let code = result::of_image_error(&e);
+        assert!(!matches!(code, result::OK | result::NONE), "{e}");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(5000))]
     #[test]
@@ -282,5 +526,19 @@ proptest! {
         let (_, r) = b.ask(&f);
         prop_assert!(r.len() <= MAX_FRAME);
         if !r.is_empty() { prop_assert_eq!(r[0], 17); }
+    }
+
+    /// FC16 headers of every count with a frame-consistent byte count: the
+    /// count is checked without overflow, and a wrong count writes nothing.
+    #[test]
+    fn fc16_of_any_count_never_panics_and_a_wrong_count_writes_nothing(count in any::<u16>(), data in proptest::collection::vec(any::<u8>(), 0..=247)) {
+        let mut b = Bench::new();
+        let (_, r) = b.ask(&write_n_raw(17, HR_SPINDLE, count, &data));
+        prop_assert!(!r.is_empty());
+        let valid = (1..=123).contains(&count) && usize::from(count) * 2 == data.len();
+        if !valid {
+            prop_assert_eq!(&r[1..3], &[0x90u8, 0x03][..]);
+            prop_assert_eq!(b.server.holding.plc_written_ms, None);
+        }
     }
 }

@@ -136,6 +136,7 @@ impl Model {
             .enumerate()
         {
             let p_ref = n.p_ref.get(a).copied().unwrap_or(0);
+            // Both sums ≤ 2^61: the parser's MAX_AXIS_TABLE_WEIGHT (fixed.rs).
             let (mut off, mut der, mut any) = (0i64, 0i64, false);
             for t in self.tables.iter().filter(|t| usize::from(t.axis) == a) {
                 let (o, d) = eval_table_pair(t, &n.x, p_ref);
@@ -148,7 +149,8 @@ impl Model {
             }
             // dE/dp in Q8 of 0.1 µm per half span; slope = dE/dp · 0.1 µm / (span/2 µm)
             // in 0.01 µm/m = dE/dp · 2·10^7 / span = der_q8 · 78125 / span
-            // (|der_q8| < 2^36, so the numerator < 2^53), divided by
+            // (the parser bounds |der| ≤ 2^61, so |der_q8| ≤ 2^37 and the
+            // numerator < 2^54; see fixed.rs), divided by
             // multiplying with the span's reciprocal (no 64-bit division).
             let der_q8 = round_shift(der, 24);
             *pair = AxisPair {

@@ -17,12 +17,29 @@
 //! | correction                       | i32  | 0.1 µm                          |
 //!
 //! Why nothing overflows: normalised values are clamped to [-1, 1] (|x| ≤ 2^24)
-//! before any product. A W1·x product is < 2^31·2^24 = 2^55 and at most
+//! before any product. A W1·x product is ≤ 2^31·2^24 = 2^55 and at most
 //! MAX_NET_INPUTS = 8 of them plus the bias (< 2^55) sum below 2^59 < 2^63.
-//! h ≤ 2^17, so a w2·h product is < 2^48 and 17 of them stay below 2^53. A
-//! table term is a Q24 product of at most six factors each ≤ 1 (renormalised
-//! after every multiply, so ≤ 2^24) times a coefficient < 2^31: < 2^55, and
-//! MAX_TERMS = 32 of them stay below 2^60. Filter states are bounded by the
+//! h ≤ 2^17, so a w2·h product is ≤ 2^48 and 17 of them (with b2 << 17) stay
+//! below 2^53. A table term is a Q24 product of at most six factors each ≤ 1
+//! (renormalised after every multiply, so ≤ 2^24) times a coefficient ≤ 2^31:
+//! ≤ 2^55, and MAX_TERMS = 32 of them stay ≤ 2^60 (one table's Q32 value).
+//! Per direction, `eval` adds MAX_NETS = 4 networks (< 2^53) and MAX_TABLES =
+//! 8 tables rounded Q32 → Q25 (≤ 2^53): below 2^57, for any image.
+//!
+//! The TEMP_COMP pair sums every table of one axis in Q32: the offset
+//! Σ coef·x^i·p^k and the derivative Σ coef·k·x^i·p^(k−1). Without a further
+//! bound that is 8 tables · 32 terms · 3 · 2^55 = 3·2^63, which overflows i64
+//! (found by issue 13). It is **bounded in the parser**, not widened: the
+//! image parser refuses an image whose tables on one axis have
+//! Σ |coef| · max(1, k) > MAX_AXIS_TABLE_WEIGHT = 2^37
+//! (`ImageError::TableSumTooLarge`), so both sums are ≤ 2^37·2^24 = 2^61 and
+//! their rounding (+2^31) cannot overflow; d/dp in Q8 is then ≤ 2^37 and
+//! times 78,125 < 2^54 for [`Span::divide`]. Why not i128: the pair is
+//! evaluated at every step on the Cortex-M4 within the ≤ 2,000-instruction
+//! budget, and 2^37 in Q8 of 0.1 µm is 53 m of correction, far beyond any
+//! model the quantizer emits, so the bound refuses only broken images.
+//! `math-core/tests/image.rs` evaluates an image at the bound, at the input
+//! extremes, with overflow checks on. Filter states are bounded by the
 //! inputs they follow (|raw| < 2^31, Q16 → < 2^47); the decay is < 1. The
 //! filtered feature is handed to the model as Q8 in an i32, saturated; the
 //! image limits every input's envelope to ±2^23 raw units, so the clamp to

@@ -23,6 +23,14 @@
 //!               input_power u8, position_power u8, 0
 //! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
 //! ```
+//!
+//! Beyond the layout, the parser refuses (each with its own [`ImageError`]):
+//! bytes after the CRC; model version 0 ("no model" on the register map); a
+//! sensor channel ≥ [`MAX_SENSORS`]; `max_correction` outside
+//! 1..=[`MAX_CORRECTION`] (10 mm) and `max_rate` outside 1..=`MAX_RATE`
+//! (100 mm/s); tables on one axis with Σ |coef| · max(1, position power) >
+//! [`MAX_AXIS_TABLE_WEIGHT`], the bound that keeps the evaluation's i64
+//! sums from overflowing (argument in [`crate::fixed`]).
 
 use crate::fixed::{Span, FEATURE_FRAC_BITS};
 use crate::limits::*;
@@ -88,6 +96,34 @@ pub enum ImageError {
     },
     /// The sections end before or after `total_len − 4`.
     LengthMismatch,
+    /// Bytes after the sealed image (`total_len` and its CRC): a staged
+    /// length that does not match the image, or garbage appended to it.
+    TrailingBytes {
+        image_len: usize,
+        got: usize,
+    },
+    /// A sensor names a bus channel the board does not have (≥ [`MAX_SENSORS`]).
+    SensorChannelOutOfRange {
+        sensor: u8,
+        channel: u8,
+    },
+    /// Model version 0 is what the register map shows for "no model".
+    ZeroModelVersion,
+    /// `max_rate` outside 1..=[`crate::compensator::MAX_RATE`] (0 would freeze the correction).
+    MaxRateOutOfRange {
+        direction: u8,
+        value: i32,
+    },
+    /// `max_correction` outside 1..=[`MAX_CORRECTION`].
+    MaxCorrectionOutOfRange {
+        direction: u8,
+        value: i32,
+    },
+    /// The tables of one axis have coefficients so large that the evaluation's
+    /// i64 sums could overflow (above [`MAX_AXIS_TABLE_WEIGHT`]).
+    TableSumTooLarge {
+        axis: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -127,6 +163,33 @@ impl core::fmt::Display for ImageError {
             ImageError::LengthMismatch => {
                 write!(f, "the image's sections do not fill its length exactly")
             }
+            ImageError::TrailingBytes { image_len, got } => write!(
+                f,
+                "{} bytes after the end of the {image_len}-byte image",
+                got.saturating_sub(image_len)
+            ),
+            ImageError::SensorChannelOutOfRange { sensor, channel } => write!(
+                f,
+                "sensor {sensor} names bus channel {channel}; the board has channels 0-{}",
+                MAX_SENSORS - 1
+            ),
+            ImageError::ZeroModelVersion => write!(
+                f,
+                "model version 0 is reserved for \"no model\"; versions start at 1"
+            ),
+            ImageError::MaxRateOutOfRange { direction, value } => write!(
+                f,
+                "direction {direction}: max rate {value} (0.1 um/s) outside 1..={}",
+                crate::compensator::MAX_RATE
+            ),
+            ImageError::MaxCorrectionOutOfRange { direction, value } => write!(
+                f,
+                "direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
+            ),
+            ImageError::TableSumTooLarge { axis } => write!(
+                f,
+                "tables of axis {axis}: coefficients too large (sum of |coef| x max(1, position power) above 2^37); the evaluation could overflow"
+            ),
         }
     }
 }
@@ -294,8 +357,8 @@ impl Model {
         }
     }
 
-    /// Parse and validate an image. `bytes` may be longer than the image (a
-    /// flash slot): only `total_len` bytes are read.
+    /// Parse and validate an image. `bytes` must be exactly the image
+    /// (`total_len` bytes): anything after its CRC is refused.
     pub fn parse(bytes: &[u8]) -> Result<Model, ImageError> {
         if bytes.len() < HEADER_LEN + 4 {
             return Err(ImageError::TooShort {
@@ -322,6 +385,12 @@ impl Model {
                 got: bytes.len(),
             });
         }
+        if bytes.len() > total_len {
+            return Err(ImageError::TrailingBytes {
+                image_len: total_len,
+                got: bytes.len(),
+            });
+        }
         let body = &bytes[..total_len - 4];
         let stored = u32::from_le_bytes([
             bytes[total_len - 4],
@@ -336,6 +405,9 @@ impl Model {
         // From here on read only the body: a section running into the CRC is a length error.
         let mut r = Reader { b: body, at: 12 };
         let model_version = r.u32()?;
+        if model_version == 0 {
+            return Err(ImageError::ZeroModelVersion);
+        }
         let step_ms = r.u32()?;
         let warmup_s = r.u32()?;
         let n_sensors = r.count("sensors", MAX_SENSORS)?;
@@ -359,11 +431,17 @@ impl Model {
         m.flags = flags;
         m.warmup_s = warmup_s;
 
-        for _ in 0..n_sensors {
+        for i in 0..n_sensors {
             let rom = r.array::<8>()?;
             let channel = r.u8()?;
             let _pad = r.array::<3>()?;
             let ref_temp = r.i32()?;
+            if usize::from(channel) >= MAX_SENSORS {
+                return Err(ImageError::SensorChannelOutOfRange {
+                    sensor: i as u8,
+                    channel,
+                });
+            }
             push(
                 &mut m.sensors,
                 SensorRef {
@@ -377,12 +455,18 @@ impl Model {
             let name = r.array::<8>()?;
             let max_correction = r.i32()?;
             let max_rate = r.i32()?;
-            if max_correction < 0 || !(0..=crate::compensator::MAX_RATE).contains(&max_rate) {
-                return Err(ImageError::BadValue {
-                    what: "direction limits",
+            if !(1..=MAX_CORRECTION).contains(&max_correction) {
+                return Err(ImageError::MaxCorrectionOutOfRange {
+                    direction: i as u8,
+                    value: max_correction,
                 });
             }
-            let _ = i;
+            if !(1..=crate::compensator::MAX_RATE).contains(&max_rate) {
+                return Err(ImageError::MaxRateOutOfRange {
+                    direction: i as u8,
+                    value: max_rate,
+                });
+            }
             push(
                 &mut m.directions,
                 Direction {
@@ -587,6 +671,21 @@ impl Model {
         }
         if r.at != body.len() {
             return Err(ImageError::LengthMismatch);
+        }
+        // The overflow bound of eval.rs's TEMP_COMP pair (fixed.rs): per axis,
+        // Σ |coef| · max(1, position power) ≤ MAX_AXIS_TABLE_WEIGHT. At most
+        // 8 · 32 terms of < 2^31 · 3, so the u64 sum cannot overflow.
+        let mut weight = [0u64; MAX_AXES];
+        for t in &m.tables {
+            if let Some(w) = weight.get_mut(usize::from(t.axis)) {
+                for term in &t.terms {
+                    *w +=
+                        u64::from(term.coef.unsigned_abs()) * u64::from(term.position_power.max(1));
+                }
+            }
+        }
+        if let Some(axis) = weight.iter().position(|&w| w > MAX_AXIS_TABLE_WEIGHT) {
+            return Err(ImageError::TableSumTooLarge { axis: axis as u8 });
         }
         m.crc = computed;
         Ok(m)

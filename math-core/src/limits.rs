@@ -24,3 +24,10 @@ pub const MAX_DIRECTIONS: usize = 6;
 pub const MAX_AXES: usize = 6;
 /// Largest model image in bytes (bounds the staging area and flash slots).
 pub const MAX_IMAGE_BYTES: usize = 8192;
+/// Largest `max_correction` an image may set, 0.1 µm (10 mm: no thermal drift
+/// of a machine tool comes near it; an image asking for more is broken).
+pub const MAX_CORRECTION: i32 = 100_000;
+/// Bound on Σ |coef| · max(1, position power) over every term of every table
+/// bound to one axis (coefficients Q8 of 0.1 µm, so 2^37 is 53 m): keeps the
+/// offset and d/dp sums of the TEMP_COMP pair below 2^61 (see `fixed`).
+pub const MAX_AXIS_TABLE_WEIGHT: u64 = 1 << 37;

@@ -33,10 +33,22 @@ fn encode_parse_round_trip_is_identical() {
     let back = Model::parse(&buf).unwrap();
     assert_eq!(back, m);
     assert_eq!(back.crc, crc32(&buf[..buf.len() - 4]));
-    // A flash slot holds the image followed by erased bytes: still parses.
-    let mut slot = buf.clone();
-    slot.extend_from_slice(&[0xFF; 100]);
-    assert_eq!(Model::parse(&slot).unwrap(), m);
+}
+
+#[test]
+fn bytes_after_the_sealed_image_are_refused() {
+    let (_, good) = demo_image();
+    for tail in [&[0u8][..], &[0xFF; 100][..]] {
+        let mut b = good.clone();
+        b.extend_from_slice(tail);
+        assert_eq!(
+            Model::parse(&b),
+            Err(ImageError::TrailingBytes {
+                image_len: good.len(),
+                got: good.len() + tail.len()
+            })
+        );
+    }
 }
 
 #[test]
@@ -143,8 +155,9 @@ fn semantic_errors_are_refused() {
     bad.directions[0].max_rate = -1;
     assert_eq!(
         enc(bad),
-        Err(ImageError::BadValue {
-            what: "direction limits"
+        Err(ImageError::MaxRateOutOfRange {
+            direction: 0,
+            value: -1
         })
     );
     let mut bad = m.clone();
@@ -155,6 +168,172 @@ fn semantic_errors_are_refused() {
             what: "sensor",
             index: 9
         })
+    );
+}
+
+fn encoded(mut m: Model) -> Result<Model, ImageError> {
+    let mut b = vec![0u8; m.encoded_len()];
+    m.encode(&mut b).unwrap();
+    Model::parse(&b)
+}
+
+#[test]
+fn a_sensor_channel_beyond_the_board_is_refused() {
+    let (m, _) = demo_image();
+    for channel in [MAX_SENSORS as u8, 99, 255] {
+        let mut bad = m.clone();
+        bad.sensors[2].channel = channel;
+        assert_eq!(
+            encoded(bad),
+            Err(ImageError::SensorChannelOutOfRange { sensor: 2, channel })
+        );
+    }
+    let mut last = m.clone();
+    last.sensors[2].channel = MAX_SENSORS as u8 - 1;
+    assert!(encoded(last).is_ok(), "the last channel is fine");
+}
+
+#[test]
+fn model_version_0_is_refused() {
+    let (m, _) = demo_image();
+    let mut bad = m.clone();
+    bad.model_version = 0;
+    assert_eq!(encoded(bad), Err(ImageError::ZeroModelVersion));
+}
+
+#[test]
+fn direction_limits_outside_their_bounds_are_refused() {
+    let (m, _) = demo_image();
+    for value in [0, -1, thermocomp_core::compensator::MAX_RATE + 1] {
+        let mut bad = m.clone();
+        bad.directions[1].max_rate = value;
+        assert_eq!(
+            encoded(bad),
+            Err(ImageError::MaxRateOutOfRange {
+                direction: 1,
+                value
+            }),
+            "max_rate {value}"
+        );
+    }
+    for value in [0, -5, MAX_CORRECTION + 1, i32::MAX] {
+        let mut bad = m.clone();
+        bad.directions[2].max_correction = value;
+        assert_eq!(
+            encoded(bad),
+            Err(ImageError::MaxCorrectionOutOfRange {
+                direction: 2,
+                value
+            }),
+            "max_correction {value}"
+        );
+    }
+    let mut edge = m.clone();
+    edge.directions[0].max_rate = thermocomp_core::compensator::MAX_RATE;
+    edge.directions[0].max_correction = MAX_CORRECTION;
+    edge.directions[1].max_rate = 1;
+    edge.directions[1].max_correction = 1;
+    assert!(encoded(edge).is_ok(), "the bounds themselves are accepted");
+}
+
+/// A model whose position-dependent tables on axis 0 all have `n_terms`
+/// terms of coefficient `coef` at position power 3 (the largest d/dp weight).
+fn heavy_tables(n_tables: usize, n_terms: usize, coef: i32) -> Model {
+    let (m, _) = demo_image();
+    let mut heavy = m.clone();
+    heavy.tables.clear();
+    for _ in 0..n_tables {
+        let mut terms = heapless::Vec::new();
+        for _ in 0..n_terms {
+            terms
+                .push(Term {
+                    coef,
+                    input: NONE,
+                    input_power: 0,
+                    position_power: 3,
+                })
+                .unwrap();
+        }
+        heavy
+            .tables
+            .push(Table {
+                direction: 1,
+                axis: 0,
+                terms,
+            })
+            .unwrap();
+    }
+    heavy
+}
+
+fn evaluate_at_extremes(m: &Model) {
+    for v in [i32::MIN, -1, 0, 1 << 28, i32::MAX] {
+        for p in [i32::MIN, 0, i32::MAX] {
+            let e = m.evaluate(&[v; MAX_INPUTS], &[p; MAX_AXES]);
+            std::hint::black_box(e);
+        }
+    }
+}
+
+#[test]
+fn tables_whose_sums_could_overflow_the_accumulator_are_refused() {
+    // Eight full tables of i32::MAX coefficients: d/dp alone sums to
+    // 8 * 32 * 3 * 2^31 * 2^24 > 2^63 in eval.rs's axis pair.
+    let bad = heavy_tables(MAX_TABLES, MAX_TERMS, i32::MAX);
+    assert_eq!(encoded(bad), Err(ImageError::TableSumTooLarge { axis: 0 }));
+    assert_eq!(
+        encoded(heavy_tables(MAX_TABLES, MAX_TERMS, i32::MIN)),
+        Err(ImageError::TableSumTooLarge { axis: 0 })
+    );
+    // At the bound the image is accepted and evaluates without overflow
+    // (this test runs with overflow checks on).
+    let per_term = MAX_AXIS_TABLE_WEIGHT / (3 * (MAX_TABLES * MAX_TERMS) as u64);
+    let at_bound = heavy_tables(MAX_TABLES, MAX_TERMS, -(per_term as i32));
+    let parsed = encoded(at_bound).expect("an image at the bound parses");
+    evaluate_at_extremes(&parsed);
+    let over = heavy_tables(MAX_TABLES, MAX_TERMS, -(per_term as i32) - 1);
+    assert_eq!(encoded(over), Err(ImageError::TableSumTooLarge { axis: 0 }));
+}
+
+#[test]
+fn every_refusal_has_a_one_line_message() {
+    let (_, good) = demo_image();
+    let mut b = good.clone();
+    b.push(0);
+    let errors = [
+        Model::parse(&b).unwrap_err(),
+        Model::parse(&good[..10]).unwrap_err(),
+        ImageError::SensorChannelOutOfRange {
+            sensor: 1,
+            channel: 99,
+        },
+        ImageError::BadCrc {
+            stored: 2_777_176_152,
+            computed: 1,
+        },
+        ImageError::TableSumTooLarge { axis: 0 },
+        ImageError::ZeroModelVersion,
+    ];
+    for e in errors {
+        let text = e.to_string();
+        assert!(!text.is_empty() && !text.contains('\n'), "{text:?}");
+        assert!(!text.contains('{'), "no Debug form: {text}");
+    }
+    assert_eq!(
+        ImageError::SensorChannelOutOfRange {
+            sensor: 1,
+            channel: 99
+        }
+        .to_string(),
+        "sensor 1 names bus channel 99; the board has channels 0-19"
+    );
+    assert_eq!(
+        ImageError::BadCrc {
+            stored: 0xA5A5_0000,
+            computed: 0x1234_5678
+        }
+        .to_string(),
+        "CRC-32 mismatch: stored 0xa5a50000, computed 0x12345678 (image corrupted)"
     );
 }
 
@@ -177,15 +356,23 @@ proptest! {
             b[at] = *v;
         }
         if seal && b.len() > 12 { b = reseal(b); }
-        if let Ok(m) = Model::parse(&b) {
-            // Whatever parses evaluates without overflow or panic, even at extremes.
-            for v in [i32::MIN, -1, 0, 1 << 28, i32::MAX] {
-                let f = [v; MAX_INPUTS];
-                let _ = m.evaluate(&f, &[i32::MIN, i32::MAX, 0, 0, 0, 0]);
-            }
-        } else if !seal {
-            // An unsealed edit that changed anything must be refused.
-            prop_assert!(b != good);
+        let parsed = Model::parse(&b);
+        if !seal {
+            // Without a re-seal, any change is refused (CRC-32, or the length
+            // fields it covers) and an unchanged image is accepted.
+            prop_assert_eq!(parsed.is_ok(), b == good, "{:?}", parsed);
+        }
+        if let Ok(m) = parsed {
+            // Whatever parses is a model the encoder reproduces (same length,
+            // same content; only padding bytes and so the CRC may differ) ...
+            let mut again = m.clone();
+            let mut buf = vec![0u8; again.encoded_len()];
+            prop_assert_eq!(again.encode(&mut buf), Ok(b.len()));
+            let mut back = Model::parse(&buf).expect("a re-encoded model parses");
+            back.crc = m.crc;
+            prop_assert_eq!(&back, &m);
+            // ... and evaluates without overflow or panic, even at extremes.
+            evaluate_at_extremes(&m);
         }
     }
 }

@@ -35,17 +35,109 @@ pub const CMD_COMMIT_MODEL: u16 = 1;
 pub const CMD_REREFERENCE: u16 = 2;
 pub const CMD_CLEAR_STAGING: u16 = 3;
 pub const CMD_LOCK: u16 = 4;
+/// Commit the staged model even when its version is not newer than the
+/// running one (going back to an older model on purpose); every other check
+/// of [`CMD_COMMIT_MODEL`] still applies.
+pub const CMD_ROLLBACK_MODEL: u16 = 5;
 
-/// Command results (HR_RESULT).
+/// Command results (HR_RESULT): one code per reason a commit is refused.
 pub mod result {
+    use thermocomp_core::ImageError;
+
     pub const OK: u16 = 0;
     pub const NONE: u16 = 1;
     /// Staged length outside 1..=MAX_IMAGE_BYTES.
     pub const BAD_LENGTH: u16 = 2;
-    /// The staged image does not parse (CRC, version, sizes, ranges).
-    pub const BAD_IMAGE: u16 = 3;
+    /// The image's CRC-32 does not match (corrupted in transfer).
+    pub const BAD_CRC: u16 = 3;
     /// Writing the model to flash failed; the previous model still serves.
     pub const STORE_FAILED: u16 = 4;
+    /// Shorter than its header or than its own total length.
+    pub const TOO_SHORT: u16 = 5;
+    /// Total length above the staging area.
+    pub const TOO_LONG: u16 = 6;
+    /// Not a model image (magic).
+    pub const BAD_MAGIC: u16 = 7;
+    /// Image format version this firmware does not read.
+    pub const UNSUPPORTED_FORMAT: u16 = 8;
+    /// Units code this firmware does not read.
+    pub const UNSUPPORTED_UNITS: u16 = 9;
+    /// A count above its fixed maximum (sensors, inputs, nets, terms …).
+    pub const TOO_MANY: u16 = 10;
+    /// A reference to a sensor, input, direction or axis that does not exist.
+    pub const BAD_INDEX: u16 = 11;
+    /// An envelope or axis range whose minimum is not below its maximum.
+    pub const BAD_RANGE: u16 = 12;
+    /// Another field outside its domain (flags, step, lag, power …).
+    pub const BAD_VALUE: u16 = 13;
+    /// The sections do not fill the image's length exactly.
+    pub const LENGTH_MISMATCH: u16 = 14;
+    /// Bytes after the sealed image (staged length longer than the image).
+    pub const TRAILING_BYTES: u16 = 15;
+    /// A sensor channel the board does not have.
+    pub const SENSOR_CHANNEL: u16 = 16;
+    /// Model version 0.
+    pub const ZERO_MODEL_VERSION: u16 = 17;
+    /// A direction's max correction outside 1..=MAX_CORRECTION.
+    pub const MAX_CORRECTION: u16 = 18;
+    /// A direction's max rate outside 1..=MAX_RATE (0 would freeze the correction).
+    pub const MAX_RATE: u16 = 19;
+    /// Table coefficients whose sums could overflow the evaluation.
+    pub const TABLE_SUM_TOO_LARGE: u16 = 20;
+    /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
+    pub const NOT_NEWER: u16 = 21;
+
+    /// The name of a result code (as in the README's table), for messages.
+    pub fn name(code: u16) -> &'static str {
+        match code {
+            OK => "OK",
+            NONE => "NONE",
+            BAD_LENGTH => "BAD_LENGTH",
+            BAD_CRC => "BAD_CRC",
+            STORE_FAILED => "STORE_FAILED",
+            TOO_SHORT => "TOO_SHORT",
+            TOO_LONG => "TOO_LONG",
+            BAD_MAGIC => "BAD_MAGIC",
+            UNSUPPORTED_FORMAT => "UNSUPPORTED_FORMAT",
+            UNSUPPORTED_UNITS => "UNSUPPORTED_UNITS",
+            TOO_MANY => "TOO_MANY",
+            BAD_INDEX => "BAD_INDEX",
+            BAD_RANGE => "BAD_RANGE",
+            BAD_VALUE => "BAD_VALUE",
+            LENGTH_MISMATCH => "LENGTH_MISMATCH",
+            TRAILING_BYTES => "TRAILING_BYTES",
+            SENSOR_CHANNEL => "SENSOR_CHANNEL",
+            ZERO_MODEL_VERSION => "ZERO_MODEL_VERSION",
+            MAX_CORRECTION => "MAX_CORRECTION",
+            MAX_RATE => "MAX_RATE",
+            TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
+            NOT_NEWER => "NOT_NEWER",
+            _ => "unknown",
+        }
+    }
+
+    /// The result code of an image refusal.
+    pub fn of_image_error(e: &ImageError) -> u16 {
+        match e {
+            ImageError::TooShort { .. } => TOO_SHORT,
+            ImageError::TooLong { .. } => TOO_LONG,
+            ImageError::BadMagic => BAD_MAGIC,
+            ImageError::UnsupportedVersion(_) => UNSUPPORTED_FORMAT,
+            ImageError::UnsupportedUnits(_) => UNSUPPORTED_UNITS,
+            ImageError::BadCrc { .. } => BAD_CRC,
+            ImageError::TooMany { .. } => TOO_MANY,
+            ImageError::BadIndex { .. } => BAD_INDEX,
+            ImageError::NonMonotoneRange { .. } => BAD_RANGE,
+            ImageError::BadValue { .. } => BAD_VALUE,
+            ImageError::LengthMismatch => LENGTH_MISMATCH,
+            ImageError::TrailingBytes { .. } => TRAILING_BYTES,
+            ImageError::SensorChannelOutOfRange { .. } => SENSOR_CHANNEL,
+            ImageError::ZeroModelVersion => ZERO_MODEL_VERSION,
+            ImageError::MaxCorrectionOutOfRange { .. } => MAX_CORRECTION,
+            ImageError::MaxRateOutOfRange { .. } => MAX_RATE,
+            ImageError::TableSumTooLarge { .. } => TABLE_SUM_TOO_LARGE,
+        }
+    }
 }
 
 /// Baud rates the board accepts (HR_BAUD holds baud / 100).
@@ -62,6 +154,18 @@ pub enum WriteError {
     Locked,
     /// The staged model was refused (SERVER DEVICE FAILURE); HR_RESULT says why.
     ModelRefused,
+}
+
+/// How a write request was addressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Addressing {
+    /// To this board's unit address: every register the map allows.
+    Unit,
+    /// To unit 0, every board on the bus at once and with no reply: only the
+    /// PLC's registers (spindle speed, axis positions). Unlocking, commands
+    /// (commit, lock, re-reference), unit, baud, limits and staging are
+    /// refused, so that one frame can never reconfigure or reload every board.
+    Broadcast,
 }
 
 /// What the application must do after a write was accepted.
@@ -89,6 +193,8 @@ pub struct Holding {
     pub clamp: [u16; MAX_DIRECTIONS],
     pub rate: [u16; MAX_DIRECTIONS],
     pub result: u16,
+    /// Version of the model serving now (0: none); a commit must be newer.
+    pub running_version: u32,
     unlocked_until_ms: Option<u64>,
     staged_len: u16,
     staging: [u8; MAX_IMAGE_BYTES],
@@ -105,6 +211,7 @@ impl Holding {
             clamp: [u16::MAX; MAX_DIRECTIONS],
             rate: [u16::MAX; MAX_DIRECTIONS],
             result: result::NONE,
+            running_version: 0,
             unlocked_until_ms: None,
             staged_len: 0,
             staging: [0; MAX_IMAGE_BYTES],
@@ -160,8 +267,18 @@ impl Holding {
     }
 
     /// Write `values` to consecutive registers from `addr`, all or nothing.
-    pub fn write(&mut self, addr: u16, values: &[u16], now_ms: u64) -> Result<Command, WriteError> {
+    pub fn write(
+        &mut self,
+        addr: u16,
+        values: &[u16],
+        now_ms: u64,
+        addressing: Addressing,
+    ) -> Result<Command, WriteError> {
         let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
+        // An empty write changes nothing and must not count as a PLC write.
+        if n == 0 {
+            return Err(WriteError::Value);
+        }
         let end = addr.checked_add(n).ok_or(WriteError::Address)?;
         // A command is written alone (FC06 or a one-register FC16), so that a
         // refused command cannot leave half a request applied.
@@ -172,6 +289,9 @@ impl Holding {
         for (i, &v) in values.iter().enumerate() {
             let a = addr + i as u16;
             self.check(a, v, now_ms)?;
+            if addressing == Addressing::Broadcast && !Self::plc_register(a) {
+                return Err(WriteError::Locked);
+            }
         }
         let mut command = Command::None;
         for (i, &v) in values.iter().enumerate() {
@@ -189,10 +309,13 @@ impl Holding {
         Ok(command)
     }
 
+    /// Registers the PLC writes in normal operation (spindle speed, positions).
+    fn plc_register(a: u16) -> bool {
+        a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+    }
+
     fn protected(a: u16) -> bool {
-        !(a == HR_UNLOCK
-            || a == HR_SPINDLE
-            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a))
+        !(a == HR_UNLOCK || Self::plc_register(a))
     }
 
     fn check(&self, a: u16, v: u16, now_ms: u64) -> Result<(), WriteError> {
@@ -210,9 +333,16 @@ impl Holding {
             return Err(WriteError::Locked);
         }
         let ok = match a {
+            // A wrong key is refused, not echoed: the master must see that the
+            // board stayed locked.
+            HR_UNLOCK => v == UNLOCK_CODE,
             HR_COMMAND => matches!(
                 v,
-                CMD_COMMIT_MODEL | CMD_REREFERENCE | CMD_CLEAR_STAGING | CMD_LOCK
+                CMD_COMMIT_MODEL
+                    | CMD_REREFERENCE
+                    | CMD_CLEAR_STAGING
+                    | CMD_LOCK
+                    | CMD_ROLLBACK_MODEL
             ),
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
@@ -229,7 +359,8 @@ impl Holding {
     fn apply(&mut self, a: u16, v: u16, now_ms: u64) -> Result<Command, WriteError> {
         match a {
             HR_UNLOCK => {
-                self.unlocked_until_ms = (v == UNLOCK_CODE).then_some(now_ms + UNLOCK_MS);
+                // check() let only the unlock code through.
+                self.unlocked_until_ms = Some(now_ms + UNLOCK_MS);
             }
             HR_COMMAND => return self.command(v),
             HR_UNIT => {
@@ -271,14 +402,23 @@ impl Holding {
 
     fn command(&mut self, v: u16) -> Result<Command, WriteError> {
         match v {
-            CMD_COMMIT_MODEL => {
+            CMD_COMMIT_MODEL | CMD_ROLLBACK_MODEL => {
                 let len = usize::from(self.staged_len);
                 if len == 0 || len > MAX_IMAGE_BYTES {
                     self.result = result::BAD_LENGTH;
                     return Err(WriteError::ModelRefused);
                 }
-                if Model::parse(&self.staging[..len]).is_err() {
-                    self.result = result::BAD_IMAGE;
+                let model = match Model::parse(&self.staging[..len]) {
+                    Ok(m) => m,
+                    Err(e) => {
+                        self.result = result::of_image_error(&e);
+                        return Err(WriteError::ModelRefused);
+                    }
+                };
+                // An older or the same version only on purpose: a stale
+                // upload must not replace a newer model by accident.
+                if v == CMD_COMMIT_MODEL && model.model_version <= self.running_version {
+                    self.result = result::NOT_NEWER;
                     return Err(WriteError::ModelRefused);
                 }
                 self.unlocked_until_ms = None;

@@ -4,9 +4,10 @@
 //! protocol's exception rules):
 //! 1. shorter than 4 bytes, longer than 256, or a wrong CRC-16 → discarded
 //!    silently (a corrupted frame may not even be for us);
-//! 2. another unit's address → ignored; broadcast (0) → writes done, no reply;
-//! 3. unknown function → exception 01; count 0 or above the limit, or a byte
-//!    count that does not match → 03; an address outside the map → 02; a
+//! 2. another unit's address → ignored; broadcast (0) → writes to the PLC's
+//!    registers done, every other write refused (`holding::Addressing`), no reply;
+//! 3. unknown function → exception 01; count 0 or above the limit (reads
+//!    125, FC16 123), or a byte count that does not match → 03; an address outside the map → 02; a
 //!    protected write while locked → 01 (wrong state); a refused model → 04.
 //!
 //! `rmodbus` parses the request and builds replies and exceptions. Two
@@ -18,11 +19,14 @@ use heapless::Vec;
 use rmodbus::server::{ModbusFrame, Read, Write};
 use rmodbus::{ErrorKind, ModbusProto};
 
-use super::holding::{Command, Holding, WriteError};
+use super::holding::{Addressing, Command, Holding, WriteError};
 use super::registers::Snapshot;
 
 /// Largest RTU frame (address + PDU 253 + CRC).
 pub const MAX_FRAME: usize = 256;
+
+/// Most registers one FC16 request may write (Modbus application protocol §6.12).
+pub const MAX_WRITE_REGISTERS: usize = 123;
 
 const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
 
@@ -103,12 +107,16 @@ impl Server {
             }
             return Action::None;
         }
-        // FC15/16: the byte count must match the frame and the register count.
+        // FC15/16: the byte count must match the frame; FC16's register count
+        // must be 1..=123 (spec §6.12) and match the byte count. The product is
+        // formed in usize: a count >= 0x8000 would wrap `u16 * 2`.
         if matches!(frame[1], 0x0F | 0x10) {
             let consistent = n >= 9
                 && usize::from(frame[6]) + 9 == n
-                && (frame[1] != 0x10
-                    || u16::from_be_bytes([frame[4], frame[5]]) * 2 == u16::from(frame[6]));
+                && (frame[1] != 0x10 || {
+                    let count = usize::from(u16::from_be_bytes([frame[4], frame[5]]));
+                    (1..=MAX_WRITE_REGISTERS).contains(&count) && count * 2 == usize::from(frame[6])
+                });
             if !consistent {
                 if frame[0] != 0 {
                     exception(frame, 0x03, reply);
@@ -157,7 +165,12 @@ impl Server {
                         for pair in w.data.chunks_exact(2) {
                             let _ = values.push(u16::from_be_bytes([pair[0], pair[1]]));
                         }
-                        match self.holding.write(w.address, &values, now_ms) {
+                        let addressing = if frame[0] == 0 {
+                            Addressing::Broadcast
+                        } else {
+                            Addressing::Unit
+                        };
+                        match self.holding.write(w.address, &values, now_ms, addressing) {
                             Ok(c) => {
                                 action = c;
                                 Ok(())
