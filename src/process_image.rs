@@ -35,6 +35,10 @@ pub enum ChannelState {
     /// Identical raw value for longer than the configured stuck time while
     /// other channels moved.
     Stuck,
+    /// The scratchpad's configuration (resolution, reset marker) was back at
+    /// its power-up contents or changed: the sensor was reset (brownout,
+    /// reconnection). Rewritten; the reading of that cycle is not used.
+    ConfigLost,
 }
 
 impl ChannelState {
@@ -52,6 +56,7 @@ impl ChannelState {
             ChannelState::OutOfRange => 8,
             ChannelState::ImplausibleStep => 9,
             ChannelState::Stuck => 10,
+            ChannelState::ConfigLost => 11,
         }
     }
 

@@ -22,6 +22,7 @@ fn measured_spindle_run_comes_back_exactly() {
     let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
     let mut m = master(&bus);
     assert_eq!(block_on(acq.discover(&mut m)), Ok(n));
+    assert_eq!(block_on(acq.configure(&mut m)), Ok(true));
     let channel: Vec<usize> = (0..n)
         .map(|k| {
             acq.map()

@@ -17,9 +17,24 @@
 //! not use it. A good reading recovers the channel at once; a step rejected as
 //! implausible is accepted when `step_confirm` consecutive readings agree with
 //! it (a real jump after a long outage is not rejected forever).
+//!
+//! # 85.0 °C: power-on value or temperature
+//! The temperature register powers up at 85.0 °C, a temperature a machine
+//! tool can reach. A power-on reset also reloads TH, TL and the configuration
+//! from EEPROM, so [`TemperatureAcquisition::configure`] writes a marker into
+//! the (unused) alarm bytes ([`MARKER_TH`], [`MARKER_TL`], never copied to
+//! EEPROM) with the resolution. A scratchpad without the marker or with
+//! another resolution comes from a sensor that was reset (brownout,
+//! reconnection) or never configured: its configuration is rewritten at once
+//! (Match ROM + Write Scratchpad) and its reading is not used that cycle
+//! (85.0 °C: [`ChannelState::PowerOnValue`]; other values:
+//! [`ChannelState::ConfigLost`], or `Pending` for a sensor never configured).
+//! With the marker intact, 85.0 °C is the power-on value only on the first
+//! reading after the configuration was written (a Convert T the sensor missed
+//! while still busy); from the second conversion on it is a temperature.
 
 use super::channel_map::ChannelMap;
-use super::ds18b20::{self, Resolution};
+use super::ds18b20::{self, Resolution, Scratchpad};
 use super::rom;
 use crate::hal::onewire::{BusError, OneWireBus};
 use crate::process_image::{ChannelState, MAX_CHANNELS};
@@ -34,6 +49,12 @@ pub enum PowerMode {
     /// Parasite power: strong pull-up for the full conversion time.
     Parasite,
 }
+
+/// Written to TH and TL with the resolution: a scratchpad still carrying
+/// them has not been reset since. Factory EEPROM holds 0x4B, 0x46; the
+/// firmware never issues Copy Scratchpad, so EEPROM never holds the marker.
+pub const MARKER_TH: u8 = 0x5A;
+pub const MARKER_TL: u8 = 0xA5;
 
 /// Acquisition parameters. All bounds explicit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,6 +146,12 @@ struct Channel {
     changed_ms: u64,
     /// A rejected step and how many readings agreed with it.
     candidate: Option<(i16, u8)>,
+    /// The sensor's scratchpad has carried the marker: a later scratchpad
+    /// without it means the sensor was reset.
+    marked: bool,
+    /// A scratchpad with the marker was read since the configuration was
+    /// last written: the register holds conversions, 85.0 °C included.
+    confirmed: bool,
 }
 
 const EMPTY: Channel = Channel {
@@ -132,6 +159,8 @@ const EMPTY: Channel = Channel {
     good: None,
     changed_ms: 0,
     candidate: None,
+    marked: false,
+    confirmed: false,
 };
 
 /// Counters of one cycle.
@@ -149,6 +178,8 @@ pub struct CycleReport {
     pub conversion_wait_us: u32,
     /// The conversion did not report done within 1.25 × t_CONV.
     pub conversion_timeout: bool,
+    /// Sensors whose configuration was found lost (reset) and rewritten.
+    pub reconfigured: u8,
 }
 
 /// The DS18B20 acquisition state of up to [`MAX_CHANNELS`] sensors.
@@ -213,17 +244,37 @@ impl TemperatureAcquisition {
         result
     }
 
-    /// Writes the configured resolution to every sensor (Skip ROM + Write
-    /// Scratchpad; alarms unused: TH = 0x4B, TL = 0x46, the factory values).
+    /// Writes the configured resolution and the reset marker to every
+    /// sensor (Skip ROM + Write Scratchpad; the alarms are unused).
     pub async fn configure<B: OneWireBus>(&mut self, bus: &mut B) -> Result<bool, BusError> {
         if !rom::select_all(bus).await? {
             return Ok(false);
         }
-        bus.write_byte(ds18b20::WRITE_SCRATCHPAD).await?;
-        bus.write_byte(0x4B).await?;
-        bus.write_byte(0x46).await?;
-        bus.write_byte(self.config.resolution.config_byte()).await?;
+        self.write_configuration(bus).await?;
+        for ch in self.channels.iter_mut() {
+            ch.confirmed = false;
+        }
         Ok(true)
+    }
+
+    /// Match ROM + Write Scratchpad of one sensor that lost its configuration.
+    async fn configure_sensor<B: OneWireBus>(
+        &mut self,
+        bus: &mut B,
+        rom: &rom::RomCode,
+    ) -> Result<bool, BusError> {
+        if !rom::select(bus, rom).await? {
+            return Ok(false);
+        }
+        self.write_configuration(bus).await?;
+        Ok(true)
+    }
+
+    async fn write_configuration<B: OneWireBus>(&self, bus: &mut B) -> Result<(), BusError> {
+        bus.write_byte(ds18b20::WRITE_SCRATCHPAD).await?;
+        bus.write_byte(MARKER_TH).await?;
+        bus.write_byte(MARKER_TL).await?;
+        bus.write_byte(self.config.resolution.config_byte()).await
     }
 
     /// One acquisition cycle; `now_ms` is the time of the readings.
@@ -255,7 +306,7 @@ impl TemperatureAcquisition {
                 if attempt > 0 {
                     report.retries = report.retries.saturating_add(1);
                 }
-                result = read_scratchpad(bus, &rom).await.map(|s| s.raw);
+                result = read_scratchpad(bus, &rom).await;
                 let retry = matches!(
                     result,
                     Err(ChannelState::CrcError
@@ -267,7 +318,14 @@ impl TemperatureAcquisition {
                     break;
                 }
             }
-            self.apply(channel, result, now_ms);
+            let (value, rewrite) = match result {
+                Ok(scratchpad) => self.judge(channel, &scratchpad),
+                Err(state) => (Err(state), false),
+            };
+            if rewrite && matches!(self.configure_sensor(bus, &rom).await, Ok(true)) {
+                report.reconfigured = report.reconfigured.saturating_add(1);
+            }
+            self.apply(channel, value, now_ms);
         }
         self.finish(report)
     }
@@ -321,6 +379,35 @@ impl TemperatureAcquisition {
             }
         }
         Ok(true)
+    }
+
+    /// Tells a CRC-valid scratchpad's temperature from the power-on value and
+    /// a reset sensor (module doc). Returns the reading for [`Self::apply`]
+    /// and whether the sensor's configuration must be rewritten.
+    fn judge(&mut self, channel: usize, sp: &Scratchpad) -> (Result<i16, ChannelState>, bool) {
+        let resolution = self.config.resolution;
+        let Some(ch) = self.channels.get_mut(channel) else {
+            return (Err(ChannelState::Pending), false);
+        };
+        let intact = sp.th == MARKER_TH && sp.tl == MARKER_TL && sp.resolution == resolution;
+        if !intact {
+            ch.confirmed = false;
+            let state = if sp.reads_power_on_value() {
+                ChannelState::PowerOnValue
+            } else if ch.marked {
+                ChannelState::ConfigLost
+            } else {
+                ChannelState::Pending
+            };
+            return (Err(state), true);
+        }
+        ch.marked = true;
+        let first_since_configured = !ch.confirmed;
+        ch.confirmed = true;
+        if sp.reads_power_on_value() && first_since_configured {
+            return (Err(ChannelState::PowerOnValue), false);
+        }
+        (Ok(sp.raw), false)
     }
 
     fn fail_all(&mut self, state: ChannelState, now_ms: u64) {

@@ -16,11 +16,15 @@ pub enum Fault {
     CorruptScratchpad(u32),
     /// Pulls every read slot low: nine zero bytes (which pass the CRC).
     AllZero,
-    /// Browned out: scratchpad back at its power-on contents (85.0 °C) and
-    /// Convert T is not executed.
+    /// Browning out continuously: every read shows the power-on contents
+    /// (85.0 °C, TH/TL/configuration from EEPROM) and Convert T is not
+    /// executed.
     PowerOn,
     /// The converter stopped: the temperature register keeps its value.
     Stuck,
+    /// The next `n` Convert T commands are missed (the device was busy or
+    /// the command was lost); the register keeps its contents.
+    MissConvert(u32),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +82,9 @@ pub struct Ds18b20 {
     th: u8,
     tl: u8,
     config: u8,
+    /// TH, TL, configuration in EEPROM: what a power-on reset loads into
+    /// the scratchpad (factory values 0x4B, 0x46, 12 bit).
+    pub eeprom: [u8; 3],
     conversion: Option<(u64, i16)>,
     phase: Phase,
     tx: [u8; 9],
@@ -102,6 +109,7 @@ impl Ds18b20 {
             th: 0x4B,
             tl: 0x46,
             config: 0x7F,
+            eeprom: [0x4B, 0x46, 0x7F],
             conversion: None,
             phase: Phase::Idle,
             tx: [0xFF; 9],
@@ -124,20 +132,48 @@ impl Ds18b20 {
     pub fn set_fault(&mut self, fault: Fault) {
         self.fault = fault;
         if fault == Fault::PowerOn {
-            self.register = POWER_ON_RAW;
-            self.config = 0x7F;
-            self.th = 0x4B;
-            self.tl = 0x46;
-            self.conversion = None;
+            self.power_on_reset();
         }
+    }
+
+    /// What a brownout or a reconnection does: the temperature register
+    /// back at 85.0 °C, TH/TL/configuration reloaded from EEPROM, any
+    /// conversion and transaction lost.
+    pub fn power_on_reset(&mut self) {
+        self.register = POWER_ON_RAW;
+        let [th, tl, config] = self.eeprom;
+        self.th = th;
+        self.tl = tl;
+        self.config = config;
+        self.conversion = None;
+        self.starved = false;
+        self.phase = Phase::Idle;
+        self.pulldown = None;
+    }
+
+    /// The scratchpad's TH, TL and configuration bytes.
+    pub fn scratchpad_config(&self) -> [u8; 3] {
+        [self.th, self.tl, self.config]
+    }
+
+    /// Overwrites the scratchpad's TH, TL and configuration bytes (a bit
+    /// upset the CRC cannot see: the device computes the CRC over it).
+    pub fn set_scratchpad_config(&mut self, bytes: [u8; 3]) {
+        [self.th, self.tl, self.config] = bytes;
+    }
+
+    /// The temperature register (what Read Scratchpad sends).
+    pub fn register(&self) -> i16 {
+        self.register
     }
 
     fn settle(&mut self, now: u64) {
         if let Some((end, value)) = self.conversion {
             if now >= end {
                 if self.parasite && self.starved {
-                    self.register = POWER_ON_RAW;
-                    self.config = 0x7F;
+                    // The supply collapsed: a full power-on reset.
+                    self.power_on_reset();
+                    return;
                 } else if self.fault != Fault::Stuck {
                     self.register = value;
                 }
@@ -337,6 +373,14 @@ impl Ds18b20 {
                 if self.fault == Fault::PowerOn {
                     return Phase::Idle;
                 }
+                if let Fault::MissConvert(n) = self.fault {
+                    self.fault = if n > 1 {
+                        Fault::MissConvert(n - 1)
+                    } else {
+                        Fault::None
+                    };
+                    return Phase::Idle;
+                }
                 let res = self.resolution();
                 let t = self.conversion_ns();
                 let value = self.temperature & res.raw_mask();
@@ -350,8 +394,10 @@ impl Ds18b20 {
                 let res = self.resolution();
                 self.tx = ds18b20::encode(self.register, self.th, self.tl, res);
                 if self.fault == Fault::PowerOn {
-                    // Power-on contents: 50 05 4B 46 7F FF 0C 10 + CRC.
-                    self.tx = ds18b20::encode(POWER_ON_RAW, 0x4B, 0x46, Resolution::Bits12);
+                    // Power-on contents: 50 05, then TH TL config from EEPROM.
+                    let [th, tl, config] = self.eeprom;
+                    self.tx =
+                        ds18b20::encode(POWER_ON_RAW, th, tl, Resolution::from_config(config));
                 }
                 if let Fault::CorruptScratchpad(n) = self.fault {
                     if n > 0 {
