@@ -39,6 +39,10 @@ pub enum ChannelState {
     /// its power-up contents or changed: the sensor was reset (brownout,
     /// reconnection). Rewritten; the reading of that cycle is not used.
     ConfigLost,
+    /// The sensor was off the bus (no presence, all ones) in this cycle or
+    /// its previous one: it may have missed the Convert T and hold an old
+    /// conversion, so a reading that passes every check is still not used.
+    Intermittent,
 }
 
 impl ChannelState {
@@ -57,6 +61,7 @@ impl ChannelState {
             ChannelState::ImplausibleStep => 9,
             ChannelState::Stuck => 10,
             ChannelState::ConfigLost => 11,
+            ChannelState::Intermittent => 12,
         }
     }
 

@@ -185,6 +185,16 @@ fn fault_scenario(
     clear(&bus);
     bus.advance_ns(10_000 * MS);
     cycle(&bus, &mut acq);
+    if matches!(
+        expected,
+        ChannelState::Disconnected | ChannelState::NoPresence
+    ) {
+        // Back on the bus: its reading counts after one whole cycle there.
+        assert_eq!(acq.state(ch), ChannelState::Intermittent);
+        assert_eq!(acq.value(ch, bus.now_ms()).validity, Validity::Invalid);
+        bus.advance_ns(1_000 * MS);
+        cycle(&bus, &mut acq);
+    }
     let v = acq.value(ch, bus.now_ms());
     assert_eq!(v.state, ChannelState::Ok);
     assert_eq!(v.validity, Validity::Fresh);

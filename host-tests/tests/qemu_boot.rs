@@ -89,7 +89,9 @@ fn replay_reads_every_sample_of_a_trace() {
         run.stdout
     );
     // T01 gone: the read floats high -> Disconnected, last good value held
-    // (row 19: 21.9 °C = 350.4 -> 350); back on the bus -> Ok again.
+    // (row 19: 21.9 °C = 350.4 -> 350); back on the bus, its first reading
+    // could predate a Convert T it missed -> Intermittent, held; one whole
+    // cycle on the bus later -> Ok (row 23: 22.3 °C = 356.8 -> 357).
     assert!(
         run.stdout
             .contains("t=200000 ms ok=1 faulty=1 T0=Some(350) Disconnected"),
@@ -98,7 +100,13 @@ fn replay_reads_every_sample_of_a_trace() {
     );
     assert!(
         run.stdout
-            .contains("t=220000 ms ok=2 faulty=0 T0=Some(355) Ok"),
+            .contains("t=220000 ms ok=1 faulty=1 T0=Some(350) Intermittent"),
+        "{}",
+        run.stdout
+    );
+    assert!(
+        run.stdout
+            .contains("t=230000 ms ok=2 faulty=0 T0=Some(357) Ok"),
         "{}",
         run.stdout
     );

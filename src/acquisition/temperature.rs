@@ -32,6 +32,20 @@
 //! With the marker intact, 85.0 °C is the power-on value only on the first
 //! reading after the configuration was written (a Convert T the sensor missed
 //! while still busy); from the second conversion on it is a temperature.
+//!
+//! # Intermittent contact
+//! Convert T goes to every sensor at once (Skip ROM; acknowledging it per
+//! sensor would cost 20 × 6 ms of Match ROM and break the 1 s cycle), so
+//! nothing tells which sensors heard it. A sensor whose data contact was open
+//! at that moment keeps its last conversion, however old, with a valid CRC
+//! and the marker intact: after an outage of minutes it would serve a
+//! minutes-old value. A sensor that was off the bus (no presence or all ones)
+//! at any attempt in this cycle or its previous one is therefore
+//! [`ChannelState::Intermittent`]: its reading is not used until it has
+//! answered a whole cycle before. What remains, a contact that opens exactly
+//! at Convert T and at no read, gives the previous cycle's conversion.
+//! (A contact that also carries the supply resets the sensor: the marker
+//! tells.)
 
 use super::channel_map::ChannelMap;
 use super::ds18b20::{self, Resolution, Scratchpad};
@@ -55,6 +69,10 @@ pub enum PowerMode {
 /// firmware never issues Copy Scratchpad, so EEPROM never holds the marker.
 pub const MARKER_TH: u8 = 0x5A;
 pub const MARKER_TL: u8 = 0xA5;
+
+/// ROM searches [`TemperatureAcquisition::discover`] makes before it gives
+/// up on a bus that answers with noise.
+pub const SEARCH_ATTEMPTS: usize = 3;
 
 /// Acquisition parameters. All bounds explicit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -152,6 +170,9 @@ struct Channel {
     /// A scratchpad with the marker was read since the configuration was
     /// last written: the register holds conversions, 85.0 °C included.
     confirmed: bool,
+    /// The sensor was off the bus (no presence, all ones) at some attempt
+    /// in its last cycle.
+    absent: bool,
 }
 
 const EMPTY: Channel = Channel {
@@ -161,6 +182,7 @@ const EMPTY: Channel = Channel {
     candidate: None,
     marked: false,
     confirmed: false,
+    absent: false,
 };
 
 /// Counters of one cycle.
@@ -228,14 +250,28 @@ impl TemperatureAcquisition {
     /// Searches the bus and maps new sensors to free channels. Returns the
     /// number of sensors found. With more than [`MAX_CHANNELS`] sensors on
     /// the bus the first ones found are still mapped and the result is
-    /// `Err(SearchError::TooMany)`; a full map keeps its sensors.
+    /// `Err(SearchError::TooMany)`; a full map keeps its sensors. A search
+    /// broken by noise (a code failing its CRC, devices vanishing mid-search)
+    /// is repeated up to [`SEARCH_ATTEMPTS`] times; if it still fails, the
+    /// sensors found before the failure (each code CRC-checked) are mapped
+    /// and the error returned.
     pub async fn discover<B: OneWireBus>(
         &mut self,
         bus: &mut B,
     ) -> Result<usize, super::rom::SearchError> {
+        use rom::SearchError;
         let mut found: heapless::Vec<rom::RomCode, MAX_CHANNELS> = heapless::Vec::new();
-        let result = rom::search(bus, &mut found).await;
-        if matches!(result, Ok(_) | Err(rom::SearchError::TooMany)) {
+        let mut result = Err(SearchError::NoPresence);
+        for _ in 0..SEARCH_ATTEMPTS {
+            result = rom::search(bus, &mut found).await;
+            if !matches!(result, Err(SearchError::Crc | SearchError::NoResponse)) {
+                break;
+            }
+        }
+        if matches!(
+            result,
+            Ok(_) | Err(SearchError::TooMany | SearchError::Crc | SearchError::NoResponse)
+        ) {
             let mut map = self.map;
             // Full map: the sensors already mapped keep working.
             let _ = map.assign_new(&found);
@@ -302,11 +338,16 @@ impl TemperatureAcquisition {
                 continue;
             };
             let mut result = Err(ChannelState::Pending);
+            let mut absent = false;
             for attempt in 0..=self.config.read_retries {
                 if attempt > 0 {
                     report.retries = report.retries.saturating_add(1);
                 }
                 result = read_scratchpad(bus, &rom).await;
+                absent |= matches!(
+                    result,
+                    Err(ChannelState::Disconnected | ChannelState::NoPresence)
+                );
                 let retry = matches!(
                     result,
                     Err(ChannelState::CrcError
@@ -318,10 +359,18 @@ impl TemperatureAcquisition {
                     break;
                 }
             }
-            let (value, rewrite) = match result {
+            let (mut value, rewrite) = match result {
                 Ok(scratchpad) => self.judge(channel, &scratchpad),
                 Err(state) => (Err(state), false),
             };
+            if let Some(ch) = self.channels.get_mut(channel) {
+                // Off the bus in this cycle or the last: it may have missed
+                // a Convert T and still hold an old conversion.
+                if value.is_ok() && (absent || ch.absent) {
+                    value = Err(ChannelState::Intermittent);
+                }
+                ch.absent = absent;
+            }
             if rewrite && matches!(self.configure_sensor(bus, &rom).await, Ok(true)) {
                 report.reconfigured = report.reconfigured.saturating_add(1);
             }
@@ -413,6 +462,9 @@ impl TemperatureAcquisition {
     fn fail_all(&mut self, state: ChannelState, now_ms: u64) {
         for c in 0..MAX_CHANNELS {
             if self.map.get(c).is_some() {
+                if let Some(ch) = self.channels.get_mut(c) {
+                    ch.absent = state == ChannelState::NoPresence;
+                }
                 self.apply(c, Err(state), now_ms);
             }
         }
