@@ -35,6 +35,44 @@ fn selftest_passes_and_exits_zero() {
 
 #[test]
 #[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
+fn selftest_timing_is_virtual_and_deterministic() {
+    // The timer check runs on QEMU's instruction-driven clock: exact, and
+    // the same however loaded the host is. One run is paused (SIGSTOP) for
+    // a second of host time mid-way; its guest sees none of it.
+    let lines: Vec<String> = (0..3)
+        .map(|i| {
+            let run = if i == 2 {
+                host_tests::qemu::run_firmware_paused(&["selftest"], LIMIT, Duration::from_secs(1))
+            } else {
+                run_firmware(&["selftest"], LIMIT)
+            };
+            assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
+            assert!(
+                run.stdout.contains(
+                    "selftest clock: 3000-instruction loop took 3000 ns: virtual (icount)"
+                ),
+                "{}",
+                run.stdout
+            );
+            run.stdout
+                .lines()
+                .filter(|l| l.starts_with("selftest"))
+                .map(String::from)
+                .collect::<Vec<_>>()
+                .join("\n")
+        })
+        .collect();
+    assert!(
+        lines[0].contains("selftest timers: 200 ms elapsed, 19 ticker periods: pass"),
+        "{}",
+        lines[0]
+    );
+    assert_eq!(lines[0], lines[1]);
+    assert_eq!(lines[0], lines[2]);
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware: scripts/test.sh builds it and runs this"]
 fn failing_selfcheck_fails_the_exit_status() {
     // A golden-vector file that does not exist cannot be checked: the
     // self-test must count that as a failure and exit 1.
