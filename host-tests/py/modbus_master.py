@@ -8,6 +8,10 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
   upload   --port P --image F [--corrupt] stage, commit; report the commit's outcome
   badcrc   --port P                      a corrupted frame, then a good one
   rate     --port P [--n N]              requests per second and latency
+  flood    --pipe BASE [--bytes N] [--gap-ms G]
+                                         N bytes of garbage into the board's UART (QEMU
+                                         -serial pipe:BASE), then one good request; how
+                                         long the flood took and the answer after it
 
 No request is ever sent twice: pymodbus runs with retries=0 and every frame
 it sends is counted. A request without a valid answer (timeout, garbled
@@ -201,6 +205,64 @@ def cmd_rate(a):
     }))
 
 
+def cmd_flood(a):
+    # The pipe holds at most one page: the writes below block until the board
+    # has taken all but the last 4 kB, as a real line (which holds a few bytes
+    # in flight) would, so "the flood has stopped" means the same to both ends.
+    # A TCP socket would queue hundreds of kB that QEMU then feeds the guest
+    # one byte per main-loop turn.
+    import fcntl
+    import os
+    import random
+    import threading
+    tx = os.open(a.pipe + ".in", os.O_WRONLY)
+    fcntl.fcntl(tx, fcntl.F_SETPIPE_SZ, 4096)
+    rx = os.open(a.pipe + ".out", os.O_RDONLY)
+    replies = bytearray()
+    lock = threading.Lock()
+
+    def reader():
+        while True:
+            chunk = os.read(rx, 4096)
+            if not chunk:
+                return
+            with lock:
+                replies.extend(chunk)
+    threading.Thread(target=reader, daemon=True).start()
+    rng = random.Random(13)
+    # Garbage never addresses this board (no unit 0 or 1 byte), and ends in
+    # the header of a long FC16 request for unit 2: a reader that only
+    # restarts at a silent gap is then in the middle of a 255-byte "frame".
+    garbage = bytes(rng.randrange(2, 256) for _ in range(a.bytes - 7))
+    garbage += bytes([2, 0x10, 0, 0, 0, 0x7B, 0xF6])
+    t0 = time.perf_counter()
+    for i in range(0, len(garbage), 4096):
+        view = memoryview(garbage)[i:i + 4096]
+        while view:
+            view = view[os.write(tx, view):]
+    flood_s = time.perf_counter() - t0
+    time.sleep(a.gap_ms / 1000)
+    with lock:
+        replies_to_garbage = len(replies)
+        replies.clear()
+    req = bytes([UNIT, 4, 0, 0, 0, 2])
+    req += struct.pack("<H", crc16(req))
+    want = bytes([UNIT, 4, 4, 0x12, 0x34, 0x56, 0x78])
+    t1 = time.perf_counter()
+    os.write(tx, req)
+    answer_s = None
+    while time.perf_counter() - t1 < a.wait_s:
+        with lock:
+            if want in replies:
+                answer_s = time.perf_counter() - t1
+                break
+        time.sleep(0.001)
+    print(json.dumps({"flood_bytes": len(garbage), "flood_s": round(flood_s, 2),
+                      "flood_bytes_per_s": round(len(garbage) / flood_s),
+                      "replies_to_garbage_bytes": replies_to_garbage,
+                      "answer_s": None if answer_s is None else round(answer_s, 3)}))
+
+
 def main():
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -209,8 +271,11 @@ def main():
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
     b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)
     q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
+    f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
+    f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
     a = p.parse_args()
-    {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate}[a.cmd](a)
+    {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
+     "flood": cmd_flood}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -281,3 +281,47 @@ fn a_dropped_frame_fails_the_master_after_one_try() {
     let ok = python(&["read", "--port", &p, "--samples", "20"]);
     assert_eq!(ok.as_array().unwrap().len(), 20);
 }
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and python3: scripts/test.sh"]
+fn after_a_300_kb_flood_of_garbage_the_next_request_is_answered_within_a_second() {
+    // The UART on a FIFO pair holding one page: the flood is written as
+    // fast as the board takes it, so when the write returns the flood has
+    // stopped for the board too (a TCP socket would queue it instead). The
+    // request follows at once: no silent gap after the garbage, whose last
+    // bytes open a 255-byte FC16 frame.
+    let _one = serial();
+    let dir = scratch("flood");
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    trace(&t, 2000);
+    demo_image(1, 1, &m);
+    let base = dir.join("uart");
+    for end in ["in", "out"] {
+        let fifo = dir.join(format!("uart.{end}"));
+        let _ = std::fs::remove_file(&fifo);
+        let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+        assert!(made.success());
+    }
+    let board = BenchBoard::start(
+        &format!("pipe:{}", base.display()),
+        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
+    );
+    assert!(
+        board.wait_for("serving Modbus RTU", BOOT),
+        "{}",
+        board.log()
+    );
+    let r = python(&[
+        "flood",
+        "--pipe",
+        base.to_str().unwrap(),
+        "--bytes",
+        "300000",
+    ]);
+    println!("{r}");
+    assert_eq!(r["flood_bytes"], 300_000, "{r}");
+    let answer_s = r["answer_s"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no answer within 5 s of the flood: {r}\n{}", board.log()));
+    assert!(answer_s < 1.0, "{r}");
+}
