@@ -35,6 +35,14 @@ pub enum ChannelState {
     /// Identical raw value for longer than the configured stuck time while
     /// other channels moved.
     Stuck,
+    /// The scratchpad's configuration (resolution, reset marker) was back at
+    /// its power-up contents or changed: the sensor was reset (brownout,
+    /// reconnection). Rewritten; the reading of that cycle is not used.
+    ConfigLost,
+    /// The sensor was off the bus (no presence, all ones) in this cycle or
+    /// its previous one: it may have missed the Convert T and hold an old
+    /// conversion, so a reading that passes every check is still not used.
+    Intermittent,
 }
 
 impl ChannelState {
@@ -52,6 +60,8 @@ impl ChannelState {
             ChannelState::OutOfRange => 8,
             ChannelState::ImplausibleStep => 9,
             ChannelState::Stuck => 10,
+            ChannelState::ConfigLost => 11,
+            ChannelState::Intermittent => 12,
         }
     }
 

@@ -4,10 +4,20 @@
 The board's UART0 is a TCP socket carrying RTU frames (QEMU -serial tcp:...),
 so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
 
-  read     --port P                      snapshot: sequence, sample time, status, corrections
+  read     --port P [--unit U]           snapshot: sequence, sample time, status, corrections
   upload   --port P --image F [--corrupt] stage, commit; report the commit's outcome
   badcrc   --port P                      a corrupted frame, then a good one
   rate     --port P [--n N]              requests per second and latency
+  flood    --pipe BASE [--bytes N] [--gap-ms G]
+                                         N bytes of garbage into the board's UART (QEMU
+                                         -serial pipe:BASE), then one good request; how
+                                         long the flood took and the answer after it
+
+No request is ever sent twice: pymodbus runs with retries=0 and every frame
+it sends is counted. A request without a valid answer (timeout, garbled
+reply) is a dropped frame. Any dropped frame or retry makes the command exit
+with status 1 and say how many on stderr, so a test cannot pass on a link
+that loses frames. (A Modbus exception is an answer, not a drop.)
 """
 import argparse
 import json
@@ -18,6 +28,8 @@ import time
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusTcpClient
+from pymodbus.exceptions import ModbusException
+from pymodbus.pdu import ExceptionResponse
 
 UNIT = 1
 IR_SEQUENCE, IR_SAMPLE_TIME, IR_MODEL_VERSION = 4, 10, 12
@@ -34,17 +46,54 @@ def u32(hi, lo):
     return (hi << 16) | lo
 
 
-def client(port):
-    c = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU, timeout=3, retries=3)
-    if not c.connect():
-        sys.exit(f"cannot connect to 127.0.0.1:{port}")
-    return c
+class Master:
+    """pymodbus without retries, counting requests, frames sent and drops."""
+
+    def __init__(self, port, unit=UNIT, timeout=3.0):
+        self.unit = unit
+        self.requests = 0
+        self.frames_sent = 0
+        self.dropped = []
+        self.c = ModbusTcpClient("127.0.0.1", port=port, framer=FramerType.RTU,
+                                 timeout=timeout, retries=0, trace_packet=self._trace)
+        if not self.c.connect():
+            sys.exit(f"cannot connect to 127.0.0.1:{port}")
+
+    def _trace(self, sending, data):
+        if sending:
+            self.frames_sent += 1
+        return data
+
+    def call(self, method, *args, **kwargs):
+        """One request; its response, or None when it was dropped."""
+        self.requests += 1
+        try:
+            r = getattr(self.c, method)(*args, device_id=self.unit, **kwargs)
+        except ModbusException as e:
+            self.dropped.append(f"{method}{args}: {e}")
+            return None
+        if r.isError() and not isinstance(r, ExceptionResponse):
+            self.dropped.append(f"{method}{args}: {r}")
+            return None
+        return r
+
+    def link(self):
+        return {"requests": self.requests, "frames_sent": self.frames_sent,
+                "retries": self.frames_sent - self.requests, "dropped": len(self.dropped)}
+
+    def close(self):
+        """Closes the link; exits 1 on any retry or dropped frame."""
+        self.c.close()
+        link = self.link()
+        if link["retries"] or link["dropped"]:
+            sys.exit(f"link not clean: {json.dumps(link)}; dropped: {self.dropped[:5]}")
+        return link
 
 
-def snapshot(c):
+def snapshot(m):
     # One request from the status register to the last prediction: one snapshot.
-    r = c.read_input_registers(0, count=54, device_id=UNIT)
-    if r.isError():
+    r = m.call("read_input_registers", 0, count=54)
+    if r is None or r.isError():
         return {"error": str(r)}
     w = r.registers
     return {
@@ -61,9 +110,9 @@ def snapshot(c):
 
 
 def cmd_read(a):
-    c = client(a.port)
-    out = [snapshot(c) for _ in range(a.samples)]
-    c.close()
+    m = Master(a.port, unit=a.unit, timeout=a.timeout)
+    out = [snapshot(m) for _ in range(a.samples)]
+    m.close()
     print(json.dumps(out))
 
 
@@ -73,23 +122,23 @@ def cmd_upload(a):
         image = bytearray(image)
         image[len(image) // 2] ^= 0xFF
         image = bytes(image)
-    c = client(a.port)
+    m = Master(a.port)
     out = {"bytes": len(image)}
-    c.write_register(HR_UNLOCK, UNLOCK_CODE, device_id=UNIT)
+    m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
     padded = image + b"\0" * (len(image) % 2)
     words = [int.from_bytes(padded[i:i + 2], "big") for i in range(0, len(padded), 2)]
     for i in range(0, len(words), 100):
-        r = c.write_registers(HR_STAGING + i, words[i:i + 100], device_id=UNIT)
-        if r.isError():
+        r = m.call("write_registers", HR_STAGING + i, words[i:i + 100])
+        if r is not None and r.isError():
             out["staging_error"] = str(r)
-    c.write_register(HR_STAGED_LEN, len(image), device_id=UNIT)
-    r = c.write_register(HR_COMMAND, CMD_COMMIT, device_id=UNIT)
-    out["commit_exception"] = getattr(r, "exception_code", None) if r.isError() else None
-    res = c.read_holding_registers(HR_RESULT, count=1, device_id=UNIT)
-    out["result"] = None if res.isError() else res.registers[0]
+    m.call("write_register", HR_STAGED_LEN, len(image))
+    r = m.call("write_register", HR_COMMAND, CMD_COMMIT)
+    out["commit_exception"] = getattr(r, "exception_code", None) if r is not None and r.isError() else None
+    res = m.call("read_holding_registers", HR_RESULT, count=1)
+    out["result"] = None if res is None or res.isError() else res.registers[0]
     time.sleep(0.3)
-    out["after"] = snapshot(c)
-    c.close()
+    out["after"] = snapshot(m)
+    out["link"] = m.close()
     print(json.dumps(out))
 
 
@@ -132,20 +181,23 @@ def cmd_badcrc(a):
 
 
 def cmd_rate(a):
-    c = client(a.port)
+    m = Master(a.port)
     lat = []
     t0 = time.perf_counter()
     for _ in range(a.n):
         t = time.perf_counter()
-        r = c.read_input_registers(0, count=54, device_id=UNIT)
+        r = m.call("read_input_registers", 0, count=54)
         lat.append(time.perf_counter() - t)
-        if r.isError():
+        if r is None or r.isError():
+            m.close()
             sys.exit(f"read failed: {r}")
     total = time.perf_counter() - t0
-    c.close()
+    link = m.close()
     lat.sort()
     print(json.dumps({
         "requests": a.n,
+        "retries": link["retries"],
+        "dropped": link["dropped"],
         "registers_per_request": 54,
         "requests_per_s": round(a.n / total, 1),
         "latency_ms_median": round(1000 * lat[len(lat) // 2], 3),
@@ -153,15 +205,77 @@ def cmd_rate(a):
     }))
 
 
+def cmd_flood(a):
+    # The pipe holds at most one page: the writes below block until the board
+    # has taken all but the last 4 kB, as a real line (which holds a few bytes
+    # in flight) would, so "the flood has stopped" means the same to both ends.
+    # A TCP socket would queue hundreds of kB that QEMU then feeds the guest
+    # one byte per main-loop turn.
+    import fcntl
+    import os
+    import random
+    import threading
+    tx = os.open(a.pipe + ".in", os.O_WRONLY)
+    fcntl.fcntl(tx, fcntl.F_SETPIPE_SZ, 4096)
+    rx = os.open(a.pipe + ".out", os.O_RDONLY)
+    replies = bytearray()
+    lock = threading.Lock()
+
+    def reader():
+        while True:
+            chunk = os.read(rx, 4096)
+            if not chunk:
+                return
+            with lock:
+                replies.extend(chunk)
+    threading.Thread(target=reader, daemon=True).start()
+    rng = random.Random(13)
+    # Garbage never addresses this board (no unit 0 or 1 byte), and ends in
+    # the header of a long FC16 request for unit 2: a reader that only
+    # restarts at a silent gap is then in the middle of a 255-byte "frame".
+    garbage = bytes(rng.randrange(2, 256) for _ in range(a.bytes - 7))
+    garbage += bytes([2, 0x10, 0, 0, 0, 0x7B, 0xF6])
+    t0 = time.perf_counter()
+    for i in range(0, len(garbage), 4096):
+        view = memoryview(garbage)[i:i + 4096]
+        while view:
+            view = view[os.write(tx, view):]
+    flood_s = time.perf_counter() - t0
+    time.sleep(a.gap_ms / 1000)
+    with lock:
+        replies_to_garbage = len(replies)
+        replies.clear()
+    req = bytes([UNIT, 4, 0, 0, 0, 2])
+    req += struct.pack("<H", crc16(req))
+    want = bytes([UNIT, 4, 4, 0x12, 0x34, 0x56, 0x78])
+    t1 = time.perf_counter()
+    os.write(tx, req)
+    answer_s = None
+    while time.perf_counter() - t1 < a.wait_s:
+        with lock:
+            if want in replies:
+                answer_s = time.perf_counter() - t1
+                break
+        time.sleep(0.001)
+    print(json.dumps({"flood_bytes": len(garbage), "flood_s": round(flood_s, 2),
+                      "flood_bytes_per_s": round(len(garbage) / flood_s),
+                      "replies_to_garbage_bytes": replies_to_garbage,
+                      "answer_s": None if answer_s is None else round(answer_s, 3)}))
+
+
 def main():
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("read"); r.add_argument("--port", type=int, required=True); r.add_argument("--samples", type=int, default=1)
+    r.add_argument("--unit", type=int, default=UNIT); r.add_argument("--timeout", type=float, default=3.0)
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
     b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)
     q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
+    f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
+    f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
     a = p.parse_args()
-    {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate}[a.cmd](a)
+    {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
+     "flood": cmd_flood}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -53,14 +53,44 @@ fn spawn_qemu(serial: &str, qemu_options: &[&str], args: &[&str]) -> std::proces
         .expect("qemu-system-arm not found: apt-get install qemu-system-arm")
 }
 
-/// Boot the firmware with `args` as its command line; kill it after `limit`.
+/// QEMU options for virtual time: the clock advances 1 ns per instruction
+/// and jumps to the next timer when the CPU sleeps, so a one-shot run's
+/// timing is the same on an idle and on a loaded host.
+pub const VIRTUAL_TIME: [&str; 2] = ["-icount", "shift=0,sleep=off"];
+
+/// Boot the firmware with `args` as its command line on virtual time
+/// ([`VIRTUAL_TIME`]); kill it after `limit` (host time).
 pub fn run_firmware(args: &[&str], limit: Duration) -> QemuRun {
-    run_firmware_with(&[], args, limit)
+    run_firmware_with(&VIRTUAL_TIME, args, limit)
 }
 
-/// As [`run_firmware`], with extra QEMU options (e.g. `-icount shift=0`).
+/// As [`run_firmware`], with these QEMU options instead (e.g. `-icount
+/// shift=0` for the bench mode).
 pub fn run_firmware_with(qemu_options: &[&str], args: &[&str], limit: Duration) -> QemuRun {
-    let mut child = spawn_qemu("null", qemu_options, args);
+    collect(spawn_qemu("null", qemu_options, args), limit)
+}
+
+/// As [`run_firmware`], with QEMU stopped (SIGSTOP) for `pause` of host time
+/// shortly after it starts: what a loaded host does to it, in the extreme.
+pub fn run_firmware_paused(args: &[&str], limit: Duration, pause: Duration) -> QemuRun {
+    let child = spawn_qemu("null", &VIRTUAL_TIME, args);
+    let pid = child.id().to_string();
+    std::thread::sleep(Duration::from_millis(30));
+    let signal = |sig: &str| {
+        let ok = Command::new("kill")
+            .args([sig, &pid])
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "kill {sig} {pid} failed");
+    };
+    signal("-STOP");
+    std::thread::sleep(pause);
+    signal("-CONT");
+    collect(child, limit)
+}
+
+/// Waits for QEMU to exit (killed after `limit`) and takes its output.
+fn collect(mut child: std::process::Child, limit: Duration) -> QemuRun {
     let start = Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().expect("wait for qemu") {

@@ -86,7 +86,18 @@ fn ds18b20_crate_returns_the_power_on_value_as_a_reading() {
     let bus = bus_with_sensors(1, 3, 400);
     bus.with_device(0, |d| d.set_fault(Fault::PowerOn));
     assert_eq!(crate_read(&bus), Ok(85.0));
-    assert_eq!(own_read(&bus), Err(ChannelState::PowerOnValue));
+    // The acquisition names it (the scratchpad lost its reset marker).
+    use thermocomp::acquisition::channel_map::ChannelMap;
+    use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
+    bus.with_device(0, |d| d.set_fault(Fault::None));
+    assert_eq!(block_on(acq.discover(&mut master(&bus))), Ok(1));
+    assert_eq!(block_on(acq.configure(&mut master(&bus))), Ok(true));
+    bus.with_device(0, |d| d.set_fault(Fault::PowerOn));
+    block_on(acq.cycle(&mut master(&bus), &mut bus.delay(), 0));
+    let rom = bus.with_device(0, |d| d.rom).unwrap();
+    let ch = acq.map().channel_of(&rom).unwrap();
+    assert_eq!(acq.state(ch), ChannelState::PowerOnValue);
 }
 
 #[test]

@@ -185,6 +185,16 @@ fn fault_scenario(
     clear(&bus);
     bus.advance_ns(10_000 * MS);
     cycle(&bus, &mut acq);
+    if matches!(
+        expected,
+        ChannelState::Disconnected | ChannelState::NoPresence
+    ) {
+        // Back on the bus: its reading counts after one whole cycle there.
+        assert_eq!(acq.state(ch), ChannelState::Intermittent);
+        assert_eq!(acq.value(ch, bus.now_ms()).validity, Validity::Invalid);
+        bus.advance_ns(1_000 * MS);
+        cycle(&bus, &mut acq);
+    }
     let v = acq.value(ch, bus.now_ms());
     assert_eq!(v.state, ChannelState::Ok);
     assert_eq!(v.validity, Validity::Fresh);
@@ -538,6 +548,123 @@ fn more_sensors_than_channels_maps_the_first_twenty() {
         Err(SearchError::TooMany)
     );
     assert_eq!(acq.map().len(), MAX_CHANNELS);
+    assert_eq!(block_on(acq.configure(&mut master(&bus))), Ok(true));
     let report = cycle(&bus, &mut acq);
     assert_eq!(report.ok, 20);
+}
+
+/// 85.0 °C in 1/16 °C: the DS18B20's power-on register value.
+const EIGHTY_FIVE: i16 = 85 * 16;
+
+#[test]
+fn a_genuine_85_degrees_is_a_temperature_for_as_long_as_it_lasts() {
+    let (bus, mut acq) = setup(2, AcquisitionConfig::default());
+    let ch = channel_of(&acq, &bus, 0);
+    // Warm up to 85.0 °C in 1/16 °C steps, then stay there for 30 cycles.
+    let mut temps: Vec<i16> = (EIGHTY_FIVE - 8..=EIGHTY_FIVE).collect();
+    temps.extend([EIGHTY_FIVE; 30]);
+    temps.extend([EIGHTY_FIVE + 1, EIGHTY_FIVE]);
+    for (i, &t) in temps.iter().enumerate() {
+        bus.with_device(0, |d| d.temperature = t);
+        cycle(&bus, &mut acq);
+        let v = acq.value(ch, bus.now_ms());
+        assert_eq!(v.state, ChannelState::Ok, "cycle {i} at {t}");
+        assert_eq!(v.validity, Validity::Fresh);
+        assert_eq!(v.raw, t);
+        bus.advance_ns(1_000 * MS);
+    }
+}
+
+#[test]
+fn a_genuine_85_degrees_at_power_up_is_confirmed_by_the_second_conversion() {
+    // Every sensor at 85.0 °C from the start: the first conversion after the
+    // configuration could be a missed Convert T, the second cannot.
+    let (bus, mut acq) = setup(3, AcquisitionConfig::default());
+    for k in 0..3 {
+        bus.with_device(k, |d| d.temperature = EIGHTY_FIVE);
+    }
+    cycle(&bus, &mut acq);
+    for k in 0..3 {
+        let v = acq.value(channel_of(&acq, &bus, k), bus.now_ms());
+        assert_eq!(v.state, ChannelState::PowerOnValue);
+        assert_eq!(v.usable(), None);
+    }
+    for _ in 0..5 {
+        bus.advance_ns(1_000 * MS);
+        cycle(&bus, &mut acq);
+        for k in 0..3 {
+            let v = acq.value(channel_of(&acq, &bus, k), bus.now_ms());
+            assert_eq!((v.state, v.raw), (ChannelState::Ok, EIGHTY_FIVE));
+        }
+    }
+}
+
+#[test]
+fn a_missed_first_conversion_leaves_the_power_on_value_named() {
+    // Powered up (register 85.0 °C), configured, then the first Convert T
+    // is missed: the scratchpad carries the marker and 85.0 °C, and the
+    // sensor is at 30 °C. That 85.0 °C must not come out as a reading.
+    let (bus, mut acq) = setup(2, AcquisitionConfig::default());
+    let ch = channel_of(&acq, &bus, 1);
+    bus.with_device(1, |d| {
+        d.temperature = 30 * 16;
+        d.set_fault(Fault::MissConvert(1));
+    });
+    cycle(&bus, &mut acq);
+    let v = acq.value(ch, bus.now_ms());
+    assert_eq!(v.state, ChannelState::PowerOnValue);
+    assert_eq!(v.usable(), None);
+    bus.advance_ns(1_000 * MS);
+    cycle(&bus, &mut acq);
+    let v = acq.value(ch, bus.now_ms());
+    assert_eq!((v.state, v.raw), (ChannelState::Ok, 30 * 16));
+}
+
+#[test]
+fn a_brownout_at_85_degrees_is_named_then_the_temperature_returns() {
+    let (bus, mut acq) = setup(2, AcquisitionConfig::default());
+    let ch = channel_of(&acq, &bus, 0);
+    for t in [EIGHTY_FIVE - 2, EIGHTY_FIVE - 1, EIGHTY_FIVE] {
+        bus.with_device(0, |d| d.temperature = t);
+        cycle(&bus, &mut acq);
+        bus.advance_ns(1_000 * MS);
+    }
+    assert_eq!(acq.state(ch), ChannelState::Ok);
+    // A brownout between two cycles: the device converts again (a genuine
+    // 85.0 °C) but its scratchpad lost the marker, so nothing tells this
+    // 85.0 °C from the power-on value yet.
+    bus.with_device(0, |d| d.power_on_reset());
+    let report = cycle(&bus, &mut acq);
+    assert_eq!(report.reconfigured, 1);
+    let v = acq.value(ch, bus.now_ms());
+    assert_eq!(
+        (v.state, v.validity),
+        (ChannelState::PowerOnValue, Validity::Held)
+    );
+    let restored = bus.with_device(0, |d| d.scratchpad_config()).unwrap();
+    assert_eq!(
+        restored,
+        [
+            thermocomp::acquisition::temperature::MARKER_TH,
+            thermocomp::acquisition::temperature::MARKER_TL,
+            acq.config().resolution.config_byte()
+        ]
+    );
+    // Confirmed by the second conversion after the rewrite, then steady.
+    let mut states = Vec::new();
+    for _ in 0..4 {
+        bus.advance_ns(1_000 * MS);
+        cycle(&bus, &mut acq);
+        states.push(acq.state(ch));
+    }
+    assert_eq!(
+        states,
+        [
+            ChannelState::PowerOnValue,
+            ChannelState::Ok,
+            ChannelState::Ok,
+            ChannelState::Ok
+        ]
+    );
+    assert_eq!(acq.value(ch, bus.now_ms()).raw, EIGHTY_FIVE);
 }

@@ -71,11 +71,25 @@ pub struct Scratchpad {
     /// Temperature, 1/16 °C, undefined low bits cleared.
     pub raw: i16,
     pub resolution: Resolution,
+    /// Alarm bytes TH, TL: reloaded from EEPROM by a power-on reset, so the
+    /// acquisition keeps its own marker in them (see
+    /// [`super::temperature`]).
+    pub th: u8,
+    pub tl: u8,
+}
+
+impl Scratchpad {
+    /// The temperature register holds the 85.0 °C power-on value. Whether it
+    /// is that value or a genuine 85.0 °C reading only the scratchpad's
+    /// history can tell (the acquisition decides).
+    pub const fn reads_power_on_value(&self) -> bool {
+        self.raw == POWER_ON_RAW
+    }
 }
 
 /// Checks and decodes the nine scratchpad bytes. The order of the checks
 /// matters: all-ones and all-zeros are named before the CRC (all zeros pass
-/// it), the 85 °C power-on value after it.
+/// it). 85.0 °C decodes as a value: it is also a real temperature.
 pub fn decode(bytes: &[u8; 9]) -> Result<Scratchpad, ChannelState> {
     if bytes.iter().all(|&b| b == 0xFF) {
         return Err(ChannelState::Disconnected);
@@ -88,10 +102,12 @@ pub fn decode(bytes: &[u8; 9]) -> Result<Scratchpad, ChannelState> {
     }
     let resolution = Resolution::from_config(bytes[4]);
     let raw = i16::from_le_bytes([bytes[0], bytes[1]]) & resolution.raw_mask();
-    if raw == POWER_ON_RAW {
-        return Err(ChannelState::PowerOnValue);
-    }
-    Ok(Scratchpad { raw, resolution })
+    Ok(Scratchpad {
+        raw,
+        resolution,
+        th: bytes[2],
+        tl: bytes[3],
+    })
 }
 
 /// Encodes a scratchpad as a DS18B20 would send it (used by emulators).
@@ -140,8 +156,11 @@ mod tests {
         let mut sp = encode(400, 0, 0, Resolution::Bits12);
         sp[0] ^= 1;
         assert_eq!(decode(&sp), Err(ChannelState::CrcError));
+        // Power-on contents: 50 05 4B 46 7F FF 0C 10 1C (datasheet).
         let sp = encode(POWER_ON_RAW, 0x4B, 0x46, Resolution::Bits12);
-        assert_eq!(decode(&sp), Err(ChannelState::PowerOnValue));
+        assert_eq!(sp, [0x50, 0x05, 0x4B, 0x46, 0x7F, 0xFF, 0x0C, 0x10, 0x1C]);
+        let decoded = decode(&sp).map(|s| (s.reads_power_on_value(), s.th, s.tl));
+        assert_eq!(decoded, Ok((true, 0x4B, 0x46)));
     }
 
     #[test]

@@ -17,9 +17,38 @@
 //! not use it. A good reading recovers the channel at once; a step rejected as
 //! implausible is accepted when `step_confirm` consecutive readings agree with
 //! it (a real jump after a long outage is not rejected forever).
+//!
+//! # 85.0 °C: power-on value or temperature
+//! The temperature register powers up at 85.0 °C, a temperature a machine
+//! tool can reach. A power-on reset also reloads TH, TL and the configuration
+//! from EEPROM, so [`TemperatureAcquisition::configure`] writes a marker into
+//! the (unused) alarm bytes ([`MARKER_TH`], [`MARKER_TL`], never copied to
+//! EEPROM) with the resolution. A scratchpad without the marker or with
+//! another resolution comes from a sensor that was reset (brownout,
+//! reconnection) or never configured: its configuration is rewritten at once
+//! (Match ROM + Write Scratchpad) and its reading is not used that cycle
+//! (85.0 °C: [`ChannelState::PowerOnValue`]; other values:
+//! [`ChannelState::ConfigLost`], or `Pending` for a sensor never configured).
+//! With the marker intact, 85.0 °C is the power-on value only on the first
+//! reading after the configuration was written (a Convert T the sensor missed
+//! while still busy); from the second conversion on it is a temperature.
+//!
+//! # Intermittent contact
+//! Convert T goes to every sensor at once (Skip ROM; acknowledging it per
+//! sensor would cost 20 × 6 ms of Match ROM and break the 1 s cycle), so
+//! nothing tells which sensors heard it. A sensor whose data contact was open
+//! at that moment keeps its last conversion, however old, with a valid CRC
+//! and the marker intact: after an outage of minutes it would serve a
+//! minutes-old value. A sensor that was off the bus (no presence or all ones)
+//! at any attempt in this cycle or its previous one is therefore
+//! [`ChannelState::Intermittent`]: its reading is not used until it has
+//! answered a whole cycle before. What remains, a contact that opens exactly
+//! at Convert T and at no read, gives the previous cycle's conversion.
+//! (A contact that also carries the supply resets the sensor: the marker
+//! tells.)
 
 use super::channel_map::ChannelMap;
-use super::ds18b20::{self, Resolution};
+use super::ds18b20::{self, Resolution, Scratchpad};
 use super::rom;
 use crate::hal::onewire::{BusError, OneWireBus};
 use crate::process_image::{ChannelState, MAX_CHANNELS};
@@ -34,6 +63,16 @@ pub enum PowerMode {
     /// Parasite power: strong pull-up for the full conversion time.
     Parasite,
 }
+
+/// Written to TH and TL with the resolution: a scratchpad still carrying
+/// them has not been reset since. Factory EEPROM holds 0x4B, 0x46; the
+/// firmware never issues Copy Scratchpad, so EEPROM never holds the marker.
+pub const MARKER_TH: u8 = 0x5A;
+pub const MARKER_TL: u8 = 0xA5;
+
+/// ROM searches [`TemperatureAcquisition::discover`] makes before it gives
+/// up on a bus that answers with noise.
+pub const SEARCH_ATTEMPTS: usize = 3;
 
 /// Acquisition parameters. All bounds explicit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,6 +164,15 @@ struct Channel {
     changed_ms: u64,
     /// A rejected step and how many readings agreed with it.
     candidate: Option<(i16, u8)>,
+    /// The sensor's scratchpad has carried the marker: a later scratchpad
+    /// without it means the sensor was reset.
+    marked: bool,
+    /// A scratchpad with the marker was read since the configuration was
+    /// last written: the register holds conversions, 85.0 °C included.
+    confirmed: bool,
+    /// The sensor was off the bus (no presence, all ones) at some attempt
+    /// in its last cycle.
+    absent: bool,
 }
 
 const EMPTY: Channel = Channel {
@@ -132,6 +180,9 @@ const EMPTY: Channel = Channel {
     good: None,
     changed_ms: 0,
     candidate: None,
+    marked: false,
+    confirmed: false,
+    absent: false,
 };
 
 /// Counters of one cycle.
@@ -149,6 +200,8 @@ pub struct CycleReport {
     pub conversion_wait_us: u32,
     /// The conversion did not report done within 1.25 × t_CONV.
     pub conversion_timeout: bool,
+    /// Sensors whose configuration was found lost (reset) and rewritten.
+    pub reconfigured: u8,
 }
 
 /// The DS18B20 acquisition state of up to [`MAX_CHANNELS`] sensors.
@@ -197,14 +250,28 @@ impl TemperatureAcquisition {
     /// Searches the bus and maps new sensors to free channels. Returns the
     /// number of sensors found. With more than [`MAX_CHANNELS`] sensors on
     /// the bus the first ones found are still mapped and the result is
-    /// `Err(SearchError::TooMany)`; a full map keeps its sensors.
+    /// `Err(SearchError::TooMany)`; a full map keeps its sensors. A search
+    /// broken by noise (a code failing its CRC, devices vanishing mid-search)
+    /// is repeated up to [`SEARCH_ATTEMPTS`] times; if it still fails, the
+    /// sensors found before the failure (each code CRC-checked) are mapped
+    /// and the error returned.
     pub async fn discover<B: OneWireBus>(
         &mut self,
         bus: &mut B,
     ) -> Result<usize, super::rom::SearchError> {
+        use rom::SearchError;
         let mut found: heapless::Vec<rom::RomCode, MAX_CHANNELS> = heapless::Vec::new();
-        let result = rom::search(bus, &mut found).await;
-        if matches!(result, Ok(_) | Err(rom::SearchError::TooMany)) {
+        let mut result = Err(SearchError::NoPresence);
+        for _ in 0..SEARCH_ATTEMPTS {
+            result = rom::search(bus, &mut found).await;
+            if !matches!(result, Err(SearchError::Crc | SearchError::NoResponse)) {
+                break;
+            }
+        }
+        if matches!(
+            result,
+            Ok(_) | Err(SearchError::TooMany | SearchError::Crc | SearchError::NoResponse)
+        ) {
             let mut map = self.map;
             // Full map: the sensors already mapped keep working.
             let _ = map.assign_new(&found);
@@ -213,17 +280,37 @@ impl TemperatureAcquisition {
         result
     }
 
-    /// Writes the configured resolution to every sensor (Skip ROM + Write
-    /// Scratchpad; alarms unused: TH = 0x4B, TL = 0x46, the factory values).
+    /// Writes the configured resolution and the reset marker to every
+    /// sensor (Skip ROM + Write Scratchpad; the alarms are unused).
     pub async fn configure<B: OneWireBus>(&mut self, bus: &mut B) -> Result<bool, BusError> {
         if !rom::select_all(bus).await? {
             return Ok(false);
         }
-        bus.write_byte(ds18b20::WRITE_SCRATCHPAD).await?;
-        bus.write_byte(0x4B).await?;
-        bus.write_byte(0x46).await?;
-        bus.write_byte(self.config.resolution.config_byte()).await?;
+        self.write_configuration(bus).await?;
+        for ch in self.channels.iter_mut() {
+            ch.confirmed = false;
+        }
         Ok(true)
+    }
+
+    /// Match ROM + Write Scratchpad of one sensor that lost its configuration.
+    async fn configure_sensor<B: OneWireBus>(
+        &mut self,
+        bus: &mut B,
+        rom: &rom::RomCode,
+    ) -> Result<bool, BusError> {
+        if !rom::select(bus, rom).await? {
+            return Ok(false);
+        }
+        self.write_configuration(bus).await?;
+        Ok(true)
+    }
+
+    async fn write_configuration<B: OneWireBus>(&self, bus: &mut B) -> Result<(), BusError> {
+        bus.write_byte(ds18b20::WRITE_SCRATCHPAD).await?;
+        bus.write_byte(MARKER_TH).await?;
+        bus.write_byte(MARKER_TL).await?;
+        bus.write_byte(self.config.resolution.config_byte()).await
     }
 
     /// One acquisition cycle; `now_ms` is the time of the readings.
@@ -251,11 +338,16 @@ impl TemperatureAcquisition {
                 continue;
             };
             let mut result = Err(ChannelState::Pending);
+            let mut absent = false;
             for attempt in 0..=self.config.read_retries {
                 if attempt > 0 {
                     report.retries = report.retries.saturating_add(1);
                 }
-                result = read_scratchpad(bus, &rom).await.map(|s| s.raw);
+                result = read_scratchpad(bus, &rom).await;
+                absent |= matches!(
+                    result,
+                    Err(ChannelState::Disconnected | ChannelState::NoPresence)
+                );
                 let retry = matches!(
                     result,
                     Err(ChannelState::CrcError
@@ -267,7 +359,22 @@ impl TemperatureAcquisition {
                     break;
                 }
             }
-            self.apply(channel, result, now_ms);
+            let (mut value, rewrite) = match result {
+                Ok(scratchpad) => self.judge(channel, &scratchpad),
+                Err(state) => (Err(state), false),
+            };
+            if let Some(ch) = self.channels.get_mut(channel) {
+                // Off the bus in this cycle or the last: it may have missed
+                // a Convert T and still hold an old conversion.
+                if value.is_ok() && (absent || ch.absent) {
+                    value = Err(ChannelState::Intermittent);
+                }
+                ch.absent = absent;
+            }
+            if rewrite && matches!(self.configure_sensor(bus, &rom).await, Ok(true)) {
+                report.reconfigured = report.reconfigured.saturating_add(1);
+            }
+            self.apply(channel, value, now_ms);
         }
         self.finish(report)
     }
@@ -323,9 +430,41 @@ impl TemperatureAcquisition {
         Ok(true)
     }
 
+    /// Tells a CRC-valid scratchpad's temperature from the power-on value and
+    /// a reset sensor (module doc). Returns the reading for [`Self::apply`]
+    /// and whether the sensor's configuration must be rewritten.
+    fn judge(&mut self, channel: usize, sp: &Scratchpad) -> (Result<i16, ChannelState>, bool) {
+        let resolution = self.config.resolution;
+        let Some(ch) = self.channels.get_mut(channel) else {
+            return (Err(ChannelState::Pending), false);
+        };
+        let intact = sp.th == MARKER_TH && sp.tl == MARKER_TL && sp.resolution == resolution;
+        if !intact {
+            ch.confirmed = false;
+            let state = if sp.reads_power_on_value() {
+                ChannelState::PowerOnValue
+            } else if ch.marked {
+                ChannelState::ConfigLost
+            } else {
+                ChannelState::Pending
+            };
+            return (Err(state), true);
+        }
+        ch.marked = true;
+        let first_since_configured = !ch.confirmed;
+        ch.confirmed = true;
+        if sp.reads_power_on_value() && first_since_configured {
+            return (Err(ChannelState::PowerOnValue), false);
+        }
+        (Ok(sp.raw), false)
+    }
+
     fn fail_all(&mut self, state: ChannelState, now_ms: u64) {
         for c in 0..MAX_CHANNELS {
             if self.map.get(c).is_some() {
+                if let Some(ch) = self.channels.get_mut(c) {
+                    ch.absent = state == ChannelState::NoPresence;
+                }
                 self.apply(c, Err(state), now_ms);
             }
         }

@@ -16,12 +16,48 @@ pub enum Fault {
     CorruptScratchpad(u32),
     /// Pulls every read slot low: nine zero bytes (which pass the CRC).
     AllZero,
-    /// Browned out: scratchpad back at its power-on contents (85.0 °C) and
-    /// Convert T is not executed.
+    /// Browning out continuously: every read shows the power-on contents
+    /// (85.0 °C, TH/TL/configuration from EEPROM) and Convert T is not
+    /// executed.
     PowerOn,
     /// The converter stopped: the temperature register keeps its value.
     Stuck,
+    /// The next `n` Convert T commands are missed (the device was busy or
+    /// the command was lost); the register keeps its contents.
+    MissConvert(u32),
+    /// Answers every command but sends no presence pulse (too weak or too
+    /// late for the master's sample): unnoticed while another device
+    /// answers the reset.
+    NoPresencePulse,
+    /// Intermittent data contact counted in resets: connected for `on`
+    /// resets, silent for the next `off`, and so on. The supply stays, so
+    /// the scratchpad survives.
+    FlappingResets {
+        on: u32,
+        off: u32,
+    },
+    /// Intermittent data contact in time: connected `on_ms`, silent
+    /// `off_ms`; a contact opening mid-transaction cuts it.
+    FlappingMs {
+        on_ms: u64,
+        off_ms: u64,
+    },
+    /// Every scratchpad transmission stops after `bits` bits; the rest reads
+    /// as ones (the pull-up).
+    CutRead {
+        bits: u8,
+    },
+    /// The next `n` ROM searches see ROM bit 13 inverted by this device (a
+    /// burst on its branch): the master assembles a code with a bad CRC.
+    SearchCorrupt(u32),
+    /// In the next `n` ROM searches this device drops out after bit 20.
+    SearchDropout(u32),
 }
+
+/// ROM bit the [`Fault::SearchCorrupt`] burst inverts.
+const SEARCH_CORRUPT_BIT: u8 = 13;
+/// ROM bit from which a [`Fault::SearchDropout`] device stays silent.
+const SEARCH_DROPOUT_BIT: u8 = 20;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
@@ -78,6 +114,9 @@ pub struct Ds18b20 {
     th: u8,
     tl: u8,
     config: u8,
+    /// TH, TL, configuration in EEPROM: what a power-on reset loads into
+    /// the scratchpad (factory values 0x4B, 0x46, 12 bit).
+    pub eeprom: [u8; 3],
     conversion: Option<(u64, i16)>,
     phase: Phase,
     tx: [u8; 9],
@@ -85,6 +124,14 @@ pub struct Ds18b20 {
     /// Reads of the scratchpad completed (for tests).
     pub scratchpad_reads: u64,
     pub conversions: u64,
+    /// Reset pulses seen (connected or not), for [`Fault::FlappingResets`].
+    resets_seen: u64,
+    /// Disconnected since the last reset ([`Fault::FlappingResets`]).
+    detached: bool,
+    /// The running search sees [`SEARCH_CORRUPT_BIT`] inverted.
+    search_flip: bool,
+    /// The running search loses this device at [`SEARCH_DROPOUT_BIT`].
+    search_drop: bool,
 }
 
 impl Ds18b20 {
@@ -102,12 +149,17 @@ impl Ds18b20 {
             th: 0x4B,
             tl: 0x46,
             config: 0x7F,
+            eeprom: [0x4B, 0x46, 0x7F],
             conversion: None,
             phase: Phase::Idle,
             tx: [0xFF; 9],
             pulldown: None,
             scratchpad_reads: 0,
             conversions: 0,
+            resets_seen: 0,
+            detached: false,
+            search_flip: false,
+            search_drop: false,
         }
     }
 
@@ -124,20 +176,48 @@ impl Ds18b20 {
     pub fn set_fault(&mut self, fault: Fault) {
         self.fault = fault;
         if fault == Fault::PowerOn {
-            self.register = POWER_ON_RAW;
-            self.config = 0x7F;
-            self.th = 0x4B;
-            self.tl = 0x46;
-            self.conversion = None;
+            self.power_on_reset();
         }
+    }
+
+    /// What a brownout or a reconnection does: the temperature register
+    /// back at 85.0 °C, TH/TL/configuration reloaded from EEPROM, any
+    /// conversion and transaction lost.
+    pub fn power_on_reset(&mut self) {
+        self.register = POWER_ON_RAW;
+        let [th, tl, config] = self.eeprom;
+        self.th = th;
+        self.tl = tl;
+        self.config = config;
+        self.conversion = None;
+        self.starved = false;
+        self.phase = Phase::Idle;
+        self.pulldown = None;
+    }
+
+    /// The scratchpad's TH, TL and configuration bytes.
+    pub fn scratchpad_config(&self) -> [u8; 3] {
+        [self.th, self.tl, self.config]
+    }
+
+    /// Overwrites the scratchpad's TH, TL and configuration bytes (a bit
+    /// upset the CRC cannot see: the device computes the CRC over it).
+    pub fn set_scratchpad_config(&mut self, bytes: [u8; 3]) {
+        [self.th, self.tl, self.config] = bytes;
+    }
+
+    /// The temperature register (what Read Scratchpad sends).
+    pub fn register(&self) -> i16 {
+        self.register
     }
 
     fn settle(&mut self, now: u64) {
         if let Some((end, value)) = self.conversion {
             if now >= end {
                 if self.parasite && self.starved {
-                    self.register = POWER_ON_RAW;
-                    self.config = 0x7F;
+                    // The supply collapsed: a full power-on reset.
+                    self.power_on_reset();
+                    return;
                 } else if self.fault != Fault::Stuck {
                     self.register = value;
                 }
@@ -174,14 +254,45 @@ impl Ds18b20 {
         self.rom.0[usize::from(i / 8)] & (1 << (i % 8)) != 0
     }
 
+    /// ROM bit as this device takes part in the running search.
+    fn search_bit(&self, i: u8) -> bool {
+        self.rom_bit(i) ^ (self.search_flip && i == SEARCH_CORRUPT_BIT)
+    }
+
+    /// Not connected to the line at `now` (it sees no edge, drives nothing).
+    fn silent(&self, now: u64) -> bool {
+        match self.fault {
+            Fault::Silent => true,
+            Fault::FlappingResets { .. } => self.detached,
+            Fault::FlappingMs { on_ms, off_ms } => (now / MS) % (on_ms + off_ms).max(1) >= on_ms,
+            _ => false,
+        }
+    }
+
+    /// The scratchpad bit about to be sent, while sending (line events).
+    pub(crate) fn sending_bit(&self) -> Option<u8> {
+        match self.phase {
+            Phase::Sending { n } if n < 72 => Some(n),
+            _ => None,
+        }
+    }
+
+    /// The Match ROM bit about to be received (line events).
+    pub(crate) fn matching_bit(&self) -> Option<u8> {
+        match self.phase {
+            Phase::MatchRom { n } => Some(n),
+            _ => None,
+        }
+    }
+
     /// The bit this device sends in the current slot, if it is sending.
     fn tx_bit(&self, now: u64) -> Option<bool> {
         match self.phase {
-            Phase::Search { bit, step: 0 } => Some(self.rom_bit(bit)),
-            Phase::Search { bit, step: 1 } => Some(!self.rom_bit(bit)),
+            Phase::Search { bit, step: 0 } => Some(self.search_bit(bit)),
+            Phase::Search { bit, step: 1 } => Some(!self.search_bit(bit)),
             Phase::ReadRom { n } => Some(self.rom_bit(n)),
             Phase::Sending { n } => {
-                if n >= 72 {
+                if n >= 72 || matches!(self.fault, Fault::CutRead { bits } if n >= bits) {
                     Some(true)
                 } else if self.fault == Fault::AllZero {
                     Some(false)
@@ -208,8 +319,12 @@ impl Ds18b20 {
             self.starved = true;
         }
         self.pulldown = None;
-        if self.fault == Fault::Silent {
+        if self.silent(now) {
             return;
+        }
+        if matches!(self.phase, Phase::Search { bit, .. } if self.search_drop && bit >= SEARCH_DROPOUT_BIT)
+        {
+            self.phase = Phase::Idle;
         }
         if self.tx_bit(now) == Some(false) {
             // t_RDV: data valid for 15 µs after the falling edge.
@@ -220,13 +335,24 @@ impl Ds18b20 {
     /// Returns true if this was an ambiguous write slot.
     pub(crate) fn on_rise(&mut self, now: u64, low_ns: u64) -> bool {
         self.settle(now);
-        if self.fault == Fault::Silent {
+        if low_ns >= 480 * US {
+            self.resets_seen += 1;
+            if let Fault::FlappingResets { on, off } = self.fault {
+                let period = u64::from(on) + u64::from(off);
+                self.detached = (self.resets_seen - 1) % period.max(1) >= u64::from(on);
+            }
+        }
+        if self.silent(now) {
             self.phase = Phase::Idle;
             return false;
         }
         if low_ns >= 480 * US {
             self.phase = Phase::RomCommand { byte: 0, n: 0 };
-            self.pulldown = Some((now + 30 * US, now + 150 * US));
+            self.search_flip = false;
+            self.search_drop = false;
+            if self.fault != Fault::NoPresencePulse {
+                self.pulldown = Some((now + 30 * US, now + 150 * US));
+            }
             return false;
         }
         let sending = self.tx_bit(now).is_some();
@@ -276,7 +402,10 @@ impl Ds18b20 {
                         0x33 => Phase::ReadRom { n: 0 },
                         0x55 => Phase::MatchRom { n: 0 },
                         0xCC => Phase::Function { byte: 0, n: 0 },
-                        0xF0 => Phase::Search { bit: 0, step: 0 },
+                        0xF0 => {
+                            self.start_search();
+                            Phase::Search { bit: 0, step: 0 }
+                        }
                         _ => Phase::Idle,
                     }
                 }
@@ -291,7 +420,7 @@ impl Ds18b20 {
                 }
             }
             Phase::Search { bit: b, step: 2 } => {
-                if bit != self.rom_bit(b) {
+                if bit != self.search_bit(b) {
                     Phase::Idle
                 } else if b == 63 {
                     Phase::Function { byte: 0, n: 0 }
@@ -331,10 +460,33 @@ impl Ds18b20 {
         };
     }
 
+    /// A Search ROM begins: a pending search fault takes effect for it.
+    fn start_search(&mut self) {
+        match self.fault {
+            Fault::SearchCorrupt(n) if n > 0 => {
+                self.search_flip = true;
+                self.fault = Fault::SearchCorrupt(n - 1);
+            }
+            Fault::SearchDropout(n) if n > 0 => {
+                self.search_drop = true;
+                self.fault = Fault::SearchDropout(n - 1);
+            }
+            _ => {}
+        }
+    }
+
     fn function(&mut self, command: u8, now: u64) -> Phase {
         match command {
             ds18b20::CONVERT_T => {
                 if self.fault == Fault::PowerOn {
+                    return Phase::Idle;
+                }
+                if let Fault::MissConvert(n) = self.fault {
+                    self.fault = if n > 1 {
+                        Fault::MissConvert(n - 1)
+                    } else {
+                        Fault::None
+                    };
                     return Phase::Idle;
                 }
                 let res = self.resolution();
@@ -350,8 +502,10 @@ impl Ds18b20 {
                 let res = self.resolution();
                 self.tx = ds18b20::encode(self.register, self.th, self.tl, res);
                 if self.fault == Fault::PowerOn {
-                    // Power-on contents: 50 05 4B 46 7F FF 0C 10 + CRC.
-                    self.tx = ds18b20::encode(POWER_ON_RAW, 0x4B, 0x46, Resolution::Bits12);
+                    // Power-on contents: 50 05, then TH TL config from EEPROM.
+                    let [th, tl, config] = self.eeprom;
+                    self.tx =
+                        ds18b20::encode(POWER_ON_RAW, th, tl, Resolution::from_config(config));
                 }
                 if let Fault::CorruptScratchpad(n) = self.fault {
                     if n > 0 {

@@ -51,6 +51,31 @@ impl Violations {
     }
 }
 
+/// When a scheduled [`LineEvent`] fires: checked at every falling edge,
+/// before the devices see it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Trigger {
+    /// After this many more falling edges (slots and resets).
+    AfterFalls(u64),
+    /// When `device` is about to send scratchpad bit `bit` (0..72).
+    ReadBit { device: usize, bit: u8 },
+    /// When `device` is about to receive Match ROM bit `bit` (0..64).
+    MatchBit { device: usize, bit: u8 },
+}
+
+/// A fault injected in the middle of whatever the master is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineEvent {
+    /// Line shorted to ground for the next `falls` falling edges.
+    Short { falls: u64 },
+    /// Cable cut (no device sees the master) for the next `falls` edges.
+    Open { falls: u64 },
+    /// Device brownout: power-on contents, transaction lost.
+    PowerOnReset(usize),
+    /// Sets a device fault.
+    SetFault(usize, Fault),
+}
+
 /// Line statistics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Stats {
@@ -77,13 +102,68 @@ pub(crate) struct Line {
     /// The strong pull-up is on.
     pub strong_pullup: bool,
     pub stats: Stats,
+    /// Falling edges so far (the clock of [`Trigger::AfterFalls`]).
+    falls: u64,
+    /// Scheduled faults; `AfterFalls` already made absolute.
+    events: Vec<(Trigger, LineEvent)>,
+    /// Transient short / open until this fall count.
+    short_until: u64,
+    open_until: u64,
 }
 
 impl Line {
+    fn is_shorted(&self) -> bool {
+        self.short || self.falls < self.short_until
+    }
+
+    fn is_open(&self) -> bool {
+        self.open || self.falls < self.open_until
+    }
+
+    /// Fires the scheduled events due at this falling edge.
+    fn fire_events(&mut self) {
+        let mut i = 0;
+        while i < self.events.len() {
+            let (trigger, event) = self.events[i];
+            let due = match trigger {
+                Trigger::AfterFalls(at) => self.falls >= at,
+                Trigger::ReadBit { device, bit } => self
+                    .devices
+                    .get(device)
+                    .is_some_and(|d| d.sending_bit() == Some(bit)),
+                Trigger::MatchBit { device, bit } => self
+                    .devices
+                    .get(device)
+                    .is_some_and(|d| d.matching_bit() == Some(bit)),
+            };
+            if !due {
+                i += 1;
+                continue;
+            }
+            self.events.remove(i);
+            match event {
+                LineEvent::Short { falls } => self.short_until = self.falls + falls,
+                LineEvent::Open { falls } => self.open_until = self.falls + falls,
+                LineEvent::PowerOnReset(d) => {
+                    if let Some(d) = self.devices.get_mut(d) {
+                        d.power_on_reset();
+                    }
+                }
+                LineEvent::SetFault(d, f) => {
+                    if let Some(d) = self.devices.get_mut(d) {
+                        d.set_fault(f);
+                    }
+                }
+            }
+        }
+    }
+
     fn drive_low(&mut self) {
         if self.master_low {
             return;
         }
+        self.fire_events();
+        self.falls += 1;
         let now = self.now_ns;
         if let Some(f) = self.fall_ns {
             if now - f < 60 * US {
@@ -97,7 +177,7 @@ impl Line {
         }
         self.master_low = true;
         self.fall_ns = Some(now);
-        if !self.open {
+        if !self.is_open() {
             for d in &mut self.devices {
                 d.on_fall(now);
             }
@@ -131,7 +211,7 @@ impl Line {
         } else {
             self.stats.slots += 1;
         }
-        if !self.open {
+        if !self.is_open() {
             let mut ambiguous = 0;
             for d in &mut self.devices {
                 if d.on_rise(now, low) {
@@ -146,7 +226,7 @@ impl Line {
 
     fn is_high(&mut self) -> bool {
         let now = self.now_ns;
-        if self.master_low || self.short {
+        if self.master_low || self.is_shorted() {
             return false;
         }
         if let Some(f) = self.fall_ns {
@@ -156,7 +236,7 @@ impl Line {
                 self.stats.violations.late_read += 1;
             }
         }
-        if self.open {
+        if self.is_open() {
             return true;
         }
         !self.devices.iter().any(|d| d.pulls_low(now))
@@ -189,6 +269,10 @@ impl Bus {
                 delay_overhead_ns: 0,
                 strong_pullup: false,
                 stats: Stats::default(),
+                falls: 0,
+                events: Vec::new(),
+                short_until: 0,
+                open_until: 0,
             })),
         }
     }
@@ -211,12 +295,49 @@ impl Bus {
 
     /// Cut the bus (no device answers) or restore it.
     pub fn set_open(&self, open: bool) {
-        self.line.borrow_mut().open = open;
+        let mut l = self.line.borrow_mut();
+        l.open = open;
+        if !open {
+            l.open_until = 0;
+        }
     }
 
-    /// Short the line to ground or remove the short.
+    /// Schedules a fault for the moment `trigger` describes.
+    pub fn schedule(&self, trigger: Trigger, event: LineEvent) {
+        let mut l = self.line.borrow_mut();
+        let trigger = match trigger {
+            Trigger::AfterFalls(n) => Trigger::AfterFalls(l.falls + n),
+            t => t,
+        };
+        l.events.push((trigger, event));
+    }
+
+    /// Scheduled events that have not fired yet.
+    pub fn pending_events(&self) -> usize {
+        self.line.borrow().events.len()
+    }
+
+    /// Takes device `i` off the bus (it sees and drives nothing).
+    pub fn unplug(&self, i: usize) {
+        self.with_device(i, |d| d.set_fault(Fault::Silent));
+    }
+
+    /// Plugs device `i` back in: it powers up (85.0 °C, EEPROM
+    /// configuration) as a real sensor does.
+    pub fn plug(&self, i: usize) {
+        self.with_device(i, |d| {
+            d.set_fault(Fault::None);
+            d.power_on_reset();
+        });
+    }
+
+    /// Short the line to ground or remove the short (a scheduled one too).
     pub fn set_short(&self, short: bool) {
-        self.line.borrow_mut().short = short;
+        let mut l = self.line.borrow_mut();
+        l.short = short;
+        if !short {
+            l.short_until = 0;
+        }
     }
 
     pub fn set_delay_overhead_ns(&self, ns: u64) {
