@@ -13,7 +13,7 @@ golden="${CARGO_TARGET_DIR:-target}/bench-golden.bin"
 cargo run -q -p tcomp --release -- golden -o "$golden" --steps 10 >&2
 # The FL_THERMAL model the demo serves: a 4-11-1 network (ch3) and a 5-term linear table (ch5).
 fl="${CARGO_TARGET_DIR:-target}/bench-fl-model.img"
-cargo run -q -p tcomp --release -- export --model demo/fl-thermal-fit.json --run demo/trace.csv --use dch5_um=mlr -o "$fl" >&2
+cargo run -q -p tcomp --release -- export --model demo/fl-thermal-fit.json --run demo/trace.csv -o "$fl" >&2
 json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench "$golden" "$fl" | grep '^{' | tail -n 1)
 [ -n "$json" ] || die "the bench firmware printed no figures"
 # Flash taken by the math core: the symbols LTO left under its name in the

@@ -20,5 +20,5 @@ if [ "$refit" = 1 ]; then
   "$tcomp" fit "$run" --split-chrono 0.6,0.8 --channels dch3_um,dch5_um --out "$fit" --json >/dev/null
 fi
 img="$target/fl-thermal.img"
-"$tcomp" export --model "$fit" --run "$run" --use dch5_um=mlr -o "$img" >&2
+"$tcomp" export --model "$fit" --run "$run" -o "$img" >&2
 "$tcomp" replay "$run" "$img" --from 0.6 --to 0.8 $json

@@ -15,7 +15,7 @@ cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
 cargo build -q -p tcomp --release >&2
 target="${CARGO_TARGET_DIR:-target}"
 model="$target/bench-modbus-model.img"
-"$target/release/tcomp" export --model demo/fl-thermal-fit.json --run demo/trace.csv --use dch5_um=mlr -o "$model" >&2
+"$target/release/tcomp" export --model demo/fl-thermal-fit.json --run demo/trace.csv -o "$model" >&2
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
 log="$target/bench-modbus-board.log"
 qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic -monitor none \

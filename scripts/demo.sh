@@ -20,8 +20,8 @@ tcomp="$target/release/tcomp"
 model="${2:-}"
 if [ -z "$model" ]; then
   model="$target/demo-model.img"
-  say "exporting the fitted FL_THERMAL model (demo/fl-thermal-fit.json) to a board image: 5-11-1 network for ch3, lagged MLR for ch5"
-  "$tcomp" export --model demo/fl-thermal-fit.json --run "$trace" --use dch5_um=mlr -o "$model"
+  say "exporting the fitted FL_THERMAL model (demo/fl-thermal-fit.json) to a board image: the model blocked cross-validation chose per channel on the training rows"
+  "$tcomp" export --model demo/fl-thermal-fit.json --run "$trace" -o "$model"
 fi
 
 log="$target/demo-board.log"

@@ -373,9 +373,9 @@ pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
     s.split(',')
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
-            let (ch, k) = p
-                .split_once('=')
-                .ok_or_else(|| anyhow::anyhow!("expected CHANNEL=ga-bpn|mlr|mlr-static, got {p}"))?;
+            let (ch, k) = p.split_once('=').ok_or_else(|| {
+                anyhow::anyhow!("expected CHANNEL=ga-bpn|mlr|mlr-static, got {p}")
+            })?;
             Ok((ch.trim().to_string(), Choice::parse(k)?))
         })
         .collect()

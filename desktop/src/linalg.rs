@@ -14,7 +14,12 @@ const SVD_RCOND: f64 = 1e-12;
 /// `min |X w − y|² + ridge·|w|²` for the rows of `X`; with `intercept` a
 /// leading column of ones is added (never penalised). Returns `[c0, c1..]`
 /// with an intercept, `[c1..]` without.
-pub fn least_squares(rows: &[Vec<f64>], y: &[f64], intercept: bool, ridge: f64) -> Result<Vec<f64>> {
+pub fn least_squares(
+    rows: &[Vec<f64>],
+    y: &[f64],
+    intercept: bool,
+    ridge: f64,
+) -> Result<Vec<f64>> {
     let p = rows.first().map_or(0, Vec::len);
     let off = usize::from(intercept);
     let n = rows.len().min(y.len());
@@ -46,7 +51,11 @@ pub fn least_squares(rows: &[Vec<f64>], y: &[f64], intercept: bool, ridge: f64) 
 pub fn least_squares_cols(cols: &[Vec<f64>], y: &[f64], ridge: f64) -> Result<Vec<f64>> {
     let n = y.len();
     let rows: Vec<Vec<f64>> = (0..n)
-        .map(|i| cols.iter().map(|c| c.get(i).copied().unwrap_or(0.0)).collect())
+        .map(|i| {
+            cols.iter()
+                .map(|c| c.get(i).copied().unwrap_or(0.0))
+                .collect()
+        })
         .collect();
     least_squares(&rows, y, false, ridge)
 }
@@ -70,11 +79,19 @@ fn solve_svd(a: DMatrix<f64>, b: &DVector<f64>) -> Result<Vec<f64>> {
 /// A matrix that is not positive definite is an error.
 pub fn solve_spd(a: &[f64], b: &[f64], n: usize) -> Result<Vec<f64>> {
     if a.len() != n * n || b.len() != n {
-        bail!("SPD solve: sizes do not match ({}×{n} vs {})", a.len(), b.len());
+        bail!(
+            "SPD solve: sizes do not match ({}×{n} vs {})",
+            a.len(),
+            b.len()
+        );
     }
     let m = DMatrix::from_row_slice(n, n, a);
     match m.cholesky() {
-        Some(c) => Ok(c.solve(&DVector::from_column_slice(b)).iter().copied().collect()),
+        Some(c) => Ok(c
+            .solve(&DVector::from_column_slice(b))
+            .iter()
+            .copied()
+            .collect()),
         None => bail!("SPD solve: matrix is not positive definite"),
     }
 }

@@ -273,19 +273,33 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 (to.clamp(0.0, 1.0) * n as f64) as usize,
             );
             let res = tcomp::replay::residuals(&table, &rows, &model, a, b);
+            let flags = tcomp::replay::flag_counts(&rows, a, b);
             if json {
                 println!(
                     "{}",
-                    serde_json::json!({"rows": n, "scored_rows": [a, b], "channels": res})
+                    serde_json::json!({"rows": n, "scored_rows": [a, b], "channels": res, "status_rows": flags})
                 );
             } else {
                 println!("{} samples compensated; scored rows {a}..{b}", n);
                 for r in &res {
                     println!(
-                        "  {}: MAE {:.2} µm, RMS {:.2} µm, peak {:.2} µm, RMS reduction {:.1} %",
-                        r.column, r.mae_um, r.rms_um, r.peak_um, r.reduction_pct
+                        "  {}: about the run's reference (what the board compensates): MAE {:.2} µm, RMS {:.2} µm (uncompensated {:.2}), peak {:.2} µm, RMS reduction {:.1} %",
+                        r.column, r.mae_um, r.rms_um, r.uncompensated_rms_um, r.peak_um, r.reduction_pct
+                    );
+                    println!(
+                        "  {}: about the block's own mean (an operator who re-zeroes): RMS {:.2} µm (uncompensated {:.2}), reduction {:.1} %",
+                        r.column, r.rms_about_mean_um, r.uncompensated_rms_about_mean_um, r.reduction_about_mean_pct
+                    );
+                    println!(
+                        "  {}: never worse than no compensation: {}",
+                        r.column,
+                        if r.never_worse { "yes" } else { "NO — this block is worse with the board" }
                     );
                 }
+                println!(
+                    "  status rows: {} valid, {} out of envelope, {} clamped, {} rate limited, {} stale, {} sensor fault",
+                    flags.valid, flags.out_of_envelope, flags.clamped, flags.rate_limited, flags.stale, flags.sensor_fault
+                );
             }
         }
         Command::Upload {

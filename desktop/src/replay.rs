@@ -63,16 +63,83 @@ pub fn replay_files(trace: &std::path::Path, image: &std::path::Path) -> Result<
     replay(&csv, model)
 }
 
-/// Error figures of the board's served correction against a measured channel.
+/// Error figures of the board's served correction against a measured channel,
+/// two ways: about the run's reference (what the board compensates: the
+/// measured error is relative to the run's first sample) and about the
+/// scored block's own mean (what an operator who re-zeroes the machine at
+/// the start of the block would see).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Residual {
     pub column: String,
     pub rows: usize,
+    /// Residual (measured − served) about the run's reference.
     pub mae_um: f64,
     pub rms_um: f64,
     pub peak_um: f64,
-    /// 100 · (1 − RMS(residual) / RMS(measured)).
+    /// RMS of the measured error itself (no compensation), about the reference.
+    pub uncompensated_rms_um: f64,
+    /// 100 · (1 − RMS(residual) / RMS(measured)), about the reference.
     pub reduction_pct: f64,
+    /// The same with each series' block mean removed (re-zeroed operator's view).
+    pub rms_about_mean_um: f64,
+    pub uncompensated_rms_about_mean_um: f64,
+    pub reduction_about_mean_pct: f64,
+    /// RMS(residual) ≤ RMS(measured) about the reference: the board did not
+    /// make this block worse than no compensation.
+    pub never_worse: bool,
+}
+
+/// Rows per status flag over the scored block.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FlagCounts {
+    pub valid: usize,
+    pub out_of_envelope: usize,
+    pub clamped: usize,
+    pub rate_limited: usize,
+    pub stale: usize,
+    pub sensor_fault: usize,
+    pub no_model: usize,
+    pub warming_up: usize,
+}
+
+/// Count status flags over rows `[from, to)`.
+pub fn flag_counts(rows: &[ReplayRow], from: usize, to: usize) -> FlagCounts {
+    use thermocomp_core::compensator::status as st;
+    let mut c = FlagCounts::default();
+    for r in rows.iter().take(to).skip(from) {
+        let s = r.out.status;
+        let mut add = |bit: u16, n: &mut usize| {
+            if s & bit != 0 {
+                *n += 1;
+            }
+        };
+        add(st::VALID, &mut c.valid);
+        add(st::OUT_OF_ENVELOPE, &mut c.out_of_envelope);
+        add(st::CLAMPED, &mut c.clamped);
+        add(st::RATE_LIMITED, &mut c.rate_limited);
+        add(st::STALE_INPUTS, &mut c.stale);
+        add(st::SENSOR_FAULT, &mut c.sensor_fault);
+        add(st::NO_MODEL, &mut c.no_model);
+        add(st::WARMING_UP, &mut c.warming_up);
+    }
+    c
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+fn demeaned(v: &[f64]) -> Vec<f64> {
+    let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+    v.iter().map(|x| x - m).collect()
+}
+
+fn reduction(res: f64, raw: f64) -> f64 {
+    if raw > 0.0 {
+        100.0 * (1.0 - res / raw)
+    } else {
+        0.0
+    }
 }
 
 /// Compare each direction `<name>` with the run's `d<name>_um` column over
@@ -90,27 +157,30 @@ pub fn residuals(
         let Some(measured) = run.col(&column) else {
             continue;
         };
-        let (mut n, mut abs, mut sq, mut peak, mut msq) = (0usize, 0.0, 0.0, 0.0f64, 0.0);
+        let (mut meas, mut res) = (vec![], vec![]);
         for (row, m) in rows.iter().zip(measured).take(to).skip(from) {
             let Some(m) = m else { continue };
-            let r = m - f64::from(row.out.corrections[d]) / 10.0;
-            n += 1;
-            abs += r.abs();
-            sq += r * r;
-            msq += m * m;
-            peak = peak.max(r.abs());
+            meas.push(*m);
+            res.push(m - f64::from(row.out.corrections[d]) / 10.0);
         }
-        if n == 0 {
+        if meas.is_empty() {
             continue;
         }
-        let nf = n as f64;
+        let n = meas.len() as f64;
+        let (r_rms, m_rms) = (rms(&res), rms(&meas));
+        let (r_rms0, m_rms0) = (rms(&demeaned(&res)), rms(&demeaned(&meas)));
         out.push(Residual {
             column,
-            rows: n,
-            mae_um: abs / nf,
-            rms_um: (sq / nf).sqrt(),
-            peak_um: peak,
-            reduction_pct: 100.0 * (1.0 - (sq / msq.max(f64::MIN_POSITIVE)).sqrt()),
+            rows: meas.len(),
+            mae_um: res.iter().map(|r| r.abs()).sum::<f64>() / n,
+            rms_um: r_rms,
+            peak_um: res.iter().fold(0.0f64, |a, r| a.max(r.abs())),
+            uncompensated_rms_um: m_rms,
+            reduction_pct: reduction(r_rms, m_rms),
+            rms_about_mean_um: r_rms0,
+            uncompensated_rms_about_mean_um: m_rms0,
+            reduction_about_mean_pct: reduction(r_rms0, m_rms0),
+            never_worse: r_rms <= m_rms,
         });
     }
     out

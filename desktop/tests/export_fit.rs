@@ -37,6 +37,11 @@ fn exported_mlr_and_net_match_the_fitted_formulas() {
             b2: -1.0,
             channel: "dx_um".into(),
         }],
+        chosen: [("dx_um", "ga-bpn"), ("dz_um", "mlr")]
+            .iter()
+            .map(|(c, m)| (c.to_string(), m.to_string()))
+            .collect(),
+        ..Default::default()
     };
     let columns: Vec<String> = vec!["T_a".into(), "T_b".into()];
     let fm = float_model_from_fit(&file, &columns, &ExportOptions::default()).unwrap();

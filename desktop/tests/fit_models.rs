@@ -38,7 +38,7 @@ fn mlr_recovers_known_coefficients() {
         (FeatureKind::SensorRise("T_b".into()), None),
     ];
     let specs = ranged_specs(&kinds, &s);
-    let m = fit_mlr(specs, &s, "dx_um");
+    let m = fit_mlr(specs, &s, "dx_um").unwrap();
     // Slopes in raw units: c_i · 2 / (max − min).
     let slope = |i: usize| m.coef[i] * 2.0 / (m.features[i].max - m.features[i].min);
     assert!((slope(0) - 2.0).abs() < 1e-8, "{}", slope(0));
@@ -185,6 +185,9 @@ fn gabpn_beats_mlr_on_nonlinear_lagged_target() {
         mlr
     );
     assert!(net.reduction_pct > 90.0, "{net:?}");
+    // Cross-validation on the training rows alone picks the network here.
+    assert_eq!(rep.chosen["dx_um"], "ga-bpn", "{:?}", rep.inputs[0].cv);
+    assert_eq!(rep.model_file.nets.len(), NetOpts::default().ensemble);
     // The exported network predicts exactly what was validated.
     let np = &rep.model_file.nets[0];
     assert_eq!(np.w1.len(), 5);
@@ -194,4 +197,168 @@ fn gabpn_beats_mlr_on_nonlinear_lagged_target() {
         .flatten()
         .chain(&np.b1)
         .all(|w| w.abs() < 2000.0));
+}
+
+/// Two sensors warming at different rates (first-order responses to the
+/// spindle schedule of `synthetic_nonlinear`), and a target linear in them.
+fn synthetic_linear(n_extra_sensors: usize) -> Run {
+    let base = synthetic_nonlinear();
+    let t = base.time_s();
+    let rpm: Vec<f64> = base
+        .col("spindle_rpm")
+        .unwrap()
+        .iter()
+        .map(|v| v.unwrap())
+        .collect();
+    let respond = |tau: f64, gain: f64| -> Vec<f64> {
+        let mut out = vec![20.0];
+        for k in 1..t.len() {
+            let target = 20.0 + rpm[k] * gain;
+            let prev = out[k - 1];
+            out.push(target + (-(t[k] - t[k - 1]) / tau).exp() * (prev - target));
+        }
+        out
+    };
+    let a = respond(2500.0, 1.0 / 400.0);
+    let b = respond(9000.0, 1.0 / 900.0);
+    let y: Vec<f64> = a
+        .iter()
+        .zip(&b)
+        .map(|(a, b)| 3.0 * (a - 20.0) - 2.0 * (b - 20.0))
+        .collect();
+    let mut cols = vec![
+        ("time_s".to_string(), t.clone()),
+        ("spindle_rpm".to_string(), rpm.clone()),
+    ];
+    // Extra sensors first: the informative pair sits beyond them.
+    for i in 0..n_extra_sensors {
+        cols.push((
+            format!("T_x{i:02}"),
+            respond(4000.0 + 300.0 * i as f64, 1.0 / 5000.0),
+        ));
+    }
+    cols.push(("T_a".into(), a));
+    cols.push(("T_b".into(), b));
+    cols.push(("dx_um".into(), y));
+    Run {
+        meta: vec![],
+        columns: cols.iter().map(|c| c.0.clone()).collect(),
+        data: cols
+            .into_iter()
+            .map(|c| c.1.into_iter().map(Some).collect())
+            .collect(),
+    }
+}
+
+fn quick_net() -> NetOpts {
+    NetOpts {
+        hidden: 4,
+        population: 12,
+        generations: 6,
+        lm_iters: 40,
+        ensemble: 2,
+        ..NetOpts::default()
+    }
+}
+
+#[test]
+fn cross_validation_prefers_the_simplest_model_that_is_good_enough() {
+    let run = synthetic_linear(0);
+    let plan = Plan::new(vec![run], vec!["lin".into()], 1, Some((0.7, 1.0))).unwrap();
+    let cfg = FitConfig {
+        split_chrono: Some((0.7, 1.0)),
+        candidates: tcomp::fit::run::Candidates::All,
+        net: quick_net(),
+        ..FitConfig::default()
+    };
+    let rep = fit_plan(&plan, &cfg).unwrap();
+    let cv = &rep.inputs[0].cv;
+    assert!(
+        cv.contains_key("mlr") && cv.contains_key("ga-bpn"),
+        "{cv:?}"
+    );
+    // The target is linear in the sensors: a network cannot be clearly better,
+    // so the choice is a linear model, and it is what the model file ships.
+    assert_ne!(rep.chosen["dx_um"], "ga-bpn", "{cv:?}");
+    assert_eq!(rep.model_file.chosen, rep.chosen);
+    let chosen = &cv[&rep.chosen["dx_um"]];
+    assert!(chosen.rms_um < 0.5, "{cv:?}");
+    // The validation block was never used for the choice: the CV rows are training rows.
+    let train_rows: usize = rep.train_segments.iter().map(|s| s.end - s.start).sum();
+    assert!(
+        chosen.rows <= train_rows && chosen.rows > train_rows / 2,
+        "{chosen:?}"
+    );
+}
+
+#[test]
+fn sensors_beyond_the_boards_channels_are_never_candidates() {
+    use thermocomp_core::limits::MAX_SENSORS;
+    // 22 extra sensors: T_a and T_b (the informative ones) are columns 23 and 24.
+    let run = synthetic_linear(22);
+    let columns: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    let plan = Plan::new(vec![run], vec!["wide".into()], 1, Some((0.7, 1.0))).unwrap();
+    let cfg = FitConfig {
+        split_chrono: Some((0.7, 1.0)),
+        candidates: tcomp::fit::run::Candidates::All,
+        skip_net: true,
+        ..FitConfig::default()
+    };
+    let rep = fit_plan(&plan, &cfg).unwrap();
+    assert!(
+        rep.notes.iter().any(|n| n.contains("beyond the board")),
+        "{:?}",
+        rep.notes
+    );
+    for m in rep.model_file.mlr.iter().chain(&rep.model_file.mlr_static) {
+        for f in &m.features {
+            for c in f.kind.columns() {
+                if c != "spindle_rpm" {
+                    let ch = columns.iter().position(|x| x == c).unwrap();
+                    assert!(ch < MAX_SENSORS, "{c} is channel {ch}");
+                }
+            }
+        }
+    }
+    // What fit produced exports; a model naming channel 23 is refused, naming the limit.
+    let opts = tcomp::export::ExportOptions::default();
+    tcomp::export::float_model_from_fit(&rep.model_file, &columns, &opts).unwrap();
+    let mut bad = rep.model_file.clone();
+    bad.mlr[0].features[0].kind = FeatureKind::SensorRise("T_a".into());
+    bad.chosen.insert("dx_um".into(), "mlr".into());
+    let err = tcomp::export::float_model_from_fit(&bad, &columns, &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("MAX_SENSORS") && err.contains("T_a"), "{err}");
+    assert!(!err.contains('\n'), "one line: {err}");
+}
+
+#[test]
+fn lags_longer_than_the_training_span_are_not_candidates() {
+    let run = synthetic_linear(0);
+    // 3000 rows × 20 s, 30 % for training: 5 h; a 6 h lag cannot be learned.
+    let plan = Plan::new(vec![run], vec!["short".into()], 1, Some((0.3, 0.5))).unwrap();
+    let cfg = FitConfig {
+        split_chrono: Some((0.3, 0.5)),
+        lags: vec![0.0, 3600.0, 21600.0],
+        skip_net: true,
+        ..FitConfig::default()
+    };
+    let rep = fit_plan(&plan, &cfg).unwrap();
+    assert!(
+        rep.notes.iter().any(|n| n.contains("training span")),
+        "{:?}",
+        rep.notes
+    );
+    for i in &rep.inputs {
+        assert!(
+            i.features.iter().all(|f| !f.ends_with("@21600")),
+            "{:?}",
+            i.features
+        );
+    }
 }

@@ -134,7 +134,10 @@ impl FitArgs {
             ..NetOpts::default()
         };
         if !(self.choice_margin >= 0.0 && self.choice_margin < 1.0) {
-            bail!("--choice-margin must be in [0, 1), got {}", self.choice_margin);
+            bail!(
+                "--choice-margin must be in [0, 1), got {}",
+                self.choice_margin
+            );
         }
         cfg.choice_margin = self.choice_margin;
         cfg.progress = !self.json;

@@ -7,8 +7,8 @@
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 
-use crate::linalg::{least_squares, solve_spd};
 use super::rng::Rng;
+use crate::linalg::{least_squares, solve_spd};
 
 /// Bound on |W1| and |b1| (the fixed-point core's range).
 pub const W1_BOUND: f64 = 1999.0;

@@ -493,7 +493,10 @@ pub fn choose_model(cv: &BTreeMap<String, CvScore>, margin: f64) -> Option<Strin
     let best = cv.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
     MODEL_NAMES
         .iter()
-        .find(|n| cv.get(**n).is_some_and(|s| s.rms_um <= best * (1.0 + margin)))
+        .find(|n| {
+            cv.get(**n)
+                .is_some_and(|s| s.rms_um <= best * (1.0 + margin))
+        })
         .map(|n| n.to_string())
 }
 
@@ -511,7 +514,9 @@ fn training_span_s(plan: &Plan) -> f64 {
 
 /// Fit on a planned split.
 pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
-    use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS};
+    use thermocomp_core::limits::{
+        MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS,
+    };
     let first = &plan.runs[plan.train[0].run];
     let channels: Vec<String> = match &cfg.channels {
         Some(c) => c.clone(),
@@ -557,7 +562,10 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         .take(MAX_SENSORS)
         .map(|s| s.to_string())
         .collect();
-    let beyond = first.temperature_columns().len().saturating_sub(MAX_SENSORS);
+    let beyond = first
+        .temperature_columns()
+        .len()
+        .saturating_sub(MAX_SENSORS);
     let mut notes = Vec::new();
     if beyond > 0 {
         notes.push(format!(
@@ -580,7 +588,11 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         let slices: Vec<Run> = plan
             .train
             .iter()
-            .map(|s| plan.runs[s.run].slice_rows(s.start, s.end).keep_temperatures(&board_sensors))
+            .map(|s| {
+                plan.runs[s.run]
+                    .slice_rows(s.start, s.end)
+                    .keep_temperatures(&board_sensors)
+            })
             .collect();
         let groups = cfg.groups.min(board_sensors.len());
         Some(select::select(&slices, groups, 0)?)
@@ -682,7 +694,9 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                     .iter()
                     .copied()
                     .filter(|i| !in_use.contains(i) && !idx.contains(i))
-                    .take(budget.saturating_sub(idx.iter().filter(|i| !in_use.contains(i)).count())),
+                    .take(
+                        budget.saturating_sub(idx.iter().filter(|i| !in_use.contains(i)).count()),
+                    ),
             )
             .collect();
         let with_net = !cfg.skip_net;
@@ -752,7 +766,11 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         if chosen == "ga-bpn" {
             nets_left -= ens;
         }
-        let used_idx: &[usize] = if chosen == "mlr-static" { &static_ok } else { &idx };
+        let used_idx: &[usize] = if chosen == "mlr-static" {
+            &static_ok
+        } else {
+            &idx
+        };
         for &i in used_idx {
             if !in_use.contains(&i) {
                 in_use.push(i);
