@@ -109,6 +109,10 @@ impl Term {
             component,
         })
     }
+    /// Roll: the rotation about the axis's own direction (EAX, EBY, ECZ).
+    pub fn is_roll(self) -> bool {
+        self.component.is_angular() && self.component.index() - 3 == self.axis.index()
+    }
     /// Straightness: a translation across the axis's own direction.
     pub fn is_straightness(self) -> bool {
         !self.component.is_angular() && self.component.index() != self.axis.index()

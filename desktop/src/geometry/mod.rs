@@ -2,6 +2,7 @@
 //! the 21 ISO 230-1 errors (`errors`), the kinematic chain that turns them
 //! into a tool-point error (`kinematics`).
 
+pub mod cli;
 pub mod errors;
 pub mod kinematics;
 
@@ -9,3 +10,6 @@ pub use errors::{Axis, Component, GeometricErrors, Poly, Squareness, Term};
 pub use kinematics::{
     sensitivity, tool_tip_error_exact, tool_tip_error_linear, Sensitivity, Structure,
 };
+pub mod identify;
+pub mod lines;
+pub mod sim;
