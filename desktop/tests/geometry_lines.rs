@@ -301,3 +301,55 @@ fn cli_simulate_then_identify_json() {
         "{err}"
     );
 }
+
+#[test]
+fn thermal_model_predicts_held_out_temperature_states() {
+    use tcomp::geometry::sim::{measure_state, ThermalMachine};
+    use tcomp::geometry::thermal::{leave_one_out, State};
+    let st = Structure::parse("XY/Z").unwrap();
+    let mut rng = Rng::new(77);
+    let machine = ThermalMachine::random(STROKE, &["xscrew", "column"], &mut rng);
+    let plan = plan14(STROKE, 100.0, 100.0);
+    let setup = MeasurementSetup {
+        noise_um: 0.3,
+        targets: 21,
+        ..Default::default()
+    };
+    let mut states = Vec::new();
+    for k in 0..6 {
+        let temps = vec![rng.range(20.0, 32.0), rng.range(20.0, 32.0)];
+        let files = measure_state(
+            &st,
+            &machine,
+            &temps,
+            &format!("S{k}"),
+            &plan,
+            &setup,
+            &mut rng,
+        );
+        let avg = average_runs(&files).unwrap();
+        assert!(avg
+            .iter()
+            .all(|a| a.temperature_state.as_deref() == Some(format!("S{k}").as_str())));
+        let mean_t: Vec<f64> = (0..2)
+            .map(|i| avg.iter().map(|a| a.temps[i].1).sum::<f64>() / avg.len() as f64)
+            .collect();
+        assert!((mean_t[0] - temps[0]).abs() < 0.05);
+        states.push(State {
+            name: format!("S{k}"),
+            lines: avg.into_iter().map(|a| a.obs).collect(),
+            temps: mean_t,
+        });
+    }
+    let sensors = vec!["xscrew".to_string(), "column".to_string()];
+    let held = leave_one_out(&st, &states, &sensors, Degrees::default(), STROKE).unwrap();
+    for h in &held {
+        assert!(h.thermal_rms_um < 0.3 * h.static_rms_um, "{h:?}");
+        assert!(h.thermal_rms_um < 2.0 * h.own_fit_rms_um + 0.1, "{h:?}");
+    }
+    // Too few states for the sensors is refused with a clear message.
+    let e = tcomp::geometry::thermal::fit(&st, &states[..3], &sensors, Degrees::default(), STROKE)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("need at least 4"), "{e}");
+}

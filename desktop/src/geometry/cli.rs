@@ -28,6 +28,26 @@ pub enum GeometryCommand {
     Identify(IdentifyArgs),
     /// Print the 14-line plan for a working volume and its conditioning.
     Plan(PlanArgs),
+    /// Temperature dependence: per error coefficient a linear function of
+    /// sensor temperatures, fitted from lines at several temperature states;
+    /// each state held out in turn.
+    FitThermal(FitThermalArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct FitThermalArgs {
+    /// Line files with `temperature_state` metadata and `T_` columns.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    #[command(flatten)]
+    pub degrees: DegreeArgs,
+    /// Sensors to use, e.g. xscrew,column (default: every T_ column).
+    #[arg(long)]
+    pub sensors: Option<String>,
+    #[arg(long)]
+    pub stroke: Option<String>,
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -106,6 +126,11 @@ pub struct SimulateArgs {
     /// Targets per line, ends included.
     #[arg(long, default_value_t = 41)]
     pub targets: usize,
+    /// Temperature states to simulate (0: one state, no temperatures). With
+    /// N > 0 the machine's errors change with three sensors (T_xscrew,
+    /// T_column, T_bed) and files are named S1_L01_forward.csv ….
+    #[arg(long, default_value_t = 0)]
+    pub states: usize,
     /// Output directory (created): L01_forward.csv … L14_backward.csv, errors.json.
     #[arg(short, long)]
     pub out: PathBuf,
@@ -241,6 +266,7 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::Simulate(s) => simulate(s),
         GeometryCommand::Identify(i) => identify_cmd(i),
         GeometryCommand::Plan(p) => plan_cmd(p),
+        GeometryCommand::FitThermal(f) => fit_thermal_cmd(f),
     }
 }
 
@@ -281,6 +307,36 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     };
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let plan = plan14(stroke, a.volume.tool, a.volume.side);
+    if a.states > 0 {
+        let machine =
+            super::sim::ThermalMachine::random(stroke, &["xscrew", "column", "bed"], &mut rng);
+        let mut n = 0;
+        for k in 1..=a.states {
+            let temps: Vec<f64> = (0..3).map(|_| rng.range(20.0, 32.0)).collect();
+            let name = format!("S{k}");
+            for f in
+                super::sim::measure_state(&st, &machine, &temps, &name, &plan, &setup, &mut rng)
+            {
+                let run = if f.run == super::lines::Run::Backward {
+                    "backward"
+                } else {
+                    "forward"
+                };
+                f.write(&a.out.join(format!("{name}_{}_{run}.csv", f.spec.id)))?;
+                n += 1;
+            }
+        }
+        let ej = ErrorsJson::from_errors(&machine.base, &st, stroke, 11);
+        let path = a.out.join("errors.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&ej)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "wrote {n} line files of {} temperature states and errors.json (errors at 20 °C) to {}",
+            a.states,
+            a.out.display()
+        );
+        return Ok(());
+    }
     let mut n = 0;
     for spec in &plan {
         let [f, b] = measure_line(&st, &truth, spec, &setup, None, &mut rng);
@@ -622,6 +678,101 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
             .map(|(n, w)| format!("{w:+.2}·{n}"))
             .collect();
         println!("  not observable: {}", c.join(" "));
+    }
+    Ok(())
+}
+
+fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
+    use super::thermal::{fit, leave_one_out, sensitivities, State};
+    let degrees = a.degrees.degrees()?;
+    let files: Vec<LineFile> = a
+        .files
+        .iter()
+        .map(|p| LineFile::read(p))
+        .collect::<Result<_>>()?;
+    let st = files[0].structure.clone();
+    let avg = average_runs(&files)?;
+    let sensors: Vec<String> = match &a.sensors {
+        Some(s) => s
+            .split(',')
+            .map(|x| x.trim().trim_start_matches("T_").to_string())
+            .collect(),
+        None => avg[0].temps.iter().map(|(n, _)| n.clone()).collect(),
+    };
+    if sensors.is_empty() {
+        bail!("the line files have no T_ columns; fit-thermal needs sensor temperatures");
+    }
+    let mut by_state: BTreeMap<String, Vec<&super::lines::Averaged>> = BTreeMap::new();
+    for l in &avg {
+        let Some(s) = &l.temperature_state else {
+            bail!("line {}: no temperature_state metadata", l.obs.id);
+        };
+        by_state.entry(s.clone()).or_default().push(l);
+    }
+    let mut states = Vec::new();
+    for (name, lines) in &by_state {
+        let mut temps = Vec::new();
+        for s in &sensors {
+            let v: Vec<f64> = lines
+                .iter()
+                .map(|l| l.temps.iter().find(|(n, _)| n == s).map(|(_, t)| *t))
+                .collect::<Option<_>>()
+                .ok_or_else(|| anyhow::anyhow!("state {name}: a line has no T_{s} column"))?;
+            temps.push(v.iter().sum::<f64>() / v.len() as f64);
+        }
+        states.push(State {
+            name: name.clone(),
+            lines: lines.iter().map(|l| l.obs.clone()).collect(),
+            temps,
+        });
+    }
+    let stroke = match &a.stroke {
+        Some(s) => parse_triple(s, "--stroke")?,
+        None => {
+            let mut m = [0.0f64; 3];
+            for l in &avg {
+                for p in &l.obs.points {
+                    for k in 0..3 {
+                        m[k] = m[k].max(p.pos_mm[k].abs());
+                    }
+                }
+            }
+            m
+        }
+    };
+    let model = fit(&st, &states, &sensors, degrees, stroke)?;
+    let held = leave_one_out(&st, &states, &sensors, degrees, stroke)?;
+    let sens = sensitivities(&model);
+    if a.json {
+        let s: BTreeMap<_, _> = sens.iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+        println!(
+            "{}",
+            serde_json::json!({"sensors": sensors, "states": states.len(), "t_ref_c": model.t_ref,
+                "sensitivity_per_kelvin_at_stroke_end": s, "held_out": held})
+        );
+        return Ok(());
+    }
+    println!(
+        "{} states, sensors {}; reference temperatures {:?} °C",
+        states.len(),
+        sensors.join(", "),
+        model
+            .t_ref
+            .iter()
+            .map(|t| (t * 100.0).round() / 100.0)
+            .collect::<Vec<_>>()
+    );
+    println!("sensitivity at the end of the stroke per kelvin of each sensor (µm/K or µrad/K):");
+    for (n, v) in &sens {
+        let s: Vec<String> = v.iter().map(|x| format!("{x:+7.3}")).collect();
+        println!("  {n:5} {}", s.join(" "));
+    }
+    println!("held-out states (fitted without them): line residual RMS, static geometry → with temperature terms (own fit):");
+    for h in &held {
+        println!(
+            "  {}: {:.2} → {:.2} µm ({:.2})",
+            h.state, h.static_rms_um, h.thermal_rms_um, h.own_fit_rms_um
+        );
     }
     Ok(())
 }

@@ -387,3 +387,26 @@ pub fn to_reference_convention(e: &GeometricErrors, stroke_mm: [f64; 3]) -> Geom
     }
     out
 }
+
+/// RMS of the readings minus the model `params` [µm], each line's free zero
+/// removed (as in the identification).
+pub fn residual_rms(st: &Structure, basis: &Basis, lines: &[LineObs], params: &[f64]) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for l in lines {
+        let r: Vec<f64> = l
+            .points
+            .iter()
+            .map(|p| {
+                let row = basis.row(st, l.direction, p.pos_mm, l.tool_offset_mm);
+                p.disp_um - row.iter().zip(params).map(|(a, b)| a * b).sum::<f64>()
+            })
+            .collect();
+        if r.is_empty() {
+            continue;
+        }
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        ss += r.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+        n += r.len();
+    }
+    (ss / n.max(1) as f64).sqrt()
+}

@@ -13,3 +13,4 @@ pub use kinematics::{
 pub mod identify;
 pub mod lines;
 pub mod sim;
+pub mod thermal;

@@ -178,3 +178,105 @@ fn tilt(d: [f64; 3], a: f64, b: f64) -> [f64; 3] {
     let v = (dv + p1 * a + p2 * b).normalize();
     [v[0], v[1], v[2]]
 }
+
+/// `a + f·b`, term by term (polynomials of the same scale).
+pub fn add_scaled(a: &GeometricErrors, b: &GeometricErrors, f: f64) -> GeometricErrors {
+    let mut out = a.clone();
+    for t in Term::all() {
+        let (pa, pb) = (a.get(t), b.get(t));
+        let scale = if pa.coeffs.is_empty() {
+            pb.scale_mm
+        } else {
+            pa.scale_mm
+        };
+        let k = pb.scale_mm / scale; // u_b = u_a · scale / scale_b
+        let n = pa.coeffs.len().max(pb.coeffs.len());
+        let coeffs = (0..n)
+            .map(|j| {
+                let ca = pa.coeffs.get(j).copied().unwrap_or(0.0);
+                let cb = pb.coeffs.get(j).copied().unwrap_or(0.0);
+                ca + f * cb / k.powi(j as i32 + 1)
+            })
+            .collect();
+        out.set(t, Poly::new(scale, coeffs));
+    }
+    for i in 0..3 {
+        out.squareness
+            .set(i, a.squareness.get(i) + f * b.squareness.get(i));
+    }
+    out
+}
+
+/// A machine whose errors change linearly with a few sensor temperatures.
+#[derive(Clone, Debug)]
+pub struct ThermalMachine {
+    pub base: GeometricErrors,
+    pub sensors: Vec<String>,
+    /// Per sensor: the errors added per kelvin above `t_ref_c`.
+    pub per_kelvin: Vec<GeometricErrors>,
+    pub t_ref_c: f64,
+}
+
+impl ThermalMachine {
+    pub fn random(stroke_mm: [f64; 3], sensors: &[&str], rng: &mut Rng) -> ThermalMachine {
+        let sizes = ErrorSizes::default();
+        let base = random_errors(stroke_mm, &sizes, rng);
+        // Per kelvin: about a tenth of the cold errors (µm/K, µrad/K).
+        let k = ErrorSizes {
+            positioning_um: 1.5,
+            straightness_um: 0.5,
+            angular_urad: 1.5,
+            squareness_urad: 1.5,
+            degrees: sizes.degrees,
+        };
+        let per_kelvin = sensors
+            .iter()
+            .map(|_| random_errors(stroke_mm, &k, rng))
+            .collect();
+        ThermalMachine {
+            base,
+            sensors: sensors.iter().map(|s| s.to_string()).collect(),
+            per_kelvin,
+            t_ref_c: 20.0,
+        }
+    }
+
+    pub fn at(&self, temps: &[f64]) -> GeometricErrors {
+        self.per_kelvin
+            .iter()
+            .zip(temps)
+            .fold(self.base.clone(), |e, (d, t)| {
+                add_scaled(&e, d, t - self.t_ref_c)
+            })
+    }
+}
+
+/// The lines of one temperature state, with the sensors' readings (state
+/// temperature + N(0, 0.05 K)) as `T_` columns.
+pub fn measure_state(
+    st: &Structure,
+    machine: &ThermalMachine,
+    temps: &[f64],
+    state: &str,
+    plan: &[LineSpec],
+    setup: &MeasurementSetup,
+    rng: &mut Rng,
+) -> Vec<LineFile> {
+    let truth = machine.at(temps);
+    let mut out = Vec::new();
+    for spec in plan {
+        for mut f in measure_line(st, &truth, spec, setup, Some(state), rng) {
+            f.temps = machine
+                .sensors
+                .iter()
+                .zip(temps)
+                .map(|(n, t)| {
+                    let v = (0..f.s_mm.len()).map(|_| t + 0.05 * rng.normal()).collect();
+                    (n.clone(), v)
+                })
+                .collect();
+            out.push(f);
+        }
+    }
+    out
+}
