@@ -20,7 +20,7 @@ fn block(b: &Basis, st: &Structure, l: &LineSpec) -> Vec<Vec<f64>> {
     rows
 }
 
-fn info(b: &Vec<Vec<f64>>, n: usize) -> DMatrix<f64> {
+fn info(b: &[Vec<f64>], n: usize) -> DMatrix<f64> {
     let mut m = DMatrix::<f64>::zeros(n, n);
     for r in b.iter() {
         for i in 0..n {
