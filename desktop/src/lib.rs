@@ -9,6 +9,7 @@ pub mod board_link;
 pub mod diagnose;
 pub mod export;
 pub mod fit;
+pub mod geometry;
 pub mod linalg;
 pub mod plots;
 pub mod replay;

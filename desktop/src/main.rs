@@ -115,6 +115,8 @@ enum Command {
     Sim(tcomp::sim::cli::SimArgs),
     /// Diagnose the sim-to-real gap of measured runs against a nominal machine model.
     Diagnose(tcomp::diagnose::cli::DiagnoseArgs),
+    /// Geometric errors: simulate or identify the 21 errors from 14 displacement lines.
+    Geometry(tcomp::geometry::cli::GeometryArgs),
     /// Print a run file's summary (rows, columns, metadata).
     Info {
         run: std::path::PathBuf,
@@ -369,6 +371,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fit(args) => tcomp::fit::cli::main(args)?,
         Command::Sim(args) => tcomp::sim::cli::main(args)?,
         Command::Diagnose(args) => tcomp::diagnose::cli::main(args)?,
+        Command::Geometry(args) => tcomp::geometry::cli::main(args)?,
         Command::Info { run, json } => {
             let r = tcomp::runcsv::Run::read(&run)?;
             if json {

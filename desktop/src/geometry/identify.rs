@@ -1,0 +1,412 @@
+//! Identification of the 21 errors from displacement lines: one linear
+//! least-squares problem (a direct solution, no iteration).
+//!
+//! Unknowns: per error term a polynomial in u = q / stroke of degree
+//! `degree` without constant (zero at K = 0). The straightness terms follow
+//! the ISO 230-1 reference-line convention: their end-point line is taken
+//! out (basis u^j − u, zero at both ends) and carried by the squareness
+//! errors and the orientation of the machine frame (X defines x, X and Y the
+//! xy plane), which displacement along lines cannot see. The three
+//! squareness errors are constants. Each line's reading is zeroed at its
+//! first target, so each line has a free offset: it is eliminated by
+//! centring the line's rows (the same as an offset unknown per line).
+//!
+//! The model is the first-order kinematics (`kinematics::sensitivity`);
+//! readings come from files. Conditioning is reported from the SVD of the
+//! design matrix with unit-norm columns; directions with a singular value
+//! below `RANK_TOL × σ_max` are reported as not observable, never filled in.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde::Serialize;
+
+use super::errors::{GeometricErrors, Poly, Squareness, Term, SQUARENESS_NAMES};
+use super::kinematics::{sensitivity, Structure};
+
+/// Relative singular-value threshold below which a direction counts as not
+/// observable.
+pub const RANK_TOL: f64 = 1e-7;
+
+/// One target of one line as the identification sees it.
+#[derive(Clone, Debug)]
+pub struct Observation {
+    pub pos_mm: [f64; 3],
+    /// Reading [µm] along `direction` (first target of the line = 0).
+    pub disp_um: f64,
+}
+
+/// One line ready for identification (forward/backward already averaged).
+#[derive(Clone, Debug)]
+pub struct LineObs {
+    pub id: String,
+    pub direction: [f64; 3],
+    pub tool_offset_mm: [f64; 3],
+    pub points: Vec<Observation>,
+}
+
+/// Polynomial degree per group of terms. Fourteen lines of one-dimensional
+/// displacement carry too little to give every term the same high degree
+/// (docs/geometry.md, "What 14 lines can see"): positioning, pitch and yaw
+/// are seen directly by the axis-parallel lines; straightness and roll only
+/// through the diagonals.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Degrees {
+    /// EXX, EYY, EZZ and the two angles of each axis that are not its roll.
+    pub main: usize,
+    /// EYX, EZX, EXY, EZY, EXZ, EYZ (≥ 2: the linear part is squareness).
+    pub straightness: usize,
+    /// EAX, EBY, ECZ.
+    pub roll: usize,
+}
+
+impl Default for Degrees {
+    fn default() -> Self {
+        Degrees {
+            main: 3,
+            straightness: 2,
+            roll: 1,
+        }
+    }
+}
+
+impl Degrees {
+    pub fn uniform(d: usize) -> Degrees {
+        Degrees {
+            main: d,
+            straightness: d,
+            roll: d,
+        }
+    }
+    pub fn of(&self, t: Term) -> usize {
+        if t.is_straightness() {
+            self.straightness
+        } else if t.is_roll() {
+            self.roll
+        } else {
+            self.main
+        }
+    }
+    pub fn max(&self) -> usize {
+        self.main.max(self.straightness).max(self.roll).max(1)
+    }
+}
+
+/// What the unknowns are.
+#[derive(Clone, Debug)]
+pub struct Basis {
+    pub degrees: Degrees,
+    pub stroke_mm: [f64; 3],
+    /// (term, power j) per column, then the three squareness columns.
+    pub columns: Vec<Column>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Column {
+    Term { term: Term, power: usize },
+    Squareness(usize),
+}
+
+impl Basis {
+    pub fn new(degrees: Degrees, stroke_mm: [f64; 3]) -> Basis {
+        let mut columns = Vec::new();
+        for term in Term::all() {
+            let first = if term.is_straightness() { 2 } else { 1 };
+            for power in first..=degrees.of(term) {
+                columns.push(Column::Term { term, power });
+            }
+        }
+        columns.extend((0..3).map(Column::Squareness));
+        Basis {
+            degrees,
+            stroke_mm,
+            columns,
+        }
+    }
+
+    /// Value of the basis function of a term column at axis position q.
+    pub fn phi(&self, term: Term, power: usize, q_mm: f64) -> f64 {
+        let u = q_mm / self.stroke_mm[term.axis.index()];
+        if term.is_straightness() {
+            u.powi(power as i32) - u
+        } else {
+            u.powi(power as i32)
+        }
+    }
+
+    pub fn column_name(&self, c: &Column) -> String {
+        match c {
+            Column::Term { term, power } => format!("{}·u^{power}", term.name()),
+            Column::Squareness(i) => SQUARENESS_NAMES[*i].to_string(),
+        }
+    }
+
+    /// The design row of a reading along `dir` at `pos` with `tool`.
+    pub fn row(&self, st: &Structure, dir: [f64; 3], pos: [f64; 3], tool: [f64; 3]) -> Vec<f64> {
+        let s = sensitivity(st, pos, tool);
+        let d = Vector3::from(dir);
+        self.columns
+            .iter()
+            .map(|c| match *c {
+                Column::Term { term, power } => {
+                    d.dot(&s.terms[term.axis.index()][term.component.index()])
+                        * self.phi(term, power, pos[term.axis.index()])
+                }
+                Column::Squareness(i) => d.dot(&s.squareness[i]),
+            })
+            .collect()
+    }
+
+    /// Errors from a parameter vector.
+    pub fn errors(&self, x: &[f64]) -> GeometricErrors {
+        let mut e = GeometricErrors::zero();
+        for t in Term::all() {
+            e.set(
+                t,
+                Poly::new(
+                    self.stroke_mm[t.axis.index()],
+                    vec![0.0; self.degrees.of(t).max(1)],
+                ),
+            );
+        }
+        for (c, v) in self.columns.iter().zip(x) {
+            match *c {
+                Column::Term { term, power } => {
+                    let mut p = e.get(term).clone();
+                    p.coeffs[power - 1] += v;
+                    if term.is_straightness() {
+                        p.coeffs[0] -= v;
+                    }
+                    e.set(term, p);
+                }
+                Column::Squareness(i) => e.squareness.set(i, *v),
+            }
+        }
+        e
+    }
+}
+
+/// One direction the lines cannot see: the combination of unknowns (largest
+/// first) that changes no reading.
+#[derive(Clone, Debug, Serialize)]
+pub struct Unobservable {
+    pub singular_value: f64,
+    /// (column name, weight) of the largest weights, unit-norm vector.
+    pub combination: Vec<(String, f64)>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Identification {
+    pub basis: Basis,
+    pub errors: GeometricErrors,
+    /// Parameter vector (basis order).
+    pub params: Vec<f64>,
+    /// Singular values of the column-normalised design matrix, descending.
+    pub singular_values: Vec<f64>,
+    pub rank: usize,
+    pub condition_number: f64,
+    pub unobservable: Vec<Unobservable>,
+    /// RMS of the readings minus the model [µm].
+    pub residual_rms_um: f64,
+    pub readings: usize,
+}
+
+/// Solve for the errors from the lines.
+pub fn identify(
+    st: &Structure,
+    lines: &[LineObs],
+    degrees: Degrees,
+    stroke_mm: [f64; 3],
+) -> anyhow::Result<Identification> {
+    let basis = Basis::new(degrees, stroke_mm);
+    if lines.iter().all(|l| l.points.len() < 2) {
+        anyhow::bail!("no line with at least two targets: nothing to identify from");
+    }
+    let n = basis.columns.len();
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    let mut rhs: Vec<f64> = Vec::new();
+    for l in lines {
+        let first = rows.len();
+        for p in &l.points {
+            rows.push(basis.row(st, l.direction, p.pos_mm, l.tool_offset_mm));
+            rhs.push(p.disp_um);
+        }
+        // Free offset per line: centre its rows and readings.
+        let m = rows.len() - first;
+        if m == 0 {
+            continue;
+        }
+        for j in 0..n {
+            let mean = rows[first..].iter().map(|r| r[j]).sum::<f64>() / m as f64;
+            rows[first..].iter_mut().for_each(|r| r[j] -= mean);
+        }
+        let mean = rhs[first..].iter().sum::<f64>() / m as f64;
+        rhs[first..].iter_mut().for_each(|b| *b -= mean);
+    }
+    let m = rows.len();
+    let a = DMatrix::from_fn(m, n, |i, j| rows[i][j]);
+    let b = DVector::from_vec(rhs);
+    // Unit-norm columns: the singular values then compare like with like.
+    let norms: Vec<f64> = (0..n)
+        .map(|j| a.column(j).norm())
+        .map(|v| if v > 0.0 { v } else { 1.0 })
+        .collect();
+    let mut an = a.clone();
+    for j in 0..n {
+        an.column_mut(j).scale_mut(1.0 / norms[j]);
+    }
+    let svd = an.clone().svd(true, true);
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&i, &j| svd.singular_values[j].total_cmp(&svd.singular_values[i]));
+    let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
+    // A design with fewer readings than unknowns has n − m null directions
+    // that the thin SVD does not list.
+    let smax = sv.first().copied().unwrap_or(0.0);
+    let tol = RANK_TOL * smax;
+    let rank = sv.iter().filter(|s| **s > tol).count();
+    let (u, vt) = (
+        svd.u
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("internal: SVD without U"))?,
+        svd.v_t
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("internal: SVD without Vᵀ"))?,
+    );
+    // Truncated-SVD (minimum-norm) solution: unobservable directions stay 0.
+    let mut xn = DVector::zeros(n);
+    for &i in &order {
+        let s = svd.singular_values[i];
+        if s > tol {
+            let coef = u.column(i).dot(&b) / s;
+            xn += vt.row(i).transpose() * coef;
+        }
+    }
+    let x: Vec<f64> = (0..n).map(|j| xn[j] / norms[j]).collect();
+    let resid = &a * DVector::from_vec(x.clone()) - &b;
+    let residual_rms_um = (resid.norm_squared() / m.max(1) as f64).sqrt();
+    // Null space: right singular vectors below the threshold plus, when the
+    // SVD is thin (m < n), the complement of the row space.
+    let mut unobservable = Vec::new();
+    let describe = |v: DVector<f64>, s: f64| {
+        let mut w: Vec<(String, f64)> = basis
+            .columns
+            .iter()
+            .zip(v.iter())
+            .map(|(c, x)| (basis.column_name(c), *x))
+            .filter(|(_, x)| x.abs() > 0.05)
+            .collect();
+        w.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+        w.truncate(8);
+        Unobservable {
+            singular_value: s,
+            combination: w,
+        }
+    };
+    let mut null_vectors: Vec<(DVector<f64>, f64)> = order
+        .iter()
+        .filter(|&&i| svd.singular_values[i] <= tol)
+        .map(|&i| (vt.row(i).transpose(), svd.singular_values[i]))
+        .collect();
+    if m < n {
+        // Complete the basis of the row space with Gram–Schmidt on unit vectors.
+        let mut basis_vecs: Vec<DVector<f64>> = order
+            .iter()
+            .filter(|&&i| svd.singular_values[i] > tol)
+            .map(|&i| vt.row(i).transpose())
+            .collect();
+        basis_vecs.extend(null_vectors.iter().map(|(v, _)| v.clone()));
+        for k in 0..n {
+            let mut v = DVector::zeros(n);
+            v[k] = 1.0;
+            for q in &basis_vecs {
+                let d = q.dot(&v);
+                v -= q * d;
+            }
+            if v.norm() > 1e-6 {
+                v /= v.norm();
+                basis_vecs.push(v.clone());
+                null_vectors.push((v, 0.0));
+            }
+        }
+    }
+    for (v, s) in null_vectors {
+        unobservable.push(describe(v, s));
+    }
+    let condition_number = match sv.iter().rev().find(|s| **s > tol) {
+        Some(smin) if rank == n => smax / smin,
+        _ => f64::INFINITY,
+    };
+    Ok(Identification {
+        errors: basis.errors(&x),
+        basis,
+        params: x,
+        singular_values: sv,
+        rank,
+        condition_number,
+        unobservable,
+        residual_rms_um,
+        readings: m,
+    })
+}
+
+/// Express a machine's errors in the identification's convention: the
+/// end-point line of each straightness moved into squareness and the frame
+/// orientation (which lines cannot see). Straightness values change by a
+/// linear term, the squareness by the matching slopes (all in µrad).
+pub fn to_reference_convention(e: &GeometricErrors, stroke_mm: [f64; 3]) -> GeometricErrors {
+    let slope = |name: &str| -> f64 {
+        let t = Term::parse(name).map(|t| (t, stroke_mm[t.axis.index()]));
+        match t {
+            // µm per mm = mrad: × 1e3 for µrad.
+            Some((t, l)) => e.value(t, l) / l * 1e3,
+            None => 0.0,
+        }
+    };
+    let mut out = e.clone();
+    let (s_yx, s_zx, s_xy, s_zy, s_xz, s_yz) = (
+        slope("EYX"),
+        slope("EZX"),
+        slope("EXY"),
+        slope("EZY"),
+        slope("EXZ"),
+        slope("EYZ"),
+    );
+    out.squareness = Squareness {
+        c0y: e.squareness.c0y - s_xy - s_yx,
+        b0z: e.squareness.b0z + s_xz + s_zx,
+        a0z: e.squareness.a0z - s_yz - s_zy,
+    };
+    for t in Term::all().filter(|t| t.is_straightness()) {
+        let l = stroke_mm[t.axis.index()];
+        let mut p = e.get(t).clone();
+        let k = e.value(t, l);
+        if p.coeffs.is_empty() {
+            continue;
+        }
+        // Subtract k·(q/l): in the poly's own scale that is k·(scale/l)·u.
+        p.coeffs[0] -= k * p.scale_mm / l;
+        out.set(t, p);
+    }
+    out
+}
+
+/// RMS of the readings minus the model `params` [µm], each line's free zero
+/// removed (as in the identification).
+pub fn residual_rms(st: &Structure, basis: &Basis, lines: &[LineObs], params: &[f64]) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for l in lines {
+        let r: Vec<f64> = l
+            .points
+            .iter()
+            .map(|p| {
+                let row = basis.row(st, l.direction, p.pos_mm, l.tool_offset_mm);
+                p.disp_um - row.iter().zip(params).map(|(a, b)| a * b).sum::<f64>()
+            })
+            .collect();
+        if r.is_empty() {
+            continue;
+        }
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        ss += r.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+        n += r.len();
+    }
+    (ss / n.max(1) as f64).sqrt()
+}
