@@ -6,7 +6,7 @@
 //! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR]`
 use anyhow::{Context, Result};
 use std::path::PathBuf;
-use tcomp::diagnose::bench::{run_bench, BenchConfig};
+use tcomp::diagnose::bench::{run_bench, run_open_bench, BenchConfig};
 use tcomp::diagnose::{diagnose, Options};
 use tcomp::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
@@ -15,6 +15,7 @@ fn main() -> Result<()> {
     let mut seed = 7u64;
     let mut json = false;
     let mut verbose = false;
+    let mut open_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -24,7 +25,8 @@ fn main() -> Result<()> {
             "--machines" => dir = PathBuf::from(args.next().context("--machines DIR")?),
             "--json" => json = true,
             "--verbose" => verbose = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --machines DIR)"),
+            "--open-only" => open_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --machines DIR)"),
         }
     }
     let machines = vec![
@@ -32,6 +34,19 @@ fn main() -> Result<()> {
         Machine::load(&dir.join("five-axis-20.toml"))?,
     ];
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let open_cfg = BenchConfig {
+        cases,
+        seed,
+        hours: 8.0,
+        sample_period_s: 10.0,
+        threads,
+        verbose,
+    };
+    let open = run_open_bench(&open_cfg)?;
+    if open_only {
+        println!("{open}");
+        return Ok(());
+    }
     let mut v = run_bench(
         &machines,
         &BenchConfig {

@@ -8,9 +8,11 @@ pub mod cli;
 pub mod fit;
 pub mod fitmode;
 pub mod ident;
+pub mod open_effects;
 pub mod prep;
 pub mod series;
 pub mod stats;
+pub mod truth;
 
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
