@@ -398,11 +398,94 @@ impl<'a> Problem<'a> {
         extra: Option<Extra>,
         lagged: Option<(usize, f64)>,
     ) -> ModelFit {
+        if extra.is_none() && lagged.is_none() && !self.cross() {
+            if let Some(f) = self.fit_shared(st) {
+                return f;
+            }
+        }
         let outs = (0..self.outputs.len())
             .into_par_iter()
             .map(|o| self.fit_output(st, o, extra, lagged.filter(|l| l.0 == o).map(|l| l.1)))
             .collect();
         ModelFit { outs }
+    }
+
+    /// Input-driven outputs share one design: one Gram matrix and one
+    /// factorisation for all of them (`None` when their missing rows differ).
+    fn fit_shared(&self, st: &Structure) -> Option<ModelFit> {
+        let nr = self.ds.runs.len();
+        let no = self.outputs.len();
+        let blocks: Vec<(Vec<Vec<f64>>, Vec<Vec<f64>>)> =
+            (0..nr).map(|r| self.columns(st, 0, r)).collect();
+        let n_shared = blocks.first().map_or(0, |b| b.0.len());
+        let n_own = blocks.first().map_or(0, |b| b.1.len());
+        if blocks.iter().any(|b| b.1.len() != n_own) {
+            return None;
+        }
+        let p = n_shared + nr * n_own;
+        let mut rows = Vec::new();
+        for (r, run) in self.ds.runs.iter().enumerate() {
+            for k in 0..run.rows() {
+                let finite = (0..no).filter(|&o| self.meas[r][o][k].is_finite()).count();
+                if finite != 0 && finite != no {
+                    return None;
+                }
+                if !run.held[k] && finite == no {
+                    rows.push((r, k));
+                }
+            }
+        }
+        if rows.len() <= p + 2 {
+            return None;
+        }
+        let value = |r: usize, k: usize, j: usize| -> f64 {
+            if j < n_shared {
+                blocks[r].0[j][k]
+            } else {
+                let jj = j - n_shared;
+                if jj / n_own == r {
+                    blocks[r].1[jj % n_own][k]
+                } else {
+                    0.0
+                }
+            }
+        };
+        let x = DMatrix::from_fn(rows.len(), p, |i, j| value(rows[i].0, rows[i].1, j));
+        let y = DMatrix::from_fn(rows.len(), no, |i, o| self.meas[rows[i].0][o][rows[i].1]);
+        let coef = ridge_multi(&x, &y, RIDGE)?;
+        let mut outs: Vec<OutFit> = (0..no)
+            .map(|_| OutFit {
+                resid: Vec::with_capacity(nr),
+                k: p,
+                ..Default::default()
+            })
+            .collect();
+        for (r, run) in self.ds.runs.iter().enumerate() {
+            let xa = DMatrix::from_fn(run.rows(), p, |k, j| value(r, k, j));
+            let pred = xa * &coef;
+            for (o, f) in outs.iter_mut().enumerate() {
+                let mut res = Vec::with_capacity(run.rows());
+                for k in 0..run.rows() {
+                    let m = self.meas[r][o][k];
+                    if !m.is_finite() {
+                        res.push(f64::NAN);
+                        continue;
+                    }
+                    let e = m - pred[(k, o)];
+                    if run.held[k] {
+                        f.sse_held += e * e;
+                        f.n_held += 1;
+                        f.peak_held = f.peak_held.max(e.abs());
+                    } else {
+                        f.sse_fit += e * e;
+                        f.n_fit += 1;
+                    }
+                    res.push(e);
+                }
+                f.resid.push(res);
+            }
+        }
+        Some(ModelFit { outs })
     }
 
     /// Fit with extra columns, keeping them only in the outputs whose
@@ -601,6 +684,28 @@ impl<'a> Problem<'a> {
         };
         (st, fit)
     }
+}
+
+/// `ridge` for several right-hand sides (columns of `y`) at once.
+pub fn ridge_multi(x: &DMatrix<f64>, y: &DMatrix<f64>, lambda: f64) -> Option<DMatrix<f64>> {
+    let p = x.ncols();
+    let mut scale = DVector::zeros(p);
+    for j in 0..p {
+        let n = x.column(j).norm();
+        scale[j] = if n > 0.0 { 1.0 / n } else { 0.0 };
+    }
+    let xs = x * DMatrix::from_diagonal(&scale);
+    let mut g = xs.tr_mul(&xs);
+    for j in 0..p {
+        g[(j, j)] += lambda.max(1e-12);
+    }
+    let rhs = xs.tr_mul(y);
+    let b = match g.clone().cholesky() {
+        Some(c) => c.solve(&rhs),
+        None => g.svd(true, true).solve(&rhs, 1e-12).ok()?,
+    };
+    let b = DMatrix::from_diagonal(&scale) * b;
+    b.iter().all(|v| v.is_finite()).then_some(b)
 }
 
 /// Ridge least squares with column scaling: `argmin |y − Xb|² + λ|Db|²`,

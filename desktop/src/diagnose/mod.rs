@@ -392,35 +392,22 @@ fn candidates(m: &Machine, ps: &[Prepared], res0: &[Vec<Vec<f64>>], opt: &Option
     out
 }
 
-/// Run `f` over `items` on up to `threads` threads, keeping the order.
-fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync>(items: &[T], threads: usize, f: F) -> Vec<R> {
-    let threads = threads.max(1).min(items.len().max(1));
-    if threads <= 1 {
-        return items.iter().map(&f).collect();
+/// `f` over `items` in parallel (rayon), keeping the order; `threads` caps
+/// the pool when it is smaller than rayon's.
+fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync + Send>(
+    items: &[T],
+    threads: usize,
+    f: F,
+) -> Vec<R> {
+    use rayon::prelude::*;
+    let run = || items.par_iter().map(&f).collect();
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+    {
+        Ok(pool) if threads < rayon::current_num_threads() => pool.install(run),
+        _ => run(),
     }
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: std::sync::Mutex<Vec<Option<R>>> =
-        std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if i >= items.len() {
-                    break;
-                }
-                let r = f(&items[i]);
-                if let Ok(mut g) = results.lock() {
-                    g[i] = Some(r);
-                }
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .flatten()
-        .collect()
 }
 
 /// Diagnose prepared runs against the nominal machine.

@@ -48,6 +48,37 @@ fn with_outputs(base: &ModelFit, new: Vec<(usize, OutFit)>) -> ModelFit {
 pub const STEP_MIN_NOISE: f64 = 5.0;
 pub const STEP_MIN_C: f64 = 0.125;
 
+/// Rows on each side of a jump.
+const JUMP_W: usize = 3;
+
+fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
+    let (s, n) = e[a..b]
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((0.0, 0usize), |acc, x| (acc.0 + x, acc.1 + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
+/// Rows at least `JUMP_W + 1` rows away from any change of an input.
+fn quiet_rows(run: &super::series::RunData) -> Vec<bool> {
+    let n = run.rows();
+    let mut quiet = vec![true; n];
+    for inp in [&run.rpm, &run.feed, &run.coolant].into_iter().flatten() {
+        for k in 1..n {
+            if (inp[k] - inp[k - 1]).abs() > 1e-9 {
+                let a = k.saturating_sub(JUMP_W + 1);
+                let b = (k + JUMP_W + 1).min(n);
+                quiet[a..b].iter_mut().for_each(|q| *q = false);
+            }
+        }
+    }
+    quiet
+}
+
 /// Step in one sensor: per sensor, the best change point on the fit rows,
 /// then a joint refit of that sensor's model with the step column.
 pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidate> {
@@ -57,44 +88,28 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
         if output.is_disp {
             continue;
         }
-        // best (run, k0) by the two-segment mean split of the fit-row residual
+        // the sharpest jump of the nominal residual (mean of 3 rows after
+        // minus 3 rows before), away from input changes, where the model's
+        // fast dynamics may miss; the rows place the time only, the size is
+        // fitted on the fit rows
         let mut best: Option<(f64, usize, usize)> = None;
         for (r, run) in ds.runs.iter().enumerate() {
             let e = &nom.outs[o].resid[r];
-            let fit_rows: Vec<usize> = (0..run.rows())
-                .filter(|&k| !run.held[k] && e[k].is_finite())
-                .collect();
-            let n = fit_rows.len();
-            if n < 20 {
-                continue;
-            }
-            let total: f64 = fit_rows.iter().map(|&k| e[k]).sum();
-            let mut left = 0.0;
-            for (i, &k) in fit_rows.iter().enumerate().take(n - 3).skip(2) {
-                left += e[fit_rows[i - 1]];
-                let _ = k;
-                let (n1, n2) = (i as f64, (n - i) as f64);
-                let m1 = left / n1;
-                let m2 = (total - left) / n2;
-                let gain = n1 * n2 / (n1 + n2) * (m1 - m2).powi(2);
-                if best.is_none_or(|b| gain > b.0) {
-                    best = Some((gain, r, k));
+            let quiet = quiet_rows(run);
+            for k in JUMP_W..run.rows().saturating_sub(JUMP_W) {
+                if !quiet[k] {
+                    continue;
+                }
+                let j = (window_mean(e, k, k + JUMP_W) - window_mean(e, k - JUMP_W, k)).abs();
+                if j.is_finite() && best.is_none_or(|b| j > b.0) {
+                    best = Some((j, r, k));
                 }
             }
         }
-        let Some((_, r, k0)) = best else {
+        let Some((_, r, start)) = best else {
             continue;
         };
-        // a step right after a held-out block may lie anywhere in it: take its middle
         let run = &ds.runs[r];
-        let mut start = k0;
-        if k0 > 0 && run.held[k0 - 1] {
-            let mut a = k0 - 1;
-            while a > 0 && run.held[a - 1] {
-                a -= 1;
-            }
-            start = (a + k0) / 2;
-        }
         let extra = move |oo: usize, rr: usize| -> Vec<Vec<f64>> {
             if oo != o {
                 return Vec::new();
@@ -113,11 +128,8 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
         // a fault is a jump: the nominal residual must change by at least
         // half the step within ±3 rows of it (model error spreads out)
         let e = &nom.outs[o].resid[r];
-        let mean = |a: usize, b: usize| {
-            let v: Vec<f64> = e[a..b].iter().copied().filter(|x| x.is_finite()).collect();
-            v.iter().sum::<f64>() / v.len().max(1) as f64
-        };
-        let jump = mean(start, (start + 3).min(run.rows())) - mean(start.saturating_sub(3), start);
+        let jump = window_mean(e, start, (start + JUMP_W).min(run.rows()))
+            - window_mean(e, start.saturating_sub(JUMP_W), start);
         if !(jump * step.signum() >= 0.5 * step.abs()) {
             continue;
         }
@@ -131,7 +143,7 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             // size + location (run, time)
             k_extra: 3,
             at_bound: Vec::new(),
-            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "located_by": "change-point scan of the sensor's nominal residual on the fit rows"}),
+            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
         });
     }
     out
