@@ -137,3 +137,147 @@ fn bad_runs_get_one_line_errors() {
     assert!(err.contains("no temperature sensor column"), "{err}");
     assert!(!err.contains("{ "), "Debug form in {err}");
 }
+
+use tcomp::diagnose::truth::{simulate, TruthEffect};
+
+/// Two runs (light and heavy duty) of the open-world truth model.
+fn truth_runs(effects: &[TruthEffect], seed: u64) -> Vec<(String, Run)> {
+    let light = vec![
+        (0.0, 0.0, 0.0),
+        (900.0, 4000.0, 0.3),
+        (5400.0, 6000.0, 0.5),
+        (9000.0, 0.0, 0.0),
+        (10800.0, 3000.0, 0.2),
+    ];
+    let heavy = vec![
+        (0.0, 0.0, 0.0),
+        (600.0, 9000.0, 0.6),
+        (4800.0, 12000.0, 0.4),
+        (8400.0, 0.0, 0.0),
+        (9600.0, 10000.0, 0.7),
+    ];
+    [light, heavy]
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            // the sensor step happens in the second run only
+            let eff: Vec<TruthEffect> = effects
+                .iter()
+                .filter(|e| i == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                .cloned()
+                .collect();
+            (
+                format!("truth{i}"),
+                simulate(d, &eff, 4.0, 10.0, seed + i as u64).run,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_sensor_step_on_an_unseen_machine_is_named_where_it_is() {
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 5,
+            step_c: 0.8,
+            at_s: 7300.0,
+        }],
+        71,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "sensor_offset");
+    let p = top.params_json();
+    assert_eq!(p["sensor"], "T_T5");
+    assert_eq!(p["run"], "truth1");
+    assert!((p["offset_c"].as_f64().unwrap() - 0.8).abs() < 0.15, "{p}");
+    assert!(
+        (p["from_s"].as_f64().unwrap() - 7300.0).abs() < 120.0,
+        "{p}"
+    );
+    // scored in °C; a sensor fault leaves the µm gap as it was
+    let ((cb, _), (ca, _)) = top.gap_c.unwrap();
+    assert!(ca < 0.8 * cb, "°C gap {cb} -> {ca}");
+    let ((ub, _), (ua, _)) = top.gap_um.unwrap();
+    assert!((ua - ub).abs() < 1e-9);
+    let j = d.to_json();
+    assert!(j["effects"][0]["gap_before_c"].as_f64().is_some());
+    assert!(j["effects"][0]["gap_after_c"].as_f64().is_some());
+}
+
+#[test]
+fn chiller_cycling_is_found_from_the_sensors_own_spectrum() {
+    let runs = truth_runs(
+        &[TruthEffect::ChillerCycling {
+            band_c: 1.0,
+            power_w: 900.0,
+        }],
+        73,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "coolant");
+    // the tank sensor carries it most; the period is that of the thermostat
+    assert_eq!(top.params_json()["sensor"], "T_T9");
+    let per = top.params_json()["period_s"].as_f64().unwrap();
+    assert!(per > 600.0 && per < 3600.0, "period {per}");
+}
+
+#[test]
+fn clean_runs_of_an_unseen_machine_name_nothing_and_say_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = truth_runs(&[], 75);
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(
+        d.findings.is_empty(),
+        "false alarm: {:?}",
+        d.findings
+            .iter()
+            .map(|f| (&f.name, f.params_json()))
+            .collect::<Vec<_>>()
+    );
+    let j = d.to_json();
+    assert_eq!(j["effects"].as_array().unwrap().len(), 0);
+    let untestable: Vec<&str> = j["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u["name"].as_str().unwrap())
+        .collect();
+    assert!(untestable.contains(&"convection") && untestable.contains(&"bending"));
+    assert!(j["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|u| !u["reason"].as_str().unwrap().is_empty()));
+    assert!(j["no_effect"]["worst_rms_over_noise"].as_f64().is_some());
+    // every candidate was tried and is reported with its held-out figures
+    assert!(d.tried.iter().any(|f| f.name == "coolant"));
+    let md = dir.path().join("r.md");
+    tcomp::diagnose::render::write_report(&d, &["a".into(), "b".into()], &md).unwrap();
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(text.contains("No candidate effect is supported") && text.contains("cannot test"));
+}
+
+#[test]
+fn the_report_plots_the_residual_before_and_after_the_selected_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 2,
+            step_c: -1.0,
+            at_s: 5000.0,
+        }],
+        77,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert_eq!(d.findings[0].name, "sensor_offset");
+    let md = dir.path().join("diag.md");
+    let files = tcomp::diagnose::render::write_report(&d, &["a".into(), "b".into()], &md).unwrap();
+    assert_eq!(files.len(), 3);
+    let svg = std::fs::read_to_string(dir.path().join("diag-channels.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("T_T2"));
+    assert!(std::fs::read_to_string(&md)
+        .unwrap()
+        .contains("diag-phases.svg"));
+}

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
-use super::{diagnose, report_md, Options};
+use super::{diagnose, render, Options};
 use crate::runcsv::Run;
 use crate::sim::Machine;
 
@@ -18,7 +18,8 @@ pub struct DiagnoseArgs {
     /// Print `{"effects": [...], "where": {...}}`.
     #[arg(long)]
     pub json: bool,
-    /// Write a markdown report here.
+    /// Write a markdown report here (plus `<name>-channels.svg` and
+    /// `<name>-phases.svg` beside it when an effect is selected).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Fraction of time (one run) or of runs (several) used to fit.
@@ -68,8 +69,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     };
     let names: Vec<String> = runs.iter().map(|r| r.0.clone()).collect();
     if let Some(p) = &a.report {
-        std::fs::write(p, report_md(&d, &names))
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        render::write_report(&d, &names, p)?;
     }
     if a.json {
         println!("{}", d.to_json());

@@ -9,6 +9,7 @@ use serde_json::{json, Value};
 
 use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate};
+use super::render::SelectedGaps;
 use super::series;
 use super::stats::{ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView};
 use super::{Diagnosis, Finding, Options};
@@ -136,17 +137,7 @@ pub fn nominal_json(p: &Problem, st: &Structure, fit: &ModelFit) -> Value {
 /// Where the nominal's gap lies, all rows of all runs.
 pub fn where_of(p: &Problem, fit: &ModelFit) -> Value {
     let ds = p.ds;
-    let ph: Vec<Vec<&'static str>> = ds
-        .runs
-        .iter()
-        .map(|r| match &r.rpm {
-            Some(rpm) => phases(rpm, r.dt),
-            None => {
-                let s: Vec<&[f64]> = r.sensors.iter().map(|s| s.values.as_slice()).collect();
-                phases_from_temperatures(&s, r.dt)
-            }
-        })
-        .collect();
+    let ph = run_phases(p);
     let mut views = Vec::new();
     for (r, run) in ds.runs.iter().enumerate() {
         for (o, out) in p.outputs.iter().enumerate() {
@@ -169,9 +160,20 @@ struct Scored {
     claimed: bool,
     /// Held-out reduction in noise units summed over the affected outputs.
     gain: f64,
+    /// The fit with the effect and the reference it is scored against
+    /// (`None`: the nominal).
+    fit: ModelFit,
+    before: Option<ModelFit>,
 }
 
-fn score(p: &Problem, c: Candidate, before: &ModelFit, min: &Options) -> Scored {
+fn score(
+    p: &Problem,
+    c: Candidate,
+    reference: Option<ModelFit>,
+    nominal: &ModelFit,
+    min: &Options,
+) -> Scored {
+    let before = reference.as_ref().unwrap_or(nominal);
     let outs = &p.outputs;
     let m_b = before.m_held_of(outs, &c.affected);
     let m_a = c.fit.m_held_of(outs, &c.affected);
@@ -245,6 +247,62 @@ fn score(p: &Problem, c: Candidate, before: &ModelFit, min: &Options) -> Scored 
         },
         claimed,
         gain,
+        fit: c.fit,
+        before: reference,
+    }
+}
+
+/// Phase of each row of each run (from the speed, else the temperatures).
+fn run_phases(p: &Problem) -> Vec<Vec<&'static str>> {
+    p.ds.runs
+        .iter()
+        .map(|r| match &r.rpm {
+            Some(rpm) => phases(rpm, r.dt),
+            None => {
+                let s: Vec<&[f64]> = r.sensors.iter().map(|s| s.values.as_slice()).collect();
+                phases_from_temperatures(&s, r.dt)
+            }
+        })
+        .collect()
+}
+
+/// Held-out RMS by channel and by phase before and after an effect.
+fn selected_gaps(p: &Problem, name: &str, before: &ModelFit, after: &ModelFit) -> SelectedGaps {
+    let channels = p
+        .outputs
+        .iter()
+        .enumerate()
+        .filter(|(o, _)| before.outs[*o].n_held > 0 && after.outs[*o].n_held > 0)
+        .map(|(o, out)| {
+            let rms = |f: &ModelFit| (f.outs[o].sse_held / f.outs[o].n_held as f64).sqrt();
+            (out.name.clone(), out.is_disp, rms(before), rms(after))
+        })
+        .collect();
+    let ph = run_phases(p);
+    let mut acc: std::collections::BTreeMap<&str, (f64, f64, usize)> = Default::default();
+    for (r, run) in p.ds.runs.iter().enumerate() {
+        for (o, out) in p.outputs.iter().enumerate() {
+            if out.is_disp || before.outs[o].resid.len() <= r || after.outs[o].resid.len() <= r {
+                continue;
+            }
+            for k in (0..run.rows()).filter(|&k| run.held[k]) {
+                let (b, a) = (before.outs[o].resid[r][k], after.outs[o].resid[r][k]);
+                if b.is_finite() && a.is_finite() {
+                    let e = acc.entry(ph[r][k]).or_default();
+                    e.0 += b * b;
+                    e.1 += a * a;
+                    e.2 += 1;
+                }
+            }
+        }
+    }
+    SelectedGaps {
+        effect: name.to_string(),
+        channels,
+        phases: acc
+            .into_iter()
+            .map(|(k, (b, a, n))| (k.to_string(), (b / n as f64).sqrt(), (a / n as f64).sqrt()))
+            .collect(),
     }
 }
 
@@ -293,7 +351,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     let n_cands = cands.len();
     let mut scored: Vec<Scored> = cands
         .into_iter()
-        .map(|(c, b)| score(&p, c, b.as_ref().unwrap_or(&fit), opt))
+        .map(|(c, b)| score(&p, c, b, &fit, opt))
         .collect();
     scored.sort_by(|a, b| b.gain.total_cmp(&a.gain));
     let mut findings = Vec::new();
@@ -311,6 +369,14 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         }
         findings.push(f);
     }
+    let selected = scored.iter().find(|s| s.claimed).map(|s| {
+        selected_gaps(
+            &p,
+            &s.finding.name,
+            s.before.as_ref().unwrap_or(&fit),
+            &s.fit,
+        )
+    });
     let tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
     let mut notes = ds.notes.clone();
     notes.push(format!(
@@ -333,6 +399,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         missing: ds.missing.clone(),
         nominal: nominal_json(&p, &st, &fit),
         no_effect: no_effect_evidence(&p, &fit),
+        selected_gaps: selected,
         ranking_rule: format!(
             "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {}, the held-out gap of the outputs it changes shrinks by ≥ {:.0} % and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units)",
             opt.min_dbic, FIT_MIN_REL * 100.0, FIT_MIN_ABS

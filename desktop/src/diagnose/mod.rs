@@ -10,6 +10,7 @@ pub mod fitmode;
 pub mod ident;
 pub mod open_effects;
 pub mod prep;
+pub mod render;
 pub mod series;
 pub mod stats;
 pub mod truth;
@@ -21,6 +22,7 @@ use crate::runcsv::Run;
 use crate::sim::{Effect, Machine, EFFECT_NAMES};
 use fit::{fit_cands, Cand, Evaluator, FitResult, Stats};
 use prep::{prepare, Kind, Prepared};
+pub use render::report_md;
 pub use stats::phases;
 use stats::{corr, first_order, r4, rms_of, ResidualView};
 
@@ -153,6 +155,9 @@ pub struct Diagnosis {
     pub no_effect: Value,
     /// How findings are ranked and when one is claimed.
     pub ranking_rule: String,
+    /// Held-out RMS by channel and by phase, before and after the selected
+    /// effect (for the report's plots).
+    pub selected_gaps: Option<render::SelectedGaps>,
 }
 
 impl Diagnosis {
@@ -578,6 +583,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         missing: Vec::new(),
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
+        selected_gaps: None,
         ranking_rule: "single effects and pairs fitted on the fit part; an effect is claimed when its BIC improves by at least min_dbic and the held-out gap (noise units) shrinks by min_rel and min_abs; ranked by held-out gap after".into(),
     })
 }
@@ -589,127 +595,4 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
     let mut d = diagnose_prepared(m, &ps, opt)?;
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
-}
-
-fn f2(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:.3}")
-    } else {
-        "–".into()
-    }
-}
-
-/// Markdown report.
-pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
-    use std::fmt::Write;
-    let mut s = String::new();
-    let _ = writeln!(s, "# Sim-to-real gap diagnosis — machine `{}`\n", d.machine);
-    let _ = writeln!(s, "Runs: {}\n", run_names.join(", "));
-    let _ = writeln!(
-        s,
-        "Nominal model, held-out data: RMS gap {} µm (peak {}), {} °C (peak {}); normalised gap {} (1 ≈ sensor noise).\n",
-        d.nominal_gap_um.map_or("–".into(), |g| f2(g.0)),
-        d.nominal_gap_um.map_or("–".into(), |g| f2(g.1)),
-        d.nominal_gap_c.map_or("–".into(), |g| f2(g.0)),
-        d.nominal_gap_c.map_or("–".into(), |g| f2(g.1)),
-        f2(d.nominal_m_held.sqrt())
-    );
-    let _ = writeln!(s, "## Which effect\n");
-    if d.findings.is_empty() {
-        let _ = writeln!(
-            s,
-            "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n"
-        );
-    } else {
-        let _ = writeln!(s, "| rank | effect | params | held-out gap µm before → after | °C before → after | ΔBIC | signature r | driver r |");
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
-        for (i, f) in d.findings.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "| {} | **{}** | `{}` | {} → {} | {} → {} | {:.1} | {} | {} |",
-                i + 1,
-                f.name,
-                f.params_json(),
-                f.gap_um.map_or("–".into(), |g| f2(g.0 .0)),
-                f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
-                f.gap_c.map_or("–".into(), |g| f2(g.0 .0)),
-                f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
-                f.dbic,
-                f.evidence
-                    .get("signature_corr")
-                    .cloned()
-                    .unwrap_or(Value::Null),
-                f.evidence
-                    .get("driver_corr")
-                    .cloned()
-                    .unwrap_or(Value::Null),
-            );
-        }
-        let _ = writeln!(s);
-    }
-    let _ = writeln!(s, "### All single candidates tried\n");
-    let _ = writeln!(s, "| effect | fitted params | ΔBIC (fit part) | held-out norm. gap before → after | µm after | °C after |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
-    for f in &d.tried {
-        let _ = writeln!(
-            s,
-            "| {} | `{}` | {:.1} | {} → {} | {} | {} |",
-            f.name,
-            f.params_json(),
-            f.dbic,
-            f2(f.m_before.sqrt()),
-            f2(f.m_after.sqrt()),
-            f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
-            f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
-        );
-    }
-    let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
-    let w = &d.where_;
-    for (title, key, unit) in [
-        ("Per sensor", "sensors", "°C"),
-        ("Per direction", "directions", "µm"),
-    ] {
-        if let Some(o) = w.get(key).and_then(|v| v.as_object()) {
-            if o.is_empty() {
-                continue;
-            }
-            let _ = writeln!(
-                s,
-                "### {title} ({unit})\n\n| channel | RMS | peak | mean |\n|---|---|---|---|"
-            );
-            for (k, v) in o {
-                let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rms"], v["peak"], v["mean"]);
-            }
-            let _ = writeln!(s);
-        }
-    }
-    if let Some(o) = w.get("phases").and_then(|v| v.as_object()) {
-        let _ = writeln!(
-            s,
-            "### Per operating phase\n\n| phase | rows | RMS °C | RMS µm |\n|---|---|---|---|"
-        );
-        for (k, v) in o {
-            let _ = writeln!(
-                s,
-                "| {k} | {} | {} | {} |",
-                v["rows"], v["rms_c"], v["rms_um"]
-            );
-        }
-        let _ = writeln!(s);
-    }
-    if let Some(o) = w.get("bands").and_then(|v| v.as_object()) {
-        let _ = writeln!(s, "### Per frequency band (moving-average split)\n\n| band | RMS °C | RMS µm |\n|---|---|---|");
-        for (k, v) in o {
-            let _ = writeln!(s, "| {k} | {} | {} |", v["rms_c"], v["rms_um"]);
-        }
-        let _ = writeln!(s);
-    }
-    if !d.notes.is_empty() {
-        let _ = writeln!(s, "## Notes\n");
-        for n in &d.notes {
-            let _ = writeln!(s, "- {n}");
-        }
-    }
-    let _ = writeln!(s, "\n_{} simulations in {:.2} s._", d.sims, d.seconds);
-    s
 }

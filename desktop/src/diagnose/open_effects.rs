@@ -647,6 +647,14 @@ pub fn ambient_drift(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Cand
         affected: took,
         fit,
         at_bound: Vec::new(),
-        evidence: json!({"shape": "per run: ramp + 24 h sine/cosine fitted to the mean sensor residual (fit rows)", "peak_c": r4(amp)}),
+        evidence: json!({
+            "shape": "per run: ramp + 24 h sine/cosine fitted to the mean sensor residual (fit rows)",
+            "peak_c": r4(amp),
+            "caveat": if ds.has_ambient {
+                "a drift of the air at the machine beyond what T_ambient measured"
+            } else {
+                "no T_ambient column: this is the room's own temperature change, an input the data lack, not a drift beyond a measured ambient"
+            },
+        }),
     })
 }
