@@ -295,7 +295,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     println!(
                         "  {}: never worse than no compensation: {}",
                         r.column,
-                        if r.never_worse { "yes" } else { "NO — this block is worse with the board" }
+                        if r.never_worse {
+                            "yes"
+                        } else {
+                            "NO — this block is worse with the board"
+                        }
                     );
                 }
                 println!(

@@ -108,7 +108,7 @@ pub fn flag_counts(rows: &[ReplayRow], from: usize, to: usize) -> FlagCounts {
     let mut c = FlagCounts::default();
     for r in rows.iter().take(to).skip(from) {
         let s = r.out.status;
-        let mut add = |bit: u16, n: &mut usize| {
+        let add = |bit: u16, n: &mut usize| {
             if s & bit != 0 {
                 *n += 1;
             }

@@ -419,10 +419,5 @@ fn sim_and_diagnose_refuse_impossible_machines_duties_and_options() {
         args.extend(option);
         refuses(d, &args, &needles);
     }
-    refuses(
-        d,
-        &["diagnose", "fit", "run.csv", "--nominal-fraction=-1"],
-        &["--nominal-fraction", "0.05"],
-    );
     assert!(!d.join("x.csv").exists());
 }

@@ -63,15 +63,29 @@ fn run(measured: &[f64]) -> Run {
 #[test]
 fn a_constant_offset_counts_about_the_reference_but_not_about_the_mean() {
     // The machine sits warm at 10 µm ± 1 µm; the board serves 10 µm flat.
-    let measured: Vec<f64> = (0..100).map(|i| 10.0 + if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+    let measured: Vec<f64> = (0..100)
+        .map(|i| 10.0 + if i % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
     let served = vec![10.0; 100];
-    let r = &residuals(&run(&measured), &rows(&served, &[status::VALID; 100]), &model_dx(), 0, 100)[0];
+    let r = &residuals(
+        &run(&measured),
+        &rows(&served, &[status::VALID; 100]),
+        &model_dx(),
+        0,
+        100,
+    )[0];
     assert!((r.rms_um - 1.0).abs() < 1e-9, "{r:?}");
-    assert!((r.uncompensated_rms_um - 101f64.sqrt()).abs() < 1e-9, "{r:?}");
+    assert!(
+        (r.uncompensated_rms_um - 101f64.sqrt()).abs() < 1e-9,
+        "{r:?}"
+    );
     assert!(r.reduction_pct > 90.0, "{r:?}");
     // About the block mean nothing was gained: the operator would have re-zeroed the 10 µm.
     assert!((r.rms_about_mean_um - 1.0).abs() < 1e-9, "{r:?}");
-    assert!((r.uncompensated_rms_about_mean_um - 1.0).abs() < 1e-9, "{r:?}");
+    assert!(
+        (r.uncompensated_rms_about_mean_um - 1.0).abs() < 1e-9,
+        "{r:?}"
+    );
     assert!(r.reduction_about_mean_pct.abs() < 1e-6, "{r:?}");
     assert!(r.never_worse);
 }
@@ -80,7 +94,13 @@ fn a_constant_offset_counts_about_the_reference_but_not_about_the_mean() {
 fn a_board_that_makes_things_worse_is_reported() {
     let measured = vec![1.0; 50];
     let served = vec![-3.0; 50];
-    let r = &residuals(&run(&measured), &rows(&served, &[status::VALID; 50]), &model_dx(), 0, 50)[0];
+    let r = &residuals(
+        &run(&measured),
+        &rows(&served, &[status::VALID; 50]),
+        &model_dx(),
+        0,
+        50,
+    )[0];
     assert!(!r.never_worse, "{r:?}");
     assert!(r.reduction_pct < 0.0);
 }

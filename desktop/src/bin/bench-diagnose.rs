@@ -6,7 +6,7 @@
 //! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR]`
 use anyhow::{Context, Result};
 use std::path::PathBuf;
-use tcomp::diagnose::bench::{run_bench, BenchConfig};
+use tcomp::diagnose::bench::{run_bench, run_open_bench, BenchConfig};
 use tcomp::diagnose::{diagnose, Options};
 use tcomp::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
@@ -15,6 +15,7 @@ fn main() -> Result<()> {
     let mut seed = 7u64;
     let mut json = false;
     let mut verbose = false;
+    let mut open_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -24,7 +25,8 @@ fn main() -> Result<()> {
             "--machines" => dir = PathBuf::from(args.next().context("--machines DIR")?),
             "--json" => json = true,
             "--verbose" => verbose = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --machines DIR)"),
+            "--open-only" => open_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --machines DIR)"),
         }
     }
     let machines = vec![
@@ -32,6 +34,19 @@ fn main() -> Result<()> {
         Machine::load(&dir.join("five-axis-20.toml"))?,
     ];
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let open_cfg = BenchConfig {
+        cases,
+        seed,
+        hours: 8.0,
+        sample_period_s: 10.0,
+        threads,
+        verbose,
+    };
+    let open = run_open_bench(&open_cfg)?;
+    if open_only {
+        println!("{open}");
+        return Ok(());
+    }
     let mut v = run_bench(
         &machines,
         &BenchConfig {
@@ -73,6 +88,20 @@ fn main() -> Result<()> {
     v["full_diagnosis_8h_1s_seconds"] = serde_json::json!(secs);
     v["full_diagnosis_8h_1s_top"] = serde_json::json!(d.findings.first().map(|f| f.name.clone()));
     v["threads"] = serde_json::json!(threads);
+    // closed world (machine file, the simulator the diagnoser searches) and
+    // open world (no machine file, the separate truth model) side by side
+    let pick = |j: &serde_json::Value| {
+        serde_json::json!({
+            "top1_rate": j["top1_rate"],
+            "heldout_gap_shrink_um": j["mean_heldout_gap_shrink_um"],
+            "heldout_gap_shrink_c": j.get("mean_heldout_gap_shrink_c").cloned().unwrap_or(j["mean_heldout_gap_shrink"].clone()),
+            "false_alarms": j["false_alarms"],
+            "clean_cases": j["clean_cases"],
+            "seconds_per_case": j["mean_diagnosis_seconds"],
+        })
+    };
+    v["side_by_side"] = serde_json::json!({"closed_world": pick(&v), "open_world": pick(&open)});
+    v["open_world"] = open.clone();
     if json {
         println!("{v}");
     } else {
@@ -85,6 +114,16 @@ fn main() -> Result<()> {
             v["mean_heldout_gap_shrink"].as_f64().unwrap_or(f64::NAN) * 100.0,
             v["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
             v["false_alarms"], v["clean_cases"], secs, threads
+        );
+        println!(
+            "open world (diagnose fit, no machine file, truth model diagnose/truth.rs): {} cases: top-1 {:.1} %, held-out shrink {:.1} % °C / {:.1} % µm, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+            open["cases"],
+            open["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["mean_heldout_gap_shrink_c"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["false_alarms"], open["clean_cases"],
+            open["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+            open["per_effect"]
         );
         if let Some(ms) = v["misses"].as_array() {
             for m in ms {

@@ -261,3 +261,158 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
         "total_seconds": t_all.elapsed().as_secs_f64(),
     }))
 }
+
+/// Open-world blind check of `diagnose fit` (no machine file) on runs of
+/// the separate truth model (`truth.rs`): each testable effect kind at
+/// random strengths, plus clean cases, one 8 h run (or `hours`) per case.
+pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
+    use super::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
+    let mut g = Gauss::new(cfg.seed ^ 0x5eed);
+    let n = cfg.cases.max(6);
+    let n_clean = (n / 6).max(1);
+    let mut plan: Vec<Option<&str>> = (0..n - n_clean)
+        .map(|i| Some(TRUTH_EFFECTS[i % TRUTH_EFFECTS.len()]))
+        .collect();
+    plan.extend(std::iter::repeat_n(None, n_clean));
+    let opt = Options {
+        threads: cfg.threads,
+        ..Options::default()
+    };
+    let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+    let (mut ok, mut n_eff, mut false_alarms) = (0usize, 0usize, 0usize);
+    let (mut shrink_c, mut shrink_um, mut times) = (Vec::new(), Vec::new(), Vec::new());
+    let mut misses = Vec::new();
+    for (ci, kind) in plan.iter().enumerate() {
+        // two runs of half the case's hours: a light and a heavy duty
+        let half = cfg.hours / 2.0;
+        let effects: Vec<TruthEffect> = kind
+            .iter()
+            .map(|k| TruthEffect::random(k, &mut g, half))
+            .collect();
+        let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
+            .iter()
+            .enumerate()
+            .map(|(ri, &(lo, hi))| {
+                let duty = truth_duty(&mut g, half, lo, hi);
+                let seed = 5000 + 2 * ci as u64 + ri as u64;
+                // a sensor fault happens once: in the second run only
+                let eff: Vec<TruthEffect> = effects
+                    .iter()
+                    .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                    .cloned()
+                    .collect();
+                (
+                    format!("open{ci}-{ri}"),
+                    simulate(&duty, &eff, half, cfg.sample_period_s, seed).run,
+                )
+            })
+            .collect();
+        let t = std::time::Instant::now();
+        let d = super::fitmode::diagnose_fit(&runs, &opt)?;
+        times.push(t.elapsed().as_secs_f64());
+        let got = d.findings.first().map(|f| f.name.clone());
+        // sensor effects must also name the right sensor
+        let sensor_ok = match effects.first() {
+            Some(TruthEffect::SensorStep { sensor, .. })
+            | Some(TruthEffect::SensorLag { sensor, .. }) => d
+                .findings
+                .first()
+                .is_some_and(|f| f.params_json()["sensor"] == format!("T_T{sensor}").as_str()),
+            _ => true,
+        };
+        let correct = match kind {
+            Some(_) => {
+                got.as_deref() == effects.first().map(TruthEffect::diagnosis_name) && sensor_ok
+            }
+            None => got.is_none(),
+        };
+        match kind {
+            Some(k) => {
+                n_eff += 1;
+                ok += correct as usize;
+                let e = per.entry(k.to_string()).or_default();
+                e.0 += 1;
+                e.1 += correct as usize;
+                if let Some(f) = d.findings.first() {
+                    if let Some(((b, _), (a, _))) = f.gap_c {
+                        if b > 0.0 {
+                            shrink_c.push(1.0 - a / b);
+                        }
+                    }
+                    if let Some(((b, _), (a, _))) = f.gap_um {
+                        if b > 0.0 {
+                            shrink_um.push(1.0 - a / b);
+                        }
+                    }
+                } else {
+                    shrink_c.push(0.0);
+                    shrink_um.push(0.0);
+                }
+            }
+            None => false_alarms += (!d.findings.is_empty()) as usize,
+        }
+        if !correct {
+            misses.push(json!({
+                "case": ci,
+                "truth": effects.iter().map(TruthEffect::describe).collect::<Vec<_>>(),
+                "got": d.findings.iter().map(|f| json!({"name": f.name, "params": f.params_json()})).collect::<Vec<_>>(),
+            }));
+        }
+        if cfg.verbose {
+            for f in &d.tried {
+                eprintln!(
+                    "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {}",
+                    f.name,
+                    f.m_before,
+                    f.m_after,
+                    f.dbic,
+                    f.gap_um.map(|g| (g.0 .0, g.1 .0)),
+                    f.gap_c.map(|g| (g.0 .0, g.1 .0)),
+                    f.params_json()
+                );
+            }
+            eprintln!(
+                "open {ci:3} truth {:50} got {:40} {} ({:.2} s)",
+                effects
+                    .first()
+                    .map_or("clean".into(), TruthEffect::describe),
+                d.findings
+                    .iter()
+                    .map(|f| format!("{} {}", f.name, f.params_json()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if correct {
+                    "ok"
+                } else if kind.is_some() {
+                    "MISS"
+                } else {
+                    "FALSE ALARM"
+                },
+                times.last().copied().unwrap_or(0.0)
+            );
+        }
+    }
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    Ok(json!({
+        "mode": "diagnose fit (no machine file), truth model diagnose/truth.rs, two runs per case (light and heavy duty)",
+        "cases": plan.len(),
+        "effect_cases": n_eff,
+        "clean_cases": n_clean,
+        "top1_rate": ok as f64 / n_eff.max(1) as f64,
+        "per_effect": per.iter().map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok}))).collect::<serde_json::Map<_, _>>(),
+        "mean_heldout_gap_shrink_c": mean(&shrink_c),
+        "mean_heldout_gap_shrink_um": mean(&shrink_um),
+        "false_alarms": false_alarms,
+        "mean_diagnosis_seconds": mean(&times),
+        "max_diagnosis_seconds": times.iter().copied().fold(0.0, f64::max),
+        "hours_per_case": cfg.hours,
+        "sample_period_s": cfg.sample_period_s,
+        "misses": misses,
+    }))
+}

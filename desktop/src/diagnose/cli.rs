@@ -1,16 +1,16 @@
 //! `tcomp diagnose <machine.toml|fit> <runs...> [--json] [--report out.md]`
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 
-use super::{diagnose, nominal, report_md, Options};
+use super::{diagnose, render, Options};
 use crate::runcsv::Run;
 use crate::sim::Machine;
 
 #[derive(clap::Args, Debug)]
 pub struct DiagnoseArgs {
-    /// Nominal machine description (TOML), or `fit` to fit a simple nominal
-    /// model to the first part of the (first) run when no description exists.
+    /// Nominal machine description (TOML), or `fit` to identify the nominal
+    /// model from the runs themselves (no machine file).
     pub machine: String,
     /// Measured runs (run CSV).
     #[arg(required = true)]
@@ -18,18 +18,13 @@ pub struct DiagnoseArgs {
     /// Print `{"effects": [...], "where": {...}}`.
     #[arg(long)]
     pub json: bool,
-    /// Write a markdown report here.
+    /// Write a markdown report here (plus `<name>-channels.svg` and
+    /// `<name>-phases.svg` beside it when an effect is selected).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Fraction of time (one run) or of runs (several) used to fit.
     #[arg(long, default_value_t = 0.6)]
     pub fit_fraction: f64,
-    /// With `fit`: fraction of the run used to fit the nominal model.
-    #[arg(long, default_value_t = 0.3)]
-    pub nominal_fraction: f64,
-    /// With `fit`: save the fitted nominal machine description here.
-    #[arg(long)]
-    pub save_nominal: Option<PathBuf>,
     /// Only try these effects (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
@@ -44,17 +39,6 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         "--fit-fraction = {}: allowed between 0.05 and 0.95",
         a.fit_fraction
     );
-    if a.machine == "fit" {
-        // Checked before the fit: the nominal part lies inside the
-        // effect-fit part (first --fit-fraction); the held-out rest was
-        // used for neither.
-        anyhow::ensure!(
-            a.nominal_fraction >= 0.05 && a.nominal_fraction <= a.fit_fraction,
-            "--nominal-fraction = {}: allowed 0.05..=--fit-fraction ({})",
-            a.nominal_fraction,
-            a.fit_fraction
-        );
-    }
     if let Some(t) = a.threads {
         anyhow::ensure!((1..=1024).contains(&t), "--threads = {t}: allowed 1..=1024");
     }
@@ -63,16 +47,6 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         .iter()
         .map(|p| Run::read_with_temperatures(p).map(|r| (p.display().to_string(), r)))
         .collect::<Result<Vec<_>>>()?;
-    let machine = if a.machine == "fit" {
-        let m = nominal::fit_nominal(&runs[0].1, a.nominal_fraction)?;
-        if let Some(p) = &a.save_nominal {
-            std::fs::write(p, m.to_toml()?)
-                .with_context(|| format!("cannot write {}", p.display()))?;
-        }
-        m
-    } else {
-        Machine::load(std::path::Path::new(&a.machine))?
-    };
     let mut opt = Options {
         fit_fraction: a.fit_fraction,
         only: a.only.clone(),
@@ -87,15 +61,22 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
             "--only: unknown effect `{o}`"
         );
     }
-    let d = diagnose(&machine, &runs, &opt)?;
+    let d = if a.machine == "fit" {
+        super::fitmode::diagnose_fit(&runs, &opt)?
+    } else {
+        let machine = Machine::load(std::path::Path::new(&a.machine))?;
+        diagnose(&machine, &runs, &opt)?
+    };
     let names: Vec<String> = runs.iter().map(|r| r.0.clone()).collect();
     if let Some(p) = &a.report {
-        std::fs::write(p, report_md(&d, &names))
-            .with_context(|| format!("cannot write {}", p.display()))?;
+        render::write_report(&d, &names, p)?;
     }
     if a.json {
         println!("{}", d.to_json());
     } else {
+        for m in &d.missing {
+            println!("missing: {m}");
+        }
         if d.findings.is_empty() {
             println!("no candidate effect is supported by the data");
         }

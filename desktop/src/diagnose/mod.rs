@@ -6,8 +6,14 @@
 pub mod bench;
 pub mod cli;
 pub mod fit;
-pub mod nominal;
+pub mod fitmode;
+pub mod ident;
+pub mod open_effects;
 pub mod prep;
+pub mod render;
+pub mod series;
+pub mod stats;
+pub mod truth;
 
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
@@ -16,6 +22,30 @@ use crate::runcsv::Run;
 use crate::sim::{Effect, Machine, EFFECT_NAMES};
 use fit::{fit_cands, Cand, Evaluator, FitResult, Stats};
 use prep::{prepare, Kind, Prepared};
+pub use render::report_md;
+pub use stats::phases;
+use stats::{corr, first_order, r4, rms_of, ResidualView};
+
+/// Where the nominal model's gap lies (all rows of all runs).
+fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
+    let ph: Vec<Vec<&'static str>> = ps
+        .iter()
+        .map(|p| phases(&p.inputs.rpm, p.inputs.dt))
+        .collect();
+    let mut views = Vec::new();
+    for ((p, rr), ph) in ps.iter().zip(res).zip(&ph) {
+        for (c, r) in p.channels.iter().zip(rr) {
+            views.push(ResidualView {
+                name: &c.name,
+                is_disp: matches!(c.kind, Kind::Disp(_)),
+                resid: r,
+                phases: ph,
+                dt: p.inputs.dt,
+            });
+        }
+    }
+    stats::where_json(&views)
+}
 
 /// Settings of a diagnosis.
 #[derive(Clone, Debug)]
@@ -69,11 +99,15 @@ pub struct Finding {
     pub gap_um: Option<((f64, f64), (f64, f64))>,
     pub gap_c: Option<((f64, f64), (f64, f64))>,
     pub evidence: Value,
+    /// Parameters of an effect that is not a simulator effect (`diagnose fit`).
+    pub params: Option<Value>,
 }
 
 impl Finding {
     pub fn params_json(&self) -> Value {
-        if self.effects.len() == 1 {
+        if let Some(p) = &self.params {
+            p.clone()
+        } else if self.effects.len() == 1 {
             self.effects[0].params_json()
         } else {
             let mut o = serde_json::Map::new();
@@ -90,6 +124,8 @@ impl Finding {
             "params": self.params_json(),
             "gap_before_um": self.gap_um.map(|g| g.0 .0),
             "gap_after_um": self.gap_um.map(|g| g.1 .0),
+            "gap_before_c": self.gap_c.map(|g| g.0 .0),
+            "gap_after_c": self.gap_c.map(|g| g.1 .0),
             "evidence": self.evidence,
         })
     }
@@ -109,6 +145,19 @@ pub struct Diagnosis {
     pub notes: Vec<String>,
     pub seconds: f64,
     pub sims: usize,
+    /// Effects the data cannot test, with the reason.
+    pub untestable: Vec<(String, String)>,
+    /// One line per missing input: what is missing and what that costs.
+    pub missing: Vec<String>,
+    /// The nominal model and its own held-out fit.
+    pub nominal: Value,
+    /// Evidence for "no effect": residual against noise, whiteness.
+    pub no_effect: Value,
+    /// How findings are ranked and when one is claimed.
+    pub ranking_rule: String,
+    /// Held-out RMS by channel and by phase, before and after the selected
+    /// effect (for the report's plots).
+    pub selected_gaps: Option<render::SelectedGaps>,
 }
 
 impl Diagnosis {
@@ -116,6 +165,13 @@ impl Diagnosis {
         json!({
             "effects": self.findings.iter().map(Finding::to_json).collect::<Vec<_>>(),
             "where": self.where_,
+            "gap_before_um": self.nominal_gap_um.map(|g| g.0),
+            "gap_before_c": self.nominal_gap_c.map(|g| g.0),
+            "untestable": self.untestable.iter().map(|(n, r)| json!({"name": n, "reason": r})).collect::<Vec<_>>(),
+            "missing": self.missing,
+            "nominal": self.nominal,
+            "no_effect": self.no_effect,
+            "ranking_rule": self.ranking_rule,
         })
     }
 }
@@ -141,227 +197,6 @@ pub fn prepare_all(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result
         p.split = ((p.rows() as f64) * opt.fit_fraction).round() as usize;
     }
     Ok(ps)
-}
-
-fn corr(a: &[f64], b: &[f64]) -> f64 {
-    let pairs: Vec<(f64, f64)> = a
-        .iter()
-        .zip(b)
-        .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .map(|(x, y)| (*x, *y))
-        .collect();
-    let n = pairs.len() as f64;
-    if n < 3.0 {
-        return 0.0;
-    }
-    let ma = pairs.iter().map(|p| p.0).sum::<f64>() / n;
-    let mb = pairs.iter().map(|p| p.1).sum::<f64>() / n;
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in &pairs {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma).powi(2);
-        sbb += (y - mb).powi(2);
-    }
-    if saa <= 0.0 || sbb <= 0.0 {
-        return 0.0;
-    }
-    sab / (saa * sbb).sqrt()
-}
-
-/// Centered moving average with window `w` rows (NaN-aware).
-fn moving_avg(v: &[f64], w: usize) -> Vec<f64> {
-    let n = v.len();
-    let h = w / 2;
-    let mut cs = vec![0.0; n + 1];
-    let mut cn = vec![0usize; n + 1];
-    for i in 0..n {
-        let ok = v[i].is_finite();
-        cs[i + 1] = cs[i] + if ok { v[i] } else { 0.0 };
-        cn[i + 1] = cn[i] + ok as usize;
-    }
-    (0..n)
-        .map(|i| {
-            let a = i.saturating_sub(h);
-            let b = (i + h + 1).min(n);
-            let c = cn[b] - cn[a];
-            if c == 0 {
-                f64::NAN
-            } else {
-                (cs[b] - cs[a]) / c as f64
-            }
-        })
-        .collect()
-}
-
-fn first_order(v: &[f64], dt: f64, tau: f64) -> Vec<f64> {
-    let e = (-dt / tau).exp();
-    let mut y = 0.0;
-    v.iter()
-        .map(|x| {
-            y = e * y + (1.0 - e) * x;
-            y
-        })
-        .collect()
-}
-
-/// Operating phase of each row from the spindle speed.
-pub fn phases(rpm: &[f64], dt: f64) -> Vec<&'static str> {
-    let mut out = Vec::with_capacity(rpm.len());
-    let mut ran = false;
-    let mut since_start = f64::INFINITY;
-    let mut since_change = f64::INFINITY;
-    let mut prev = rpm.first().copied().unwrap_or(0.0);
-    if prev > 0.0 {
-        since_start = 0.0;
-    }
-    for &r in rpm {
-        if (r - prev).abs() > 50.0 {
-            if prev <= 0.0 && r > 0.0 {
-                since_start = 0.0;
-            } else if prev > 0.0 && r > 0.0 {
-                since_change = 0.0;
-            }
-        }
-        prev = r;
-        let ph = if r > 0.0 {
-            ran = true;
-            if since_change < 600.0 {
-                "speed_change"
-            } else if since_start < 3600.0 {
-                "warm_up"
-            } else {
-                "steady"
-            }
-        } else if ran {
-            "cool_down"
-        } else {
-            "idle"
-        };
-        out.push(ph);
-        since_start += dt;
-        since_change += dt;
-    }
-    out
-}
-
-fn rms_of(vals: impl Iterator<Item = f64>) -> (f64, f64, usize) {
-    let (mut s, mut pk, mut n) = (0.0, 0.0f64, 0usize);
-    for v in vals.filter(|v| v.is_finite()) {
-        s += v * v;
-        pk = pk.max(v.abs());
-        n += 1;
-    }
-    if n == 0 {
-        (f64::NAN, f64::NAN, 0)
-    } else {
-        ((s / n as f64).sqrt(), pk, n)
-    }
-}
-
-fn r4(x: f64) -> Value {
-    if x.is_finite() {
-        json!((x * 1e4).round() / 1e4)
-    } else {
-        Value::Null
-    }
-}
-
-/// Where the nominal model's gap lies (all rows of all runs).
-fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
-    let mut sensors = serde_json::Map::new();
-    let mut dirs = serde_json::Map::new();
-    // channel name → pooled residuals over runs
-    let mut names: Vec<(String, bool)> = Vec::new();
-    for p in ps {
-        for c in &p.channels {
-            let e = (c.name.clone(), matches!(c.kind, Kind::Disp(_)));
-            if !names.contains(&e) {
-                names.push(e);
-            }
-        }
-    }
-    for (name, disp) in &names {
-        let vals: Vec<f64> = ps
-            .iter()
-            .zip(res)
-            .flat_map(|(p, rr)| {
-                p.channels
-                    .iter()
-                    .zip(rr)
-                    .filter(|(c, _)| &c.name == name)
-                    .flat_map(|(_, r)| r.iter().copied())
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        let (rms, pk, n) = rms_of(vals.iter().copied());
-        let mean = vals.iter().filter(|v| v.is_finite()).sum::<f64>() / n.max(1) as f64;
-        let o = json!({"rms": r4(rms), "peak": r4(pk), "mean": r4(mean)});
-        if *disp {
-            dirs.insert(name.clone(), o);
-        } else {
-            sensors.insert(name.clone(), o);
-        }
-    }
-    // phases
-    let mut ph_t: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
-    let mut ph_d: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
-    let mut ph_rows: std::collections::BTreeMap<&str, usize> = Default::default();
-    let mut bands_t = [(0.0, 0usize); 3];
-    let mut bands_d = [(0.0, 0usize); 3];
-    for (p, rr) in ps.iter().zip(res) {
-        let ph = phases(&p.inputs.rpm, p.inputs.dt);
-        for x in &ph {
-            *ph_rows.entry(x).or_default() += 1;
-        }
-        let w10 = ((600.0 / p.inputs.dt).round() as usize).max(1);
-        let w60 = ((3600.0 / p.inputs.dt).round() as usize).max(1);
-        for (c, r) in p.channels.iter().zip(rr) {
-            let disp = matches!(c.kind, Kind::Disp(_));
-            let tgt = if disp { &mut ph_d } else { &mut ph_t };
-            for (k, v) in r.iter().enumerate() {
-                if v.is_finite() {
-                    let e = tgt.entry(ph[k]).or_default();
-                    e.0 += v * v;
-                    e.1 += 1;
-                }
-            }
-            let slow = moving_avg(r, w60);
-            let mid10 = moving_avg(r, w10);
-            let b = if disp { &mut bands_d } else { &mut bands_t };
-            for k in 0..r.len() {
-                if !r[k].is_finite() {
-                    continue;
-                }
-                let parts = [slow[k], mid10[k] - slow[k], r[k] - mid10[k]];
-                for (bi, x) in parts.iter().enumerate() {
-                    if x.is_finite() {
-                        b[bi].0 += x * x;
-                        b[bi].1 += 1;
-                    }
-                }
-            }
-        }
-    }
-    let rm = |e: Option<&(f64, usize)>| match e {
-        Some((s, n)) if *n > 0 => r4((s / *n as f64).sqrt()),
-        _ => Value::Null,
-    };
-    let mut phase = serde_json::Map::new();
-    for (k, rows) in &ph_rows {
-        phase.insert(
-            k.to_string(),
-            json!({"rows": rows, "rms_c": rm(ph_t.get(k)), "rms_um": rm(ph_d.get(k))}),
-        );
-    }
-    let band_names = ["slow_gt_1h", "mid_10min_1h", "fast_lt_10min"];
-    let mut bands = serde_json::Map::new();
-    for (i, bn) in band_names.iter().enumerate() {
-        bands.insert(
-            bn.to_string(),
-            json!({"rms_c": rm(Some(&bands_t[i])), "rms_um": rm(Some(&bands_d[i]))}),
-        );
-    }
-    json!({"sensors": sensors, "directions": dirs, "phases": phase, "bands": bands})
 }
 
 /// Evidence: signature correlation (nominal residual vs the effect's change
@@ -562,35 +397,22 @@ fn candidates(m: &Machine, ps: &[Prepared], res0: &[Vec<Vec<f64>>], opt: &Option
     out
 }
 
-/// Run `f` over `items` on up to `threads` threads, keeping the order.
-fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync>(items: &[T], threads: usize, f: F) -> Vec<R> {
-    let threads = threads.max(1).min(items.len().max(1));
-    if threads <= 1 {
-        return items.iter().map(&f).collect();
+/// `f` over `items` in parallel (rayon), keeping the order; `threads` caps
+/// the pool when it is smaller than rayon's.
+fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync + Send>(
+    items: &[T],
+    threads: usize,
+    f: F,
+) -> Vec<R> {
+    use rayon::prelude::*;
+    let run = || items.par_iter().map(&f).collect();
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+    {
+        Ok(pool) if threads < rayon::current_num_threads() => pool.install(run),
+        _ => run(),
     }
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: std::sync::Mutex<Vec<Option<R>>> =
-        std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                if i >= items.len() {
-                    break;
-                }
-                let r = f(&items[i]);
-                if let Ok(mut g) = results.lock() {
-                    g[i] = Some(r);
-                }
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_default()
-        .into_iter()
-        .flatten()
-        .collect()
 }
 
 /// Diagnose prepared runs against the nominal machine.
@@ -628,6 +450,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
                 gap_um: st0.gap_held(true).zip(st.gap_held(true)),
                 gap_c: st0.gap_held(false).zip(st.gap_held(false)),
                 evidence: ev_json,
+                params: None,
             },
             st,
         ))
@@ -756,6 +579,12 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         notes,
         seconds: t0.elapsed().as_secs_f64(),
         sims,
+        untestable: Vec::new(),
+        missing: Vec::new(),
+        nominal: json!({"kind": "machine description", "name": m.spec.name}),
+        no_effect: Value::Null,
+        selected_gaps: None,
+        ranking_rule: "single effects and pairs fitted on the fit part; an effect is claimed when its BIC improves by at least min_dbic and the held-out gap (noise units) shrinks by min_rel and min_abs; ranked by held-out gap after".into(),
     })
 }
 
@@ -766,127 +595,4 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
     let mut d = diagnose_prepared(m, &ps, opt)?;
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
-}
-
-fn f2(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:.3}")
-    } else {
-        "–".into()
-    }
-}
-
-/// Markdown report.
-pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
-    use std::fmt::Write;
-    let mut s = String::new();
-    let _ = writeln!(s, "# Sim-to-real gap diagnosis — machine `{}`\n", d.machine);
-    let _ = writeln!(s, "Runs: {}\n", run_names.join(", "));
-    let _ = writeln!(
-        s,
-        "Nominal model, held-out data: RMS gap {} µm (peak {}), {} °C (peak {}); normalised gap {} (1 ≈ sensor noise).\n",
-        d.nominal_gap_um.map_or("–".into(), |g| f2(g.0)),
-        d.nominal_gap_um.map_or("–".into(), |g| f2(g.1)),
-        d.nominal_gap_c.map_or("–".into(), |g| f2(g.0)),
-        d.nominal_gap_c.map_or("–".into(), |g| f2(g.1)),
-        f2(d.nominal_m_held.sqrt())
-    );
-    let _ = writeln!(s, "## Which effect\n");
-    if d.findings.is_empty() {
-        let _ = writeln!(
-            s,
-            "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n"
-        );
-    } else {
-        let _ = writeln!(s, "| rank | effect | params | held-out gap µm before → after | °C before → after | ΔBIC | signature r | driver r |");
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
-        for (i, f) in d.findings.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "| {} | **{}** | `{}` | {} → {} | {} → {} | {:.1} | {} | {} |",
-                i + 1,
-                f.name,
-                f.params_json(),
-                f.gap_um.map_or("–".into(), |g| f2(g.0 .0)),
-                f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
-                f.gap_c.map_or("–".into(), |g| f2(g.0 .0)),
-                f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
-                f.dbic,
-                f.evidence
-                    .get("signature_corr")
-                    .cloned()
-                    .unwrap_or(Value::Null),
-                f.evidence
-                    .get("driver_corr")
-                    .cloned()
-                    .unwrap_or(Value::Null),
-            );
-        }
-        let _ = writeln!(s);
-    }
-    let _ = writeln!(s, "### All single candidates tried\n");
-    let _ = writeln!(s, "| effect | fitted params | ΔBIC (fit part) | held-out norm. gap before → after | µm after | °C after |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
-    for f in &d.tried {
-        let _ = writeln!(
-            s,
-            "| {} | `{}` | {:.1} | {} → {} | {} | {} |",
-            f.name,
-            f.params_json(),
-            f.dbic,
-            f2(f.m_before.sqrt()),
-            f2(f.m_after.sqrt()),
-            f.gap_um.map_or("–".into(), |g| f2(g.1 .0)),
-            f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
-        );
-    }
-    let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
-    let w = &d.where_;
-    for (title, key, unit) in [
-        ("Per sensor", "sensors", "°C"),
-        ("Per direction", "directions", "µm"),
-    ] {
-        if let Some(o) = w.get(key).and_then(|v| v.as_object()) {
-            if o.is_empty() {
-                continue;
-            }
-            let _ = writeln!(
-                s,
-                "### {title} ({unit})\n\n| channel | RMS | peak | mean |\n|---|---|---|---|"
-            );
-            for (k, v) in o {
-                let _ = writeln!(s, "| {k} | {} | {} | {} |", v["rms"], v["peak"], v["mean"]);
-            }
-            let _ = writeln!(s);
-        }
-    }
-    if let Some(o) = w.get("phases").and_then(|v| v.as_object()) {
-        let _ = writeln!(
-            s,
-            "### Per operating phase\n\n| phase | rows | RMS °C | RMS µm |\n|---|---|---|---|"
-        );
-        for (k, v) in o {
-            let _ = writeln!(
-                s,
-                "| {k} | {} | {} | {} |",
-                v["rows"], v["rms_c"], v["rms_um"]
-            );
-        }
-        let _ = writeln!(s);
-    }
-    if let Some(o) = w.get("bands").and_then(|v| v.as_object()) {
-        let _ = writeln!(s, "### Per frequency band (moving-average split)\n\n| band | RMS °C | RMS µm |\n|---|---|---|");
-        for (k, v) in o {
-            let _ = writeln!(s, "| {k} | {} | {} |", v["rms_c"], v["rms_um"]);
-        }
-        let _ = writeln!(s);
-    }
-    if !d.notes.is_empty() {
-        let _ = writeln!(s, "## Notes\n");
-        for n in &d.notes {
-            let _ = writeln!(s, "- {n}");
-        }
-    }
-    let _ = writeln!(s, "\n_{} simulations in {:.2} s._", d.sims, d.seconds);
-    s
 }

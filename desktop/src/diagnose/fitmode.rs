@@ -1,0 +1,408 @@
+//! `tcomp diagnose fit <runs…>`: the diagnosis without a machine file.
+//! The nominal model is identified from the runs (`ident`), the gap is
+//! located on its residual, and only the effects an identified nominal
+//! cannot absorb are tested (`open_effects`); everything else is listed as
+//! untestable with the reason.
+
+use anyhow::Result;
+use serde_json::{json, Value};
+
+use super::ident::{ModelFit, Problem, Structure};
+use super::open_effects::{self, Candidate};
+use super::render::SelectedGaps;
+use super::series;
+use super::stats::{ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView};
+use super::{Diagnosis, Finding, Options};
+use crate::runcsv::Run;
+
+/// Effects an identified nominal absorbs (or the data cannot show), with why.
+pub fn untestable(p: &Problem) -> Vec<(String, String)> {
+    let ds = p.ds;
+    let mut v = vec![
+        ("convection".to_string(), "a different convection level only changes the gains and time constants the nominal is identified with; without a machine file it is not a gap".to_string()),
+        ("bending".to_string(), "displacement is identified as a linear map of the node rises, which contains any bending proportional to a temperature difference".to_string()),
+        ("sensor_offset (constant over a run)".to_string(), "a constant offset is indistinguishable from the sensor's own rest level (its level is identified per run); steps inside a run are tested".to_string()),
+    ];
+    if ds.has_feed {
+        v.push(("ballscrew".into(), "heat that follows feed_activity is an input of the nominal and is absorbed by its gains".into()));
+    } else {
+        v.push((
+            "ballscrew".into(),
+            "no feed_activity column: heat from axis travel has no observed driver".into(),
+        ));
+    }
+    if ds.has_coolant {
+        v.push(("coolant (on/off level)".into(), "coolant_on is an input of the nominal, so the mean cooling is absorbed; only a periodic chiller drive is tested".into()));
+    }
+    let speed = "bearing_nonlinear / speed nonlinearity".to_string();
+    if !ds.has_rpm {
+        v.push((
+            speed,
+            "no spindle_rpm column: the heat input is not observed, temperatures drive the nominal"
+                .into(),
+        ));
+    } else if open_effects::runs_of_different_speeds(p) {
+        v.push((speed, "tried and reported under `tried`, never claimed: with a two-term speed law (n and n^e) in the nominal, a steeper term also soaks up other heat that comes with running (coolant flow coupling) and named it on clean runs of the open-world truth model".into()));
+    } else {
+        v.push((speed, "needs at least two runs whose mean speeds differ by 20 % of the maximum: within one run a steeper speed law cannot be told from other heat that comes with running".into()));
+    }
+    if ds.disps.is_empty() {
+        v.push(("sensor_lag".into(), "no displacement column: a sensor's lag is only visible against its body, and an identified nominal absorbs any lag of a sensor's own reading".into()));
+    }
+    v
+}
+
+/// Residual evidence of "no effect": per-channel held-out RMS against the
+/// noise level and a Ljung–Box whiteness test on the held-out residual.
+pub fn no_effect_evidence(p: &Problem, fit: &ModelFit) -> Value {
+    let mut ch = serde_json::Map::new();
+    let mut worst_ratio = 0.0f64;
+    let mut white = 0usize;
+    let mut tested = 0usize;
+    for (o, (out, f)) in p.outputs.iter().zip(&fit.outs).enumerate() {
+        if f.n_held == 0 {
+            continue;
+        }
+        let rms = (f.sse_held / f.n_held as f64).sqrt();
+        let ratio = rms / out.noise;
+        worst_ratio = worst_ratio.max(ratio);
+        // held-out rows, runs concatenated, thinned to ≥ 2 min apart
+        let mut held = Vec::new();
+        for (r, run) in p.ds.runs.iter().enumerate() {
+            for k in 0..run.rows() {
+                if run.held[k] {
+                    held.push(fit.outs[o].resid[r][k]);
+                }
+            }
+        }
+        let dt = p.ds.runs.first().map_or(60.0, |r| r.dt);
+        let step = ((120.0 / dt).ceil() as usize).max(1);
+        let lb = ljung_box(&held, 10, step);
+        if let Some((_, _, pv)) = lb {
+            tested += 1;
+            if pv > 0.01 {
+                white += 1;
+            }
+        }
+        ch.insert(
+            out.name.clone(),
+            json!({
+                "held_out_rms": r4(rms),
+                "noise": r4(out.noise),
+                "rms_over_noise": r4(ratio),
+                "ljung_box_p": lb.map(|l| r4(l.2)),
+            }),
+        );
+    }
+    json!({
+        "channels": ch,
+        "worst_rms_over_noise": r4(worst_ratio),
+        "white_channels": white,
+        "tested_channels": tested,
+        "rule": "residual at noise level: held-out RMS ≤ 2 × noise; white: Ljung–Box p > 0.01 over 10 lags of rows ≥ 2 min apart",
+    })
+}
+
+/// Description of the identified nominal and its own held-out fit.
+pub fn nominal_json(p: &Problem, st: &Structure, fit: &ModelFit) -> Value {
+    let um = fit.gap_held(&p.outputs, true);
+    let c = fit.gap_held(&p.outputs, false);
+    let fit_rms = |disp: bool| {
+        let (mut s, mut n) = (0.0, 0usize);
+        for (f, o) in fit.outs.iter().zip(&p.outputs) {
+            if o.is_disp == disp {
+                s += f.sse_fit;
+                n += f.n_fit;
+            }
+        }
+        (n > 0).then(|| (s / n as f64).sqrt())
+    };
+    json!({
+        "kind": "identified modal thermal network",
+        "drive": if p.cross() { "temperatures (no spindle_rpm): each sensor from the principal components of the others" } else { "inputs: spindle heat, feed, coolant, ambient as present" },
+        "time_constants_s": st.modes,
+        "order": st.modes.len(),
+        "speed_exponent": if p.ds.has_rpm { json!(st.exponent) } else { Value::Null },
+        "coefficients": fit.k(),
+        "bic": r4(fit.bic(&p.outputs)),
+        "fit_rms_c": fit_rms(false).map(r4),
+        "fit_rms_um": fit_rms(true).map(r4),
+        "held_out_rms_c": c.map(|g| r4(g.0)),
+        "held_out_rms_um": um.map(|g| r4(g.0)),
+        "held_out_peak_um": um.map(|g| r4(g.1)),
+        "split": format!("each run in {} time blocks, blocks {:?} held out", series::BLOCKS, series::HELD_BLOCKS),
+    })
+}
+
+/// Where the nominal's gap lies, all rows of all runs.
+pub fn where_of(p: &Problem, fit: &ModelFit) -> Value {
+    let ds = p.ds;
+    let ph = run_phases(p);
+    let mut views = Vec::new();
+    for (r, run) in ds.runs.iter().enumerate() {
+        for (o, out) in p.outputs.iter().enumerate() {
+            views.push(ResidualView {
+                name: &out.name,
+                is_disp: out.is_disp,
+                resid: &fit.outs[o].resid[r],
+                phases: &ph[r],
+                dt: run.dt,
+            });
+        }
+    }
+    where_json(&views)
+}
+
+/// A candidate scored against its reference fit (the nominal, or for
+/// `sensor_lag` the static displacement map).
+struct Scored {
+    finding: Finding,
+    claimed: bool,
+    /// Held-out reduction in noise units summed over the affected outputs.
+    gain: f64,
+    /// The fit with the effect and the reference it is scored against
+    /// (`None`: the nominal).
+    fit: ModelFit,
+    before: Option<ModelFit>,
+}
+
+fn score(
+    p: &Problem,
+    c: Candidate,
+    reference: Option<ModelFit>,
+    nominal: &ModelFit,
+    min: &Options,
+) -> Scored {
+    let before = reference.as_ref().unwrap_or(nominal);
+    let outs = &p.outputs;
+    let m_b = before.m_held_of(outs, &c.affected);
+    let m_a = c.fit.m_held_of(outs, &c.affected);
+    let n = before.n_fit().max(2) as f64;
+    let dbic = c.fit.j_fit(outs) - before.j_fit(outs) + c.k_extra as f64 * n.ln();
+    let gum = before.gap_held(outs, true).zip(c.fit.gap_held(outs, true));
+    let gc = before
+        .gap_held(outs, false)
+        .zip(c.fit.gap_held(outs, false));
+    let gain: f64 = c
+        .affected
+        .iter()
+        .filter(|&&o| before.outs[o].n_held > 0)
+        .map(|&o| {
+            (before.outs[o].sse_held - c.fit.outs[o].sse_held)
+                / before.outs[o].n_held as f64
+                / outs[o].noise.powi(2)
+        })
+        .sum();
+    let no_worse =
+        |g: Option<((f64, f64), (f64, f64))>| g.is_none_or(|g| g.1 .0 <= g.0 .0 * (1.0 + 1e-9));
+    // sensor lag is judged against the static body map, which is itself
+    // approximate, and a steeper speed law also soaks up other heat that
+    // comes with running: both must halve the gap they are judged on
+    let min_rel = if c.name == "sensor_lag" {
+        0.5
+    } else {
+        FIT_MIN_REL
+    };
+    let periodic_ok = c.name != "coolant"
+        || c.evidence["peak_over_median_power"]
+            .as_f64()
+            .is_some_and(|v| v >= PERIODIC_MIN_PEAK);
+    let claimed = c.name != "bearing_nonlinear"
+        && dbic <= -min.min_dbic
+        && m_a.is_finite()
+        && c.at_bound.is_empty()
+        && periodic_ok
+        && m_a <= m_b * (1.0 - min_rel)
+        && m_b - m_a >= FIT_MIN_ABS
+        && no_worse(gum)
+        && no_worse(gc);
+    let mut ev = c.evidence.clone();
+    if let Some(o) = ev.as_object_mut() {
+        o.insert("delta_bic".into(), r4(dbic));
+        o.insert("held_out_norm_gap_before".into(), r4(m_b.sqrt()));
+        o.insert("held_out_norm_gap_after".into(), r4(m_a.sqrt()));
+        o.insert(
+            "affected".into(),
+            json!(c
+                .affected
+                .iter()
+                .map(|&i| outs[i].name.clone())
+                .collect::<Vec<_>>()),
+        );
+        o.insert("at_bound".into(), json!(c.at_bound));
+        o.insert("peak_before_um".into(), json!(gum.map(|g| r4(g.0 .1))));
+        o.insert("peak_after_um".into(), json!(gum.map(|g| r4(g.1 .1))));
+    }
+    Scored {
+        finding: Finding {
+            name: c.name.to_string(),
+            effects: Vec::new(),
+            dbic,
+            m_before: m_b,
+            m_after: m_a,
+            gap_um: gum,
+            gap_c: gc,
+            evidence: ev,
+            params: Some(c.params),
+        },
+        claimed,
+        gain,
+        fit: c.fit,
+        before: reference,
+    }
+}
+
+/// Phase of each row of each run (from the speed, else the temperatures).
+fn run_phases(p: &Problem) -> Vec<Vec<&'static str>> {
+    p.ds.runs
+        .iter()
+        .map(|r| match &r.rpm {
+            Some(rpm) => phases(rpm, r.dt),
+            None => {
+                let s: Vec<&[f64]> = r.sensors.iter().map(|s| s.values.as_slice()).collect();
+                phases_from_temperatures(&s, r.dt)
+            }
+        })
+        .collect()
+}
+
+/// Held-out RMS by channel and by phase before and after an effect.
+fn selected_gaps(p: &Problem, name: &str, before: &ModelFit, after: &ModelFit) -> SelectedGaps {
+    let channels = p
+        .outputs
+        .iter()
+        .enumerate()
+        .filter(|(o, _)| before.outs[*o].n_held > 0 && after.outs[*o].n_held > 0)
+        .map(|(o, out)| {
+            let rms = |f: &ModelFit| (f.outs[o].sse_held / f.outs[o].n_held as f64).sqrt();
+            (out.name.clone(), out.is_disp, rms(before), rms(after))
+        })
+        .collect();
+    let ph = run_phases(p);
+    let mut acc: std::collections::BTreeMap<&str, (f64, f64, usize)> = Default::default();
+    for (r, run) in p.ds.runs.iter().enumerate() {
+        for (o, out) in p.outputs.iter().enumerate() {
+            if out.is_disp || before.outs[o].resid.len() <= r || after.outs[o].resid.len() <= r {
+                continue;
+            }
+            for k in (0..run.rows()).filter(|&k| run.held[k]) {
+                let (b, a) = (before.outs[o].resid[r][k], after.outs[o].resid[r][k]);
+                if b.is_finite() && a.is_finite() {
+                    let e = acc.entry(ph[r][k]).or_default();
+                    e.0 += b * b;
+                    e.1 += a * a;
+                    e.2 += 1;
+                }
+            }
+        }
+    }
+    SelectedGaps {
+        effect: name.to_string(),
+        channels,
+        phases: acc
+            .into_iter()
+            .map(|(k, (b, a, n))| (k.to_string(), (b / n as f64).sqrt(), (a / n as f64).sqrt()))
+            .collect(),
+    }
+}
+
+/// A periodic drive must stand this far above the median of the residual
+/// spectrum (sum over sensors) to be claimed.
+pub const PERIODIC_MIN_PEAK: f64 = 8.0;
+
+/// Relative held-out shrink (noise units, affected outputs) to claim an effect.
+pub const FIT_MIN_REL: f64 = 0.3;
+/// Absolute held-out shrink (noise-variance units) to claim an effect.
+pub const FIT_MIN_ABS: f64 = 1.0;
+
+/// Diagnose runs without a machine file.
+pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
+    let t0 = std::time::Instant::now();
+    let ds = series::load(runs, opt.max_rows.min(1500))?;
+    let p = Problem::new(&ds);
+    let (st, fit) = p.identify();
+    let where_ = where_of(&p, &fit);
+    // candidates (each against the nominal; the lag against the body map)
+    let only = |n: &str| opt.only.is_empty() || opt.only.iter().any(|o| o == n);
+    let mut cands: Vec<(Candidate, Option<ModelFit>)> = Vec::new();
+    if only("sensor_offset") {
+        cands.extend(
+            open_effects::sensor_steps(&p, &st, &fit)
+                .into_iter()
+                .map(|c| (c, None)),
+        );
+    }
+    if only("sensor_lag") {
+        cands.extend(
+            open_effects::sensor_lags(&p)
+                .into_iter()
+                .map(|(c, b)| (c, Some(b))),
+        );
+    }
+    if only("coolant") {
+        cands.extend(open_effects::periodic(&p, &st, &fit).map(|c| (c, None)));
+    }
+    if only("bearing_nonlinear") {
+        cands.extend(open_effects::speed_nonlinearity(&p, &st, &fit).map(|c| (c, None)));
+    }
+    if only("ambient_drift") {
+        cands.extend(open_effects::ambient_drift(&p, &st, &fit).map(|c| (c, None)));
+    }
+    let n_cands = cands.len();
+    let mut scored: Vec<Scored> = cands
+        .into_iter()
+        .map(|(c, b)| score(&p, c, b, &fit, opt))
+        .collect();
+    scored.sort_by(|a, b| b.gain.total_cmp(&a.gain));
+    let mut findings = Vec::new();
+    for s in scored.iter().filter(|s| s.claimed) {
+        let mut f = s.finding.clone();
+        if let Some(o) = f.evidence.as_object_mut() {
+            o.insert(
+                "role".into(),
+                json!(if findings.is_empty() {
+                    "selected"
+                } else {
+                    "alternative: supported alone but explains less than the selected effect"
+                }),
+            );
+        }
+        findings.push(f);
+    }
+    let selected = scored.iter().find(|s| s.claimed).map(|s| {
+        selected_gaps(
+            &p,
+            &s.finding.name,
+            s.before.as_ref().unwrap_or(&fit),
+            &s.fit,
+        )
+    });
+    let tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
+    let mut notes = ds.notes.clone();
+    notes.push(format!(
+        "nominal identified on {} run(s), {} rows, fit and held-out blocks in every run",
+        ds.runs.len(),
+        ds.runs.iter().map(|r| r.rows()).sum::<usize>()
+    ));
+    Ok(Diagnosis {
+        machine: "identified from the runs (no machine file)".into(),
+        findings,
+        tried,
+        where_,
+        nominal_m_held: fit.m_held_of(&p.outputs, &(0..p.outputs.len()).collect::<Vec<_>>()),
+        nominal_gap_um: fit.gap_held(&p.outputs, true),
+        nominal_gap_c: fit.gap_held(&p.outputs, false),
+        notes,
+        seconds: t0.elapsed().as_secs_f64(),
+        sims: n_cands,
+        untestable: untestable(&p),
+        missing: ds.missing.clone(),
+        nominal: nominal_json(&p, &st, &fit),
+        no_effect: no_effect_evidence(&p, &fit),
+        selected_gaps: selected,
+        ranking_rule: format!(
+            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {}, the held-out gap of the outputs it changes shrinks by ≥ {:.0} % and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units)",
+            opt.min_dbic, FIT_MIN_REL * 100.0, FIT_MIN_ABS
+        ),
+    })
+}

@@ -1,0 +1,660 @@
+//! Candidate effects of `diagnose fit`: only those an identified nominal
+//! cannot absorb. Each is added to the nominal as extra regressors (or a
+//! re-mapped sensor), fitted jointly on the fit blocks and scored on the
+//! held-out blocks in the unit it shows in (°C, µm).
+//!
+//! - `sensor_offset`: a step in one sensor at one time of one run (an
+//!   offset that changes inside a run), located by a change-point scan of
+//!   that sensor's nominal residual on the fit rows;
+//! - `sensor_lag`: a sensor that lags its body: displacement, a static map
+//!   of the true node temperatures, is better explained by the sensor
+//!   corrected for a first-order lag (`T + τ dT/dt`) than by its reading;
+//! - `coolant`: a periodic coolant/chiller drive, its period from the
+//!   sensors' own residual spectra (gated by `coolant_on` when present);
+//! - `bearing_nonlinear`: spindle heat that does not follow the nominal's
+//!   single power of speed (needs several speed levels);
+//! - `ambient_drift`: a slow drift common to every sensor that `T_ambient`
+//!   does not carry.
+
+use serde_json::{json, Value};
+
+use super::ident::{ModelFit, OutFit, Problem, Structure};
+use super::stats::r4;
+
+/// A fitted candidate against the nominal.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    pub name: &'static str,
+    pub params: Value,
+    /// Outputs whose model changed.
+    pub affected: Vec<usize>,
+    pub fit: ModelFit,
+    /// Extra fitted parameters (continuous and searched).
+    pub k_extra: usize,
+    /// Parameters that ended on the edge of their search range.
+    pub at_bound: Vec<String>,
+    pub evidence: Value,
+}
+
+fn with_outputs(base: &ModelFit, new: Vec<(usize, OutFit)>) -> ModelFit {
+    let mut f = base.clone();
+    for (o, of) in new {
+        f.outs[o] = of;
+    }
+    f
+}
+
+/// Smallest step claimed, in noise units and in °C (1/16 °C: one DS18B20 count).
+pub const STEP_MIN_NOISE: f64 = 5.0;
+pub const STEP_MIN_C: f64 = 0.125;
+
+/// Rows on each side of a jump.
+const JUMP_W: usize = 3;
+
+fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
+    let (s, n) = e[a..b]
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((0.0, 0usize), |acc, x| (acc.0 + x, acc.1 + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
+/// Rows at least `JUMP_W + 1` rows away from any change of an input.
+fn quiet_rows(run: &super::series::RunData) -> Vec<bool> {
+    let n = run.rows();
+    let mut quiet = vec![true; n];
+    for inp in [&run.rpm, &run.feed, &run.coolant].into_iter().flatten() {
+        for k in 1..n {
+            if (inp[k] - inp[k - 1]).abs() > 1e-9 {
+                let a = k.saturating_sub(JUMP_W + 1);
+                let b = (k + JUMP_W + 1).min(n);
+                quiet[a..b].iter_mut().for_each(|q| *q = false);
+            }
+        }
+    }
+    quiet
+}
+
+/// Step in one sensor: per sensor, the best change point on the fit rows,
+/// then a joint refit of that sensor's model with the step column.
+pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidate> {
+    let ds = p.ds;
+    let mut out = Vec::new();
+    for (o, output) in p.outputs.iter().enumerate() {
+        if output.is_disp {
+            continue;
+        }
+        // the sharpest jump of the nominal residual (mean of 3 rows after
+        // minus 3 rows before), away from input changes, where the model's
+        // fast dynamics may miss; the rows place the time only, the size is
+        // fitted on the fit rows
+        let mut best: Option<(f64, usize, usize)> = None;
+        for (r, run) in ds.runs.iter().enumerate() {
+            let e = &nom.outs[o].resid[r];
+            let quiet = quiet_rows(run);
+            for k in JUMP_W..run.rows().saturating_sub(JUMP_W) {
+                if !quiet[k] {
+                    continue;
+                }
+                let j = (window_mean(e, k, k + JUMP_W) - window_mean(e, k - JUMP_W, k)).abs();
+                if j.is_finite() && best.is_none_or(|b| j > b.0) {
+                    best = Some((j, r, k));
+                }
+            }
+        }
+        let Some((_, r, start)) = best else {
+            continue;
+        };
+        let run = &ds.runs[r];
+        let extra = move |oo: usize, rr: usize| -> Vec<Vec<f64>> {
+            if oo != o {
+                return Vec::new();
+            }
+            let rows = ds.runs[rr].rows();
+            vec![(0..rows)
+                .map(|k| if rr == r && k >= start { 1.0 } else { 0.0 })
+                .collect()]
+        };
+        let of = p.fit_output(st, o, Some(&extra), None);
+        let step = of.extra_coef.first().copied().unwrap_or(0.0);
+        // a step within a few noise steps is not a sensor fault
+        if step.abs() < STEP_MIN_NOISE * output.noise || step.abs() < STEP_MIN_C {
+            continue;
+        }
+        // a fault is a jump: the nominal residual must change by at least
+        // half the step within ±3 rows of it (model error spreads out)
+        let e = &nom.outs[o].resid[r];
+        let jump = window_mean(e, start, (start + JUMP_W).min(run.rows()))
+            - window_mean(e, start.saturating_sub(JUMP_W), start);
+        if !(jump * step.signum() >= 0.5 * step.abs()) {
+            continue;
+        }
+        let t_s = run.time[start] - run.time[0];
+        let fit = with_outputs(nom, vec![(o, of)]);
+        out.push(Candidate {
+            name: "sensor_offset",
+            params: json!({"sensor": output.name, "offset_c": r4(step), "run": run.name, "from_s": r4(t_s)}),
+            affected: vec![o],
+            fit,
+            // size + location (run, time)
+            k_extra: 3,
+            at_bound: Vec::new(),
+            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
+        });
+    }
+    out
+}
+
+/// Least-squares slope over ±`w` rows (a smoothed derivative, per second).
+fn slope(v: &[f64], dt: f64, w: usize) -> Vec<f64> {
+    let n = v.len();
+    (0..n)
+        .map(|k| {
+            let a = k.saturating_sub(w);
+            let b = (k + w).min(n - 1);
+            let (mut sx, mut sy, mut sxx, mut sxy, mut c) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for j in a..=b {
+                if v[j].is_finite() {
+                    let x = j as f64 * dt;
+                    sx += x;
+                    sy += v[j];
+                    sxx += x * x;
+                    sxy += x * v[j];
+                    c += 1.0;
+                }
+            }
+            let den = c * sxx - sx * sx;
+            if c < 3.0 || den <= 0.0 {
+                0.0
+            } else {
+                (c * sxy - sx * sy) / den
+            }
+        })
+        .collect()
+}
+
+/// The static body map of one displacement: per-run level + Σ L_i·rise_i,
+/// with sensor `lagged` (if any) corrected by `T + τ dT/dt`. Returns the
+/// fit (one output) for the displacement output `o`.
+fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
+    let ds = p.ds;
+    let ns = ds.sensors.len();
+    let nr = ds.runs.len();
+    let cols: Vec<Vec<Vec<f64>>> = ds
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(r, run)| {
+            (0..ns)
+                .map(|i| {
+                    let v = &p.meas[r][i];
+                    let z = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
+                    let mut x: Vec<f64> = v.iter().map(|t| t - z).collect();
+                    if let Some((s, tau)) = lagged {
+                        if s == i {
+                            let w = ((120.0 / run.dt).ceil() as usize).max(2);
+                            let d = slope(&x, run.dt, w);
+                            for (xk, dk) in x.iter_mut().zip(d) {
+                                *xk += tau * dk;
+                            }
+                        }
+                    }
+                    x
+                })
+                .collect()
+        })
+        .collect();
+    let k = ns + nr;
+    let mut rows = Vec::new();
+    for (r, run) in ds.runs.iter().enumerate() {
+        for kk in 0..run.rows() {
+            if !run.held[kk]
+                && p.meas[r][o][kk].is_finite()
+                && (0..ns).all(|i| cols[r][i][kk].is_finite())
+            {
+                rows.push((r, kk));
+            }
+        }
+    }
+    let val = |r: usize, kk: usize, j: usize| -> f64 {
+        if j < ns {
+            cols[r][j][kk]
+        } else if j - ns == r {
+            1.0
+        } else {
+            0.0
+        }
+    };
+    let mut f = OutFit {
+        k,
+        ..Default::default()
+    };
+    let coef = if rows.len() > k + 2 {
+        let x = nalgebra::DMatrix::from_fn(rows.len(), k, |i, j| val(rows[i].0, rows[i].1, j));
+        let y = nalgebra::DVector::from_iterator(
+            rows.len(),
+            rows.iter().map(|&(r, kk)| p.meas[r][o][kk]),
+        );
+        super::ident::ridge(&x, &y, 1e-6)
+    } else {
+        None
+    };
+    let coef = coef.unwrap_or_else(|| nalgebra::DVector::zeros(k));
+    for (r, run) in ds.runs.iter().enumerate() {
+        let mut res = Vec::with_capacity(run.rows());
+        for kk in 0..run.rows() {
+            let m = p.meas[r][o][kk];
+            let pred: f64 = (0..k).map(|j| coef[j] * val(r, kk, j)).sum();
+            let e = m - pred;
+            if !e.is_finite() {
+                res.push(f64::NAN);
+                continue;
+            }
+            if run.held[kk] {
+                f.sse_held += e * e;
+                f.n_held += 1;
+                f.peak_held = f.peak_held.max(e.abs());
+            } else {
+                f.sse_fit += e * e;
+                f.n_fit += 1;
+            }
+            res.push(e);
+        }
+        f.resid.push(res);
+    }
+    f
+}
+
+/// Lag grid [s] for `sensor_lag`.
+pub const LAG_GRID: [f64; 7] = [30.0, 60.0, 120.0, 240.0, 480.0, 900.0, 1800.0];
+
+/// Sensor lag against the body: for each sensor, the lag correction that
+/// best improves the static displacement map on the fit rows. Returns the
+/// candidates and the static map's own fit (its "before").
+pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
+    let disp: Vec<usize> = (0..p.outputs.len())
+        .filter(|&o| p.outputs[o].is_disp)
+        .collect();
+    if disp.is_empty() {
+        return Vec::new();
+    }
+    let before: Vec<OutFit> = disp.iter().map(|&o| body_map(p, o, None)).collect();
+    let base = ModelFit {
+        outs: (0..p.outputs.len())
+            .map(|o| {
+                disp.iter()
+                    .position(|&d| d == o)
+                    .map_or_else(OutFit::default, |i| before[i].clone())
+            })
+            .collect(),
+    };
+    let mut out = Vec::new();
+    for s in 0..p.ds.sensors.len() {
+        let mut best: Option<(f64, f64, Vec<OutFit>)> = None;
+        for &tau in &LAG_GRID {
+            let fits: Vec<OutFit> = disp
+                .iter()
+                .map(|&o| body_map(p, o, Some((s, tau))))
+                .collect();
+            let j: f64 = fits
+                .iter()
+                .zip(&disp)
+                .map(|(f, &o)| f.sse_fit / p.outputs[o].noise.powi(2))
+                .sum();
+            if best.as_ref().is_none_or(|b| j < b.0) {
+                best = Some((j, tau, fits));
+            }
+        }
+        let Some((_, tau, fits)) = best else {
+            continue;
+        };
+        let fit = with_outputs(&base, disp.iter().copied().zip(fits).collect());
+        let mut at_bound = Vec::new();
+        if tau == LAG_GRID[LAG_GRID.len() - 1] {
+            at_bound.push(format!("tau_s = {tau} (upper end of the search)"));
+        }
+        out.push((
+            Candidate {
+                name: "sensor_lag",
+                params: json!({"sensor": p.ds.sensors[s], "tau_s": tau}),
+                affected: disp.clone(),
+                fit,
+                k_extra: 1,
+                at_bound,
+                evidence: json!({"channel": p.ds.sensors[s], "reference": "static displacement map of the sensor rises (the body), before and after correcting this sensor for a first-order lag"}),
+            },
+            base.clone(),
+        ));
+    }
+    out
+}
+
+/// Periods searched for a coolant/chiller drive [s].
+pub const PERIOD_RANGE: (f64, f64) = (240.0, 5400.0);
+
+/// Periodic drive: the period with the most residual power summed over
+/// the sensors (noise-normalised, fit rows, per-run sine and cosine), then
+/// sine/cosine of it and its second harmonic (a sawtooth) added to every
+/// output, per run (phase is free per run), gated by `coolant_on`.
+pub fn periodic(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Candidate> {
+    let ds = p.ds;
+    let dt_max = ds.runs.iter().map(|r| r.dt).fold(0.0, f64::max);
+    let lo = PERIOD_RANGE.0.max(4.0 * dt_max);
+    let hi = PERIOD_RANGE.1;
+    if lo >= hi {
+        return None;
+    }
+    let gate = |r: usize, k: usize| -> f64 { ds.runs[r].coolant.as_ref().map_or(1.0, |c| c[k]) };
+    // power of a sinusoid of period `per` in output o's fit-row residual
+    let power = |o: usize, per: f64| -> f64 {
+        let w = 2.0 * std::f64::consts::PI / per;
+        let mut gain = 0.0;
+        for (r, run) in ds.runs.iter().enumerate() {
+            let e = &nom.outs[o].resid[r];
+            let (mut ss, mut cc, mut sc, mut ys, mut yc, mut s1, mut c1, mut y1, mut n) =
+                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            for k in 0..run.rows() {
+                if run.held[k] || !e[k].is_finite() {
+                    continue;
+                }
+                let g = gate(r, k);
+                let t = run.time[k];
+                let (s, c) = ((w * t).sin() * g, (w * t).cos() * g);
+                ss += s * s;
+                cc += c * c;
+                sc += s * c;
+                ys += e[k] * s;
+                yc += e[k] * c;
+                s1 += s;
+                c1 += c;
+                y1 += e[k];
+                n += 1.0;
+            }
+            if n < 10.0 {
+                continue;
+            }
+            // remove the mean (the run's level is in the nominal)
+            let (ss, cc, sc) = (ss - s1 * s1 / n, cc - c1 * c1 / n, sc - s1 * c1 / n);
+            let (ys, yc) = (ys - y1 * s1 / n, yc - y1 * c1 / n);
+            let det = ss * cc - sc * sc;
+            if det <= 1e-12 {
+                continue;
+            }
+            let a = (cc * ys - sc * yc) / det;
+            let b = (ss * yc - sc * ys) / det;
+            gain += a * ys + b * yc;
+        }
+        gain / p.outputs[o].noise.powi(2)
+    };
+    let temps: Vec<usize> = (0..p.outputs.len())
+        .filter(|&o| !p.outputs[o].is_disp)
+        .collect();
+    let total = |per: f64| -> (f64, usize, f64) {
+        let mut best = (0usize, 0.0);
+        let mut sum = 0.0;
+        for &o in &temps {
+            let g = power(o, per);
+            sum += g;
+            if g > best.1 {
+                best = (o, g);
+            }
+        }
+        (sum, best.0, best.1)
+    };
+    let n_grid = 160;
+    let grid: Vec<f64> = (0..n_grid)
+        .map(|i| (lo.ln() + (hi.ln() - lo.ln()) * i as f64 / (n_grid - 1) as f64).exp())
+        .collect();
+    let spectrum: Vec<(f64, usize, f64)> = grid.iter().map(|&per| total(per)).collect();
+    let (mut i_best, mut best) = (0usize, f64::MIN);
+    for (i, s) in spectrum.iter().enumerate() {
+        if s.0 > best {
+            best = s.0;
+            i_best = i;
+        }
+    }
+    // refine around the peak
+    let mut per = grid[i_best];
+    let a = grid[i_best.saturating_sub(1)];
+    let b = grid[(i_best + 1).min(n_grid - 1)];
+    let mut pk = spectrum[i_best];
+    for j in 0..=40 {
+        let q = a + (b - a) * j as f64 / 40.0;
+        let v = total(q);
+        if v.0 > pk.0 {
+            pk = v;
+            per = q;
+        }
+    }
+    let mut powers: Vec<f64> = spectrum.iter().map(|s| s.0).collect();
+    powers.sort_by(|a, b| a.total_cmp(b));
+    let median = powers[powers.len() / 2].max(1e-12);
+    let w = 2.0 * std::f64::consts::PI / per;
+    let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> {
+        let run = &ds.runs[r];
+        let nr = ds.runs.len();
+        let mut cols = Vec::new();
+        for rr in 0..nr {
+            for h in [1.0, 2.0] {
+                for f in [f64::sin, f64::cos] {
+                    cols.push(
+                        (0..run.rows())
+                            .map(|k| {
+                                if rr == r {
+                                    f(h * w * run.time[k]) * gate(r, k)
+                                } else {
+                                    0.0
+                                }
+                            })
+                            .collect(),
+                    );
+                }
+            }
+        }
+        cols
+    };
+    let (fit, took) = p.fit_where_supported(st, &extra, nom);
+    if took.is_empty() {
+        return None;
+    }
+    let mut at_bound = Vec::new();
+    if i_best == 0 || i_best == n_grid - 1 {
+        at_bound.push(format!(
+            "period_s = {per:.0} (end of the {lo:.0}–{hi:.0} s search)"
+        ));
+    }
+    Some(Candidate {
+        name: "coolant",
+        params: json!({"period_s": r4(per), "sensor": p.outputs[pk.1].name, "gated_by_coolant_on": ds.has_coolant}),
+        k_extra: 4 * ds.runs.len() * took.len() + 1,
+        affected: took,
+        fit,
+        at_bound,
+        evidence: json!({
+            "period_s": r4(per),
+            "strongest_sensor": p.outputs[pk.1].name,
+            "peak_over_median_power": r4(pk.0 / median),
+            "spectrum": "sum over sensors of the noise-normalised power of a sinusoid in the nominal residual, fit rows",
+        }),
+    })
+}
+
+/// Distinct speed levels (2 % of the maximum apart) held for ≥ 5 % of the rows.
+pub fn speed_levels(p: &Problem) -> Vec<f64> {
+    let mut counts: std::collections::BTreeMap<i64, usize> = Default::default();
+    let mut total = 0usize;
+    for run in &p.ds.runs {
+        if let Some(rpm) = &run.rpm {
+            for n in rpm {
+                total += 1;
+                if *n > 0.0 {
+                    *counts
+                        .entry((n / p.n_max * 50.0).round() as i64)
+                        .or_default() += 1;
+                }
+            }
+        }
+    }
+    counts
+        .iter()
+        .filter(|(_, c)| **c * 20 >= total)
+        .map(|(l, _)| *l as f64 / 50.0 * p.n_max)
+        .collect()
+}
+
+/// Whether at least two runs differ in their mean running speed by 20 %
+/// of the maximum: within one run a steeper speed law is confounded with
+/// every other bilinear effect of running (coolant flow, preload).
+pub fn runs_of_different_speeds(p: &Problem) -> bool {
+    let means: Vec<f64> =
+        p.ds.runs
+            .iter()
+            .filter_map(|r| {
+                let v: Vec<f64> = r
+                    .rpm
+                    .as_ref()?
+                    .iter()
+                    .copied()
+                    .filter(|n| *n > 0.0)
+                    .collect();
+                (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+            })
+            .collect();
+    let (lo, hi) = means
+        .iter()
+        .fold((f64::MAX, f64::MIN), |a, &m| (a.0.min(m), a.1.max(m)));
+    means.len() >= 2 && hi - lo >= 0.2 * p.n_max
+}
+
+/// Speed nonlinearity: a second power of speed, steeper than the
+/// nominal's, through the same modes, for every output.
+pub fn speed_nonlinearity(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Candidate> {
+    let ds = p.ds;
+    if !ds.has_rpm || speed_levels(p).len() < 3 || !runs_of_different_speeds(p) {
+        return None;
+    }
+    let mut best: Option<(f64, f64, ModelFit, Vec<usize>)> = None;
+    let exps: Vec<f64> = [3.0, 4.0]
+        .iter()
+        .copied()
+        .filter(|e| *e > st.exponent + 0.9)
+        .collect();
+    for &e in &exps {
+        let n_max = p.n_max;
+        let modes = st.modes.clone();
+        let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> {
+            let run = &ds.runs[r];
+            let Some(rpm) = &run.rpm else {
+                return Vec::new();
+            };
+            let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(e)).collect();
+            modes
+                .iter()
+                .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
+                .collect()
+        };
+        let (fit, took) = p.fit_where_supported(st, &extra, nom);
+        let j = fit.bic(&p.outputs) + took.len() as f64 * 0.0;
+        if !took.is_empty() && best.as_ref().is_none_or(|b| j < b.0) {
+            best = Some((j, e, fit, took));
+        }
+    }
+    let (_, e, fit, took) = best?;
+    let mut at_bound = Vec::new();
+    if Some(&e) == exps.last() {
+        at_bound.push(format!("p = {e} (steepest power tried)"));
+    }
+    Some(Candidate {
+        name: "bearing_nonlinear",
+        params: json!({"p": e, "nominal_exponent": st.exponent}),
+        k_extra: st.modes.len() * took.len() + 1,
+        affected: took,
+        fit,
+        at_bound,
+        evidence: json!({"speed_levels_rpm": speed_levels(p).iter().map(|v| v.round()).collect::<Vec<_>>(), "driver": format!("(n/n_max)^{e} through the nominal's modes")}),
+    })
+}
+
+/// Ambient drift that `T_ambient` does not carry: one slow shape common to
+/// all sensors (per run: a ramp and a 24 h sine/cosine in time), its shape
+/// from the mean sensor residual, each output with its own gain.
+pub fn ambient_drift(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Candidate> {
+    let ds = p.ds;
+    let temps: Vec<usize> = (0..p.outputs.len())
+        .filter(|&o| !p.outputs[o].is_disp)
+        .collect();
+    if temps.len() < 2 {
+        return None;
+    }
+    // common-mode residual per run, fitted with the drift shape on fit rows
+    let day = 2.0 * std::f64::consts::PI / 86400.0;
+    let shape_cols = |t: f64| [t / 3600.0, (day * t).sin(), (day * t).cos()];
+    let mut shapes: Vec<Vec<f64>> = Vec::new();
+    for (r, run) in ds.runs.iter().enumerate() {
+        let mut rows = Vec::new();
+        let mut y = Vec::new();
+        for k in 0..run.rows() {
+            if run.held[k] {
+                continue;
+            }
+            let v: Vec<f64> = temps
+                .iter()
+                .map(|&o| nom.outs[o].resid[r][k])
+                .filter(|x| x.is_finite())
+                .collect();
+            if v.len() * 2 < temps.len() {
+                continue;
+            }
+            rows.push(k);
+            y.push(v.iter().sum::<f64>() / v.len() as f64);
+        }
+        let t0 = run.time[0];
+        let x = nalgebra::DMatrix::from_fn(rows.len(), 4, |i, j| {
+            if j == 0 {
+                1.0
+            } else {
+                shape_cols(run.time[rows[i]] - t0)[j - 1]
+            }
+        });
+        let yv = nalgebra::DVector::from_vec(y);
+        let c = super::ident::ridge(&x, &yv, 1e-6)?;
+        shapes.push(
+            run.time
+                .iter()
+                .map(|t| {
+                    let s = shape_cols(t - t0);
+                    c[1] * s[0] + c[2] * s[1] + c[3] * s[2]
+                })
+                .collect(),
+        );
+    }
+    let shapes2 = shapes.clone();
+    let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> { vec![shapes2[r].clone()] };
+    let (fit, took) = p.fit_where_supported(st, &extra, nom);
+    // a drift of the air reaches every sensor: most must take it
+    if took.iter().filter(|&&o| !p.outputs[o].is_disp).count() * 10 < temps.len() * 7 {
+        return None;
+    }
+    let amp = shapes.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    Some(Candidate {
+        name: "ambient_drift",
+        params: json!({"peak_c": r4(amp)}),
+        k_extra: 3 * ds.runs.len() + took.len(),
+        affected: took,
+        fit,
+        at_bound: Vec::new(),
+        evidence: json!({
+            "shape": "per run: ramp + 24 h sine/cosine fitted to the mean sensor residual (fit rows)",
+            "peak_c": r4(amp),
+            "caveat": if ds.has_ambient {
+                "a drift of the air at the machine beyond what T_ambient measured"
+            } else {
+                "no T_ambient column: this is the room's own temperature change, an input the data lack, not a drift beyond a measured ambient"
+            },
+        }),
+    })
+}

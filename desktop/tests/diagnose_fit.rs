@@ -1,0 +1,283 @@
+//! `tcomp diagnose fit` (no machine file) on runs written exactly as the
+//! run-CSV format defines them: `T_ambient` as the ambient input, sensors
+//! named `T_T0…T_T15`, no `coolant_on`, one run without `spindle_rpm`
+//! (data in tests/data/diagnose-fit, made by its make.sh).
+use tcomp::diagnose::fitmode::diagnose_fit;
+use tcomp::diagnose::ident::Problem;
+use tcomp::diagnose::series;
+use tcomp::diagnose::Options;
+use tcomp::runcsv::Run;
+
+fn data(name: &str) -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/diagnose-fit")
+        .join(name)
+}
+
+fn read(name: &str) -> (String, Run) {
+    (name.to_string(), Run::read(&data(name)).unwrap())
+}
+
+#[test]
+fn t_ambient_is_the_ambient_input_and_every_t_column_a_sensor() {
+    let runs = [read("warm-a.csv"), read("mixed-b.csv")];
+    let ds = series::load(&runs, 1500).unwrap();
+    assert!(ds.has_ambient && ds.has_rpm && !ds.has_coolant);
+    let want: Vec<String> = (0..16).map(|i| format!("T_T{i}")).collect();
+    assert_eq!(ds.sensors, want);
+    assert_eq!(ds.disps, vec!["dx_um", "dz_um"]);
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let j = d.to_json();
+    let sensors = j["where"]["sensors"].as_object().unwrap();
+    assert_eq!(sensors.len(), 16);
+    assert!(!sensors.contains_key("T_ambient") && !sensors.contains_key("ambient"));
+    for s in &want {
+        assert!(
+            sensors[s]["rms"].as_f64().unwrap() > 0.0,
+            "{s} has no residual"
+        );
+    }
+    // the nominal reports its own held-out fit, in °C and µm
+    assert!(j["nominal"]["held_out_rms_c"].as_f64().unwrap() > 0.0);
+    assert!(j["nominal"]["held_out_rms_um"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        j["missing"].as_array().unwrap().len(),
+        1,
+        "{}",
+        j["missing"]
+    );
+    assert!(j["missing"][0].as_str().unwrap().contains("coolant_on"));
+}
+
+#[test]
+fn every_run_is_used_for_fitting_and_for_scoring() {
+    let runs = [read("warm-a.csv"), read("mixed-b.csv")];
+    let ds = series::load(&runs, 1500).unwrap();
+    for r in &ds.runs {
+        let held = r.held.iter().filter(|h| **h).count();
+        assert!(
+            held > r.rows() / 4 && held < r.rows() / 2,
+            "{held} of {}",
+            r.rows()
+        );
+        // fit rows at the start and at the end of each run, held-out in between
+        assert!(!r.held[0] && !r.held[r.rows() - 1]);
+        assert!(r.held[r.rows() * 3 / 10] && r.held[r.rows() * 7 / 10]);
+    }
+    let p = Problem::new(&ds);
+    let (_, fit) = p.identify();
+    let fit_rows: usize = ds
+        .runs
+        .iter()
+        .map(|r| r.held.iter().filter(|h| !**h).count())
+        .sum();
+    // each sensor's model is fitted on the fit rows of both runs
+    for f in fit.outs.iter() {
+        assert_eq!(f.n_fit, fit_rows);
+        assert_eq!(f.resid.len(), 2);
+    }
+}
+
+#[test]
+fn a_run_without_spindle_rpm_is_diagnosed_and_says_what_it_costs() {
+    let exe = env!("CARGO_BIN_EXE_tcomp");
+    let out = std::process::Command::new(exe)
+        .args(["diagnose", "fit"])
+        .arg(data("norpm-a.csv"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.contains("spindle_rpm"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{stdout}");
+    assert!(lines[0].contains("cannot be tested"), "{}", lines[0]);
+    let out = std::process::Command::new(exe)
+        .args(["diagnose", "fit", "--json"])
+        .arg(data("norpm-a.csv"))
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["nominal"]["speed_exponent"], serde_json::Value::Null);
+    assert!(v["nominal"]["drive"]
+        .as_str()
+        .unwrap()
+        .contains("temperatures"));
+    assert!(v["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|u| u["name"].as_str().unwrap().contains("speed")));
+    assert_eq!(v["where"]["sensors"].as_object().unwrap().len(), 16);
+}
+
+#[test]
+fn bad_runs_get_one_line_errors() {
+    let exe = env!("CARGO_BIN_EXE_tcomp");
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("amb-only.csv");
+    let mut s = String::from("time_s,T_ambient,dx_um\n");
+    for k in 0..30 {
+        s.push_str(&format!("{},20,{}\n", k * 60, k as f64 * 0.1));
+    }
+    std::fs::write(&p, s).unwrap();
+    let out = std::process::Command::new(exe)
+        .args(["diagnose", "fit"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no temperature sensor column"), "{err}");
+    assert!(!err.contains("{ "), "Debug form in {err}");
+}
+
+use tcomp::diagnose::truth::{simulate, TruthEffect};
+
+/// Two runs (light and heavy duty) of the open-world truth model.
+fn truth_runs(effects: &[TruthEffect], seed: u64) -> Vec<(String, Run)> {
+    let light = vec![
+        (0.0, 0.0, 0.0),
+        (900.0, 4000.0, 0.3),
+        (5400.0, 6000.0, 0.5),
+        (9000.0, 0.0, 0.0),
+        (10800.0, 3000.0, 0.2),
+    ];
+    let heavy = vec![
+        (0.0, 0.0, 0.0),
+        (600.0, 9000.0, 0.6),
+        (4800.0, 12000.0, 0.4),
+        (8400.0, 0.0, 0.0),
+        (9600.0, 10000.0, 0.7),
+    ];
+    [light, heavy]
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            // the sensor step happens in the second run only
+            let eff: Vec<TruthEffect> = effects
+                .iter()
+                .filter(|e| i == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                .cloned()
+                .collect();
+            (
+                format!("truth{i}"),
+                simulate(d, &eff, 4.0, 10.0, seed + i as u64).run,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_sensor_step_on_an_unseen_machine_is_named_where_it_is() {
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 5,
+            step_c: 0.8,
+            at_s: 7300.0,
+        }],
+        71,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "sensor_offset");
+    let p = top.params_json();
+    assert_eq!(p["sensor"], "T_T5");
+    assert_eq!(p["run"], "truth1");
+    assert!((p["offset_c"].as_f64().unwrap() - 0.8).abs() < 0.15, "{p}");
+    assert!(
+        (p["from_s"].as_f64().unwrap() - 7300.0).abs() < 120.0,
+        "{p}"
+    );
+    // scored in °C; a sensor fault leaves the µm gap as it was
+    let ((cb, _), (ca, _)) = top.gap_c.unwrap();
+    assert!(ca < 0.8 * cb, "°C gap {cb} -> {ca}");
+    let ((ub, _), (ua, _)) = top.gap_um.unwrap();
+    assert!((ua - ub).abs() < 1e-9);
+    let j = d.to_json();
+    assert!(j["effects"][0]["gap_before_c"].as_f64().is_some());
+    assert!(j["effects"][0]["gap_after_c"].as_f64().is_some());
+}
+
+#[test]
+fn chiller_cycling_is_found_from_the_sensors_own_spectrum() {
+    let runs = truth_runs(
+        &[TruthEffect::ChillerCycling {
+            band_c: 1.0,
+            power_w: 900.0,
+        }],
+        73,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "coolant");
+    // the tank sensor carries it most; the period is that of the thermostat
+    assert_eq!(top.params_json()["sensor"], "T_T9");
+    let per = top.params_json()["period_s"].as_f64().unwrap();
+    assert!(per > 600.0 && per < 3600.0, "period {per}");
+}
+
+#[test]
+fn clean_runs_of_an_unseen_machine_name_nothing_and_say_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = truth_runs(&[], 75);
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(
+        d.findings.is_empty(),
+        "false alarm: {:?}",
+        d.findings
+            .iter()
+            .map(|f| (&f.name, f.params_json()))
+            .collect::<Vec<_>>()
+    );
+    let j = d.to_json();
+    assert_eq!(j["effects"].as_array().unwrap().len(), 0);
+    let untestable: Vec<&str> = j["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u["name"].as_str().unwrap())
+        .collect();
+    assert!(untestable.contains(&"convection") && untestable.contains(&"bending"));
+    assert!(j["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|u| !u["reason"].as_str().unwrap().is_empty()));
+    assert!(j["no_effect"]["worst_rms_over_noise"].as_f64().is_some());
+    // every candidate was tried and is reported with its held-out figures
+    assert!(d.tried.iter().any(|f| f.name == "coolant"));
+    let md = dir.path().join("r.md");
+    tcomp::diagnose::render::write_report(&d, &["a".into(), "b".into()], &md).unwrap();
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(text.contains("No candidate effect is supported") && text.contains("cannot test"));
+}
+
+#[test]
+fn the_report_plots_the_residual_before_and_after_the_selected_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 2,
+            step_c: -1.0,
+            at_s: 5000.0,
+        }],
+        77,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert_eq!(d.findings[0].name, "sensor_offset");
+    let md = dir.path().join("diag.md");
+    let files = tcomp::diagnose::render::write_report(&d, &["a".into(), "b".into()], &md).unwrap();
+    assert_eq!(files.len(), 3);
+    let svg = std::fs::read_to_string(dir.path().join("diag-channels.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("T_T2"));
+    assert!(std::fs::read_to_string(&md)
+        .unwrap()
+        .contains("diag-phases.svg"));
+}
