@@ -29,7 +29,8 @@ enum Command {
         /// A run CSV whose T_ columns give the board's channel order.
         #[arg(long, requires = "model")]
         run: Option<std::path::PathBuf>,
-        /// Per channel net or MLR, e.g. dch5_um=mlr (others: net).
+        /// Per-channel override of the fit's cross-validated choice, e.g.
+        /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, mlr, mlr-static).
         #[arg(long, default_value = "")]
         r#use: String,
         #[arg(long, default_value_t = 200.0)]

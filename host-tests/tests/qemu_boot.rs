@@ -47,13 +47,20 @@ fn selftest_timing_is_virtual_and_deterministic() {
                 run_firmware(&["selftest"], LIMIT)
             };
             assert_eq!(run.status, Some(0), "stdout:\n{}", run.stdout);
-            assert!(
-                run.stdout.contains(
-                    "selftest clock: 3000-instruction loop took 3000 ns: virtual (icount)"
-                ),
-                "{}",
-                run.stdout
-            );
+            // 1 ns per instruction under icount; the loop's own entry and
+            // exit add a few (how many depends on the build's code layout,
+            // 0..=8 seen): within the calibration's 0.3 %, never host time.
+            let took = run
+                .stdout
+                .lines()
+                .find_map(|l| {
+                    l.strip_prefix("selftest clock: 3000-instruction loop took ")?
+                        .strip_suffix(" ns: virtual (icount)")?
+                        .parse::<u64>()
+                        .ok()
+                })
+                .unwrap_or(0);
+            assert!((3000..=3009).contains(&took), "{}", run.stdout);
             run.stdout
                 .lines()
                 .filter(|l| l.starts_with("selftest"))
