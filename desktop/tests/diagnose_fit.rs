@@ -281,3 +281,47 @@ fn the_report_plots_the_residual_before_and_after_the_selected_effect() {
         .unwrap()
         .contains("diag-phases.svg"));
 }
+
+/// The same runs as a measured set without `spindle_rpm` and `feed_activity`.
+fn without_inputs(runs: Vec<(String, Run)>) -> Vec<(String, Run)> {
+    runs.into_iter()
+        .map(|(n, r)| {
+            let keep: Vec<usize> = (0..r.columns.len())
+                .filter(|&i| r.columns[i] != "spindle_rpm" && r.columns[i] != "feed_activity")
+                .collect();
+            let run = Run {
+                meta: r.meta.clone(),
+                columns: keep.iter().map(|&i| r.columns[i].clone()).collect(),
+                data: keep.iter().map(|&i| r.data[i].clone()).collect(),
+            };
+            (n, run)
+        })
+        .collect()
+}
+
+#[test]
+fn without_spindle_rpm_temperatures_drive_and_a_step_is_still_found() {
+    let clean = without_inputs(truth_runs(&[], 81));
+    let d = diagnose_fit(&clean, &Options::default()).unwrap();
+    assert!(
+        d.findings.is_empty(),
+        "false alarm: {:?}",
+        d.findings
+            .iter()
+            .map(|f| (&f.name, f.params_json()))
+            .collect::<Vec<_>>()
+    );
+    assert!(d.missing.iter().any(|m| m.starts_with("no spindle_rpm")));
+    let step = without_inputs(truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 6,
+            step_c: 1.0,
+            at_s: 6000.0,
+        }],
+        83,
+    ));
+    let d = diagnose_fit(&step, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "sensor_offset");
+    assert_eq!(top.params_json()["sensor"], "T_T6");
+}

@@ -93,7 +93,14 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
                 f.dbic
             );
         }
-        println!("({} simulations, {:.2} s)", d.sims, d.seconds);
+        if a.machine == "fit" {
+            println!(
+                "({} candidate effects tried against the identified nominal, {:.2} s)",
+                d.sims, d.seconds
+            );
+        } else {
+            println!("({} simulations, {:.2} s)", d.sims, d.seconds);
+        }
     }
     Ok(())
 }

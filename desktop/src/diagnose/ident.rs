@@ -55,6 +55,9 @@ pub struct Structure {
     pub exponent: f64,
 }
 
+/// Regressor columns of one run: (shared by runs, the run's own).
+pub type Columns = (Vec<Vec<f64>>, Vec<Vec<f64>>);
+
 /// Extra regressor columns an effect adds, per (output, run).
 pub type Extra<'a> = &'a (dyn Fn(usize, usize) -> Vec<Vec<f64>> + Sync);
 
@@ -362,7 +365,7 @@ impl<'a> Problem<'a> {
     /// states of every input (plus, without rpm, the drivers directly), the
     /// run's level and free decays. Columns of other runs are zero there, so
     /// the caller lays runs out block-wise.
-    pub fn columns(&self, st: &Structure, o: usize, r: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    pub fn columns(&self, st: &Structure, o: usize, r: usize) -> Columns {
         let run = &self.ds.runs[r];
         let dt = run.dt;
         let mut shared = Vec::new();
@@ -415,8 +418,7 @@ impl<'a> Problem<'a> {
     fn fit_shared(&self, st: &Structure) -> Option<ModelFit> {
         let nr = self.ds.runs.len();
         let no = self.outputs.len();
-        let blocks: Vec<(Vec<Vec<f64>>, Vec<Vec<f64>>)> =
-            (0..nr).map(|r| self.columns(st, 0, r)).collect();
+        let blocks: Vec<Columns> = (0..nr).map(|r| self.columns(st, 0, r)).collect();
         let n_shared = blocks.first().map_or(0, |b| b.0.len());
         let n_own = blocks.first().map_or(0, |b| b.1.len());
         if blocks.iter().any(|b| b.1.len() != n_own) {

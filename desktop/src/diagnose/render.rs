@@ -170,7 +170,11 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
             let _ = writeln!(s, "- {n}");
         }
     }
-    let _ = writeln!(s, "\n_{} simulations in {:.2} s._", d.sims, d.seconds);
+    let _ = writeln!(
+        s,
+        "\n_{} candidate fits (simulations with a machine file) in {:.2} s._",
+        d.sims, d.seconds
+    );
     s
 }
 

@@ -227,8 +227,8 @@ pub fn simulate(
     };
     let mut g = Gauss::new(seed);
     // measured ambient: 20 °C, a slow swing and the DS18B20's own noise
-    let amb_phase = g.uniform() * 6.28;
-    let amb_meas = |t: f64| 20.0 + 0.4 * ((t / 86400.0) * 6.28 + amb_phase).sin();
+    let amb_phase = g.uniform() * std::f64::consts::TAU;
+    let amb_meas = |t: f64| 20.0 + 0.4 * ((t / 86400.0) * std::f64::consts::TAU + amb_phase).sin();
     let drift: f64 = effects
         .iter()
         .map(|e| match e {
