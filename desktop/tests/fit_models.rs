@@ -362,3 +362,42 @@ fn lags_longer_than_the_training_span_are_not_candidates() {
         );
     }
 }
+
+#[test]
+fn capped_samples_stride_evenly_across_segments() {
+    let run = synthetic_nonlinear();
+    let runs = vec![run];
+    let cache =
+        SeriesCache::new(&runs, vec![(FeatureKind::SensorRise("T_a".into()), None)]).unwrap();
+    let segs = [
+        Segment {
+            run: 0,
+            start: 0,
+            end: 1000,
+        },
+        Segment {
+            run: 0,
+            start: 2000,
+            end: 3000,
+        },
+    ];
+    let full = cache.samples(&runs, &segs, &[0], "dx_um").unwrap();
+    let capped = cache
+        .samples_capped(&runs, &segs, &[0], "dx_um", 300)
+        .unwrap();
+    assert_eq!(full.y.len(), 2000);
+    assert!(
+        capped.y.len() <= 300 && capped.y.len() >= 250,
+        "{}",
+        capped.y.len()
+    );
+    // Every 7th row of the concatenated segments (2000 / 300 rounded up), both segments sampled.
+    assert_eq!(capped.rows[0], (0, 0));
+    assert_eq!(capped.rows[1], (0, 7));
+    assert!(capped.rows.iter().any(|r| r.1 >= 2000));
+    for (i, r) in capped.rows.iter().enumerate() {
+        let k = full.rows.iter().position(|f| f == r).unwrap();
+        assert_eq!(k, 7 * i);
+        assert_eq!(capped.y[i], full.y[k]);
+    }
+}

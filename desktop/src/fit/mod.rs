@@ -410,16 +410,41 @@ impl SeriesCache {
         idx: &[usize],
         channel: &str,
     ) -> Result<Samples> {
-        let mut s = Samples::default();
+        self.samples_capped(runs, segs, idx, channel, usize::MAX)
+    }
+
+    /// As [`SeriesCache::samples`], but every k-th row with a target so that
+    /// at most `max_rows` are gathered (selection and cross-validation on a
+    /// densely sampled run: the rows are far closer than any time constant).
+    pub fn samples_capped(
+        &self,
+        runs: &[Run],
+        segs: &[Segment],
+        idx: &[usize],
+        channel: &str,
+        max_rows: usize,
+    ) -> Result<Samples> {
+        let mut cols = Vec::with_capacity(segs.len());
+        let mut total = 0usize;
         for seg in segs {
             let y = runs[seg.run]
                 .col(channel)
                 .with_context(|| format!("run {} has no column `{channel}`", seg.run + 1))?;
+            total += y[seg.start..seg.end].iter().filter(|v| v.is_some()).count();
+            cols.push(y);
+        }
+        let stride = total.div_ceil(max_rows.max(1)).max(1);
+        let mut s = Samples::default();
+        let mut k = 0usize;
+        for (seg, y) in segs.iter().zip(cols) {
             for r in seg.start..seg.end {
                 if let Some(t) = y[r] {
-                    s.x.push(idx.iter().map(|&f| self.series[f][seg.run][r]).collect());
-                    s.y.push(t);
-                    s.rows.push((seg.run, r));
+                    if k.is_multiple_of(stride) {
+                        s.x.push(idx.iter().map(|&f| self.series[f][seg.run][r]).collect());
+                        s.y.push(t);
+                        s.rows.push((seg.run, r));
+                    }
+                    k += 1;
                 }
             }
         }
@@ -578,6 +603,10 @@ pub fn blocked_folds(
     folds
 }
 
+/// Rows (at most) each fold's fit and held-out parts use during input
+/// selection and cross-validation; runs sampled densely are strided to it.
+pub const SELECT_ROWS: usize = 20_000;
+
 /// Mean squared error of an MLR on `idx`, fitted on `fit`, scored on `val`.
 fn mlr_block_sse(
     cache: &SeriesCache,
@@ -587,8 +616,8 @@ fn mlr_block_sse(
     idx: &[usize],
     channel: &str,
 ) -> Result<(f64, usize)> {
-    let tr = cache.samples(runs, fit, idx, channel)?;
-    let va = cache.samples(runs, val, idx, channel)?;
+    let tr = cache.samples_capped(runs, fit, idx, channel, SELECT_ROWS)?;
+    let va = cache.samples_capped(runs, val, idx, channel, SELECT_ROWS)?;
     if tr.y.is_empty() || va.y.is_empty() {
         return Ok((0.0, 0));
     }

@@ -438,8 +438,8 @@ fn cross_validate(
     let (mut acc_static, mut acc_mlr, mut acc_net) =
         (CvAcc::default(), CvAcc::default(), CvAcc::default());
     for (fit, val) in folds {
-        let tr = cache.samples(&plan.runs, fit, idx, ch)?;
-        let va = cache.samples(&plan.runs, val, idx, ch)?;
+        let tr = cache.samples_capped(&plan.runs, fit, idx, ch, SELECT_ROWS)?;
+        let va = cache.samples_capped(&plan.runs, val, idx, ch, SELECT_ROWS)?;
         if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
             continue;
         }
@@ -448,16 +448,16 @@ fn cross_validate(
         let p: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
         acc_mlr.add_fold(&va.y, &p);
         if !static_idx.is_empty() {
-            let trs = cache.samples(&plan.runs, fit, static_idx, ch)?;
-            let vas = cache.samples(&plan.runs, val, static_idx, ch)?;
+            let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
+            let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
             let ms = fit_mlr(ranged_specs(&skinds, &trs), &trs, ch)?;
             let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
             acc_static.add_fold(&vas.y, &p);
         }
         if with_net {
             let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
-            let inner_s = cache.samples(&plan.runs, &inner, idx, ch)?;
-            let block_s = cache.samples(&plan.runs, &block, idx, ch)?;
+            let inner_s = cache.samples_capped(&plan.runs, &inner, idx, ch, cfg.net.max_rows)?;
+            let block_s = cache.samples_capped(&plan.runs, &block, idx, ch, cfg.net.max_rows)?;
             let (members, _) = train_ensemble(
                 &specs,
                 ch,
@@ -737,8 +737,8 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         };
         if with_net {
             let (inner, block) = plan.inner_block(cfg.es_frac);
-            let inner_s = cache.samples(&plan.runs, &inner, &idx, ch)?;
-            let block_s = cache.samples(&plan.runs, &block, &idx, ch)?;
+            let inner_s = cache.samples_capped(&plan.runs, &inner, &idx, ch, cfg.net.max_rows)?;
+            let block_s = cache.samples_capped(&plan.runs, &block, &idx, ch, cfg.net.max_rows)?;
             let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
             let (members, infos) =
                 train_ensemble(&specs, ch, &inner_s, &block_s, &full, &cfg.net, &pb);
