@@ -80,7 +80,8 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
 
 /// Write a golden-vector file (the demo model and `steps` steps).
 pub fn golden(out: &Path, steps: u32, seed: u64) -> Result<usize> {
-    let bytes = thermocomp_core::golden::generate(steps, seed);
+    let bytes = thermocomp_core::golden::generate(steps, seed)
+        .map_err(|e| anyhow::anyhow!("golden vectors: {e}"))?;
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
     Ok(bytes.len())
 }

@@ -21,7 +21,7 @@ fn scratch(name: &str) -> std::path::PathBuf {
 fn firmware_reproduces_the_host_golden_vectors_bit_for_bit() {
     let dir = scratch("golden");
     let path = dir.join("golden.bin");
-    let bytes = golden::generate(1500, 4242);
+    let bytes = golden::generate(1500, 4242).unwrap();
     assert_eq!(
         golden::check(&bytes),
         Ok(1500),
@@ -49,7 +49,7 @@ fn firmware_reproduces_the_host_golden_vectors_bit_for_bit() {
 fn a_single_changed_expected_bit_fails_the_firmware_selftest() {
     let dir = scratch("golden-bad");
     let path = dir.join("golden.bin");
-    let mut bytes = golden::generate(300, 7);
+    let mut bytes = golden::generate(300, 7).unwrap();
     let n = bytes.len();
     bytes[n - 9] ^= 0x04; // inside the last step's expected outputs
     std::fs::write(&path, &bytes).unwrap();

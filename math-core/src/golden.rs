@@ -142,15 +142,15 @@ pub fn write_step(out: &mut Vec<u8>, input: &StepInput, result: &StepOutput, n_d
 
 /// Host side: the demo model and a step sequence that walks through every
 /// rule (warm-up, lags over long gaps, envelope edges, clamps, rate limits,
-/// sensor faults and recovery), as a golden file.
+/// sensor faults and recovery), as a golden file. An error (the demo model
+/// out of the fixed-point range) is a message, not a panic.
 #[cfg(feature = "std")]
-pub fn generate(n_steps: u32, seed: u64) -> Vec<u8> {
+pub fn generate(n_steps: u32, seed: u64) -> Result<Vec<u8>, std::string::String> {
+    use std::string::ToString;
     let fm = crate::float::demo_model(seed);
-    let (mut model, _) = fm.quantize().expect("the demo model quantizes");
+    let (mut model, _) = fm.quantize().map_err(|e| e.to_string())?;
     let mut image = vec![0u8; model.encoded_len()];
-    let len = model
-        .encode(&mut image)
-        .expect("buffer sized by encoded_len");
+    let len = model.encode(&mut image).map_err(|e| e.to_string())?;
     image.truncate(len);
     let (ns, na, nd) = (
         model.sensors.len(),
@@ -211,7 +211,7 @@ pub fn generate(n_steps: u32, seed: u64) -> Vec<u8> {
         let r = comp.step(&input);
         write_step(&mut out, &input, &r, nd);
     }
-    out
+    Ok(out)
 }
 
 /// The model image inside a golden file (for benchmarks that need the model).

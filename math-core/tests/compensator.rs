@@ -134,7 +134,7 @@ fn lag_filter_follows_a_step_like_a_first_order_system() {
 
 #[test]
 fn golden_vectors_reproduce_and_a_changed_expectation_is_caught() {
-    let g = golden::generate(400, 99);
+    let g = golden::generate(400, 99).unwrap();
     assert_eq!(golden::check(&g), Ok(400));
     // Flip one bit of the last step's last expected value.
     let mut bad = g.clone();

@@ -83,6 +83,20 @@ pub struct ModelFit {
     pub outs: Vec<OutFit>,
 }
 
+impl OutFit {
+    /// Book one residual `e` of a row: into the held-out or the fit sums.
+    pub fn add_residual(&mut self, e: f64, held: bool) {
+        if held {
+            self.sse_held += e * e;
+            self.n_held += 1;
+            self.peak_held = self.peak_held.max(e.abs());
+        } else {
+            self.sse_fit += e * e;
+            self.n_fit += 1;
+        }
+    }
+}
+
 impl ModelFit {
     /// −2 log-likelihood of the fit rows with an unknown variance per
     /// channel, floored at a tenth of its noise.
@@ -474,14 +488,7 @@ impl<'a> Problem<'a> {
                         continue;
                     }
                     let e = m - pred[(k, o)];
-                    if run.held[k] {
-                        f.sse_held += e * e;
-                        f.n_held += 1;
-                        f.peak_held = f.peak_held.max(e.abs());
-                    } else {
-                        f.sse_fit += e * e;
-                        f.n_fit += 1;
-                    }
+                    f.add_residual(e, run.held[k]);
                     res.push(e);
                 }
                 f.resid.push(res);

@@ -254,14 +254,7 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
                 res.push(f64::NAN);
                 continue;
             }
-            if run.held[kk] {
-                f.sse_held += e * e;
-                f.n_held += 1;
-                f.peak_held = f.peak_held.max(e.abs());
-            } else {
-                f.sse_fit += e * e;
-                f.n_fit += 1;
-            }
+            f.add_residual(e, run.held[kk]);
             res.push(e);
         }
         f.resid.push(res);
