@@ -153,6 +153,30 @@ impl LinkArgs {
     }
 }
 
+/// A reader that closes the pipe early (`tcomp … --json | head`) ends the
+/// program quietly, as Unix tools do (exit 141 = killed by SIGPIPE); any
+/// other panic is a one-line internal error without the stack trace.
+fn quiet_panics() {
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("panic");
+        if msg.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        eprintln!(
+            "error: internal error: {msg}{at} (please report it; --debug shows the stack trace)"
+        );
+    }));
+}
+
 /// Errors are one line (`error: what: because`) and exit 1; the stack trace
 /// is for developers and only shown with `--debug` or `TCOMP_BACKTRACE=1`,
 /// whatever `RUST_BACKTRACE` says (anyhow would otherwise print it with every
@@ -163,6 +187,9 @@ fn main() -> std::process::ExitCode {
     // anyhow decides at the first error whether to capture a backtrace, from
     // these variables: capture exactly when it will be printed.
     std::env::set_var("RUST_LIB_BACKTRACE", if debug { "1" } else { "0" });
+    if !debug {
+        quiet_panics();
+    }
     match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) if debug => {

@@ -22,6 +22,7 @@ pub struct GeometryArgs {
 pub enum GeometryCommand {
     /// Write the 14 line files (forward and backward runs) of a machine with
     /// random smooth errors (or the errors of --errors), and its errors as JSON.
+    #[command(alias = "sim")]
     Simulate(SimulateArgs),
     /// Identify the 21 errors from line files; prints the error functions,
     /// the conditioning and what the lines cannot see.
@@ -32,6 +33,70 @@ pub enum GeometryCommand {
     /// sensor temperatures, fitted from lines at several temperature states;
     /// each state held out in turn.
     FitThermal(FitThermalArgs),
+    /// Volumetric check: predicted against measured (simulated, with noise)
+    /// tool-tip error over a held-out grid, before and after compensation;
+    /// from error files, or a whole simulated thermal check (--thermal-sim).
+    Check(CheckArgs),
+    /// Tool-tip error at one position of a three- or five-axis machine
+    /// (exact and first-order), in the workpiece frame.
+    Tooltip(TooltipArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    /// Errors of the machine (errors.json of `simulate`): the "measured" side.
+    #[arg(long, required_unless_present = "thermal_sim")]
+    pub truth: Option<PathBuf>,
+    /// Errors the compensation uses (the JSON of `identify --json`).
+    #[arg(long, required_unless_present = "thermal_sim")]
+    pub model: Option<PathBuf>,
+    /// Turntable (pivot, offsets, rotary errors) of the machine: checks the
+    /// five-axis chain over A ∈ {−30, 0, 30}° × C ∈ {0, 90, 180, 270}°.
+    #[arg(long)]
+    pub turntable_truth: Option<PathBuf>,
+    /// Turntable errors the compensation uses (default: the truth's geometry, no errors).
+    #[arg(long)]
+    pub turntable_model: Option<PathBuf>,
+    /// Simulate the whole thermal check instead: a machine whose errors change
+    /// with three temperatures, 14 lines at --states temperature states,
+    /// `fit-thermal`, then --held-out unseen temperature states on the grid.
+    #[arg(long)]
+    pub thermal_sim: bool,
+    #[arg(long, default_value_t = 8)]
+    pub states: usize,
+    #[arg(long, default_value_t = 4)]
+    pub held_out: usize,
+    /// Noise of the tool-tip "measurement" (and of the line readings with --thermal-sim) [µm].
+    #[arg(long, default_value_t = 0.5)]
+    pub noise_um: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write the SVG plot (predicted vs measured; error per point before/after).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TooltipArgs {
+    /// Linear-axis errors (errors.json or identify --json output); default none.
+    #[arg(long)]
+    pub errors: Option<PathBuf>,
+    /// Turntable file (five-axis): pivot, offsets and rotary errors.
+    #[arg(long)]
+    pub turntable: Option<PathBuf>,
+    /// Structure when --errors is not given.
+    #[arg(long, default_value = "XY/Z")]
+    pub structure: String,
+    /// Axis positions x,y,z [mm] or x,y,z,a,c [mm, deg].
+    #[arg(long)]
+    pub at: String,
+    /// Tool offset from the spindle gauge point x,y,z [mm].
+    #[arg(long, default_value = "0,0,100")]
+    pub tool: String,
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -267,6 +332,8 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::Identify(i) => identify_cmd(i),
         GeometryCommand::Plan(p) => plan_cmd(p),
         GeometryCommand::FitThermal(f) => fit_thermal_cmd(f),
+        GeometryCommand::Check(c) => super::check::check_cmd(c),
+        GeometryCommand::Tooltip(t) => tooltip_cmd(t),
     }
 }
 
@@ -774,5 +841,69 @@ fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
             h.state, h.static_rms_um, h.thermal_rms_um, h.own_fit_rms_um
         );
     }
+    Ok(())
+}
+
+fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
+    use super::five_axis::{tool_tip_error_exact5, tool_tip_error_linear5, RotaryPos, Turntable};
+    let (st, lin) = match &a.errors {
+        Some(p) => {
+            let ej = ErrorsJson::read(p)?;
+            let st = Structure::parse(&ej.structure)
+                .with_context(|| format!("{}: structure", p.display()))?;
+            (st, ej.to_errors()?)
+        }
+        None => (
+            Structure::parse(&a.structure).context("--structure")?,
+            GeometricErrors::zero(),
+        ),
+    };
+    let v: Vec<f64> = a
+        .at
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| anyhow::anyhow!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at))?;
+    if !(v.len() == 3 || v.len() == 5) || v.iter().any(|x| !x.is_finite()) {
+        bail!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at);
+    }
+    let tool = parse_triple(&a.tool, "--tool")?;
+    let turntable = match &a.turntable {
+        Some(p) => Turntable::read(p)?,
+        None if v.len() == 5 => bail!("--at gives rotary angles but no --turntable file"),
+        None => Turntable::default(),
+    };
+    let pos = [v[0], v[1], v[2]];
+    let r = RotaryPos {
+        a_deg: v.get(3).copied().unwrap_or(0.0),
+        c_deg: v.get(4).copied().unwrap_or(0.0),
+    };
+    let exact = tool_tip_error_exact5(&st, &lin, &turntable, pos, r, tool);
+    let linear = tool_tip_error_linear5(&st, &lin, &turntable, pos, r, tool);
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({"frame": "workpiece", "unit": "um",
+                "exact_um": [exact.x, exact.y, exact.z],
+                "first_order_um": [linear.x, linear.y, linear.z],
+                "length_um": exact.norm()})
+        );
+        return Ok(());
+    }
+    println!(
+        "tool-tip error at x,y,z {:.3},{:.3},{:.3} mm, A {:.3}°, C {:.3}°, tool {:?} mm (workpiece frame):",
+        pos[0], pos[1], pos[2], r.a_deg, r.c_deg, tool
+    );
+    println!(
+        "  exact        {:+9.3} {:+9.3} {:+9.3} µm (length {:.3} µm)",
+        exact.x,
+        exact.y,
+        exact.z,
+        exact.norm()
+    );
+    println!(
+        "  first order  {:+9.3} {:+9.3} {:+9.3} µm",
+        linear.x, linear.y, linear.z
+    );
     Ok(())
 }

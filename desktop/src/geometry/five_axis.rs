@@ -50,9 +50,6 @@ impl Rotary {
             Rotary::C => 'C',
         }
     }
-    fn index(self) -> usize {
-        self as usize
-    }
     /// Unit vector of the axis of rotation in its own frame.
     fn direction(self) -> Vector3<f64> {
         match self {
