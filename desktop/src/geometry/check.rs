@@ -259,12 +259,16 @@ pub fn plot(path: &Path, title: &str, points: &[Compared]) -> Result<()> {
 pub struct ThermalCheck {
     pub points: Vec<Compared>,
     pub static_points: Vec<Compared>,
+    /// With the bias terms optimised on tool-tip readings at `bias_states`
+    /// other states (s21–s22); empty when there are none.
+    pub bias_points: Vec<Compared>,
     pub states: Vec<(String, Vec<f64>)>,
 }
 
 pub fn thermal_sim(
     states: usize,
     held_out: usize,
+    bias_states: usize,
     noise_um: f64,
     seed: u64,
 ) -> Result<ThermalCheck> {
@@ -306,8 +310,41 @@ pub fn thermal_sim(
         .map(|i| train.iter().map(|s| s.temps[i]).sum::<f64>() / train.len() as f64)
         .collect();
     let static_errors = model.errors_at(&mean);
+    // s21: tool-tip readings on a coarse 3×3×3 grid (10/50/90 % of the
+    // strokes, the two tools) at other temperature states; s22: the bias
+    // terms re-optimised on them.
+    let mut calibration = Vec::new();
+    for _ in 0..bias_states {
+        let temps: Vec<f64> = (0..3).map(|_| rng.range(20.0, 32.0)).collect();
+        let conv = super::identify::to_reference_convention(&machine.at(&temps), stroke);
+        let mut pts = Vec::new();
+        for fx in [0.1, 0.5, 0.9] {
+            for fy in [0.1, 0.5, 0.9] {
+                for fz in [0.1, 0.5, 0.9] {
+                    let pos = [fx * stroke[0], fy * stroke[1], fz * stroke[2]];
+                    for tool in [[0.0, 0.0, 120.0], [40.0, -60.0, 180.0]] {
+                        let e = super::kinematics::tool_tip_error_exact(&st, &conv, pos, tool);
+                        let n = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * noise_um;
+                        let m = e + n;
+                        pts.push(super::thermal::ToolTipObs {
+                            pos_mm: pos,
+                            tool_mm: tool,
+                            error_um: [m.x, m.y, m.z],
+                        });
+                    }
+                }
+            }
+        }
+        calibration.push(super::thermal::CalibrationState { temps, points: pts });
+    }
+    let biased = if calibration.is_empty() {
+        None
+    } else {
+        Some(super::thermal::optimise_bias(&st, &model, &calibration)?)
+    };
     let grid = Grid::held_out(stroke, false);
     let (mut points, mut static_points, mut held) = (Vec::new(), Vec::new(), Vec::new());
+    let mut bias_points = Vec::new();
     for k in 1..=held_out {
         let temps: Vec<f64> = (0..3).map(|_| rng.range(20.0, 32.0)).collect();
         let name = format!("H{k}");
@@ -347,11 +384,29 @@ pub fn thermal_sim(
             &name,
             &mut Rng::new(state_seed),
         ));
+        if let Some(b) = &biased {
+            let e = b.errors_at(&temps);
+            let m = MachineErrors {
+                linear: &e,
+                turntable: None,
+            };
+            bias_points.extend(compare(
+                &st,
+                &t,
+                &m,
+                stroke,
+                &grid,
+                noise_um,
+                &name,
+                &mut Rng::new(state_seed),
+            ));
+        }
         held.push((name, temps));
     }
     Ok(ThermalCheck {
         points,
         static_points,
+        bias_points,
         states: held,
     })
 }
@@ -362,9 +417,11 @@ pub fn check_cmd(a: super::cli::CheckArgs) -> Result<()> {
         bail!("--noise-um must be ≥ 0");
     }
     if a.thermal_sim {
-        let c = thermal_sim(a.states, a.held_out, a.noise_um, a.seed)?;
+        let c = thermal_sim(a.states, a.held_out, a.bias_states, a.noise_um, a.seed)?;
         let all = figures(&c.points.iter().collect::<Vec<_>>());
         let stat = figures(&c.static_points.iter().collect::<Vec<_>>());
+        let bias =
+            (!c.bias_points.is_empty()).then(|| figures(&c.bias_points.iter().collect::<Vec<_>>()));
         let per_state: Vec<serde_json::Value> = c
             .states
             .iter()
@@ -384,7 +441,9 @@ pub fn check_cmd(a: super::cli::CheckArgs) -> Result<()> {
                 "{}",
                 serde_json::json!({"mode": "thermal-sim", "training_states": a.states,
                     "noise_um": a.noise_um, "seed": a.seed, "frame": "workpiece",
-                    "thermal_model": all, "static_geometry": stat, "held_out_states": per_state})
+                    "bias_states": a.bias_states,
+                    "thermal_model": all, "static_geometry": stat,
+                    "thermal_model_bias_optimised": bias, "held_out_states": per_state})
             );
             return Ok(());
         }
@@ -397,6 +456,15 @@ pub fn check_cmd(a: super::cli::CheckArgs) -> Result<()> {
         );
         print_figures("geometry + temperature terms", &all);
         print_figures("geometry at mean temperature (no temperature terms)", &stat);
+        if let Some(b) = &bias {
+            print_figures(
+                &format!(
+                    "temperature terms, bias optimised on tool-tip readings at {} other states",
+                    a.bias_states
+                ),
+                b,
+            );
+        }
         return Ok(());
     }
     let (Some(tp), Some(mp)) = (&a.truth, &a.model) else {
@@ -528,7 +596,7 @@ mod tests {
 
     #[test]
     fn temperature_terms_beat_static_geometry_on_held_out_states() {
-        let c = thermal_sim(8, 3, 0.5, 3).unwrap();
+        let c = thermal_sim(8, 3, 3, 0.5, 3).unwrap();
         let t = figures(&c.points.iter().collect::<Vec<_>>());
         let s = figures(&c.static_points.iter().collect::<Vec<_>>());
         assert_eq!(t.points, 3 * 432);

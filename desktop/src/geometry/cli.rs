@@ -66,6 +66,10 @@ pub struct CheckArgs {
     pub states: usize,
     #[arg(long, default_value_t = 4)]
     pub held_out: usize,
+    /// With --thermal-sim: states with tool-tip readings (3×3×3 grid, two
+    /// tools) on which the bias terms are re-optimised (seed 001 s21–s22); 0: off.
+    #[arg(long, default_value_t = 3)]
+    pub bias_states: usize,
     /// Noise of the tool-tip "measurement" (and of the line readings with --thermal-sim) [µm].
     #[arg(long, default_value_t = 0.5)]
     pub noise_um: f64,

@@ -187,3 +187,64 @@ pub fn sensitivities(model: &ThermalModel) -> Vec<(String, Vec<f64>)> {
     }
     rows
 }
+
+/// One tool-tip measurement (seed 001 s21): the error vector of the tool
+/// point relative to the workpiece [µm] at axis positions `pos_mm` with tool
+/// offset `tool_mm`, e.g. from a touch probe on an artefact or a tracker.
+#[derive(Clone, Debug)]
+pub struct ToolTipObs {
+    pub pos_mm: [f64; 3],
+    pub tool_mm: [f64; 3],
+    pub error_um: [f64; 3],
+}
+
+/// Tool-tip measurements at one temperature state (another ambient
+/// temperature or duty cycle than the line measurements).
+#[derive(Clone, Debug)]
+pub struct CalibrationState {
+    pub temps: Vec<f64>,
+    pub points: Vec<ToolTipObs>,
+}
+
+/// Seed 001 s22: keep the fitted temperature slopes, re-optimise the bias
+/// terms θ₀ so the model's tool-tip predictions match the measurements at
+/// the calibration states (least squares over every reading, first-order
+/// kinematics, SVD: directions the readings cannot see stay as the lines
+/// fitted them).
+pub fn optimise_bias(
+    st: &Structure,
+    model: &ThermalModel,
+    calibration: &[CalibrationState],
+) -> Result<ThermalModel> {
+    let mut rows = Vec::new();
+    let mut y = Vec::new();
+    for c in calibration {
+        if c.temps.len() != model.sensors.len() {
+            bail!(
+                "calibration state with {} temperatures for {} sensors",
+                c.temps.len(),
+                model.sensors.len()
+            );
+        }
+        let p = model.params_at(&c.temps);
+        for o in &c.points {
+            for (k, e) in o.error_um.iter().enumerate() {
+                let mut dir = [0.0; 3];
+                dir[k] = 1.0;
+                let row = model.basis.row(st, dir, o.pos_mm, o.tool_mm);
+                let predicted: f64 = row.iter().zip(&p).map(|(a, b)| a * b).sum();
+                rows.push(row);
+                y.push(e - predicted);
+            }
+        }
+    }
+    if rows.is_empty() {
+        bail!("bias optimisation: no tool-tip measurements");
+    }
+    let delta = crate::linalg::least_squares(&rows, &y, false, 0.0)?;
+    let mut out = model.clone();
+    for (b, d) in out.base.iter_mut().zip(&delta) {
+        *b += d;
+    }
+    Ok(out)
+}
