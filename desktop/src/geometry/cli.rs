@@ -40,6 +40,18 @@ pub enum GeometryCommand {
     /// Tool-tip error at one position of a three- or five-axis machine
     /// (exact and first-order), in the workpiece frame.
     Tooltip(TooltipArgs),
+    /// The volumetric correction polynomial the board will evaluate
+    /// (positions, tool length): its terms, size and fit to the kinematics.
+    Table(TableArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    /// Errors (errors.json or identify --json output).
+    #[arg(long)]
+    pub model: PathBuf,
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -338,6 +350,7 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::FitThermal(f) => fit_thermal_cmd(f),
         GeometryCommand::Check(c) => super::check::check_cmd(c),
         GeometryCommand::Tooltip(t) => tooltip_cmd(t),
+        GeometryCommand::Table(t) => table_cmd(t),
     }
 }
 
@@ -908,6 +921,37 @@ fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
     println!(
         "  first order  {:+9.3} {:+9.3} {:+9.3} µm",
         linear.x, linear.y, linear.z
+    );
+    Ok(())
+}
+
+fn table_cmd(a: TableArgs) -> Result<()> {
+    let ej = ErrorsJson::read(&a.model)?;
+    let st = Structure::parse(&ej.structure)
+        .with_context(|| format!("{}: structure", a.model.display()))?;
+    let p = super::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
+    // On the board a term will be 4 exponent/sensor bytes + 3 × i32 coefficients.
+    let bytes = p.terms.len() * 16;
+    if a.json {
+        let mut v = serde_json::to_value(&p)?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert("bytes_on_board".into(), serde_json::json!(bytes));
+            o.insert("unit".into(), serde_json::json!("um"));
+        }
+        println!("{v}");
+        return Ok(());
+    }
+    println!(
+        "volumetric polynomial of {} ({}, strokes {:?} mm): {} terms (of 52 monomials × 3 directions), about {bytes} bytes on the board",
+        a.model.display(),
+        st,
+        ej.stroke_mm,
+        p.terms.len()
+    );
+    println!(
+        "largest difference to the first-order kinematics on check points: {:.4} µm (terms below {} µm dropped)",
+        p.max_fit_error_um,
+        super::volumetric::DROP_BELOW_UM
     );
     Ok(())
 }

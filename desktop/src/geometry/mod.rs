@@ -16,3 +16,4 @@ pub mod identify;
 pub mod lines;
 pub mod sim;
 pub mod thermal;
+pub mod volumetric;
