@@ -10,15 +10,21 @@ use thermocomp_core::{Model, StepOutput};
 use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::compensation::{Compensation, PlcInputs};
+use crate::fault::{FaultBoard, FaultRecord};
 use crate::modbus::holding::{result, Command};
 use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::process_image::MAX_CHANNELS;
+use crate::settings::Settings;
+use crate::watchdog::Progress;
 
 /// PLC registers older than this make the inputs "stale".
 pub const PLC_TIMEOUT_MS: u64 = 10_000;
+/// Unit address and baud rate of a board with default settings.
+pub const DEFAULT_UNIT: u8 = 1;
+pub const DEFAULT_BAUD: u32 = 115_200;
 
 pub struct App<F: NorFlash> {
     pub server: Server,
@@ -26,6 +32,12 @@ pub struct App<F: NorFlash> {
     pub compensation: Compensation,
     pub store: ModelStore<F>,
     map: ChannelMap,
+    /// What the watchdog feeder looks at ([`crate::watchdog`]).
+    pub progress: Progress,
+    /// Set by the test-only command 9: the measurement loop must stop.
+    pub stall_requested: bool,
+    /// The board's settings without stored ones (command 7 goes back to them).
+    defaults: Settings,
 }
 
 /// What the board must do after a request (after sending the reply).
@@ -36,23 +48,68 @@ pub enum LinkChange {
     Reconfigure {
         baud: u32,
     },
+    /// Command 6: the board forgets its fault record ([`crate::fault::clear`]).
+    ClearFaultRecord,
+    /// Command 8 (feature `test-faults`): panic once the reply is out.
+    TestPanic,
 }
 
 impl<F: NorFlash> App<F> {
-    /// Load the newest valid model from the slots (none: "no model").
+    /// Load the newest valid model and the settings stored with it from
+    /// the slots (none: "no model"; `unit` and `baud` with no clamp or rate
+    /// override when no settings are stored).
     pub fn new(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
         let mut server = Server::new(unit, baud);
         let mut store = ModelStore::new(flash, slot_size);
         let model = store.load(server.holding.scratch());
+        let defaults = Settings {
+            unit,
+            baud,
+            ..Settings::default()
+        };
+        let stored = store.settings().and_then(Settings::decode);
+        apply_settings(&mut server.holding, &stored.unwrap_or(defaults));
         let mut app = App {
             server,
             snapshot: Snapshot::default(),
             compensation: Compensation::new(None, &map),
             store,
             map,
+            progress: Progress::default(),
+            stall_requested: false,
+            defaults,
         };
         app.install(model);
         app
+    }
+
+    /// The settings in force (unit, baud, clamp and rate overrides).
+    pub fn settings(&self) -> Settings {
+        let h = &self.server.holding;
+        Settings {
+            unit: h.unit,
+            baud: h.baud,
+            clamp: h.clamp,
+            rate: h.rate,
+        }
+    }
+
+    /// Store the settings in force with the model (A/B slots, power-cut
+    /// safe); a flash failure leaves them applied until the next reboot and
+    /// says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
+    fn store_settings(&mut self) {
+        let bytes = self.settings().encode();
+        if self.store.settings() == Some(&bytes[..]) {
+            return;
+        }
+        if self.store.commit_settings(&bytes).is_err() {
+            self.server.holding.result = result::SETTINGS_NOT_STORED;
+        }
+    }
+
+    /// Serve the fault record found at boot (status bit 9, input registers 160–168).
+    pub fn set_fault_record(&mut self, record: Option<FaultRecord>) {
+        self.snapshot.fault = record;
     }
 
     /// Store an image (factory programming, or the bench's initial model) and use it.
@@ -124,6 +181,7 @@ impl<F: NorFlash> App<F> {
             stale: plc_stale,
         };
         let out = self.compensation.step(acq, now_ms, &plc);
+        self.progress.cycles = self.progress.cycles.wrapping_add(1);
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
         s.heartbeat = s.heartbeat.wrapping_add(1);
@@ -176,13 +234,42 @@ impl<F: NorFlash> App<F> {
             }
             Command::LimitsChanged => {
                 self.apply_limits();
+                self.store_settings();
                 LinkChange::None
             }
-            Command::LinkChanged => LinkChange::Reconfigure {
-                baud: self.server.holding.baud,
-            },
+            Command::LinkChanged => {
+                self.store_settings();
+                LinkChange::Reconfigure {
+                    baud: self.server.holding.baud,
+                }
+            }
+            Command::ClearFault => {
+                self.snapshot.fault = None;
+                LinkChange::ClearFaultRecord
+            }
+            Command::RestoreDefaults => {
+                apply_settings(&mut self.server.holding, &self.defaults);
+                self.apply_limits();
+                self.store_settings();
+                LinkChange::Reconfigure {
+                    baud: self.defaults.baud,
+                }
+            }
+            Command::TestPanic => LinkChange::TestPanic,
+            Command::TestStall => {
+                self.stall_requested = true;
+                LinkChange::None
+            }
         }
     }
+}
+
+/// Settings into the holding registers that carry them.
+fn apply_settings(h: &mut crate::modbus::holding::Holding, s: &Settings) {
+    h.unit = s.unit;
+    h.baud = s.baud;
+    h.clamp = s.clamp;
+    h.rate = s.rate;
 }
 
 /// The app state as the boards share it between their two tasks.
@@ -192,19 +279,30 @@ pub type SharedApp<M, F> =
 /// The Modbus task of every board: one frame in, at most one reply out, from
 /// the shared app state (locked only between awaits). A frame that arrives
 /// before the app is set up gets no answer, as from a board still booting.
-pub async fn serve_modbus<P, F, M>(
+/// `B` is the board's fault path (command 6 clears its record; the
+/// test-only command 8 panics into it once the reply is out).
+pub async fn serve_modbus<B, P, F, M>(
     port: &mut P,
     shared: &SharedApp<M, F>,
     uptime_ms: impl Fn() -> u64,
 ) -> !
 where
+    B: FaultBoard,
     P: crate::hal::serial::RtuPort,
     F: NorFlash,
     M: embassy_sync::blocking_mutex::raw::RawMutex,
 {
     let mut frame = [0u8; MAX_FRAME + 1];
     let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
+    // The baud rate the port runs at: the board's default until the app
+    // (with its stored settings) is up.
+    let mut applied_baud: Option<u32> = None;
     loop {
+        let want = shared.lock(|a| a.borrow().as_ref().map(|app| app.server.holding.baud));
+        if let Some(b) = want.filter(|b| applied_baud != Some(*b)) {
+            port.set_baud(b);
+            applied_baud = Some(b);
+        }
         let Ok(n) = port.read_frame(&mut frame).await else {
             continue;
         };
@@ -214,15 +312,29 @@ where
         let now = uptime_ms();
         reply.clear();
         let change = shared.lock(|a| {
-            a.borrow_mut()
-                .as_mut()
-                .map(|app| app.request(request, now, &mut reply))
+            a.borrow_mut().as_mut().map(|app| {
+                app.progress.modbus_busy = true;
+                app.request(request, now, &mut reply)
+            })
         });
         if !reply.is_empty() {
             port.write_frame(&reply).await;
         }
-        if let Some(LinkChange::Reconfigure { baud }) = change {
-            port.set_baud(baud);
+        shared.lock(|a| {
+            if let Some(app) = a.borrow_mut().as_mut() {
+                app.progress.modbus_busy = false;
+                app.progress.requests = app.progress.requests.wrapping_add(1);
+            }
+        });
+        match change {
+            Some(LinkChange::Reconfigure { baud }) => {
+                port.set_baud(baud);
+                applied_baud = Some(baud);
+            }
+            Some(LinkChange::ClearFaultRecord) => crate::fault::clear::<B>(),
+            #[cfg(feature = "test-faults")]
+            Some(LinkChange::TestPanic) => panic!("test panic requested by command 8"),
+            _ => {}
         }
     }
 }

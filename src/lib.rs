@@ -5,8 +5,11 @@
 pub mod acquisition;
 pub mod app;
 pub mod compensation;
+pub mod fault;
 pub mod hal;
 pub mod modbus;
 pub mod model_store;
 pub mod process_image;
+pub mod settings;
 pub mod trace;
+pub mod watchdog;

@@ -8,6 +8,8 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
   upload   --port P --image F [--corrupt] stage, commit; report the commit's outcome
   badcrc   --port P                      a corrupted frame, then a good one
   rate     --port P [--n N]              requests per second and latency
+  command  --port P --code N             unlock, write command N; its exception (None: accepted)
+  fault    --port P                      status and the fault record (input registers 160-168)
   flood    --pipe BASE [--bytes N] [--gap-ms G]
                                          N bytes of garbage into the board's UART (QEMU
                                          -serial pipe:BASE), then one good request; how
@@ -263,6 +265,28 @@ def cmd_flood(a):
                       "answer_s": None if answer_s is None else round(answer_s, 3)}))
 
 
+def cmd_command(a):
+    m = Master(a.port)
+    m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    t = time.perf_counter()
+    r = m.call("write_register", HR_COMMAND, a.code)
+    out = {"exception": getattr(r, "exception_code", None) if r is not None and r.isError() else None,
+           "reply_ms": round(1000 * (time.perf_counter() - t), 1)}
+    out["link"] = m.close()
+    print(json.dumps(out))
+
+
+def cmd_fault(a):
+    m = Master(a.port, timeout=a.timeout)
+    st = m.call("read_input_registers", 3, count=1)
+    r = m.call("read_input_registers", 160, count=20)
+    m.close()
+    w = r.registers
+    print(json.dumps({"status": st.registers[0], "kind": w[0], "pc": u32(w[1], w[2]),
+                      "uptime_s": u32(w[3], w[4]), "count": u32(w[5], w[6]),
+                      "detail": u32(w[7], w[8]), "reserved": w[9:]}))
+
+
 def main():
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -273,9 +297,11 @@ def main():
     q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
     f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
     f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
+    c = sub.add_parser("command"); c.add_argument("--port", type=int, required=True); c.add_argument("--code", type=int, required=True)
+    g = sub.add_parser("fault"); g.add_argument("--port", type=int, required=True); g.add_argument("--timeout", type=float, default=3.0)
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
-     "flood": cmd_flood}[a.cmd](a)
+     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -39,6 +39,17 @@ pub const CMD_LOCK: u16 = 4;
 /// running one (going back to an older model on purpose); every other check
 /// of [`CMD_COMMIT_MODEL`] still applies.
 pub const CMD_ROLLBACK_MODEL: u16 = 5;
+/// Forget the fault record (input registers 160–168, status bit 9).
+pub const CMD_CLEAR_FAULT: u16 = 6;
+/// Restore the default settings (unit 1, 115200 baud, no clamp or rate
+/// override, no fixed reference) and store them; link changes apply after the reply.
+pub const CMD_RESTORE_DEFAULTS: u16 = 7;
+/// Test builds only (feature `test-faults`, the QEMU bench board): panic
+/// after the reply, to show the fault path end to end.
+pub const CMD_TEST_PANIC: u16 = 8;
+/// Test builds only (feature `test-faults`): the measurement loop stops
+/// making progress, so the watchdog must trip.
+pub const CMD_TEST_STALL: u16 = 9;
 
 /// Command results (HR_RESULT): one code per reason a commit is refused.
 pub mod result {
@@ -86,6 +97,9 @@ pub mod result {
     pub const TABLE_SUM_TOO_LARGE: u16 = 20;
     /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
     pub const NOT_NEWER: u16 = 21;
+    /// A settings change (unit, baud, clamp, rate, command 7) is in force
+    /// but could not be stored in flash: it is lost at the next reboot.
+    pub const SETTINGS_NOT_STORED: u16 = 22;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -112,6 +126,7 @@ pub mod result {
             MAX_RATE => "MAX_RATE",
             TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
             NOT_NEWER => "NOT_NEWER",
+            SETTINGS_NOT_STORED => "SETTINGS_NOT_STORED",
             _ => "unknown",
         }
     }
@@ -181,6 +196,14 @@ pub enum Command {
     LimitsChanged,
     /// Unit address or baud rate changed: apply after the reply is sent.
     LinkChanged,
+    /// Command 6: forget the fault record.
+    ClearFault,
+    /// Command 7: back to the default settings.
+    RestoreDefaults,
+    /// Command 8 (feature `test-faults`): panic after the reply.
+    TestPanic,
+    /// Command 9 (feature `test-faults`): stall the measurement loop.
+    TestStall,
 }
 
 pub struct Holding {
@@ -336,14 +359,18 @@ impl Holding {
             // A wrong key is refused, not echoed: the master must see that the
             // board stayed locked.
             HR_UNLOCK => v == UNLOCK_CODE,
-            HR_COMMAND => matches!(
-                v,
-                CMD_COMMIT_MODEL
-                    | CMD_REREFERENCE
-                    | CMD_CLEAR_STAGING
-                    | CMD_LOCK
-                    | CMD_ROLLBACK_MODEL
-            ),
+            HR_COMMAND => {
+                matches!(
+                    v,
+                    CMD_COMMIT_MODEL
+                        | CMD_REREFERENCE
+                        | CMD_CLEAR_STAGING
+                        | CMD_LOCK
+                        | CMD_ROLLBACK_MODEL
+                        | CMD_CLEAR_FAULT
+                        | CMD_RESTORE_DEFAULTS
+                ) || (cfg!(feature = "test-faults") && matches!(v, CMD_TEST_PANIC | CMD_TEST_STALL))
+            }
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
@@ -431,6 +458,10 @@ impl Holding {
                 self.staged_len = 0;
                 Ok(Command::None)
             }
+            CMD_CLEAR_FAULT => Ok(Command::ClearFault),
+            CMD_RESTORE_DEFAULTS => Ok(Command::RestoreDefaults),
+            CMD_TEST_PANIC => Ok(Command::TestPanic),
+            CMD_TEST_STALL => Ok(Command::TestStall),
             _ => {
                 self.unlocked_until_ms = None;
                 Ok(Command::None)

@@ -7,6 +7,7 @@
 use thermocomp_core::eval::AxisPair;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 
+use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
 
 /// Version of this register map (input register 2).
@@ -44,6 +45,21 @@ pub const IR_STATES: u16 = 130;
 /// Last input register.
 pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
 
+/// Status bit 9: a fault record from before the last reset is held (input
+/// registers 160–168) until command 6 clears it.
+pub const STATUS_FAULT_RECORDED: u16 = 1 << 9;
+/// The fault record ([`crate::fault::FaultRecord`]): kind (160), program
+/// counter u32 (161–162), uptime at the fault u32 s (163–164), faults since
+/// the record was cleared u32 (165–166), detail u32 (167–168); 169–179
+/// reserved (read 0). All 0 when no record is held.
+pub const IR_FAULT_KIND: u16 = 160;
+pub const IR_FAULT_PC: u16 = 161;
+pub const IR_FAULT_UPTIME: u16 = 163;
+pub const IR_FAULT_COUNT: u16 = 165;
+pub const IR_FAULT_DETAIL: u16 = 167;
+/// Last register of the board-safety block (160–179).
+pub const IR_SAFETY_LAST: u16 = 179;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Snapshot {
     pub sequence: u32,
@@ -66,6 +82,8 @@ pub struct Snapshot {
     /// 0.01 °C, `None` where no valid value.
     pub temperatures: [Option<i16>; MAX_CHANNELS],
     pub states: [u16; MAX_CHANNELS],
+    /// The fault record from before the last reset, until cleared.
+    pub fault: Option<FaultRecord>,
 }
 
 impl Default for Snapshot {
@@ -88,6 +106,7 @@ impl Default for Snapshot {
             axes: [AxisPair::default(); MAX_AXES],
             temperatures: [None; MAX_CHANNELS],
             states: [0; MAX_CHANNELS],
+            fault: None,
         }
     }
 }
@@ -120,6 +139,9 @@ impl Snapshot {
     /// The value of input register `addr`, or `None` past the end of the map
     /// (the server answers ILLEGAL DATA ADDRESS). Reserved gaps read 0.
     pub fn input_register(&self, addr: u16) -> Option<u16> {
+        if (IR_FAULT_KIND..=IR_SAFETY_LAST).contains(&addr) {
+            return Some(self.safety_register(addr));
+        }
         if addr > IR_LAST {
             return None;
         }
@@ -130,6 +152,11 @@ impl Snapshot {
             MAP_VERSION
         } else if addr == IR_STATUS {
             self.status
+                | if self.fault.is_some() {
+                    STATUS_FAULT_RECORDED
+                } else {
+                    0
+                }
         } else if let Some(w) = word32(addr, IR_SEQUENCE, self.sequence) {
             w
         } else if let Some(w) = word32(addr, IR_HEARTBEAT, self.heartbeat) {
@@ -192,5 +219,28 @@ impl Snapshot {
             0
         };
         Some(v)
+    }
+}
+
+impl Snapshot {
+    /// Input registers 160–179: the fault record (0 without one).
+    fn safety_register(&self, addr: u16) -> u16 {
+        let Some(f) = self.fault else {
+            return 0;
+        };
+        let uptime_s = u32::try_from(f.uptime_ms / 1000).unwrap_or(u32::MAX);
+        if addr == IR_FAULT_KIND {
+            f.kind
+        } else if let Some(w) = word32(addr, IR_FAULT_PC, f.pc) {
+            w
+        } else if let Some(w) = word32(addr, IR_FAULT_UPTIME, uptime_s) {
+            w
+        } else if let Some(w) = word32(addr, IR_FAULT_COUNT, f.count) {
+            w
+        } else if let Some(w) = word32(addr, IR_FAULT_DETAIL, f.detail) {
+            w
+        } else {
+            0
+        }
     }
 }

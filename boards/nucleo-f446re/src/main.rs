@@ -10,9 +10,11 @@ mod model_flash;
 mod onewire;
 mod probe_adc;
 mod rtu_port;
+mod safety;
 
 use core::cell::RefCell;
 use defmt::{info, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Speed};
@@ -26,7 +28,7 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
-use {defmt_rtt as _, panic_probe as _};
+use thermocomp::fault;
 
 const SYSCLK_HZ: u32 = 168_000_000;
 /// Modbus unit address and baud rate at power-on.
@@ -71,10 +73,21 @@ fn clock_config() -> Config {
     config
 }
 
+/// Boot (1-Wire search, sensor configuration, model load) must be done
+/// within this long; until then the watchdog is fed unconditionally.
+const BOOT_DEADLINE_MS: u64 = 20_000;
+
+/// Sets everything up, then stays as the watchdog feeder: `main` never
+/// returns, and an initialisation that fails is a fault (record + reset),
+/// never a silent exit.
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clock_config());
     info!("thermocomp on NUCLEO-F446RE, 168 MHz");
+    safety::note_watchdog_reset();
+    let mut watchdog =
+        embassy_stm32::wdg::IndependentWatchdog::new(p.IWDG, safety::WATCHDOG_TIMEOUT_US);
+    watchdog.unleash();
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
     let bus = onewire::new_bus(p.PC7, SYSCLK_HZ);
     let probe = probe_adc::ProbeInput::new(p.ADC1, p.PA0);
@@ -93,7 +106,7 @@ async fn main(spawner: Spawner) {
         Ok(u) => u,
         Err(e) => {
             defmt::error!("USART1 configuration refused: {}", e);
-            return;
+            fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::UART)
         }
     };
     let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
@@ -104,14 +117,47 @@ async fn main(spawner: Spawner) {
             spawner.spawn(t2);
             spawner.spawn(t3);
         }
-        _ => defmt::error!("tasks could not be spawned"),
+        _ => {
+            defmt::error!("tasks could not be spawned");
+            fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::SPAWN)
+        }
+    }
+    feed_watchdog(watchdog).await
+}
+
+/// Feeds the IWDG while booting (up to [`BOOT_DEADLINE_MS`]), then only when
+/// both the measurement loop and the Modbus task made progress
+/// ([`thermocomp::watchdog::Feeder`]).
+async fn feed_watchdog(
+    mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, peripherals::IWDG>,
+) -> ! {
+    let progress = || APP.lock(|a| a.borrow().as_ref().map(|app| app.progress));
+    let mut feeder: Option<thermocomp::watchdog::Feeder> = None;
+    loop {
+        Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;
+        match (progress(), feeder.as_mut()) {
+            (Some(p), Some(f)) => {
+                if f.check(&p).is_ok() {
+                    watchdog.pet();
+                }
+            }
+            (Some(p), None) => {
+                feeder = Some(thermocomp::watchdog::Feeder::new(&p));
+                watchdog.pet();
+            }
+            (None, _) if Instant::now().as_millis() < BOOT_DEADLINE_MS => watchdog.pet(),
+            (None, _) => {}
+        }
     }
 }
 
 /// Modbus RTU server: the application's loop on this board's port.
 #[embassy_executor::task]
 async fn modbus(mut port: rtu_port::Rs485Port) {
-    thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
+    thermocomp::app::serve_modbus::<safety::Nucleo, _, _, _>(&mut port, &APP, || {
+        Instant::now().as_millis()
+    })
+    .await
 }
 
 type Bus =
@@ -133,7 +179,19 @@ async fn acquisition(
     if !matches!(acq.configure(&mut bus).await, Ok(true)) {
         warn!("1-Wire: could not set the resolution (no sensor answered)");
     }
-    let app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, *acq.map());
+    let mut app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, *acq.map());
+    let record = fault::recorded::<safety::Nucleo>();
+    if let Some(r) = record {
+        warn!(
+            "fault record: {} at pc={:x}, uptime {} ms, fault #{}, detail {:x}",
+            fault::kind::name(r.kind),
+            r.pc,
+            r.uptime_ms,
+            r.count,
+            r.detail
+        );
+    }
+    app.set_fault_record(record);
     info!(
         "model: version {} crc {:x}",
         app.snapshot.model_version, app.snapshot.model_crc

@@ -1,0 +1,166 @@
+//! A board that is safe in the field, shown on the QEMU bench board with a
+//! real Modbus master (pymodbus): an injected panic (test-only command 8)
+//! ends in a reset and the fault record is read back over Modbus after it;
+//! a stalled measurement loop (test-only command 9) trips the watchdog.
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use serde_json::Value;
+
+const BOOT: Duration = Duration::from_secs(60);
+const SERVING: &str = "serving Modbus RTU";
+
+fn python(args: &[&str]) -> Value {
+    let script = workspace_root().join("host-tests/py/modbus_master.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "modbus_master.py {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("thermocomp-safety-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A long trace (the board must still be replaying when the test ends) and
+/// the demo model.
+fn files(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
+    for i in 0..5000u32 {
+        csv += &format!("{},3000", i * 15);
+        for c in 0..6 {
+            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
+        }
+        csv += "\n";
+    }
+    std::fs::write(&t, csv).unwrap();
+    let mut fm = thermocomp_core::float::demo_model(1);
+    fm.model_version = 1;
+    tcomp::export::export(&fm, &m).unwrap();
+    (t, m)
+}
+
+/// One bench board at a time (see qemu_modbus.rs).
+static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn boot(dir: &std::path::Path) -> (BenchBoard, u16) {
+    let (t, m) = files(dir);
+    let port = free_tcp_port();
+    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
+    let board = BenchBoard::start(
+        &serial,
+        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
+    );
+    assert!(board.wait_for(SERVING, BOOT), "{}", board.log());
+    (board, port)
+}
+
+/// Wait until the board has booted `n` times; the host time it took.
+fn wait_for_boots(board: &BenchBoard, n: usize, limit: Duration) -> Duration {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if board.log().matches(SERVING).count() >= n {
+            return start.elapsed();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("no boot #{n} within {limit:?}:\n{}", board.log());
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("panic"));
+    let p = port.to_string();
+    let before = python(&["fault", "--port", &p]);
+    assert_eq!(before["kind"], 0, "{before}");
+    assert_eq!(before["status"].as_u64().unwrap() & (1 << 9), 0, "{before}");
+    // Command 8: answered, then the panic; the fault path resets the board.
+    let cmd = python(&["command", "--port", &p, "--code", "8"]);
+    assert_eq!(cmd["exception"], Value::Null, "{cmd}");
+    wait_for_boots(&board, 2, BOOT);
+    let log = board.log();
+    assert!(log.contains("test panic requested by command 8"), "{log}");
+    let after = python(&["fault", "--port", &p]);
+    println!("{after}");
+    assert_eq!(after["kind"], 1, "panic: {after}");
+    assert_eq!(after["count"], 1, "{after}");
+    assert!(
+        after["detail"].as_u64().unwrap() > 0,
+        "source line: {after}"
+    );
+    assert_ne!(
+        after["status"].as_u64().unwrap() & (1 << 9),
+        0,
+        "FAULT_RECORDED: {after}"
+    );
+    // The board serves normally after the reset: model and test pattern.
+    let snap = &python(&["read", "--port", &p])[0];
+    assert_eq!(snap["pattern"], 0x1234_5678, "{snap}");
+    assert_eq!(snap["model_version"], 1, "{snap}");
+    // A second panic counts on.
+    python(&["command", "--port", &p, "--code", "8"]);
+    wait_for_boots(&board, 3, BOOT);
+    assert_eq!(python(&["fault", "--port", &p])["count"], 2);
+    // Command 6 clears the record and the status bit; it stays cleared.
+    let clear = python(&["command", "--port", &p, "--code", "6"]);
+    assert_eq!(clear["exception"], Value::Null, "{clear}");
+    let cleared = python(&["fault", "--port", &p]);
+    assert_eq!(cleared["kind"], 0, "{cleared}");
+    assert_eq!(cleared["count"], 0, "{cleared}");
+    assert_eq!(
+        cleared["status"].as_u64().unwrap() & (1 << 9),
+        0,
+        "{cleared}"
+    );
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("watchdog"));
+    let p = port.to_string();
+    // Fed while both tasks run: several timeouts' worth of serving, no reset.
+    std::thread::sleep(Duration::from_secs(9));
+    let ok = python(&["read", "--port", &p, "--samples", "5"]);
+    assert_eq!(ok.as_array().unwrap().len(), 5);
+    assert_eq!(board.log().matches(SERVING).count(), 1, "{}", board.log());
+    // Command 9: the measurement loop stops; Modbus keeps answering.
+    let cmd = python(&["command", "--port", &p, "--code", "9"]);
+    assert_eq!(cmd["exception"], Value::Null, "{cmd}");
+    let stalled_at = Instant::now();
+    std::thread::sleep(Duration::from_secs(1));
+    let still = python(&["read", "--port", &p]);
+    assert_eq!(
+        still[0]["pattern"], 0x1234_5678,
+        "Modbus still serves while stalled"
+    );
+    let took = stalled_at.elapsed() + wait_for_boots(&board, 2, BOOT);
+    println!("watchdog reset {took:?} after the stall");
+    // The 4 s timeout, and not much more (feeder period, host load).
+    assert!(took >= Duration::from_millis(3_900), "{took:?}");
+    assert!(took < Duration::from_secs(15), "{took:?}");
+    let log = board.log();
+    assert!(log.contains("watchdog expired at pc="), "{log}");
+    let rec = python(&["fault", "--port", &p]);
+    println!("{rec}");
+    assert_eq!(rec["kind"], 3, "watchdog: {rec}");
+    assert_eq!(rec["count"], 1, "{rec}");
+    assert_eq!(rec["detail"], 1, "the measurement loop, not Modbus: {rec}");
+    assert_ne!(rec["pc"], 0, "the interrupted PC: {rec}");
+    assert_ne!(rec["status"].as_u64().unwrap() & (1 << 9), 0, "{rec}");
+}
