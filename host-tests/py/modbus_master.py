@@ -9,6 +9,8 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
   badcrc   --port P                      a corrupted frame, then a good one
   rate     --port P [--n N]              requests per second and latency
   command  --port P --code N             unlock, write command N; its exception (None: accepted)
+  hold     --port P [--write A=V ...] [--unit U]
+                                         unlock, write holding registers (one FC06 each), read 0-31
   fault    --port P                      status and the fault record (input registers 160-168)
   flood    --pipe BASE [--bytes N] [--gap-ms G]
                                          N bytes of garbage into the board's UART (QEMU
@@ -266,13 +268,30 @@ def cmd_flood(a):
 
 
 def cmd_command(a):
-    m = Master(a.port)
+    m = Master(a.port, unit=a.unit)
     m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
     t = time.perf_counter()
     r = m.call("write_register", HR_COMMAND, a.code)
     out = {"exception": getattr(r, "exception_code", None) if r is not None and r.isError() else None,
            "reply_ms": round(1000 * (time.perf_counter() - t), 1)}
     out["link"] = m.close()
+    print(json.dumps(out))
+
+
+def cmd_hold(a):
+    m = Master(a.port, unit=a.unit)
+    out = {"exceptions": {}}
+    if a.write:
+        m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    for w in a.write:
+        addr, val = (int(x, 0) for x in w.split("="))
+        r = m.call("write_register", addr, val)
+        if r is not None and r.isError():
+            out["exceptions"][addr] = r.exception_code
+    if not a.no_read:
+        r = m.call("read_holding_registers", 0, count=32)
+        out["registers"] = None if r is None or r.isError() else r.registers
+    m.close()
     print(json.dumps(out))
 
 
@@ -298,10 +317,13 @@ def main():
     f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
     f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
     c = sub.add_parser("command"); c.add_argument("--port", type=int, required=True); c.add_argument("--code", type=int, required=True)
+    c.add_argument("--unit", type=int, default=UNIT)
+    h = sub.add_parser("hold"); h.add_argument("--port", type=int, required=True); h.add_argument("--write", action="append", default=[])
+    h.add_argument("--unit", type=int, default=UNIT); h.add_argument("--no-read", action="store_true")
     g = sub.add_parser("fault"); g.add_argument("--port", type=int, required=True); g.add_argument("--timeout", type=float, default=3.0)
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
-     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault}[a.cmd](a)
+     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 //! A board that is safe in the field, shown on the QEMU bench board with a
 //! real Modbus master (pymodbus): an injected panic (test-only command 8)
 //! ends in a reset and the fault record is read back over Modbus after it;
-//! a stalled measurement loop (test-only command 9) trips the watchdog.
+//! a stalled measurement loop (test-only command 9) trips the watchdog;
+//! settings written over Modbus survive the reboot.
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -163,4 +164,59 @@ fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
     assert_eq!(rec["detail"], 1, "the measurement loop, not Modbus: {rec}");
     assert_ne!(rec["pc"], 0, "the interrupted PC: {rec}");
     assert_ne!(rec["status"].as_u64().unwrap() & (1 << 9), 0, "{rec}");
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("settings"));
+    let p = port.to_string();
+    // Clamp direction 0 to 12.3 µm, rate of direction 1 to 5.0 µm/s, unit 7.
+    let w = python(&[
+        "hold",
+        "--port",
+        &p,
+        "--write",
+        "20=123",
+        "--write",
+        "27=50",
+        "--write",
+        "3=7",
+        "--no-read",
+    ]);
+    assert_eq!(w["exceptions"], serde_json::json!({}), "{w}");
+    // Reboot (the panic command, at the new unit address).
+    let cmd = python(&["hold", "--port", &p, "--unit", "7"]);
+    assert_eq!(cmd["registers"][3], 7, "{cmd}");
+    let panic = python(&["command", "--port", &p, "--unit", "7", "--code", "8"]);
+    assert_eq!(panic["exception"], Value::Null, "{panic}");
+    wait_for_boots(&board, 2, BOOT);
+    let after = python(&["hold", "--port", &p, "--unit", "7"]);
+    let r = &after["registers"];
+    assert_eq!(
+        (r[3].clone(), r[20].clone(), r[27].clone()),
+        (7.into(), 123.into(), 50.into()),
+        "{after}"
+    );
+    assert_eq!(r[21], 0xFFFF, "{after}");
+    // Command 7: defaults again (the reply comes from unit 7, then unit 1).
+    let w = python(&[
+        "hold",
+        "--port",
+        &p,
+        "--unit",
+        "7",
+        "--write",
+        "1=7",
+        "--no-read",
+    ]);
+    assert_eq!(w["exceptions"], serde_json::json!({}), "{w}");
+    let d = python(&["hold", "--port", &p]);
+    let r = &d["registers"];
+    assert_eq!(
+        (r[3].clone(), r[20].clone(), r[27].clone()),
+        (1.into(), 0xFFFF.into(), 0xFFFF.into()),
+        "{d}"
+    );
 }
