@@ -11,6 +11,7 @@ use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::compensation::{Compensation, PlcInputs};
 use crate::fault::{FaultBoard, FaultRecord};
+use crate::hal::flash::BackgroundErase;
 use crate::modbus::holding::{result, Command};
 use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::server::MAX_FRAME;
@@ -38,6 +39,18 @@ pub struct App<F: NorFlash> {
     pub stall_requested: bool,
     /// The board's settings without stored ones (command 7 goes back to them).
     defaults: Settings,
+    /// The flash write in progress ([`App::poll_flash`]).
+    job: Option<FlashJob>,
+}
+
+/// A flash write accepted over Modbus and done in the background: the
+/// erase outside the app lock, programming (a few ms) inside it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FlashJob {
+    /// Store the staged image (this long) with the settings in force.
+    Model { len: usize, erasing: bool },
+    /// Store the settings in force with the model held now.
+    Settings { erasing: bool },
 }
 
 /// What the board must do after a request (after sending the reply).
@@ -54,7 +67,7 @@ pub enum LinkChange {
     TestPanic,
 }
 
-impl<F: NorFlash> App<F> {
+impl<F: BackgroundErase> App<F> {
     /// Load the newest valid model and the settings stored with it from
     /// the slots (none: "no model"; `unit` and `baud` with no clamp or rate
     /// override when no settings are stored).
@@ -78,6 +91,7 @@ impl<F: NorFlash> App<F> {
             progress: Progress::default(),
             stall_requested: false,
             defaults,
+            job: None,
         };
         app.install(model);
         app
@@ -99,11 +113,77 @@ impl<F: NorFlash> App<F> {
     /// says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
     fn store_settings(&mut self) {
         let bytes = self.settings().encode();
-        if self.store.settings() == Some(&bytes[..]) {
+        if self.store.settings() == Some(&bytes[..]) || self.job.is_some() {
             return;
         }
-        if self.store.commit_settings(&bytes).is_err() {
-            self.server.holding.result = result::SETTINGS_NOT_STORED;
+        self.job = Some(FlashJob::Settings { erasing: false });
+        self.server.holding.busy = true;
+        self.server.holding.result = result::COMMIT_IN_PROGRESS;
+    }
+
+    /// True while a commit (model or settings) is being written.
+    pub fn flash_busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Drive the flash write in progress; call it every few tens of ms (the
+    /// boards' watchdog feeder does, every 100 ms). The first call starts
+    /// the erase of the inactive slot — at once on a flash that erases in
+    /// the background — and returns; a later call, once the erase is done,
+    /// programs the slot (image or the model held now, then the settings in
+    /// force, magic last), swaps it in and sets HR_RESULT. Modbus requests
+    /// are answered meanwhile; writes that would change what is being
+    /// stored get exception 06 (busy). Returns true while a job remains.
+    pub fn poll_flash(&mut self) -> bool {
+        let Some(job) = self.job else {
+            return false;
+        };
+        let erasing = match job {
+            FlashJob::Model { erasing, .. } | FlashJob::Settings { erasing } => erasing,
+        };
+        if !erasing {
+            if self.store.begin().is_err() {
+                self.end_job(job, false);
+                return false;
+            }
+            self.job = Some(match job {
+                FlashJob::Model { len, .. } => FlashJob::Model { len, erasing: true },
+                FlashJob::Settings { .. } => FlashJob::Settings { erasing: true },
+            });
+        }
+        if !self.store.erase_done() {
+            return true;
+        }
+        let settings = self.settings().encode();
+        let ok = match job {
+            FlashJob::Model { len, .. } => {
+                let staged = self.server.holding.staged();
+                let staged = &staged[..len.min(staged.len())];
+                match Model::parse(staged) {
+                    Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
+                        self.install(Some(m));
+                        true
+                    }
+                    _ => false,
+                }
+            }
+            FlashJob::Settings { .. } => self.store.finish(None, &settings).is_ok(),
+        };
+        self.end_job(job, ok);
+        // Settings changed while the model was written are in the slot
+        // already (the settings in force at `finish`).
+        false
+    }
+
+    fn end_job(&mut self, job: FlashJob, ok: bool) {
+        self.job = None;
+        self.server.holding.busy = false;
+        let h = &mut self.server.holding;
+        match (job, ok) {
+            (FlashJob::Model { .. }, true) => h.result = result::OK,
+            (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
+            (FlashJob::Settings { .. }, true) => h.result = result::OK,
+            (FlashJob::Settings { .. }, false) => h.result = result::SETTINGS_NOT_STORED,
         }
     }
 
@@ -215,17 +295,14 @@ impl<F: NorFlash> App<F> {
         match self.server.handle(frame, uptime_ms, &self.snapshot, reply) {
             Command::None => LinkChange::None,
             Command::CommitModel { len } => {
-                // The server validated the image; store it in the other slot, then swap.
-                let staged =
-                    &self.server.holding.staged()[..len.min(self.server.holding.staged().len())];
-                let outcome = Model::parse(staged).map(|m| (m, self.store.commit(staged)));
-                match outcome {
-                    Ok((m, Ok(()))) => {
-                        self.install(Some(m));
-                        self.server.holding.result = result::OK;
-                    }
-                    _ => self.server.holding.result = result::STORE_FAILED,
-                }
+                // The server validated the image; it is written to the other
+                // slot in the background (poll_flash) and swapped in when done.
+                self.job = Some(FlashJob::Model {
+                    len,
+                    erasing: false,
+                });
+                self.server.holding.busy = true;
+                self.server.holding.result = result::COMMIT_IN_PROGRESS;
                 LinkChange::None
             }
             Command::Rereference => {
@@ -289,7 +366,7 @@ pub async fn serve_modbus<B, P, F, M>(
 where
     B: FaultBoard,
     P: crate::hal::serial::RtuPort,
-    F: NorFlash,
+    F: BackgroundErase,
     M: embassy_sync::blocking_mutex::raw::RawMutex,
 {
     let mut frame = [0u8; MAX_FRAME + 1];

@@ -15,6 +15,8 @@
 //! has none: defaults).
 
 use embedded_storage::nor_flash::NorFlash;
+
+use crate::hal::flash::BackgroundErase;
 use thermocomp_core::image::crc32;
 use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_core::Model;
@@ -172,7 +174,7 @@ impl<F: NorFlash> ModelStore<F> {
             return Err(StoreError::TooLarge);
         }
         let settings = self.settings.clone();
-        self.write_slot(Source::Bytes(image), &settings)?;
+        self.write_slot(Source::Bytes(image), &settings, true)?;
         Ok(())
     }
 
@@ -187,16 +189,46 @@ impl<F: NorFlash> ModelStore<F> {
         match self.active {
             Some((s, _)) if self.active_image.0 > 0 => {
                 let (len, crc) = self.active_image;
-                self.write_slot(Source::Slot { s, len, crc }, &settings)
+                self.write_slot(Source::Slot { s, len, crc }, &settings, true)
             }
-            _ => self.write_slot(Source::Bytes(&[]), &settings),
+            _ => self.write_slot(Source::Bytes(&[]), &settings, true),
         }
+    }
+
+    /// Offsets of the inactive slot (the one the next commit writes).
+    fn inactive_range(&self) -> (u32, u32) {
+        let target = self.active.map_or(0, |(s, _)| 1 - s);
+        (self.slots[target], self.slots[target] + self.slot_size)
+    }
+
+    /// Second half of a commit after [`ModelStore::begin`] erased the
+    /// inactive slot: program `image` (`None`: keep the model held now) and
+    /// the `settings` payload, header and magic last; then it is the active slot.
+    pub fn finish(&mut self, image: Option<&[u8]>, settings: &[u8]) -> Result<(), StoreError> {
+        if settings.len() > MAX_SETTINGS_BYTES {
+            return Err(StoreError::TooLarge);
+        }
+        let mut payload = heapless::Vec::new();
+        let _ = payload.extend_from_slice(settings);
+        let source = match (image, self.active) {
+            (Some(b), _) if b.is_empty() || b.len() > MAX_IMAGE_BYTES => {
+                return Err(StoreError::TooLarge)
+            }
+            (Some(b), _) => Source::Bytes(b),
+            (None, Some((s, _))) if self.active_image.0 > 0 => {
+                let (len, crc) = self.active_image;
+                Source::Slot { s, len, crc }
+            }
+            (None, _) => Source::Bytes(&[]),
+        };
+        self.write_slot(source, &payload, false)
     }
 
     fn write_slot(
         &mut self,
         image: Source,
         settings: &heapless::Vec<u8, MAX_SETTINGS_BYTES>,
+        erase: bool,
     ) -> Result<(), StoreError> {
         let (len, crc) = match image {
             Source::Bytes(b) => (b.len() as u32, crc32(b)),
@@ -211,9 +243,11 @@ impl<F: NorFlash> ModelStore<F> {
             None => (0, 1),
         };
         let base = self.slots[target];
-        self.flash
-            .erase(base, base + self.slot_size)
-            .map_err(|_| StoreError::Flash)?;
+        if erase {
+            self.flash
+                .erase(base, base + self.slot_size)
+                .map_err(|_| StoreError::Flash)?;
+        }
         // Program the image in write-size-aligned chunks (the tail padded with 0xFF).
         let ws = F::WRITE_SIZE.max(1);
         let mut chunk = [0xFFu8; 64];
@@ -270,6 +304,22 @@ impl<F: NorFlash> ModelStore<F> {
         self.active_image = (len, crc);
         self.settings = settings.clone();
         Ok(())
+    }
+}
+
+impl<F: BackgroundErase> ModelStore<F> {
+    /// First half of a commit: start erasing the inactive slot (the active
+    /// one keeps serving; a power cut now leaves it as it was).
+    pub fn begin(&mut self) -> Result<(), StoreError> {
+        let (from, to) = self.inactive_range();
+        self.flash
+            .start_erase(from, to)
+            .map_err(|_| StoreError::Flash)
+    }
+
+    /// True once the erase [`ModelStore::begin`] started is done.
+    pub fn erase_done(&mut self) -> bool {
+        self.flash.erase_done()
     }
 }
 

@@ -2,6 +2,7 @@
 //! boot, restored to defaults by command 7, and a power cut at every flash
 //! operation of a settings commit (or of a model commit) leaves the old
 //! settings or the new ones, with the model intact.
+use embedded_storage::nor_flash::NorFlash as _;
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
@@ -186,10 +187,14 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
     app.request(&write1(1, HR_CLAMP + 2, 150), 0, &mut reply);
     assert_eq!(reply[1], 6, "{reply:02x?}");
+    app.poll_flash();
     app.request(&write1(1, HR_RATE, 40), 0, &mut reply);
+    app.poll_flash();
     app.request(&write1(1, HR_BAUD, 192), 0, &mut reply);
+    app.poll_flash();
     app.request(&write1(1, HR_UNIT, 9), 0, &mut reply);
     assert_eq!(reply[0], 1, "the reply still comes from unit 1");
+    app.poll_flash();
     let mut expect = Settings::default();
     expect.clamp[2] = 150;
     expect.rate[0] = 40;
@@ -209,6 +214,7 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     app.request(&write1(9, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
     let change = app.request(&write1(9, HR_COMMAND, CMD_RESTORE_DEFAULTS), 0, &mut reply);
     assert_eq!(reply[0], 9, "answered at the old address");
+    app.poll_flash();
     assert_eq!(
         change,
         thermocomp::app::LinkChange::Reconfigure { baud: 115_200 }
@@ -222,9 +228,93 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
     app.request(&write1(1, HR_CLAMP, 10), 0, &mut reply);
     assert_eq!(app.settings().clamp[0], 10);
+    assert!(!app.poll_flash(), "the failed write ends the job");
     app.request(&frame(&[1, 3, 0, HR_RESULT as u8, 0, 1]), 0, &mut reply);
     assert_eq!(
         u16::from_be_bytes([reply[3], reply[4]]),
         result::SETTINGS_NOT_STORED
     );
+}
+
+/// A flash whose erase runs in the background for `steps` polls, as the
+/// QEMU board's flash model does in real time.
+struct SlowErase {
+    inner: MockFlash,
+    left: u32,
+    steps: u32,
+}
+
+impl embedded_storage::nor_flash::ErrorType for SlowErase {
+    type Error = host_tests::mock_flash::MockError;
+}
+impl embedded_storage::nor_flash::ReadNorFlash for SlowErase {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, o: u32, b: &mut [u8]) -> Result<(), Self::Error> {
+        self.inner.read(o, b)
+    }
+    fn capacity(&self) -> usize {
+        self.inner.capacity()
+    }
+}
+impl embedded_storage::nor_flash::NorFlash for SlowErase {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = ERASE_SIZE;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.inner.erase(from, to)
+    }
+    fn write(&mut self, o: u32, b: &[u8]) -> Result<(), Self::Error> {
+        assert_eq!(self.left, 0, "programmed while the erase runs");
+        self.inner.write(o, b)
+    }
+}
+impl thermocomp::hal::flash::BackgroundErase for SlowErase {
+    fn start_erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.left = self.steps;
+        self.inner.erase(from, to)
+    }
+    fn erase_done(&mut self) -> bool {
+        self.left = self.left.saturating_sub(1);
+        self.left == 0
+    }
+}
+
+#[test]
+fn a_commit_is_answered_at_once_and_written_in_the_background() {
+    let flash = SlowErase {
+        inner: MockFlash::new(2 * SLOT as usize),
+        left: 0,
+        steps: 5,
+    };
+    let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let (_, img) = image(3);
+    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    for (i, pair) in img.chunks(2).enumerate() {
+        let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
+        app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);
+    }
+    app.request(&write1(1, HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
+    app.request(&write1(1, HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
+    assert_eq!(reply[1], 6, "the commit is acknowledged: {reply:02x?}");
+    assert_eq!(app.server.holding.result, result::COMMIT_IN_PROGRESS);
+    assert_eq!(app.snapshot.model_version, 0, "not swapped in yet");
+    // While it is written: reads answer, staging and settings are busy (06),
+    // the PLC's registers are written as usual. (The commit locked the board.)
+    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_STAGING, 0), 0, &mut reply);
+    assert_eq!((reply[1], reply[2]), (0x86, 6));
+    app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
+    assert_eq!((reply[1], reply[2]), (0x86, 6));
+    app.request(&write1(1, HR_SPINDLE, 1200), 0, &mut reply);
+    assert_eq!(reply[1], 6);
+    let mut polls = 0;
+    while app.poll_flash() {
+        polls += 1;
+        assert!(polls < 100);
+    }
+    assert_eq!(polls, 4, "the erase took its time");
+    assert_eq!(app.server.holding.result, result::OK);
+    assert_eq!(app.snapshot.model_version, 3);
+    app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
+    assert_eq!(reply[1], 6, "not busy any more");
 }

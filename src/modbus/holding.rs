@@ -100,6 +100,9 @@ pub mod result {
     /// A settings change (unit, baud, clamp, rate, command 7) is in force
     /// but could not be stored in flash: it is lost at the next reboot.
     pub const SETTINGS_NOT_STORED: u16 = 22;
+    /// A commit (model or settings) is being written to flash in the
+    /// background; poll until another code (0 OK, 4, 22).
+    pub const COMMIT_IN_PROGRESS: u16 = 23;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -127,6 +130,7 @@ pub mod result {
             TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
             NOT_NEWER => "NOT_NEWER",
             SETTINGS_NOT_STORED => "SETTINGS_NOT_STORED",
+            COMMIT_IN_PROGRESS => "COMMIT_IN_PROGRESS",
             _ => "unknown",
         }
     }
@@ -169,6 +173,9 @@ pub enum WriteError {
     Locked,
     /// The staged model was refused (SERVER DEVICE FAILURE); HR_RESULT says why.
     ModelRefused,
+    /// A commit is being written to flash (SERVER DEVICE BUSY): staging,
+    /// commits and settings wait until it is done.
+    Busy,
 }
 
 /// How a write request was addressed.
@@ -218,6 +225,8 @@ pub struct Holding {
     pub result: u16,
     /// Version of the model serving now (0: none); a commit must be newer.
     pub running_version: u32,
+    /// A commit is being written ([`WriteError::Busy`] for what it stores).
+    pub busy: bool,
     unlocked_until_ms: Option<u64>,
     staged_len: u16,
     staging: [u8; MAX_IMAGE_BYTES],
@@ -235,6 +244,7 @@ impl Holding {
             rate: [u16::MAX; MAX_DIRECTIONS],
             result: result::NONE,
             running_version: 0,
+            busy: false,
             unlocked_until_ms: None,
             staged_len: 0,
             staging: [0; MAX_IMAGE_BYTES],
@@ -337,6 +347,21 @@ impl Holding {
         a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
     }
 
+    /// Writes that change what a commit in progress stores.
+    fn stored(a: u16, v: u16) -> bool {
+        matches!(a, HR_UNIT | HR_BAUD | HR_STAGED_LEN)
+            || (a == HR_COMMAND
+                && matches!(
+                    v,
+                    CMD_COMMIT_MODEL
+                        | CMD_ROLLBACK_MODEL
+                        | CMD_CLEAR_STAGING
+                        | CMD_RESTORE_DEFAULTS
+                ))
+            || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
+            || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
+    }
+
     fn protected(a: u16) -> bool {
         !(a == HR_UNLOCK || Self::plc_register(a))
     }
@@ -354,6 +379,9 @@ impl Holding {
         }
         if Self::protected(a) && !self.unlocked(now_ms) {
             return Err(WriteError::Locked);
+        }
+        if self.busy && Self::stored(a, v) {
+            return Err(WriteError::Busy);
         }
         let ok = match a {
             // A wrong key is refused, not echoed: the master must see that the

@@ -131,7 +131,16 @@ async fn main(spawner: Spawner) {
 async fn feed_watchdog(
     mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, peripherals::IWDG>,
 ) -> ! {
-    let progress = || APP.lock(|a| a.borrow().as_ref().map(|app| app.progress));
+    // Each look also drives a flash commit in progress (erase outside the
+    // lock, then programming): `App::poll_flash`.
+    let progress = || {
+        APP.lock(|a| {
+            a.borrow_mut().as_mut().map(|app| {
+                app.poll_flash();
+                app.progress
+            })
+        })
+    };
     let mut feeder: Option<thermocomp::watchdog::Feeder> = None;
     loop {
         Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;

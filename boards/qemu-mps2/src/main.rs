@@ -475,7 +475,16 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
 /// ([`thermocomp::watchdog::Feeder`]).
 #[embassy_executor::task]
 async fn watchdog_feeder() {
-    let progress = || APP.lock(|a| a.borrow().as_ref().map(|app| app.progress));
+    // Each look also drives a flash commit in progress (erase outside the
+    // lock, then programming): `App::poll_flash`.
+    let progress = || {
+        APP.lock(|a| {
+            a.borrow_mut().as_mut().map(|app| {
+                app.poll_flash();
+                app.progress
+            })
+        })
+    };
     safety::watchdog_start();
     log!(
         "watchdog started: {} ms, fed when both tasks progressed",
