@@ -1,6 +1,9 @@
 //! thermocomp: the compensator application, written once against the narrow
 //! hardware traits in [`hal`] and run unchanged on every board in `boards/`.
 #![no_std]
+// No unsafe in the application: registers and RAM the board owns are
+// reached only through the board crates (boards/*), behind src/hal traits.
+#![forbid(unsafe_code)]
 
 pub mod acquisition;
 pub mod app;
