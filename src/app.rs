@@ -8,6 +8,7 @@ use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 use thermocomp_core::{Model, StepOutput};
 
 use crate::acquisition::channel_map::ChannelMap;
+use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::compensation::{Compensation, PlcInputs};
 use crate::fault::{FaultBoard, FaultRecord};
@@ -17,9 +18,12 @@ use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
+use crate::model_store::MAX_SETTINGS_BYTES;
+use crate::process_image::ChannelState;
 use crate::process_image::MAX_CHANNELS;
-use crate::settings::Settings;
+use crate::settings::{Settings, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
+use thermocomp_core::limits::MAX_SENSORS;
 
 /// PLC registers older than this make the inputs "stale".
 pub const PLC_TIMEOUT_MS: u64 = 10_000;
@@ -68,9 +72,10 @@ pub enum LinkChange {
 }
 
 impl<F: BackgroundErase> App<F> {
-    /// Load the newest valid model and the settings stored with it from
-    /// the slots (none: "no model"; `unit` and `baud` with no clamp or rate
-    /// override when no settings are stored).
+    /// Load the newest valid model and the settings and channel map stored
+    /// with it from the slots (none: "no model"; `unit` and `baud` with no
+    /// clamp or rate override when no settings are stored; `map` when no
+    /// channel map is stored).
     pub fn new(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
         let mut server = Server::new(unit, baud);
         let mut store = ModelStore::new(flash, slot_size);
@@ -80,7 +85,14 @@ impl<F: BackgroundErase> App<F> {
             baud,
             ..Settings::default()
         };
-        let stored = store.settings().and_then(Settings::decode);
+        let blob = store.settings();
+        let stored = blob
+            .and_then(|b| b.get(..SETTINGS_LEN))
+            .and_then(Settings::decode);
+        let map = blob
+            .and_then(|b| b.get(SETTINGS_LEN..))
+            .and_then(|b| ChannelMap::from_bytes(b).ok())
+            .unwrap_or(map);
         apply_settings(&mut server.holding, &stored.unwrap_or(defaults));
         let mut app = App {
             server,
@@ -112,13 +124,59 @@ impl<F: BackgroundErase> App<F> {
     /// safe); a flash failure leaves them applied until the next reboot and
     /// says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
     fn store_settings(&mut self) {
-        let bytes = self.settings().encode();
+        let bytes = self.persisted();
         if self.store.settings() == Some(&bytes[..]) || self.job.is_some() {
             return;
         }
         self.job = Some(FlashJob::Settings { erasing: false });
         self.server.holding.busy = true;
         self.server.holding.result = result::COMMIT_IN_PROGRESS;
+    }
+
+    /// What the slots keep besides the model: the settings, then the
+    /// channel map (ROM code per channel).
+    fn persisted(&self) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
+        let mut v = heapless::Vec::new();
+        let _ = v.extend_from_slice(&self.settings().encode());
+        let _ = v.extend_from_slice(&self.map.to_bytes());
+        v
+    }
+
+    /// The channel map in force (stored, or the board's at first boot).
+    pub fn channel_map(&self) -> ChannelMap {
+        self.map
+    }
+
+    /// A new channel map from a bus search (sensors found that were not
+    /// mapped went to free channels; mapped ones keep theirs): stored in
+    /// the slots, the channels it added reported (input registers 172–173),
+    /// and the model's sensors resolved again if that changes where one reads.
+    pub fn update_channel_map(&mut self, map: ChannelMap) {
+        if map == self.map {
+            return;
+        }
+        for c in 0..MAX_CHANNELS {
+            if self.map.get(c).is_none() && map.get(c).is_some() {
+                self.snapshot.map_added |= 1 << c;
+            }
+        }
+        let resolved_before: [Option<u8>; MAX_SENSORS] =
+            core::array::from_fn(|i| self.compensation.channel_of(i));
+        self.map = map;
+        let model = self.compensation.model().cloned();
+        let changes = model.as_ref().is_some_and(|m| {
+            m.sensors.iter().enumerate().any(|(i, s)| {
+                s.rom != [0; 8]
+                    && map
+                        .channel_of(&RomCode(s.rom))
+                        .and_then(|c| u8::try_from(c).ok())
+                        != resolved_before[i]
+            })
+        });
+        if changes {
+            self.install(model);
+        }
+        self.store_settings();
     }
 
     /// True while a commit (model or settings) is being written.
@@ -154,7 +212,7 @@ impl<F: BackgroundErase> App<F> {
         if !self.store.erase_done() {
             return true;
         }
-        let settings = self.settings().encode();
+        let settings = self.persisted();
         let ok = match job {
             FlashJob::Model { len, .. } => {
                 let staged = self.server.holding.staged();
@@ -195,7 +253,19 @@ impl<F: BackgroundErase> App<F> {
     /// Store an image (factory programming, or the bench's initial model) and use it.
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
         let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
-        self.store.commit(image).map_err(|_| result::STORE_FAILED)?;
+        if matches!(self.job, Some(FlashJob::Model { .. })) {
+            return Err(result::COMMIT_IN_PROGRESS);
+        }
+        // With the settings and map in force (a pending settings write is
+        // done by this one).
+        let persisted = self.persisted();
+        self.store
+            .commit_with(image, &persisted)
+            .map_err(|_| result::STORE_FAILED)?;
+        if self.job.is_some() {
+            self.job = None;
+            self.server.holding.busy = false;
+        }
         self.install(Some(model));
         Ok(())
     }
@@ -271,10 +341,14 @@ impl<F: BackgroundErase> App<F> {
         s.corrections = out.corrections;
         s.predictions = out.predicted;
         s.axes = out.axes;
+        s.map_missing = 0;
         for c in 0..MAX_CHANNELS {
             let v = acq.value(c, now_ms);
             s.temperatures[c] = v.usable().map(centidegrees);
             s.states[c] = v.state.code();
+            if self.map.get(c).is_some() && v.state == ChannelState::NoPresence {
+                s.map_missing |= 1 << c;
+            }
         }
         out
     }

@@ -25,7 +25,7 @@ const MAGIC: [u8; 4] = *b"TCSL";
 const HEADER: u32 = 16;
 const SETTINGS_MAGIC: [u8; 4] = *b"TCSE";
 /// Largest settings payload a slot carries.
-pub const MAX_SETTINGS_BYTES: usize = 64;
+pub const MAX_SETTINGS_BYTES: usize = 256;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -176,6 +176,17 @@ impl<F: NorFlash> ModelStore<F> {
         let settings = self.settings.clone();
         self.write_slot(Source::Bytes(image), &settings, true)?;
         Ok(())
+    }
+
+    /// As [`ModelStore::commit`], with a new settings payload in the same slot.
+    pub fn commit_with(&mut self, image: &[u8], settings: &[u8]) -> Result<(), StoreError> {
+        if image.is_empty() || image.len() > MAX_IMAGE_BYTES || settings.len() > MAX_SETTINGS_BYTES
+        {
+            return Err(StoreError::TooLarge);
+        }
+        let mut payload = heapless::Vec::new();
+        let _ = payload.extend_from_slice(settings);
+        self.write_slot(Source::Bytes(image), &payload, true)
     }
 
     /// Store a new settings payload with the model held now (copied from the

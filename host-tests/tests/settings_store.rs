@@ -318,3 +318,47 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
     assert_eq!(reply[1], 6, "not busy any more");
 }
+
+fn rom(n: u8) -> thermocomp::acquisition::rom::RomCode {
+    thermocomp::acquisition::rom::RomCode::from_serial(0x28, [n, 0, 0, 0, 0, 1])
+}
+
+#[test]
+fn the_channel_map_persists_and_a_swapped_sensor_goes_to_a_free_channel() {
+    let mut app = app_on(MockFlash::new(2 * SLOT as usize));
+    // First boot: the search found a and b (channels 0 and 1).
+    let mut m1 = ChannelMap::new();
+    m1.assign_new(&[rom(1), rom(2)]).unwrap();
+    app.update_channel_map(m1);
+    assert!(app.flash_busy(), "stored in the background");
+    app.poll_flash();
+    let read = |app: &mut App<MockFlash>| {
+        let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+        app.request(&frame(&[1, 4, 0, 170, 0, 4]), 0, &mut reply);
+        let w: Vec<u16> = reply[3..11]
+            .chunks(2)
+            .map(|c| u16::from_be_bytes([c[0], c[1]]))
+            .collect();
+        (
+            u32::from(w[0]) << 16 | u32::from(w[1]),
+            u32::from(w[2]) << 16 | u32::from(w[3]),
+        )
+    };
+    assert_eq!(read(&mut app).1, 0b11, "channels 0 and 1 added since boot");
+    // Reboot: the map comes from flash, not from the (empty) search order.
+    let mut app = power_cycle(&mut app);
+    assert_eq!(app.channel_map(), m1);
+    assert_eq!(read(&mut app), (0, 0), "nothing added since this boot");
+    // Sensor b is swapped for c: the board starts the search from the stored
+    // map, so c takes the free channel 2 and b keeps channel 1 (missing).
+    let mut m2 = app.channel_map();
+    m2.assign_new(&[rom(1), rom(3)]).unwrap();
+    assert_eq!(m2.channel_of(&rom(2)), Some(1));
+    assert_eq!(m2.channel_of(&rom(3)), Some(2));
+    app.update_channel_map(m2);
+    app.poll_flash();
+    assert_eq!(read(&mut app).1, 0b100, "c reported as new on channel 2");
+    let app = power_cycle(&mut app);
+    assert_eq!(app.channel_map(), m2);
+    assert_eq!(app.settings(), Settings::default(), "settings untouched");
+}

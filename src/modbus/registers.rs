@@ -50,13 +50,18 @@ pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
 pub const STATUS_FAULT_RECORDED: u16 = 1 << 9;
 /// The fault record ([`crate::fault::FaultRecord`]): kind (160), program
 /// counter u32 (161–162), uptime at the fault u32 s (163–164), faults since
-/// the record was cleared u32 (165–166), detail u32 (167–168); 169–179
-/// reserved (read 0). All 0 when no record is held.
+/// the record was cleared u32 (165–166), detail u32 (167–168); all 0 when
+/// no record is held. 169, 174–179 reserved (read 0).
 pub const IR_FAULT_KIND: u16 = 160;
 pub const IR_FAULT_PC: u16 = 161;
 pub const IR_FAULT_UPTIME: u16 = 163;
 pub const IR_FAULT_COUNT: u16 = 165;
 pub const IR_FAULT_DETAIL: u16 = 167;
+/// Sensor identity: mapped channels whose sensor (ROM code) does not answer,
+/// u32 bit mask, bit c = channel c (172–173: channels added to the map since
+/// boot, new sensors on free channels). Always served.
+pub const IR_MAP_MISSING: u16 = 170;
+pub const IR_MAP_ADDED: u16 = 172;
 /// Last register of the board-safety block (160–179).
 pub const IR_SAFETY_LAST: u16 = 179;
 
@@ -84,6 +89,10 @@ pub struct Snapshot {
     pub states: [u16; MAX_CHANNELS],
     /// The fault record from before the last reset, until cleared.
     pub fault: Option<FaultRecord>,
+    /// Mapped channels whose sensor is missing (bit per channel).
+    pub map_missing: u32,
+    /// Channels added to the map since boot (bit per channel).
+    pub map_added: u32,
 }
 
 impl Default for Snapshot {
@@ -107,6 +116,8 @@ impl Default for Snapshot {
             temperatures: [None; MAX_CHANNELS],
             states: [0; MAX_CHANNELS],
             fault: None,
+            map_missing: 0,
+            map_added: 0,
         }
     }
 }
@@ -225,6 +236,12 @@ impl Snapshot {
 impl Snapshot {
     /// Input registers 160–179: the fault record (0 without one).
     fn safety_register(&self, addr: u16) -> u16 {
+        if let Some(w) = word32(addr, IR_MAP_MISSING, self.map_missing) {
+            return w;
+        }
+        if let Some(w) = word32(addr, IR_MAP_ADDED, self.map_added) {
+            return w;
+        }
         let Some(f) = self.fault else {
             return 0;
         };

@@ -48,6 +48,8 @@ static APP: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<App<model_flas
 /// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
 /// (BENCHMARKS.md, sensor acquisition).
 const CYCLE_PERIOD: Duration = Duration::from_secs(1);
+/// The bus is searched again every this many cycles (one minute).
+const REDISCOVER_CYCLES: u32 = 60;
 
 /// 168 MHz from the ST-LINK's 8 MHz MCO (HSE bypass). 180 MHz would need the
 /// regulator's over-drive mode for no gain the compensator needs.
@@ -180,7 +182,10 @@ async fn acquisition(
     mut probe_input: probe_adc::ProbeInput<'static>,
     flash: model_flash::SlotFlash,
 ) {
-    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
+    // The channel map stored with the model first: a search then only adds
+    // new sensors on free channels, never renumbers the known ones.
+    let mut app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, ChannelMap::new());
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), app.channel_map());
     match acq.discover(&mut bus).await {
         Ok(n) => info!("1-Wire: {} sensor(s) found", n),
         Err(e) => warn!("1-Wire search failed: {}", e),
@@ -188,7 +193,7 @@ async fn acquisition(
     if !matches!(acq.configure(&mut bus).await, Ok(true)) {
         warn!("1-Wire: could not set the resolution (no sensor answered)");
     }
-    let mut app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, *acq.map());
+    app.update_channel_map(*acq.map());
     let record = fault::recorded::<safety::Nucleo>();
     if let Some(r) = record {
         warn!(
@@ -223,9 +228,23 @@ async fn acquisition(
         min_tenth_um: 0,
         max_tenth_um: 20_000,
     });
+    let mut cycles = 0u32;
     loop {
         let start = Instant::now();
         let now_ms = start.as_millis();
+        cycles = cycles.wrapping_add(1);
+        if cycles.is_multiple_of(REDISCOVER_CYCLES) {
+            // Sensors added at run time go to free channels (reported in
+            // input registers 172-173); missing ones keep their channel and
+            // read "no presence" (170-171), never another sensor's value.
+            if acq.discover(&mut bus).await.is_ok() {
+                APP.lock(|a| {
+                    if let Some(app) = a.borrow_mut().as_mut() {
+                        app.update_channel_map(*acq.map());
+                    }
+                });
+            }
+        }
         let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
         let out = APP.lock(|a| {
             a.borrow_mut()

@@ -388,6 +388,10 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
         BAUD,
         *sensors.acquisition.map(),
     );
+    // The bench maps its emulated sensors in trace-column order; stored with
+    // the model like a field board's map (by the programming below, when a
+    // model is given; else in the background).
+    app.update_channel_map(*sensors.acquisition.map());
     if let Some(p) = model_path {
         static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
         let Some(buf) = BUF.try_init([0; MAX_IMAGE_BYTES]) else {
