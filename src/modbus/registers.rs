@@ -254,10 +254,9 @@ impl Snapshot {
             w
         } else if let Some(w) = word32(addr, IR_FAULT_COUNT, f.count) {
             w
-        } else if let Some(w) = word32(addr, IR_FAULT_DETAIL, f.detail) {
-            w
         } else {
-            0
+            // The detail word, or a reserved register (0).
+            word32(addr, IR_FAULT_DETAIL, f.detail).unwrap_or_default()
         }
     }
 }
