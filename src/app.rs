@@ -8,17 +8,28 @@ use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 use thermocomp_core::{Model, StepOutput};
 
 use crate::acquisition::channel_map::ChannelMap;
+use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::compensation::{Compensation, PlcInputs};
+use crate::fault::{FaultBoard, FaultRecord};
+use crate::hal::flash::BackgroundErase;
 use crate::modbus::holding::{result, Command};
 use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
+use crate::model_store::MAX_SETTINGS_BYTES;
+use crate::process_image::ChannelState;
 use crate::process_image::MAX_CHANNELS;
+use crate::settings::{Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::watchdog::Progress;
+use thermocomp_core::limits::MAX_SENSORS;
 
 /// PLC registers older than this make the inputs "stale".
 pub const PLC_TIMEOUT_MS: u64 = 10_000;
+/// Unit address and baud rate of a board with default settings.
+pub const DEFAULT_UNIT: u8 = 1;
+pub const DEFAULT_BAUD: u32 = 115_200;
 
 pub struct App<F: NorFlash> {
     pub server: Server,
@@ -26,6 +37,24 @@ pub struct App<F: NorFlash> {
     pub compensation: Compensation,
     pub store: ModelStore<F>,
     map: ChannelMap,
+    /// What the watchdog feeder looks at ([`crate::watchdog`]).
+    pub progress: Progress,
+    /// Set by the test-only command 9: the measurement loop must stop.
+    pub stall_requested: bool,
+    /// The board's settings without stored ones (command 7 goes back to them).
+    defaults: Settings,
+    /// The flash write in progress ([`App::poll_flash`]).
+    job: Option<FlashJob>,
+}
+
+/// A flash write accepted over Modbus and done in the background: the
+/// erase outside the app lock, programming (a few ms) inside it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FlashJob {
+    /// Store the staged image (this long) with the settings in force.
+    Model { len: usize, erasing: bool },
+    /// Store the settings in force with the model held now.
+    Settings { erasing: bool },
 }
 
 /// What the board must do after a request (after sending the reply).
@@ -36,29 +65,207 @@ pub enum LinkChange {
     Reconfigure {
         baud: u32,
     },
+    /// Command 6: the board forgets its fault record ([`crate::fault::clear`]).
+    ClearFaultRecord,
+    /// Command 8 (feature `test-faults`): panic once the reply is out.
+    TestPanic,
 }
 
-impl<F: NorFlash> App<F> {
-    /// Load the newest valid model from the slots (none: "no model").
+impl<F: BackgroundErase> App<F> {
+    /// Load the newest valid model and the settings and channel map stored
+    /// with it from the slots (none: "no model"; `unit` and `baud` with no
+    /// clamp or rate override when no settings are stored; `map` when no
+    /// channel map is stored).
     pub fn new(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
         let mut server = Server::new(unit, baud);
         let mut store = ModelStore::new(flash, slot_size);
         let model = store.load(server.holding.scratch());
+        let defaults = Settings {
+            unit,
+            baud,
+            ..Settings::default()
+        };
+        let blob = store.settings();
+        let stored = blob
+            .and_then(|b| b.get(..SETTINGS_LEN))
+            .and_then(Settings::decode);
+        let map = blob
+            .and_then(|b| b.get(SETTINGS_LEN..))
+            .and_then(|b| ChannelMap::from_bytes(b).ok())
+            .unwrap_or(map);
+        apply_settings(&mut server.holding, &stored.unwrap_or(defaults));
         let mut app = App {
             server,
             snapshot: Snapshot::default(),
             compensation: Compensation::new(None, &map),
             store,
             map,
+            progress: Progress::default(),
+            stall_requested: false,
+            defaults,
+            job: None,
         };
         app.install(model);
         app
     }
 
+    /// The settings in force (unit, baud, clamp and rate overrides).
+    pub fn settings(&self) -> Settings {
+        let h = &self.server.holding;
+        Settings {
+            unit: h.unit,
+            baud: h.baud,
+            clamp: h.clamp,
+            rate: h.rate,
+        }
+    }
+
+    /// Store the settings in force with the model (A/B slots, power-cut
+    /// safe); a flash failure leaves them applied until the next reboot and
+    /// says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
+    fn store_settings(&mut self) {
+        let bytes = self.persisted();
+        if self.store.settings() == Some(&bytes[..]) || self.job.is_some() {
+            return;
+        }
+        self.job = Some(FlashJob::Settings { erasing: false });
+        self.server.holding.busy = true;
+        self.server.holding.result = result::COMMIT_IN_PROGRESS;
+    }
+
+    /// What the slots keep besides the model: the settings, then the
+    /// channel map (ROM code per channel).
+    fn persisted(&self) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
+        let mut v = heapless::Vec::new();
+        let _ = v.extend_from_slice(&self.settings().encode());
+        let _ = v.extend_from_slice(&self.map.to_bytes());
+        v
+    }
+
+    /// The channel map in force (stored, or the board's at first boot).
+    pub fn channel_map(&self) -> ChannelMap {
+        self.map
+    }
+
+    /// A new channel map from a bus search (sensors found that were not
+    /// mapped went to free channels; mapped ones keep theirs): stored in
+    /// the slots, the channels it added reported (input registers 172–173),
+    /// and the model's sensors resolved again if that changes where one reads.
+    pub fn update_channel_map(&mut self, map: ChannelMap) {
+        if map == self.map {
+            return;
+        }
+        for c in 0..MAX_CHANNELS {
+            if self.map.get(c).is_none() && map.get(c).is_some() {
+                self.snapshot.map_added |= 1 << c;
+            }
+        }
+        let resolved_before: [Option<u8>; MAX_SENSORS] =
+            core::array::from_fn(|i| self.compensation.channel_of(i));
+        self.map = map;
+        let model = self.compensation.model().cloned();
+        let changes = model.as_ref().is_some_and(|m| {
+            m.sensors.iter().enumerate().any(|(i, s)| {
+                s.rom != [0; 8]
+                    && map
+                        .channel_of(&RomCode(s.rom))
+                        .and_then(|c| u8::try_from(c).ok())
+                        != resolved_before[i]
+            })
+        });
+        if changes {
+            self.install(model);
+        }
+        self.store_settings();
+    }
+
+    /// True while a commit (model or settings) is being written.
+    pub fn flash_busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Drive the flash write in progress; call it every few tens of ms (the
+    /// boards' watchdog feeder does, every 100 ms). The first call starts
+    /// the erase of the inactive slot — at once on a flash that erases in
+    /// the background — and returns; a later call, once the erase is done,
+    /// programs the slot (image or the model held now, then the settings in
+    /// force, magic last), swaps it in and sets HR_RESULT. Modbus requests
+    /// are answered meanwhile; writes that would change what is being
+    /// stored get exception 06 (busy). Returns true while a job remains.
+    pub fn poll_flash(&mut self) -> bool {
+        let Some(job) = self.job else {
+            return false;
+        };
+        let erasing = match job {
+            FlashJob::Model { erasing, .. } | FlashJob::Settings { erasing } => erasing,
+        };
+        if !erasing {
+            if self.store.begin().is_err() {
+                self.end_job(job, false);
+                return false;
+            }
+            self.job = Some(match job {
+                FlashJob::Model { len, .. } => FlashJob::Model { len, erasing: true },
+                FlashJob::Settings { .. } => FlashJob::Settings { erasing: true },
+            });
+        }
+        if !self.store.erase_done() {
+            return true;
+        }
+        let settings = self.persisted();
+        let ok = match job {
+            FlashJob::Model { len, .. } => {
+                let staged = self.server.holding.staged();
+                let staged = &staged[..len.min(staged.len())];
+                match Model::parse(staged) {
+                    Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
+                        self.install(Some(m));
+                        true
+                    }
+                    _ => false,
+                }
+            }
+            FlashJob::Settings { .. } => self.store.finish(None, &settings).is_ok(),
+        };
+        self.end_job(job, ok);
+        // Settings changed while the model was written are in the slot
+        // already (the settings in force at `finish`).
+        false
+    }
+
+    fn end_job(&mut self, job: FlashJob, ok: bool) {
+        self.job = None;
+        self.server.holding.busy = false;
+        let h = &mut self.server.holding;
+        match (job, ok) {
+            (FlashJob::Model { .. }, true) => h.result = result::OK,
+            (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
+            (FlashJob::Settings { .. }, true) => h.result = result::OK,
+            (FlashJob::Settings { .. }, false) => h.result = result::SETTINGS_NOT_STORED,
+        }
+    }
+
+    /// Serve the fault record found at boot (status bit 9, input registers 160–168).
+    pub fn set_fault_record(&mut self, record: Option<FaultRecord>) {
+        self.snapshot.fault = record;
+    }
+
     /// Store an image (factory programming, or the bench's initial model) and use it.
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
         let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
-        self.store.commit(image).map_err(|_| result::STORE_FAILED)?;
+        if matches!(self.job, Some(FlashJob::Model { .. })) {
+            return Err(result::COMMIT_IN_PROGRESS);
+        }
+        // With the settings and map in force (a pending settings write is
+        // done by this one).
+        let persisted = self.persisted();
+        self.store
+            .commit_with(image, &persisted)
+            .map_err(|_| result::STORE_FAILED)?;
+        if self.job.is_some() {
+            self.job = None;
+            self.server.holding.busy = false;
+        }
         self.install(Some(model));
         Ok(())
     }
@@ -124,6 +331,7 @@ impl<F: NorFlash> App<F> {
             stale: plc_stale,
         };
         let out = self.compensation.step(acq, now_ms, &plc);
+        self.progress.cycles = self.progress.cycles.wrapping_add(1);
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
         s.heartbeat = s.heartbeat.wrapping_add(1);
@@ -133,10 +341,14 @@ impl<F: NorFlash> App<F> {
         s.corrections = out.corrections;
         s.predictions = out.predicted;
         s.axes = out.axes;
+        s.map_missing = 0;
         for c in 0..MAX_CHANNELS {
             let v = acq.value(c, now_ms);
             s.temperatures[c] = v.usable().map(centidegrees);
             s.states[c] = v.state.code();
+            if self.map.get(c).is_some() && v.state == ChannelState::NoPresence {
+                s.map_missing |= 1 << c;
+            }
         }
         out
     }
@@ -157,17 +369,14 @@ impl<F: NorFlash> App<F> {
         match self.server.handle(frame, uptime_ms, &self.snapshot, reply) {
             Command::None => LinkChange::None,
             Command::CommitModel { len } => {
-                // The server validated the image; store it in the other slot, then swap.
-                let staged =
-                    &self.server.holding.staged()[..len.min(self.server.holding.staged().len())];
-                let outcome = Model::parse(staged).map(|m| (m, self.store.commit(staged)));
-                match outcome {
-                    Ok((m, Ok(()))) => {
-                        self.install(Some(m));
-                        self.server.holding.result = result::OK;
-                    }
-                    _ => self.server.holding.result = result::STORE_FAILED,
-                }
+                // The server validated the image; it is written to the other
+                // slot in the background (poll_flash) and swapped in when done.
+                self.job = Some(FlashJob::Model {
+                    len,
+                    erasing: false,
+                });
+                self.server.holding.busy = true;
+                self.server.holding.result = result::COMMIT_IN_PROGRESS;
                 LinkChange::None
             }
             Command::Rereference => {
@@ -176,13 +385,42 @@ impl<F: NorFlash> App<F> {
             }
             Command::LimitsChanged => {
                 self.apply_limits();
+                self.store_settings();
                 LinkChange::None
             }
-            Command::LinkChanged => LinkChange::Reconfigure {
-                baud: self.server.holding.baud,
-            },
+            Command::LinkChanged => {
+                self.store_settings();
+                LinkChange::Reconfigure {
+                    baud: self.server.holding.baud,
+                }
+            }
+            Command::ClearFault => {
+                self.snapshot.fault = None;
+                LinkChange::ClearFaultRecord
+            }
+            Command::RestoreDefaults => {
+                apply_settings(&mut self.server.holding, &self.defaults);
+                self.apply_limits();
+                self.store_settings();
+                LinkChange::Reconfigure {
+                    baud: self.defaults.baud,
+                }
+            }
+            Command::TestPanic => LinkChange::TestPanic,
+            Command::TestStall => {
+                self.stall_requested = true;
+                LinkChange::None
+            }
         }
     }
+}
+
+/// Settings into the holding registers that carry them.
+fn apply_settings(h: &mut crate::modbus::holding::Holding, s: &Settings) {
+    h.unit = s.unit;
+    h.baud = s.baud;
+    h.clamp = s.clamp;
+    h.rate = s.rate;
 }
 
 /// The app state as the boards share it between their two tasks.
@@ -192,19 +430,30 @@ pub type SharedApp<M, F> =
 /// The Modbus task of every board: one frame in, at most one reply out, from
 /// the shared app state (locked only between awaits). A frame that arrives
 /// before the app is set up gets no answer, as from a board still booting.
-pub async fn serve_modbus<P, F, M>(
+/// `B` is the board's fault path (command 6 clears its record; the
+/// test-only command 8 panics into it once the reply is out).
+pub async fn serve_modbus<B, P, F, M>(
     port: &mut P,
     shared: &SharedApp<M, F>,
     uptime_ms: impl Fn() -> u64,
 ) -> !
 where
+    B: FaultBoard,
     P: crate::hal::serial::RtuPort,
-    F: NorFlash,
+    F: BackgroundErase,
     M: embassy_sync::blocking_mutex::raw::RawMutex,
 {
     let mut frame = [0u8; MAX_FRAME + 1];
     let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
+    // The baud rate the port runs at: the board's default until the app
+    // (with its stored settings) is up.
+    let mut applied_baud: Option<u32> = None;
     loop {
+        let want = shared.lock(|a| a.borrow().as_ref().map(|app| app.server.holding.baud));
+        if let Some(b) = want.filter(|b| applied_baud != Some(*b)) {
+            port.set_baud(b);
+            applied_baud = Some(b);
+        }
         let Ok(n) = port.read_frame(&mut frame).await else {
             continue;
         };
@@ -214,15 +463,29 @@ where
         let now = uptime_ms();
         reply.clear();
         let change = shared.lock(|a| {
-            a.borrow_mut()
-                .as_mut()
-                .map(|app| app.request(request, now, &mut reply))
+            a.borrow_mut().as_mut().map(|app| {
+                app.progress.modbus_busy = true;
+                app.request(request, now, &mut reply)
+            })
         });
         if !reply.is_empty() {
             port.write_frame(&reply).await;
         }
-        if let Some(LinkChange::Reconfigure { baud }) = change {
-            port.set_baud(baud);
+        shared.lock(|a| {
+            if let Some(app) = a.borrow_mut().as_mut() {
+                app.progress.modbus_busy = false;
+                app.progress.requests = app.progress.requests.wrapping_add(1);
+            }
+        });
+        match change {
+            Some(LinkChange::Reconfigure { baud }) => {
+                port.set_baud(baud);
+                applied_baud = Some(baud);
+            }
+            Some(LinkChange::ClearFaultRecord) => crate::fault::clear::<B>(),
+            #[cfg(feature = "test-faults")]
+            Some(LinkChange::TestPanic) => panic!("test panic requested by command 8"),
+            _ => {}
         }
     }
 }

@@ -1,12 +1,18 @@
 //! thermocomp: the compensator application, written once against the narrow
 //! hardware traits in [`hal`] and run unchanged on every board in `boards/`.
 #![no_std]
+// No unsafe in the application: registers and RAM the board owns are
+// reached only through the board crates (boards/*), behind src/hal traits.
+#![forbid(unsafe_code)]
 
 pub mod acquisition;
 pub mod app;
 pub mod compensation;
+pub mod fault;
 pub mod hal;
 pub mod modbus;
 pub mod model_store;
 pub mod process_image;
+pub mod settings;
 pub mod trace;
+pub mod watchdog;

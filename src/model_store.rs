@@ -1,20 +1,31 @@
-//! Two model slots in flash (A/B) so that a power loss at any moment leaves
-//! the old model or the new one, never a broken one.
+//! Two slots in flash (A/B) holding the model and the board's settings, so
+//! that a power loss at any moment leaves the old model and settings or the
+//! new ones, never a broken one.
 //!
 //! Slot layout: a 16-byte header — magic "TCSL", generation u32, image length
-//! u32, CRC-32 of the image — then the image. A commit erases the inactive
-//! slot, programs the image, then the header's last three words, and the
-//! magic last of all: until the magic is there, the slot is not a candidate.
-//! At boot the valid slot (magic, length, CRC and a model that parses) with
-//! the newer generation wins.
+//! u32, CRC-32 of the image — then the image (length 0: no model, settings
+//! only), then at the next 4-byte boundary a settings block — magic "TCSE",
+//! length u32, CRC-32 of the payload, the payload ([`crate::settings`]).
+//! A commit (of a model or of settings) erases the inactive slot, programs
+//! the image, the settings block, then the header's last three words, and
+//! the magic last of all: until the magic is there, the slot is not a
+//! candidate. At boot the valid slot (magic, length, CRC and a model that
+//! parses) with the newer generation wins; its settings block counts when
+//! its own magic and CRC are right (a slot written before settings existed
+//! has none: defaults).
 
 use embedded_storage::nor_flash::NorFlash;
+
+use crate::hal::flash::BackgroundErase;
 use thermocomp_core::image::crc32;
 use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_core::Model;
 
 const MAGIC: [u8; 4] = *b"TCSL";
 const HEADER: u32 = 16;
+const SETTINGS_MAGIC: [u8; 4] = *b"TCSE";
+/// Largest settings payload a slot carries.
+pub const MAX_SETTINGS_BYTES: usize = 256;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -31,6 +42,10 @@ pub struct ModelStore<F: NorFlash> {
     slots: [u32; 2],
     slot_size: u32,
     active: Option<(usize, u32)>,
+    /// Image length and CRC of the active slot (0, 0: no model).
+    active_image: (u32, u32),
+    /// The settings payload of the active slot (empty: none stored).
+    settings: heapless::Vec<u8, MAX_SETTINGS_BYTES>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -48,7 +63,14 @@ impl<F: NorFlash> ModelStore<F> {
             slots: [0, slot_size],
             slot_size,
             active: None,
+            active_image: (0, 0),
+            settings: heapless::Vec::new(),
         }
+    }
+
+    /// The stored settings payload (`None`: none stored yet).
+    pub fn settings(&self) -> Option<&[u8]> {
+        (!self.settings.is_empty()).then_some(&self.settings[..])
     }
 
     pub fn flash(&mut self) -> &mut F {
@@ -73,9 +95,41 @@ impl<F: NorFlash> ModelStore<F> {
         }
         let (s, g) = best?;
         let h = self.valid_header(s, buf)?;
-        let model = Model::parse(&buf[..h.len as usize]).ok()?;
         self.active = Some((s, g));
-        Some(model)
+        self.active_image = (h.len, h.crc);
+        self.settings = self.read_settings(s, h.len);
+        if h.len == 0 {
+            return None;
+        }
+        Model::parse(&buf[..h.len as usize]).ok()
+    }
+
+    /// Offset of slot `s`'s settings block after an image of `len` bytes.
+    fn settings_offset(&self, s: usize, len: u32) -> u32 {
+        self.slots[s] + HEADER + len.div_ceil(4) * 4
+    }
+
+    fn read_settings(&mut self, s: usize, len: u32) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
+        let mut out = heapless::Vec::new();
+        let at = self.settings_offset(s, len);
+        let mut h = [0u8; 12];
+        if at + 12 > self.slots[s] + self.slot_size || self.flash.read(at, &mut h).is_err() {
+            return out;
+        }
+        let word = |i: usize| u32::from_le_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
+        let n = word(4) as usize;
+        if h[0..4] != SETTINGS_MAGIC || n == 0 || n > MAX_SETTINGS_BYTES {
+            return out;
+        }
+        let mut payload = [0u8; MAX_SETTINGS_BYTES];
+        if at + 12 + n as u32 > self.slots[s] + self.slot_size
+            || self.flash.read(at + 12, &mut payload[..n]).is_err()
+            || crc32(&payload[..n]) != word(8)
+        {
+            return out;
+        }
+        let _ = out.extend_from_slice(&payload[..n]);
+        out
     }
 
     /// Slot index and generation of the model that `load` or `commit` made active.
@@ -99,8 +153,12 @@ impl<F: NorFlash> ModelStore<F> {
             crc: word(12),
         };
         let len = header.len as usize;
-        if len == 0 || len > MAX_IMAGE_BYTES || header.len + HEADER > self.slot_size {
+        if len > MAX_IMAGE_BYTES || header.len + HEADER > self.slot_size {
             return None;
+        }
+        if len == 0 {
+            // Settings only, no model.
+            return (header.crc == crc32(&[])).then_some(header);
         }
         self.flash.read(base + HEADER, &mut buf[..len]).ok()?;
         if crc32(&buf[..len]) != header.crc || Model::parse(&buf[..len]).is_err() {
@@ -109,10 +167,86 @@ impl<F: NorFlash> ModelStore<F> {
         Some(header)
     }
 
-    /// Write `image` to the inactive slot and make it the active one.
+    /// Write `image` to the inactive slot (with the settings held now) and
+    /// make it the active one.
     pub fn commit(&mut self, image: &[u8]) -> Result<(), StoreError> {
-        let len = image.len() as u32;
-        if image.is_empty() || image.len() > MAX_IMAGE_BYTES || len + HEADER > self.slot_size {
+        if image.is_empty() || image.len() > MAX_IMAGE_BYTES {
+            return Err(StoreError::TooLarge);
+        }
+        let settings = self.settings.clone();
+        self.write_slot(Source::Bytes(image), &settings, true)?;
+        Ok(())
+    }
+
+    /// As [`ModelStore::commit`], with a new settings payload in the same slot.
+    pub fn commit_with(&mut self, image: &[u8], settings: &[u8]) -> Result<(), StoreError> {
+        if image.is_empty() || image.len() > MAX_IMAGE_BYTES || settings.len() > MAX_SETTINGS_BYTES
+        {
+            return Err(StoreError::TooLarge);
+        }
+        let mut payload = heapless::Vec::new();
+        let _ = payload.extend_from_slice(settings);
+        self.write_slot(Source::Bytes(image), &payload, true)
+    }
+
+    /// Store a new settings payload with the model held now (copied from the
+    /// active slot) and make that slot the active one.
+    pub fn commit_settings(&mut self, payload: &[u8]) -> Result<(), StoreError> {
+        if payload.is_empty() || payload.len() > MAX_SETTINGS_BYTES {
+            return Err(StoreError::TooLarge);
+        }
+        let mut settings = heapless::Vec::new();
+        let _ = settings.extend_from_slice(payload);
+        match self.active {
+            Some((s, _)) if self.active_image.0 > 0 => {
+                let (len, crc) = self.active_image;
+                self.write_slot(Source::Slot { s, len, crc }, &settings, true)
+            }
+            _ => self.write_slot(Source::Bytes(&[]), &settings, true),
+        }
+    }
+
+    /// Offsets of the inactive slot (the one the next commit writes).
+    fn inactive_range(&self) -> (u32, u32) {
+        let target = self.active.map_or(0, |(s, _)| 1 - s);
+        (self.slots[target], self.slots[target] + self.slot_size)
+    }
+
+    /// Second half of a commit after [`ModelStore::begin`] erased the
+    /// inactive slot: program `image` (`None`: keep the model held now) and
+    /// the `settings` payload, header and magic last; then it is the active slot.
+    pub fn finish(&mut self, image: Option<&[u8]>, settings: &[u8]) -> Result<(), StoreError> {
+        if settings.len() > MAX_SETTINGS_BYTES {
+            return Err(StoreError::TooLarge);
+        }
+        let mut payload = heapless::Vec::new();
+        let _ = payload.extend_from_slice(settings);
+        let source = match (image, self.active) {
+            (Some(b), _) if b.is_empty() || b.len() > MAX_IMAGE_BYTES => {
+                return Err(StoreError::TooLarge)
+            }
+            (Some(b), _) => Source::Bytes(b),
+            (None, Some((s, _))) if self.active_image.0 > 0 => {
+                let (len, crc) = self.active_image;
+                Source::Slot { s, len, crc }
+            }
+            (None, _) => Source::Bytes(&[]),
+        };
+        self.write_slot(source, &payload, false)
+    }
+
+    fn write_slot(
+        &mut self,
+        image: Source,
+        settings: &heapless::Vec<u8, MAX_SETTINGS_BYTES>,
+        erase: bool,
+    ) -> Result<(), StoreError> {
+        let (len, crc) = match image {
+            Source::Bytes(b) => (b.len() as u32, crc32(b)),
+            Source::Slot { len, crc, .. } => (len, crc),
+        };
+        let settings_end = HEADER + len.div_ceil(4) * 4 + 12 + settings.len() as u32;
+        if settings_end > self.slot_size {
             return Err(StoreError::TooLarge);
         }
         let (target, generation) = match self.active {
@@ -120,29 +254,50 @@ impl<F: NorFlash> ModelStore<F> {
             None => (0, 1),
         };
         let base = self.slots[target];
-        self.flash
-            .erase(base, base + self.slot_size)
-            .map_err(|_| StoreError::Flash)?;
+        if erase {
+            self.flash
+                .erase(base, base + self.slot_size)
+                .map_err(|_| StoreError::Flash)?;
+        }
         // Program the image in write-size-aligned chunks (the tail padded with 0xFF).
         let ws = F::WRITE_SIZE.max(1);
         let mut chunk = [0xFFu8; 64];
         let step = (chunk.len() / ws) * ws;
         let mut off = 0usize;
-        while off < image.len() {
-            let n = (image.len() - off).min(step);
+        while off < len as usize {
+            let n = (len as usize - off).min(step);
             let padded = n.div_ceil(ws) * ws;
             chunk[..padded].fill(0xFF);
-            chunk[..n].copy_from_slice(&image[off..off + n]);
+            match image {
+                Source::Bytes(b) => chunk[..n].copy_from_slice(&b[off..off + n]),
+                Source::Slot { s, .. } => self
+                    .flash
+                    .read(self.slots[s] + HEADER + off as u32, &mut chunk[..n])
+                    .map_err(|_| StoreError::Flash)?,
+            }
             self.flash
                 .write(base + HEADER + off as u32, &chunk[..padded])
                 .map_err(|_| StoreError::Flash)?;
             off += n;
         }
+        // The settings block, before the header.
+        if !settings.is_empty() {
+            let mut block = [0xFFu8; 12 + MAX_SETTINGS_BYTES + 8];
+            block[0..4].copy_from_slice(&SETTINGS_MAGIC);
+            block[4..8].copy_from_slice(&(settings.len() as u32).to_le_bytes());
+            block[8..12].copy_from_slice(&crc32(settings).to_le_bytes());
+            block[12..12 + settings.len()].copy_from_slice(settings);
+            let total = (12 + settings.len()).div_ceil(ws) * ws;
+            let at = self.settings_offset(target, len);
+            self.flash
+                .write(at, &block[..total.min(block.len())])
+                .map_err(|_| StoreError::Flash)?;
+        }
         let mut h = [0u8; HEADER as usize];
         h[0..4].copy_from_slice(&MAGIC);
         h[4..8].copy_from_slice(&generation.to_le_bytes());
         h[8..12].copy_from_slice(&len.to_le_bytes());
-        h[12..16].copy_from_slice(&crc32(image).to_le_bytes());
+        h[12..16].copy_from_slice(&crc.to_le_bytes());
         // The magic goes last (write sizes up to 4 bytes; larger ones write the header at once).
         if ws <= 4 {
             self.flash
@@ -157,6 +312,32 @@ impl<F: NorFlash> ModelStore<F> {
                 .map_err(|_| StoreError::Flash)?;
         }
         self.active = Some((target, generation));
+        self.active_image = (len, crc);
+        self.settings = settings.clone();
         Ok(())
     }
+}
+
+impl<F: BackgroundErase> ModelStore<F> {
+    /// First half of a commit: start erasing the inactive slot (the active
+    /// one keeps serving; a power cut now leaves it as it was).
+    pub fn begin(&mut self) -> Result<(), StoreError> {
+        let (from, to) = self.inactive_range();
+        self.flash
+            .start_erase(from, to)
+            .map_err(|_| StoreError::Flash)
+    }
+
+    /// True once the erase [`ModelStore::begin`] started is done.
+    pub fn erase_done(&mut self) -> bool {
+        self.flash.erase_done()
+    }
+}
+
+/// Where a slot's image comes from: new bytes, or the active slot (a
+/// settings commit keeps the model).
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Bytes(&'a [u8]),
+    Slot { s: usize, len: u32, crc: u32 },
 }

@@ -318,12 +318,23 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
         Commit::Rollback => CMD_ROLLBACK_MODEL,
     };
     let committed = link.write_one(HR_COMMAND, command);
-    let code = link
+    let mut code = link
         .read_holdings(HR_RESULT, 1)
         .ok()
         .and_then(|r| r.first().copied());
+    // The board answers the commit at once and writes the flash in the
+    // background (result 23 until done: ~1-2 s for a sector erase).
+    let start = std::time::Instant::now();
+    while code == Some(result::COMMIT_IN_PROGRESS) && start.elapsed() < Duration::from_secs(15) {
+        std::thread::sleep(Duration::from_millis(50));
+        code = link
+            .read_holdings(HR_RESULT, 1)
+            .ok()
+            .and_then(|r| r.first().copied());
+    }
     match (committed, code) {
-        (Ok(()), Some(code)) => Ok(code),
+        (Ok(()), Some(result::OK)) => Ok(result::OK),
+        (Ok(()), Some(code)) => bail!("commit accepted, but storing it failed: result {code} {}", result::name(code)),
         (Ok(()), None) => bail!("committed, but the result register could not be read"),
         (Err(e), Some(result::NOT_NEWER)) => Err(e.context(format!(
             "commit refused: result {} NOT_NEWER, the board runs this or a newer model version; pass --rollback to go back on purpose",

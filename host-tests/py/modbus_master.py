@@ -5,9 +5,16 @@ The board's UART0 is a TCP socket carrying RTU frames (QEMU -serial tcp:...),
 so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
 
   read     --port P [--unit U]           snapshot: sequence, sample time, status, corrections
-  upload   --port P --image F [--corrupt] stage, commit; report the commit's outcome
+  upload   --port P --image F [--corrupt] [--watch S]
+                                         stage, commit; the reply time, the time until the
+                                         background write is done, the outcome; with --watch
+                                         the largest gap between snapshots before and during it
   badcrc   --port P                      a corrupted frame, then a good one
   rate     --port P [--n N]              requests per second and latency
+  command  --port P --code N             unlock, write command N; its exception (None: accepted)
+  hold     --port P [--write A=V ...] [--unit U]
+                                         unlock, write holding registers (one FC06 each), read 0-31
+  fault    --port P                      status and the fault record (input registers 160-168)
   flood    --pipe BASE [--bytes N] [--gap-ms G]
                                          N bytes of garbage into the board's UART (QEMU
                                          -serial pipe:BASE), then one good request; how
@@ -36,6 +43,7 @@ IR_SEQUENCE, IR_SAMPLE_TIME, IR_MODEL_VERSION = 4, 10, 12
 IR_CORRECTIONS = 30
 HR_UNLOCK, HR_COMMAND, HR_RESULT, HR_STAGED_LEN, HR_STAGING = 0, 1, 2, 32, 1000
 UNLOCK_CODE, CMD_COMMIT = 0xA5C3, 1
+COMMIT_IN_PROGRESS = 23
 
 
 def s32(hi, lo):
@@ -116,6 +124,27 @@ def cmd_read(a):
     print(json.dumps(out))
 
 
+def watch_sequence(m, seconds, until=None):
+    """Polls the snapshot sequence for `seconds` (or until `until()` is
+    true and `seconds` passed); the largest host-time gap between two
+    sequence changes, in ms."""
+    t0 = time.perf_counter()
+    last_seq, last_t, gap = None, None, 0.0
+    while True:
+        r = m.call("read_input_registers", IR_SEQUENCE, count=2)
+        now = time.perf_counter()
+        if r is not None and not r.isError():
+            seq = u32(r.registers[0], r.registers[1])
+            if seq != last_seq:
+                if last_t is not None:
+                    gap = max(gap, now - last_t)
+                last_seq, last_t = seq, now
+        finished = until is None or until()
+        if now - t0 >= seconds and finished:
+            return round(1000 * gap, 1)
+        time.sleep(0.01)
+
+
 def cmd_upload(a):
     image = open(a.image, "rb").read()
     if a.corrupt:
@@ -124,6 +153,8 @@ def cmd_upload(a):
         image = bytes(image)
     m = Master(a.port)
     out = {"bytes": len(image)}
+    if a.watch:
+        out["baseline_max_sample_gap_ms"] = watch_sequence(m, a.watch)
     m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
     padded = image + b"\0" * (len(image) % 2)
     words = [int.from_bytes(padded[i:i + 2], "big") for i in range(0, len(padded), 2)]
@@ -132,10 +163,26 @@ def cmd_upload(a):
         if r is not None and r.isError():
             out["staging_error"] = str(r)
     m.call("write_register", HR_STAGED_LEN, len(image))
+    t = time.perf_counter()
     r = m.call("write_register", HR_COMMAND, CMD_COMMIT)
+    out["commit_reply_ms"] = round(1000 * (time.perf_counter() - t), 1)
     out["commit_exception"] = getattr(r, "exception_code", None) if r is not None and r.isError() else None
-    res = m.call("read_holding_registers", HR_RESULT, count=1)
-    out["result"] = None if res is None or res.isError() else res.registers[0]
+    # The flash is written in the background: poll the result while it says
+    # "in progress" (23).
+    state = {"result": None}
+
+    def done():
+        res = m.call("read_holding_registers", HR_RESULT, count=1)
+        state["result"] = None if res is None or res.isError() else res.registers[0]
+        if state["result"] != COMMIT_IN_PROGRESS and "commit_done_ms" not in out:
+            out["commit_done_ms"] = round(1000 * (time.perf_counter() - t), 1)
+        return state["result"] != COMMIT_IN_PROGRESS or time.perf_counter() - t > 10
+    if a.watch:
+        out["commit_max_sample_gap_ms"] = watch_sequence(m, a.watch, done)
+    else:
+        while not done():
+            time.sleep(0.02)
+    out["result"] = state["result"]
     time.sleep(0.3)
     out["after"] = snapshot(m)
     out["link"] = m.close()
@@ -263,19 +310,78 @@ def cmd_flood(a):
                       "answer_s": None if answer_s is None else round(answer_s, 3)}))
 
 
+def cmd_command(a):
+    m = Master(a.port, unit=a.unit)
+    m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    t = time.perf_counter()
+    r = m.call("write_register", HR_COMMAND, a.code)
+    out = {"exception": getattr(r, "exception_code", None) if r is not None and r.isError() else None,
+           "reply_ms": round(1000 * (time.perf_counter() - t), 1)}
+    out["link"] = m.close()
+    print(json.dumps(out))
+
+
+def cmd_hold(a):
+    m = Master(a.port, unit=a.unit)
+    out = {"exceptions": {}}
+    if a.write:
+        m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    for w in a.write:
+        addr, val = (int(x, 0) for x in w.split("="))
+        t = time.perf_counter()
+        while True:
+            r = m.call("write_register", addr, val)
+            # 06: a settings write is still going to flash; ask again.
+            if r is None or not r.isError() or r.exception_code != 6 or time.perf_counter() - t > 10:
+                break
+            time.sleep(0.05)
+        if r is not None and r.isError():
+            out["exceptions"][addr] = r.exception_code
+    if a.write and not a.no_read:
+        # Until the settings are in flash (HR_RESULT leaves 23).
+        t = time.perf_counter()
+        while time.perf_counter() - t < 10:
+            res = m.call("read_holding_registers", HR_RESULT, count=1)
+            if res is None or res.isError() or res.registers[0] != COMMIT_IN_PROGRESS:
+                break
+            time.sleep(0.05)
+    if not a.no_read:
+        r = m.call("read_holding_registers", 0, count=32)
+        out["registers"] = None if r is None or r.isError() else r.registers
+    m.close()
+    print(json.dumps(out))
+
+
+def cmd_fault(a):
+    m = Master(a.port, timeout=a.timeout)
+    st = m.call("read_input_registers", 3, count=1)
+    r = m.call("read_input_registers", 160, count=20)
+    m.close()
+    w = r.registers
+    print(json.dumps({"status": st.registers[0], "kind": w[0], "pc": u32(w[1], w[2]),
+                      "uptime_s": u32(w[3], w[4]), "count": u32(w[5], w[6]),
+                      "detail": u32(w[7], w[8]), "reserved": w[9:]}))
+
+
 def main():
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("read"); r.add_argument("--port", type=int, required=True); r.add_argument("--samples", type=int, default=1)
     r.add_argument("--unit", type=int, default=UNIT); r.add_argument("--timeout", type=float, default=3.0)
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
+    u.add_argument("--watch", type=float, default=0.0, help="seconds of sequence polling before and after the commit")
     b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)
     q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
     f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
     f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
+    c = sub.add_parser("command"); c.add_argument("--port", type=int, required=True); c.add_argument("--code", type=int, required=True)
+    c.add_argument("--unit", type=int, default=UNIT)
+    h = sub.add_parser("hold"); h.add_argument("--port", type=int, required=True); h.add_argument("--write", action="append", default=[])
+    h.add_argument("--unit", type=int, default=UNIT); h.add_argument("--no-read", action="store_true")
+    g = sub.add_parser("fault"); g.add_argument("--port", type=int, required=True); g.add_argument("--timeout", type=float, default=3.0)
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
-     "flood": cmd_flood}[a.cmd](a)
+     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -137,3 +137,7 @@ impl NorFlash for MockFlash {
         Ok(())
     }
 }
+
+/// Erases at once (the default blocking erase): the application's
+/// background commit runs start → done → program in one `poll_flash`.
+impl thermocomp::hal::flash::BackgroundErase for MockFlash {}

@@ -63,6 +63,9 @@ fn upload_with(app: &mut App<MockFlash>, img: &[u8], command: u16) -> Vec<u8> {
     }
     app.request(&write1(HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
     app.request(&write1(HR_COMMAND, command), 0, &mut reply);
+    // The flash write runs in the background; the mock erases at once.
+    app.poll_flash();
+    assert!(!app.flash_busy());
     reply.to_vec()
 }
 

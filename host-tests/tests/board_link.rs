@@ -109,6 +109,8 @@ fn inspectable_board(
                     s.write_all(&e).unwrap();
                 } else {
                     b.app.request(&buf, 0, &mut reply);
+                    // What the board's feeder task does: drive a flash write.
+                    b.app.poll_flash();
                     s.write_all(&reply).unwrap();
                 }
                 buf.clear();

@@ -12,6 +12,7 @@
 //! - `float` (feature `std`): the same model in f64 and the quantizer.
 //! - [`golden`]: golden vectors checked on the board (generated on the host).
 #![cfg_attr(not(feature = "std"), no_std)]
+#![forbid(unsafe_code)]
 
 pub mod compensator;
 pub mod eval;

@@ -9,9 +9,11 @@
 //! - [`adc`]: one ADC channel (the eddy-current probe).
 //! - [`serial`]: the RS-485 Modbus port, one RTU frame at a time.
 //! - parameter storage: `embedded_storage::nor_flash::NorFlash` (the model
-//!   slots, [`crate::model_store`]).
+//!   slots, [`crate::model_store`]), with [`flash::BackgroundErase`] so a
+//!   commit's erase runs outside the app lock.
 
 pub mod adc;
 pub mod clock;
+pub mod flash;
 pub mod onewire;
 pub mod serial;

@@ -39,6 +39,17 @@ pub const CMD_LOCK: u16 = 4;
 /// running one (going back to an older model on purpose); every other check
 /// of [`CMD_COMMIT_MODEL`] still applies.
 pub const CMD_ROLLBACK_MODEL: u16 = 5;
+/// Forget the fault record (input registers 160–168, status bit 9).
+pub const CMD_CLEAR_FAULT: u16 = 6;
+/// Restore the default settings (unit 1, 115200 baud, no clamp or rate
+/// override, no fixed reference) and store them; link changes apply after the reply.
+pub const CMD_RESTORE_DEFAULTS: u16 = 7;
+/// Test builds only (feature `test-faults`, the QEMU bench board): panic
+/// after the reply, to show the fault path end to end.
+pub const CMD_TEST_PANIC: u16 = 8;
+/// Test builds only (feature `test-faults`): the measurement loop stops
+/// making progress, so the watchdog must trip.
+pub const CMD_TEST_STALL: u16 = 9;
 
 /// Command results (HR_RESULT): one code per reason a commit is refused.
 pub mod result {
@@ -86,6 +97,12 @@ pub mod result {
     pub const TABLE_SUM_TOO_LARGE: u16 = 20;
     /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
     pub const NOT_NEWER: u16 = 21;
+    /// A settings change (unit, baud, clamp, rate, command 7) is in force
+    /// but could not be stored in flash: it is lost at the next reboot.
+    pub const SETTINGS_NOT_STORED: u16 = 22;
+    /// A commit (model or settings) is being written to flash in the
+    /// background; poll until another code (0 OK, 4, 22).
+    pub const COMMIT_IN_PROGRESS: u16 = 23;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -112,6 +129,8 @@ pub mod result {
             MAX_RATE => "MAX_RATE",
             TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
             NOT_NEWER => "NOT_NEWER",
+            SETTINGS_NOT_STORED => "SETTINGS_NOT_STORED",
+            COMMIT_IN_PROGRESS => "COMMIT_IN_PROGRESS",
             _ => "unknown",
         }
     }
@@ -154,6 +173,9 @@ pub enum WriteError {
     Locked,
     /// The staged model was refused (SERVER DEVICE FAILURE); HR_RESULT says why.
     ModelRefused,
+    /// A commit is being written to flash (SERVER DEVICE BUSY): staging,
+    /// commits and settings wait until it is done.
+    Busy,
 }
 
 /// How a write request was addressed.
@@ -181,6 +203,14 @@ pub enum Command {
     LimitsChanged,
     /// Unit address or baud rate changed: apply after the reply is sent.
     LinkChanged,
+    /// Command 6: forget the fault record.
+    ClearFault,
+    /// Command 7: back to the default settings.
+    RestoreDefaults,
+    /// Command 8 (feature `test-faults`): panic after the reply.
+    TestPanic,
+    /// Command 9 (feature `test-faults`): stall the measurement loop.
+    TestStall,
 }
 
 pub struct Holding {
@@ -195,6 +225,8 @@ pub struct Holding {
     pub result: u16,
     /// Version of the model serving now (0: none); a commit must be newer.
     pub running_version: u32,
+    /// A commit is being written ([`WriteError::Busy`] for what it stores).
+    pub busy: bool,
     unlocked_until_ms: Option<u64>,
     staged_len: u16,
     staging: [u8; MAX_IMAGE_BYTES],
@@ -212,6 +244,7 @@ impl Holding {
             rate: [u16::MAX; MAX_DIRECTIONS],
             result: result::NONE,
             running_version: 0,
+            busy: false,
             unlocked_until_ms: None,
             staged_len: 0,
             staging: [0; MAX_IMAGE_BYTES],
@@ -314,6 +347,21 @@ impl Holding {
         a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
     }
 
+    /// Writes that change what a commit in progress stores.
+    fn stored(a: u16, v: u16) -> bool {
+        matches!(a, HR_UNIT | HR_BAUD | HR_STAGED_LEN)
+            || (a == HR_COMMAND
+                && matches!(
+                    v,
+                    CMD_COMMIT_MODEL
+                        | CMD_ROLLBACK_MODEL
+                        | CMD_CLEAR_STAGING
+                        | CMD_RESTORE_DEFAULTS
+                ))
+            || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
+            || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
+    }
+
     fn protected(a: u16) -> bool {
         !(a == HR_UNLOCK || Self::plc_register(a))
     }
@@ -332,18 +380,25 @@ impl Holding {
         if Self::protected(a) && !self.unlocked(now_ms) {
             return Err(WriteError::Locked);
         }
+        if self.busy && Self::stored(a, v) {
+            return Err(WriteError::Busy);
+        }
         let ok = match a {
             // A wrong key is refused, not echoed: the master must see that the
             // board stayed locked.
             HR_UNLOCK => v == UNLOCK_CODE,
-            HR_COMMAND => matches!(
-                v,
-                CMD_COMMIT_MODEL
-                    | CMD_REREFERENCE
-                    | CMD_CLEAR_STAGING
-                    | CMD_LOCK
-                    | CMD_ROLLBACK_MODEL
-            ),
+            HR_COMMAND => {
+                matches!(
+                    v,
+                    CMD_COMMIT_MODEL
+                        | CMD_REREFERENCE
+                        | CMD_CLEAR_STAGING
+                        | CMD_LOCK
+                        | CMD_ROLLBACK_MODEL
+                        | CMD_CLEAR_FAULT
+                        | CMD_RESTORE_DEFAULTS
+                ) || (cfg!(feature = "test-faults") && matches!(v, CMD_TEST_PANIC | CMD_TEST_STALL))
+            }
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
@@ -431,6 +486,10 @@ impl Holding {
                 self.staged_len = 0;
                 Ok(Command::None)
             }
+            CMD_CLEAR_FAULT => Ok(Command::ClearFault),
+            CMD_RESTORE_DEFAULTS => Ok(Command::RestoreDefaults),
+            CMD_TEST_PANIC => Ok(Command::TestPanic),
+            CMD_TEST_STALL => Ok(Command::TestStall),
             _ => {
                 self.unlocked_until_ms = None;
                 Ok(Command::None)

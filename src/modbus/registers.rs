@@ -7,6 +7,7 @@
 use thermocomp_core::eval::AxisPair;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 
+use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
 
 /// Version of this register map (input register 2).
@@ -44,6 +45,26 @@ pub const IR_STATES: u16 = 130;
 /// Last input register.
 pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
 
+/// Status bit 9: a fault record from before the last reset is held (input
+/// registers 160–168) until command 6 clears it.
+pub const STATUS_FAULT_RECORDED: u16 = 1 << 9;
+/// The fault record ([`crate::fault::FaultRecord`]): kind (160), program
+/// counter u32 (161–162), uptime at the fault u32 s (163–164), faults since
+/// the record was cleared u32 (165–166), detail u32 (167–168); all 0 when
+/// no record is held. 169, 174–179 reserved (read 0).
+pub const IR_FAULT_KIND: u16 = 160;
+pub const IR_FAULT_PC: u16 = 161;
+pub const IR_FAULT_UPTIME: u16 = 163;
+pub const IR_FAULT_COUNT: u16 = 165;
+pub const IR_FAULT_DETAIL: u16 = 167;
+/// Sensor identity: mapped channels whose sensor (ROM code) does not answer,
+/// u32 bit mask, bit c = channel c (172–173: channels added to the map since
+/// boot, new sensors on free channels). Always served.
+pub const IR_MAP_MISSING: u16 = 170;
+pub const IR_MAP_ADDED: u16 = 172;
+/// Last register of the board-safety block (160–179).
+pub const IR_SAFETY_LAST: u16 = 179;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Snapshot {
     pub sequence: u32,
@@ -66,6 +87,12 @@ pub struct Snapshot {
     /// 0.01 °C, `None` where no valid value.
     pub temperatures: [Option<i16>; MAX_CHANNELS],
     pub states: [u16; MAX_CHANNELS],
+    /// The fault record from before the last reset, until cleared.
+    pub fault: Option<FaultRecord>,
+    /// Mapped channels whose sensor is missing (bit per channel).
+    pub map_missing: u32,
+    /// Channels added to the map since boot (bit per channel).
+    pub map_added: u32,
 }
 
 impl Default for Snapshot {
@@ -88,6 +115,9 @@ impl Default for Snapshot {
             axes: [AxisPair::default(); MAX_AXES],
             temperatures: [None; MAX_CHANNELS],
             states: [0; MAX_CHANNELS],
+            fault: None,
+            map_missing: 0,
+            map_added: 0,
         }
     }
 }
@@ -120,6 +150,9 @@ impl Snapshot {
     /// The value of input register `addr`, or `None` past the end of the map
     /// (the server answers ILLEGAL DATA ADDRESS). Reserved gaps read 0.
     pub fn input_register(&self, addr: u16) -> Option<u16> {
+        if (IR_FAULT_KIND..=IR_SAFETY_LAST).contains(&addr) {
+            return Some(self.safety_register(addr));
+        }
         if addr > IR_LAST {
             return None;
         }
@@ -130,6 +163,11 @@ impl Snapshot {
             MAP_VERSION
         } else if addr == IR_STATUS {
             self.status
+                | if self.fault.is_some() {
+                    STATUS_FAULT_RECORDED
+                } else {
+                    0
+                }
         } else if let Some(w) = word32(addr, IR_SEQUENCE, self.sequence) {
             w
         } else if let Some(w) = word32(addr, IR_HEARTBEAT, self.heartbeat) {
@@ -192,5 +230,33 @@ impl Snapshot {
             0
         };
         Some(v)
+    }
+}
+
+impl Snapshot {
+    /// Input registers 160–179: the fault record (0 without one).
+    fn safety_register(&self, addr: u16) -> u16 {
+        if let Some(w) = word32(addr, IR_MAP_MISSING, self.map_missing) {
+            return w;
+        }
+        if let Some(w) = word32(addr, IR_MAP_ADDED, self.map_added) {
+            return w;
+        }
+        let Some(f) = self.fault else {
+            return 0;
+        };
+        let uptime_s = u32::try_from(f.uptime_ms / 1000).unwrap_or(u32::MAX);
+        if addr == IR_FAULT_KIND {
+            f.kind
+        } else if let Some(w) = word32(addr, IR_FAULT_PC, f.pc) {
+            w
+        } else if let Some(w) = word32(addr, IR_FAULT_UPTIME, uptime_s) {
+            w
+        } else if let Some(w) = word32(addr, IR_FAULT_COUNT, f.count) {
+            w
+        } else {
+            // The detail word, or a reserved register (0).
+            word32(addr, IR_FAULT_DETAIL, f.detail).unwrap_or_default()
+        }
     }
 }

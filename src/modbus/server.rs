@@ -179,6 +179,7 @@ impl Server {
                             Err(WriteError::Value) => Err(ErrorKind::IllegalDataValue),
                             Err(WriteError::Locked) => Err(ErrorKind::IllegalFunction),
                             Err(WriteError::ModelRefused) => Err(ErrorKind::SlaveDeviceFailure),
+                            Err(WriteError::Busy) => Err(ErrorKind::SlaveDeviceBusy),
                         }
                     }
                     Ok(Write::Bits(_)) => Err(ErrorKind::IllegalFunction),

@@ -10,9 +10,11 @@ mod model_flash;
 mod onewire;
 mod probe_adc;
 mod rtu_port;
+mod safety;
 
 use core::cell::RefCell;
 use defmt::{info, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{Level, Output, Speed};
@@ -26,7 +28,7 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
-use {defmt_rtt as _, panic_probe as _};
+use thermocomp::fault;
 
 const SYSCLK_HZ: u32 = 168_000_000;
 /// Modbus unit address and baud rate at power-on.
@@ -46,6 +48,8 @@ static APP: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<App<model_flas
 /// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
 /// (BENCHMARKS.md, sensor acquisition).
 const CYCLE_PERIOD: Duration = Duration::from_secs(1);
+/// The bus is searched again every this many cycles (one minute).
+const REDISCOVER_CYCLES: u32 = 60;
 
 /// 168 MHz from the ST-LINK's 8 MHz MCO (HSE bypass). 180 MHz would need the
 /// regulator's over-drive mode for no gain the compensator needs.
@@ -71,10 +75,21 @@ fn clock_config() -> Config {
     config
 }
 
+/// Boot (1-Wire search, sensor configuration, model load) must be done
+/// within this long; until then the watchdog is fed unconditionally.
+const BOOT_DEADLINE_MS: u64 = 20_000;
+
+/// Sets everything up, then stays as the watchdog feeder: `main` never
+/// returns, and an initialisation that fails is a fault (record + reset),
+/// never a silent exit.
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clock_config());
     info!("thermocomp on NUCLEO-F446RE, 168 MHz");
+    safety::note_watchdog_reset();
+    let mut watchdog =
+        embassy_stm32::wdg::IndependentWatchdog::new(p.IWDG, safety::WATCHDOG_TIMEOUT_US);
+    watchdog.unleash();
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
     let bus = onewire::new_bus(p.PC7, SYSCLK_HZ);
     let probe = probe_adc::ProbeInput::new(p.ADC1, p.PA0);
@@ -93,7 +108,7 @@ async fn main(spawner: Spawner) {
         Ok(u) => u,
         Err(e) => {
             defmt::error!("USART1 configuration refused: {}", e);
-            return;
+            fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::UART)
         }
     };
     let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
@@ -104,14 +119,56 @@ async fn main(spawner: Spawner) {
             spawner.spawn(t2);
             spawner.spawn(t3);
         }
-        _ => defmt::error!("tasks could not be spawned"),
+        _ => {
+            defmt::error!("tasks could not be spawned");
+            fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::SPAWN)
+        }
+    }
+    feed_watchdog(watchdog).await
+}
+
+/// Feeds the IWDG while booting (up to [`BOOT_DEADLINE_MS`]), then only when
+/// both the measurement loop and the Modbus task made progress
+/// ([`thermocomp::watchdog::Feeder`]).
+async fn feed_watchdog(
+    mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, peripherals::IWDG>,
+) -> ! {
+    // Each look also drives a flash commit in progress (erase outside the
+    // lock, then programming): `App::poll_flash`.
+    let progress = || {
+        APP.lock(|a| {
+            a.borrow_mut().as_mut().map(|app| {
+                app.poll_flash();
+                app.progress
+            })
+        })
+    };
+    let mut feeder: Option<thermocomp::watchdog::Feeder> = None;
+    loop {
+        Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;
+        match (progress(), feeder.as_mut()) {
+            (Some(p), Some(f)) => {
+                if f.check(&p).is_ok() {
+                    watchdog.pet();
+                }
+            }
+            (Some(p), None) => {
+                feeder = Some(thermocomp::watchdog::Feeder::new(&p));
+                watchdog.pet();
+            }
+            (None, _) if Instant::now().as_millis() < BOOT_DEADLINE_MS => watchdog.pet(),
+            (None, _) => {}
+        }
     }
 }
 
 /// Modbus RTU server: the application's loop on this board's port.
 #[embassy_executor::task]
 async fn modbus(mut port: rtu_port::Rs485Port) {
-    thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
+    thermocomp::app::serve_modbus::<safety::Nucleo, _, _, _>(&mut port, &APP, || {
+        Instant::now().as_millis()
+    })
+    .await
 }
 
 type Bus =
@@ -125,7 +182,10 @@ async fn acquisition(
     mut probe_input: probe_adc::ProbeInput<'static>,
     flash: model_flash::SlotFlash,
 ) {
-    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
+    // The channel map stored with the model first: a search then only adds
+    // new sensors on free channels, never renumbers the known ones.
+    let mut app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, ChannelMap::new());
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), app.channel_map());
     match acq.discover(&mut bus).await {
         Ok(n) => info!("1-Wire: {} sensor(s) found", n),
         Err(e) => warn!("1-Wire search failed: {}", e),
@@ -133,7 +193,28 @@ async fn acquisition(
     if !matches!(acq.configure(&mut bus).await, Ok(true)) {
         warn!("1-Wire: could not set the resolution (no sensor answered)");
     }
-    let app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, *acq.map());
+    app.update_channel_map(*acq.map());
+    let record = fault::recorded::<safety::Nucleo>();
+    if let Some(r) = record {
+        warn!(
+            "fault record: {} at pc={:x}, uptime {} ms, fault #{}, detail {:x}",
+            fault::kind::name(r.kind),
+            r.pc,
+            r.uptime_ms,
+            r.count,
+            r.detail
+        );
+    }
+    app.set_fault_record(record);
+    if let Some(model) = app.compensation.model() {
+        let (cycles, runs) = step_cycles(model.clone());
+        info!(
+            "one compensator step of the stored model: {} cycles (DWT, mean of {} steps) = {} us at 168 MHz; QEMU counts instructions for the same step (BENCHMARKS.md)",
+            cycles,
+            runs,
+            cycles / (SYSCLK_HZ / 1_000_000)
+        );
+    }
     info!(
         "model: version {} crc {:x}",
         app.snapshot.model_version, app.snapshot.model_crc
@@ -147,9 +228,23 @@ async fn acquisition(
         min_tenth_um: 0,
         max_tenth_um: 20_000,
     });
+    let mut cycles = 0u32;
     loop {
         let start = Instant::now();
         let now_ms = start.as_millis();
+        cycles = cycles.wrapping_add(1);
+        if cycles.is_multiple_of(REDISCOVER_CYCLES) {
+            // Sensors added at run time go to free channels (reported in
+            // input registers 172-173); missing ones keep their channel and
+            // read "no presence" (170-171), never another sensor's value.
+            if acq.discover(&mut bus).await.is_ok() {
+                APP.lock(|a| {
+                    if let Some(app) = a.borrow_mut().as_mut() {
+                        app.update_channel_map(*acq.map());
+                    }
+                });
+            }
+        }
         let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
         let out = APP.lock(|a| {
             a.borrow_mut()
@@ -175,6 +270,39 @@ async fn acquisition(
         }
         Timer::at(start + CYCLE_PERIOD).await;
     }
+}
+
+/// Mean DWT cycle count of one `Compensator::step` of `model` at mid-range
+/// inputs (all sensors 25 °C, 6000 rpm), measured on this chip at boot, with
+/// flash wait states and the ART accelerator as they are in operation.
+fn step_cycles(model: thermocomp_core::Model) -> (u32, u32) {
+    use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
+    use thermocomp_core::{Compensator, StepInput};
+    const RUNS: u32 = 100;
+    // SAFETY: enabling the cycle counter (DEMCR.TRCENA, DWT.CTRL.CYCCNTENA)
+    // at boot; nothing else on this board uses the DWT.
+    let mut cp = unsafe { cortex_m::Peripherals::steal() };
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+    let n = model.sensors.len();
+    let temps = [Some(400i32); MAX_SENSORS];
+    let positions = [0i32; MAX_AXES];
+    let mut comp = Compensator::new(Some(model));
+    let mut now = 0u64;
+    let start = cortex_m::peripheral::DWT::cycle_count();
+    for _ in 0..RUNS {
+        now += 1000;
+        let input = StepInput {
+            now_ms: now,
+            temps: &temps[..n],
+            spindle_rpm: 6000,
+            positions: &positions,
+            stale: false,
+        };
+        core::hint::black_box(comp.step(core::hint::black_box(&input)));
+    }
+    let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
+    (cycles / RUNS, RUNS)
 }
 
 /// LD2 blinks at 1 Hz while the executor runs.

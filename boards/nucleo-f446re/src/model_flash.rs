@@ -48,3 +48,9 @@ impl NorFlash for SlotFlash {
         self.flash.blocking_write(SLOTS_OFFSET + offset, bytes)
     }
 }
+
+/// Blocking erase (the default): the F446 has one flash bank, and every
+/// flash read — every instruction fetch — stalls while a sector erases, so
+/// a background erase would stall the CPU all the same. The application
+/// starts it after the commit's reply is out (HR_RESULT 23 until done).
+impl thermocomp::hal::flash::BackgroundErase for SlotFlash {}

@@ -2,6 +2,12 @@
 //! (SSRAM on mps2-an386, so it keeps its contents only while QEMU runs),
 //! behind the same NorFlash trait as the real board's flash, with NOR rules:
 //! erase sets 0xFF, programming only clears bits, aligned writes.
+//!
+//! Erase time: the background erase a commit uses ([`BackgroundErase`])
+//! takes the real time of the NUCLEO's slot erase — one 128 KiB sector of
+//! the F446, 1 s typical (datasheet t_ERASE128KB) — during which the region
+//! refuses writes as a busy NOR would. (The blocking `erase` of the boot-time
+//! programming path is instantaneous.)
 
 use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
@@ -18,6 +24,8 @@ pub const SLOT_SIZE: u32 = (SLOTS_BYTES / 2) as u32;
 pub enum RamNorError {
     NotAligned,
     OutOfBounds,
+    /// A background erase is still running.
+    Busy,
 }
 
 impl NorFlashError for RamNorError {
@@ -25,12 +33,18 @@ impl NorFlashError for RamNorError {
         match self {
             RamNorError::NotAligned => NorFlashErrorKind::NotAligned,
             RamNorError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            RamNorError::Busy => NorFlashErrorKind::Other,
         }
     }
 }
 
+/// Real erase time of one slot (a 128 KiB sector on the F446, typical).
+pub const SLOT_ERASE_MS: u64 = 1_000;
+
 pub struct RamNor {
     mem: &'static mut [u8],
+    /// A background erase runs until then.
+    busy_until: Option<embassy_time::Instant>,
 }
 
 impl RamNor {
@@ -48,7 +62,10 @@ impl RamNor {
                 SLOTS_BYTES,
             )
         };
-        Some(RamNor { mem })
+        Some(RamNor {
+            mem,
+            busy_until: None,
+        })
     }
 }
 
@@ -87,6 +104,9 @@ impl NorFlash for RamNor {
         Ok(())
     }
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), RamNorError> {
+        if !thermocomp::hal::flash::BackgroundErase::erase_done(self) {
+            return Err(RamNorError::Busy);
+        }
         let o = offset as usize;
         if !o.is_multiple_of(Self::WRITE_SIZE) || !bytes.len().is_multiple_of(Self::WRITE_SIZE) {
             return Err(RamNorError::NotAligned);
@@ -99,5 +119,25 @@ impl NorFlash for RamNor {
             *d &= *s;
         }
         Ok(())
+    }
+}
+
+impl thermocomp::hal::flash::BackgroundErase for RamNor {
+    fn start_erase(&mut self, from: u32, to: u32) -> Result<(), RamNorError> {
+        self.erase(from, to)?;
+        let ms = SLOT_ERASE_MS * u64::from(to - from) / u64::from(SLOT_SIZE);
+        self.busy_until =
+            Some(embassy_time::Instant::now() + embassy_time::Duration::from_millis(ms));
+        Ok(())
+    }
+
+    fn erase_done(&mut self) -> bool {
+        match self.busy_until {
+            Some(t) if embassy_time::Instant::now() < t => false,
+            _ => {
+                self.busy_until = None;
+                true
+            }
+        }
     }
 }

@@ -28,6 +28,7 @@ mod executor;
 mod flash;
 mod host_trace;
 mod rtu_port;
+mod safety;
 mod semihost;
 mod time_driver;
 mod uart;
@@ -48,6 +49,7 @@ use thermocomp::acquisition::temperature::{
 };
 use thermocomp::app::App;
 use thermocomp::compensation::{Compensation, PlcInputs};
+use thermocomp::fault;
 use thermocomp::trace::TraceSample;
 use thermocomp_core::limits::{MAX_AXES, MAX_IMAGE_BYTES, MAX_SENSORS};
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
@@ -108,12 +110,23 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
             };
             let model = words.next().filter(|m| *m != "-");
             let pace_ms = words.next().and_then(|p| p.parse().ok()).unwrap_or(100);
-            match (serve_measure(trace, model, pace_ms), serve_modbus()) {
-                (Ok(t1), Ok(t2)) => {
+            // From here on a fault resets the board, as in the field.
+            safety::FIELD_MODE.store(true, Ordering::Relaxed);
+            match (
+                serve_measure(trace, model, pace_ms),
+                serve_modbus(),
+                watchdog_feeder(),
+            ) {
+                (Ok(t1), Ok(t2), Ok(t3)) => {
                     spawner.spawn(t1);
                     spawner.spawn(t2);
+                    spawner.spawn(t3);
                 }
-                _ => semihost::exit(exit_code::PANIC),
+                _ => fault::fault::<safety::Bench>(
+                    fault::kind::INIT_FAILED,
+                    0,
+                    fault::init_step::SPAWN,
+                ),
             }
         }
         "bench" => match bench(arg, words.next()) {
@@ -366,7 +379,7 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
     let channels = trace.header().channels();
     let mut sensors = Sensors::new(channels).await;
     let Some(flash) = flash::RamNor::take() else {
-        semihost::exit(exit_code::PANIC)
+        fault::fault::<safety::Bench>(fault::kind::INIT_FAILED, 0, fault::init_step::FLASH)
     };
     let mut app = App::new(
         flash,
@@ -375,10 +388,14 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
         BAUD,
         *sensors.acquisition.map(),
     );
+    // The bench maps its emulated sensors in trace-column order; stored with
+    // the model like a field board's map (by the programming below, when a
+    // model is given; else in the background).
+    app.update_channel_map(*sensors.acquisition.map());
     if let Some(p) = model_path {
         static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
         let Some(buf) = BUF.try_init([0; MAX_IMAGE_BYTES]) else {
-            semihost::exit(exit_code::PANIC)
+            fault::fault::<safety::Bench>(fault::kind::INIT_FAILED, 0, fault::init_step::BUFFER)
         };
         match read_host_file(p, buf).map(|img| app.program(img)) {
             Some(Ok(())) => log!("model {} programmed into the flash slots", p),
@@ -389,6 +406,18 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
             ),
         }
     }
+    let record = fault::recorded::<safety::Bench>();
+    if let Some(r) = record {
+        log!(
+            "fault record: {} at pc={:#010x}, uptime {} ms, fault #{} since cleared, detail {:#x}",
+            fault::kind::name(r.kind),
+            r.pc,
+            r.uptime_ms,
+            r.count,
+            r.detail
+        );
+    }
+    app.set_fault_record(record);
     log!(
         "serving Modbus RTU on UART0: unit {}, {} baud, model version {} crc {:#010x}; replaying {} ({} channels), one sample per {} ms",
         UNIT, BAUD, app.snapshot.model_version, app.snapshot.model_crc, path, channels, pace_ms
@@ -397,6 +426,12 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
     let mut rows = 0u32;
     while let Some(sample) = next_sample_or_exit(&mut trace) {
         rows += 1;
+        if APP.lock(|a| a.borrow().as_ref().is_some_and(|app| app.stall_requested)) {
+            // Test command 9: this loop stops making progress (the executor
+            // and the Modbus task go on); the watchdog must notice.
+            log!("measurement loop stalled on request (command 9)");
+            core::future::pending::<()>().await;
+        }
         let report = sensors.acquire(&sample).await;
         let uptime = Instant::now().as_millis();
         let out = APP.lock(|a| {
@@ -427,12 +462,70 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
         Timer::after(Duration::from_millis(pace_ms)).await;
     }
     log!("trace done: {} samples; still serving", rows);
+    // The trace has ended, but the loop is not stalled: it keeps counting
+    // (idle) cycles for the watchdog at the same pace.
+    loop {
+        APP.lock(|a| {
+            if let Some(app) = a.borrow_mut().as_mut() {
+                app.progress.cycles = app.progress.cycles.wrapping_add(1);
+            }
+        });
+        Timer::after(Duration::from_millis(pace_ms)).await;
+    }
 }
+
+/// Feeds the watchdog while booting (up to [`BOOT_DEADLINE_MS`]), then only
+/// when both the measurement loop and the Modbus task made progress
+/// ([`thermocomp::watchdog::Feeder`]).
+#[embassy_executor::task]
+async fn watchdog_feeder() {
+    // Each look also drives a flash commit in progress (erase outside the
+    // lock, then programming): `App::poll_flash`.
+    let progress = || {
+        APP.lock(|a| {
+            a.borrow_mut().as_mut().map(|app| {
+                app.poll_flash();
+                app.progress
+            })
+        })
+    };
+    safety::watchdog_start();
+    log!(
+        "watchdog started: {} ms, fed when both tasks progressed",
+        safety::WATCHDOG_TIMEOUT_MS
+    );
+    let mut feeder: Option<thermocomp::watchdog::Feeder> = None;
+    loop {
+        Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;
+        match (progress(), feeder.as_mut()) {
+            (Some(p), Some(f)) => match f.check(&p) {
+                Ok(()) => {
+                    safety::STALLED.store(0, Ordering::Relaxed);
+                    safety::watchdog_feed();
+                }
+                Err(bits) => safety::STALLED.store(bits, Ordering::Relaxed),
+            },
+            (Some(p), None) => {
+                feeder = Some(thermocomp::watchdog::Feeder::new(&p));
+                safety::watchdog_feed();
+            }
+            (None, _) if Instant::now().as_millis() < BOOT_DEADLINE_MS => safety::watchdog_feed(),
+            (None, _) => {}
+        }
+    }
+}
+
+/// Boot (trace, sensor search, model) must be done within this long; until
+/// then the watchdog is fed unconditionally.
+const BOOT_DEADLINE_MS: u64 = 20_000;
 
 #[embassy_executor::task]
 async fn serve_modbus() {
     let mut port = rtu_port::QemuRtuPort::new(BAUD);
-    thermocomp::app::serve_modbus(&mut port, &APP, || Instant::now().as_millis()).await
+    thermocomp::app::serve_modbus::<safety::Bench, _, _, _>(&mut port, &APP, || {
+        Instant::now().as_millis()
+    })
+    .await
 }
 
 /// The next sample of a host trace; `None` at its end. A malformed line
@@ -567,13 +660,22 @@ unsafe fn DefaultHandler(irqn: i16) {
 
 #[exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    log!("hard fault at pc={:#010x}", frame.pc());
+    // SAFETY: a read of the SCB's fault status register.
+    let cfsr = unsafe { (*cortex_m::peripheral::SCB::PTR).cfsr.read() };
+    log!("hard fault at pc={:#010x} cfsr={:#010x}", frame.pc(), cfsr);
+    if safety::FIELD_MODE.load(Ordering::Relaxed) {
+        fault::fault::<safety::Bench>(fault::kind::HARD_FAULT, frame.pc(), cfsr)
+    }
     semihost::exit(exit_code::PANIC)
 }
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     log!("panic: {}", info);
+    if safety::FIELD_MODE.load(Ordering::Relaxed) {
+        let line = info.location().map_or(0, |l| l.line());
+        fault::fault::<safety::Bench>(fault::kind::PANIC, 0, line)
+    }
     semihost::exit(exit_code::PANIC)
 }
 

@@ -1,0 +1,100 @@
+//! The NUCLEO's fault path and watchdog ([`thermocomp::fault`] and
+//! [`thermocomp::watchdog`] on the STM32F446RE).
+//!
+//! - Safe state: PA8, the RS-485 transceiver's driver enable, driven low
+//!   through GPIOA's BSRR (one write, no lock, valid from any context), so a
+//!   fault during a reply never leaves the bus jammed.
+//! - Fault record: 8 words at the top of SRAM (`__fault_record`, reserved
+//!   in `board-memory.x` outside every section; SRAM keeps its contents over
+//!   a system or watchdog reset, not over a power cycle).
+//! - Reset: SCB AIRCR.SYSRESETREQ.
+//! - Watchdog: the IWDG (LSI clock), which resets without an interrupt
+//!   first: after a watchdog reset the boot code finds RCC_CSR.IWDGRSTF and
+//!   records a fault of kind watchdog with PC 0 (unknown).
+
+use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+
+use embassy_stm32::pac;
+use thermocomp::fault::{self, FaultBoard, WORDS};
+
+extern "C" {
+    /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
+    static mut __fault_record: [u32; WORDS];
+}
+
+/// IWDG timeout: 10 s nominal. The longest legitimate gap between two feeds
+/// is one measurement cycle (1 s; 20 sensors take 0.96 s on the bus) plus a
+/// model commit that erases a 128 KiB sector with the CPU stalled on flash
+/// (RM0390 / datasheet: 1 s typical, 2 s max at x32 parallelism, 4 s max at
+/// x8): 5 s at worst. The LSI runs at 17–47 kHz over temperature and parts
+/// (datasheet), so 10 s nominal is between 6.8 s and 18.8 s: always longer
+/// than 5 s, and a stall is still caught within 20 s.
+pub const WATCHDOG_TIMEOUT_US: u32 = 10_000_000;
+/// How often the feeder looks at the progress counters.
+pub const FEED_CHECK_MS: u64 = 100;
+
+pub struct Nucleo;
+
+impl FaultBoard for Nucleo {
+    fn safe_state() {
+        // PA8 low: BSRR bit 16 + 8 resets the pin (atomic, no read-modify-write).
+        pac::GPIOA.bsrr().write(|w| w.set_br(8, true));
+    }
+
+    fn uptime_ms() -> u64 {
+        embassy_time::Instant::now().as_millis()
+    }
+
+    fn load() -> [u32; WORDS] {
+        let mut w = [0u32; WORDS];
+        // SAFETY: the reserved words are plain SRAM that only this module
+        // touches, word by word with volatile accesses.
+        unsafe {
+            let base = addr_of_mut!(__fault_record) as *const u32;
+            for (i, v) in w.iter_mut().enumerate() {
+                *v = read_volatile(base.add(i));
+            }
+        }
+        w
+    }
+
+    fn store(words: &[u32; WORDS]) {
+        // SAFETY: as in `load`.
+        unsafe {
+            let base = addr_of_mut!(__fault_record) as *mut u32;
+            for (i, v) in words.iter().enumerate() {
+                write_volatile(base.add(i), *v);
+            }
+        }
+    }
+
+    fn reset() -> ! {
+        cortex_m::peripheral::SCB::sys_reset()
+    }
+}
+
+/// At boot: was the last reset the IWDG's? Then record it (a watchdog reset
+/// leaves no time for the fault path) and clear the reset flags.
+pub fn note_watchdog_reset() {
+    let csr = pac::RCC.csr().read();
+    if csr.wdgrstf() {
+        fault::record::<Nucleo>(fault::kind::WATCHDOG, 0, 0);
+    }
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+}
+
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: a read of the SCB's configurable fault status register.
+    let cfsr = unsafe { (*cortex_m::peripheral::SCB::PTR).cfsr.read() };
+    fault::fault::<Nucleo>(fault::kind::HARD_FAULT, frame.pc(), cfsr)
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    // The bus first, then the log (a probe may not be attached).
+    Nucleo::safe_state();
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    let line = info.location().map_or(0, |l| l.line());
+    fault::fault::<Nucleo>(fault::kind::PANIC, 0, line)
+}

@@ -1,0 +1,272 @@
+//! A board that is safe in the field, shown on the QEMU bench board with a
+//! real Modbus master (pymodbus): an injected panic (test-only command 8)
+//! ends in a reset and the fault record is read back over Modbus after it;
+//! a stalled measurement loop (test-only command 9) trips the watchdog;
+//! settings written over Modbus survive the reboot; a model commit is
+//! answered at once and written in the background (the flash model takes
+//! the real 1 s erase) while the measurement loop keeps its period.
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use serde_json::Value;
+
+const BOOT: Duration = Duration::from_secs(60);
+const SERVING: &str = "serving Modbus RTU";
+
+fn python(args: &[&str]) -> Value {
+    let script = workspace_root().join("host-tests/py/modbus_master.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "modbus_master.py {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("thermocomp-safety-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A long trace (the board must still be replaying when the test ends) and
+/// the demo model.
+fn files(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
+    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
+    for i in 0..5000u32 {
+        csv += &format!("{},3000", i * 15);
+        for c in 0..6 {
+            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
+        }
+        csv += "\n";
+    }
+    std::fs::write(&t, csv).unwrap();
+    let mut fm = thermocomp_core::float::demo_model(1);
+    fm.model_version = 1;
+    tcomp::export::export(&fm, &m).unwrap();
+    (t, m)
+}
+
+/// One bench board at a time (see qemu_modbus.rs).
+static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn boot(dir: &std::path::Path) -> (BenchBoard, u16) {
+    boot_paced(dir, "50")
+}
+
+fn boot_paced(dir: &std::path::Path, pace_ms: &str) -> (BenchBoard, u16) {
+    let (t, m) = files(dir);
+    let port = free_tcp_port();
+    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
+    let board = BenchBoard::start(
+        &serial,
+        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), pace_ms],
+    );
+    assert!(board.wait_for(SERVING, BOOT), "{}", board.log());
+    (board, port)
+}
+
+/// Wait until the board has booted `n` times; the host time it took.
+fn wait_for_boots(board: &BenchBoard, n: usize, limit: Duration) -> Duration {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if board.log().matches(SERVING).count() >= n {
+            return start.elapsed();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("no boot #{n} within {limit:?}:\n{}", board.log());
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("panic"));
+    let p = port.to_string();
+    let before = python(&["fault", "--port", &p]);
+    assert_eq!(before["kind"], 0, "{before}");
+    assert_eq!(before["status"].as_u64().unwrap() & (1 << 9), 0, "{before}");
+    // Command 8: answered, then the panic; the fault path resets the board.
+    let cmd = python(&["command", "--port", &p, "--code", "8"]);
+    assert_eq!(cmd["exception"], Value::Null, "{cmd}");
+    wait_for_boots(&board, 2, BOOT);
+    let log = board.log();
+    assert!(log.contains("test panic requested by command 8"), "{log}");
+    let after = python(&["fault", "--port", &p]);
+    println!("{after}");
+    assert_eq!(after["kind"], 1, "panic: {after}");
+    assert_eq!(after["count"], 1, "{after}");
+    assert!(
+        after["detail"].as_u64().unwrap() > 0,
+        "source line: {after}"
+    );
+    assert_ne!(
+        after["status"].as_u64().unwrap() & (1 << 9),
+        0,
+        "FAULT_RECORDED: {after}"
+    );
+    // The board serves normally after the reset: model and test pattern.
+    let snap = &python(&["read", "--port", &p])[0];
+    assert_eq!(snap["pattern"], 0x1234_5678, "{snap}");
+    assert_eq!(snap["model_version"], 1, "{snap}");
+    // A second panic counts on.
+    python(&["command", "--port", &p, "--code", "8"]);
+    wait_for_boots(&board, 3, BOOT);
+    assert_eq!(python(&["fault", "--port", &p])["count"], 2);
+    // Command 6 clears the record and the status bit; it stays cleared.
+    let clear = python(&["command", "--port", &p, "--code", "6"]);
+    assert_eq!(clear["exception"], Value::Null, "{clear}");
+    let cleared = python(&["fault", "--port", &p]);
+    assert_eq!(cleared["kind"], 0, "{cleared}");
+    assert_eq!(cleared["count"], 0, "{cleared}");
+    assert_eq!(
+        cleared["status"].as_u64().unwrap() & (1 << 9),
+        0,
+        "{cleared}"
+    );
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("watchdog"));
+    let p = port.to_string();
+    // Fed while both tasks run: several timeouts' worth of serving, no reset.
+    std::thread::sleep(Duration::from_secs(9));
+    let ok = python(&["read", "--port", &p, "--samples", "5"]);
+    assert_eq!(ok.as_array().unwrap().len(), 5);
+    assert_eq!(board.log().matches(SERVING).count(), 1, "{}", board.log());
+    // Command 9: the measurement loop stops; Modbus keeps answering.
+    let cmd = python(&["command", "--port", &p, "--code", "9"]);
+    assert_eq!(cmd["exception"], Value::Null, "{cmd}");
+    let stalled_at = Instant::now();
+    std::thread::sleep(Duration::from_secs(1));
+    let still = python(&["read", "--port", &p]);
+    assert_eq!(
+        still[0]["pattern"], 0x1234_5678,
+        "Modbus still serves while stalled"
+    );
+    let took = stalled_at.elapsed() + wait_for_boots(&board, 2, BOOT);
+    println!("watchdog reset {took:?} after the stall");
+    // The 4 s timeout, and not much more (feeder period, host load).
+    assert!(took >= Duration::from_millis(3_900), "{took:?}");
+    assert!(took < Duration::from_secs(15), "{took:?}");
+    let log = board.log();
+    assert!(log.contains("watchdog expired at pc="), "{log}");
+    let rec = python(&["fault", "--port", &p]);
+    println!("{rec}");
+    assert_eq!(rec["kind"], 3, "watchdog: {rec}");
+    assert_eq!(rec["count"], 1, "{rec}");
+    assert_eq!(rec["detail"], 1, "the measurement loop, not Modbus: {rec}");
+    assert_ne!(rec["pc"], 0, "the interrupted PC: {rec}");
+    assert_ne!(rec["status"].as_u64().unwrap() & (1 << 9), 0, "{rec}");
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let (board, port) = boot(&scratch("settings"));
+    let p = port.to_string();
+    // Clamp direction 0 to 12.3 µm, rate of direction 1 to 5.0 µm/s, unit 7.
+    let w = python(&[
+        "hold",
+        "--port",
+        &p,
+        "--write",
+        "20=123",
+        "--write",
+        "27=50",
+        "--write",
+        "3=7",
+        "--no-read",
+    ]);
+    assert_eq!(w["exceptions"], serde_json::json!({}), "{w}");
+    // Wait until they are in flash (HR_RESULT 23 → 0), then reboot (the
+    // panic command, at the new unit address).
+    let cmd = python(&["hold", "--port", &p, "--unit", "7", "--write", "0=0xA5C3"]);
+    assert_eq!(cmd["registers"][3], 7, "{cmd}");
+    assert_eq!(cmd["registers"][2], 0, "stored: {cmd}");
+    let panic = python(&["command", "--port", &p, "--unit", "7", "--code", "8"]);
+    assert_eq!(panic["exception"], Value::Null, "{panic}");
+    wait_for_boots(&board, 2, BOOT);
+    let after = python(&["hold", "--port", &p, "--unit", "7"]);
+    let r = &after["registers"];
+    assert_eq!(
+        (r[3].clone(), r[20].clone(), r[27].clone()),
+        (7.into(), 123.into(), 50.into()),
+        "{after}"
+    );
+    assert_eq!(r[21], 0xFFFF, "{after}");
+    // Command 7: defaults again (the reply comes from unit 7, then unit 1).
+    let w = python(&[
+        "hold",
+        "--port",
+        &p,
+        "--unit",
+        "7",
+        "--write",
+        "1=7",
+        "--no-read",
+    ]);
+    assert_eq!(w["exceptions"], serde_json::json!({}), "{w}");
+    let d = python(&["hold", "--port", &p]);
+    let r = &d["registers"];
+    assert_eq!(
+        (r[3].clone(), r[20].clone(), r[27].clone()),
+        (1.into(), 0xFFFF.into(), 0xFFFF.into()),
+        "{d}"
+    );
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = scratch("commit");
+    // One sample per second, as on the NUCLEO.
+    let (_board, port) = boot_paced(&dir, "1000");
+    let v2 = dir.join("v2.img");
+    let mut fm = thermocomp_core::float::demo_model(2);
+    fm.model_version = 2;
+    tcomp::export::export(&fm, &v2).unwrap();
+    let p = port.to_string();
+    let r = python(&[
+        "upload",
+        "--port",
+        &p,
+        "--image",
+        v2.to_str().unwrap(),
+        "--watch",
+        "4",
+    ]);
+    println!("{r}");
+    assert_eq!(r["commit_exception"], Value::Null, "{r}");
+    assert_eq!(r["result"], 0, "{r}");
+    assert_eq!(r["after"]["model_version"], 2, "{r}");
+    let reply = r["commit_reply_ms"].as_f64().unwrap();
+    assert!(reply < 100.0, "the commit's reply took {reply} ms: {r}");
+    // The write really waited for the erase (1 s), outside the lock.
+    let done = r["commit_done_ms"].as_f64().unwrap();
+    assert!(done >= 1000.0, "{r}");
+    let base = r["baseline_max_sample_gap_ms"].as_f64().unwrap();
+    let during = r["commit_max_sample_gap_ms"].as_f64().unwrap();
+    assert!(
+        base > 900.0 && base < 1600.0,
+        "period before the commit: {r}"
+    );
+    assert!(
+        during < base + 300.0,
+        "the loop kept its period during the commit: {r}"
+    );
+}

@@ -1,0 +1,22 @@
+//! Flash whose erase may run in the background: the model/settings slots
+//! ([`crate::model_store`]). A commit starts the erase of the inactive slot,
+//! the application goes on (Modbus answers, the measurement loop keeps its
+//! period), and programming follows once [`BackgroundErase::erase_done`].
+//!
+//! The defaults are a blocking erase (done when `start_erase` returns): the
+//! host mock and the NUCLEO, whose single-bank F446 stalls every flash read
+//! — so every instruction fetch — while a sector erases anyway.
+
+use embedded_storage::nor_flash::NorFlash;
+
+pub trait BackgroundErase: NorFlash {
+    /// Start erasing `[from, to)`; may return before the erase is done.
+    fn start_erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.erase(from, to)
+    }
+
+    /// True once the erase started last has finished.
+    fn erase_done(&mut self) -> bool {
+        true
+    }
+}

@@ -1,0 +1,75 @@
+//! Settings that survive a reboot: unit address, baud rate, clamp and rate
+//! overrides. They are stored with the model in the same A/B flash slots
+//! ([`crate::model_store`]: a settings block after the image, written
+//! before the slot's magic), so a power cut at any moment leaves the old
+//! settings or the new ones, and are applied at boot. Command 7 restores
+//! the defaults (and stores them).
+
+use thermocomp_core::limits::MAX_DIRECTIONS;
+
+use crate::modbus::holding::BAUD_RATES;
+
+/// Encoded size (bytes): version, unit, baud/100, clamp × 6, rate × 6.
+pub const ENCODED_LEN: usize = 1 + 1 + 2 + 2 * MAX_DIRECTIONS * 2;
+const VERSION: u8 = 1;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Settings {
+    /// Modbus unit address, 1–247.
+    pub unit: u8,
+    /// One of [`BAUD_RATES`].
+    pub baud: u32,
+    /// Per-direction clamp override, 0.1 µm (0xFFFF: none, the model's).
+    pub clamp: [u16; MAX_DIRECTIONS],
+    /// Per-direction rate-limit override, 0.1 µm/s (0xFFFF: none).
+    pub rate: [u16; MAX_DIRECTIONS],
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            unit: crate::app::DEFAULT_UNIT,
+            baud: crate::app::DEFAULT_BAUD,
+            clamp: [u16::MAX; MAX_DIRECTIONS],
+            rate: [u16::MAX; MAX_DIRECTIONS],
+        }
+    }
+}
+
+impl Settings {
+    pub fn encode(&self) -> [u8; ENCODED_LEN] {
+        let mut b = [0u8; ENCODED_LEN];
+        b[0] = VERSION;
+        b[1] = self.unit;
+        b[2..4].copy_from_slice(&((self.baud / 100) as u16).to_le_bytes());
+        for (i, v) in self.clamp.iter().chain(self.rate.iter()).enumerate() {
+            b[4 + 2 * i..6 + 2 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        b
+    }
+
+    /// Settings from stored bytes; `None` for another version or a value
+    /// outside its range (the board then keeps its defaults).
+    pub fn decode(b: &[u8]) -> Option<Settings> {
+        if b.len() != ENCODED_LEN || b[0] != VERSION {
+            return None;
+        }
+        let unit = b[1];
+        let baud = u32::from(u16::from_le_bytes([b[2], b[3]])) * 100;
+        if !(1..=247).contains(&unit) || !BAUD_RATES.contains(&baud) {
+            return None;
+        }
+        let word = |i: usize| u16::from_le_bytes([b[4 + 2 * i], b[5 + 2 * i]]);
+        let mut s = Settings {
+            unit,
+            baud,
+            ..Settings::default()
+        };
+        for d in 0..MAX_DIRECTIONS {
+            s.clamp[d] = word(d);
+            s.rate[d] = word(MAX_DIRECTIONS + d);
+        }
+        Some(s)
+    }
+}
