@@ -45,27 +45,26 @@ grep -q "serving Modbus RTU" "$log" || { cat "$log"; die "the bench board did no
 pty=$(grep -o '/dev/pts/[0-9]*' "$log" | head -n 1)
 grep -E "model|serving" "$log"
 
-say "mbpoll (Modbus RTU master) on $pty reads, every 2 s: the sample time (IR 10-11), the status (IR 3) and the corrections of ch3 and ch5 (IR 30-33, int32, 0.1 um, high word first)"
+say "mbpoll (Modbus RTU master) on $pty reads, every 2 s, input registers 3-33 in one request (one consistent sample): the status (IR 3), the sample time (IR 10-11) and the corrections of ch3 and ch5 (IR 30-33, int32, 0.1 um, high word first)"
 printf '%10s %-9s %8s %16s %16s\n' "trace time" "part" "status" "ch3 corr/meas" "ch5 corr/meas"
 div() { awk -v a="$1" -v b="$2" 'BEGIN{printf "%.4f", a/b}'; }
 measured() { # the trace's measured error of column $2 at time_s $1 (what the compensation should cancel)
   awk -F, -v t="$1" -v col="$2" '/^#/{next} !h{for(i=1;i<=NF;i++) if($i==col) c=i; h=1; next} $1==t{print $c; exit}' "$trace"
 }
 part() { awk -v t="$1" -v s="$split_t" 'BEGIN{print (t >= s ? "held-out" : "training")}'; }
-read_int32() { # start register (1-based for mbpoll), count
-  mbpoll -m rtu -a 1 -b 115200 -P none -t 3:int -B -r "$1" -c "$2" -1 -o 1 -q "$pty" 2>/dev/null | sed -n 's/^\[[0-9]*\]:[[:space:]]*//p'
-}
+u32() { echo $(( (16#${1#0x} << 16) | 16#${2#0x} )); }
+i32() { local v; v=$(u32 "$1" "$2"); ((v >= 2147483648)) && v=$((v - 4294967296)); echo "$v"; }
 last=""
 for _ in $(seq 60); do
   sleep 2
-  t=$(read_int32 11 1 | head -n 1)
+  mapfile -t r < <(mbpoll -m rtu -a 1 -b 115200 -P none -t 3:hex -r 4 -c 31 -1 -o 1 -q "$pty" 2>/dev/null | sed -n 's/^\[[0-9]*\]:[[:space:]]*//p')
+  [ "${#r[@]}" -eq 31 ] || { echo "  (no answer)"; continue; }
+  t=$(u32 "${r[7]}" "${r[8]}")
   [ "$t" = "$last" ] && break  # the trace is over; the board keeps serving its last state
   last="$t"
-  status=$(mbpoll -m rtu -a 1 -b 115200 -P none -t 3:hex -r 4 -c 1 -1 -o 1 -q "$pty" 2>/dev/null | sed -n 's/^\[[0-9]*\]:[[:space:]]*//p')
-  mapfile -t c < <(read_int32 31 2)
-  [ -n "$t" ] && [ "${#c[@]}" -eq 2 ] || { echo "  (no answer)"; continue; }
-  printf '%8.2f h %-9s %8s %7.1f/%-7.1f %7.1f/%-7.1f\n' "$(div "$t" 3600)" "$(part "$t")" "$status" \
-    "$(div "${c[0]}" 10)" "$(measured "$t" dch3_um)" "$(div "${c[1]}" 10)" "$(measured "$t" dch5_um)"
+  printf '%8.2f h %-9s %8s %7.1f/%-7.1f %7.1f/%-7.1f\n' "$(div "$t" 3600)" "$(part "$t")" "${r[0]}" \
+    "$(div "$(i32 "${r[27]}" "${r[28]}")" 10)" "$(measured "$t" dch3_um)" \
+    "$(div "$(i32 "${r[29]}" "${r[30]}")" 10)" "$(measured "$t" dch5_um)"
 done
 for _ in $(seq 300); do grep -q "trace done" "$log" && break; sleep 0.2; done
 
