@@ -171,7 +171,7 @@ pub fn float_model_from_fit(
     channels.dedup();
     let mut model = FloatModel {
         model_version: opts.model_version,
-        step_ms: 1000,
+        step_ms: crate::fit::features::STEP_MS,
         warmup_s: opts.warmup_s,
         fixed_reference: false,
         sensors: vec![],

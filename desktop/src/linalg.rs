@@ -96,22 +96,61 @@ pub fn solve_spd(a: &[f64], b: &[f64], n: usize) -> Result<Vec<f64>> {
     }
 }
 
-/// `exp(A)` for a square matrix (row-major n×n), by nalgebra's Padé scaling
-/// and squaring.
-pub fn expm(a: &[f64], n: usize) -> Vec<f64> {
-    let m = DMatrix::from_row_slice(n, n, a);
-    row_major(&m.exp())
+/// `exp(A)` for a square matrix, by nalgebra's Padé scaling and squaring.
+/// A matrix with a non-finite entry is an error (its exponential is not).
+pub fn expm(a: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    if !a.is_square() {
+        bail!(
+            "matrix exponential: {}×{} is not square",
+            a.nrows(),
+            a.ncols()
+        );
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        bail!("matrix exponential: the matrix holds a non-finite value");
+    }
+    let e = a.clone().exp();
+    if e.iter().any(|v| !v.is_finite()) {
+        bail!("matrix exponential: the result overflows");
+    }
+    Ok(e)
 }
 
-/// Row-major copy of a matrix.
-pub fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
-    let mut out = Vec::with_capacity(m.nrows() * m.ncols());
-    for i in 0..m.nrows() {
-        for j in 0..m.ncols() {
-            out.push(m[(i, j)]);
-        }
+/// Exact zero-order-hold discretisation of `dx/dt = A x + b` over `dt`:
+/// `(Φ, Ψ)` with `x(t+dt) = Φ x(t) + Ψ b` for `b` constant over the step,
+/// from the exponential of the augmented matrix `[[A, I], [0, 0]]·dt`.
+pub fn discretize(a: &DMatrix<f64>, dt: f64) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    let n = a.nrows();
+    let mut aug = DMatrix::<f64>::zeros(2 * n, 2 * n);
+    aug.view_mut((0, 0), (n, a.ncols())).copy_from(&(a * dt));
+    for i in 0..n {
+        aug[(i, n + i)] = dt;
     }
-    out
+    let e = expm(&aug)?;
+    Ok((
+        e.view((0, 0), (n, n)).into_owned(),
+        e.view((0, n), (n, n)).into_owned(),
+    ))
+}
+
+/// Solve the square system `A x = b` by LU with partial pivoting; a
+/// singular (or non-finite) system is an error.
+pub fn solve(a: DMatrix<f64>, b: &[f64]) -> Result<Vec<f64>> {
+    if !a.is_square() || a.nrows() != b.len() {
+        bail!(
+            "solve: sizes do not match ({}×{} vs {})",
+            a.nrows(),
+            a.ncols(),
+            b.len()
+        );
+    }
+    if a.iter().chain(b).any(|v| !v.is_finite()) {
+        bail!("solve: the system holds a non-finite value");
+    }
+    match a.lu().solve(&DVector::from_column_slice(b)) {
+        Some(x) if x.iter().all(|v| v.is_finite()) => Ok(x.iter().copied().collect()),
+        _ => bail!("solve: the matrix is singular"),
+    }
 }
 
 #[cfg(test)]
@@ -159,10 +198,37 @@ mod tests {
 
     #[test]
     fn expm_of_a_diagonal_and_a_rotation() {
-        let e = expm(&[1.0, 0.0, 0.0, -2.0], 2);
-        assert!((e[0] - 1f64.exp()).abs() < 1e-12 && (e[3] - (-2f64).exp()).abs() < 1e-12);
+        let e = expm(&DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -2.0])).unwrap();
+        assert!(
+            (e[(0, 0)] - 1f64.exp()).abs() < 1e-12 && (e[(1, 1)] - (-2f64).exp()).abs() < 1e-12
+        );
         let t = 0.7;
-        let r = expm(&[0.0, -t, t, 0.0], 2);
-        assert!((r[0] - t.cos()).abs() < 1e-12 && (r[2] - t.sin()).abs() < 1e-12);
+        let r = expm(&DMatrix::from_row_slice(2, 2, &[0.0, -t, t, 0.0])).unwrap();
+        assert!((r[(0, 0)] - t.cos()).abs() < 1e-12 && (r[(1, 0)] - t.sin()).abs() < 1e-12);
+        assert!(expm(&DMatrix::from_row_slice(1, 1, &[f64::NAN])).is_err());
+    }
+
+    #[test]
+    fn discretize_a_first_order_lag() {
+        let a = DMatrix::from_row_slice(1, 1, &[-0.01]);
+        let (phi, psi) = discretize(&a, 10.0).unwrap();
+        assert!((phi[(0, 0)] - (-0.1f64).exp()).abs() < 1e-14);
+        // ∫0^10 e^{-0.01 s} ds = (1 - e^{-0.1}) / 0.01
+        assert!((psi[(0, 0)] - (1.0 - (-0.1f64).exp()) / 0.01).abs() < 1e-11);
+    }
+
+    #[test]
+    fn solve_small_and_singular() {
+        let x = solve(
+            DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 3.0]),
+            &[3.0, 5.0],
+        )
+        .unwrap();
+        assert!((x[0] - 0.8).abs() < 1e-12 && (x[1] - 1.4).abs() < 1e-12);
+        assert!(solve(
+            DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]),
+            &[1.0, 1.0]
+        )
+        .is_err());
     }
 }

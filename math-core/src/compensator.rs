@@ -7,23 +7,23 @@
 //!    served correction is held where it is, `SENSOR_FAULT` set, `VALID`
 //!    cleared; filters do not advance. (The acquisition already bridged short
 //!    gaps by holding the last good value; those arrive with `stale` set.)
-//! 3. **Reference sample**: temperature rises are taken against the first
-//!    step at which every sensor the model uses is valid (or against the
-//!    image's stored reference with `FLAG_FIXED_REFERENCE`); the lag filters
-//!    start from that sample. [`Compensator::rereference`] takes a new one.
-//! 4. **Lag filters** advance in whole model steps (`step_ms`), the newest
-//!    sample held over the elapsed steps (exact for any gap length).
-//! 5. **Training envelope**: every input and position is held at the edge of
+//! 3. **Features** by the shared pipeline ([`crate::features`], the very
+//!    code `tcomp fit` trains on): reference sample (the first step at which
+//!    every sensor the model uses is valid, or the image's stored reference
+//!    with `FLAG_FIXED_REFERENCE`; [`Compensator::rereference`] takes a new
+//!    one), lag filters advanced in whole model steps (`step_ms`) with the
+//!    newest sample held over the elapsed steps (exact for any gap length).
+//! 4. **Training envelope**: every input and position is held at the edge of
 //!    the range seen in training (no extrapolation past it);
 //!    `OUT_OF_ENVELOPE` says so. The model's output at the edge is the last
 //!    value it was trained to produce, so it cannot run away.
-//! 6. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
+//! 5. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
 
 use crate::eval::{AxisPair, Evaluation};
-use crate::fixed::{decay_pow_q30, lag_update, FEATURE_FRAC_BITS};
-use crate::image::{InputKind, Model, FLAG_FIXED_REFERENCE};
+use crate::features::FeatureState;
+use crate::image::Model;
 use crate::limits::*;
 
 /// Largest rate limit, 0.1 µm/s (100 mm/s: no thermal drift comes near it).
@@ -74,10 +74,7 @@ pub struct StepOutput {
 
 pub struct Compensator {
     model: Option<Model>,
-    reference: [i32; MAX_SENSORS],
-    reference_ms: Option<u64>,
-    filters_q16: [i64; MAX_INPUTS],
-    filter_clock_ms: u64,
+    features: FeatureState,
     last_step_ms: u64,
     served: [i32; MAX_DIRECTIONS],
     last_eval: Evaluation,
@@ -95,10 +92,7 @@ impl Compensator {
     pub fn new(model: Option<Model>) -> Self {
         Compensator {
             model,
-            reference: [0; MAX_SENSORS],
-            reference_ms: None,
-            filters_q16: [0; MAX_INPUTS],
-            filter_clock_ms: 0,
+            features: FeatureState::new(),
             last_step_ms: 0,
             served: [0; MAX_DIRECTIONS],
             last_eval: Evaluation::default(),
@@ -115,18 +109,18 @@ impl Compensator {
     /// the new model's rate limit (no jump).
     pub fn load(&mut self, model: Option<Model>) {
         self.model = model;
-        self.reference_ms = None;
+        self.features.rereference();
     }
 
     /// Take a new reference sample at the next step (e.g. machine cold again).
     pub fn rereference(&mut self) {
-        self.reference_ms = None;
+        self.features.rereference();
     }
 
     /// The reference temperatures (1/16 °C) per model sensor, once taken.
     pub fn reference(&self) -> Option<&[i32]> {
         let n = self.model.as_ref()?.sensors.len();
-        self.reference_ms.map(|_| &self.reference[..n])
+        self.features.reference(n)
     }
 
     /// Tighten one direction's limits (0.1 µm, 0.1 µm/s); values above the image's are ignored.
@@ -143,90 +137,23 @@ impl Compensator {
             out.status = status::NO_MODEL;
             return out;
         };
-        let temp = |s: u8| input.temps.get(usize::from(s)).copied().flatten();
-        let needed_valid = model.inputs.iter().all(|inp| match inp.kind {
-            InputKind::SensorRise { a } => temp(a).is_some(),
-            InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
-            InputKind::Spindle => true,
-        });
         if input.stale {
             out.status |= status::STALE_INPUTS;
         }
-        if !needed_valid {
+        // Features (reference sample, gaps, lag filters): the shared pipeline.
+        let Some(features) =
+            self.features
+                .step(model, input.now_ms, input.temps, input.spindle_rpm)
+        else {
             out.status |= status::SENSOR_FAULT;
             out.corrections = self.served;
             out.predicted = self.last_eval.corrections;
             out.axes = self.last_eval.axes;
             self.last_step_ms = input.now_ms;
             return out;
-        }
-
-        // Features: Q16 of 1/16 °C or rpm, after the lag filters.
-        let mut first = false;
-        let reference_ms = match self.reference_ms {
-            Some(t) => t,
-            None => {
-                first = true;
-                for (i, (s, r)) in model
-                    .sensors
-                    .iter()
-                    .zip(self.reference.iter_mut())
-                    .enumerate()
-                {
-                    *r = if model.flags & FLAG_FIXED_REFERENCE != 0 {
-                        s.ref_temp
-                    } else {
-                        temp(i as u8).unwrap_or(0)
-                    };
-                }
-                self.reference_ms = Some(input.now_ms);
-                self.filter_clock_ms = input.now_ms;
-                input.now_ms
-            }
         };
-        // Whole filter steps since the last update; u32 division (hardware
-        // UDIV) for any gap under 49 days, the 64-bit routine beyond.
-        let step_ms = u64::from(model.step_ms);
-        let elapsed = input.now_ms.saturating_sub(self.filter_clock_ms);
-        let steps = match u32::try_from(elapsed) {
-            Ok(e) => u64::from(e / model.step_ms),
-            Err(_) => elapsed / step_ms,
-        };
-        self.filter_clock_ms += steps * step_ms;
-        let t = |s: u8| i64::from(temp(s).unwrap_or(0));
-        let mut features = [0i32; MAX_INPUTS];
-        for (inp, (feature, filter)) in model
-            .inputs
-            .iter()
-            .zip(features.iter_mut().zip(self.filters_q16.iter_mut()))
-        {
-            let raw = match inp.kind {
-                InputKind::SensorRise { a } => {
-                    t(a) - i64::from(self.reference.get(usize::from(a)).copied().unwrap_or(0))
-                }
-                InputKind::SensorDiff { a, b } => t(a) - t(b),
-                InputKind::Spindle => i64::from(input.spindle_rpm),
-            } << 16;
-            let value_q16 = match inp.lag {
-                None => raw,
-                Some(_) if first => {
-                    *filter = raw;
-                    raw
-                }
-                Some(lag) => {
-                    if steps > 0 {
-                        *filter = lag_update(*filter, raw, decay_pow_q30(lag.decay_q30, steps));
-                    }
-                    *filter
-                }
-            };
-            // Filters run in Q16 (i64); the model takes Q8 in an i32, saturated
-            // (the envelope, within ±2^23 raw, then holds it at its edge).
-            *feature = (value_q16 >> (16 - FEATURE_FRAC_BITS))
-                .clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
-        }
-        let positions = input.positions;
-        let eval = model.evaluate(&features[..model.inputs.len()], positions);
+        let eval = model.evaluate(features, input.positions);
+        let reference_ms = self.features.reference_ms().unwrap_or(input.now_ms);
         if eval.out_of_envelope {
             out.status |= status::OUT_OF_ENVELOPE;
         }

@@ -251,20 +251,13 @@ impl FloatModel {
             }
             let lag = match inp.tau_s {
                 None => None,
-                Some(tau) if tau > 0.0 => {
-                    let d = (-(f64::from(self.step_ms) / 1000.0) / tau).exp();
-                    Some(Lag {
-                        tau_s: tau.round() as u32,
-                        decay_q30: q(d, (1u64 << 30) as f64, "lag decay")?.min((1 << 30) - 1)
-                            as u32,
-                    })
-                }
-                Some(tau) => {
-                    return Err(QuantizeError::OutOfRange {
+                Some(tau) => Some(lag(tau, self.step_ms).map_err(|e| match e {
+                    QuantizeError::OutOfRange { value, .. } => QuantizeError::OutOfRange {
                         what: format!("input {i} time constant"),
-                        value: tau,
-                    })
-                }
+                        value,
+                    },
+                    other => other,
+                })?),
             };
             let spec = InputSpec {
                 kind: inp.kind,
@@ -400,6 +393,23 @@ impl FloatModel {
         }
         report
     }
+}
+
+/// The lag filter of time constant `tau_s` (seconds) for a model stepping
+/// every `step_ms`: its per-step decay exp(−step/τ) in Q30, as the image
+/// stores it (what the quantizer writes and what `tcomp fit` trains with).
+pub fn lag(tau_s: f64, step_ms: u32) -> Result<Lag, QuantizeError> {
+    if !(tau_s > 0.0 && tau_s.is_finite() && tau_s < f64::from(u32::MAX)) || step_ms == 0 {
+        return Err(QuantizeError::OutOfRange {
+            what: "lag time constant".to_string(),
+            value: tau_s,
+        });
+    }
+    let d = (-(f64::from(step_ms) / 1000.0) / tau_s).exp();
+    Ok(Lag {
+        tau_s: tau_s.round() as u32,
+        decay_q30: q(d, (1u64 << 30) as f64, "lag decay")?.min((1 << 30) - 1) as u32,
+    })
 }
 
 /// Round `v · scale` to i32 or say which parameter does not fit.

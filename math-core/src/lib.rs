@@ -7,8 +7,10 @@
 //! - [`image`]: the model image (binary blob with CRC-32) → validated [`image::Model`].
 //! - [`fixed`]: Q formats, the sigmoid table, normalisation, lag-filter decay.
 //! - [`eval`]: the network and the polynomial tables for one set of inputs.
-//! - [`compensator`]: the state machine around them (reference sample, lag
-//!   filters, training envelope, clamps, rate limit, status bits).
+//! - [`features`]: the feature pipeline (reference sample, gaps, lag filters
+//!   in whole model steps) the board runs and `tcomp fit` trains on.
+//! - [`compensator`]: the state machine around them (features, training
+//!   envelope, clamps, rate limit, status bits).
 //! - `float` (feature `std`): the same model in f64 and the quantizer.
 //! - [`golden`]: golden vectors checked on the board (generated on the host).
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -16,6 +18,7 @@
 
 pub mod compensator;
 pub mod eval;
+pub mod features;
 pub mod fixed;
 #[cfg(feature = "std")]
 pub mod float;
@@ -24,5 +27,6 @@ pub mod image;
 pub mod limits;
 
 pub use compensator::{Compensator, StepInput, StepOutput};
+pub use features::FeatureState;
 pub use image::{ImageError, Model};
 pub use limits::*;

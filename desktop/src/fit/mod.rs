@@ -1,13 +1,15 @@
 //! `tcomp fit`: MLR baseline and the GA-BPN network (genetic search of the
-//! initial weights, then Levenberg–Marquardt refinement), with the board's
-//! model semantics: temperatures quantized to 1/16 °C, inputs that are sensor
-//! rises / differences / spindle speed, optional first-order lags,
+//! initial weights, then Levenberg–Marquardt refinement), trained on the
+//! board's own features ([`features`]: the math core's pipeline — 1/16 °C
+//! readings, the reference row, gaps, lag filters per whole model step):
+//! sensor rises / differences / spindle speed, optional first-order lags,
 //! normalization of each input to [−1, 1] by its training range.
 //!
 //! Validation is always on held-out runs or later time blocks — never a random
 //! row split.
 
 pub mod cli;
+pub mod features;
 pub mod net;
 pub mod rng;
 pub mod run;
@@ -25,7 +27,8 @@ use crate::runcsv::Run;
 /// What an input measures (before the optional lag).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum FeatureKind {
-    /// `T_i(t) − T_i(t_ref)`, `t_ref` = first row of the run (column name).
+    /// `T_i(t) − T_i(t_ref)`, `t_ref` = the board's reference row: the first
+    /// row of the run at which the sensors are valid (column name).
     SensorRise(String),
     /// `T_a − T_b` (column names).
     SensorDiff(String, String),
@@ -196,7 +199,7 @@ pub trait Model {
             .collect();
         self.predict_norm(&xn)
     }
-    /// Predict a whole run (features computed from the run's own first row).
+    /// Predict a whole run on the board's features (NaN on rows with a sensor gap).
     fn predict_run(&self, run: &Run) -> Result<Vec<f64>> {
         let kinds: Vec<_> = self
             .features()
@@ -244,86 +247,17 @@ impl Model for NetParams {
 
 // ------------------------------------------------------------------ features
 
-/// A DS18B20 reading: round to 1/16 °C.
-#[inline]
-pub fn quantize_temp(t: f64) -> f64 {
-    (t * 16.0).round() / 16.0
-}
-
-/// First-order lag: `y_0 = u_0`, then `y ← u + exp(−dt/tau)·(y − u)`.
-pub fn lag_filter(time_s: &[f64], u: &[f64], tau_s: f64) -> Vec<f64> {
-    let mut out = Vec::with_capacity(u.len());
-    let mut y = match u.first() {
-        Some(&v) => v,
-        None => return out,
-    };
-    out.push(y);
-    for k in 1..u.len() {
-        let dt = time_s[k] - time_s[k - 1];
-        let a = (-dt / tau_s).exp();
-        y = u[k] + a * (y - u[k]);
-        out.push(y);
-    }
-    out
-}
-
-/// Column values with gaps filled by the last value (leading gaps by the
-/// first value).
-fn filled(run: &Run, name: &str) -> Result<Vec<f64>> {
-    let col = run.col(name).with_context(|| {
-        format!(
-            "run has no column `{name}` (columns: {})",
-            run.columns.join(",")
-        )
-    })?;
-    let first = col
-        .iter()
-        .flatten()
-        .next()
-        .copied()
-        .with_context(|| format!("column `{name}` has no values"))?;
-    let mut last = first;
-    Ok(col
-        .iter()
-        .map(|v| {
-            if let Some(v) = v {
-                last = *v;
-            }
-            last
-        })
-        .collect())
-}
-
-/// The raw (un-normalized) input series of one feature over a whole run.
+/// The raw (un-normalized) input series of one feature over a whole run, as
+/// the board computes it ([`features::board_series`]): °C or rpm, NaN on rows
+/// where the board computes no feature.
 pub fn feature_series(run: &Run, kind: &FeatureKind, tau_s: Option<f64>) -> Result<Vec<f64>> {
-    let u: Vec<f64> = match kind {
-        FeatureKind::SensorRise(a) => {
-            let t: Vec<f64> = filled(run, a)?.into_iter().map(quantize_temp).collect();
-            let t0 = t[0];
-            t.into_iter().map(|v| v - t0).collect()
-        }
-        FeatureKind::SensorDiff(a, b) => {
-            let ta = filled(run, a)?;
-            let tb = filled(run, b)?;
-            ta.iter()
-                .zip(&tb)
-                .map(|(x, y)| quantize_temp(*x) - quantize_temp(*y))
-                .collect()
-        }
-        FeatureKind::Spindle => filled(run, "spindle_rpm")?,
-    };
-    Ok(match tau_s {
-        Some(tau) if tau > 0.0 => lag_filter(&run.time_s(), &u, tau),
-        _ => u,
-    })
+    let mut s = features::board_series(run, &[(kind.clone(), tau_s)])?;
+    Ok(s.pop().unwrap_or_default())
 }
 
 /// Several features' series over a run: `out[feature][row]`.
 pub fn feature_columns(run: &Run, kinds: &[(FeatureKind, Option<f64>)]) -> Result<Vec<Vec<f64>>> {
-    kinds
-        .iter()
-        .map(|(k, t)| feature_series(run, k, *t))
-        .collect()
+    features::board_series(run, kinds)
 }
 
 // -------------------------------------------------------------------- splits
@@ -391,18 +325,23 @@ pub struct SeriesCache {
 
 impl SeriesCache {
     pub fn new(runs: &[Run], kinds: Vec<(FeatureKind, Option<f64>)>) -> Result<SeriesCache> {
-        let series = kinds
-            .iter()
-            .map(|(k, t)| {
-                runs.iter()
-                    .map(|r| feature_series(r, k, *t))
-                    .collect::<Result<Vec<_>>>()
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let mut series = vec![Vec::with_capacity(runs.len()); kinds.len()];
+        for run in runs {
+            for (f, col) in feature_columns(run, &kinds)?.into_iter().enumerate() {
+                series[f].push(col);
+            }
+        }
         Ok(SeriesCache { kinds, series })
     }
 
-    /// Samples of features `idx` over the segments; rows without a target are skipped.
+    /// The board computes features `idx` at row `r` of run `run` (no gap).
+    #[inline]
+    fn usable(&self, idx: &[usize], run: usize, r: usize) -> bool {
+        idx.iter().all(|&f| self.series[f][run][r].is_finite())
+    }
+
+    /// Samples of features `idx` over the segments; rows without a target or
+    /// where the board computes no feature (a sensor gap) are skipped.
     pub fn samples(
         &self,
         runs: &[Run],
@@ -430,7 +369,9 @@ impl SeriesCache {
             let y = runs[seg.run]
                 .col(channel)
                 .with_context(|| format!("run {} has no column `{channel}`", seg.run + 1))?;
-            total += y[seg.start..seg.end].iter().filter(|v| v.is_some()).count();
+            total += (seg.start..seg.end)
+                .filter(|&r| y[r].is_some() && self.usable(idx, seg.run, r))
+                .count();
             cols.push(y);
         }
         let stride = total.div_ceil(max_rows.max(1)).max(1);
@@ -438,7 +379,7 @@ impl SeriesCache {
         let mut k = 0usize;
         for (seg, y) in segs.iter().zip(cols) {
             for r in seg.start..seg.end {
-                if let Some(t) = y[r] {
+                if let (Some(t), true) = (y[r], self.usable(idx, seg.run, r)) {
                     if k.is_multiple_of(stride) {
                         s.x.push(idx.iter().map(|&f| self.series[f][seg.run][r]).collect());
                         s.y.push(t);

@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+use super::features;
 use super::net::{self, Net, NetOpts};
 use super::*;
 use crate::runcsv::Run;
@@ -779,6 +780,16 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         file.chosen.insert(ch.clone(), chosen);
         inputs.push(info);
         file.mlr.push(mlr);
+    }
+    // Sensor gaps: the board skips a step when any of the image's sensors is
+    // empty; say where that differs from what each channel trained on.
+    let image_kinds = features::chosen_kinds(&file);
+    if let Some(n) = features::image_gap_rows(&plan.runs, &plan.train, &image_kinds)? {
+        if n > 0 {
+            notes.push(format!(
+                "{n} training rows have a sensor gap in another channel's inputs: there the board's features for the exported model differ from the ones trained on (the board skips a step when any of its sensors is empty)"
+            ));
+        }
     }
     let models = reports
         .into_values()

@@ -9,7 +9,6 @@ pub mod cli;
 pub mod duty;
 pub mod effects;
 pub mod limits;
-pub mod linalg;
 pub mod machine;
 
 use anyhow::{bail, Result};
@@ -20,7 +19,8 @@ pub use duty::{Duty, Inputs};
 pub use effects::{Effect, EFFECT_NAMES};
 pub use machine::{Machine, Probe};
 
-use linalg::{discretize, solve, Mat};
+use crate::linalg::{discretize, solve};
+use nalgebra::{DMatrix, DVector};
 
 /// Noise-free simulator output at the output samples.
 #[derive(Clone, Debug)]
@@ -126,18 +126,25 @@ fn saw(t: f64, amp: f64, period: f64) -> f64 {
 
 /// The state matrix `A` (dx/dt = A x + b) for the given ambient and
 /// coolant conductances.
-fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> Mat {
-    let mut a = Mat::zeros(m.n);
-    for &(i, j, g) in &m.links {
-        a.add(i, i, -g / m.c[i]);
-        a.add(j, j, -g / m.c[j]);
-        a.add(i, j, g / m.c[i]);
-        a.add(j, i, g / m.c[j]);
-    }
+fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> DMatrix<f64> {
+    let mut a = -conductance(m, g_amb);
     for i in 0..m.n {
-        a.add(i, i, -(g_amb[i] + g_cool[i]) / m.c[i]);
+        a[(i, i)] -= g_cool[i];
+        a.row_mut(i).unscale_mut(m.c[i]);
     }
     a
+}
+
+/// The conductance matrix `L + diag(g_amb)` (W/K) of the network.
+fn conductance(m: &Machine, g_amb: &[f64]) -> DMatrix<f64> {
+    let mut l = DMatrix::from_diagonal(&DVector::from_column_slice(&g_amb[..m.n]));
+    for &(i, j, g) in &m.links {
+        l[(i, i)] += g;
+        l[(j, j)] += g;
+        l[(i, j)] -= g;
+        l[(j, i)] -= g;
+    }
+    l
 }
 
 /// Steady state of the network for heat `q` [W] and ambient `ta`
@@ -145,21 +152,11 @@ fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> Mat {
 pub fn steady_state(m: &Machine, q: &[f64], ta: f64, effects: &[Effect]) -> Result<Vec<f64>> {
     let act = activate(m, effects)?;
     let g_amb: Vec<f64> = (0..m.n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
-    let mut l = Mat::zeros(m.n);
-    for &(i, j, g) in &m.links {
-        l.add(i, i, g);
-        l.add(j, j, g);
-        l.add(i, j, -g);
-        l.add(j, i, -g);
-    }
-    let mut rhs = vec![0.0; m.n];
-    for i in 0..m.n {
-        l.add(i, i, g_amb[i]);
-        rhs[i] = q[i] + g_amb[i] * (ta + m.amb_offset[i]);
-    }
-    solve(&l, &rhs).ok_or_else(|| {
-        anyhow::anyhow!("thermal network is singular (a node without a path to ambient?)")
-    })
+    let rhs: Vec<f64> = (0..m.n)
+        .map(|i| q[i] + g_amb[i] * (ta + m.amb_offset[i]))
+        .collect();
+    solve(conductance(m, &g_amb), &rhs)
+        .map_err(|e| anyhow::anyhow!("thermal network: {e} (a node without a path to ambient?)"))
 }
 
 /// Simulate without noise. Output every `stride`-th step, starting at row 0.
@@ -171,33 +168,22 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     let dt = inp.dt;
     let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
     let zeros = vec![0.0; n];
-    let (phi0, psi0) = discretize(&state_matrix(m, &g_amb, &zeros), dt);
+    let (phi0, psi0) = discretize(&state_matrix(m, &g_amb, &zeros), dt)?;
     let mut g_cool = vec![0.0; n];
     let cool_mats = if let Some((g, ..)) = act.cool {
         for &i in &m.coolant_nodes {
             g_cool[i] += g / m.coolant_nodes.len() as f64;
         }
-        Some(discretize(&state_matrix(m, &g_amb, &g_cool), dt))
+        Some(discretize(&state_matrix(m, &g_amb, &g_cool), dt)?)
     } else {
         None
     };
     // initial equilibrium at rest
     let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
-    let mut x = {
-        let mut l = Mat::zeros(n);
-        for &(i, j, g) in &m.links {
-            l.add(i, i, g);
-            l.add(j, j, g);
-            l.add(i, j, -g);
-            l.add(j, i, -g);
-        }
-        let mut rhs = vec![0.0; n];
-        for i in 0..n {
-            l.add(i, i, g_amb[i]);
-            rhs[i] = g_amb[i] * (ta0 + m.amb_offset[i]);
-        }
-        solve(&l, &rhs).ok_or_else(|| anyhow::anyhow!("thermal network is singular"))?
-    };
+    let rhs: Vec<f64> = (0..n).map(|i| g_amb[i] * (ta0 + m.amb_offset[i])).collect();
+    let mut x = DVector::from_vec(
+        solve(conductance(m, &g_amb), &rhs).map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
+    );
     let x0 = x.clone();
     let k_total = inp.len();
     let n_out = k_total.div_ceil(stride);
@@ -207,9 +193,8 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     let mut disp = vec![Vec::with_capacity(n_out); nd];
     let mut ts = Vec::with_capacity(n_out);
     let mut q = vec![0.0; n];
-    let mut b = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
-    let mut tmp2 = vec![0.0; n];
+    let mut b = DVector::<f64>::zeros(n);
+    let mut next = DVector::<f64>::zeros(n);
     let n_max = m.spec.n_max_rpm;
     let n_screw = m.ballscrew_nodes.len().max(1) as f64;
     let mut last_rpm = f64::NAN;
@@ -273,11 +258,9 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
             }
             _ => (&phi0, &psi0),
         };
-        phi.mul_vec_into(&x, &mut tmp);
-        psi.mul_vec_into(&b, &mut tmp2);
-        for i in 0..n {
-            x[i] = tmp[i] + tmp2[i];
-        }
+        next.gemv(1.0, phi, &x, 0.0);
+        next.gemv(1.0, psi, &b, 1.0);
+        std::mem::swap(&mut x, &mut next);
     }
     // sensor lag (first-order, exact for a signal linear between samples)
     if let Some(tau) = act.lag {
