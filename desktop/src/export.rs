@@ -95,6 +95,9 @@ pub enum Choice {
     Mlr,
     /// The static MLR on the selected sensors (`mlr-static`).
     MlrStatic,
+    /// The lagged MLR plus its residual networks (`hybrid`): a table and
+    /// networks of the same direction, which the board sums.
+    Hybrid,
 }
 
 impl Choice {
@@ -103,7 +106,8 @@ impl Choice {
             "net" | "ga-bpn" => Choice::Net,
             "mlr" => Choice::Mlr,
             "mlr-static" => Choice::MlrStatic,
-            other => anyhow::bail!("unknown model `{other}` (ga-bpn, mlr or mlr-static)"),
+            "hybrid" => Choice::Hybrid,
+            other => anyhow::bail!("unknown model `{other}` (ga-bpn, hybrid, mlr or mlr-static)"),
         })
     }
 }
@@ -278,15 +282,31 @@ pub fn float_model_from_fit(
             max_correction_um: opts.max_correction_um,
             max_rate_um_per_s: opts.max_rate_um_per_s,
         });
-        let members: Vec<_> = file.nets.iter().filter(|n| &n.channel == ch).collect();
+        let members: Vec<_> = match choice {
+            Choice::Net => file.nets.iter().filter(|n| &n.channel == ch).collect(),
+            Choice::Hybrid => file
+                .hybrid_nets
+                .iter()
+                .filter(|n| &n.channel == ch)
+                .collect(),
+            _ => vec![],
+        };
         let mlr = match choice {
             Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
-            _ => file.mlr.iter().find(|m| &m.channel == ch),
+            Choice::Mlr | Choice::Hybrid => file.mlr.iter().find(|m| &m.channel == ch),
+            Choice::Net => None,
         };
-        match choice {
-            Choice::Net => {
+        if matches!(choice, Choice::Net | Choice::Hybrid) {
+            {
                 if members.is_empty() {
-                    anyhow::bail!("no fitted network for channel {ch} (fit without --mlr-only)");
+                    anyhow::bail!(
+                        "no fitted {} network for channel {ch} (fit without --mlr-only)",
+                        if choice == Choice::Hybrid {
+                            "hybrid"
+                        } else {
+                            "ga-bpn"
+                        }
+                    );
                 }
                 if model.nets.len() + members.len() > MAX_NETS {
                     anyhow::bail!(
@@ -331,7 +351,9 @@ pub fn float_model_from_fit(
                     });
                 }
             }
-            Choice::Mlr | Choice::MlrStatic => {
+        }
+        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) {
+            {
                 let Some(m) = mlr else {
                     anyhow::bail!("no fitted {choice:?} model for channel {ch}");
                 };
@@ -375,7 +397,7 @@ pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
             let (ch, k) = p.split_once('=').ok_or_else(|| {
-                anyhow::anyhow!("expected CHANNEL=ga-bpn|mlr|mlr-static, got {p}")
+                anyhow::anyhow!("expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static, got {p}")
             })?;
             Ok((ch.trim().to_string(), Choice::parse(k)?))
         })

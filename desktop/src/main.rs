@@ -30,7 +30,7 @@ enum Command {
         #[arg(long, requires = "model")]
         run: Option<std::path::PathBuf>,
         /// Per-channel override of the fit's cross-validated choice, e.g.
-        /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, mlr, mlr-static).
+        /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, hybrid, mlr, mlr-static).
         #[arg(long, default_value = "")]
         r#use: String,
         #[arg(long, default_value_t = 200.0)]

@@ -7,6 +7,7 @@
 //!
 //! Usage: bench-fit [--json] [--data run.csv] [--ensemble N] [--no-sklearn]
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -23,26 +24,26 @@ fn default_data() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/caiviac-fl-thermal/run.csv")
 }
 
-/// Rows with `t0 ≤ t ≤ t1` linearly interpolated to 1 Hz (time restarts at 0).
-fn resample_1hz(run: &Run, t0: f64, t1: f64) -> Result<Run> {
+/// Rows with `t0 ≤ t ≤ t1` linearly interpolated every `dt` seconds (time
+/// restarts at 0).
+fn resample(run: &Run, t0: f64, t1: f64, dt: f64, what: &str) -> Result<Run> {
     let t = run.time_s();
     let mut out = Run {
         meta: run.meta.clone(),
         columns: run.columns.clone(),
         data: vec![Vec::new(); run.columns.len()],
     };
-    out.set_meta(
-        "source",
-        "FL_THERMAL resampled to 1 Hz (linear interpolation) for bench-fit",
-    );
+    out.set_meta("source", what);
     let mut k = 0usize;
-    let mut ts = t0;
-    while ts <= t1 {
-        while k + 1 < t.len() && t[k + 1] < ts {
-            k += 1;
-        }
-        if k + 1 >= t.len() {
+    let mut i = 0u64;
+    loop {
+        let ts = t0 + i as f64 * dt;
+        if ts > t1 + 1e-6 * dt || t.len() < 2 {
             break;
+        }
+        let ts = ts.min(t[t.len() - 1]);
+        while k + 2 < t.len() && t[k + 1] < ts {
+            k += 1;
         }
         let w = ((ts - t[k]) / (t[k + 1] - t[k])).clamp(0.0, 1.0);
         out.data[0].push(Some(ts - t0));
@@ -53,12 +54,39 @@ fn resample_1hz(run: &Run, t0: f64, t1: f64) -> Result<Run> {
             };
             out.data[c].push(v);
         }
-        ts += 1.0;
+        i += 1;
     }
     if out.rows() < 100 {
         bail!("resampling gave only {} rows", out.rows());
     }
     Ok(out)
+}
+
+fn resample_1hz(run: &Run, t0: f64, t1: f64) -> Result<Run> {
+    resample(
+        run,
+        t0,
+        t1,
+        1.0,
+        "FL_THERMAL resampled to 1 Hz (linear interpolation) for bench-fit",
+    )
+}
+
+/// FL_THERMAL's whole span linearly interpolated to `rows` rows (the
+/// 500,000-row fit-time case).
+pub fn resample_rows(run: &Run, rows: usize) -> Result<Run> {
+    let t = run.time_s();
+    let (t0, t1) = (t[0], t[t.len() - 1]);
+    let dt = (t1 - t0) / (rows.max(2) - 1) as f64;
+    let mut r = resample(
+        run,
+        t0,
+        t1,
+        dt,
+        "FL_THERMAL interpolated for the bench-fit fit-time case",
+    )?;
+    r.set_meta("sample_period_s", &format!("{dt}"));
+    Ok(r)
 }
 
 fn main() -> Result<()> {
@@ -110,17 +138,107 @@ fn main() -> Result<()> {
     };
     let mut table = Vec::new();
     for (ch, publ) in PUBLISHED {
-        let inputs = rep
-            .inputs
-            .iter()
-            .find(|i| i.channel == ch)
-            .map(|i| i.features.clone())
-            .unwrap_or_default();
+        let info = rep.inputs.iter().find(|i| i.channel == ch);
         table.push(serde_json::json!({
             "channel": ch, "published_seq2seq_attention_mae_um": publ,
+            "chosen": rep.chosen.get(ch),
+            "chosen_mae_um": rep.chosen.get(ch).and_then(|m| mae(m, ch)),
             "mlr_static_mae_um": mae("mlr-static", ch), "mlr_mae_um": mae("mlr", ch),
-            "ga_bpn_mae_um": mae("ga-bpn", ch), "inputs": inputs,
+            "hybrid_mae_um": mae("hybrid", ch), "ga_bpn_mae_um": mae("ga-bpn", ch),
+            "cv": info.map(|i| &i.cv),
+            "inputs": info.map(|i| i.features.clone()).unwrap_or_default(),
         }));
+    }
+
+    // (a2) Seed spread: the default pipeline with ensemble base seeds
+    // 1, 5, 9, ... (members never shared between seeds); test MAE of the
+    // chosen model and of each network candidate.
+    let n_seeds: usize = opt("--seeds")
+        .map(|s| s.parse())
+        .transpose()
+        .context("--seeds")?
+        .unwrap_or(5);
+    let mut seeds_out = Vec::new();
+    if n_seeds > 0 {
+        let mut per: Vec<BTreeMap<String, Vec<f64>>> = vec![BTreeMap::new(); PUBLISHED.len()];
+        let mut chosen_names: Vec<Vec<String>> = vec![vec![]; PUBLISHED.len()];
+        for k in 0..n_seeds {
+            let seed = 1 + 4 * k as u64;
+            let c = FitConfig {
+                net: NetOpts {
+                    seed,
+                    ..cfg.net.clone()
+                },
+                progress: false,
+                ..cfg.clone()
+            };
+            let r = fit_plan(&plan, &c)?;
+            for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
+                let chosen = r.chosen.get(*ch).cloned().unwrap_or_default();
+                for m in &r.models {
+                    if let Some(x) = m.channels.get(*ch) {
+                        per[i].entry(m.name.clone()).or_default().push(x.mae_um);
+                        if m.name == chosen {
+                            per[i].entry("chosen".into()).or_default().push(x.mae_um);
+                        }
+                    }
+                }
+                chosen_names[i].push(chosen);
+            }
+            if !json {
+                eprintln!("seed {seed}: chosen {:?}", r.chosen);
+            }
+        }
+        for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
+            let stats: BTreeMap<&String, serde_json::Value> = per[i]
+                .iter()
+                .map(|(name, v)| {
+                    let n = v.len() as f64;
+                    let mean = v.iter().sum::<f64>() / n;
+                    let sd = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>()
+                        / (n - 1.0).max(1.0))
+                    .sqrt();
+                    (
+                        name,
+                        serde_json::json!({"mae_um": v, "mean_um": mean, "sd_um": sd,
+                            "spread_pct": 100.0 * sd / mean}),
+                    )
+                })
+                .collect();
+            seeds_out.push(serde_json::json!({"channel": ch,
+                "base_seeds": (0..n_seeds).map(|k| 1 + 4 * k).collect::<Vec<_>>(),
+                "chosen": chosen_names[i], "test_mae": stats}));
+        }
+    }
+
+    // (c) Fit time on 500,000 rows: FL_THERMAL's whole span interpolated
+    // (≈ 3 Hz), default pipeline, both published channels.
+    let big_rows: usize = opt("--big-rows")
+        .map(|s| s.parse())
+        .transpose()
+        .context("--big-rows")?
+        .unwrap_or(500_000);
+    let mut big = serde_json::Value::Null;
+    if big_rows > 0 {
+        let rb = resample_rows(&run, big_rows)?;
+        if let Some(p) = opt("--write-big") {
+            rb.write(std::path::Path::new(&p))?;
+        }
+        let n = rb.rows();
+        let t_c = Instant::now();
+        let planb = Plan::new(vec![rb], vec!["fl-big".into()], 1, Some((0.6, 0.8)))?;
+        let c = FitConfig {
+            progress: false,
+            ..cfg.clone()
+        };
+        let r = fit_plan(&planb, &c)?;
+        let secs = t_c.elapsed().as_secs_f64();
+        big = serde_json::json!({"rows": n, "fit_s": secs, "target_s": 30.0,
+            "chosen": r.chosen,
+            "cv": r.inputs.iter().map(|i| (i.channel.clone(), i.cv.clone())).collect::<BTreeMap<_, _>>()});
+        if !json {
+            eprintln!("{n}-row fit: {secs:.1} s, chosen {:?}", r.chosen);
+        }
     }
 
     // (b) 4 h at 1 Hz: GA + LM vs scikit-learn.
@@ -216,16 +334,16 @@ fn main() -> Result<()> {
         "sklearn": sk, "sklearn_error": sk_err,
         "ratio_sklearn_over_ours": sk_s.map(|s| s / ours_s),
     });
-    let out =
-        serde_json::json!({"fl_thermal": table, "fl_thermal_fit_s": fl_s, "timing_4h_1hz": timing});
+    let out = serde_json::json!({"fl_thermal": table, "fl_thermal_fit_s": fl_s,
+        "seed_spread": seeds_out, "big_fit": big, "timing_4h_1hz": timing});
     if json {
         println!("{out}");
         return Ok(());
     }
-    println!("FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm");
+    println!("FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)");
     println!(
-        "{:<9} {:>10} {:>11} {:>8} {:>8}  inputs (ours)",
-        "channel", "published", "MLR static", "MLR", "GA-BPN"
+        "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
+        "channel", "published", "MLR static", "MLR", "hybrid", "GA-BPN", "chosen"
     );
     for row in &table {
         let f = |k: &str| {
@@ -234,12 +352,14 @@ fn main() -> Result<()> {
                 .map_or("-".to_string(), |v| format!("{v:.2}"))
         };
         println!(
-            "{:<9} {:>10} {:>11} {:>8} {:>8}  {}",
+            "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} {}",
             row["channel"].as_str().unwrap_or(""),
             f("published_seq2seq_attention_mae_um"),
             f("mlr_static_mae_um"),
             f("mlr_mae_um"),
+            f("hybrid_mae_um"),
             f("ga_bpn_mae_um"),
+            row["chosen"].as_str().unwrap_or("-"),
             row["inputs"]
                 .as_array()
                 .map(|a| a
@@ -249,6 +369,12 @@ fn main() -> Result<()> {
                     .join(", "))
                 .unwrap_or_default()
         );
+    }
+    for s in &seeds_out {
+        println!("seed spread {}: {}", s["channel"], s["test_mae"]);
+    }
+    if !big.is_null() {
+        println!("big fit: {big}");
     }
     println!("(published: seq2seq + attention, GPU; fit took {fl_s:.1} s for both channels)\n");
     println!(

@@ -68,6 +68,15 @@ pub struct FitArgs {
     /// Only the MLR models.
     #[arg(long)]
     pub mlr_only: bool,
+    /// Also fit and cross-validate the hybrid candidate (lagged MLR +
+    /// networks on its residual; off by default: it never won the
+    /// cross-validation on FL_THERMAL and doubles the network time).
+    #[arg(long)]
+    pub hybrid: bool,
+    /// Cross-validate every network candidate on every fold (by default one
+    /// is dropped as soon as its error bound shows it cannot be chosen).
+    #[arg(long)]
+    pub full_cv: bool,
     /// Write the fitted models (MLR and networks, JSON).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -142,6 +151,8 @@ impl FitArgs {
         cfg.choice_margin = self.choice_margin;
         cfg.progress = !self.json;
         cfg.skip_net = self.mlr_only;
+        cfg.hybrid = self.hybrid;
+        cfg.cv_drop = !self.full_cv;
         Ok(cfg)
     }
 }

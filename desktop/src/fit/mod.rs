@@ -82,13 +82,49 @@ pub struct ModelFile {
     #[serde(default)]
     pub mlr_static: Vec<MlrParams>,
     /// The model blocked cross-validation on the training rows chose per
-    /// channel (`mlr-static`, `mlr` or `ga-bpn`); what `export` ships by default.
+    /// channel (`mlr-static`, `mlr`, `hybrid` or `ga-bpn`); what `export`
+    /// ships by default.
     #[serde(default)]
     pub chosen: std::collections::BTreeMap<String, String>,
+    /// Residual networks per channel (model name `hybrid`): the channel's
+    /// hybrid prediction is its lagged MLR (`mlr`) plus the mean of these
+    /// members, trained on the MLR's training residual. The board sums a
+    /// table and networks of the same direction, so it ships as both.
+    #[serde(default)]
+    pub hybrid_nets: Vec<NetParams>,
 }
 
-/// Model names, simplest first (the order ties are broken in).
-pub const MODEL_NAMES: [&str; 3] = ["mlr-static", "mlr", "ga-bpn"];
+/// Model names, simplest first (the order ties are broken in): the hybrid is
+/// anchored on the lagged MLR (its network only corrects the residual), so it
+/// is taken as simpler than the free network.
+pub const MODEL_NAMES: [&str; 4] = ["mlr-static", "mlr", "hybrid", "ga-bpn"];
+
+/// Lagged MLR plus a network ensemble on its residual, same inputs.
+pub struct Hybrid<'a> {
+    pub mlr: &'a MlrParams,
+    pub residual: NetEnsemble<'a>,
+}
+
+impl<'a> Hybrid<'a> {
+    /// The hybrid of `channel` in a fit file (None without its parts).
+    pub fn of(file: &'a ModelFile, channel: &str) -> Option<Self> {
+        let mlr = file.mlr.iter().find(|m| m.channel == channel)?;
+        let residual = NetEnsemble::of(&file.hybrid_nets, channel)?;
+        Some(Hybrid { mlr, residual })
+    }
+}
+
+impl Model for Hybrid<'_> {
+    fn features(&self) -> &[FeatureSpec] {
+        &self.mlr.features
+    }
+    fn channel(&self) -> &str {
+        &self.mlr.channel
+    }
+    fn predict_norm(&self, xn: &[f64]) -> f64 {
+        self.mlr.predict_norm(xn) + self.residual.predict_norm(xn)
+    }
+}
 
 /// The networks of one channel, averaged: the ensemble that goes on the board.
 pub struct NetEnsemble<'a> {
@@ -545,23 +581,32 @@ pub fn blocked_folds(
 }
 
 /// Rows (at most) each fold's fit and held-out parts use during input
-/// selection and cross-validation; runs sampled densely are strided to it.
-pub const SELECT_ROWS: usize = 20_000;
+/// selection and cross-validation; runs sampled densely are strided to it
+/// (8,000 rows over a fold spanning hours are seconds apart, far below any
+/// thermal time constant; FL_THERMAL's 15 s rows are never strided).
+pub const SELECT_ROWS: usize = 8_000;
 
-/// Mean squared error of an MLR on `idx`, fitted on `fit`, scored on `val`.
+/// Sum of squared errors (and rows) of an MLR on candidate columns `idx`,
+/// fitted on `tr`, scored on `va` (both gathered with every candidate).
 fn mlr_block_sse(
     cache: &SeriesCache,
-    runs: &[Run],
-    fit: &[Segment],
-    val: &[Segment],
+    tr: &Samples,
+    va: &Samples,
     idx: &[usize],
     channel: &str,
 ) -> Result<(f64, usize)> {
-    let tr = cache.samples_capped(runs, fit, idx, channel, SELECT_ROWS)?;
-    let va = cache.samples_capped(runs, val, idx, channel, SELECT_ROWS)?;
     if tr.y.is_empty() || va.y.is_empty() {
         return Ok((0.0, 0));
     }
+    let pick = |s: &Samples| Samples {
+        x: s.x
+            .iter()
+            .map(|r| idx.iter().map(|&i| r[i]).collect())
+            .collect(),
+        y: s.y.clone(),
+        rows: vec![],
+    };
+    let (tr, va) = (pick(tr), pick(va));
     let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
     let m = fit_mlr(ranged_specs(&kinds, &tr), &tr, channel)?;
     let xn = normalize_rows(&m.features, &va.x);
@@ -589,6 +634,18 @@ pub fn greedy_select(
     in_use: &[usize],
     new_budget: usize,
 ) -> Result<(Vec<usize>, f64)> {
+    // Each fold's rows, gathered once with every candidate (the rows do not
+    // depend on the inputs).
+    let all: Vec<usize> = (0..cache.kinds.len()).collect();
+    let gathered = folds
+        .iter()
+        .map(|(fit, val)| {
+            Ok((
+                cache.samples_capped(runs, fit, &all, channel, SELECT_ROWS)?,
+                cache.samples_capped(runs, val, &all, channel, SELECT_ROWS)?,
+            ))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let mut chosen: Vec<usize> = Vec::new();
     let mut best_err = f64::INFINITY;
     while chosen.len() < max_inputs {
@@ -601,8 +658,8 @@ pub fn greedy_select(
             let mut idx = chosen.clone();
             idx.push(c);
             let (mut sse, mut n) = (0.0, 0usize);
-            for (fit, val) in folds {
-                let (s, k) = mlr_block_sse(cache, runs, fit, val, &idx, channel)?;
+            for (tr, va) in &gathered {
+                let (s, k) = mlr_block_sse(cache, tr, va, &idx, channel)?;
                 sse += s;
                 n += k;
             }

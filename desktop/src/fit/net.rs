@@ -50,7 +50,7 @@ impl Default for NetOpts {
             tournament: 3,
             elites: 2,
             mutation_rate: 0.15,
-            ga_rows: 2500,
+            ga_rows: 1000,
             lm_iters: 300,
             patience: 30,
             l2: 1e-5,
@@ -186,6 +186,69 @@ fn solve_output(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
     s / y.len().max(1) as f64
 }
 
+/// GA fitness: as [`solve_output`], but by the normal equations of the
+/// (n_hidden + 1)-column hidden layer and a Cholesky factorization with a
+/// small ridge — an O(n·nh²) accumulation instead of an SVD of the n×(nh+1)
+/// matrix per genome. Only ranks genomes; the winner's output layer is
+/// solved again by SVD on all rows.
+fn fitness(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
+    let (n_in, nh) = (net.n_in, net.nh);
+    let k = n_in + 1;
+    let m = nh + 1;
+    let mut ata = vec![0.0; m * m];
+    let mut aty = vec![0.0; m];
+    let mut h = vec![0.0; m];
+    h[0] = 1.0;
+    let mut hs: Vec<f64> = Vec::with_capacity(x.len() * m);
+    for (r, &t) in x.iter().zip(y) {
+        for j in 0..nh {
+            let w = &net.theta[j * k..j * k + k];
+            let mut z = w[n_in];
+            for i in 0..n_in {
+                z += w[i] * r[i];
+            }
+            h[1 + j] = sigmoid(z);
+        }
+        for a in 0..m {
+            let ha = h[a];
+            aty[a] += ha * t;
+            for b in 0..=a {
+                ata[a * m + b] += ha * h[b];
+            }
+        }
+        hs.extend_from_slice(&h);
+    }
+    let ridge = 1e-6 * y.len().max(1) as f64;
+    for a in 0..m {
+        for b in 0..a {
+            ata[b * m + a] = ata[a * m + b];
+        }
+        if a > 0 {
+            ata[a * m + a] += ridge;
+        }
+    }
+    let Ok(c) = solve_spd(&ata, &aty, m) else {
+        return f64::INFINITY;
+    };
+    let o = net.out_off();
+    net.theta[o + nh] = c[0];
+    net.theta[o..o + nh].copy_from_slice(&c[1..]);
+    let sse: f64 = hs
+        .chunks_exact(m)
+        .zip(y)
+        .map(|(hr, &t)| {
+            let p: f64 = hr.iter().zip(&c).map(|(a, b)| a * b).sum();
+            (p - t) * (p - t)
+        })
+        .sum();
+    let v = sse / y.len().max(1) as f64;
+    if v.is_finite() {
+        v
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Genetic search of the hidden-layer weights. Returns the best network
 /// (output layer least-squares fitted) and its fitness history.
 pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) -> (Net, Vec<f64>) {
@@ -209,7 +272,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
         .map(|_| (new_net(&mut rng), f64::INFINITY))
         .collect();
     pop.par_iter_mut()
-        .for_each(|(n, f)| *f = solve_output(n, &xs, &ys));
+        .for_each(|(n, f)| *f = fitness(n, &xs, &ys));
     let mut history = Vec::new();
     for gen in 0..opts.generations {
         pop.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -245,7 +308,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
         }
         next[opts.elites..]
             .par_iter_mut()
-            .for_each(|(n, f)| *f = solve_output(n, &xs, &ys));
+            .for_each(|(n, f)| *f = fitness(n, &xs, &ys));
         pop = next;
         pb.inc(1);
     }
@@ -257,23 +320,29 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
     (best, history)
 }
 
-/// Gauss–Newton pieces over all rows: (JᵀJ/N, Jᵀr/N, mse).
+/// Gauss–Newton pieces over all rows: (JᵀJ/N, Jᵀr/N, mse). The Jacobian is
+/// built in blocks of rows and JᵀJ accumulated by nalgebra's matrix product
+/// (blocked, vectorized) — the cost of every Levenberg–Marquardt step.
 fn normal_eqs(net: &Net, x: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
+    use nalgebra::{DMatrix, DVector};
     let p = net.theta.len();
     let (n_in, nh) = (net.n_in, net.nh);
     let k = n_in + 1;
     let o = nh * k;
-    let chunk = (x.len() / 16).max(256);
-    let (mut jtj, mut jtr, sse) = x
+    let chunk = 512;
+    let (jtj, jtr, sse) = x
         .par_chunks(chunk)
         .zip(y.par_chunks(chunk))
         .map(|(xc, yc)| {
-            let mut jtj = vec![0.0; p * p];
-            let mut jtr = vec![0.0; p];
-            let mut g = vec![0.0; p];
+            let rows = xc.len();
+            // Row-major J (rows × p) = column-major Jᵀ (p × rows).
+            let mut jt = DMatrix::<f64>::zeros(p, rows);
+            let mut e = DVector::<f64>::zeros(rows);
+            let th = &net.theta;
             let mut sse = 0.0;
-            for (r, &t) in xc.iter().zip(yc) {
-                let th = &net.theta;
+            let buf = jt.as_mut_slice();
+            for (ri, (r, &t)) in xc.iter().zip(yc).enumerate() {
+                let g = &mut buf[ri * p..(ri + 1) * p];
                 let mut out = th[o + nh];
                 for j in 0..nh {
                     let w = &th[j * k..j * k + k];
@@ -291,39 +360,22 @@ fn normal_eqs(net: &Net, x: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>, f64)
                     g[j * k + n_in] = d;
                 }
                 g[o + nh] = 1.0;
-                let e = out - t;
-                sse += e * e;
-                for a in 0..p {
-                    let ga = g[a];
-                    jtr[a] += ga * e;
-                    let row = &mut jtj[a * p..a * p + a + 1];
-                    for (b, v) in row.iter_mut().enumerate() {
-                        *v += ga * g[b];
-                    }
-                }
+                let err = out - t;
+                e[ri] = err;
+                sse += err * err;
             }
+            let jtj = &jt * jt.transpose();
+            let jtr = &jt * e;
             (jtj, jtr, sse)
         })
         .reduce(
-            || (vec![0.0; p * p], vec![0.0; p], 0.0),
-            |mut a, b| {
-                for (u, v) in a.0.iter_mut().zip(&b.0) {
-                    *u += v;
-                }
-                for (u, v) in a.1.iter_mut().zip(&b.1) {
-                    *u += v;
-                }
-                (a.0, a.1, a.2 + b.2)
-            },
+            || (DMatrix::zeros(p, p), DVector::zeros(p), 0.0),
+            |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2),
         );
     let n = x.len().max(1) as f64;
-    for a in 0..p {
-        for b in 0..=a {
-            jtj[a * p + b] /= n;
-            jtj[b * p + a] = jtj[a * p + b];
-        }
-        jtr[a] /= n;
-    }
+    // Symmetric: row-major and column-major layouts agree.
+    let jtj: Vec<f64> = jtj.iter().map(|v| v / n).collect();
+    let jtr: Vec<f64> = jtr.iter().map(|v| v / n).collect();
     (jtj, jtr, sse / n)
 }
 

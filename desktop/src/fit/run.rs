@@ -55,6 +55,10 @@ pub struct FitConfig {
     pub skip_net: bool,
     /// A simpler model is chosen when its CV RMS is within this fraction of the best.
     pub choice_margin: f64,
+    /// Also fit and cross-validate the hybrid (lagged MLR + networks on its residual).
+    pub hybrid: bool,
+    /// Stop a network candidate's cross-validation once it cannot be chosen.
+    pub cv_drop: bool,
 }
 
 impl Default for FitConfig {
@@ -73,6 +77,8 @@ impl Default for FitConfig {
             progress: false,
             skip_net: false,
             choice_margin: 0.02,
+            hybrid: false,
+            cv_drop: true,
         }
     }
 }
@@ -377,6 +383,10 @@ pub struct CvScore {
     pub mae_um: f64,
     pub rows: usize,
     pub fold_rms_um: Vec<f64>,
+    /// Stopped before its last fold: it could no longer be chosen (its
+    /// figures cover only the folds it ran, latest first).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub dropped: bool,
 }
 
 /// Errors collected over folds.
@@ -409,6 +419,7 @@ impl CvAcc {
             mae_um: self.abs / self.n as f64,
             rows: self.n,
             fold_rms_um: self.folds.clone(),
+            dropped: false,
         })
     }
 }
@@ -420,9 +431,80 @@ fn split_blocks(plan: &Plan, segs: &[Segment], frac: f64) -> (Vec<Segment>, Vec<
         .unzip()
 }
 
+/// `s` with the target replaced by its residual after `m` (what the hybrid's
+/// networks learn).
+fn residual_samples<M: Model>(m: &M, s: &Samples) -> Samples {
+    Samples {
+        y: s.x
+            .iter()
+            .zip(&s.y)
+            .map(|(r, y)| y - m.predict_raw(r))
+            .collect(),
+        x: s.x.clone(),
+        rows: s.rows.clone(),
+    }
+}
+
+/// The hybrid's residual networks: an ensemble trained on the residual of
+/// `mlr`, kept only if it lowers the residual on the early-stopping time
+/// block (otherwise no networks: the hybrid is the MLR alone).
+fn train_hybrid(
+    mlr: &MlrParams,
+    specs: &[FeatureSpec],
+    inner: &Samples,
+    block: &Samples,
+    full: &Samples,
+    opts: &NetOpts,
+    pb: &ProgressBar,
+) -> Vec<NetParams> {
+    let rb = residual_samples(mlr, block);
+    let (members, _) = train_ensemble(
+        specs,
+        &mlr.channel,
+        &residual_samples(mlr, inner),
+        &rb,
+        &residual_samples(mlr, full),
+        opts,
+        pb,
+    );
+    if rb.y.is_empty() {
+        return members;
+    }
+    let ens = NetEnsemble {
+        members: members.iter().collect(),
+    };
+    let (mut with, mut without) = (0.0, 0.0);
+    for (r, y) in rb.x.iter().zip(&rb.y) {
+        with += (y - ens.predict_raw(r)).powi(2);
+        without += y * y;
+    }
+    if with < without {
+        members
+    } else {
+        vec![]
+    }
+}
+
+/// Which network candidates to fit and score.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetCandidates {
+    /// The free GA-BPN ensemble (`ga-bpn`).
+    pub net: bool,
+    /// Lagged MLR + GA-BPN ensemble on its residual (`hybrid`).
+    pub hybrid: bool,
+}
+
 /// Blocked time cross-validation of every candidate model of one channel on
 /// the training rows: each fold refits the model on the other blocks and
 /// scores it on its own block. Validation rows are never touched.
+///
+/// The linear models are scored on every fold. A network candidate is then
+/// scored fold by fold, the latest time block first, and dropped as soon as
+/// it cannot be chosen: its pooled squared error so far, divided by all the
+/// held-out rows (as if the remaining folds scored zero), already puts its
+/// RMS at or above the best linear model's RMS / (1 + margin) (the choice
+/// would then take the linear model). A dropped candidate reports the folds
+/// it ran and `dropped: true`, and is not admissible.
 #[allow(clippy::too_many_arguments)]
 fn cross_validate(
     cache: &SeriesCache,
@@ -432,13 +514,14 @@ fn cross_validate(
     static_idx: &[usize],
     ch: &str,
     cfg: &FitConfig,
-    with_net: bool,
+    with: NetCandidates,
 ) -> Result<BTreeMap<String, CvScore>> {
     let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
     let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-    let (mut acc_static, mut acc_mlr, mut acc_net) =
-        (CvAcc::default(), CvAcc::default(), CvAcc::default());
-    for (fit, val) in folds {
+    let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
+    // Per usable fold: (fold index, specs, fitted MLR, fit rows, held-out rows).
+    let mut kept = Vec::new();
+    for (f, (fit, val)) in folds.iter().enumerate() {
         let tr = cache.samples_capped(&plan.runs, fit, idx, ch, SELECT_ROWS)?;
         let va = cache.samples_capped(&plan.runs, val, idx, ch, SELECT_ROWS)?;
         if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
@@ -446,8 +529,8 @@ fn cross_validate(
         }
         let specs = ranged_specs(&kinds, &tr);
         let m = fit_mlr(specs.clone(), &tr, ch)?;
-        let p: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
-        acc_mlr.add_fold(&va.y, &p);
+        let p_mlr: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
+        acc_mlr.add_fold(&va.y, &p_mlr);
         if !static_idx.is_empty() {
             let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
             let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
@@ -455,33 +538,80 @@ fn cross_validate(
             let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
             acc_static.add_fold(&vas.y, &p);
         }
-        if with_net {
+        kept.push((f, specs, m, tr, va, p_mlr));
+    }
+    let mut out = BTreeMap::new();
+    for (name, acc) in [("mlr-static", &acc_static), ("mlr", &acc_mlr)] {
+        if let Some(sc) = acc.score() {
+            out.insert(name.to_string(), sc);
+        }
+    }
+    let n_total = acc_mlr.n;
+    let linear_best = out
+        .values()
+        .map(|s| s.rms_um)
+        .fold(f64::INFINITY, f64::min);
+    for (name, on) in [("hybrid", with.hybrid), ("ga-bpn", with.net)] {
+        if !on {
+            continue;
+        }
+        let bar = linear_best / (1.0 + cfg.choice_margin);
+        let mut acc = CvAcc::default();
+        let mut dropped = false;
+        for (f, specs, m, tr, va, p_mlr) in kept.iter().rev() {
+            let fit = &folds[*f].0;
             let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
             let inner_s = cache.samples_capped(&plan.runs, &inner, idx, ch, cfg.net.max_rows)?;
             let block_s = cache.samples_capped(&plan.runs, &block, idx, ch, cfg.net.max_rows)?;
-            let (members, _) = train_ensemble(
-                &specs,
-                ch,
-                &inner_s,
-                &block_s,
-                &tr,
-                &cfg.net,
-                &ProgressBar::hidden(),
-            );
-            let ens = NetEnsemble {
-                members: members.iter().collect(),
+            let full_s = tr.strided(cfg.net.max_rows);
+            let p: Vec<f64> = if name == "ga-bpn" {
+                let (members, _) = train_ensemble(
+                    specs,
+                    ch,
+                    &inner_s,
+                    &block_s,
+                    &full_s,
+                    &cfg.net,
+                    &ProgressBar::hidden(),
+                );
+                let ens = NetEnsemble {
+                    members: members.iter().collect(),
+                };
+                va.x.iter().map(|r| ens.predict_raw(r)).collect()
+            } else {
+                let members = train_hybrid(
+                    m,
+                    specs,
+                    &inner_s,
+                    &block_s,
+                    &full_s,
+                    &cfg.net,
+                    &ProgressBar::hidden(),
+                );
+                let ens = NetEnsemble {
+                    members: members.iter().collect(),
+                };
+                va.x.iter()
+                    .zip(p_mlr)
+                    .map(|(r, pm)| {
+                        if members.is_empty() {
+                            *pm
+                        } else {
+                            pm + ens.predict_raw(r)
+                        }
+                    })
+                    .collect()
             };
-            let p: Vec<f64> = va.x.iter().map(|r| ens.predict_raw(r)).collect();
-            acc_net.add_fold(&va.y, &p);
+            acc.add_fold(&va.y, &p);
+            if cfg.cv_drop && n_total > 0 && (acc.sq / n_total as f64).sqrt() >= bar {
+                dropped = acc.n < n_total;
+                break;
+            }
         }
-    }
-    let mut out = BTreeMap::new();
-    for (name, acc) in [
-        ("mlr-static", acc_static),
-        ("mlr", acc_mlr),
-        ("ga-bpn", acc_net),
-    ] {
-        if let Some(sc) = acc.score() {
+        // Fold figures in time order.
+        acc.folds.reverse();
+        if let Some(mut sc) = acc.score() {
+            sc.dropped = dropped;
             out.insert(name.to_string(), sc);
         }
     }
@@ -700,10 +830,13 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                     ),
             )
             .collect();
-        let with_net = !cfg.skip_net;
+        let with = NetCandidates {
+            net: !cfg.skip_net,
+            hybrid: !cfg.skip_net && cfg.hybrid,
+        };
         let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
         let cv = if folds.len() > 1 {
-            cross_validate(&cache, plan, &folds, &idx, &static_ok, ch, cfg, with_net)?
+            cross_validate(&cache, plan, &folds, &idx, &static_ok, ch, cfg, with)?
         } else {
             BTreeMap::new()
         };
@@ -736,35 +869,75 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             cv: cv.clone(),
             net: None,
         };
-        if with_net {
+        let mut hybrid_empty = false;
+        if with.net || with.hybrid {
             let (inner, block) = plan.inner_block(cfg.es_frac);
             let inner_s = cache.samples_capped(&plan.runs, &inner, &idx, ch, cfg.net.max_rows)?;
             let block_s = cache.samples_capped(&plan.runs, &block, &idx, ch, cfg.net.max_rows)?;
-            let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
-            let (members, infos) =
-                train_ensemble(&specs, ch, &inner_s, &block_s, &full, &cfg.net, &pb);
-            pb.finish_and_clear();
-            let ens = NetEnsemble {
-                members: members.iter().collect(),
-            };
-            if let Some(r) = reports.get_mut("ga-bpn") {
-                r.channels
-                    .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
+            let full_s = full.strided(cfg.net.max_rows);
+            if with.net {
+                let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
+                let (members, infos) =
+                    train_ensemble(&specs, ch, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+                pb.finish_and_clear();
+                let ens = NetEnsemble {
+                    members: members.iter().collect(),
+                };
+                if let Some(r) = reports.get_mut("ga-bpn") {
+                    r.channels
+                        .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
+                }
+                info.net = infos.into_iter().next();
+                file.nets.extend(members);
             }
-            info.net = infos.into_iter().next();
-            file.nets.extend(members);
+            if with.hybrid {
+                let pb = progress_bar(cfg.progress, 1, format!("hybrid {ch}"));
+                let members =
+                    train_hybrid(&mlr, &specs, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+                pb.finish_and_clear();
+                if members.is_empty() {
+                    notes.push(format!(
+                        "{ch}: the hybrid's residual networks did not lower the residual on the early-stopping block: the hybrid is the MLR alone"
+                    ));
+                    if let Some(r) = reports.get_mut("hybrid") {
+                        r.channels
+                            .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
+                    }
+                } else {
+                    let hyb = Hybrid {
+                        mlr: &mlr,
+                        residual: NetEnsemble {
+                            members: members.iter().collect(),
+                        },
+                    };
+                    if let Some(r) = reports.get_mut("hybrid") {
+                        r.channels
+                            .insert(ch.clone(), validate(&hyb, &val, plan, &mut r.per_run));
+                    }
+                }
+                hybrid_empty = members.is_empty();
+                file.hybrid_nets.extend(members);
+            }
         }
         // The choice: cross-validated on training rows, within the board's networks.
         let mut admissible = cv.clone();
-        if admissible.contains_key("ga-bpn") && nets_left < ens {
-            admissible.remove("ga-bpn");
-            notes.push(format!(
-                "{ch}: the network is not admissible (the board holds {MAX_NETS} networks, {} in use)",
-                MAX_NETS - nets_left
-            ));
+        admissible.retain(|_, s| !s.dropped);
+        for name in ["ga-bpn", "hybrid"] {
+            if admissible.contains_key(name) && nets_left < ens {
+                admissible.remove(name);
+                notes.push(format!(
+                    "{ch}: {name} is not admissible (the board holds {MAX_NETS} networks, {} in use)",
+                    MAX_NETS - nets_left
+                ));
+            }
         }
-        let chosen = choose_model(&admissible, cfg.choice_margin).unwrap_or_else(|| "mlr".into());
-        if chosen == "ga-bpn" {
+        let mut chosen =
+            choose_model(&admissible, cfg.choice_margin).unwrap_or_else(|| "mlr".into());
+        if chosen == "hybrid" && hybrid_empty {
+            // The final hybrid kept no networks: it is the lagged MLR.
+            chosen = "mlr".into();
+        }
+        if chosen == "ga-bpn" || chosen == "hybrid" {
             nets_left -= ens;
         }
         let used_idx: &[usize] = if chosen == "mlr-static" {
