@@ -16,6 +16,10 @@
 //!   trace is acquired and compensated one sample every `pace_ms` (default
 //!   100) while UART0 serves the register map; after the last sample the
 //!   board keeps serving (a host test or the demo script stops QEMU).
+//!   An optional fourth word `swap=<sensor>@<row>` replaces that emulated
+//!   sensor by a new one (another ROM code) at that trace row. A fault in
+//!   this mode resets the board (fault record, as in the field); the CMSDK
+//!   watchdog runs.
 //! - `bench [golden.bin]`: instruction counts (run QEMU with `-icount
 //!   shift=0`) of the calibration loop and, with the golden file's model, of
 //!   one full evaluation and one compensator step, printed as one JSON line.
