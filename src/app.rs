@@ -346,7 +346,12 @@ impl<F: BackgroundErase> App<F> {
             let v = acq.value(c, now_ms);
             s.temperatures[c] = v.usable().map(centidegrees);
             s.states[c] = v.state.code();
-            if self.map.get(c).is_some() && v.state == ChannelState::NoPresence {
+            if self.map.get(c).is_some()
+                && matches!(
+                    v.state,
+                    ChannelState::NoPresence | ChannelState::Disconnected
+                )
+            {
                 s.map_missing |= 1 << c;
             }
         }

@@ -14,6 +14,7 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
   command  --port P --code N             unlock, write command N; its exception (None: accepted)
   hold     --port P [--write A=V ...] [--unit U]
                                          unlock, write holding registers (one FC06 each), read 0-31
+  inputs   --port P --addr A [--count N] input registers as a list
   fault    --port P                      status and the fault record (input registers 160-168)
   flood    --pipe BASE [--bytes N] [--gap-ms G]
                                          N bytes of garbage into the board's UART (QEMU
@@ -352,6 +353,13 @@ def cmd_hold(a):
     print(json.dumps(out))
 
 
+def cmd_inputs(a):
+    m = Master(a.port)
+    r = m.call("read_input_registers", a.addr, count=a.count)
+    m.close()
+    print(json.dumps(r.registers))
+
+
 def cmd_fault(a):
     m = Master(a.port, timeout=a.timeout)
     st = m.call("read_input_registers", 3, count=1)
@@ -378,10 +386,12 @@ def main():
     c.add_argument("--unit", type=int, default=UNIT)
     h = sub.add_parser("hold"); h.add_argument("--port", type=int, required=True); h.add_argument("--write", action="append", default=[])
     h.add_argument("--unit", type=int, default=UNIT); h.add_argument("--no-read", action="store_true")
+    i = sub.add_parser("inputs"); i.add_argument("--port", type=int, required=True)
+    i.add_argument("--addr", type=int, required=True); i.add_argument("--count", type=int, default=1)
     g = sub.add_parser("fault"); g.add_argument("--port", type=int, required=True); g.add_argument("--timeout", type=float, default=3.0)
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
-     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold}[a.cmd](a)
+     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold, "inputs": cmd_inputs}[a.cmd](a)
 
 
 if __name__ == "__main__":

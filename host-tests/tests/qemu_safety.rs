@@ -63,13 +63,16 @@ fn boot(dir: &std::path::Path) -> (BenchBoard, u16) {
 }
 
 fn boot_paced(dir: &std::path::Path, pace_ms: &str) -> (BenchBoard, u16) {
+    boot_with(dir, &[pace_ms])
+}
+
+fn boot_with(dir: &std::path::Path, extra: &[&str]) -> (BenchBoard, u16) {
     let (t, m) = files(dir);
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), pace_ms],
-    );
+    let mut args = vec!["serve", t.to_str().unwrap(), m.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let board = BenchBoard::start(&serial, &args);
     assert!(board.wait_for(SERVING, BOOT), "{}", board.log());
     (board, port)
 }
@@ -269,4 +272,48 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
         during < base + 300.0,
         "the loop kept its period during the commit: {r}"
     );
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
+fn a_swapped_sensor_is_reported_missing_and_new_and_the_model_never_reads_it() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    // Sensor 2 (channel 2, the model's third input) is swapped at row 20.
+    let (board, port) = boot_with(&scratch("swap"), &["50", "swap=2@20"]);
+    let p = port.to_string();
+    let start = Instant::now();
+    let regs = loop {
+        let r = python(&["inputs", "--port", &p, "--addr", "170", "--count", "4"]);
+        let w: Vec<u64> = r
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        if w[1] != 0 && w[3] != 0 {
+            break w;
+        }
+        assert!(start.elapsed() < BOOT, "no swap seen:\n{}", board.log());
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(
+        regs,
+        [0, 1 << 2, 0, 1 << 6],
+        "missing: channel 2; added: channel 6"
+    );
+    // Channel 2 reads "no presence"/"disconnected" and no temperature; the new sensor's
+    // value is on channel 6 (and only there): the model's input on channel 2
+    // is a sensor fault, never the new sensor's reading.
+    std::thread::sleep(Duration::from_secs(2));
+    let states = python(&["inputs", "--port", &p, "--addr", "130", "--count", "7"]);
+    // 3 no presence / 7 disconnected: the ROM code does not answer.
+    assert!(states[2] == 3 || states[2] == 7, "{states}");
+    assert_eq!(states[6], 2, "the new sensor is ok: {states}");
+    let temps = python(&["inputs", "--port", &p, "--addr", "110", "--count", "7"]);
+    assert_eq!(temps[2], 0x8000, "{temps}");
+    assert_ne!(temps[6], 0x8000, "{temps}");
+    let status = python(&["inputs", "--port", &p, "--addr", "3"])[0]
+        .as_u64()
+        .unwrap();
+    assert_ne!(status & 0x2, 0, "SENSOR_FAULT: {status:#x}");
 }

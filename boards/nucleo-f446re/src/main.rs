@@ -147,11 +147,13 @@ async fn feed_watchdog(
     loop {
         Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;
         match (progress(), feeder.as_mut()) {
-            (Some(p), Some(f)) => {
-                if f.check(&p).is_ok() {
+            (Some(p), Some(f)) => match f.check(&p) {
+                Ok(()) => {
+                    safety::set_watchdog_hint(0);
                     watchdog.pet();
                 }
-            }
+                Err(bits) => safety::set_watchdog_hint(bits),
+            },
             (Some(p), None) => {
                 feeder = Some(thermocomp::watchdog::Feeder::new(&p));
                 watchdog.pet();

@@ -3,8 +3,8 @@
 //! program below them). embassy-stm32's blocking `Flash` implements
 //! `NorFlash` over the whole array; this adapter shifts offsets so the
 //! application's slot A is sector 6 and slot B sector 7.
-//! Erasing a 128 KiB sector takes 1–2 s with the bus stalled: a model commit
-//! delays Modbus replies by that much (documented in the register map).
+//! Erasing a 128 KiB sector takes 1–2 s with the bus stalled; the
+//! application answers the commit first (HR_RESULT 23) and erases after.
 
 use embassy_stm32::flash::{Blocking, Error, Flash};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};

@@ -10,7 +10,8 @@
 //! - Reset: SCB AIRCR.SYSRESETREQ.
 //! - Watchdog: the IWDG (LSI clock), which resets without an interrupt
 //!   first: after a watchdog reset the boot code finds RCC_CSR.IWDGRSTF and
-//!   records a fault of kind watchdog with PC 0 (unknown).
+//!   records a fault of kind watchdog with PC 0 (unknown) and, as detail,
+//!   which activity the feeder last saw stalled (a NOINIT word it keeps).
 
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
@@ -20,6 +21,15 @@ use thermocomp::fault::{self, FaultBoard, WORDS};
 extern "C" {
     /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
     static mut __fault_record: [u32; WORDS];
+    /// One word after the record (NOINIT): the feeder's last stall bits.
+    static mut __watchdog_hint: u32;
+}
+
+/// What the feeder saw stalled at its last look (0: fed), kept over the
+/// IWDG's reset, which gives no interrupt to record it in.
+pub fn set_watchdog_hint(bits: u32) {
+    // SAFETY: a word of NOINIT RAM only this module touches.
+    unsafe { write_volatile(addr_of_mut!(__watchdog_hint), bits) };
 }
 
 /// IWDG timeout: 10 s nominal. The longest legitimate gap between two feeds
@@ -78,7 +88,10 @@ impl FaultBoard for Nucleo {
 pub fn note_watchdog_reset() {
     let csr = pac::RCC.csr().read();
     if csr.wdgrstf() {
-        fault::record::<Nucleo>(fault::kind::WATCHDOG, 0, 0);
+        // SAFETY: as in `set_watchdog_hint`; only the two stall bits count
+        // (the word is power-on garbage until the feeder's first look).
+        let hint = unsafe { read_volatile(addr_of_mut!(__watchdog_hint)) } & 0b11;
+        fault::record::<Nucleo>(fault::kind::WATCHDOG, 0, hint);
     }
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
 }

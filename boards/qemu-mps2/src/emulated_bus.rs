@@ -89,6 +89,20 @@ impl EmulatedBus {
         self.devices.get(index).map(|d| d.rom)
     }
 
+    /// Replace device `index` by a new DS18B20 (another ROM code, power-on
+    /// scratchpad): what a technician swapping a sensor does.
+    pub fn replace(&mut self, index: usize) {
+        if let Some(d) = self.devices.get_mut(index) {
+            let serial = [index as u8 + 1, 0xA5, 0x17, 0x0C, 0x00, 0x01];
+            d.rom = RomCode::from_serial(ds18b20::FAMILY, serial);
+            d.next_raw = ds18b20::POWER_ON_RAW;
+            d.latched_raw = ds18b20::POWER_ON_RAW;
+            d.config = Resolution::Bits12.config_byte();
+            d.th = 0x4B;
+            d.tl = 0x46;
+        }
+    }
+
     /// Set what device `index` will measure at the next Convert T; `None`
     /// takes it off the bus (no presence, reads float high).
     pub fn set_temperature(&mut self, index: usize, raw: Option<i16>) {

@@ -16,6 +16,10 @@
 //!   trace is acquired and compensated one sample every `pace_ms` (default
 //!   100) while UART0 serves the register map; after the last sample the
 //!   board keeps serving (a host test or the demo script stops QEMU).
+//!   An optional fourth word `swap=<sensor>@<row>` replaces that emulated
+//!   sensor by a new one (another ROM code) at that trace row. A fault in
+//!   this mode resets the board (fault record, as in the field); the CMSDK
+//!   watchdog runs.
 //! - `bench [golden.bin]`: instruction counts (run QEMU with `-icount
 //!   shift=0`) of the calibration loop and, with the golden file's model, of
 //!   one full evaluation and one compensator step, printed as one JSON line.
@@ -110,10 +114,16 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
             };
             let model = words.next().filter(|m| *m != "-");
             let pace_ms = words.next().and_then(|p| p.parse().ok()).unwrap_or(100);
+            // `swap=<sensor>@<row>`: the emulated sensor is replaced by a new
+            // one (another ROM code) at that trace row.
+            let swap = words.next().and_then(|w| {
+                let (k, row) = w.strip_prefix("swap=")?.split_once('@')?;
+                Some((k.parse::<usize>().ok()?, row.parse::<u32>().ok()?))
+            });
             // From here on a fault resets the board, as in the field.
             safety::FIELD_MODE.store(true, Ordering::Relaxed);
             match (
-                serve_measure(trace, model, pace_ms),
+                serve_measure(trace, model, pace_ms, swap),
                 serve_modbus(),
                 watchdog_feeder(),
             ) {
@@ -374,7 +384,12 @@ const UNIT: u8 = 1;
 const BAUD: u32 = 115_200;
 
 #[embassy_executor::task]
-async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pace_ms: u64) {
+async fn serve_measure(
+    path: &'static str,
+    model_path: Option<&'static str>,
+    pace_ms: u64,
+    swap: Option<(usize, u32)>,
+) {
     let mut trace = open_trace(path);
     let channels = trace.header().channels();
     let mut sensors = Sensors::new(channels).await;
@@ -431,6 +446,23 @@ async fn serve_measure(path: &'static str, model_path: Option<&'static str>, pac
             // and the Modbus task go on); the watchdog must notice.
             log!("measurement loop stalled on request (command 9)");
             core::future::pending::<()>().await;
+        }
+        if swap.is_some_and(|(_, row)| row == rows) {
+            if let Some((k, _)) = swap {
+                log!("sensor {} replaced by a new one (another ROM code)", k);
+                sensors.bus.replace(k);
+            }
+        }
+        if rows.is_multiple_of(REDISCOVER_ROWS) {
+            // Search the bus again: a new sensor goes to a free channel.
+            if sensors.acquisition.discover(&mut sensors.bus).await.is_ok() {
+                let map = *sensors.acquisition.map();
+                APP.lock(|a| {
+                    if let Some(app) = a.borrow_mut().as_mut() {
+                        app.update_channel_map(map);
+                    }
+                });
+            }
         }
         let report = sensors.acquire(&sample).await;
         let uptime = Instant::now().as_millis();
@@ -514,6 +546,9 @@ async fn watchdog_feeder() {
         }
     }
 }
+
+/// The bench searches its bus again every this many trace rows.
+const REDISCOVER_ROWS: u32 = 10;
 
 /// Boot (trace, sensor search, model) must be done within this long; until
 /// then the watchdog is fed unconditionally.
