@@ -23,6 +23,16 @@ use crate::runcsv::Run;
 /// discretisation, the same in training and on the board.
 pub const STEP_MS: u32 = 1000;
 
+/// The temperature columns the board reads, in its channel order: the run's
+/// `T_…` columns in file order, the first [`MAX_SENSORS`] of them.
+pub fn board_channels(run: &Run) -> Vec<String> {
+    run.temperature_columns()
+        .iter()
+        .take(MAX_SENSORS)
+        .map(|s| s.to_string())
+        .collect()
+}
+
 /// A run as the board's inputs see it (integers, board channel order).
 pub struct BoardRows {
     pub time_ms: Vec<u64>,
@@ -49,12 +59,7 @@ impl BoardRows {
                 }
             })
             .collect::<Result<Vec<_>>>()?;
-        let channels: Vec<String> = run
-            .temperature_columns()
-            .iter()
-            .take(MAX_SENSORS)
-            .map(|s| s.to_string())
-            .collect();
+        let channels = board_channels(run);
         let temps = channels
             .iter()
             .map(|c| {
