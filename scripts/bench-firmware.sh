@@ -11,7 +11,7 @@ cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
 elf="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
 golden="${CARGO_TARGET_DIR:-target}/bench-golden.bin"
 cargo run -q -p tcomp --release -- golden -o "$golden" --steps 10 >&2
-# The FL_THERMAL model the demo serves: a 4-11-1 network (ch3) and a 5-term linear table (ch5).
+# The FL_THERMAL model the demo serves (export's default: the fit's cross-validated choice per channel).
 fl="${CARGO_TARGET_DIR:-target}/bench-fl-model.img"
 cargo run -q -p tcomp --release -- export --model demo/fl-thermal-fit.json --run demo/trace.csv -o "$fl" >&2
 json=$(QEMU_EXTRA="-icount shift=0" boards/runner.sh "$elf" bench "$golden" "$fl" | grep '^{' | tail -n 1)

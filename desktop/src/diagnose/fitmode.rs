@@ -321,6 +321,12 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     let ds = series::load(runs, opt.max_rows.min(1500))?;
     let p = Problem::new(&ds);
     let (st, fit) = p.identify();
+    if let Some(o) = fit.outs.iter().position(|f| f.failed) {
+        anyhow::bail!(
+            "diagnose fit: the least-squares fit of the identified model failed for output {} (singular design or too few rows)",
+            p.outputs.get(o).map_or("?", |x| x.name.as_str())
+        );
+    }
     let where_ = where_of(&p, &fit);
     // candidates (each against the nominal; the lag against the body map)
     let only = |n: &str| opt.only.is_empty() || opt.only.iter().any(|o| o == n);

@@ -75,6 +75,10 @@ pub struct OutFit {
     pub k: usize,
     /// Coefficients of the extra columns (in their order).
     pub extra_coef: Vec<f64>,
+    /// The least-squares solver gave up (singular, or too few rows): no
+    /// prediction, residuals NaN, fit and held-out sums infinite, so the
+    /// structure search never picks it and `diagnose fit` refuses it.
+    pub failed: bool,
 }
 
 /// A fitted model over all outputs.
@@ -84,6 +88,22 @@ pub struct ModelFit {
 }
 
 impl OutFit {
+    /// The fit of an output whose solver gave up (never zeros as coefficients):
+    /// `rows[r]` rows per run, `n_fit` / `n_held` of them measured.
+    pub fn failed(k: usize, rows: &[usize], n_fit: usize, n_held: usize) -> OutFit {
+        OutFit {
+            resid: rows.iter().map(|&n| vec![f64::NAN; n]).collect(),
+            sse_fit: f64::INFINITY,
+            n_fit: n_fit.max(1),
+            sse_held: f64::INFINITY,
+            n_held,
+            peak_held: f64::INFINITY,
+            k,
+            extra_coef: vec![],
+            failed: true,
+        }
+    }
+
     /// Book one residual `e` of a row: into the held-out or the fit sums.
     pub fn add_residual(&mut self, e: f64, held: bool) {
         if held {
@@ -592,7 +612,18 @@ impl<'a> Problem<'a> {
         } else {
             None
         };
-        let coef = coef.unwrap_or_else(|| DVector::zeros(p));
+        let Some(coef) = coef else {
+            let held = (0..nr)
+                .map(|r| {
+                    let run = &self.ds.runs[r];
+                    (0..run.rows())
+                        .filter(|&k| run.held[k] && self.meas[r][o][k].is_finite())
+                        .count()
+                })
+                .sum();
+            let sizes: Vec<usize> = self.ds.runs.iter().map(|r| r.rows()).collect();
+            return OutFit::failed(p, &sizes, rows.len(), held);
+        };
         fit.extra_coef = (0..n_extra)
             .map(|j| coef[n_shared + nr * n_own + j])
             .collect();
@@ -606,14 +637,7 @@ impl<'a> Problem<'a> {
                 }
                 let pred: f64 = (0..p).map(|j| coef[j] * value(r, k, j)).sum();
                 let e = m - pred;
-                if run.held[k] {
-                    fit.sse_held += e * e;
-                    fit.n_held += 1;
-                    fit.peak_held = fit.peak_held.max(e.abs());
-                } else {
-                    fit.sse_fit += e * e;
-                    fit.n_fit += 1;
-                }
+                fit.add_residual(e, run.held[k]);
                 res.push(e);
             }
             fit.resid.push(res);
@@ -771,5 +795,35 @@ mod tests {
         );
         let (rms, _) = fit.gap_held(&p.outputs, false).unwrap();
         assert!(rms < 1.3 * noise, "held-out RMS {rms}");
+    }
+
+    /// A design the solver cannot use (more coefficients than fit rows) is a
+    /// failed fit with NaN residuals and infinite figures, never zero
+    /// coefficients that would pass the raw measurement off as a residual.
+    #[test]
+    fn a_fit_the_solver_gives_up_on_is_failed_not_zero() {
+        let n = 40;
+        let mut run = Run::default();
+        let col = |v: Vec<f64>| v.into_iter().map(Some).collect::<Vec<_>>();
+        run.push_column("time_s", col((0..n).map(|k| k as f64 * 30.0).collect()))
+            .unwrap();
+        run.push_column("spindle_rpm", col(vec![3000.0; n]))
+            .unwrap();
+        run.push_column("T_a", col((0..n).map(|k| 20.0 + k as f64 * 0.1).collect()))
+            .unwrap();
+        let ds = crate::diagnose::series::load(&[("tiny".into(), run)], 1500).unwrap();
+        let p = Problem::new(&ds);
+        // Far more modes than the few fit rows can carry.
+        let st = Structure {
+            modes: TAU_GRID.to_vec(),
+            exponent: 1.0,
+        };
+        let extra = |_: usize, _: usize| -> Vec<Vec<f64>> { vec![vec![1.0; n]; 3 * n] };
+        let f = p.fit_output(&st, 0, Some(&extra), None);
+        assert!(f.failed);
+        assert!(f.sse_fit.is_infinite() && f.extra_coef.is_empty());
+        assert!(f.resid.iter().flatten().all(|e| e.is_nan()));
+        let m = ModelFit { outs: vec![f] };
+        assert!(m.bic(&p.outputs).is_infinite());
     }
 }

@@ -243,7 +243,18 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
     } else {
         None
     };
-    let coef = coef.unwrap_or_else(|| nalgebra::DVector::zeros(k));
+    let Some(coef) = coef else {
+        let held = (0..ds.runs.len())
+            .map(|r| {
+                let run = &ds.runs[r];
+                (0..run.rows())
+                    .filter(|&kk| run.held[kk] && p.meas[r][o][kk].is_finite())
+                    .count()
+            })
+            .sum();
+        let sizes: Vec<usize> = ds.runs.iter().map(|r| r.rows()).collect();
+        return OutFit::failed(k, &sizes, rows.len(), held);
+    };
     for (r, run) in ds.runs.iter().enumerate() {
         let mut res = Vec::with_capacity(run.rows());
         for kk in 0..run.rows() {

@@ -23,6 +23,16 @@ use crate::runcsv::Run;
 /// discretisation, the same in training and on the board.
 pub const STEP_MS: u32 = 1000;
 
+/// The temperature columns the board reads, in its channel order: the run's
+/// `T_…` columns in file order, the first [`MAX_SENSORS`] of them.
+pub fn board_channels(run: &Run) -> Vec<String> {
+    run.temperature_columns()
+        .iter()
+        .take(MAX_SENSORS)
+        .map(|s| s.to_string())
+        .collect()
+}
+
 /// A run as the board's inputs see it (integers, board channel order).
 pub struct BoardRows {
     pub time_ms: Vec<u64>,
@@ -49,12 +59,7 @@ impl BoardRows {
                 }
             })
             .collect::<Result<Vec<_>>>()?;
-        let channels: Vec<String> = run
-            .temperature_columns()
-            .iter()
-            .take(MAX_SENSORS)
-            .map(|s| s.to_string())
-            .collect();
+        let channels = board_channels(run);
         let temps = channels
             .iter()
             .map(|c| {
@@ -257,39 +262,24 @@ pub fn image_gap_rows(
 /// The distinct inputs of the models `file.chosen` names (what `export`
 /// puts on the board by default), in first-use order.
 pub fn chosen_kinds(file: &super::ModelFile) -> Vec<(FeatureKind, Option<f64>)> {
+    fn inputs<'a, M: super::Model>(
+        models: &'a [M],
+        ch: &'a str,
+    ) -> impl Iterator<Item = &'a super::FeatureSpec> + 'a {
+        models
+            .iter()
+            .filter(move |m| m.channel() == ch)
+            .flat_map(|m| m.features())
+    }
     let mut out: Vec<(FeatureKind, Option<f64>)> = Vec::new();
     for (ch, name) in &file.chosen {
         let specs: Vec<&super::FeatureSpec> = match name.as_str() {
-            "mlr" => file
-                .mlr
-                .iter()
-                .filter(|m| &m.channel == ch)
-                .flat_map(|m| &m.features)
-                .collect(),
-            "mlr-static" => file
-                .mlr_static
-                .iter()
-                .filter(|m| &m.channel == ch)
-                .flat_map(|m| &m.features)
-                .collect(),
-            "ga-bpn" => file
-                .nets
-                .iter()
-                .filter(|m| &m.channel == ch)
-                .flat_map(|m| &m.features)
-                .collect(),
+            "mlr" => inputs(&file.mlr, ch).collect(),
+            "mlr-static" => inputs(&file.mlr_static, ch).collect(),
+            "ga-bpn" => inputs(&file.nets, ch).collect(),
             // Any other model (e.g. a table plus networks): every input the channel has.
-            _ => file
-                .mlr
-                .iter()
-                .filter(|m| &m.channel == ch)
-                .flat_map(|m| &m.features)
-                .chain(
-                    file.nets
-                        .iter()
-                        .filter(|m| &m.channel == ch)
-                        .flat_map(|m| &m.features),
-                )
+            _ => inputs(&file.mlr, ch)
+                .chain(inputs(&file.nets, ch))
                 .collect(),
         };
         for f in specs {

@@ -687,12 +687,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     };
     // The board reads temperature channels 0..MAX_SENSORS in the run's
     // column order: sensors beyond are never candidates.
-    let board_sensors: Vec<String> = first
-        .temperature_columns()
-        .iter()
-        .take(MAX_SENSORS)
-        .map(|s| s.to_string())
-        .collect();
+    let board_sensors = features::board_channels(first);
     let beyond = first
         .temperature_columns()
         .len()
