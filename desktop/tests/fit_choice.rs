@@ -182,10 +182,13 @@ fn the_hybrid_wins_where_a_drift_and_a_bounded_nonlinearity_add_up() {
     assert!(rms("hybrid") < rms("ga-bpn"), "{cv:?}");
     assert_eq!(rep.chosen["dx_um"], "hybrid", "{cv:?}");
     // On the later, unseen 30 % the hybrid also beats the lagged MLR.
-    let val = |n: &str| {
-        rep.models.iter().find(|m| m.name == n).unwrap().channels["dx_um"].rms_um
-    };
-    assert!(val("hybrid") < val("mlr"), "{} vs {}", val("hybrid"), val("mlr"));
+    let val = |n: &str| rep.models.iter().find(|m| m.name == n).unwrap().channels["dx_um"].rms_um;
+    assert!(
+        val("hybrid") < val("mlr"),
+        "{} vs {}",
+        val("hybrid"),
+        val("mlr")
+    );
     // It ships as the MLR's table plus the residual networks, summed on the
     // board: the exported float model predicts what was validated.
     let columns = vec!["T_a".to_string(), "T_b".to_string()];
@@ -197,7 +200,10 @@ fn the_hybrid_wins_where_a_drift_and_a_bounded_nonlinearity_add_up() {
     .unwrap();
     assert_eq!(fm.tables.len(), 1);
     assert_eq!(fm.nets.len(), quick_net().ensemble);
-    assert!(fm.nets.iter().all(|n| n.direction == fm.tables[0].direction));
+    assert!(fm
+        .nets
+        .iter()
+        .all(|n| n.direction == fm.tables[0].direction));
 }
 
 #[test]

@@ -367,7 +367,9 @@ fn main() -> Result<()> {
         println!("{out}");
         return Ok(());
     }
-    println!("FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)");
+    println!(
+        "FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)"
+    );
     println!(
         "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
         "channel", "published", "MLR static", "MLR", "hybrid", "GA-BPN", "chosen"
