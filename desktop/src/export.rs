@@ -297,95 +297,91 @@ pub fn float_model_from_fit(
             Choice::Net => None,
         };
         if matches!(choice, Choice::Net | Choice::Hybrid) {
-            {
-                if members.is_empty() {
+            if members.is_empty() {
+                anyhow::bail!(
+                    "no fitted {} network for channel {ch} (fit without --mlr-only)",
+                    if choice == Choice::Hybrid {
+                        "hybrid"
+                    } else {
+                        "ga-bpn"
+                    }
+                );
+            }
+            if model.nets.len() + members.len() > MAX_NETS {
+                anyhow::bail!(
+                    "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
+                    members.len()
+                );
+            }
+            // The ensemble's mean: each member's output layer scaled by 1/k.
+            let k = members.len() as f64;
+            for n in members {
+                if n.features.len() > MAX_NET_INPUTS {
                     anyhow::bail!(
-                        "no fitted {} network for channel {ch} (fit without --mlr-only)",
-                        if choice == Choice::Hybrid {
-                            "hybrid"
-                        } else {
-                            "ga-bpn"
-                        }
+                        "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
+                        n.features.len()
                     );
                 }
-                if model.nets.len() + members.len() > MAX_NETS {
-                    anyhow::bail!(
-                        "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
-                        members.len()
-                    );
+                let mut inputs = vec![];
+                let mut folds = vec![];
+                for f in &n.features {
+                    let (i, a, c) = input_of(f, &mut model)?;
+                    inputs.push(i);
+                    folds.push((a, c));
                 }
-                // The ensemble's mean: each member's output layer scaled by 1/k.
-                let k = members.len() as f64;
-                for n in members {
-                    if n.features.len() > MAX_NET_INPUTS {
-                        anyhow::bail!(
-                            "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
-                            n.features.len()
-                        );
-                    }
-                    let mut inputs = vec![];
-                    let mut folds = vec![];
-                    for f in &n.features {
-                        let (i, a, c) = input_of(f, &mut model)?;
-                        inputs.push(i);
-                        folds.push((a, c));
-                    }
-                    let w1: Vec<Vec<f64>> =
-                        n.w1.iter()
-                            .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
-                            .collect();
-                    let b1 =
-                        n.w1.iter()
-                            .zip(&n.b1)
-                            .map(|(row, b)| {
-                                b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
-                            })
-                            .collect();
-                    model.nets.push(FloatNet {
-                        direction: d,
-                        inputs,
-                        w1,
-                        b1,
-                        w2: n.w2.iter().map(|w| w / k).collect(),
-                        b2: n.b2 / k,
-                    });
-                }
+                let w1: Vec<Vec<f64>> =
+                    n.w1.iter()
+                        .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
+                        .collect();
+                let b1 =
+                    n.w1.iter()
+                        .zip(&n.b1)
+                        .map(|(row, b)| {
+                            b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
+                        })
+                        .collect();
+                model.nets.push(FloatNet {
+                    direction: d,
+                    inputs,
+                    w1,
+                    b1,
+                    w2: n.w2.iter().map(|w| w / k).collect(),
+                    b2: n.b2 / k,
+                });
             }
         }
         if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) {
-            {
-                let Some(m) = mlr else {
-                    anyhow::bail!("no fitted {choice:?} model for channel {ch}");
-                };
-                if model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
-                    anyhow::bail!(
-                        "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
-                    );
-                }
-                let mut terms = vec![];
-                let mut c0 = m.c0;
-                for (f, coef) in m.features.iter().zip(&m.coef) {
-                    let (i, a, c) = input_of(f, &mut model)?;
-                    c0 += coef * c;
-                    terms.push(FloatTerm {
-                        coef_um: coef * a,
-                        input: Some(i),
-                        input_power: 1,
-                        position_power: 0,
-                    });
-                }
+            let Some(m) = mlr else {
+                anyhow::bail!("no fitted {choice:?} model for channel {ch}");
+            };
+            if model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
+                anyhow::bail!(
+                    "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
+                );
+            }
+            let mut terms = vec![];
+            let mut c0 = m.c0;
+            for (f, coef) in m.features.iter().zip(&m.coef) {
+                let (i, a, c) = input_of(f, &mut model)?;
+                c0 += coef * c;
                 terms.push(FloatTerm {
-                    coef_um: c0,
-                    input: None,
-                    input_power: 0,
+                    coef_um: coef * a,
+                    input: Some(i),
+                    input_power: 1,
                     position_power: 0,
                 });
-                model.tables.push(FloatTable {
-                    direction: d,
-                    axis: None,
-                    terms,
-                });
             }
+            terms.push(FloatTerm {
+                coef_um: c0,
+                input: None,
+                input_power: 0,
+                position_power: 0,
+            });
+            model.tables.push(FloatTable {
+                direction: d,
+                axis: None,
+                terms,
+            });
         }
     }
     Ok(model)

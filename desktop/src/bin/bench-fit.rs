@@ -5,7 +5,13 @@
 //!     FL_THERMAL, 24–28 h, interpolated to 1 Hz) against scikit-learn's
 //!     MLPRegressor(11, logistic) on the same inputs and split.
 //!
+//! (c) the default pipeline refitted with 5 ensemble base seeds: test MAE
+//!     spread of the chosen model and of each network candidate;
+//! (d) fit time of the default pipeline on 500,000 rows (FL_THERMAL
+//!     interpolated), wall and CPU.
+//!
 //! Usage: bench-fit [--json] [--data run.csv] [--ensemble N] [--no-sklearn]
+//!        [--seeds N] [--big-rows N] [--write-big FILE]
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -89,6 +95,19 @@ pub fn resample_rows(run: &Run, rows: usize) -> Result<Run> {
     Ok(r)
 }
 
+/// CPU time (user + system, all threads) of this process so far, seconds
+/// (Linux `/proc/self/stat`, USER_HZ = 100); None elsewhere. Wall-clock time
+/// on a machine shared with other jobs overstates the fit's own cost.
+fn cpu_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which ends with the last ')').
+    let rest = s.get(s.rfind(')')? + 2..)?;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let json = args.iter().any(|a| a == "--json");
@@ -111,6 +130,7 @@ fn main() -> Result<()> {
 
     // (a) FL_THERMAL chronological 60/20.
     let t_a = Instant::now();
+    let ca = cpu_s();
     let plan = Plan::new(
         vec![run.clone()],
         vec!["fl-thermal".into()],
@@ -129,6 +149,7 @@ fn main() -> Result<()> {
     };
     let rep = fit_plan(&plan, &cfg)?;
     let fl_s = t_a.elapsed().as_secs_f64();
+    let fl_cpu = cpu_s().zip(ca).map(|(b, a)| b - a);
     let mae = |model: &str, ch: &str| {
         rep.models
             .iter()
@@ -226,6 +247,7 @@ fn main() -> Result<()> {
         }
         let n = rb.rows();
         let t_c = Instant::now();
+        let c0 = cpu_s();
         let planb = Plan::new(vec![rb], vec!["fl-big".into()], 1, Some((0.6, 0.8)))?;
         let c = FitConfig {
             progress: false,
@@ -233,11 +255,16 @@ fn main() -> Result<()> {
         };
         let r = fit_plan(&planb, &c)?;
         let secs = t_c.elapsed().as_secs_f64();
-        big = serde_json::json!({"rows": n, "fit_s": secs, "target_s": 30.0,
+        let cpu = cpu_s().zip(c0).map(|(b, a)| b - a);
+        big = serde_json::json!({"rows": n, "fit_s": secs, "fit_cpu_s": cpu, "target_s": 30.0,
             "chosen": r.chosen,
             "cv": r.inputs.iter().map(|i| (i.channel.clone(), i.cv.clone())).collect::<BTreeMap<_, _>>()});
         if !json {
-            eprintln!("{n}-row fit: {secs:.1} s, chosen {:?}", r.chosen);
+            eprintln!(
+                "{n}-row fit: {secs:.1} s wall, {:.1} s CPU, chosen {:?}",
+                cpu.unwrap_or(f64::NAN),
+                r.chosen
+            );
         }
     }
 
@@ -334,13 +361,15 @@ fn main() -> Result<()> {
         "sklearn": sk, "sklearn_error": sk_err,
         "ratio_sklearn_over_ours": sk_s.map(|s| s / ours_s),
     });
-    let out = serde_json::json!({"fl_thermal": table, "fl_thermal_fit_s": fl_s,
+    let out = serde_json::json!({"fl_thermal": table, "fl_thermal_fit_s": fl_s, "fl_thermal_fit_cpu_s": fl_cpu,
         "seed_spread": seeds_out, "big_fit": big, "timing_4h_1hz": timing});
     if json {
         println!("{out}");
         return Ok(());
     }
-    println!("FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)");
+    println!(
+        "FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)"
+    );
     println!(
         "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
         "channel", "published", "MLR static", "MLR", "hybrid", "GA-BPN", "chosen"

@@ -547,10 +547,7 @@ fn cross_validate(
         }
     }
     let n_total = acc_mlr.n;
-    let linear_best = out
-        .values()
-        .map(|s| s.rms_um)
-        .fold(f64::INFINITY, f64::min);
+    let linear_best = out.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
     for (name, on) in [("hybrid", with.hybrid), ("ga-bpn", with.net)] {
         if !on {
             continue;
