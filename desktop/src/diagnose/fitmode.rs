@@ -331,7 +331,7 @@ pub const FIT_MIN_REL: f64 = 0.3;
 /// Absolute held-out shrink (noise-variance units) to claim an effect.
 pub const FIT_MIN_ABS: f64 = 1.0;
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag.
-pub const LAG_MIN_FIT_REL: f64 = 0.5;
+pub const LAG_MIN_FIT_REL: f64 = 0.2;
 
 /// Diagnose runs without a machine file.
 pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
