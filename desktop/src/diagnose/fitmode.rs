@@ -209,10 +209,12 @@ fn score(
         || c.evidence["peak_over_median_power"]
             .as_f64()
             .is_some_and(|v| v >= PERIODIC_MIN_PEAK);
-    // bearing_nonlinear and ambient_drift are tried and reported, never
-    // claimed: on the open-world truth model they named clean runs as often
-    // as effect runs (see `untestable`)
-    let claimable = !matches!(c.name, "bearing_nonlinear" | "ambient_drift");
+    // bearing_nonlinear, and ambient_drift beyond a measured T_ambient, are
+    // tried and reported, never claimed: on the open-world truth model they
+    // were not told apart from clean runs (see `untestable`); without a
+    // T_ambient column ambient_drift is the room's own change and stays
+    let claimable =
+        c.name != "bearing_nonlinear" && !(c.name == "ambient_drift" && p.ds.has_ambient);
     // the lag's reference is the lag-smoothed body map, whose noise is far
     // below the channel's: its fit rows must shrink by half instead of an
     // absolute margin in channel-noise units
