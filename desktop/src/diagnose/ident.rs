@@ -361,14 +361,6 @@ impl<'a> Problem<'a> {
                     .map(|n| (n.abs() / self.n_max).powf(exponent))
                     .collect(),
             ));
-            // whatever switches with the spindle at any speed (coolant
-            // pump and flow, lubrication, fans)
-            v.push((
-                "running",
-                rpm.iter()
-                    .map(|n| if n.abs() > 0.0 { 1.0 } else { 0.0 })
-                    .collect(),
-            ));
         }
         if let Some(f) = &run.feed {
             v.push(("feed", f.clone()));
