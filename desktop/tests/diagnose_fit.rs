@@ -325,3 +325,37 @@ fn without_spindle_rpm_temperatures_drive_and_a_step_is_still_found() {
     assert_eq!(top.name, "sensor_offset");
     assert_eq!(top.params_json()["sensor"], "T_T6");
 }
+
+#[test]
+fn a_lagging_sensor_is_named_against_its_body() {
+    // the spindle-nose sensor glued through a contact resistance (10 min)
+    let runs = truth_runs(
+        &[TruthEffect::SensorLag {
+            sensor: 0,
+            tau_s: 600.0,
+        }],
+        85,
+    );
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "sensor_lag");
+    let p = top.params_json();
+    assert_eq!(p["sensor"], "T_T0");
+    let tau = p["tau_s"].as_f64().unwrap();
+    assert!((300.0..=1000.0).contains(&tau), "tau {tau}");
+    // scored in µm on the lagged body map: the held-out mean square at
+    // least halves (RMS × 1/√2)
+    let ((ub, _), (ua, _)) = top.gap_um.unwrap();
+    assert!(ua < 0.71 * ub, "µm gap {ub} -> {ua}");
+    // the effects the data cannot tell apart are listed, not guessed
+    let j = d.to_json();
+    let names: Vec<&str> = j["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u["name"].as_str().unwrap())
+        .collect();
+    assert!(names.iter().any(|n| n.starts_with("ambient_drift")));
+    assert!(names.iter().any(|n| n.starts_with("bearing_nonlinear")));
+    assert!(d.findings.iter().all(|f| f.name != "ambient_drift"));
+}

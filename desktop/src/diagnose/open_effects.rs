@@ -7,14 +7,15 @@
 //!   offset that changes inside a run), located by a change-point scan of
 //!   that sensor's nominal residual on the fit rows;
 //! - `sensor_lag`: a sensor that lags its body: displacement, a static map
-//!   of the true node temperatures, is better explained by the sensor
-//!   corrected for a first-order lag (`T + τ dT/dt`) than by its reading;
+//!   of the true node temperatures, seen through a first-order lag, is
+//!   better explained with that sensor as read than lagged like the others;
 //! - `coolant`: a periodic coolant/chiller drive, its period from the
 //!   sensors' own residual spectra (gated by `coolant_on` when present);
 //! - `bearing_nonlinear`: spindle heat that does not follow the nominal's
-//!   single power of speed (needs several speed levels);
+//!   speed law across runs of different speeds (a separate gain of that law
+//!   in the faster runs); tried and reported, never claimed (`fitmode`);
 //! - `ambient_drift`: a slow drift common to every sensor that `T_ambient`
-//!   does not carry.
+//!   does not carry; tried and reported, never claimed.
 
 use serde_json::{json, Value};
 
@@ -149,41 +150,37 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
     out
 }
 
-/// Least-squares slope over ±`w` rows (a smoothed derivative, per second).
-fn slope(v: &[f64], dt: f64, w: usize) -> Vec<f64> {
-    let n = v.len();
-    (0..n)
-        .map(|k| {
-            let a = k.saturating_sub(w);
-            let b = (k + w).min(n - 1);
-            let (mut sx, mut sy, mut sxx, mut sxy, mut c) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            for j in a..=b {
-                if v[j].is_finite() {
-                    let x = j as f64 * dt;
-                    sx += x;
-                    sy += v[j];
-                    sxx += x * x;
-                    sxy += x * v[j];
-                    c += 1.0;
-                }
+/// Values with gaps held from the last finite value (the first one before it).
+fn held(v: &[f64]) -> Vec<f64> {
+    let mut last = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
+    v.iter()
+        .map(|&x| {
+            if x.is_finite() {
+                last = x;
             }
-            let den = c * sxx - sx * sx;
-            if c < 3.0 || den <= 0.0 {
-                0.0
-            } else {
-                (c * sxy - sx * sy) / den
-            }
+            last
         })
         .collect()
 }
 
-/// The static body map of one displacement: per-run level + Σ L_i·rise_i,
-/// with sensor `lagged` (if any) corrected by `T + τ dT/dt`. Returns the
-/// fit (one output) for the displacement output `o`.
-fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
+/// The body map of one displacement seen through a lag of `tau`: the
+/// displacement is a static linear map of the true node temperatures, so
+/// its lagged version is the same map of the lagged temperatures. Every
+/// sensor rise and the displacement pass through the same first-order lag
+/// (`lag_signal`, exact for a linear map) except the sensor `own`, which
+/// enters as read: if that sensor already lags its body by `tau`, its
+/// reading is the lagged body temperature and the map becomes exact; for
+/// any other sensor, taking it un-lagged only adds a lead. Per-run level +
+/// Σ L_i·rise_i, ridge least squares on the fit rows.
+fn lagged_body_map(p: &Problem, o: usize, tau: f64, own: Option<usize>) -> OutFit {
     let ds = p.ds;
     let ns = ds.sensors.len();
     let nr = ds.runs.len();
+    let rise = |v: &[f64]| -> Vec<f64> {
+        let h = held(v);
+        let z = h.first().copied().unwrap_or(0.0);
+        h.iter().map(|x| x - z).collect()
+    };
     let cols: Vec<Vec<Vec<f64>>> = ds
         .runs
         .iter()
@@ -191,39 +188,42 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
         .map(|(r, run)| {
             (0..ns)
                 .map(|i| {
-                    let v = &p.meas[r][i];
-                    let z = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
-                    let mut x: Vec<f64> = v.iter().map(|t| t - z).collect();
-                    if let Some((s, tau)) = lagged {
-                        if s == i {
-                            let w = ((120.0 / run.dt).ceil() as usize).max(2);
-                            let d = slope(&x, run.dt, w);
-                            for (xk, dk) in x.iter_mut().zip(d) {
-                                *xk += tau * dk;
-                            }
-                        }
+                    let x = rise(&p.meas[r][i]);
+                    if own == Some(i) {
+                        x
+                    } else {
+                        super::ident::lag_signal(&x, run.dt, tau)
                     }
-                    x
                 })
                 .collect()
         })
         .collect();
-    let k = ns + nr;
+    let target: Vec<Vec<f64>> = ds
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(r, run)| {
+            let y = super::ident::lag_signal(&held(&p.meas[r][o]), run.dt, tau);
+            y.iter()
+                .zip(&p.meas[r][o])
+                .map(|(a, m)| if m.is_finite() { *a } else { f64::NAN })
+                .collect()
+        })
+        .collect();
+    let nc = ns;
+    let k = nc + nr;
     let mut rows = Vec::new();
     for (r, run) in ds.runs.iter().enumerate() {
         for kk in 0..run.rows() {
-            if !run.held[kk]
-                && p.meas[r][o][kk].is_finite()
-                && (0..ns).all(|i| cols[r][i][kk].is_finite())
-            {
+            if !run.held[kk] && target[r][kk].is_finite() {
                 rows.push((r, kk));
             }
         }
     }
     let val = |r: usize, kk: usize, j: usize| -> f64 {
-        if j < ns {
+        if j < nc {
             cols[r][j][kk]
-        } else if j - ns == r {
+        } else if j - nc == r {
             1.0
         } else {
             0.0
@@ -235,10 +235,8 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
     };
     let coef = if rows.len() > k + 2 {
         let x = nalgebra::DMatrix::from_fn(rows.len(), k, |i, j| val(rows[i].0, rows[i].1, j));
-        let y = nalgebra::DVector::from_iterator(
-            rows.len(),
-            rows.iter().map(|&(r, kk)| p.meas[r][o][kk]),
-        );
+        let y =
+            nalgebra::DVector::from_iterator(rows.len(), rows.iter().map(|&(r, kk)| target[r][kk]));
         super::ident::ridge(&x, &y, 1e-6)
     } else {
         None
@@ -255,12 +253,13 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
         let sizes: Vec<usize> = ds.runs.iter().map(|r| r.rows()).collect();
         return OutFit::failed(k, &sizes, rows.len(), held);
     };
+    // with `own`: that sensor's coefficient as lagged and as read
+    f.extra_coef = own.map(|i| coef[i]).into_iter().collect();
     for (r, run) in ds.runs.iter().enumerate() {
         let mut res = Vec::with_capacity(run.rows());
         for kk in 0..run.rows() {
-            let m = p.meas[r][o][kk];
             let pred: f64 = (0..k).map(|j| coef[j] * val(r, kk, j)).sum();
-            let e = m - pred;
+            let e = target[r][kk] - pred;
             if !e.is_finite() {
                 res.push(f64::NAN);
                 continue;
@@ -274,64 +273,89 @@ fn body_map(p: &Problem, o: usize, lagged: Option<(usize, f64)>) -> OutFit {
 }
 
 /// Lag grid [s] for `sensor_lag`.
-pub const LAG_GRID: [f64; 7] = [30.0, 60.0, 120.0, 240.0, 480.0, 900.0, 1800.0];
+pub const LAG_GRID: [f64; 9] = [
+    60.0, 90.0, 135.0, 200.0, 300.0, 450.0, 675.0, 1000.0, 1500.0,
+];
 
-/// Sensor lag against the body: for each sensor, the lag correction that
-/// best improves the static displacement map on the fit rows. Returns the
-/// candidates and the static map's own fit (its "before").
+/// Sensor lag against the body: for each lag `tau` of the grid, the body
+/// map of every displacement with all signals lagged by `tau` (the
+/// reference) against the same map with one sensor taken as read (it
+/// already lags by `tau`). Per sensor, the `tau` with the largest relative
+/// fit-row gain. Returns the candidates and, for each, its reference fit.
 pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
+    use rayon::prelude::*;
     let disp: Vec<usize> = (0..p.outputs.len())
         .filter(|&o| p.outputs[o].is_disp)
         .collect();
-    if disp.is_empty() {
+    let ns = p.ds.sensors.len();
+    if disp.is_empty() || ns < 2 {
         return Vec::new();
     }
-    let before: Vec<OutFit> = disp.iter().map(|&o| body_map(p, o, None)).collect();
-    let base = ModelFit {
-        outs: (0..p.outputs.len())
+    let no = p.outputs.len();
+    let assemble = |fits: Vec<OutFit>| ModelFit {
+        outs: (0..no)
             .map(|o| {
                 disp.iter()
                     .position(|&d| d == o)
-                    .map_or_else(OutFit::default, |i| before[i].clone())
+                    .map_or_else(OutFit::default, |i| fits[i].clone())
             })
             .collect(),
     };
-    let mut out = Vec::new();
-    for s in 0..p.ds.sensors.len() {
-        let mut best: Option<(f64, f64, Vec<OutFit>)> = None;
-        for &tau in &LAG_GRID {
-            let fits: Vec<OutFit> = disp
+    let j_of = |fits: &[OutFit]| -> f64 {
+        fits.iter()
+            .zip(&disp)
+            .map(|(f, &o)| f.sse_fit / p.outputs[o].noise.powi(2))
+            .sum()
+    };
+    // per tau: reference fits, then per sensor the fits with it as read
+    let per_tau: Vec<(Vec<OutFit>, Vec<Vec<OutFit>>)> = LAG_GRID
+        .par_iter()
+        .map(|&tau| {
+            let base: Vec<OutFit> = disp
                 .iter()
-                .map(|&o| body_map(p, o, Some((s, tau))))
+                .map(|&o| lagged_body_map(p, o, tau, None))
                 .collect();
-            let j: f64 = fits
-                .iter()
-                .zip(&disp)
-                .map(|(f, &o)| f.sse_fit / p.outputs[o].noise.powi(2))
-                .sum();
-            if best.as_ref().is_none_or(|b| j < b.0) {
-                best = Some((j, tau, fits));
-            }
-        }
-        let Some((_, tau, fits)) = best else {
+            let own: Vec<Vec<OutFit>> = (0..ns)
+                .map(|s| {
+                    disp.iter()
+                        .map(|&o| lagged_body_map(p, o, tau, Some(s)))
+                        .collect()
+                })
+                .collect();
+            (base, own)
+        })
+        .collect();
+    let mut out = Vec::new();
+    for s in 0..ns {
+        let Some((ti, gain)) = per_tau
+            .iter()
+            .enumerate()
+            .map(|(ti, (base, own))| (ti, 1.0 - j_of(&own[s]) / j_of(base).max(1e-12)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+        else {
             continue;
         };
-        let fit = with_outputs(&base, disp.iter().copied().zip(fits).collect());
+        let tau = LAG_GRID[ti];
+        let (base, own) = &per_tau[ti];
         let mut at_bound = Vec::new();
-        if tau == LAG_GRID[LAG_GRID.len() - 1] {
-            at_bound.push(format!("tau_s = {tau} (upper end of the search)"));
+        if ti == 0 || ti == LAG_GRID.len() - 1 {
+            at_bound.push(format!("tau_s = {tau} (end of the search)"));
         }
         out.push((
             Candidate {
                 name: "sensor_lag",
                 params: json!({"sensor": p.ds.sensors[s], "tau_s": tau}),
                 affected: disp.clone(),
-                fit,
+                fit: assemble(own[s].clone()),
                 k_extra: 1,
                 at_bound,
-                evidence: json!({"channel": p.ds.sensors[s], "reference": "static displacement map of the sensor rises (the body), before and after correcting this sensor for a first-order lag"}),
+                evidence: json!({
+                    "channel": p.ds.sensors[s],
+                    "fit_rel_gain": r4(gain),
+                    "reference": "body map: each displacement as a static linear map of the sensor rises; with every signal seen through a first-order lag of tau_s (reference) against the same with this sensor taken as read (it already lags its body by tau_s)",
+                }),
             },
-            base.clone(),
+            assemble(base.clone()),
         ));
     }
     out
@@ -541,45 +565,81 @@ pub fn speed_nonlinearity(p: &Problem, st: &Structure, nom: &ModelFit) -> Option
     if !ds.has_rpm || speed_levels(p).len() < 3 || !runs_of_different_speeds(p) {
         return None;
     }
-    let mut best: Option<(f64, f64, ModelFit, Vec<usize>)> = None;
-    let exps: Vec<f64> = [3.0, 4.0]
+    // mean running speed per run; the faster runs get their own gain of the
+    // nominal's speed law: with the right law one gain fits every run
+    let means: Vec<f64> = ds
+        .runs
+        .iter()
+        .map(|r| {
+            let v: Vec<f64> = r
+                .rpm
+                .iter()
+                .flatten()
+                .copied()
+                .filter(|n| *n > 0.0)
+                .collect();
+            v.iter().sum::<f64>() / v.len().max(1) as f64
+        })
+        .collect();
+    let lo = means.iter().copied().fold(f64::MAX, f64::min);
+    let fast: Vec<bool> = means.iter().map(|m| *m >= lo + 0.2 * p.n_max).collect();
+    let n_max = p.n_max;
+    let e = st.exponent;
+    let modes = st.modes.clone();
+    let fast2 = fast.clone();
+    let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> {
+        let run = &ds.runs[r];
+        let Some(rpm) = &run.rpm else {
+            return Vec::new();
+        };
+        let u: Vec<f64> = rpm
+            .iter()
+            .map(|n| {
+                if fast2[r] {
+                    (n.abs() / n_max).powf(e)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        modes
+            .iter()
+            .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
+            .collect()
+    };
+    let (fit, took) = p.fit_where_supported(st, &extra, nom);
+    if took.is_empty() {
+        return None;
+    }
+    // steady-state gain of the faster runs' extra term per sensor (each
+    // modal column has unit DC gain): the rise it adds where it is largest
+    let gains: Vec<(usize, f64)> = took
+        .iter()
+        .filter(|&&o| !p.outputs[o].is_disp)
+        .map(|&o| (o, fit.outs[o].extra_coef.iter().sum::<f64>()))
+        .collect();
+    let strongest = gains
         .iter()
         .copied()
-        .filter(|e| *e > st.exponent + 0.9)
-        .collect();
-    for &e in &exps {
-        let n_max = p.n_max;
-        let modes = st.modes.clone();
-        let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> {
-            let run = &ds.runs[r];
-            let Some(rpm) = &run.rpm else {
-                return Vec::new();
-            };
-            let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(e)).collect();
-            modes
-                .iter()
-                .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
-                .collect()
-        };
-        let (fit, took) = p.fit_where_supported(st, &extra, nom);
-        let j = fit.bic(&p.outputs) + took.len() as f64 * 0.0;
-        if !took.is_empty() && best.as_ref().is_none_or(|b| j < b.0) {
-            best = Some((j, e, fit, took));
-        }
-    }
-    let (_, e, fit, took) = best?;
-    let mut at_bound = Vec::new();
-    if Some(&e) == exps.last() {
-        at_bound.push(format!("p = {e} (steepest power tried)"));
-    }
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
     Some(Candidate {
         name: "bearing_nonlinear",
-        params: json!({"p": e, "nominal_exponent": st.exponent}),
-        k_extra: st.modes.len() * took.len() + 1,
+        params: json!({
+            "faster_runs": ds.runs.iter().zip(&fast).filter(|(_, f)| **f).map(|(r, _)| r.name.clone()).collect::<Vec<_>>(),
+            "nominal_exponent": st.exponent,
+            "sensor": strongest.map(|(o, _)| p.outputs[o].name.clone()),
+            "extra_rise_c": strongest.map(|(_, g)| r4(g)),
+        }),
+        k_extra: st.modes.len() * took.len(),
         affected: took,
         fit,
-        at_bound,
-        evidence: json!({"speed_levels_rpm": speed_levels(p).iter().map(|v| v.round()).collect::<Vec<_>>(), "driver": format!("(n/n_max)^{e} through the nominal's modes")}),
+        at_bound: Vec::new(),
+        evidence: json!({
+            "speed_levels_rpm": speed_levels(p).iter().map(|v| v.round()).collect::<Vec<_>>(),
+            "driver": format!("a separate gain of the nominal's speed law (n/n_max)^{e} in the faster runs (mean running speed ≥ 20 % of the maximum above the slowest run's)"),
+            "strongest_sensor": strongest.map(|(o, _)| p.outputs[o].name.clone()),
+            "steady_gain_c": strongest.map(|(_, g)| r4(g)),
+        }),
     })
 }
 
