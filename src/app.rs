@@ -133,6 +133,7 @@ impl<F: NorFlash> App<F> {
         s.corrections = out.corrections;
         s.predictions = out.predicted;
         s.axes = out.axes;
+        s.active = out.active;
         for c in 0..MAX_CHANNELS {
             let v = acq.value(c, now_ms);
             s.temperatures[c] = v.usable().map(centidegrees);

@@ -20,6 +20,16 @@
 //! 6. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
+//! 7. **Degraded mode** (images with fallback models, format v2): when a
+//!    sensor some direction's main model reads is invalid, that direction is
+//!    served by the first fallback (image order) whose inputs are all valid
+//!    (`DEGRADED`; [`StepOutput::active`] names it); a direction with no such
+//!    fallback is held as in rule 2. The switch (and the switch back when the
+//!    sensor recovers) only changes the target: the served value still moves
+//!    by at most max rate × elapsed time, so it never jumps. The lag filters
+//!    of valid inputs keep running; an invalid input's filter is frozen and
+//!    on recovery advances over the whole gap with its first new sample
+//!    (rule 4, per input). Without fallbacks rule 2 applies unchanged.
 
 use crate::eval::{AxisPair, Evaluation};
 use crate::fixed::{decay_pow_q30, lag_update, FEATURE_FRAC_BITS};
@@ -47,7 +57,12 @@ pub mod status {
     pub const OUT_OF_ENVELOPE: u16 = 1 << 6;
     /// The correction's change was limited by the maximum rate.
     pub const RATE_LIMITED: u16 = 1 << 7;
+    /// Some direction is served by a fallback model (a model sensor is invalid).
+    pub const DEGRADED: u16 = 1 << 8;
 }
+
+/// [`StepOutput::active`]: no model serves the direction (held or no model).
+pub const ACTIVE_NONE: u8 = 0xFF;
 
 /// Inputs of one step.
 #[derive(Debug, Clone, Copy)]
@@ -70,6 +85,9 @@ pub struct StepOutput {
     pub predicted: [i32; MAX_DIRECTIONS],
     pub axes: [AxisPair; MAX_AXES],
     pub status: u16,
+    /// Per direction, the model serving it: 0 main, k fallback k (1-based,
+    /// image order), [`ACTIVE_NONE`] held or no model.
+    pub active: [u8; MAX_DIRECTIONS],
 }
 
 pub struct Compensator {
@@ -83,6 +101,17 @@ pub struct Compensator {
     last_eval: Evaluation,
     /// Integrator limits (max correction, max rate) that may only tighten the image's.
     limit_override: [(i32, i32); MAX_DIRECTIONS],
+    /// Per direction, bit i: the main model reads input i.
+    main_mask: [u16; MAX_DIRECTIONS],
+    /// Inputs whose filter is frozen (sensor invalid), and the filter clock
+    /// each was last advanced to.
+    frozen: u16,
+    frozen_clock_ms: [u64; MAX_INPUTS],
+    /// Inputs whose filter has not started (invalid at the reference sample).
+    unstarted: u16,
+    /// Sensors without a reference sample (invalid when it was taken): their
+    /// rises stay invalid until the next reference.
+    unreferenced: u32,
 }
 
 impl Default for Compensator {
@@ -93,8 +122,8 @@ impl Default for Compensator {
 
 impl Compensator {
     pub fn new(model: Option<Model>) -> Self {
-        Compensator {
-            model,
+        let mut c = Compensator {
+            model: None,
             reference: [0; MAX_SENSORS],
             reference_ms: None,
             filters_q16: [0; MAX_INPUTS],
@@ -103,7 +132,14 @@ impl Compensator {
             served: [0; MAX_DIRECTIONS],
             last_eval: Evaluation::default(),
             limit_override: [(i32::MAX, i32::MAX); MAX_DIRECTIONS],
-        }
+            main_mask: [0; MAX_DIRECTIONS],
+            frozen: 0,
+            frozen_clock_ms: [0; MAX_INPUTS],
+            unstarted: 0,
+            unreferenced: 0,
+        };
+        c.load(model);
+        c
     }
 
     pub fn model(&self) -> Option<&Model> {
@@ -114,13 +150,22 @@ impl Compensator {
     /// the served correction is kept and moves to the new model's output at
     /// the new model's rate limit (no jump).
     pub fn load(&mut self, model: Option<Model>) {
+        self.main_mask = [0; MAX_DIRECTIONS];
+        if let Some(m) = &model {
+            for (d, mask) in self.main_mask.iter_mut().enumerate() {
+                *mask = m.main_input_mask(d);
+            }
+        }
         self.model = model;
-        self.reference_ms = None;
+        self.rereference();
     }
 
     /// Take a new reference sample at the next step (e.g. machine cold again).
     pub fn rereference(&mut self) {
         self.reference_ms = None;
+        self.frozen = 0;
+        self.unstarted = 0;
+        self.unreferenced = 0;
     }
 
     /// The reference temperatures (1/16 °C) per model sensor, once taken.
@@ -141,18 +186,54 @@ impl Compensator {
         let Some(model) = self.model.as_ref() else {
             self.served = [0; MAX_DIRECTIONS];
             out.status = status::NO_MODEL;
+            out.active = [ACTIVE_NONE; MAX_DIRECTIONS];
             return out;
         };
         let temp = |s: u8| input.temps.get(usize::from(s)).copied().flatten();
-        let needed_valid = model.inputs.iter().all(|inp| match inp.kind {
-            InputKind::SensorRise { a } => temp(a).is_some(),
-            InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
-            InputKind::Spindle => true,
-        });
+        // Bit i: input i's sensors are valid.
+        let mut valid = 0u16;
+        for (i, inp) in model.inputs.iter().enumerate() {
+            let ok = match inp.kind {
+                InputKind::SensorRise { a } => {
+                    temp(a).is_some() && self.unreferenced & (1 << (a % 32)) == 0
+                }
+                InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
+                InputKind::Spindle => true,
+            };
+            valid |= u16::from(ok) << i;
+        }
+        let all = (1u32 << model.inputs.len()) as u16;
+        let all = all.wrapping_sub(1);
         if input.stale {
             out.status |= status::STALE_INPUTS;
         }
-        if !needed_valid {
+        // Per direction: the main model (0), a fallback (k), or none.
+        let n_dir = model.directions.len().min(MAX_DIRECTIONS);
+        let mut servable = valid == all;
+        // (Before the reference sample too: a sensor dead at power-up then
+        // gets no reference and its rises stay invalid until a new one.)
+        if !servable && !model.fallbacks.is_empty() {
+            for (d, (act, &mask)) in out
+                .active
+                .iter_mut()
+                .zip(&self.main_mask)
+                .enumerate()
+                .take(n_dir)
+            {
+                *act = if mask & !valid == 0 {
+                    0
+                } else {
+                    model
+                        .fallbacks
+                        .iter()
+                        .position(|f| usize::from(f.direction) == d && f.input_mask & !valid == 0)
+                        .map_or(ACTIVE_NONE, |k| (k + 1) as u8)
+                };
+                servable |= *act != ACTIVE_NONE;
+            }
+        }
+        if !servable {
+            out.active = [ACTIVE_NONE; MAX_DIRECTIONS];
             out.status |= status::SENSOR_FAULT;
             out.corrections = self.served;
             out.predicted = self.last_eval.corrections;
@@ -176,9 +257,16 @@ impl Compensator {
                     *r = if model.flags & FLAG_FIXED_REFERENCE != 0 {
                         s.ref_temp
                     } else {
-                        temp(i as u8).unwrap_or(0)
+                        match temp(i as u8) {
+                            Some(v) => v,
+                            None => {
+                                self.unreferenced |= 1 << (i % 32);
+                                0
+                            }
+                        }
                     };
                 }
+                self.unstarted = !valid & all;
                 self.reference_ms = Some(input.now_ms);
                 self.filter_clock_ms = input.now_ms;
                 input.now_ms
@@ -192,14 +280,38 @@ impl Compensator {
             Ok(e) => u64::from(e / model.step_ms),
             Err(_) => elapsed / step_ms,
         };
+        let clock_before = self.filter_clock_ms;
         self.filter_clock_ms += steps * step_ms;
         let t = |s: u8| i64::from(temp(s).unwrap_or(0));
         let mut features = [0i32; MAX_INPUTS];
-        for (inp, (feature, filter)) in model
+        for (i, (inp, (feature, filter))) in model
             .inputs
             .iter()
             .zip(features.iter_mut().zip(self.filters_q16.iter_mut()))
+            .enumerate()
         {
+            let bit = 1u16 << i;
+            if valid & bit == 0 {
+                // Degraded: freeze this input at its last value (no fallback reads it).
+                if first {
+                    *filter = 0;
+                }
+                if self.frozen & bit == 0 {
+                    self.frozen |= bit;
+                    self.frozen_clock_ms[i] = clock_before;
+                }
+                *feature = (*filter >> (16 - FEATURE_FRAC_BITS))
+                    .clamp(i64::from(i32::MIN), i64::from(i32::MAX))
+                    as i32;
+                continue;
+            }
+            // Recovered: advance over the whole gap (on the step grid).
+            let steps = if self.frozen & bit != 0 {
+                self.frozen &= !bit;
+                (self.filter_clock_ms - self.frozen_clock_ms[i]) / step_ms
+            } else {
+                steps
+            };
             let raw = match inp.kind {
                 InputKind::SensorRise { a } => {
                     t(a) - i64::from(self.reference.get(usize::from(a)).copied().unwrap_or(0))
@@ -207,9 +319,14 @@ impl Compensator {
                 InputKind::SensorDiff { a, b } => t(a) - t(b),
                 InputKind::Spindle => i64::from(input.spindle_rpm),
             } << 16;
+            let start = first || self.unstarted & bit != 0;
+            self.unstarted &= !bit;
             let value_q16 = match inp.lag {
-                None => raw,
-                Some(_) if first => {
+                None => {
+                    *filter = raw;
+                    raw
+                }
+                Some(_) if start => {
                     *filter = raw;
                     raw
                 }
@@ -226,7 +343,22 @@ impl Compensator {
                 .clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
         }
         let positions = input.positions;
-        let eval = model.evaluate(&features[..model.inputs.len()], positions);
+        let mut eval = model.evaluate(&features[..model.inputs.len()], positions);
+        if out.active[..n_dir].iter().any(|&a| a != 0) {
+            let n = model.normalise(&features[..model.inputs.len()], positions);
+            for (c, &a) in eval.corrections.iter_mut().zip(&out.active[..n_dir]) {
+                match a {
+                    0 => {}
+                    ACTIVE_NONE => {
+                        out.status |= status::SENSOR_FAULT;
+                    }
+                    k => {
+                        *c = model.fallback_correction(usize::from(k) - 1, &n);
+                        out.status |= status::DEGRADED;
+                    }
+                }
+            }
+        }
         if eval.out_of_envelope {
             out.status |= status::OUT_OF_ENVELOPE;
         }
@@ -245,9 +377,12 @@ impl Compensator {
             .iter_mut()
             .zip(&self.limit_override)
             .zip(&eval.corrections);
-        for (dir, ((served, &(o_max, o_rate)), &predicted)) in
-            model.directions.iter().zip(per_direction)
+        for ((dir, ((served, &(o_max, o_rate)), &predicted)), &active) in
+            model.directions.iter().zip(per_direction).zip(&out.active)
         {
+            if active == ACTIVE_NONE {
+                continue; // held: no model for this direction now
+            }
             let max_c = i64::from(dir.max_correction.min(o_max));
             let rate = dir.max_rate.min(o_rate).clamp(0, MAX_RATE) as u32;
             let max_step = i64::from(rate) * i64::from(dt_s) + i64::from(rate * dt_rem / 1000);
@@ -268,7 +403,12 @@ impl Compensator {
         out.corrections = self.served;
         out.predicted = eval.corrections;
         out.axes = eval.axes;
-        out.status |= status::VALID;
+        if out.status & status::SENSOR_FAULT == 0 {
+            out.status |= status::VALID;
+        }
+        for a in out.active[n_dir..].iter_mut() {
+            *a = ACTIVE_NONE;
+        }
         out
     }
 }

@@ -86,6 +86,14 @@ pub mod result {
     pub const TABLE_SUM_TOO_LARGE: u16 = 20;
     /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
     pub const NOT_NEWER: u16 = 21;
+    /// An image section (format v2) of a kind this firmware does not read.
+    pub const UNKNOWN_SECTION: u16 = 30;
+    /// An image section whose contents do not match its declared length.
+    pub const SECTION_LENGTH: u16 = 31;
+    /// The same image section kind twice.
+    pub const DUPLICATE_SECTION: u16 = 32;
+    /// A fallback model reads a sensor it is meant to do without.
+    pub const FALLBACK_USES_EXCLUDED: u16 = 33;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -112,6 +120,10 @@ pub mod result {
             MAX_RATE => "MAX_RATE",
             TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
             NOT_NEWER => "NOT_NEWER",
+            UNKNOWN_SECTION => "UNKNOWN_SECTION",
+            SECTION_LENGTH => "SECTION_LENGTH",
+            DUPLICATE_SECTION => "DUPLICATE_SECTION",
+            FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
             _ => "unknown",
         }
     }
@@ -136,6 +148,10 @@ pub mod result {
             ImageError::MaxCorrectionOutOfRange { .. } => MAX_CORRECTION,
             ImageError::MaxRateOutOfRange { .. } => MAX_RATE,
             ImageError::TableSumTooLarge { .. } => TABLE_SUM_TOO_LARGE,
+            ImageError::UnknownSection { .. } => UNKNOWN_SECTION,
+            ImageError::SectionLength { .. } => SECTION_LENGTH,
+            ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
+            ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
         }
     }
 }

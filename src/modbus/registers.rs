@@ -41,8 +41,14 @@ pub const AXIS_BLOCK: u16 = 8;
 pub const IR_TEMPERATURES: u16 = 110;
 /// Sensor states ([`crate::process_image::ChannelState::code`]).
 pub const IR_STATES: u16 = 130;
-/// Last input register.
-pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
+/// Active model per direction: 0 main, k fallback k, 0xFFFF none (held / no model).
+pub const IR_ACTIVE_MODEL: u16 = 150;
+/// Bit d: direction d is served by a fallback model.
+pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
+/// Bit d: direction d has no usable model (held).
+pub const IR_HELD_DIRECTIONS: u16 = 157;
+/// Last input register (158–159 reserved for degraded mode, read 0).
+pub const IR_LAST: u16 = 159;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Snapshot {
@@ -66,6 +72,8 @@ pub struct Snapshot {
     /// 0.01 °C, `None` where no valid value.
     pub temperatures: [Option<i16>; MAX_CHANNELS],
     pub states: [u16; MAX_CHANNELS],
+    /// Per direction, the model serving it ([`thermocomp_core::compensator::ACTIVE_NONE`]: none).
+    pub active: [u8; MAX_DIRECTIONS],
 }
 
 impl Default for Snapshot {
@@ -88,6 +96,7 @@ impl Default for Snapshot {
             axes: [AxisPair::default(); MAX_AXES],
             temperatures: [None; MAX_CHANNELS],
             states: [0; MAX_CHANNELS],
+            active: [thermocomp_core::compensator::ACTIVE_NONE; MAX_DIRECTIONS],
         }
     }
 }
@@ -188,6 +197,22 @@ impl Snapshot {
             t.map_or(NOT_AVAILABLE, |v| v as u16)
         } else if in_block(IR_STATES, MAX_CHANNELS as u16) {
             self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS]
+        } else if in_block(IR_ACTIVE_MODEL, MAX_DIRECTIONS as u16) {
+            match self.active[usize::from(addr - IR_ACTIVE_MODEL) % MAX_DIRECTIONS] {
+                thermocomp_core::compensator::ACTIVE_NONE => 0xFFFF,
+                k => u16::from(k),
+            }
+        } else if addr == IR_DEGRADED_DIRECTIONS || addr == IR_HELD_DIRECTIONS {
+            let want = |a: u8| match addr {
+                IR_DEGRADED_DIRECTIONS => a != 0 && a != thermocomp_core::compensator::ACTIVE_NONE,
+                _ => a == thermocomp_core::compensator::ACTIVE_NONE,
+            };
+            let n = usize::from(self.n_directions).min(MAX_DIRECTIONS);
+            self.active[..n]
+                .iter()
+                .enumerate()
+                .filter(|(_, &a)| want(a))
+                .fold(0u16, |m, (d, _)| m | (1 << d))
         } else {
             0
         };
