@@ -68,6 +68,12 @@ pub struct FitArgs {
     /// Only the MLR models.
     #[arg(long)]
     pub mlr_only: bool,
+    /// Do not fit fallback models (degraded mode: models without each model sensor).
+    #[arg(long)]
+    pub no_fallbacks: bool,
+    /// Also fit fallbacks without each pair of a channel's model sensors.
+    #[arg(long, conflicts_with = "no_fallbacks")]
+    pub fallback_pairs: bool,
     /// Write the fitted models (MLR and networks, JSON).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -142,6 +148,8 @@ impl FitArgs {
         cfg.choice_margin = self.choice_margin;
         cfg.progress = !self.json;
         cfg.skip_net = self.mlr_only;
+        cfg.fallbacks = !self.no_fallbacks;
+        cfg.fallback_pairs = self.fallback_pairs;
         Ok(cfg)
     }
 }

@@ -8,6 +8,7 @@
 //! row split.
 
 pub mod cli;
+pub mod fallback;
 pub mod net;
 pub mod rng;
 pub mod run;
@@ -82,6 +83,9 @@ pub struct ModelFile {
     /// channel (`mlr-static`, `mlr` or `ga-bpn`); what `export` ships by default.
     #[serde(default)]
     pub chosen: std::collections::BTreeMap<String, String>,
+    /// Per channel, models without each of its sensors (degraded mode, issue 15).
+    #[serde(default)]
+    pub fallbacks: Vec<fallback::FallbackParams>,
 }
 
 /// Model names, simplest first (the order ties are broken in).

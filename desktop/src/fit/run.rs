@@ -54,6 +54,10 @@ pub struct FitConfig {
     pub skip_net: bool,
     /// A simpler model is chosen when its CV RMS is within this fraction of the best.
     pub choice_margin: f64,
+    /// Fit fallback models without each model sensor (`fallback.rs`).
+    pub fallbacks: bool,
+    /// ... and without each pair of model sensors.
+    pub fallback_pairs: bool,
 }
 
 impl Default for FitConfig {
@@ -72,6 +76,8 @@ impl Default for FitConfig {
             progress: false,
             skip_net: false,
             choice_margin: 0.02,
+            fallbacks: true,
+            fallback_pairs: false,
         }
     }
 }
@@ -208,6 +214,8 @@ pub struct FitReport {
     pub selection: Option<Selection>,
     pub train_segments: Vec<Segment>,
     pub val_segments: Vec<Segment>,
+    /// Fallback models per channel and excluded sensor(s), with their figures.
+    pub fallbacks: Vec<super::fallback::FallbackReport>,
     #[serde(skip)]
     pub model_file: ModelFile,
 }
@@ -423,7 +431,7 @@ fn split_blocks(plan: &Plan, segs: &[Segment], frac: f64) -> (Vec<Segment>, Vec<
 /// the training rows: each fold refits the model on the other blocks and
 /// scores it on its own block. Validation rows are never touched.
 #[allow(clippy::too_many_arguments)]
-fn cross_validate(
+pub(crate) fn cross_validate(
     cache: &SeriesCache,
     plan: &Plan,
     folds: &[(Vec<Segment>, Vec<Segment>)],
@@ -780,11 +788,28 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         inputs.push(info);
         file.mlr.push(mlr);
     }
+    let mut fallbacks = Vec::new();
+    if cfg.fallbacks {
+        let ctx = super::fallback::Context {
+            cache: &cache,
+            plan,
+            folds: &folds,
+            static_idx: &static_idx,
+            cfg,
+        };
+        let pb = progress_bar(cfg.progress, 1, "fallback models".into());
+        let (params, reps) =
+            super::fallback::fit_fallbacks(&ctx, &file, &channels, &mut in_use, &mut notes)?;
+        pb.finish_and_clear();
+        file.fallbacks = params;
+        fallbacks = reps;
+    }
     let models = reports
         .into_values()
         .filter(|r| !r.channels.is_empty())
         .collect();
     Ok(FitReport {
+        fallbacks,
         models,
         inputs,
         chosen: file.chosen.clone(),
@@ -830,6 +855,22 @@ pub fn print_report(r: &FitReport) {
             println!(
                 "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%",
                 m.name, ch, x.mae_um, x.rms_um, x.peak_um, x.raw_rms_um, x.reduction_pct
+            );
+        }
+    }
+    if !r.fallbacks.is_empty() {
+        println!("\nfallback models (degraded mode; validation rows):");
+        for f in &r.fallbacks {
+            let cv = f.cv.get(&f.model).map_or(f64::NAN, |c| c.rms_um);
+            println!(
+                "{:<10} without {:<16} {:<10} CV RMS {:>6.2} µm, RMS {:>6.2} µm, reduction {:>5.1}%  ({})",
+                f.channel,
+                f.excluded.join("+"),
+                f.model,
+                cv,
+                f.validation.rms_um,
+                f.validation.reduction_pct,
+                f.features.join(", ")
             );
         }
     }
