@@ -388,11 +388,21 @@ pub fn float_model_from_fit(
             }
         }
     }
-    // Fallback models (image v2), in the fit's order: per channel each
-    // single sensor, then pairs. One that would need inputs beyond the
-    // board's is left out (said on stderr); `export` drops the last ones if
-    // the image would exceed MAX_IMAGE_BYTES.
-    for fb in &file.fallbacks {
+    // Fallback models (image v2) in the board's priority order: the board
+    // serves a direction with the first fallback whose sensors are all
+    // valid, so per channel the lowest cross-validated RMS comes first
+    // (singles before pairs at equal CV; no CV figure: last). One that would
+    // need inputs beyond the board's is left out (said on stderr); `export`
+    // drops the last ones if the image would exceed MAX_IMAGE_BYTES.
+    let mut ordered: Vec<&crate::fit::fallback::FallbackParams> = file.fallbacks.iter().collect();
+    ordered.sort_by(|a, b| {
+        let key = |f: &crate::fit::fallback::FallbackParams| {
+            (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len())
+        };
+        let (ka, kb) = (key(a), key(b));
+        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
+    });
+    for fb in ordered {
         let Some(d) = channels.iter().position(|c| *c == fb.channel) else {
             continue;
         };

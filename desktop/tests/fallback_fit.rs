@@ -98,6 +98,7 @@ fn fit_adds_a_fallback_per_model_sensor_chosen_and_validated_like_the_main_model
     let j = serde_json::to_string(&rep.model_file).unwrap();
     let back: ModelFile = serde_json::from_str(&j).unwrap();
     assert_eq!(back.fallbacks.len(), 3);
+    assert!(back.fallbacks.iter().all(|f| f.cv_rms_um.is_some()));
     // An old fit file without fallbacks still reads.
     let old: ModelFile = serde_json::from_str(r#"{"mlr":[],"nets":[]}"#).unwrap();
     assert!(old.fallbacks.is_empty());
@@ -142,7 +143,13 @@ fn export_packs_the_fallbacks_and_replay_shows_the_board_with_a_sensor_lost() {
     }
     for f in &failed[a..] {
         assert_eq!(f.out.status & status::DEGRADED, status::DEGRADED);
-        assert_eq!(f.out.active[0], 1, "the fallback without T_a");
+        let k = usize::from(f.out.active[0]);
+        assert!(k >= 1, "a fallback serves");
+        assert_eq!(
+            model.fallbacks[k - 1].excluded,
+            [0, 0xFF],
+            "the one without T_a"
+        );
         assert_eq!(f.out.active[1], ACTIVE_NONE);
     }
     let r_all = residuals(&run, &all, &model, a, b);
@@ -159,4 +166,30 @@ fn export_packs_the_fallbacks_and_replay_shows_the_board_with_a_sensor_lost() {
         let e = parse_failure(bad, &run).unwrap_err().to_string();
         assert!(!e.contains('\n') && e.contains("--fail-sensor"), "{e}");
     }
+}
+
+#[test]
+fn the_image_orders_fallbacks_by_cross_validated_rms() {
+    let (run, rep) = fitted();
+    let columns: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let float = float_model_from_fit(&rep.model_file, &columns, &ExportOptions::default()).unwrap();
+    let cv_of = |sensor: u8| {
+        let name = &columns[usize::from(float.sensors[usize::from(sensor)].channel)];
+        rep.model_file
+            .fallbacks
+            .iter()
+            .find(|f| &f.excluded[0] == name)
+            .and_then(|f| f.cv_rms_um)
+            .unwrap()
+    };
+    let cvs: Vec<f64> = float
+        .fallbacks
+        .iter()
+        .map(|f| cv_of(f.excluded[0]))
+        .collect();
+    assert!(cvs.windows(2).all(|w| w[0] <= w[1]), "{cvs:?}");
 }

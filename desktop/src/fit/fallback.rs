@@ -28,6 +28,10 @@ pub struct FallbackParams {
     /// `mlr-static` or `mlr`, chosen by blocked cross-validation.
     pub model: String,
     pub params: MlrParams,
+    /// Blocked-CV RMS of the chosen model on the training rows (µm): the
+    /// board's priority among fallbacks whose sensors are valid (lowest first).
+    #[serde(default)]
+    pub cv_rms_um: Option<f64>,
 }
 
 /// What `fit --json` reports per fallback.
@@ -218,11 +222,16 @@ pub fn fit_fallbacks(
                 cv,
                 validation: metrics(&val.y, &pred),
             });
+            let cv_rms_um = reports
+                .last()
+                .and_then(|r: &FallbackReport| r.cv.get(&r.model))
+                .map(|c| c.rms_um);
             params.push(FallbackParams {
                 channel: ch.clone(),
                 excluded,
                 model,
                 params: mlr,
+                cv_rms_um,
             });
         }
     }
