@@ -283,6 +283,8 @@ impl Compensator {
         let clock_before = self.filter_clock_ms;
         self.filter_clock_ms += steps * step_ms;
         let t = |s: u8| i64::from(temp(s).unwrap_or(0));
+        // Inputs needing more than the plain update (invalid, recovering, not started).
+        let special = (!valid & all) | self.frozen | self.unstarted;
         let mut features = [0i32; MAX_INPUTS];
         for (i, (inp, (feature, filter))) in model
             .inputs
@@ -291,27 +293,33 @@ impl Compensator {
             .enumerate()
         {
             let bit = 1u16 << i;
-            if valid & bit == 0 {
-                // Degraded: freeze this input at its last value (no fallback reads it).
-                if first {
-                    *filter = 0;
+            let (mut steps, mut start) = (steps, first);
+            if special & bit != 0 {
+                if valid & bit == 0 {
+                    // Degraded: freeze this input at its last value (no fallback reads it).
+                    if first {
+                        *filter = 0;
+                    }
+                    if self.frozen & bit == 0 {
+                        self.frozen |= bit;
+                        self.frozen_clock_ms[i] = clock_before;
+                    }
+                    *feature = (*filter >> (16 - FEATURE_FRAC_BITS))
+                        .clamp(i64::from(i32::MIN), i64::from(i32::MAX))
+                        as i32;
+                    continue;
                 }
-                if self.frozen & bit == 0 {
-                    self.frozen |= bit;
-                    self.frozen_clock_ms[i] = clock_before;
+                // Recovered: advance over the whole gap (on the step grid).
+                if self.frozen & bit != 0 {
+                    self.frozen &= !bit;
+                    steps = (self.filter_clock_ms - self.frozen_clock_ms[i]) / step_ms;
                 }
-                *feature = (*filter >> (16 - FEATURE_FRAC_BITS))
-                    .clamp(i64::from(i32::MIN), i64::from(i32::MAX))
-                    as i32;
-                continue;
+                // Valid for the first time since the reference: start the filter.
+                if self.unstarted & bit != 0 {
+                    self.unstarted &= !bit;
+                    start = true;
+                }
             }
-            // Recovered: advance over the whole gap (on the step grid).
-            let steps = if self.frozen & bit != 0 {
-                self.frozen &= !bit;
-                (self.filter_clock_ms - self.frozen_clock_ms[i]) / step_ms
-            } else {
-                steps
-            };
             let raw = match inp.kind {
                 InputKind::SensorRise { a } => {
                     t(a) - i64::from(self.reference.get(usize::from(a)).copied().unwrap_or(0))
@@ -319,8 +327,6 @@ impl Compensator {
                 InputKind::SensorDiff { a, b } => t(a) - t(b),
                 InputKind::Spindle => i64::from(input.spindle_rpm),
             } << 16;
-            let start = first || self.unstarted & bit != 0;
-            self.unstarted &= !bit;
             let value_q16 = match inp.lag {
                 None => {
                     *filter = raw;
