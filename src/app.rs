@@ -342,6 +342,7 @@ impl<F: BackgroundErase> App<F> {
         s.predictions = out.predicted;
         s.axes = out.axes;
         s.map_missing = 0;
+        s.active = out.active;
         for c in 0..MAX_CHANNELS {
             let v = acq.value(c, now_ms);
             s.temperatures[c] = v.usable().map(centidegrees);

@@ -17,12 +17,28 @@ pub struct ExportSummary {
     /// Worst |fixed − float| per direction over the admissible inputs, µm.
     pub max_deviation_um: Vec<f64>,
     pub samples: usize,
+    /// Fallback models packed (image format v2 when > 0).
+    pub fallbacks: usize,
 }
 
 /// Quantize, encode and write an image; the image is parsed back before it
 /// is written, so only a valid image reaches the disk.
 pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
-    let (mut fixed, report) = model.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (mut fixed, mut report) = model.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+    // Fallbacks are optional: drop the last (lowest priority) until the image fits.
+    let mut trimmed = model.clone();
+    while fixed.encoded_len() > thermocomp_core::limits::MAX_IMAGE_BYTES
+        && trimmed.fallbacks.pop().is_some()
+    {
+        (fixed, report) = trimmed.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    if trimmed.fallbacks.len() < model.fallbacks.len() {
+        eprintln!(
+            "note: {} fallback model(s) left out to keep the image within {} bytes",
+            model.fallbacks.len() - trimmed.fallbacks.len(),
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
     let len = fixed.encoded_len();
     if len > thermocomp_core::limits::MAX_IMAGE_BYTES {
         anyhow::bail!(
@@ -55,6 +71,7 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
             .collect(),
         max_deviation_um: r.max_deviation_um.clone(),
         samples: r.samples,
+        fallbacks: m.fallbacks.len(),
     }
 }
 
@@ -70,6 +87,9 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
         s.crc32,
         s.model_version
     );
+    if s.fallbacks > 0 {
+        println!("  {} fallback model(s) for degraded mode", s.fallbacks);
+    }
     for (d, dev) in s.directions.iter().zip(&s.max_deviation_um) {
         println!(
             "  {d}: worst fixed-vs-float deviation {dev:.4} µm over {} admissible input samples",
@@ -184,9 +204,11 @@ pub fn float_model_from_fit(
         inputs: vec![],
         nets: vec![],
         tables: vec![],
+        fallbacks: vec![],
     };
     use thermocomp_core::limits::{
-        MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS, MAX_TABLES, MAX_TERMS,
+        MAX_DIRECTIONS, MAX_FALLBACKS, MAX_FALLBACK_TERMS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS,
+        MAX_SENSORS, MAX_TABLES, MAX_TERMS,
     };
     if channels.len() > MAX_DIRECTIONS {
         anyhow::bail!(
@@ -383,6 +405,93 @@ pub fn float_model_from_fit(
                 terms,
             });
         }
+    }
+    // Fallback models (image v2) in the board's priority order: the board
+    // serves a direction with the first fallback whose sensors are all
+    // valid, so per channel the lowest cross-validated RMS comes first
+    // (singles before pairs at equal CV; no CV figure: last). One that would
+    // need inputs beyond the board's is left out (said on stderr); `export`
+    // drops the last ones if the image would exceed MAX_IMAGE_BYTES.
+    let mut ordered: Vec<&crate::fit::fallback::FallbackParams> = file.fallbacks.iter().collect();
+    ordered.sort_by(|a, b| {
+        let key = |f: &crate::fit::fallback::FallbackParams| {
+            (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len())
+        };
+        let (ka, kb) = (key(a), key(b));
+        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
+    });
+    for fb in ordered {
+        let Some(d) = channels.iter().position(|c| *c == fb.channel) else {
+            continue;
+        };
+        // Only sensors the exported model reads: a fallback for any other is never used.
+        let excluded: Option<Vec<u8>> = fb
+            .excluded
+            .iter()
+            .map(|name| {
+                let ch = temperature_columns.iter().position(|c| c == name)?;
+                model
+                    .sensors
+                    .iter()
+                    .position(|s| usize::from(s.channel) == ch)
+                    .map(|i| i as u8)
+            })
+            .collect();
+        let Some(excluded) = excluded else { continue };
+        let held_terms: usize = model.fallbacks.iter().map(|f| f.terms.len()).sum();
+        if model.fallbacks.len() >= MAX_FALLBACKS
+            || held_terms + fb.params.features.len() + 1 > MAX_FALLBACK_TERMS
+        {
+            eprintln!(
+                "note: fallback of {} without {} left out: the image holds {MAX_FALLBACKS} fallbacks of {MAX_FALLBACK_TERMS} terms in all",
+                fb.channel,
+                fb.excluded.join("+")
+            );
+            continue;
+        }
+        let (n_sensors, n_inputs) = (model.sensors.len(), model.inputs.len());
+        let m = &fb.params;
+        let mut terms = vec![];
+        let mut c0 = m.c0;
+        let mut failed = None;
+        for (f, coef) in m.features.iter().zip(&m.coef) {
+            match input_of(f, &mut model) {
+                Ok((i, a, c)) => {
+                    c0 += coef * c;
+                    terms.push(FloatTerm {
+                        coef_um: coef * a,
+                        input: Some(i),
+                        input_power: 1,
+                        position_power: 0,
+                    });
+                }
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
+        }
+        if let Some(e) = failed {
+            model.sensors.truncate(n_sensors);
+            model.inputs.truncate(n_inputs);
+            eprintln!(
+                "note: fallback of {} without {} left out: {e}",
+                fb.channel,
+                fb.excluded.join("+")
+            );
+            continue;
+        }
+        terms.push(FloatTerm {
+            coef_um: c0,
+            input: None,
+            input_power: 0,
+            position_power: 0,
+        });
+        model.fallbacks.push(thermocomp_core::float::FloatFallback {
+            direction: d as u8,
+            excluded,
+            terms,
+        });
     }
     Ok(model)
 }

@@ -56,6 +56,10 @@ enum Command {
         from: f64,
         #[arg(long, default_value_t = 1.0)]
         to: f64,
+        /// Lose a sensor from a time on: `T_t4@1800` (seconds of the run) or
+        /// `T_t4@60%` (from that fraction of the rows); repeatable.
+        #[arg(long = "fail-sensor", value_name = "NAME@TIME")]
+        fail_sensor: Vec<String>,
         #[arg(long)]
         json: bool,
     },
@@ -286,6 +290,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             image,
             from,
             to,
+            fail_sensor,
             json,
         } => {
             // Run file first, then image: each refusal names its own file.
@@ -295,7 +300,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let model = thermocomp_core::Model::parse(&bytes)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", image.display()))?;
             check_channels(&model, &table, &image, &run)?;
-            let rows = tcomp::replay::replay_files(&run, &image)
+            let failures = fail_sensor
+                .iter()
+                .map(|f| tcomp::replay::parse_failure(f, &table))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let rows = tcomp::replay::replay_files_failing(&run, &image, &failures)
                 .with_context(|| format!("in run file {}", run.display()))?;
             let n = rows.len();
             let (a, b) = (
@@ -307,7 +316,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if json {
                 println!(
                     "{}",
-                    serde_json::json!({"rows": n, "scored_rows": [a, b], "channels": res, "status_rows": flags})
+                    serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags})
                 );
             } else {
                 println!("{} samples compensated; scored rows {a}..{b}", n);
@@ -331,8 +340,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     );
                 }
                 println!(
-                    "  status rows: {} valid, {} out of envelope, {} clamped, {} rate limited, {} stale, {} sensor fault",
-                    flags.valid, flags.out_of_envelope, flags.clamped, flags.rate_limited, flags.stale, flags.sensor_fault
+                    "  status rows: {} valid, {} out of envelope, {} clamped, {} rate limited, {} stale, {} sensor fault, {} degraded",
+                    flags.valid, flags.out_of_envelope, flags.clamped, flags.rate_limited, flags.stale, flags.sensor_fault, flags.degraded
                 );
             }
         }

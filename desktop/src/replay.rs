@@ -15,8 +15,26 @@ pub struct ReplayRow {
     pub out: StepOutput,
 }
 
+/// A sensor lost from a time on (`tcomp replay --fail-sensor`): the board
+/// reads its channel as invalid from `from_ms` (trace time) to the end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SensorFailure {
+    /// Temperature channel (the run's T_ column index).
+    pub channel: usize,
+    pub from_ms: u64,
+}
+
 /// Compensate every sample of a run CSV (text) with `model`.
 pub fn replay(csv: &str, model: Model) -> Result<Vec<ReplayRow>> {
+    replay_failing(csv, model, &[])
+}
+
+/// As [`replay`], with sensors lost from given times on.
+pub fn replay_failing(
+    csv: &str,
+    model: Model,
+    failures: &[SensorFailure],
+) -> Result<Vec<ReplayRow>> {
     let mut lines = csv
         .lines()
         .enumerate()
@@ -36,6 +54,11 @@ pub fn replay(csv: &str, model: Model) -> Result<Vec<ReplayRow>> {
         for (t, ch) in temps.iter_mut().zip(&channels) {
             // The board reads i16 from a DS18B20; anything else is no sensor.
             *t = ch
+                .filter(|c| {
+                    !failures
+                        .iter()
+                        .any(|f| f.channel == *c && s.time_ms >= f.from_ms)
+                })
                 .and_then(|c| s.temperatures.get(c).copied().flatten())
                 .filter(|v| i16::try_from(*v).is_ok());
         }
@@ -56,11 +79,63 @@ pub fn replay(csv: &str, model: Model) -> Result<Vec<ReplayRow>> {
 
 /// Read a trace file and a model image file and replay.
 pub fn replay_files(trace: &std::path::Path, image: &std::path::Path) -> Result<Vec<ReplayRow>> {
+    replay_files_failing(trace, image, &[])
+}
+
+/// As [`replay_files`], with sensors lost from given times on.
+pub fn replay_files_failing(
+    trace: &std::path::Path,
+    image: &std::path::Path,
+    failures: &[SensorFailure],
+) -> Result<Vec<ReplayRow>> {
     let csv =
         std::fs::read_to_string(trace).with_context(|| format!("reading {}", trace.display()))?;
     let bytes = std::fs::read(image).with_context(|| format!("reading {}", image.display()))?;
     let model = Model::parse(&bytes).map_err(|e| anyhow!("{}: {e}", image.display()))?;
-    replay(&csv, model)
+    replay_failing(&csv, model, failures)
+}
+
+/// Parse `--fail-sensor NAME@TIME`: NAME a temperature column of `run`,
+/// TIME seconds of the run's time (`1800`, `1800s`) or a percentage of its
+/// rows (`60%`: from the row where `--from 0.6` starts scoring).
+pub fn parse_failure(spec: &str, run: &crate::runcsv::Run) -> Result<SensorFailure> {
+    let (name, at) = spec
+        .split_once('@')
+        .ok_or_else(|| anyhow!("--fail-sensor {spec}: expected NAME@SECONDS or NAME@PERCENT%"))?;
+    let columns = run.temperature_columns();
+    let channel = columns
+        .iter()
+        .position(|c| *c == name.trim())
+        .ok_or_else(|| {
+            anyhow!(
+                "--fail-sensor {spec}: no temperature column {name} (columns: {})",
+                columns.join(",")
+            )
+        })?;
+    let at = at.trim();
+    let from_ms = if let Some(p) = at.strip_suffix('%') {
+        let p: f64 = p
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("--fail-sensor {spec}: {at} is not a percentage"))?;
+        if !(0.0..=100.0).contains(&p) {
+            anyhow::bail!("--fail-sensor {spec}: percentage outside 0-100");
+        }
+        let t = run.time_s();
+        let row = ((p / 100.0) * t.len() as f64) as usize;
+        t.get(row).map_or(u64::MAX, |s| (s * 1000.0).round() as u64)
+    } else {
+        let s: f64 = at
+            .trim_end_matches('s')
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("--fail-sensor {spec}: {at} is not a time in seconds"))?;
+        if !(s >= 0.0 && s.is_finite()) {
+            anyhow::bail!("--fail-sensor {spec}: time must be 0 s or later");
+        }
+        (s * 1000.0).round() as u64
+    };
+    Ok(SensorFailure { channel, from_ms })
 }
 
 /// Error figures of the board's served correction against a measured channel,
@@ -100,6 +175,8 @@ pub struct FlagCounts {
     pub sensor_fault: usize,
     pub no_model: usize,
     pub warming_up: usize,
+    /// A direction served by a fallback model (a model sensor invalid).
+    pub degraded: usize,
 }
 
 /// Count status flags over rows `[from, to)`.
@@ -121,6 +198,7 @@ pub fn flag_counts(rows: &[ReplayRow], from: usize, to: usize) -> FlagCounts {
         add(st::SENSOR_FAULT, &mut c.sensor_fault);
         add(st::NO_MODEL, &mut c.no_model);
         add(st::WARMING_UP, &mut c.warming_up);
+        add(st::DEGRADED, &mut c.degraded);
     }
     c
 }

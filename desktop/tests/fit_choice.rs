@@ -54,7 +54,8 @@ fn drift_and_cycles(nonlinear: bool, drift: f64) -> Run {
             }
         })
         .collect();
-    let q = quantize_temp;
+    // The board's 1/16 °C reading (the DS18B20 LSB).
+    let q = |t: f64| (t * 16.0).round() / 16.0;
     let y: Vec<f64> = ta
         .iter()
         .zip(&tb)

@@ -99,13 +99,20 @@ class Master:
         return link
 
 
-def snapshot(m):
+def snapshot(m, degraded=False):
     # One request from the status register to the last prediction: one snapshot.
     r = m.call("read_input_registers", 0, count=54)
     if r is None or r.isError():
         return {"error": str(r)}
     w = r.registers
-    return {
+    extra = {}
+    if degraded:
+        # Degraded mode (150-157): a second request, so possibly the next snapshot.
+        e = m.call("read_input_registers", 150, count=8)
+        if e is None or e.isError():
+            return {"error": str(e)}
+        extra = {"active": e.registers[0:6], "degraded_directions": e.registers[6], "held_directions": e.registers[7]}
+    return {**extra,
         "pattern": u32(w[0], w[1]),
         "status": w[3],
         "sequence": u32(w[IR_SEQUENCE], w[IR_SEQUENCE + 1]),
@@ -120,7 +127,7 @@ def snapshot(m):
 
 def cmd_read(a):
     m = Master(a.port, unit=a.unit, timeout=a.timeout)
-    out = [snapshot(m) for _ in range(a.samples)]
+    out = [snapshot(m, a.degraded) for _ in range(a.samples)]
     m.close()
     print(json.dumps(out))
 
@@ -376,6 +383,7 @@ def main():
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("read"); r.add_argument("--port", type=int, required=True); r.add_argument("--samples", type=int, default=1)
     r.add_argument("--unit", type=int, default=UNIT); r.add_argument("--timeout", type=float, default=3.0)
+    r.add_argument("--degraded", action="store_true")
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
     u.add_argument("--watch", type=float, default=0.0, help="seconds of sequence polling before and after the commit")
     b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)

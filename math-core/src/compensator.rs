@@ -20,6 +20,16 @@
 //! 5. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
+//! 6. **Degraded mode** (images with fallback models, format v2): when a
+//!    sensor some direction's main model reads is invalid, that direction is
+//!    served by the first fallback (image order) whose inputs are all valid
+//!    (`DEGRADED`; [`StepOutput::active`] names it); a direction with no such
+//!    fallback is held as in rule 2. The switch (and the switch back when the
+//!    sensor recovers) only changes the target: the served value still moves
+//!    by at most max rate × elapsed time, so it never jumps. The lag filters
+//!    of valid inputs keep running; an invalid input's filter is frozen and
+//!    on recovery advances over the whole gap with its first new sample
+//!    ([`crate::features`] rule 6). Without fallbacks rule 2 applies unchanged.
 
 use crate::eval::{AxisPair, Evaluation};
 use crate::features::FeatureState;
@@ -47,7 +57,12 @@ pub mod status {
     pub const OUT_OF_ENVELOPE: u16 = 1 << 6;
     /// The correction's change was limited by the maximum rate.
     pub const RATE_LIMITED: u16 = 1 << 7;
+    /// Some direction is served by a fallback model (a model sensor is invalid).
+    pub const DEGRADED: u16 = 1 << 8;
 }
+
+/// [`StepOutput::active`]: no model serves the direction (held or no model).
+pub const ACTIVE_NONE: u8 = 0xFF;
 
 /// Inputs of one step.
 #[derive(Debug, Clone, Copy)]
@@ -70,6 +85,9 @@ pub struct StepOutput {
     pub predicted: [i32; MAX_DIRECTIONS],
     pub axes: [AxisPair; MAX_AXES],
     pub status: u16,
+    /// Per direction, the model serving it: 0 main, k fallback k (1-based,
+    /// image order), [`ACTIVE_NONE`] held or no model.
+    pub active: [u8; MAX_DIRECTIONS],
 }
 
 pub struct Compensator {
@@ -80,6 +98,8 @@ pub struct Compensator {
     last_eval: Evaluation,
     /// Integrator limits (max correction, max rate) that may only tighten the image's.
     limit_override: [(i32, i32); MAX_DIRECTIONS],
+    /// Per direction, bit i: the main model reads input i.
+    main_mask: [u16; MAX_DIRECTIONS],
 }
 
 impl Default for Compensator {
@@ -90,14 +110,17 @@ impl Default for Compensator {
 
 impl Compensator {
     pub fn new(model: Option<Model>) -> Self {
-        Compensator {
-            model,
+        let mut c = Compensator {
+            model: None,
             features: FeatureState::new(),
             last_step_ms: 0,
             served: [0; MAX_DIRECTIONS],
             last_eval: Evaluation::default(),
             limit_override: [(i32::MAX, i32::MAX); MAX_DIRECTIONS],
-        }
+            main_mask: [0; MAX_DIRECTIONS],
+        };
+        c.load(model);
+        c
     }
 
     pub fn model(&self) -> Option<&Model> {
@@ -108,8 +131,14 @@ impl Compensator {
     /// the served correction is kept and moves to the new model's output at
     /// the new model's rate limit (no jump).
     pub fn load(&mut self, model: Option<Model>) {
+        self.main_mask = [0; MAX_DIRECTIONS];
+        if let Some(m) = &model {
+            for (d, mask) in self.main_mask.iter_mut().enumerate() {
+                *mask = m.main_input_mask(d);
+            }
+        }
         self.model = model;
-        self.features.rereference();
+        self.rereference();
     }
 
     /// Take a new reference sample at the next step (e.g. machine cold again).
@@ -135,25 +164,78 @@ impl Compensator {
         let Some(model) = self.model.as_ref() else {
             self.served = [0; MAX_DIRECTIONS];
             out.status = status::NO_MODEL;
+            out.active = [ACTIVE_NONE; MAX_DIRECTIONS];
             return out;
         };
+        // Bit i: input i's sensors are valid.
+        let valid = self.features.valid_mask(model, input.temps);
+        let all = FeatureState::all_inputs(model);
         if input.stale {
             out.status |= status::STALE_INPUTS;
         }
-        // Features (reference sample, gaps, lag filters): the shared pipeline.
-        let Some(features) =
-            self.features
-                .step(model, input.now_ms, input.temps, input.spindle_rpm)
-        else {
+        // Per direction: the main model (0), a fallback (k), or none.
+        let n_dir = model.directions.len().min(MAX_DIRECTIONS);
+        let mut servable = valid == all;
+        // (Before the reference sample too: a sensor dead at power-up then
+        // gets no reference and its rises stay invalid until a new one.)
+        if !servable && !model.fallbacks.is_empty() {
+            for (d, (act, &mask)) in out
+                .active
+                .iter_mut()
+                .zip(&self.main_mask)
+                .enumerate()
+                .take(n_dir)
+            {
+                *act = if mask & !valid == 0 {
+                    0
+                } else {
+                    model
+                        .fallbacks
+                        .iter()
+                        .position(|f| usize::from(f.direction) == d && f.input_mask & !valid == 0)
+                        .map_or(ACTIVE_NONE, |k| (k + 1) as u8)
+                };
+                servable |= *act != ACTIVE_NONE;
+            }
+        }
+        if !servable {
+            out.active = [ACTIVE_NONE; MAX_DIRECTIONS];
             out.status |= status::SENSOR_FAULT;
             out.corrections = self.served;
             out.predicted = self.last_eval.corrections;
             out.axes = self.last_eval.axes;
             self.last_step_ms = input.now_ms;
             return out;
-        };
-        let eval = model.evaluate(features, input.positions);
+        }
+
+        // Features (reference sample, gaps, lag filters): the shared pipeline.
+        let mut features = [0i32; MAX_INPUTS];
+        let n_in = model.inputs.len();
+        features[..n_in].copy_from_slice(self.features.step_masked(
+            model,
+            input.now_ms,
+            input.temps,
+            input.spindle_rpm,
+            valid,
+        ));
         let reference_ms = self.features.reference_ms().unwrap_or(input.now_ms);
+        let positions = input.positions;
+        let mut eval = model.evaluate(&features[..model.inputs.len()], positions);
+        if out.active[..n_dir].iter().any(|&a| a != 0) {
+            let n = model.normalise(&features[..model.inputs.len()], positions);
+            for (c, &a) in eval.corrections.iter_mut().zip(&out.active[..n_dir]) {
+                match a {
+                    0 => {}
+                    ACTIVE_NONE => {
+                        out.status |= status::SENSOR_FAULT;
+                    }
+                    k => {
+                        *c = model.fallback_correction(usize::from(k) - 1, &n);
+                        out.status |= status::DEGRADED;
+                    }
+                }
+            }
+        }
         if eval.out_of_envelope {
             out.status |= status::OUT_OF_ENVELOPE;
         }
@@ -172,9 +254,12 @@ impl Compensator {
             .iter_mut()
             .zip(&self.limit_override)
             .zip(&eval.corrections);
-        for (dir, ((served, &(o_max, o_rate)), &predicted)) in
-            model.directions.iter().zip(per_direction)
+        for ((dir, ((served, &(o_max, o_rate)), &predicted)), &active) in
+            model.directions.iter().zip(per_direction).zip(&out.active)
         {
+            if active == ACTIVE_NONE {
+                continue; // held: no model for this direction now
+            }
             let max_c = i64::from(dir.max_correction.min(o_max));
             let rate = dir.max_rate.min(o_rate).clamp(0, MAX_RATE) as u32;
             let max_step = i64::from(rate) * i64::from(dt_s) + i64::from(rate * dt_rem / 1000);
@@ -195,7 +280,12 @@ impl Compensator {
         out.corrections = self.served;
         out.predicted = eval.corrections;
         out.axes = eval.axes;
-        out.status |= status::VALID;
+        if out.status & status::SENSOR_FAULT == 0 {
+            out.status |= status::VALID;
+        }
+        for a in out.active[n_dir..].iter_mut() {
+            *a = ACTIVE_NONE;
+        }
         out
     }
 }

@@ -109,7 +109,7 @@ impl Model {
             let p = n.p.get(usize::from(t.axis)).copied();
             let value = match (t.axis == NONE, p) {
                 (false, Some(p)) => eval_table_at(t, &n.x, p),
-                _ => eval_table_static(t, &n.x),
+                _ => eval_table_static(&t.terms, &n.x),
             };
             if let Some(acc) = acc.get_mut(usize::from(t.direction)) {
                 *acc += round_shift(value, 7);
@@ -123,6 +123,12 @@ impl Model {
             pair.ref_pos = axis.ref_pos;
         }
         e
+    }
+
+    /// Fallback `k`'s correction (0.1 µm), rounded once as the main model's.
+    pub fn fallback_correction(&self, k: usize, n: &Normalised) -> i32 {
+        let value = eval_table_static(self.fallback_terms_of(k), &n.x);
+        sat_i32(round_shift(round_shift(value, 7), 25))
     }
 
     /// Per axis, the TEMP_COMP pair of its position-dependent tables: the
@@ -188,9 +194,9 @@ pub fn eval_net_q25(net: &Net, x: &[i32; MAX_INPUTS]) -> i64 {
 
 /// A table without a position (every term's position power is 0): its Q32
 /// accumulator (0.1 µm).
-fn eval_table_static(t: &Table, x: &[i32; MAX_INPUTS]) -> i64 {
+fn eval_table_static(terms: &[crate::image::Term], x: &[i32; MAX_INPUTS]) -> i64 {
     let mut value = 0i64;
-    for term in &t.terms {
+    for term in terms {
         let xpow = match (x.get(usize::from(term.input)), term.input_power) {
             (Some(&xi), 1) => xi,
             (Some(&xi), k) => {

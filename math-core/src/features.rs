@@ -19,6 +19,14 @@
 //!    update, the newest sample held over the elapsed steps (exact for any
 //!    gap length): y ← u + dⁿ (y − u), d = exp(−step/τ) in Q30.
 //! 5. **Output**: each input in Q8 of its raw unit (i32, saturated).
+//! 6. **Partial validity** (degraded mode, [`FeatureState::step_masked`]; the
+//!    compensator uses it only for images with fallback models): the inputs
+//!    whose sensors are valid advance as above; an invalid input's filter is
+//!    frozen at its last value and, when its sensor is back, advances over
+//!    the whole gap (on the step grid) with its first new sample. A sensor
+//!    invalid when the reference is taken gets none: its rises stay invalid
+//!    until the next reference. With every input valid this is exactly
+//!    [`FeatureState::step`].
 
 use crate::fixed::{decay_pow_q30, lag_update, FEATURE_FRAC_BITS};
 use crate::image::{InputKind, Model, FLAG_FIXED_REFERENCE};
@@ -35,6 +43,14 @@ pub struct FeatureState {
     filters_q16: [i64; MAX_INPUTS],
     filter_clock_ms: u64,
     features: Features,
+    /// Inputs whose filter is frozen (sensor invalid), and the filter clock
+    /// each was last advanced to.
+    frozen: u16,
+    frozen_clock_ms: [u64; MAX_INPUTS],
+    /// Inputs whose filter has not started (invalid at the reference sample).
+    unstarted: u16,
+    /// Sensors without a reference sample (invalid when it was taken).
+    unreferenced: u32,
 }
 
 impl Default for FeatureState {
@@ -51,12 +67,44 @@ impl FeatureState {
             filters_q16: [0; MAX_INPUTS],
             filter_clock_ms: 0,
             features: [0; MAX_INPUTS],
+            frozen: 0,
+            frozen_clock_ms: [0; MAX_INPUTS],
+            unstarted: 0,
+            unreferenced: 0,
         }
     }
 
     /// Take a new reference sample (and restart the filters) at the next valid step.
     pub fn rereference(&mut self) {
         self.reference_ms = None;
+        self.frozen = 0;
+        self.unstarted = 0;
+        self.unreferenced = 0;
+    }
+
+    /// Bit i: input i of `model` can be computed now (its sensors are valid
+    /// and, for a rise, its sensor has a reference sample).
+    #[inline]
+    pub fn valid_mask(&self, model: &Model, temps: &[Option<i32>]) -> u16 {
+        let temp = |s: u8| temps.get(usize::from(s)).copied().flatten();
+        let mut valid = 0u16;
+        for (i, inp) in model.inputs.iter().enumerate() {
+            let ok = match inp.kind {
+                InputKind::SensorRise { a } => {
+                    temp(a).is_some() && self.unreferenced & (1 << (a % 32)) == 0
+                }
+                InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
+                InputKind::Spindle => true,
+            };
+            valid |= u16::from(ok) << i;
+        }
+        valid
+    }
+
+    /// Mask of every input of `model`.
+    #[inline]
+    pub fn all_inputs(model: &Model) -> u16 {
+        ((1u32 << model.inputs.len()) as u16).wrapping_sub(1)
     }
 
     /// When the reference sample was taken (ms), once taken.
@@ -96,7 +144,23 @@ impl FeatureState {
         if !Self::inputs_valid(model, temps) {
             return None;
         }
+        let all = Self::all_inputs(model);
+        Some(self.step_masked(model, now_ms, temps, spindle_rpm, all))
+    }
+
+    /// One sample with only the inputs in `valid` computable (rule 6;
+    /// `valid` from [`FeatureState::valid_mask`]). Invalid inputs return
+    /// their frozen last value, which no model that is served reads.
+    pub fn step_masked(
+        &mut self,
+        model: &Model,
+        now_ms: u64,
+        temps: &[Option<i32>],
+        spindle_rpm: i32,
+        valid: u16,
+    ) -> &[i32] {
         let temp = |s: u8| temps.get(usize::from(s)).copied().flatten();
+        let all = Self::all_inputs(model);
         let mut first = false;
         if self.reference_ms.is_none() {
             first = true;
@@ -109,9 +173,16 @@ impl FeatureState {
                 *r = if model.flags & FLAG_FIXED_REFERENCE != 0 {
                     s.ref_temp
                 } else {
-                    temp(i as u8).unwrap_or(0)
+                    match temp(i as u8) {
+                        Some(v) => v,
+                        None => {
+                            self.unreferenced |= 1 << (i % 32);
+                            0
+                        }
+                    }
                 };
             }
+            self.unstarted = !valid & all;
             self.reference_ms = Some(now_ms);
             self.filter_clock_ms = now_ms;
         }
@@ -123,13 +194,45 @@ impl FeatureState {
             Ok(e) => u64::from(e / model.step_ms),
             Err(_) => elapsed / step_ms,
         };
+        let clock_before = self.filter_clock_ms;
         self.filter_clock_ms += steps * step_ms;
         let t = |s: u8| i64::from(temp(s).unwrap_or(0));
-        for (inp, (feature, filter)) in model
+        // Inputs needing more than the plain update (invalid, recovering, not started).
+        let special = (!valid & all) | self.frozen | self.unstarted;
+        for (i, (inp, (feature, filter))) in model
             .inputs
             .iter()
             .zip(self.features.iter_mut().zip(self.filters_q16.iter_mut()))
+            .enumerate()
         {
+            let bit = 1u16 << i;
+            let (mut steps, mut start) = (steps, first);
+            if special & bit != 0 {
+                if valid & bit == 0 {
+                    // Frozen at its last value (no served model reads it).
+                    if first {
+                        *filter = 0;
+                    }
+                    if self.frozen & bit == 0 {
+                        self.frozen |= bit;
+                        self.frozen_clock_ms[i] = clock_before;
+                    }
+                    *feature = (*filter >> (16 - FEATURE_FRAC_BITS))
+                        .clamp(i64::from(i32::MIN), i64::from(i32::MAX))
+                        as i32;
+                    continue;
+                }
+                // Recovered: advance over the whole gap (on the step grid).
+                if self.frozen & bit != 0 {
+                    self.frozen &= !bit;
+                    steps = (self.filter_clock_ms - self.frozen_clock_ms[i]) / step_ms;
+                }
+                // Valid for the first time since the reference: start the filter.
+                if self.unstarted & bit != 0 {
+                    self.unstarted &= !bit;
+                    start = true;
+                }
+            }
             let raw = match inp.kind {
                 InputKind::SensorRise { a } => {
                     t(a) - i64::from(self.reference.get(usize::from(a)).copied().unwrap_or(0))
@@ -138,8 +241,12 @@ impl FeatureState {
                 InputKind::Spindle => i64::from(spindle_rpm),
             } << 16;
             let value_q16 = match inp.lag {
-                None => raw,
-                Some(_) if first => {
+                // Kept so a frozen unlagged input returns its last value.
+                None => {
+                    *filter = raw;
+                    raw
+                }
+                Some(_) if start => {
                     *filter = raw;
                     raw
                 }
@@ -155,6 +262,6 @@ impl FeatureState {
             *feature = (value_q16 >> (16 - FEATURE_FRAC_BITS))
                 .clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
         }
-        Some(&self.features[..model.inputs.len()])
+        &self.features[..model.inputs.len()]
     }
 }

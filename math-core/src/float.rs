@@ -44,6 +44,15 @@ pub struct FloatTable {
     pub terms: Vec<FloatTerm>,
 }
 
+/// A fallback model (image format v2): a static polynomial table that serves
+/// `direction` without the `excluded` model sensors (one or two).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FloatFallback {
+    pub direction: u8,
+    pub excluded: Vec<u8>,
+    pub terms: Vec<FloatTerm>,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct FloatDirection {
     pub name: String,
@@ -72,6 +81,8 @@ pub struct FloatModel {
     pub inputs: Vec<FloatInput>,
     pub nets: Vec<FloatNet>,
     pub tables: Vec<FloatTable>,
+    /// Fallback models in priority order (empty: a v1 image).
+    pub fallbacks: Vec<FloatFallback>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -299,6 +310,24 @@ impl FloatModel {
             }
             m.tables.push(tab).map_err(|_| too_many("tables"))?;
         }
+        for f in &self.fallbacks {
+            let mut terms: heapless::Vec<Term, MAX_TERMS> = heapless::Vec::new();
+            for term in &f.terms {
+                let tm = Term {
+                    coef: q(term.coef_um * 10.0, 256.0, "fallback coefficient")?,
+                    input: term.input.unwrap_or(NONE),
+                    input_power: term.input_power,
+                    position_power: term.position_power,
+                };
+                terms.push(tm).map_err(|_| too_many("fallback terms"))?;
+            }
+            let ex = |i: usize| f.excluded.get(i).copied().unwrap_or(NONE);
+            if f.excluded.is_empty() || f.excluded.len() > 2 {
+                return Err(too_many("fallback excluded sensors"));
+            }
+            m.push_fallback(f.direction, [ex(0), ex(1)], &terms)
+                .map_err(|_| too_many("fallbacks"))?;
+        }
         let mut buf = vec![0u8; m.encoded_len()];
         m.encode(&mut buf).map_err(|_| too_many("bytes"))?;
         let model = Model::parse(&buf).map_err(QuantizeError::Image)?;
@@ -524,5 +553,6 @@ pub fn demo_model(seed: u64) -> FloatModel {
                 ],
             },
         ],
+        fallbacks: vec![],
     }
 }

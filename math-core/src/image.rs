@@ -3,7 +3,8 @@
 //! [`Model::parse`] accepts only a fully valid image and never panics; any
 //! defect is an [`ImageError`].
 //!
-//! Layout (format version 1; every count is bounded by [`crate::limits`]):
+//! Layout (format version 2; version 1 is the same without the sections;
+//! every count is bounded by [`crate::limits`]):
 //!
 //! ```text
 //! header   32 B  "TCMI", format u16, flags u16, total_len u32, model_version u32,
@@ -21,8 +22,27 @@
 //! table         direction u8, axis u8 (0xFF: none), n_terms u8, 0,
 //!               term × n_terms: coef i32 (Q8 of 0.1 µm), input u8 (0xFF: none),
 //!               input_power u8, position_power u8, 0
+//! sections      (v2 only) n_sections u8, 3 × 0, then per section:
+//!               kind u8, 0, len u16, payload (len bytes)
 //! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
 //! ```
+//!
+//! Section kinds (each at most once; an unknown kind is refused, so a board
+//! never serves an image whose meaning it only half reads):
+//!
+//! ```text
+//! kind 1  fallback models: n u8, 3 × 0, then per fallback (priority order):
+//!         direction u8, excluded sensor a u8, excluded sensor b u8 (0xFF: none),
+//!         n_terms u8, term × n_terms (the table term encoding; position power 0)
+//! ```
+//!
+//! A fallback is one static polynomial table over the image's inputs that
+//! serves its direction without the excluded sensor(s): it may not use an
+//! input that reads them. The encoder writes version 1 when there are no
+//! sections, so such images (and the golden vectors) are byte-identical to
+//! v1 builds. Size: a fallback costs 4 + 8·terms bytes (an MLR on five
+//! inputs: 52 B), the section 8 B; the whole image stays within
+//! [`MAX_IMAGE_BYTES`] (8192), checked by the parser and by `tcomp export`.
 //!
 //! Beyond the layout, the parser refuses (each with its own [`ImageError`]):
 //! bytes after the CRC; model version 0 ("no model" on the register map); a
@@ -37,7 +57,10 @@ use crate::limits::*;
 use heapless::Vec;
 
 pub const MAGIC: [u8; 4] = *b"TCMI";
-pub const FORMAT_VERSION: u16 = 1;
+/// The newest format this build reads and writes (it also reads version 1).
+pub const FORMAT_VERSION: u16 = 2;
+/// Section kind: fallback models (degraded-mode compensation).
+pub const SECTION_FALLBACKS: u8 = 1;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.
@@ -124,6 +147,24 @@ pub enum ImageError {
     TableSumTooLarge {
         axis: u8,
     },
+    /// A v2 section of a kind this build does not know.
+    UnknownSection {
+        kind: u8,
+    },
+    /// A v2 section's payload does not match its declared length (or its
+    /// header is malformed).
+    SectionLength {
+        kind: u8,
+    },
+    /// The same section kind twice.
+    DuplicateSection {
+        kind: u8,
+    },
+    /// A fallback model uses an input that reads a sensor it is meant to do without.
+    FallbackUsesExcluded {
+        fallback: u8,
+        sensor: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -139,7 +180,7 @@ impl core::fmt::Display for ImageError {
             ImageError::BadMagic => write!(f, "not a model image (it does not start with TCMI)"),
             ImageError::UnsupportedVersion(v) => write!(
                 f,
-                "image format version {v} not supported (this build reads {FORMAT_VERSION})"
+                "image format version {v} not supported (this build reads 1 and {FORMAT_VERSION})"
             ),
             ImageError::UnsupportedUnits(u) => write!(
                 f,
@@ -189,6 +230,21 @@ impl core::fmt::Display for ImageError {
             ImageError::TableSumTooLarge { axis } => write!(
                 f,
                 "tables of axis {axis}: coefficients too large (sum of |coef| x max(1, position power) above 2^37); the evaluation could overflow"
+            ),
+            ImageError::UnknownSection { kind } => write!(
+                f,
+                "image section kind {kind} not known to this build (it reads kind {SECTION_FALLBACKS})"
+            ),
+            ImageError::SectionLength { kind } => write!(
+                f,
+                "image section kind {kind}: contents do not match its declared length"
+            ),
+            ImageError::DuplicateSection { kind } => {
+                write!(f, "image section kind {kind} appears more than once")
+            }
+            ImageError::FallbackUsesExcluded { fallback, sensor } => write!(
+                f,
+                "fallback model {fallback} uses sensor {sensor}, which it is meant to do without"
             ),
         }
     }
@@ -284,6 +340,21 @@ pub struct Term {
     pub position_power: u8,
 }
 
+/// A fallback model (format v2, section kind 1): serves `direction` when
+/// the main model's sensors are not all valid, without `excluded`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Fallback {
+    pub direction: u8,
+    /// The sensors it does without (model sensor indices; [`NONE`]: unused slot).
+    pub excluded: [u8; 2],
+    /// Its terms: `Model::fallback_terms[first_term .. first_term + n_terms]`
+    /// (a static polynomial table, position power 0).
+    pub first_term: u16,
+    pub n_terms: u8,
+    /// Bit i: it reads model input i (computed at parse time).
+    pub input_mask: u16,
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Table {
     pub direction: u8,
@@ -308,6 +379,9 @@ pub struct Model {
     pub inputs: Vec<InputSpec, MAX_INPUTS>,
     pub nets: Vec<Net, MAX_NETS>,
     pub tables: Vec<Table, MAX_TABLES>,
+    /// Fallback models in priority order (format v2; empty in v1 images).
+    pub fallbacks: Vec<Fallback, MAX_FALLBACKS>,
+    pub fallback_terms: Vec<Term, MAX_FALLBACK_TERMS>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
     pub(crate) input_span: [Span; MAX_INPUTS],
@@ -350,6 +424,8 @@ impl Model {
             inputs: Vec::new(),
             nets: Vec::new(),
             tables: Vec::new(),
+            fallbacks: Vec::new(),
+            fallback_terms: Vec::new(),
             input_span: [Span::default(); MAX_INPUTS],
             axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
@@ -371,7 +447,7 @@ impl Model {
             return Err(ImageError::BadMagic);
         }
         let version = r.u16()?;
-        if version != FORMAT_VERSION {
+        if version != 1 && version != FORMAT_VERSION {
             return Err(ImageError::UnsupportedVersion(version));
         }
         let flags = r.u16()?;
@@ -669,6 +745,9 @@ impl Model {
             }
             push(&mut m.tables, t)?;
         }
+        if version >= 2 {
+            parse_sections(&mut r, &mut m)?;
+        }
         if r.at != body.len() {
             return Err(ImageError::LengthMismatch);
         }
@@ -691,6 +770,63 @@ impl Model {
         Ok(m)
     }
 
+    /// The terms of fallback `k` (0-based).
+    pub fn fallback_terms_of(&self, k: usize) -> &[Term] {
+        match self.fallbacks.get(k) {
+            Some(f) => {
+                let a = usize::from(f.first_term);
+                self.fallback_terms
+                    .get(a..a + usize::from(f.n_terms))
+                    .unwrap_or(&[])
+            }
+            None => &[],
+        }
+    }
+
+    /// Bit i: the main model of `direction` reads input i.
+    pub fn main_input_mask(&self, direction: usize) -> u16 {
+        let nets = self
+            .nets
+            .iter()
+            .filter(|n| usize::from(n.direction) == direction)
+            .fold(0, |m, n| m | input_mask(n.inputs.iter().copied()));
+        self.tables
+            .iter()
+            .filter(|t| usize::from(t.direction) == direction)
+            .fold(nets, |m, t| m | input_mask(t.terms.iter().map(|x| x.input)))
+    }
+
+    /// Add a fallback (desktop side; the parser checks it when the image is read back).
+    pub fn push_fallback(
+        &mut self,
+        direction: u8,
+        excluded: [u8; 2],
+        terms: &[Term],
+    ) -> Result<(), ImageError> {
+        let first_term = self.fallback_terms.len() as u16;
+        for t in terms {
+            push(&mut self.fallback_terms, *t)?;
+        }
+        push(
+            &mut self.fallbacks,
+            Fallback {
+                direction,
+                excluded,
+                first_term,
+                n_terms: terms.len() as u8,
+                input_mask: input_mask(terms.iter().map(|t| t.input)),
+            },
+        )
+    }
+
+    /// Size of the v2 sections (0 when there are none: the image is v1).
+    fn sections_len(&self) -> usize {
+        if self.fallbacks.is_empty() {
+            return 0;
+        }
+        4 + 4 + 4 + self.fallbacks.len() * 4 + self.fallback_terms.len() * 8
+    }
+
     /// Size of the encoded image in bytes.
     pub fn encoded_len(&self) -> usize {
         let mut n = HEADER_LEN + 4;
@@ -703,7 +839,7 @@ impl Model {
         for t in &self.tables {
             n += 4 + 8 * t.terms.len();
         }
-        n
+        n + self.sections_len()
     }
 
     /// Write the image with its CRC into `out`; returns its length. Also
@@ -716,7 +852,12 @@ impl Model {
         }
         let mut w = Writer { b: out, at: 0 };
         w.put(&MAGIC);
-        w.put(&FORMAT_VERSION.to_le_bytes());
+        let version: u16 = if self.sections_len() > 0 {
+            FORMAT_VERSION
+        } else {
+            1
+        };
+        w.put(&version.to_le_bytes());
         w.put(&self.flags.to_le_bytes());
         w.put(&(len as u32).to_le_bytes());
         w.put(&self.model_version.to_le_bytes());
@@ -788,6 +929,21 @@ impl Model {
                 w.put(&[term.input, term.input_power, term.position_power, 0]);
             }
         }
+        if self.sections_len() > 0 {
+            w.put(&[1, 0, 0, 0]);
+            let payload = (self.sections_len() - 8) as u16;
+            w.put(&[SECTION_FALLBACKS, 0]);
+            w.put(&payload.to_le_bytes());
+            w.put(&[self.fallbacks.len() as u8, 0, 0, 0]);
+            for k in 0..self.fallbacks.len() {
+                let f = self.fallbacks[k];
+                w.put(&[f.direction, f.excluded[0], f.excluded[1], f.n_terms]);
+                for term in self.fallback_terms_of(k) {
+                    w.put(&term.coef.to_le_bytes());
+                    w.put(&[term.input, term.input_power, term.position_power, 0]);
+                }
+            }
+        }
         let crc = crc32(&w.b[..w.at]);
         w.put(&crc.to_le_bytes());
         self.crc = crc;
@@ -819,6 +975,129 @@ pub fn name8(s: &str) -> [u8; 8] {
 fn name_str(n: &[u8; 8]) -> &str {
     let end = n.iter().position(|&c| c == 0).unwrap_or(8);
     core::str::from_utf8(&n[..end]).unwrap_or("?")
+}
+
+/// Bit i set for every input index i (NONE and out-of-range indices ignored).
+fn input_mask(inputs: impl Iterator<Item = u8>) -> u16 {
+    inputs
+        .filter(|&i| usize::from(i) < MAX_INPUTS)
+        .fold(0u16, |m, i| m | (1 << i))
+}
+
+/// The v2 sections after the tables (see the module docs).
+fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n = r.count("sections", MAX_SECTIONS)?;
+    let _pad = r.array::<3>()?;
+    let mut seen = 0u32;
+    for _ in 0..n {
+        let kind = r.u8()?;
+        let _pad = r.u8()?;
+        let len = usize::from(r.u16()?);
+        let start = r.at;
+        let end = start
+            .checked_add(len)
+            .filter(|&e| e <= r.b.len())
+            .ok_or(ImageError::SectionLength { kind })?;
+        let bit = 1u32 << (kind % 32);
+        if kind != SECTION_FALLBACKS {
+            return Err(ImageError::UnknownSection { kind });
+        }
+        if seen & bit != 0 {
+            return Err(ImageError::DuplicateSection { kind });
+        }
+        seen |= bit;
+        let mut sr = Reader {
+            b: &r.b[..end],
+            at: start,
+        };
+        parse_fallbacks(&mut sr, m).map_err(|e| match e {
+            ImageError::LengthMismatch => ImageError::SectionLength { kind },
+            e => e,
+        })?;
+        if sr.at != end {
+            return Err(ImageError::SectionLength { kind });
+        }
+        r.at = end;
+    }
+    Ok(())
+}
+
+/// Section kind 1: fallback models.
+fn parse_fallbacks(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n = r.count("fallbacks", MAX_FALLBACKS)?;
+    let _pad = r.array::<3>()?;
+    let (n_sensors, n_inputs) = (m.sensors.len(), m.inputs.len());
+    for k in 0..n {
+        let direction = r.u8()?;
+        let excluded = [r.u8()?, r.u8()?];
+        let n_terms = usize::from(r.u8()?);
+        if usize::from(direction) >= m.directions.len() {
+            return Err(ImageError::BadIndex {
+                what: "fallback direction",
+                index: direction,
+            });
+        }
+        for (j, &s) in excluded.iter().enumerate() {
+            // The first slot names a sensor; the second may be NONE.
+            if !(j == 1 && s == NONE) && usize::from(s) >= n_sensors {
+                return Err(ImageError::BadIndex {
+                    what: "fallback excluded sensor",
+                    index: s,
+                });
+            }
+        }
+        if n_terms == 0 || n_terms > MAX_TERMS {
+            return Err(ImageError::TooMany {
+                what: "fallback terms",
+                count: n_terms,
+                max: MAX_TERMS,
+            });
+        }
+        let mut terms: Vec<Term, MAX_TERMS> = Vec::new();
+        for _ in 0..n_terms {
+            let coef = r.i32()?;
+            let input = r.u8()?;
+            let input_power = r.u8()?;
+            let position_power = r.u8()?;
+            let _pad = r.u8()?;
+            if input != NONE && usize::from(input) >= n_inputs {
+                return Err(ImageError::BadIndex {
+                    what: "fallback term input",
+                    index: input,
+                });
+            }
+            if input_power > MAX_POWER || position_power != 0 || (input == NONE && input_power != 0)
+            {
+                return Err(ImageError::BadValue {
+                    what: "fallback term power",
+                });
+            }
+            if let Some(inp) = m.inputs.get(usize::from(input)) {
+                let reads = |s: u8| match inp.kind {
+                    InputKind::SensorRise { a } => a == s,
+                    InputKind::SensorDiff { a, b } => a == s || b == s,
+                    InputKind::Spindle => false,
+                };
+                if let Some(&s) = excluded.iter().find(|&&s| s != NONE && reads(s)) {
+                    return Err(ImageError::FallbackUsesExcluded {
+                        fallback: k as u8,
+                        sensor: s,
+                    });
+                }
+            }
+            push(
+                &mut terms,
+                Term {
+                    coef,
+                    input,
+                    input_power,
+                    position_power,
+                },
+            )?;
+        }
+        m.push_fallback(direction, excluded, &terms)?;
+    }
+    Ok(())
 }
 
 fn sensor_index(i: u8, n: usize) -> Result<u8, ImageError> {

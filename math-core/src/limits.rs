@@ -31,3 +31,11 @@ pub const MAX_CORRECTION: i32 = 100_000;
 /// bound to one axis (coefficients Q8 of 0.1 µm, so 2^37 is 53 m): keeps the
 /// offset and d/dp sums of the TEMP_COMP pair below 2^61 (see `fixed`).
 pub const MAX_AXIS_TABLE_WEIGHT: u64 = 1 << 37;
+/// Fallback models (format v2, section kind 1) in one image: per direction
+/// one without each model sensor and, where room, without each pair.
+pub const MAX_FALLBACKS: usize = 32;
+/// Terms of all fallback models together (each fallback is one static
+/// polynomial table of at most [`MAX_TERMS`] terms).
+pub const MAX_FALLBACK_TERMS: usize = 256;
+/// Typed sections after the tables (format v2).
+pub const MAX_SECTIONS: usize = 8;

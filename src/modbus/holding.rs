@@ -103,6 +103,14 @@ pub mod result {
     /// A commit (model or settings) is being written to flash in the
     /// background; poll until another code (0 OK, 4, 22).
     pub const COMMIT_IN_PROGRESS: u16 = 23;
+    /// An image section (format v2) of a kind this firmware does not read.
+    pub const UNKNOWN_SECTION: u16 = 30;
+    /// An image section whose contents do not match its declared length.
+    pub const SECTION_LENGTH: u16 = 31;
+    /// The same image section kind twice.
+    pub const DUPLICATE_SECTION: u16 = 32;
+    /// A fallback model reads a sensor it is meant to do without.
+    pub const FALLBACK_USES_EXCLUDED: u16 = 33;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -131,6 +139,10 @@ pub mod result {
             NOT_NEWER => "NOT_NEWER",
             SETTINGS_NOT_STORED => "SETTINGS_NOT_STORED",
             COMMIT_IN_PROGRESS => "COMMIT_IN_PROGRESS",
+            UNKNOWN_SECTION => "UNKNOWN_SECTION",
+            SECTION_LENGTH => "SECTION_LENGTH",
+            DUPLICATE_SECTION => "DUPLICATE_SECTION",
+            FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
             _ => "unknown",
         }
     }
@@ -155,6 +167,10 @@ pub mod result {
             ImageError::MaxCorrectionOutOfRange { .. } => MAX_CORRECTION,
             ImageError::MaxRateOutOfRange { .. } => MAX_RATE,
             ImageError::TableSumTooLarge { .. } => TABLE_SUM_TOO_LARGE,
+            ImageError::UnknownSection { .. } => UNKNOWN_SECTION,
+            ImageError::SectionLength { .. } => SECTION_LENGTH,
+            ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
+            ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
         }
     }
 }

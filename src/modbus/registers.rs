@@ -42,8 +42,14 @@ pub const AXIS_BLOCK: u16 = 8;
 pub const IR_TEMPERATURES: u16 = 110;
 /// Sensor states ([`crate::process_image::ChannelState::code`]).
 pub const IR_STATES: u16 = 130;
-/// Last input register.
-pub const IR_LAST: u16 = IR_STATES + MAX_CHANNELS as u16 - 1;
+/// Active model per direction: 0 main, k fallback k, 0xFFFF none (held / no model).
+pub const IR_ACTIVE_MODEL: u16 = 150;
+/// Bit d: direction d is served by a fallback model.
+pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
+/// Bit d: direction d has no usable model (held).
+pub const IR_HELD_DIRECTIONS: u16 = 157;
+/// Last input register (158–159 reserved for degraded mode, read 0).
+pub const IR_LAST: u16 = 159;
 
 /// Status bit 9: a fault record from before the last reset is held (input
 /// registers 160–168) until command 6 clears it.
@@ -93,6 +99,8 @@ pub struct Snapshot {
     pub map_missing: u32,
     /// Channels added to the map since boot (bit per channel).
     pub map_added: u32,
+    /// Per direction, the model serving it ([`thermocomp_core::compensator::ACTIVE_NONE`]: none).
+    pub active: [u8; MAX_DIRECTIONS],
 }
 
 impl Default for Snapshot {
@@ -118,6 +126,7 @@ impl Default for Snapshot {
             fault: None,
             map_missing: 0,
             map_added: 0,
+            active: [thermocomp_core::compensator::ACTIVE_NONE; MAX_DIRECTIONS],
         }
     }
 }
@@ -226,6 +235,22 @@ impl Snapshot {
             t.map_or(NOT_AVAILABLE, |v| v as u16)
         } else if in_block(IR_STATES, MAX_CHANNELS as u16) {
             self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS]
+        } else if in_block(IR_ACTIVE_MODEL, MAX_DIRECTIONS as u16) {
+            match self.active[usize::from(addr - IR_ACTIVE_MODEL) % MAX_DIRECTIONS] {
+                thermocomp_core::compensator::ACTIVE_NONE => 0xFFFF,
+                k => u16::from(k),
+            }
+        } else if addr == IR_DEGRADED_DIRECTIONS || addr == IR_HELD_DIRECTIONS {
+            let want = |a: u8| match addr {
+                IR_DEGRADED_DIRECTIONS => a != 0 && a != thermocomp_core::compensator::ACTIVE_NONE,
+                _ => a == thermocomp_core::compensator::ACTIVE_NONE,
+            };
+            let n = usize::from(self.n_directions).min(MAX_DIRECTIONS);
+            self.active[..n]
+                .iter()
+                .enumerate()
+                .filter(|(_, &a)| want(a))
+                .fold(0u16, |m, (d, _)| m | (1 << d))
         } else {
             0
         };

@@ -304,7 +304,7 @@ struct StatusNames(u16);
 impl core::fmt::Display for StatusNames {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         use thermocomp_core::compensator::status::*;
-        const NAMES: [(u16, &str); 8] = [
+        const NAMES: [(u16, &str); 9] = [
             (VALID, "valid"),
             (SENSOR_FAULT, "sensor-fault"),
             (NO_MODEL, "no-model"),
@@ -313,6 +313,7 @@ impl core::fmt::Display for StatusNames {
             (STALE_INPUTS, "stale"),
             (OUT_OF_ENVELOPE, "out-of-envelope"),
             (RATE_LIMITED, "rate-limited"),
+            (DEGRADED, "degraded"),
         ];
         for (bit, name) in NAMES {
             if self.0 & bit != 0 {

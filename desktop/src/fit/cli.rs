@@ -77,6 +77,12 @@ pub struct FitArgs {
     /// is dropped as soon as its error bound shows it cannot be chosen).
     #[arg(long)]
     pub full_cv: bool,
+    /// Do not fit fallback models (degraded mode: models without each model sensor).
+    #[arg(long)]
+    pub no_fallbacks: bool,
+    /// Also fit fallbacks without each pair of a channel's model sensors.
+    #[arg(long, conflicts_with = "no_fallbacks")]
+    pub fallback_pairs: bool,
     /// Write the fitted models (MLR and networks, JSON).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -153,6 +159,8 @@ impl FitArgs {
         cfg.skip_net = self.mlr_only;
         cfg.hybrid = self.hybrid;
         cfg.cv_drop = !self.full_cv;
+        cfg.fallbacks = !self.no_fallbacks;
+        cfg.fallback_pairs = self.fallback_pairs;
         Ok(cfg)
     }
 }

@@ -9,6 +9,7 @@
 //! row split.
 
 pub mod cli;
+pub mod fallback;
 pub mod features;
 pub mod net;
 pub mod rng;
@@ -92,6 +93,9 @@ pub struct ModelFile {
     /// table and networks of the same direction, so it ships as both.
     #[serde(default)]
     pub hybrid_nets: Vec<NetParams>,
+    /// Per channel, models without each of its sensors (degraded mode, issue 15).
+    #[serde(default)]
+    pub fallbacks: Vec<fallback::FallbackParams>,
 }
 
 /// Model names, simplest first (the order ties are broken in): the hybrid is

@@ -59,6 +59,10 @@ pub struct FitConfig {
     pub hybrid: bool,
     /// Stop a network candidate's cross-validation once it cannot be chosen.
     pub cv_drop: bool,
+    /// Fit fallback models without each model sensor (`fallback.rs`).
+    pub fallbacks: bool,
+    /// ... and without each pair of model sensors.
+    pub fallback_pairs: bool,
 }
 
 impl Default for FitConfig {
@@ -79,6 +83,8 @@ impl Default for FitConfig {
             choice_margin: 0.02,
             hybrid: false,
             cv_drop: true,
+            fallbacks: true,
+            fallback_pairs: false,
         }
     }
 }
@@ -215,6 +221,8 @@ pub struct FitReport {
     pub selection: Option<Selection>,
     pub train_segments: Vec<Segment>,
     pub val_segments: Vec<Segment>,
+    /// Fallback models per channel and excluded sensor(s), with their figures.
+    pub fallbacks: Vec<super::fallback::FallbackReport>,
     #[serde(skip)]
     pub model_file: ModelFile,
 }
@@ -506,7 +514,7 @@ pub struct NetCandidates {
 /// would then take the linear model). A dropped candidate reports the folds
 /// it ran and `dropped: true`, and is not admissible.
 #[allow(clippy::too_many_arguments)]
-fn cross_validate(
+pub(crate) fn cross_validate(
     cache: &SeriesCache,
     plan: &Plan,
     folds: &[(Vec<Segment>, Vec<Segment>)],
@@ -956,11 +964,28 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             ));
         }
     }
+    let mut fallbacks = Vec::new();
+    if cfg.fallbacks {
+        let ctx = super::fallback::Context {
+            cache: &cache,
+            plan,
+            folds: &folds,
+            static_idx: &static_idx,
+            cfg,
+        };
+        let pb = progress_bar(cfg.progress, 1, "fallback models".into());
+        let (params, reps) =
+            super::fallback::fit_fallbacks(&ctx, &file, &channels, &mut in_use, &mut notes)?;
+        pb.finish_and_clear();
+        file.fallbacks = params;
+        fallbacks = reps;
+    }
     let models = reports
         .into_values()
         .filter(|r| !r.channels.is_empty())
         .collect();
     Ok(FitReport {
+        fallbacks,
         models,
         inputs,
         chosen: file.chosen.clone(),
@@ -1006,6 +1031,22 @@ pub fn print_report(r: &FitReport) {
             println!(
                 "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%",
                 m.name, ch, x.mae_um, x.rms_um, x.peak_um, x.raw_rms_um, x.reduction_pct
+            );
+        }
+    }
+    if !r.fallbacks.is_empty() {
+        println!("\nfallback models (degraded mode; validation rows):");
+        for f in &r.fallbacks {
+            let cv = f.cv.get(&f.model).map_or(f64::NAN, |c| c.rms_um);
+            println!(
+                "{:<10} without {:<16} {:<10} CV RMS {:>6.2} µm, RMS {:>6.2} µm, reduction {:>5.1}%  ({})",
+                f.channel,
+                f.excluded.join("+"),
+                f.model,
+                cv,
+                f.validation.rms_um,
+                f.validation.reduction_pct,
+                f.features.join(", ")
             );
         }
     }
