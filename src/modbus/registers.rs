@@ -48,8 +48,9 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register (158–159 reserved for degraded mode, read 0).
-pub const IR_LAST: u16 = 159;
+/// Last input register: the end of the board-safety block (158–159 and
+/// 169, 174–179 reserved, read 0).
+pub const IR_LAST: u16 = IR_SAFETY_LAST;
 
 /// Status bit 9: a fault record from before the last reset is held (input
 /// registers 160–168) until command 6 clears it.
