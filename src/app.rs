@@ -489,6 +489,10 @@ where
                 applied_baud = Some(baud);
             }
             Some(LinkChange::ClearFaultRecord) => crate::fault::clear::<B>(),
+            // On purpose, and only in the bench build: command 8 exists to drive
+            // the real panic → fault record → reset path under QEMU. Without
+            // `test-faults` (every field board) holding.rs refuses the command
+            // and this arm is not compiled.
             #[cfg(feature = "test-faults")]
             Some(LinkChange::TestPanic) => panic!("test panic requested by command 8"),
             _ => {}

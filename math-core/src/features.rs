@@ -118,17 +118,6 @@ impl FeatureState {
             .map(|_| &self.reference[..n.min(MAX_SENSORS)])
     }
 
-    /// Every sensor an input of `model` reads has a valid value in `temps`.
-    #[inline]
-    pub fn inputs_valid(model: &Model, temps: &[Option<i32>]) -> bool {
-        let temp = |s: u8| temps.get(usize::from(s)).copied().flatten();
-        model.inputs.iter().all(|inp| match inp.kind {
-            InputKind::SensorRise { a } => temp(a).is_some(),
-            InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
-            InputKind::Spindle => true,
-        })
-    }
-
     /// One sample: `temps` per model sensor (1/16 °C, `None` = invalid),
     /// spindle speed in rpm. Returns the model's inputs (Q8 of the raw unit,
     /// one per `model.inputs`), or `None` when a sensor the inputs read is
@@ -141,10 +130,12 @@ impl FeatureState {
         temps: &[Option<i32>],
         spindle_rpm: i32,
     ) -> Option<&[i32]> {
-        if !Self::inputs_valid(model, temps) {
+        // (Only `step_masked` with a partial mask marks sensors unreferenced,
+        // so here this is "every sensor the inputs read is valid".)
+        let all = Self::all_inputs(model);
+        if self.valid_mask(model, temps) != all {
             return None;
         }
-        let all = Self::all_inputs(model);
         Some(self.step_masked(model, now_ms, temps, spindle_rpm, all))
     }
 

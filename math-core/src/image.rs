@@ -714,11 +714,12 @@ impl Model {
                 terms: Vec::new(),
             };
             for _ in 0..n_terms {
-                let coef = r.i32()?;
-                let input = r.u8()?;
-                let input_power = r.u8()?;
-                let position_power = r.u8()?;
-                let _pad = r.u8()?;
+                let Term {
+                    coef,
+                    input,
+                    input_power,
+                    position_power,
+                } = r.term()?;
                 if input != NONE && usize::from(input) >= n_inputs {
                     return Err(ImageError::BadIndex {
                         what: "term input",
@@ -1055,11 +1056,12 @@ fn parse_fallbacks(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> 
         }
         let mut terms: Vec<Term, MAX_TERMS> = Vec::new();
         for _ in 0..n_terms {
-            let coef = r.i32()?;
-            let input = r.u8()?;
-            let input_power = r.u8()?;
-            let position_power = r.u8()?;
-            let _pad = r.u8()?;
+            let Term {
+                coef,
+                input,
+                input_power,
+                position_power,
+            } = r.term()?;
             if input != NONE && usize::from(input) >= n_inputs {
                 return Err(ImageError::BadIndex {
                     what: "fallback term input",
@@ -1125,6 +1127,21 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
+    /// One 8-byte term (tables and fallbacks): coef i32, input, powers, pad;
+    /// the caller checks it against what its section allows.
+    fn term(&mut self) -> Result<Term, ImageError> {
+        let coef = self.i32()?;
+        let input = self.u8()?;
+        let input_power = self.u8()?;
+        let position_power = self.u8()?;
+        let _pad = self.u8()?;
+        Ok(Term {
+            coef,
+            input,
+            input_power,
+            position_power,
+        })
+    }
     fn array<const N: usize>(&mut self) -> Result<[u8; N], ImageError> {
         let end = self.at.checked_add(N).ok_or(ImageError::LengthMismatch)?;
         let s = self.b.get(self.at..end).ok_or(ImageError::LengthMismatch)?;
