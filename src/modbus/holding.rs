@@ -124,6 +124,10 @@ pub mod result {
     /// Command 10 (or 2 with a kept reference) accepted: the reference is
     /// taken at the next cycle with every model sensor fresh, then stored.
     pub const REFERENCE_PENDING: u16 = 50;
+    /// The image names a sensor by a ROM code that fails its CRC-8.
+    pub const SENSOR_ROM: u16 = 51;
+    /// The image names two sensors by the same ROM code.
+    pub const DUPLICATE_SENSOR_ROM: u16 = 52;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -157,6 +161,8 @@ pub mod result {
             DUPLICATE_SECTION => "DUPLICATE_SECTION",
             FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
             REFERENCE_PENDING => "REFERENCE_PENDING",
+            SENSOR_ROM => "SENSOR_ROM",
+            DUPLICATE_SENSOR_ROM => "DUPLICATE_SENSOR_ROM",
             _ => "unknown",
         }
     }
@@ -185,6 +191,8 @@ pub mod result {
             ImageError::SectionLength { .. } => SECTION_LENGTH,
             ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
             ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
+            ImageError::BadSensorRom { .. } => SENSOR_ROM,
+            ImageError::DuplicateSensorRom { .. } => DUPLICATE_SENSOR_ROM,
         }
     }
 }
