@@ -104,7 +104,11 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
         if u32_of(&w[2..]) != 0 {
             break w;
         }
-        assert!(start.elapsed() < BOOT, "no new sensor seen:\n{}", board.log());
+        assert!(
+            start.elapsed() < BOOT,
+            "no new sensor seen:\n{}",
+            board.log()
+        );
         std::thread::sleep(Duration::from_millis(200));
     };
     assert_eq!(u32_of(&map[..2]), 1 << 2, "channel 2 missing");
