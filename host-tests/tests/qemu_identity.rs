@@ -14,6 +14,9 @@ use thermocomp::modbus::registers::*;
 
 const BOOT: Duration = Duration::from_secs(60);
 
+/// One bench board at a time (see qemu_modbus.rs).
+static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn u32_of(w: &[u16]) -> u32 {
     u32::from(w[0]) << 16 | u32::from(w[1])
 }
@@ -21,6 +24,7 @@ fn u32_of(w: &[u16]) -> u32 {
 #[test]
 #[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
 fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
     let dir = std::env::temp_dir().join(format!("thermocomp-qemu-rom-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (trace, v1, v2) = (
@@ -130,4 +134,99 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     let temps = link.read_inputs(IR_TEMPERATURES, 7).unwrap();
     assert_eq!(temps[2], NOT_AVAILABLE, "{temps:?}");
     assert_ne!(temps[6], NOT_AVAILABLE, "{temps:?}");
+}
+
+/// Wait until the board has booted `n` times (its log says so `n` times).
+fn wait_for_boots(board: &BenchBoard, n: usize) {
+    let start = Instant::now();
+    while board.log().matches("serving Modbus RTU").count() < n {
+        assert!(start.elapsed() < BOOT, "{}", board.log());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn command(link: &mut BoardLink, code: u16) {
+    use thermocomp::modbus::holding::{HR_COMMAND, HR_UNLOCK, UNLOCK_CODE};
+    link.write_one(HR_UNLOCK, UNLOCK_CODE).unwrap();
+    link.write_one(HR_COMMAND, code).unwrap();
+}
+
+/// Poll until input register `addr` reads `want`.
+fn wait_input(link: &mut BoardLink, board: &BenchBoard, addr: u16, want: u16) {
+    let start = Instant::now();
+    while link.read_inputs(addr, 1).unwrap()[0] != want {
+        assert!(
+            start.elapsed() < BOOT,
+            "IR {addr} != {want}:\n{}",
+            board.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+#[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
+fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
+    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    use thermocomp::modbus::holding::{
+        result, CMD_FORGET_REFERENCE, CMD_KEEP_REFERENCE, HR_RESULT,
+    };
+    let dir = std::env::temp_dir().join(format!("thermocomp-qemu-ref-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (trace, img) = (dir.join("trace.csv"), dir.join("v1.img"));
+    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
+    for i in 0..5000u32 {
+        csv += &format!("{},3000", i * 15);
+        for c in 0..6 {
+            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
+        }
+        csv += "\n";
+    }
+    std::fs::write(&trace, csv).unwrap();
+    let mut fm = thermocomp_core::float::demo_model(1);
+    fm.model_version = 1;
+    tcomp::export::export(&fm, &img).unwrap();
+    let port = free_tcp_port();
+    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
+    let board = BenchBoard::start(
+        &serial,
+        &[
+            "serve",
+            trace.to_str().unwrap(),
+            img.to_str().unwrap(),
+            "50",
+        ],
+    );
+    wait_for_boots(&board, 1);
+    let addr = format!("127.0.0.1:{port}");
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    assert_eq!(link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(), vec![0]);
+    command(&mut link, CMD_KEEP_REFERENCE);
+    wait_input(&mut link, &board, IR_REFERENCE_STATE, 1);
+    // Stored (HR_RESULT 23 → 0), then a reset (the test panic, command 8).
+    let start = Instant::now();
+    while link.read_holdings(HR_RESULT, 1).unwrap()[0] != result::OK {
+        assert!(start.elapsed() < BOOT, "{}", board.log());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    command(&mut link, 8);
+    wait_for_boots(&board, 2);
+    // (The same connection: QEMU keeps the socket across the guest's reset.)
+    assert_eq!(
+        link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(),
+        vec![1],
+        "kept across the reset:\n{}",
+        board.log()
+    );
+    // Command 11: forgotten, and still after the next reset.
+    command(&mut link, CMD_FORGET_REFERENCE);
+    wait_input(&mut link, &board, IR_REFERENCE_STATE, 0);
+    let start = Instant::now();
+    while link.read_holdings(HR_RESULT, 1).unwrap()[0] != result::OK {
+        assert!(start.elapsed() < BOOT, "{}", board.log());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    command(&mut link, 8);
+    wait_for_boots(&board, 3);
+    assert_eq!(link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(), vec![0]);
 }
