@@ -254,6 +254,11 @@ pub struct UploadSummary {
     pub model_version: u32,
     pub model_crc: String,
     pub result: u16,
+    /// Model sensors the image names by a ROM code that is on none of the
+    /// board's channels (input registers 200–279): the board serves without
+    /// them (fallback or held) until that sensor is on the bus. Empty when
+    /// the board does not serve ROM codes.
+    pub sensors_not_on_board: Vec<usize>,
 }
 
 /// Which commit command an upload ends with.
@@ -365,11 +370,23 @@ fn verify(
             model.crc
         );
     }
+    // Sensors named by ROM that the board has on no channel.
+    let sensors_not_on_board = match channel_roms(link) {
+        Ok(roms) => model
+            .sensors
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.rom != [0; 8] && !roms.contains(&s.rom))
+            .map(|(i, _)| i)
+            .collect(),
+        Err(_) => vec![],
+    };
     Ok(UploadSummary {
         bytes: image.len(),
         model_version: version,
         model_crc: format!("{crc:#010x}"),
         result,
+        sensors_not_on_board,
     })
 }
 

@@ -390,6 +390,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "uploaded {} bytes; the board serves model version {} crc {}",
                     s.bytes, s.model_version, s.model_crc
                 );
+                if !s.sensors_not_on_board.is_empty() {
+                    println!(
+                        "  model sensor(s) {:?}: their ROM codes are on none of the board's channels; it serves without them (fallback or held) until they are on the bus",
+                        s.sensors_not_on_board
+                    );
+                }
             }
         }
         Command::Record {

@@ -388,7 +388,10 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
             while s.read_exact(&mut byte).is_ok() {
                 buf.push(byte[0]);
                 if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
-                    board.lock().unwrap().request(&buf, 0, &mut reply);
+                    let mut app = board.lock().unwrap();
+                    app.request(&buf, 0, &mut reply);
+                    // What the board's feeder task does: drive a flash write.
+                    app.poll_flash();
                     s.write_all(&reply).unwrap();
                     buf.clear();
                 }
@@ -411,6 +414,20 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     run.write_to(&mut again).unwrap();
     let back = tcomp::runcsv::Run::from_reader(again.as_slice()).unwrap();
     assert_eq!(back.sensor_roms().unwrap(), roms);
+    // Upload a model named by these ROM codes, one of them on no channel:
+    // the upload says which model sensor the board will serve without.
+    let mut run_by_rom = recorded_run(&bus);
+    run_by_rom.meta.retain(|(k, _)| !k.starts_with("rom."));
+    for (c, rom) in map.iter() {
+        run_by_rom.set_sensor_rom(&format!("T{:02}", c + 1), &rom.0);
+    }
+    let mut model = Model::parse(&export_by_rom(&run_by_rom)).unwrap();
+    model.sensors[4].rom = Ds18b20::rom_for(0xABC_0004).0;
+    let mut image = vec![0u8; model.encoded_len()];
+    model.encode(&mut image).unwrap();
+    let s =
+        tcomp::board_link::upload(&mut link, &image, tcomp::board_link::Commit::NewerOnly).unwrap();
+    assert_eq!(s.sensors_not_on_board, vec![4]);
     // A sensor swapped on channel 0 before an append: refused, one line.
     let mut swapped = map;
     swapped.set(0, Some(Ds18b20::rom_for(0x5_1234))).unwrap();
