@@ -289,3 +289,41 @@ fn a_stored_reference_that_does_not_check_is_no_reference() {
     assert_eq!(KeptReference::decode(&bad), None);
     assert_eq!(KeptReference::decode(&good[1..]), None);
 }
+
+#[test]
+fn on_an_image_with_a_fixed_reference_command_2_takes_and_keeps_a_measured_one() {
+    let mut rig = Rig::new();
+    let mut fm = thermocomp_core::float::demo_model(1);
+    fm.fixed_reference = true; // ref_temp 20 °C per sensor
+    let (mut m, _) = fm.quantize().unwrap();
+    let mut img = vec![0u8; m.encoded_len()];
+    m.encode(&mut img).unwrap();
+    let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
+    app.program(&img).unwrap();
+    rig.set_all(21 * 16);
+    rig.app_cycle(&mut app);
+    assert_eq!(
+        reference(&mut app),
+        vec![20 * 16; 6],
+        "the image's reference"
+    );
+    command(&mut app, CMD_REREFERENCE);
+    assert_eq!(holding_result(&app), result::REFERENCE_PENDING);
+    rig.set_all(22 * 16);
+    rig.app_cycle(&mut app);
+    app.poll_flash();
+    assert_eq!(reference(&mut app), vec![22 * 16; 6], "measured, kept");
+    let mut app = power_cycle(&rig, &mut app);
+    rig.app_cycle(&mut app);
+    assert_eq!(
+        reference(&mut app),
+        vec![22 * 16; 6],
+        "kept over the image's"
+    );
+    // Command 11: the image's own reference again from the next boot on.
+    command(&mut app, CMD_FORGET_REFERENCE);
+    app.poll_flash();
+    let mut app = power_cycle(&rig, &mut app);
+    rig.app_cycle(&mut app);
+    assert_eq!(reference(&mut app), vec![20 * 16; 6]);
+}
