@@ -19,6 +19,8 @@ pub struct ExportSummary {
     pub samples: usize,
     /// Fallback models packed (image format v2 when > 0).
     pub fallbacks: usize,
+    /// Sensors the image names by 1-Wire ROM code (the rest by channel).
+    pub sensors_by_rom: usize,
 }
 
 /// Quantize, encode and write an image; the image is parsed back before it
@@ -72,7 +74,46 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
         max_deviation_um: r.max_deviation_um.clone(),
         samples: r.samples,
         fallbacks: m.fallbacks.len(),
+        sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
     }
+}
+
+/// Name the model's sensors by the ROM codes the run recorded for their
+/// columns (`# rom.T_<name>:`, [`crate::runcsv::Run::sensor_roms`]), so the
+/// board reads each from the physical sensor it was trained on, whatever
+/// channel that sensor has. Each sensor's `channel` (its run column) stays.
+/// A run with ROM codes for some of the model's sensors but not all is
+/// refused (a model half by ROM, half by channel would be trusted more than
+/// it deserves); a run without any leaves the model by channel. Returns how
+/// many sensors are named by ROM.
+pub fn name_sensors_by_rom(
+    model: &mut FloatModel,
+    temperature_columns: &[String],
+    roms: &std::collections::BTreeMap<String, [u8; 8]>,
+) -> Result<usize> {
+    let column = |ch: u8| temperature_columns.get(usize::from(ch));
+    let missing: Vec<&str> = model
+        .sensors
+        .iter()
+        .filter_map(|s| column(s.channel))
+        .filter(|c| !roms.contains_key(*c))
+        .map(String::as_str)
+        .collect();
+    if missing.len() == model.sensors.len() {
+        return Ok(0);
+    }
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "the run records ROM codes for some of the model's sensors but not for {}: record the run again with every sensor on the bus (tcomp record) or remove the rom.* lines",
+            missing.join(", ")
+        );
+    }
+    for s in &mut model.sensors {
+        if let Some(rom) = column(s.channel).and_then(|c| roms.get(c)) {
+            s.rom = *rom;
+        }
+    }
+    Ok(model.sensors.len())
 }
 
 pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
@@ -89,6 +130,12 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
     );
     if s.fallbacks > 0 {
         println!("  {} fallback model(s) for degraded mode", s.fallbacks);
+    }
+    if s.sensors_by_rom > 0 {
+        println!(
+            "  {} sensor(s) named by 1-Wire ROM code (the board reads each from its own sensor, whatever its channel)",
+            s.sensors_by_rom
+        );
     }
     for (d, dev) in s.directions.iter().zip(&s.max_deviation_um) {
         println!(

@@ -221,21 +221,39 @@ fn one_line(e: &anyhow::Error) -> String {
 
 /// A model channel the run has no temperature column for would be a
 /// permanently failed sensor: the replay would show nothing of the model.
+/// A sensor named by ROM code that the run (recording ROM codes) does not
+/// hold is replayed as missing, as the board would, and said so.
 fn check_channels(
     model: &thermocomp_core::Model,
     run: &tcomp::runcsv::Run,
     image: &std::path::Path,
     run_path: &std::path::Path,
 ) -> anyhow::Result<()> {
-    let columns = run.temperature_columns().len();
-    for s in model.sensors.iter().filter(|s| s.rom == [0; 8]) {
-        anyhow::ensure!(
-            usize::from(s.channel) < columns,
-            "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
-            image.display(),
-            s.channel,
-            run_path.display()
-        );
+    let names: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    let roms = run
+        .sensor_roms()
+        .with_context(|| format!("in run file {}", run_path.display()))?;
+    let columns = names.len();
+    let resolved = tcomp::replay::sensor_columns(model, &names, &roms);
+    for (i, (s, c)) in model.sensors.iter().zip(&resolved).enumerate() {
+        match c {
+            Some(c) => anyhow::ensure!(
+                *c < columns,
+                "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
+                image.display(),
+                c,
+                run_path.display()
+            ),
+            None => eprintln!(
+                "note: model sensor {i} (ROM {}) is not in {}: replayed as a missing sensor",
+                tcomp::runcsv::format_rom(&s.rom),
+                run_path.display()
+            ),
+        }
     }
     Ok(())
 }
@@ -264,11 +282,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     let run = run.ok_or_else(|| {
                         anyhow::anyhow!("--run <csv> gives the board's channel order")
                     })?;
-                    let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(&run)?
+                    let table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
+                    let columns: Vec<String> = table
                         .temperature_columns()
                         .iter()
                         .map(|c| c.to_string())
                         .collect();
+                    let roms = table
+                        .sensor_roms()
+                        .with_context(|| format!("in run file {}", run.display()))?;
                     let opts = tcomp::export::ExportOptions {
                         model_version,
                         max_correction_um,
@@ -276,7 +298,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         choices: tcomp::export::parse_choices(&r#use)?,
                         ..Default::default()
                     };
-                    tcomp::export::float_model_from_fit(&file, &columns, &opts)?
+                    let mut float = tcomp::export::float_model_from_fit(&file, &columns, &opts)?;
+                    tcomp::export::name_sensors_by_rom(&mut float, &columns, &roms)?;
+                    float
                 }
                 (false, None) => {
                     anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
@@ -366,6 +390,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "uploaded {} bytes; the board serves model version {} crc {}",
                     s.bytes, s.model_version, s.model_crc
                 );
+                if !s.sensors_not_on_board.is_empty() {
+                    println!(
+                        "  model sensor(s) {:?}: their ROM codes are on none of the board's channels; it serves without them (fallback or held) until they are on the bus",
+                        s.sensors_not_on_board
+                    );
+                }
             }
         }
         Command::Record {

@@ -11,6 +11,9 @@
 //!                step_ms u32, warmup_s u32, n_sensors u8, n_inputs u8, n_nets u8,
 //!                n_tables u8, n_directions u8, n_axes u8, units u8, reserved u8
 //! sensor   16 B  rom [8] (all zero: by channel), channel u8, 3 × 0, ref_temp i32 (1/16 °C)
+//!                (a ROM code names the physical sensor: the board reads the
+//!                channel its channel map holds that ROM on, never `channel`,
+//!                which then records the run column it was trained on)
 //! direction 16 B name [8] (ASCII, zero-padded), max_correction i32 (0.1 µm),
 //!                max_rate i32 (0.1 µm/s)
 //! axis     20 B  name [8], pos_min i32, pos_max i32, ref_pos i32 (µm or 0.001°)
@@ -45,7 +48,8 @@
 //! [`MAX_IMAGE_BYTES`] (8192), checked by the parser and by `tcomp export`.
 //!
 //! Beyond the layout, the parser refuses (each with its own [`ImageError`]):
-//! bytes after the CRC; model version 0 ("no model" on the register map); a
+//! bytes after the CRC; a sensor ROM code that fails its CRC-8 or names a
+//! sensor twice; model version 0 ("no model" on the register map); a
 //! sensor channel ≥ [`MAX_SENSORS`]; `max_correction` outside
 //! 1..=[`MAX_CORRECTION`] (10 mm) and `max_rate` outside 1..=`MAX_RATE`
 //! (100 mm/s); tables on one axis with Σ |coef| · max(1, position power) >
@@ -70,6 +74,13 @@ pub const HEADER_LEN: usize = 32;
 pub const NONE: u8 = 0xFF;
 
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+/// The 1-Wire ROM code's CRC-8 (Dallas/Maxim, x^8 + x^5 + x^4 + 1).
+const CRC8_MAXIM: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_MAXIM_DOW);
+
+/// CRC-8 of a ROM code's first seven bytes (its eighth byte must equal it).
+pub fn rom_crc8(bytes: &[u8]) -> u8 {
+    CRC8_MAXIM.checksum(bytes)
+}
 
 /// CRC-32 of a byte string (the image's checksum, also shown over Modbus).
 pub fn crc32(bytes: &[u8]) -> u32 {
@@ -165,6 +176,17 @@ pub enum ImageError {
         fallback: u8,
         sensor: u8,
     },
+    /// A sensor named by a ROM code whose CRC-8 byte does not match (a
+    /// mistyped or corrupted code would name no sensor on any bus).
+    BadSensorRom {
+        sensor: u8,
+    },
+    /// Two sensors named by the same ROM code (one physical sensor cannot
+    /// be two model sensors).
+    DuplicateSensorRom {
+        sensor: u8,
+        first: u8,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -245,6 +267,14 @@ impl core::fmt::Display for ImageError {
             ImageError::FallbackUsesExcluded { fallback, sensor } => write!(
                 f,
                 "fallback model {fallback} uses sensor {sensor}, which it is meant to do without"
+            ),
+            ImageError::BadSensorRom { sensor } => write!(
+                f,
+                "sensor {sensor}: ROM code fails its CRC-8 (not a 1-Wire ROM code)"
+            ),
+            ImageError::DuplicateSensorRom { sensor, first } => write!(
+                f,
+                "sensor {sensor} has the same ROM code as sensor {first}"
             ),
         }
     }
@@ -517,6 +547,17 @@ impl Model {
                     sensor: i as u8,
                     channel,
                 });
+            }
+            if rom != [0; 8] {
+                if rom_crc8(&rom[..7]) != rom[7] {
+                    return Err(ImageError::BadSensorRom { sensor: i as u8 });
+                }
+                if let Some(first) = m.sensors.iter().position(|s| s.rom == rom) {
+                    return Err(ImageError::DuplicateSensorRom {
+                        sensor: i as u8,
+                        first: first as u8,
+                    });
+                }
             }
             push(
                 &mut m.sensors,

@@ -50,6 +50,16 @@ pub const CMD_TEST_PANIC: u16 = 8;
 /// Test builds only (feature `test-faults`): the measurement loop stops
 /// making progress, so the watchdog must trip.
 pub const CMD_TEST_STALL: u16 = 9;
+/// Keep a reference sample across reboots (a machine with a fixed
+/// reference): the next cycle at which every model sensor reads fresh is
+/// the new reference sample (per channel), used from then on and at every
+/// boot, and stored with the settings (HR_RESULT 50, then 23, then 0 or 22).
+/// While a reference is kept (or the image has a fixed reference),
+/// [`CMD_REREFERENCE`] does the same.
+pub const CMD_KEEP_REFERENCE: u16 = 10;
+/// Forget the kept reference (stored); the reference in use stays until
+/// the next boot or command 2.
+pub const CMD_FORGET_REFERENCE: u16 = 11;
 
 /// Command results (HR_RESULT): one code per reason a commit is refused.
 pub mod result {
@@ -111,6 +121,13 @@ pub mod result {
     pub const DUPLICATE_SECTION: u16 = 32;
     /// A fallback model reads a sensor it is meant to do without.
     pub const FALLBACK_USES_EXCLUDED: u16 = 33;
+    /// Command 10 (or 2 with a kept reference) accepted: the reference is
+    /// taken at the next cycle with every model sensor fresh, then stored.
+    pub const REFERENCE_PENDING: u16 = 50;
+    /// The image names a sensor by a ROM code that fails its CRC-8.
+    pub const SENSOR_ROM: u16 = 51;
+    /// The image names two sensors by the same ROM code.
+    pub const DUPLICATE_SENSOR_ROM: u16 = 52;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -143,6 +160,9 @@ pub mod result {
             SECTION_LENGTH => "SECTION_LENGTH",
             DUPLICATE_SECTION => "DUPLICATE_SECTION",
             FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
+            REFERENCE_PENDING => "REFERENCE_PENDING",
+            SENSOR_ROM => "SENSOR_ROM",
+            DUPLICATE_SENSOR_ROM => "DUPLICATE_SENSOR_ROM",
             _ => "unknown",
         }
     }
@@ -171,6 +191,8 @@ pub mod result {
             ImageError::SectionLength { .. } => SECTION_LENGTH,
             ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
             ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
+            ImageError::BadSensorRom { .. } => SENSOR_ROM,
+            ImageError::DuplicateSensorRom { .. } => DUPLICATE_SENSOR_ROM,
         }
     }
 }
@@ -227,6 +249,10 @@ pub enum Command {
     TestPanic,
     /// Command 9 (feature `test-faults`): stall the measurement loop.
     TestStall,
+    /// Command 10: take a reference sample and keep it.
+    KeepReference,
+    /// Command 11: forget the kept reference.
+    ForgetReference,
 }
 
 pub struct Holding {
@@ -373,6 +399,8 @@ impl Holding {
                         | CMD_ROLLBACK_MODEL
                         | CMD_CLEAR_STAGING
                         | CMD_RESTORE_DEFAULTS
+                        | CMD_KEEP_REFERENCE
+                        | CMD_FORGET_REFERENCE
                 ))
             || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
@@ -413,6 +441,8 @@ impl Holding {
                         | CMD_ROLLBACK_MODEL
                         | CMD_CLEAR_FAULT
                         | CMD_RESTORE_DEFAULTS
+                        | CMD_KEEP_REFERENCE
+                        | CMD_FORGET_REFERENCE
                 ) || (cfg!(feature = "test-faults") && matches!(v, CMD_TEST_PANIC | CMD_TEST_STALL))
             }
             HR_UNIT => (1..=247).contains(&v),
@@ -506,6 +536,8 @@ impl Holding {
             CMD_RESTORE_DEFAULTS => Ok(Command::RestoreDefaults),
             CMD_TEST_PANIC => Ok(Command::TestPanic),
             CMD_TEST_STALL => Ok(Command::TestStall),
+            CMD_KEEP_REFERENCE => Ok(Command::KeepReference),
+            CMD_FORGET_REFERENCE => Ok(Command::ForgetReference),
             _ => {
                 self.unlocked_until_ms = None;
                 Ok(Command::None)

@@ -5,7 +5,7 @@
 //! 32-bit values: high word first (register n = bits 31..16).
 
 use thermocomp_core::eval::AxisPair;
-use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
+use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_SENSORS};
 
 use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
@@ -72,6 +72,25 @@ pub const IR_MAP_ADDED: u16 = 172;
 /// Last register of the board-safety block (160–179).
 pub const IR_SAFETY_LAST: u16 = 179;
 
+/// Sensor identity block (200–299). ROM code of each channel's sensor, 4
+/// registers per channel (channel c at 200 + 4c), the 8 bytes in bus order
+/// (family code first: high byte of the first register, CRC last); all
+/// zero for an unmapped channel.
+pub const IR_CHANNEL_ROMS: u16 = 200;
+/// The channel each model sensor reads, two per register (sensor 2k in the
+/// high byte, 2k + 1 in the low byte; 0xFF: none — its ROM is not in the
+/// channel map, or no such sensor), registers 280–289.
+pub const IR_SENSOR_CHANNELS: u16 = 280;
+/// Model sensors with no answering sensor (u32, bit i = model sensor i:
+/// its ROM is not on the bus or its channel does not answer); their inputs
+/// are invalid (degraded mode or held), never another sensor's value.
+pub const IR_SENSORS_MISSING: u16 = 290;
+/// The kept reference (commands 10/11): 0 none, 1 kept and in use, 2 to be
+/// taken at the next cycle with every model sensor fresh.
+pub const IR_REFERENCE_STATE: u16 = 292;
+/// Last register of the identity block (293–299 reserved, read 0).
+pub const IR_IDENTITY_LAST: u16 = 299;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Snapshot {
     pub sequence: u32,
@@ -102,6 +121,14 @@ pub struct Snapshot {
     pub map_added: u32,
     /// Per direction, the model serving it ([`thermocomp_core::compensator::ACTIVE_NONE`]: none).
     pub active: [u8; MAX_DIRECTIONS],
+    /// ROM code per channel, bus order (all zero: unmapped).
+    pub roms: [[u8; 8]; MAX_CHANNELS],
+    /// Channel of each model sensor (0xFF: none).
+    pub sensor_channels: [u8; MAX_SENSORS],
+    /// Model sensors with no answering sensor (bit per model sensor).
+    pub sensors_missing: u32,
+    /// 0 no kept reference, 1 kept, 2 pending.
+    pub reference_state: u16,
 }
 
 impl Default for Snapshot {
@@ -128,6 +155,10 @@ impl Default for Snapshot {
             map_missing: 0,
             map_added: 0,
             active: [thermocomp_core::compensator::ACTIVE_NONE; MAX_DIRECTIONS],
+            roms: [[0; 8]; MAX_CHANNELS],
+            sensor_channels: [0xFF; MAX_SENSORS],
+            sensors_missing: 0,
+            reference_state: 0,
         }
     }
 }
@@ -162,6 +193,9 @@ impl Snapshot {
     pub fn input_register(&self, addr: u16) -> Option<u16> {
         if (IR_FAULT_KIND..=IR_SAFETY_LAST).contains(&addr) {
             return Some(self.safety_register(addr));
+        }
+        if (IR_CHANNEL_ROMS..=IR_IDENTITY_LAST).contains(&addr) {
+            return Some(self.identity_register(addr));
         }
         if addr > IR_LAST {
             return None;
@@ -260,6 +294,27 @@ impl Snapshot {
 }
 
 impl Snapshot {
+    /// Input registers 200–299: sensor identity and the kept reference.
+    fn identity_register(&self, addr: u16) -> u16 {
+        let k = usize::from(addr.saturating_sub(IR_CHANNEL_ROMS));
+        if let Some(rom) = self.roms.get(k / 4) {
+            let i = 2 * (k % 4);
+            return u16::from_be_bytes([rom[i], rom[i + 1]]);
+        }
+        let k = usize::from(addr.saturating_sub(IR_SENSOR_CHANNELS));
+        if addr >= IR_SENSOR_CHANNELS && k < MAX_SENSORS / 2 {
+            let ch = |i: usize| self.sensor_channels.get(i).copied().unwrap_or(0xFF);
+            return u16::from_be_bytes([ch(2 * k), ch(2 * k + 1)]);
+        }
+        if let Some(w) = word32(addr, IR_SENSORS_MISSING, self.sensors_missing) {
+            return w;
+        }
+        if addr == IR_REFERENCE_STATE {
+            return self.reference_state;
+        }
+        0
+    }
+
     /// Input registers 160–179: the fault record (0 without one).
     fn safety_register(&self, addr: u16) -> u16 {
         if let Some(w) = word32(addr, IR_MAP_MISSING, self.map_missing) {
