@@ -36,9 +36,11 @@
 //! are clamped into the section's envelope, which the parser keeps inside
 //! the DS18B20 range −55 … 125 °C (−880 … 2000 sixteenths), as it keeps
 //! the reference: |T − T_ref| ≤ 2880 < 2^12, and the constant scale is
-//! 16 = 2^4. One term adds ≤ (2^31 + 1) · 2^12 < 2^44 to the accumulator,
-//! and at most [`MAX_VOL_TERMS`] = 256 = 2^8 terms give |acc| < 2^52
-//! < 2^63. The final rounding adds 800,000 < 2^20: still < 2^63, and the
+//! 16 = 2^4. The rounded terms are summed per scale (constant, or per
+//! kelvin of sensor i): at most [`MAX_VOL_TERMS`] = 256 = 2^8 of them,
+//! so each sum is < 2^8 · (2^31 + 1) < 2^40; scaled (< 2^12) and added
+//! over the 1 + 4 scales — still at most 256 terms in all — they give
+//! |acc| ≤ 256 · (2^31 + 1) · 2^12 < 2^52 < 2^63. The final rounding adds 800,000 < 2^20: still < 2^63, and the
 //! quotient (< 2^52 / 1.6·10^6 < 2^31) fits the i32 before the clamp to
 //! the section's max correction (≤ 10 mm). No bound on the coefficients
 //! beyond their i32 type is needed; `math-core/tests/volumetric.rs`
@@ -309,7 +311,10 @@ impl Volumetric {
             p[2] = mul_q24(u, u);
             p[3] = mul_q24(p[2], u);
         }
-        let mut acc = [0i64; 3];
+        // Sums of the rounded terms (pm) per scale: constant (index 0) and
+        // per kelvin of each sensor; scaled once at the end (exactly
+        // Σ q·s, the integers are distributive).
+        let mut sum = [[0i64; 3]; MAX_VOL_SENSORS + 1];
         for t in &self.terms {
             let [a, b, c, e] = t.exps;
             let m = mul_q24(
@@ -319,15 +324,23 @@ impl Volumetric {
                 ),
                 pow[3][usize::from(e & 3)],
             );
-            let scale = if t.sensor == NONE {
-                16
+            let group = if t.sensor == NONE {
+                0
             } else {
-                rise.get(usize::from(t.sensor)).copied().unwrap_or(0)
+                usize::from(t.sensor) + 1
             };
             let m = i64::from(m);
-            for (a, &c) in acc.iter_mut().zip(&t.coef) {
-                let q = (i64::from(c) * m + (1 << 23)) >> 24;
-                *a += q * scale;
+            if let Some(g) = sum.get_mut(group) {
+                for (a, &c) in g.iter_mut().zip(&t.coef) {
+                    *a += (i64::from(c) * m + (1 << 23)) >> 24;
+                }
+            }
+        }
+        let mut acc = [0i64; 3];
+        for (d, a) in acc.iter_mut().enumerate() {
+            *a = sum[0][d] << 4;
+            for (g, r) in sum[1..].iter().zip(&rise) {
+                *a += g[d] * r;
             }
         }
         out.acc = acc;

@@ -248,7 +248,7 @@ pub fn quantisation_report(
 /// (variables, products, terms, final rounding) plus, per term, half a pm
 /// of coefficient rounding, the stroke rounding (≤ ½ µm of stroke moves a
 /// variable by ≤ ½/stroke, a monomial by its degree times that) and the
-/// reference rounding (≤ 1/32 K times a per-kelvin coefficient).
+/// reference rounding (≤ 1/32 K, as stored, times a per-kelvin coefficient).
 fn bound_um(poly: &VolumetricPoly, v: &Volumetric, rises: &[i32], o: &BoardOptions) -> f64 {
     let core = v.error_bound_tenth_um(rises) / 10.0;
     let mut extra = [0.0f64; 3];
@@ -267,8 +267,13 @@ fn bound_um(poly: &VolumetricPoly, v: &Volumetric, rises: &[i32], o: &BoardOptio
                         / f64::from(v.stroke_um[k]);
                 e += c_um * f64::from(q.exps[k]) * du * scale_k;
             }
-            if t.sensor.is_some() {
-                e += c_um / 32.0;
+            if let Some(i) = t.sensor {
+                // The reference as stored (1/16 °C) against the f64 one.
+                let stored = v
+                    .sensors
+                    .get(i)
+                    .map_or(0.0, |s| f64::from(s.sensor.ref_temp) / 16.0);
+                e += c_um * (poly.t_ref_c.get(i).copied().unwrap_or(stored) - stored).abs();
             }
             extra[d] += e;
         }
