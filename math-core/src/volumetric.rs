@@ -165,6 +165,7 @@ pub struct VolOutput {
 impl Volumetric {
     /// Validate a section: every premise of the overflow argument (module
     /// docs) is checked here, each refusal a named [`ImageError`].
+    #[allow(clippy::needless_range_loop)] // five parallel per-axis arrays
     pub fn new(s: &VolumetricSpec<'_>) -> Result<Volumetric, ImageError> {
         let mut spans = [Span::default(); 4];
         for k in 0..3 {
@@ -344,14 +345,19 @@ impl Volumetric {
             }
         }
         out.acc = acc;
-        for k in 0..3 {
-            let v = round_div(acc[k], ACC_PER_TENTH_UM);
-            let max = i64::from(self.max_correction[k]);
-            let c = v.clamp(-max, max);
-            if c != v {
+        for ((c, &a), &max) in out
+            .corrections
+            .iter_mut()
+            .zip(&acc)
+            .zip(&self.max_correction)
+        {
+            let v = round_div(a, ACC_PER_TENTH_UM);
+            let max = i64::from(max);
+            let clamped = v.clamp(-max, max);
+            if clamped != v {
                 out.status |= vstatus::CLAMPED;
             }
-            out.corrections[k] = c as i32;
+            *c = clamped as i32;
         }
         out.status |= vstatus::VALID;
         out

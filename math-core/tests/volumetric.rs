@@ -2,6 +2,8 @@
 //! without it unchanged, the integer evaluation against the f64 polynomial
 //! of the same coefficients within the stated bound, the overflow bound at
 //! the extremes (tests run with overflow checks), every refusal typed.
+// Per-direction loops index several parallel [x, y, z] arrays.
+#![allow(clippy::needless_range_loop)]
 use proptest::prelude::*;
 use thermocomp_core::float::demo_model;
 use thermocomp_core::image::*;

@@ -319,7 +319,7 @@ impl Snapshot {
         let k = addr.wrapping_sub(IR_VOL_CORRECTION);
         if k < 6 {
             let c = v.corrections[usize::from(k / 2) % 3] as u32;
-            return if k % 2 == 0 { hi(c) } else { lo(c) };
+            return if k.is_multiple_of(2) { hi(c) } else { lo(c) };
         }
         if addr == IR_VOL_STATUS {
             v.status
