@@ -173,16 +173,28 @@ impl<F: BackgroundErase> App<F> {
         }
         let resolved_before: [Option<u8>; MAX_SENSORS] =
             core::array::from_fn(|i| self.compensation.channel_of(i));
+        let vol_before: [Option<u8>; MAX_VOL_SENSORS] =
+            core::array::from_fn(|i| self.compensation.vol_channel_of(i));
         self.map = map;
         let model = self.compensation.model().cloned();
+        let moved = |rom: [u8; 8], before: Option<u8>| {
+            rom != [0; 8]
+                && map
+                    .channel_of(&RomCode(rom))
+                    .and_then(|c| u8::try_from(c).ok())
+                    != before
+        };
         let changes = model.as_ref().is_some_and(|m| {
-            m.sensors.iter().enumerate().any(|(i, s)| {
-                s.rom != [0; 8]
-                    && map
-                        .channel_of(&RomCode(s.rom))
-                        .and_then(|c| u8::try_from(c).ok())
-                        != resolved_before[i]
-            })
+            m.sensors
+                .iter()
+                .enumerate()
+                .any(|(i, s)| moved(s.rom, resolved_before[i]))
+                || m.volumetric.as_ref().is_some_and(|v| {
+                    v.sensors
+                        .iter()
+                        .enumerate()
+                        .any(|(i, s)| moved(s.sensor.rom, vol_before[i]))
+                })
         });
         if changes {
             self.install(model);

@@ -243,3 +243,30 @@ fn volumetric_refusals_have_their_own_result_codes() {
         assert_eq!(result::name(code), name);
     }
 }
+
+#[test]
+fn a_section_sensor_named_by_rom_follows_the_channel_map() {
+    use thermocomp::acquisition::rom::RomCode;
+    let rom = RomCode::from_serial(0x28, [1, 2, 3, 4, 5, 6]).0;
+    let s = VolSensor {
+        sensor: SensorRef {
+            rom,
+            channel: 0,
+            ref_temp: 320,
+        },
+        min: 0,
+        max: 1000,
+    };
+    let mut app = app();
+    app.program(&image(Some(section(&[s])))).unwrap();
+    assert_eq!(
+        app.compensation.vol_channel_of(0),
+        None,
+        "not on the bus yet"
+    );
+    // A bus search finds it on channel 7 (the model's own sensors are by channel).
+    let mut map = ChannelMap::new();
+    map.set(7, Some(RomCode(rom))).unwrap();
+    app.update_channel_map(map);
+    assert_eq!(app.compensation.vol_channel_of(0), Some(7));
+}
