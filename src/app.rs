@@ -16,7 +16,7 @@ use crate::compensation::{Compensation, PlcInputs};
 use crate::fault::{FaultBoard, FaultRecord};
 use crate::hal::flash::BackgroundErase;
 use crate::modbus::holding::{result, Command};
-use crate::modbus::registers::{centidegrees, Snapshot};
+use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot, NOT_AVAILABLE_32};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
@@ -26,6 +26,7 @@ use crate::process_image::MAX_CHANNELS;
 use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
+use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
 
 // The slots' settings block holds the settings, the channel map and a kept reference.
 const _: () = assert!(
@@ -57,6 +58,13 @@ pub struct App<F: NorFlash> {
     /// Command 10 accepted: take the reference at the next cycle with every
     /// model sensor fresh.
     reference_pending: bool,
+    /// The volumetric section's sensors at the last cycle (1/16 °C) and
+    /// whether one was held: a PLC write of positions is answered with
+    /// these at once ([`App::update_volumetric`]).
+    vol_temps: [Option<i32>; MAX_VOL_SENSORS],
+    vol_held: bool,
+    /// Uptime of the last cycle or request (ms), for the PLC-timeout rule.
+    vol_uptime_ms: u64,
 }
 
 /// A flash write accepted over Modbus and done in the background: the
@@ -121,6 +129,9 @@ impl<F: BackgroundErase> App<F> {
             job: None,
             kept,
             reference_pending: false,
+            vol_temps: [None; MAX_VOL_SENSORS],
+            vol_held: false,
+            vol_uptime_ms: 0,
         };
         app.snapshot.reference_state = u16::from(kept.is_some());
         app.publish_map();
@@ -252,17 +263,29 @@ impl<F: BackgroundErase> App<F> {
         }
         let resolved_before: [Option<u8>; MAX_SENSORS] =
             core::array::from_fn(|i| self.compensation.channel_of(i));
+        let vol_before: [Option<u8>; MAX_VOL_SENSORS] =
+            core::array::from_fn(|i| self.compensation.vol_channel_of(i));
         self.map = map;
         self.publish_map();
         let model = self.compensation.model().cloned();
+        let moved = |rom: [u8; 8], before: Option<u8>| {
+            rom != [0; 8]
+                && map
+                    .channel_of(&RomCode(rom))
+                    .and_then(|c| u8::try_from(c).ok())
+                    != before
+        };
         let changes = model.as_ref().is_some_and(|m| {
-            m.sensors.iter().enumerate().any(|(i, s)| {
-                s.rom != [0; 8]
-                    && map
-                        .channel_of(&RomCode(s.rom))
-                        .and_then(|c| u8::try_from(c).ok())
-                        != resolved_before[i]
-            })
+            m.sensors
+                .iter()
+                .enumerate()
+                .any(|(i, s)| moved(s.rom, resolved_before[i]))
+                || m.volumetric.as_ref().is_some_and(|v| {
+                    v.sensors
+                        .iter()
+                        .enumerate()
+                        .any(|(i, s)| moved(s.sensor.rom, vol_before[i]))
+                })
         });
         if changes {
             self.install(model);
@@ -384,6 +407,66 @@ impl<F: BackgroundErase> App<F> {
         self.snapshot.n_directions = nd as u16;
         self.snapshot.n_axes = na as u16;
         self.snapshot.n_sensors = ns as u16;
+        // No temperatures of the new section's sensors yet: "sensor fault"
+        // (not available) until the next cycle, never the old model's values.
+        self.vol_temps = [None; MAX_VOL_SENSORS];
+        self.vol_held = false;
+        self.update_volumetric(self.vol_uptime_ms);
+    }
+
+    /// Evaluate the volumetric correction (image section kind 3) at the
+    /// PLC's positions and tool length with the last cycle's temperatures,
+    /// into input registers 180–199. Without a section, without positions
+    /// from the PLC or with a sensor fault the correction registers read
+    /// "not available" (0x8000 0000) and the status says why.
+    pub fn update_volumetric(&mut self, uptime_ms: u64) {
+        self.vol_uptime_ms = uptime_ms;
+        let h = &self.server.holding;
+        let vol = &mut self.snapshot.vol;
+        let sequence = vol.sequence.wrapping_add(1);
+        let Some(v) = self
+            .compensation
+            .model()
+            .and_then(|m| m.volumetric.as_ref())
+        else {
+            *vol = VolSnapshot {
+                sequence,
+                ..VolSnapshot::default()
+            };
+            return;
+        };
+        let n = v.sensors.len().min(MAX_VOL_SENSORS);
+        let out = v.evaluate(&h.positions, h.tool_length_um, &self.vol_temps[..n]);
+        let mut status = out.status;
+        if !h.positions_written {
+            status = (status & !vstatus::VALID) | vstatus::NO_POSITIONS;
+        }
+        let plc_stale = h
+            .plc_written_ms
+            .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
+        if plc_stale || self.vol_held {
+            status |= vstatus::STALE;
+        }
+        let valid = status & vstatus::VALID != 0;
+        *vol = VolSnapshot {
+            corrections: if valid {
+                out.corrections
+            } else {
+                [NOT_AVAILABLE_32; 3]
+            },
+            status,
+            terms: v.terms.len() as u16,
+            tool_um: if valid { out.tool_um } else { NOT_AVAILABLE_32 },
+            temps: core::array::from_fn(|i| {
+                self.vol_temps
+                    .get(i)
+                    .copied()
+                    .flatten()
+                    .filter(|_| i < n)
+                    .and_then(|t| i16::try_from(t).ok())
+            }),
+            sequence,
+        };
     }
 
     fn apply_limits(&mut self) {
@@ -429,6 +512,8 @@ impl<F: BackgroundErase> App<F> {
             self.take_reference(acq, now_ms);
         }
         let out = self.compensation.step(acq, now_ms, &plc);
+        (self.vol_temps, self.vol_held) = self.compensation.vol_temperatures(acq, now_ms);
+        self.update_volumetric(uptime_ms);
         self.progress.cycles = self.progress.cycles.wrapping_add(1);
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
@@ -481,7 +566,16 @@ impl<F: BackgroundErase> App<F> {
         uptime_ms: u64,
         reply: &mut heapless::Vec<u8, MAX_FRAME>,
     ) -> LinkChange {
-        match self.server.handle(frame, uptime_ms, &self.snapshot, reply) {
+        let h = &self.server.holding;
+        let geometry_before = (h.positions, h.tool_length_um, h.positions_written);
+        let command = self.server.handle(frame, uptime_ms, &self.snapshot, reply);
+        let h = &self.server.holding;
+        if (h.positions, h.tool_length_um, h.positions_written) != geometry_before {
+            // New positions or tool length: the volumetric correction follows
+            // at once (not at the next cycle), so the PLC's next read has it.
+            self.update_volumetric(uptime_ms);
+        }
+        match command {
             Command::None => LinkChange::None,
             Command::CommitModel { len } => {
                 // The server validated the image; it is written to the other

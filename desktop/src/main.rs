@@ -41,6 +41,18 @@ enum Command {
         model_version: u32,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Add the volumetric correction: the JSON of `tcomp geometry table
+        /// --json` (image section kind 3; its sensors are found by name
+        /// among the --run file's T_ columns).
+        #[arg(long)]
+        geometry: Option<std::path::PathBuf>,
+        /// Tool length at full scale of the volumetric section (mm); longer
+        /// tools are held there and flagged.
+        #[arg(long, default_value_t = 500.0, requires = "geometry")]
+        tool_max_mm: f64,
+        /// Machine position (mm) of the volumetric polynomial's zero, per axis: x,y,z.
+        #[arg(long, default_value = "0,0,0", requires = "geometry")]
+        geometry_origin_mm: String,
         #[arg(short, long)]
         out: std::path::PathBuf,
         #[arg(long)]
@@ -269,9 +281,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             max_rate_um_per_s,
             model_version,
             seed,
+            geometry,
+            tool_max_mm,
+            geometry_origin_mm,
             out,
             json,
         } => {
+            let run_for_geometry = run.clone();
             let float = match (demo, model) {
                 (true, _) => thermocomp_core::float::demo_model(seed),
                 (false, Some(path)) => {
@@ -306,7 +322,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
                 }
             };
-            let summary = tcomp::export::export(&float, &out)?;
+            let section = match geometry {
+                Some(path) => Some(geometry_section(
+                    &path,
+                    &float,
+                    run_for_geometry.as_deref(),
+                    tool_max_mm,
+                    &geometry_origin_mm,
+                    max_correction_um,
+                )?),
+                None => None,
+            };
+            let summary = tcomp::export::export_with(&float, section, &out)?;
             tcomp::export::print_summary(&summary, &out, json);
         }
         Command::Replay {
@@ -459,4 +486,113 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `tcomp export --geometry`: read `geometry table --json`'s polynomial,
+/// find its sensors' board channels (the run's T_ columns, by name) and
+/// its X, Y, Z position slots (the model's axes of those names, else the
+/// first slots the model does not use), quantise it and report the cost.
+fn geometry_section(
+    path: &std::path::Path,
+    float: &thermocomp_core::float::FloatModel,
+    run: Option<&std::path::Path>,
+    tool_max_mm: f64,
+    origin: &str,
+    max_correction_um: f64,
+) -> anyhow::Result<tcomp::export::GeometrySection> {
+    use tcomp::geometry::board::{quantisation_report, quantize, BoardOptions};
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    let poly: tcomp::geometry::volumetric::VolumetricPoly =
+        serde_json::from_str(&text).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: not a `tcomp geometry table --json` output: {e}",
+                path.display()
+            )
+        })?;
+    let mut channels = Vec::new();
+    if !poly.sensors.is_empty() {
+        let run = run.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: the volumetric polynomial reads sensor(s) {}: --run <csv> gives their board channels",
+                path.display(),
+                poly.sensors.join(", ")
+            )
+        })?;
+        let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(run)?
+            .temperature_columns()
+            .iter()
+            .map(|c| c.to_string())
+            .collect();
+        for s in &poly.sensors {
+            let want = if s.starts_with("T_") {
+                s.clone()
+            } else {
+                format!("T_{s}")
+            };
+            let ch = columns
+                .iter()
+                .position(|c| *c == want || c == s)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "{}: sensor {s} of the volumetric polynomial is not among the T_ columns of {}",
+                        path.display(),
+                        run.display()
+                    )
+                })?;
+            let ch = u8::try_from(ch)
+                .ok()
+                .filter(|&c| usize::from(c) < thermocomp_core::limits::MAX_SENSORS)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "sensor {s} is board channel {ch}; the board reads channels 0..=19"
+                    )
+                })?;
+            channels.push(ch);
+        }
+    }
+    let o: Vec<f64> = origin
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .ok_or_else(|| {
+            anyhow::anyhow!("--geometry-origin-mm {origin:?}: expected three numbers x,y,z (mm)")
+        })?;
+    let mut slots = [0u8; 3];
+    let mut used: Vec<usize> = Vec::new();
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if let Some(i) = float
+            .axes
+            .iter()
+            .position(|a| a.name.eq_ignore_ascii_case(name))
+        {
+            slots[k] = i as u8;
+            used.push(i);
+        }
+    }
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if !float.axes.iter().any(|a| a.name.eq_ignore_ascii_case(name)) {
+            let free = (0..thermocomp_core::limits::MAX_AXES)
+                .find(|i| *i >= float.axes.len() && !used.contains(i))
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no free PLC position slot for axis {name} of the volumetric section"
+                    )
+                })?;
+            slots[k] = free as u8;
+            used.push(free);
+        }
+    }
+    let opts = BoardOptions {
+        channels,
+        slots,
+        origin_mm: [o[0], o[1], o[2]],
+        tool_max_mm,
+        max_correction_um,
+    };
+    let v = quantize(&poly, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let report = quantisation_report(&poly, &v, &opts);
+    Ok((v, report))
 }

@@ -6,6 +6,7 @@
 
 use thermocomp_core::eval::AxisPair;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_SENSORS};
+use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 
 use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
@@ -48,9 +49,28 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register: the end of the board-safety block (158–159 and
-/// 169, 174–179 reserved, read 0).
-pub const IR_LAST: u16 = IR_SAFETY_LAST;
+/// Last input register: the end of the sensor-identity block (158–159,
+/// 169, 174–179, 196–199 and 293–299 reserved, read 0).
+pub const IR_LAST: u16 = IR_IDENTITY_LAST;
+
+/// "Not available" for 32-bit measurements: reads 0x8000, 0x0000 (i32::MIN).
+pub const NOT_AVAILABLE_32: i32 = i32::MIN;
+/// The volumetric correction (image section kind 3, issue 14): x, y, z,
+/// int32 0.1 µm each ([`NOT_AVAILABLE_32`] unless status bit 0), 180–185.
+pub const IR_VOL_CORRECTION: u16 = 180;
+/// Volumetric status bits ([`thermocomp_core::volumetric::vstatus`]).
+pub const IR_VOL_STATUS: u16 = 186;
+/// Terms of the image's volumetric section (0: none).
+pub const IR_VOL_TERMS: u16 = 187;
+/// Tool length the correction used (after clamping), int32 µm.
+pub const IR_VOL_TOOL: u16 = 188;
+/// Temperatures the correction used, per section sensor, int16 1/16 °C
+/// (the sensor's own unit; 0x8000 none), 190–193.
+pub const IR_VOL_TEMPS: u16 = 190;
+/// Evaluations since boot, u32 (a PLC that wrote positions waits for it to move).
+pub const IR_VOL_SEQUENCE: u16 = 194;
+/// Last register of the volumetric block (180–199).
+pub const IR_VOL_LAST: u16 = 199;
 
 /// Status bit 9: a fault record from before the last reset is held (input
 /// registers 160–168) until command 6 clears it.
@@ -129,6 +149,35 @@ pub struct Snapshot {
     pub sensors_missing: u32,
     /// 0 no kept reference, 1 kept, 2 pending.
     pub reference_state: u16,
+    /// The volumetric correction (input registers 180–199).
+    pub vol: VolSnapshot,
+}
+
+/// The volumetric block of the snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VolSnapshot {
+    /// 0.1 µm; [`NOT_AVAILABLE_32`] unless `status` has VALID.
+    pub corrections: [i32; 3],
+    pub status: u16,
+    pub terms: u16,
+    /// µm; [`NOT_AVAILABLE_32`] unless VALID.
+    pub tool_um: i32,
+    /// 1/16 °C per section sensor; `None`: no value (or no such sensor).
+    pub temps: [Option<i16>; MAX_VOL_SENSORS],
+    pub sequence: u32,
+}
+
+impl Default for VolSnapshot {
+    fn default() -> Self {
+        VolSnapshot {
+            corrections: [NOT_AVAILABLE_32; 3],
+            status: thermocomp_core::volumetric::vstatus::NO_SECTION,
+            terms: 0,
+            tool_um: NOT_AVAILABLE_32,
+            temps: [None; MAX_VOL_SENSORS],
+            sequence: 0,
+        }
+    }
 }
 
 impl Default for Snapshot {
@@ -159,6 +208,7 @@ impl Default for Snapshot {
             sensor_channels: [0xFF; MAX_SENSORS],
             sensors_missing: 0,
             reference_state: 0,
+            vol: VolSnapshot::default(),
         }
     }
 }
@@ -196,6 +246,9 @@ impl Snapshot {
         }
         if (IR_CHANNEL_ROMS..=IR_IDENTITY_LAST).contains(&addr) {
             return Some(self.identity_register(addr));
+        }
+        if (IR_VOL_CORRECTION..=IR_VOL_LAST).contains(&addr) {
+            return Some(self.vol_register(addr));
         }
         if addr > IR_LAST {
             return None;
@@ -313,6 +366,28 @@ impl Snapshot {
             return self.reference_state;
         }
         0
+    }
+
+    /// Input registers 180–199: the volumetric correction.
+    fn vol_register(&self, addr: u16) -> u16 {
+        let v = &self.vol;
+        let k = addr.wrapping_sub(IR_VOL_CORRECTION);
+        if k < 6 {
+            let c = v.corrections[usize::from(k / 2) % 3] as u32;
+            return if k.is_multiple_of(2) { hi(c) } else { lo(c) };
+        }
+        if addr == IR_VOL_STATUS {
+            v.status
+        } else if addr == IR_VOL_TERMS {
+            v.terms
+        } else if let Some(w) = word32(addr, IR_VOL_TOOL, v.tool_um as u32) {
+            w
+        } else if (IR_VOL_TEMPS..IR_VOL_TEMPS + MAX_VOL_SENSORS as u16).contains(&addr) {
+            v.temps[usize::from(addr - IR_VOL_TEMPS) % MAX_VOL_SENSORS]
+                .map_or(NOT_AVAILABLE, |t| t as u16)
+        } else {
+            word32(addr, IR_VOL_SEQUENCE, v.sequence).unwrap_or_default()
+        }
     }
 
     /// Input registers 160–179: the fault record (0 without one).
