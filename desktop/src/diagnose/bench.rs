@@ -352,7 +352,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
                 ok += correct as usize;
                 visibility
                     .entry(k.to_string())
-                    .or_insert_with(Vec::new)
+                    .or_default()
                     .push((vis.max_c, vis.max_um, correct));
                 let e = per.entry(k.to_string()).or_default();
                 e.0 += 1;
