@@ -62,6 +62,8 @@ fn finds_a_sensor_offset_on_the_right_sensor() {
         vec![Effect::SensorOffset {
             sensor: "T07".into(),
             offset_c: -0.8,
+            at_s: 0.0,
+            run: None,
         }],
         12,
     );
