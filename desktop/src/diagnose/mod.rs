@@ -760,9 +760,14 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
             .filter(|&i| tried[i].0.dbic <= -opt.min_dbic)
             .min_by(|&a, &b| tried[a].0.dbic.total_cmp(&tried[b].0.dbic)),
     };
-    let need_pairs = best_single
-        .as_ref()
-        .is_none_or(|b| b.m_after > floor.max(opt.min_abs + 1.0));
+    // (when no single is supported, pairs are tried only if the nominal's
+    // own held-out gap is above that floor: below it the runs are at noise
+    // level for every single and a pair is a fit of noise)
+    let floor = floor.max(opt.min_abs + 1.0);
+    let need_pairs = match &best_single {
+        Some(b) => b.m_after > floor,
+        None => m0 > floor,
+    };
     let mut pairs = Vec::new();
     if let (true, Some(bi)) = (need_pairs, base_idx) {
         for j in 0..tried.len() {
