@@ -17,6 +17,7 @@ fn main() -> Result<()> {
     let mut verbose = false;
     let mut open_only = false;
     let mut machine_only = false;
+    let mut closed_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -28,7 +29,8 @@ fn main() -> Result<()> {
             "--verbose" => verbose = true,
             "--open-only" => open_only = true,
             "--open-machine-only" => machine_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --machines DIR)"),
+            "--closed-only" => closed_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR)"),
         }
     }
     let machines = vec![
@@ -44,6 +46,21 @@ fn main() -> Result<()> {
         threads,
         verbose,
     };
+    if closed_only {
+        let v = run_bench(
+            &machines,
+            &BenchConfig {
+                cases,
+                seed,
+                hours: 8.0,
+                sample_period_s: 10.0,
+                threads,
+                verbose,
+            },
+        )?;
+        println!("{v}");
+        return Ok(());
+    }
     let truth_machine = Machine::load(&dir.join("vertical-mc-truth.toml"))?;
     let open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
     if machine_only {
