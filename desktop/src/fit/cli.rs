@@ -73,6 +73,11 @@ pub struct FitArgs {
     /// cross-validation on FL_THERMAL and doubles the network time).
     #[arg(long)]
     pub hybrid: bool,
+    /// Do not score or offer the blend `w·mlr + (1−w)·ga-bpn` (weight `w`
+    /// from the cross-validation's out-of-fold predictions; it scores the
+    /// network on every fold).
+    #[arg(long)]
+    pub no_blend: bool,
     /// Cross-validate every network candidate on every fold (by default one
     /// is dropped as soon as its error bound shows it cannot be chosen).
     #[arg(long)]
@@ -159,6 +164,7 @@ impl FitArgs {
         cfg.skip_net = self.mlr_only;
         cfg.hybrid = self.hybrid;
         cfg.cv_drop = !self.full_cv;
+        cfg.blend = !self.no_blend;
         cfg.fallbacks = !self.no_fallbacks;
         cfg.fallback_pairs = self.fallback_pairs;
         Ok(cfg)
