@@ -103,11 +103,12 @@ pub struct ModelFile {
     pub fallbacks: Vec<fallback::FallbackParams>,
 }
 
-/// Model names, simplest first (the order ties are broken in): the blend and
-/// the hybrid are anchored on the lagged MLR (the blend shrinks the network
-/// towards it, the hybrid's network only corrects its residual), so they are
-/// taken as simpler than the free network.
-pub const MODEL_NAMES: [&str; 5] = ["mlr-static", "mlr", "blend", "hybrid", "ga-bpn"];
+/// Model names, simplest first (the order ties are broken in): the hybrid is
+/// anchored on the lagged MLR (its network only corrects the residual), so it
+/// is taken as simpler than the free network; the blend carries both the
+/// lagged MLR's table and the networks, so it comes last: it is chosen only
+/// when it beats each of its parts by more than the margin.
+pub const MODEL_NAMES: [&str; 5] = ["mlr-static", "mlr", "hybrid", "ga-bpn", "blend"];
 
 /// `w·mlr + (1−w)·ensemble` on the same inputs (model name `blend`). The
 /// board ships it as the MLR's table with every term scaled by `w` and the

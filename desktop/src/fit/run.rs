@@ -1047,9 +1047,13 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             // The final hybrid kept no networks: it is the lagged MLR.
             chosen = "mlr".into();
         }
-        if chosen == "blend" && file.blend.get(ch).is_some_and(|w| *w >= 1.0) {
-            // All weight on the table: the blend is the lagged MLR.
-            chosen = "mlr".into();
+        if chosen == "blend" {
+            // All weight on one part: the blend is that part.
+            match file.blend.get(ch) {
+                Some(w) if *w >= 1.0 => chosen = "mlr".into(),
+                Some(w) if *w <= 0.0 => chosen = "ga-bpn".into(),
+                _ => {}
+            }
         }
         if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
             nets_left -= ens;
