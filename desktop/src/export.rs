@@ -315,7 +315,7 @@ pub fn float_model_from_fit(
             Choice::Blend => {
                 let w = *file.blend.get(ch).ok_or_else(|| {
                     anyhow::anyhow!(
-                        "no blend weight for channel {ch} in the fit file (fit without --no-blend)"
+                        "no blend weight for channel {ch} in the fit file (fit with --blend)"
                     )
                 })?;
                 anyhow::ensure!(

@@ -135,6 +135,7 @@ fn the_choice_never_reads_the_validation_rows() {
         features: inputs(),
         net: quick_net(),
         hybrid: true,
+        blend: true,
         ..FitConfig::default()
     };
     let fit = |run: Run| {
@@ -163,6 +164,7 @@ fn the_choice_never_reads_the_validation_rows() {
     assert_eq!(ra.chosen, rb.chosen);
     assert_eq!(ra.model_file, rb.model_file);
     assert!(!ra.model_file.nets.is_empty() && !ra.model_file.hybrid_nets.is_empty());
+    assert!(ra.model_file.blend.contains_key("dx_um"));
 }
 
 #[test]
@@ -228,8 +230,6 @@ fn dropping_a_network_that_cannot_win_keeps_the_choice() {
             ..quick_net()
         },
         hybrid: true,
-        // The blend scores the network on every fold (never dropped).
-        blend: false,
         ..FitConfig::default()
     };
     let full = fit_1thread(
@@ -301,6 +301,7 @@ fn blend_fit(nonlinear: bool) -> (Run, FitReport) {
         split_chrono: Some((0.7, 1.0)),
         features: inputs(),
         net: quick_net(),
+        blend: true,
         ..FitConfig::default()
     };
     (run, fit_1thread(&plan, &cfg))

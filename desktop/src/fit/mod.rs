@@ -96,7 +96,7 @@ pub struct ModelFile {
     /// Per channel, the blend's weight `w` on the lagged MLR (model name
     /// `blend`: `w·mlr + (1−w)·ga-bpn`, the same inputs), chosen on the
     /// out-of-fold predictions of the blocked cross-validation.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub blend: std::collections::BTreeMap<String, f64>,
     /// Per channel, models without each of its sensors (degraded mode, issue 15).
     #[serde(default)]
