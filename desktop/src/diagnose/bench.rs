@@ -4,6 +4,8 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
+use super::stats::r4;
+
 use super::{diagnose, Options};
 use crate::sim::{sim_run, Duty, Effect, Gauss, Machine, SimOptions, EFFECT_NAMES};
 
@@ -282,31 +284,49 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let (mut ok, mut n_eff, mut false_alarms) = (0usize, 0usize, 0usize);
     let (mut shrink_c, mut shrink_um, mut times) = (Vec::new(), Vec::new(), Vec::new());
     let mut misses = Vec::new();
+    let mut visibility: std::collections::BTreeMap<String, Vec<(f64, f64, bool)>> =
+        Default::default();
+    let mut redraws = 0usize;
     for (ci, kind) in plan.iter().enumerate() {
         // two runs of half the case's hours: a light and a heavy duty
         let half = cfg.hours / 2.0;
-        let effects: Vec<TruthEffect> = kind
-            .iter()
-            .map(|k| TruthEffect::random(k, &mut g, half))
-            .collect();
-        let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
-            .iter()
-            .enumerate()
-            .map(|(ri, &(lo, hi))| {
-                let duty = truth_duty(&mut g, half, lo, hi);
-                let seed = 5000 + 2 * ci as u64 + ri as u64;
-                // a sensor fault happens once: in the second run only
-                let eff: Vec<TruthEffect> = effects
-                    .iter()
-                    .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
-                    .cloned()
-                    .collect();
-                (
-                    format!("open{ci}-{ri}"),
-                    simulate(&duty, &eff, half, cfg.sample_period_s, seed).run,
-                )
-            })
-            .collect();
+        // an effect case must move its data by a visible amount somewhere
+        // (see `VISIBLE_C`): drawn again when it does not (a lag on a sensor
+        // whose body changes slowly reads like the body itself)
+        let mut redrawn = 0usize;
+        let (effects, runs, vis) = loop {
+            let effects: Vec<TruthEffect> = kind
+                .iter()
+                .map(|k| TruthEffect::random(k, &mut g, half))
+                .collect();
+            let mut vis = Visibility::default();
+            let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
+                .iter()
+                .enumerate()
+                .map(|(ri, &(lo, hi))| {
+                    let duty = truth_duty(&mut g, half, lo, hi);
+                    let seed = 5000 + 2 * ci as u64 + ri as u64;
+                    // a sensor fault happens once: in the second run only
+                    let eff: Vec<TruthEffect> = effects
+                        .iter()
+                        .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                        .cloned()
+                        .collect();
+                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
+                    if !eff.is_empty() {
+                        // the same run without the effect (same duty, same noise)
+                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
+                        vis.add(&run, &clean);
+                    }
+                    (format!("open{ci}-{ri}"), run)
+                })
+                .collect();
+            if effects.is_empty() || vis.visible() || redrawn >= 20 {
+                break (effects, runs, vis);
+            }
+            redrawn += 1;
+        };
+        redraws += redrawn;
         let t = std::time::Instant::now();
         let d = super::fitmode::diagnose_fit(&runs, &opt)?;
         times.push(t.elapsed().as_secs_f64());
@@ -330,6 +350,10 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             Some(k) => {
                 n_eff += 1;
                 ok += correct as usize;
+                visibility
+                    .entry(k.to_string())
+                    .or_default()
+                    .push((vis.max_c, vis.max_um, correct));
                 let e = per.entry(k.to_string()).or_default();
                 e.0 += 1;
                 e.1 += correct as usize;
@@ -354,6 +378,8 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         if !correct {
             misses.push(json!({
                 "case": ci,
+                "effect_rms_c": r4(vis.max_c),
+                "effect_rms_um": r4(vis.max_um),
                 "truth": effects.iter().map(TruthEffect::describe).collect::<Vec<_>>(),
                 "got": d.findings.iter().map(|f| json!({"name": f.name, "params": f.params_json()})).collect::<Vec<_>>(),
             }));
@@ -375,7 +401,9 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
                 );
             }
             eprintln!(
-                "open {ci:3} truth {:50} got {:40} {} ({:.2} s)",
+                "open {ci:3} effect rms {:.3} °C {:.3} µm truth {:50} got {:40} {} ({:.2} s)",
+                vis.max_c,
+                vis.max_um,
                 effects
                     .first()
                     .map_or("clean".into(), TruthEffect::describe),
@@ -430,5 +458,88 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         "hours_per_case": cfg.hours,
         "sample_period_s": cfg.sample_period_s,
         "misses": misses,
+        "effect_visibility": visibility_json(&visibility),
+        "visibility_rule": format!("an effect case is drawn again (at most 20 times) until its data differ from the same runs without it by ≥ {VISIBLE_C} °C RMS on a sensor or ≥ {VISIBLE_UM} µm RMS on a probe"),
+        "redrawn_effects": redraws,
     }))
+}
+
+/// How far an effect moves a case's data: the largest RMS difference
+/// (over channels and runs) between the run with the effect and the same
+/// run (same duty, same noise) without it, in °C and in µm.
+#[derive(Default)]
+struct Visibility {
+    max_c: f64,
+    max_um: f64,
+}
+
+/// Smallest RMS change an effect case must make on some sensor [°C]
+/// (≈ 4 × the truth model's sensor noise: 0.02 °C plus 1/16 °C steps) or
+/// on some probe [µm] (2.5 × its 0.2 µm noise).
+pub const VISIBLE_C: f64 = 0.1;
+pub const VISIBLE_UM: f64 = 0.5;
+
+impl Visibility {
+    fn visible(&self) -> bool {
+        self.max_c >= VISIBLE_C || self.max_um >= VISIBLE_UM
+    }
+
+    fn add(&mut self, with: &crate::runcsv::Run, clean: &crate::runcsv::Run) {
+        for name in &with.columns {
+            let is_t = crate::runcsv::is_temperature_column(name) && name != "T_ambient";
+            let is_d = crate::runcsv::is_error_column(name);
+            if !is_t && !is_d {
+                continue;
+            }
+            let (Some(a), Some(b)) = (with.col(name), clean.col(name)) else {
+                continue;
+            };
+            let (s, n) = a
+                .iter()
+                .zip(b)
+                .filter_map(|(x, y)| Some((x.as_ref()? - y.as_ref()?).powi(2)))
+                .fold((0.0, 0usize), |acc, d| (acc.0 + d, acc.1 + 1));
+            let rms = if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
+            if is_t {
+                self.max_c = self.max_c.max(rms);
+            } else {
+                self.max_um = self.max_um.max(rms);
+            }
+        }
+    }
+}
+
+/// Per effect kind: median effect RMS (°C, µm) of the cases found and missed.
+fn visibility_json(v: &std::collections::BTreeMap<String, Vec<(f64, f64, bool)>>) -> Value {
+    let median = |mut x: Vec<f64>| -> Option<Value> {
+        if x.is_empty() {
+            return None;
+        }
+        x.sort_by(|a, b| a.total_cmp(b));
+        Some(r4(x[x.len() / 2]))
+    };
+    v.iter()
+        .map(|(k, cases)| {
+            let pick = |found: bool, um: bool| {
+                median(
+                    cases
+                        .iter()
+                        .filter(|c| c.2 == found)
+                        .map(|c| if um { c.1 } else { c.0 })
+                        .collect(),
+                )
+            };
+            (
+                k.clone(),
+                json!({
+                    "rule": "largest RMS difference over channels and runs between the case's run and the same run without the effect",
+                    "found_median_rms_c": pick(true, false),
+                    "found_median_rms_um": pick(true, true),
+                    "missed_median_rms_c": pick(false, false),
+                    "missed_median_rms_um": pick(false, true),
+                }),
+            )
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
 }
