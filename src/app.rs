@@ -8,22 +8,30 @@ use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 use thermocomp_core::{Model, StepOutput};
 
 use crate::acquisition::channel_map::ChannelMap;
+use crate::acquisition::channel_map::CHANNEL_MAP_BYTES;
 use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::TemperatureAcquisition;
+use crate::acquisition::temperature::Validity;
 use crate::compensation::{Compensation, PlcInputs};
 use crate::fault::{FaultBoard, FaultRecord};
 use crate::hal::flash::BackgroundErase;
 use crate::modbus::holding::{result, Command};
-use crate::modbus::registers::{centidegrees, Snapshot};
+use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot, NOT_AVAILABLE_32};
 use crate::modbus::server::MAX_FRAME;
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::model_store::MAX_SETTINGS_BYTES;
 use crate::process_image::ChannelState;
 use crate::process_image::MAX_CHANNELS;
-use crate::settings::{Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
+use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
+
+// The slots' settings block holds the settings, the channel map and a kept reference.
+const _: () = assert!(
+    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN <= MAX_SETTINGS_BYTES
+);
 
 /// PLC registers older than this make the inputs "stale".
 pub const PLC_TIMEOUT_MS: u64 = 10_000;
@@ -45,6 +53,18 @@ pub struct App<F: NorFlash> {
     defaults: Settings,
     /// The flash write in progress ([`App::poll_flash`]).
     job: Option<FlashJob>,
+    /// The reference sample kept across reboots (commands 10, 11).
+    kept: Option<KeptReference>,
+    /// Command 10 accepted: take the reference at the next cycle with every
+    /// model sensor fresh.
+    reference_pending: bool,
+    /// The volumetric section's sensors at the last cycle (1/16 °C) and
+    /// whether one was held: a PLC write of positions is answered with
+    /// these at once ([`App::update_volumetric`]).
+    vol_temps: [Option<i32>; MAX_VOL_SENSORS],
+    vol_held: bool,
+    /// Uptime of the last cycle or request (ms), for the PLC-timeout rule.
+    vol_uptime_ms: u64,
 }
 
 /// A flash write accepted over Modbus and done in the background: the
@@ -90,9 +110,12 @@ impl<F: BackgroundErase> App<F> {
             .and_then(|b| b.get(..SETTINGS_LEN))
             .and_then(Settings::decode);
         let map = blob
-            .and_then(|b| b.get(SETTINGS_LEN..))
+            .and_then(|b| b.get(SETTINGS_LEN..SETTINGS_LEN + CHANNEL_MAP_BYTES))
             .and_then(|b| ChannelMap::from_bytes(b).ok())
             .unwrap_or(map);
+        let kept = blob
+            .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
+            .and_then(KeptReference::decode);
         apply_settings(&mut server.holding, &stored.unwrap_or(defaults));
         let mut app = App {
             server,
@@ -104,7 +127,14 @@ impl<F: BackgroundErase> App<F> {
             stall_requested: false,
             defaults,
             job: None,
+            kept,
+            reference_pending: false,
+            vol_temps: [None; MAX_VOL_SENSORS],
+            vol_held: false,
+            vol_uptime_ms: 0,
         };
+        app.snapshot.reference_state = u16::from(kept.is_some());
+        app.publish_map();
         app.install(model);
         app
     }
@@ -134,12 +164,83 @@ impl<F: BackgroundErase> App<F> {
     }
 
     /// What the slots keep besides the model: the settings, then the
-    /// channel map (ROM code per channel).
+    /// channel map (ROM code per channel), then the kept reference if any.
     fn persisted(&self) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
         let mut v = heapless::Vec::new();
         let _ = v.extend_from_slice(&self.settings().encode());
         let _ = v.extend_from_slice(&self.map.to_bytes());
+        if let Some(k) = &self.kept {
+            let _ = v.extend_from_slice(&k.encode());
+        }
         v
+    }
+
+    /// The kept reference sample (commands 10, 11), if any.
+    pub fn kept_reference(&self) -> Option<KeptReference> {
+        self.kept
+    }
+
+    /// Command 10 (or 2 on a machine with a fixed reference): the next
+    /// cycle with every model sensor fresh takes the reference and keeps it.
+    fn request_reference(&mut self) {
+        self.reference_pending = true;
+        self.snapshot.reference_state = 2;
+        self.server.holding.result = result::REFERENCE_PENDING;
+    }
+
+    /// Take the pending reference sample now if every model sensor reads
+    /// fresh: per mapped channel its reading, used from this cycle on and stored.
+    fn take_reference(&mut self, acq: &TemperatureAcquisition, now_ms: u64) {
+        let fresh = |c: usize| {
+            let v = acq.value(c, now_ms);
+            (v.validity == Validity::Fresh).then_some(v.raw)
+        };
+        let n = self.compensation.model().map_or(0, |m| m.sensors.len());
+        let ready = (0..n).all(|i| {
+            self.compensation
+                .channel_of(i)
+                .is_some_and(|c| fresh(usize::from(c)).is_some())
+        });
+        if !ready {
+            return;
+        }
+        let mut temps = [None; MAX_CHANNELS];
+        for (c, t) in temps.iter_mut().enumerate() {
+            if self.map.get(c).is_some() {
+                *t = fresh(c);
+            }
+        }
+        self.kept = Some(KeptReference { temps });
+        self.reference_pending = false;
+        self.snapshot.reference_state = 1;
+        self.apply_kept_reference();
+        self.server.holding.result = result::OK;
+        self.store_settings();
+    }
+
+    /// The kept reference, per model sensor through its channel, as the
+    /// compensator's next reference sample.
+    fn apply_kept_reference(&mut self) {
+        let Some(k) = self.kept else {
+            return;
+        };
+        let n = self.compensation.model().map_or(0, |m| m.sensors.len());
+        let refs: [Option<i32>; MAX_SENSORS] = core::array::from_fn(|i| {
+            self.compensation
+                .channel_of(i)
+                .and_then(|c| k.temps.get(usize::from(c)).copied().flatten())
+                .map(i32::from)
+        });
+        self.compensation
+            .compensator()
+            .preset_reference(&refs[..n.min(MAX_SENSORS)]);
+    }
+
+    /// The channel map's ROM codes into the identity registers (200–279).
+    fn publish_map(&mut self) {
+        for (c, r) in self.snapshot.roms.iter_mut().enumerate() {
+            *r = self.map.get(c).map_or([0; 8], |rom| rom.0);
+        }
     }
 
     /// The channel map in force (stored, or the board's at first boot).
@@ -162,16 +263,29 @@ impl<F: BackgroundErase> App<F> {
         }
         let resolved_before: [Option<u8>; MAX_SENSORS] =
             core::array::from_fn(|i| self.compensation.channel_of(i));
+        let vol_before: [Option<u8>; MAX_VOL_SENSORS] =
+            core::array::from_fn(|i| self.compensation.vol_channel_of(i));
         self.map = map;
+        self.publish_map();
         let model = self.compensation.model().cloned();
+        let moved = |rom: [u8; 8], before: Option<u8>| {
+            rom != [0; 8]
+                && map
+                    .channel_of(&RomCode(rom))
+                    .and_then(|c| u8::try_from(c).ok())
+                    != before
+        };
         let changes = model.as_ref().is_some_and(|m| {
-            m.sensors.iter().enumerate().any(|(i, s)| {
-                s.rom != [0; 8]
-                    && map
-                        .channel_of(&RomCode(s.rom))
-                        .and_then(|c| u8::try_from(c).ok())
-                        != resolved_before[i]
-            })
+            m.sensors
+                .iter()
+                .enumerate()
+                .any(|(i, s)| moved(s.rom, resolved_before[i]))
+                || m.volumetric.as_ref().is_some_and(|v| {
+                    v.sensors
+                        .iter()
+                        .enumerate()
+                        .any(|(i, s)| moved(s.sensor.rom, vol_before[i]))
+                })
         });
         if changes {
             self.install(model);
@@ -272,7 +386,11 @@ impl<F: BackgroundErase> App<F> {
 
     fn install(&mut self, model: Option<Model>) {
         self.compensation.load(model, &self.map);
+        self.apply_kept_reference();
         self.apply_limits();
+        for (i, ch) in self.snapshot.sensor_channels.iter_mut().enumerate() {
+            *ch = self.compensation.channel_of(i).unwrap_or(0xFF);
+        }
         let (v, crc, nd, na, ns) = match self.compensation.model() {
             Some(m) => (
                 m.model_version,
@@ -289,6 +407,66 @@ impl<F: BackgroundErase> App<F> {
         self.snapshot.n_directions = nd as u16;
         self.snapshot.n_axes = na as u16;
         self.snapshot.n_sensors = ns as u16;
+        // No temperatures of the new section's sensors yet: "sensor fault"
+        // (not available) until the next cycle, never the old model's values.
+        self.vol_temps = [None; MAX_VOL_SENSORS];
+        self.vol_held = false;
+        self.update_volumetric(self.vol_uptime_ms);
+    }
+
+    /// Evaluate the volumetric correction (image section kind 3) at the
+    /// PLC's positions and tool length with the last cycle's temperatures,
+    /// into input registers 180–199. Without a section, without positions
+    /// from the PLC or with a sensor fault the correction registers read
+    /// "not available" (0x8000 0000) and the status says why.
+    pub fn update_volumetric(&mut self, uptime_ms: u64) {
+        self.vol_uptime_ms = uptime_ms;
+        let h = &self.server.holding;
+        let vol = &mut self.snapshot.vol;
+        let sequence = vol.sequence.wrapping_add(1);
+        let Some(v) = self
+            .compensation
+            .model()
+            .and_then(|m| m.volumetric.as_ref())
+        else {
+            *vol = VolSnapshot {
+                sequence,
+                ..VolSnapshot::default()
+            };
+            return;
+        };
+        let n = v.sensors.len().min(MAX_VOL_SENSORS);
+        let out = v.evaluate(&h.positions, h.tool_length_um, &self.vol_temps[..n]);
+        let mut status = out.status;
+        if !h.positions_written {
+            status = (status & !vstatus::VALID) | vstatus::NO_POSITIONS;
+        }
+        let plc_stale = h
+            .plc_written_ms
+            .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
+        if plc_stale || self.vol_held {
+            status |= vstatus::STALE;
+        }
+        let valid = status & vstatus::VALID != 0;
+        *vol = VolSnapshot {
+            corrections: if valid {
+                out.corrections
+            } else {
+                [NOT_AVAILABLE_32; 3]
+            },
+            status,
+            terms: v.terms.len() as u16,
+            tool_um: if valid { out.tool_um } else { NOT_AVAILABLE_32 },
+            temps: core::array::from_fn(|i| {
+                self.vol_temps
+                    .get(i)
+                    .copied()
+                    .flatten()
+                    .filter(|_| i < n)
+                    .and_then(|t| i16::try_from(t).ok())
+            }),
+            sequence,
+        };
     }
 
     fn apply_limits(&mut self) {
@@ -330,7 +508,12 @@ impl<F: BackgroundErase> App<F> {
             positions,
             stale: plc_stale,
         };
+        if self.reference_pending {
+            self.take_reference(acq, now_ms);
+        }
         let out = self.compensation.step(acq, now_ms, &plc);
+        (self.vol_temps, self.vol_held) = self.compensation.vol_temperatures(acq, now_ms);
+        self.update_volumetric(uptime_ms);
         self.progress.cycles = self.progress.cycles.wrapping_add(1);
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
@@ -356,6 +539,17 @@ impl<F: BackgroundErase> App<F> {
                 s.map_missing |= 1 << c;
             }
         }
+        // A model sensor whose ROM is not mapped, or whose channel does not answer.
+        let n = self.compensation.model().map_or(0, |m| m.sensors.len());
+        s.sensors_missing = (0..n.min(32)).fold(0u32, |m, i| {
+            let gone = self.compensation.channel_of(i).is_none_or(|c| {
+                matches!(
+                    acq.value(usize::from(c), now_ms).state,
+                    ChannelState::Unused | ChannelState::NoPresence | ChannelState::Disconnected
+                )
+            });
+            m | (u32::from(gone) << i)
+        });
         out
     }
 
@@ -372,7 +566,16 @@ impl<F: BackgroundErase> App<F> {
         uptime_ms: u64,
         reply: &mut heapless::Vec<u8, MAX_FRAME>,
     ) -> LinkChange {
-        match self.server.handle(frame, uptime_ms, &self.snapshot, reply) {
+        let h = &self.server.holding;
+        let geometry_before = (h.positions, h.tool_length_um, h.positions_written);
+        let command = self.server.handle(frame, uptime_ms, &self.snapshot, reply);
+        let h = &self.server.holding;
+        if (h.positions, h.tool_length_um, h.positions_written) != geometry_before {
+            // New positions or tool length: the volumetric correction follows
+            // at once (not at the next cycle), so the PLC's next read has it.
+            self.update_volumetric(uptime_ms);
+        }
+        match command {
             Command::None => LinkChange::None,
             Command::CommitModel { len } => {
                 // The server validated the image; it is written to the other
@@ -383,6 +586,28 @@ impl<F: BackgroundErase> App<F> {
                 });
                 self.server.holding.busy = true;
                 self.server.holding.result = result::COMMIT_IN_PROGRESS;
+                LinkChange::None
+            }
+            Command::Rereference
+                if self.kept.is_some()
+                    || self.compensation.model().is_some_and(|m| {
+                        m.flags & thermocomp_core::image::FLAG_FIXED_REFERENCE != 0
+                    }) =>
+            {
+                // A machine with a fixed reference: the new sample is kept.
+                self.request_reference();
+                LinkChange::None
+            }
+            Command::KeepReference => {
+                self.request_reference();
+                LinkChange::None
+            }
+            Command::ForgetReference => {
+                self.kept = None;
+                self.reference_pending = false;
+                self.snapshot.reference_state = 0;
+                self.server.holding.result = result::OK;
+                self.store_settings();
                 LinkChange::None
             }
             Command::Rereference => {
@@ -405,6 +630,11 @@ impl<F: BackgroundErase> App<F> {
                 LinkChange::ClearFaultRecord
             }
             Command::RestoreDefaults => {
+                // No fixed reference either (the one in use stays until
+                // the next boot or command 2).
+                self.kept = None;
+                self.reference_pending = false;
+                self.snapshot.reference_state = 0;
                 apply_settings(&mut self.server.holding, &self.defaults);
                 self.apply_limits();
                 self.store_settings();

@@ -6,7 +6,9 @@ use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::{TemperatureAcquisition, Validity};
 use crate::process_image::MAX_CHANNELS;
+use thermocomp_core::image::SensorRef;
 use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
+use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
 
 /// Machine data the PLC writes (spindle speed, axis positions), with its age.
@@ -24,6 +26,19 @@ pub struct Compensation {
     /// Bus channel of each model sensor; `None` when the model names a ROM
     /// code that is not on the bus (that input is then invalid).
     channel_of: [Option<u8>; MAX_SENSORS],
+    /// Bus channel of each sensor of the volumetric section (same rule).
+    vol_channel_of: [Option<u8>; MAX_VOL_SENSORS],
+}
+
+/// The bus channel a sensor record names: its channel when the ROM code is
+/// all zero, else where the channel map has that ROM code (`None`: not on the bus).
+fn resolve(s: &SensorRef, map: &ChannelMap) -> Option<u8> {
+    if s.rom == [0; 8] {
+        (usize::from(s.channel) < MAX_CHANNELS).then_some(s.channel)
+    } else {
+        map.channel_of(&RomCode(s.rom))
+            .and_then(|c| u8::try_from(c).ok())
+    }
 }
 
 impl Compensation {
@@ -31,6 +46,7 @@ impl Compensation {
         let mut c = Compensation {
             compensator: Compensator::new(None),
             channel_of: [None; MAX_SENSORS],
+            vol_channel_of: [None; MAX_VOL_SENSORS],
         };
         c.load(model, map);
         c
@@ -39,14 +55,15 @@ impl Compensation {
     /// Swap the model (after an upload) and resolve its sensors again.
     pub fn load(&mut self, model: Option<Model>, map: &ChannelMap) {
         self.channel_of = [None; MAX_SENSORS];
+        self.vol_channel_of = [None; MAX_VOL_SENSORS];
         if let Some(m) = &model {
             for (slot, s) in self.channel_of.iter_mut().zip(&m.sensors) {
-                *slot = if s.rom == [0; 8] {
-                    (usize::from(s.channel) < MAX_CHANNELS).then_some(s.channel)
-                } else {
-                    map.channel_of(&RomCode(s.rom))
-                        .and_then(|c| u8::try_from(c).ok())
-                };
+                *slot = resolve(s, map);
+            }
+            if let Some(v) = &m.volumetric {
+                for (slot, s) in self.vol_channel_of.iter_mut().zip(&v.sensors) {
+                    *slot = resolve(&s.sensor, map);
+                }
             }
         }
         self.compensator.load(model);
@@ -63,6 +80,35 @@ impl Compensation {
     /// Bus channel feeding model sensor `i`.
     pub fn channel_of(&self, i: usize) -> Option<u8> {
         self.channel_of.get(i).copied().flatten()
+    }
+
+    /// Bus channel feeding sensor `i` of the volumetric section.
+    pub fn vol_channel_of(&self, i: usize) -> Option<u8> {
+        self.vol_channel_of.get(i).copied().flatten()
+    }
+
+    /// The volumetric section's sensors on the latest acquisition cycle
+    /// (1/16 °C; `None`: faulty or not on the bus) and whether one is a
+    /// held rather than a fresh value.
+    pub fn vol_temperatures(
+        &self,
+        acq: &TemperatureAcquisition,
+        now_ms: u64,
+    ) -> ([Option<i32>; MAX_VOL_SENSORS], bool) {
+        let mut temps = [None; MAX_VOL_SENSORS];
+        let mut held = false;
+        let n = self
+            .model()
+            .and_then(|m| m.volumetric.as_ref())
+            .map_or(0, |v| v.sensors.len());
+        for (t, ch) in temps.iter_mut().zip(self.vol_channel_of.iter()).take(n) {
+            if let Some(ch) = ch {
+                let v = acq.value(usize::from(*ch), now_ms);
+                held |= v.validity == Validity::Held;
+                *t = v.usable().map(i32::from);
+            }
+        }
+        (temps, held)
     }
 
     /// One compensation step on the latest acquisition cycle.

@@ -3,11 +3,13 @@
 //! ([`crate::model_store`]: a settings block after the image, written
 //! before the slot's magic), so a power cut at any moment leaves the old
 //! settings or the new ones, and are applied at boot. Command 7 restores
-//! the defaults (and stores them).
+//! the defaults (and stores them). The slots also keep the channel map and
+//! the kept reference sample ([`KeptReference`]) after these settings.
 
 use thermocomp_core::limits::MAX_DIRECTIONS;
 
 use crate::modbus::holding::BAUD_RATES;
+use crate::process_image::MAX_CHANNELS;
 
 /// Encoded size (bytes): version, unit, baud/100, clamp × 6, rate × 6.
 pub const ENCODED_LEN: usize = 1 + 1 + 2 + 2 * MAX_DIRECTIONS * 2;
@@ -71,5 +73,64 @@ impl Settings {
             s.rate[d] = word(MAX_DIRECTIONS + d);
         }
         Some(s)
+    }
+}
+
+/// Encoded size of a kept reference: tag, version, channel mask u32,
+/// [`MAX_CHANNELS`] × i16 (1/16 °C).
+pub const REFERENCE_LEN: usize = 2 + 4 + 2 * MAX_CHANNELS;
+const REFERENCE_TAG: u8 = b'R';
+const REFERENCE_VERSION: u8 = 1;
+
+/// The reference sample a machine with a fixed reference keeps across
+/// reboots (commands 10 and 11; command 7 drops it): per bus channel the
+/// reading taken when it was kept (1/16 °C), so it serves any model that
+/// reads these channels. Stored after the channel map in the slots'
+/// settings block (same power-cut-safe commit).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct KeptReference {
+    /// 1/16 °C per channel; `None`: no reading when it was kept.
+    pub temps: [Option<i16>; MAX_CHANNELS],
+}
+
+impl KeptReference {
+    pub fn encode(&self) -> [u8; REFERENCE_LEN] {
+        let mut b = [0u8; REFERENCE_LEN];
+        b[0] = REFERENCE_TAG;
+        b[1] = REFERENCE_VERSION;
+        let mut mask = 0u32;
+        for (c, t) in self.temps.iter().enumerate() {
+            if let Some(v) = t {
+                mask |= 1 << c;
+                b[6 + 2 * c..8 + 2 * c].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+        b[2..6].copy_from_slice(&mask.to_le_bytes());
+        b
+    }
+
+    /// A kept reference from stored bytes; `None` for another length, tag
+    /// or version, a channel bit beyond [`MAX_CHANNELS`], or a reading
+    /// outside the DS18B20's range (−55…125 °C): the board then has none.
+    pub fn decode(b: &[u8]) -> Option<KeptReference> {
+        if b.len() != REFERENCE_LEN || b[0] != REFERENCE_TAG || b[1] != REFERENCE_VERSION {
+            return None;
+        }
+        let mask = u32::from_le_bytes([b[2], b[3], b[4], b[5]]);
+        if mask >> MAX_CHANNELS != 0 {
+            return None;
+        }
+        let mut temps = [None; MAX_CHANNELS];
+        for (c, t) in temps.iter_mut().enumerate() {
+            if mask & (1 << c) != 0 {
+                let v = i16::from_le_bytes([b[6 + 2 * c], b[7 + 2 * c]]);
+                if !(-55 * 16..=125 * 16).contains(&v) {
+                    return None;
+                }
+                *t = Some(v);
+            }
+        }
+        Some(KeptReference { temps })
     }
 }

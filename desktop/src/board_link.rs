@@ -23,8 +23,9 @@ use thermocomp::modbus::holding::{
     HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, STAGING_REGS, UNLOCK_CODE,
 };
 use thermocomp::modbus::registers::{
-    IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS, IR_PREDICTIONS, IR_PROBE,
-    IR_PROBE_STATE, IR_SAMPLE_TIME, IR_STATES, IR_TEMPERATURES, NOT_AVAILABLE,
+    IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
+    IR_PREDICTIONS, IR_PROBE, IR_PROBE_STATE, IR_SAMPLE_TIME, IR_STATES, IR_TEMPERATURES,
+    NOT_AVAILABLE,
 };
 use thermocomp::modbus::server::MAX_WRITE_REGISTERS;
 use thermocomp::process_image::{ChannelState, MAX_CHANNELS};
@@ -253,6 +254,11 @@ pub struct UploadSummary {
     pub model_version: u32,
     pub model_crc: String,
     pub result: u16,
+    /// Model sensors the image names by a ROM code that is on none of the
+    /// board's channels (input registers 200–279): the board serves without
+    /// them (fallback or held) until that sensor is on the bus. Empty when
+    /// the board does not serve ROM codes.
+    pub sensors_not_on_board: Vec<usize>,
 }
 
 /// Which commit command an upload ends with.
@@ -364,12 +370,37 @@ fn verify(
             model.crc
         );
     }
+    // Sensors named by ROM that the board has on no channel.
+    let sensors_not_on_board = match channel_roms(link) {
+        Ok(roms) => model
+            .sensors
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.rom != [0; 8] && !roms.contains(&s.rom))
+            .map(|(i, _)| i)
+            .collect(),
+        Err(_) => vec![],
+    };
     Ok(UploadSummary {
         bytes: image.len(),
         model_version: version,
         model_crc: format!("{crc:#010x}"),
         result,
+        sensors_not_on_board,
     })
+}
+
+/// The ROM code of each channel's sensor (all zero: unmapped), from input
+/// registers 200–279 (4 per channel, bytes in bus order).
+pub fn channel_roms(link: &mut BoardLink) -> Result<[[u8; 8]; MAX_CHANNELS]> {
+    let words = link.read_inputs(IR_CHANNEL_ROMS, 4 * MAX_CHANNELS as u16)?;
+    let mut roms = [[0u8; 8]; MAX_CHANNELS];
+    for (rom, w) in roms.iter_mut().zip(words.chunks(4)) {
+        for (k, v) in w.iter().enumerate() {
+            rom[2 * k..2 * k + 2].copy_from_slice(&v.to_be_bytes());
+        }
+    }
+    Ok(roms)
 }
 
 /// Poll the board and append rows to a run CSV. Columns: `time_s` (host
@@ -377,7 +408,9 @@ fn verify(
 /// (the board's sample time), `spindle_rpm` (the PLC's register), `T01…`
 /// (°C, empty when the channel has no valid value), `comp_d<k>_um` (the
 /// served correction per direction, µm), `dprobe_um` (probe, when valid),
-/// `state_T01…` (channel state codes). Each row is flushed at once.
+/// `state_T01…` (channel state codes). Each row is flushed at once. The
+/// metadata names each column's sensor by ROM code (`# rom.T01: 28…`) when
+/// the board serves them; appending to a file whose sensors changed is refused.
 pub fn record(
     link: &mut BoardLink,
     out: &Path,
@@ -403,9 +436,46 @@ pub fn record(
     header.push("dprobe_um".into());
     header.extend(channels.iter().map(|c| format!("state_T{:02}", c + 1)));
     let header_line = header.join(",");
+    // The sensor on each channel, by ROM code (input registers 200–279).
+    let roms = channel_roms(link);
+    let rom_lines: Vec<(String, String)> = match &roms {
+        Ok(roms) => channels
+            .iter()
+            .filter(|&&c| roms[c] != [0; 8])
+            .map(|&c| {
+                (
+                    format!("{}T{:02}", crate::runcsv::ROM_KEY_PREFIX, c + 1),
+                    crate::runcsv::format_rom(&roms[c]),
+                )
+            })
+            .collect(),
+        Err(e) => {
+            eprintln!("note: the board does not serve ROM codes (input registers 200-279: {e}); the run names no sensor by ROM code");
+            vec![]
+        }
+    };
     let mut t0 = 0.0;
     let mut file = if append && out.exists() {
         let text = std::fs::read_to_string(out)?;
+        // A column must stay one physical sensor: a swapped sensor starts a new file.
+        for line in text.lines().filter_map(|l| l.strip_prefix("# ")) {
+            let Some((k, v)) = line.split_once(':') else {
+                continue;
+            };
+            if !k.starts_with(crate::runcsv::ROM_KEY_PREFIX) {
+                continue;
+            }
+            let now = rom_lines.iter().find(|(key, _)| key == k.trim());
+            if now.map(|(_, r)| r.as_str()) != Some(v.trim()) {
+                bail!(
+                    "{}: the sensor of {} was {} when the file was started and is {} now; record to a new file",
+                    out.display(),
+                    k.trim().trim_start_matches(crate::runcsv::ROM_KEY_PREFIX),
+                    v.trim(),
+                    now.map_or("missing", |(_, r)| r.as_str())
+                );
+            }
+        }
         let mut lines = text.lines().filter(|l| !l.starts_with('#'));
         if lines.next() != Some(header_line.as_str()) {
             bail!(
@@ -436,6 +506,9 @@ pub fn record(
             "# board_model_crc: {:#010x}",
             u32_of(&snap, IR_MODEL_CRC)
         )?;
+        for (k, v) in &rom_lines {
+            writeln!(f, "# {k}: {v}")?;
+        }
         writeln!(f, "{header_line}")?;
         f
     };

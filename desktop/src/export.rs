@@ -19,18 +19,45 @@ pub struct ExportSummary {
     pub samples: usize,
     /// Fallback models packed (image format v2 when > 0).
     pub fallbacks: usize,
+    /// Sensors the image names by 1-Wire ROM code (the rest by channel).
+    pub sensors_by_rom: usize,
+    /// The volumetric section (`--geometry`) and what its quantisation costs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub volumetric: Option<crate::geometry::board::QuantisationReport>,
 }
+
+/// A volumetric section to add to the image, with its quantisation report.
+pub type GeometrySection = (
+    thermocomp_core::volumetric::Volumetric,
+    crate::geometry::board::QuantisationReport,
+);
 
 /// Quantize, encode and write an image; the image is parsed back before it
 /// is written, so only a valid image reaches the disk.
 pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
-    let (mut fixed, mut report) = model.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+    export_with(model, None, out)
+}
+
+/// [`export`] with a volumetric section (`tcomp export --geometry`): the
+/// section is required, so when the image would not fit the fallbacks go
+/// first (as without it) and then the export is refused, naming the limit.
+pub fn export_with(
+    model: &FloatModel,
+    geometry: Option<GeometrySection>,
+    out: &Path,
+) -> Result<ExportSummary> {
+    let quantize = |m: &FloatModel| -> Result<(Model, QuantReport)> {
+        let (mut fixed, report) = m.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+        fixed.volumetric = geometry.as_ref().map(|(v, _)| v.clone());
+        Ok((fixed, report))
+    };
+    let (mut fixed, mut report) = quantize(model)?;
     // Fallbacks are optional: drop the last (lowest priority) until the image fits.
     let mut trimmed = model.clone();
     while fixed.encoded_len() > thermocomp_core::limits::MAX_IMAGE_BYTES
         && trimmed.fallbacks.pop().is_some()
     {
-        (fixed, report) = trimmed.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+        (fixed, report) = quantize(&trimmed)?;
     }
     if trimmed.fallbacks.len() < model.fallbacks.len() {
         eprintln!(
@@ -40,6 +67,14 @@ pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
         );
     }
     let len = fixed.encoded_len();
+    if let (true, Some((v, _))) = (len > thermocomp_core::limits::MAX_IMAGE_BYTES, &geometry) {
+        anyhow::bail!(
+            "the image with the volumetric section ({} bytes, {} terms) would be {len} bytes; the board's upload staging area holds {} (MAX_IMAGE_BYTES)",
+            4 + v.encoded_len(),
+            v.terms.len(),
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
     if len > thermocomp_core::limits::MAX_IMAGE_BYTES {
         anyhow::bail!(
             "the image would be {len} bytes; the board's upload staging area holds {} (MAX_IMAGE_BYTES)",
@@ -49,7 +84,9 @@ pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
     let bytes = encode(&mut fixed)?;
     Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e}"))?;
     std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
-    Ok(summary(&fixed, &bytes, &report))
+    let mut s = summary(&fixed, &bytes, &report);
+    s.volumetric = geometry.map(|(_, r)| r);
+    Ok(s)
 }
 
 pub fn encode(model: &mut Model) -> Result<Vec<u8>> {
@@ -72,7 +109,47 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
         max_deviation_um: r.max_deviation_um.clone(),
         samples: r.samples,
         fallbacks: m.fallbacks.len(),
+        sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
+        volumetric: None,
     }
+}
+
+/// Name the model's sensors by the ROM codes the run recorded for their
+/// columns (`# rom.T_<name>:`, [`crate::runcsv::Run::sensor_roms`]), so the
+/// board reads each from the physical sensor it was trained on, whatever
+/// channel that sensor has. Each sensor's `channel` (its run column) stays.
+/// A run with ROM codes for some of the model's sensors but not all is
+/// refused (a model half by ROM, half by channel would be trusted more than
+/// it deserves); a run without any leaves the model by channel. Returns how
+/// many sensors are named by ROM.
+pub fn name_sensors_by_rom(
+    model: &mut FloatModel,
+    temperature_columns: &[String],
+    roms: &std::collections::BTreeMap<String, [u8; 8]>,
+) -> Result<usize> {
+    let column = |ch: u8| temperature_columns.get(usize::from(ch));
+    let missing: Vec<&str> = model
+        .sensors
+        .iter()
+        .filter_map(|s| column(s.channel))
+        .filter(|c| !roms.contains_key(*c))
+        .map(String::as_str)
+        .collect();
+    if missing.len() == model.sensors.len() {
+        return Ok(0);
+    }
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "the run records ROM codes for some of the model's sensors but not for {}: record the run again with every sensor on the bus (tcomp record) or remove the rom.* lines",
+            missing.join(", ")
+        );
+    }
+    for s in &mut model.sensors {
+        if let Some(rom) = column(s.channel).and_then(|c| roms.get(c)) {
+            s.rom = *rom;
+        }
+    }
+    Ok(model.sensors.len())
 }
 
 pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
@@ -90,10 +167,28 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
     if s.fallbacks > 0 {
         println!("  {} fallback model(s) for degraded mode", s.fallbacks);
     }
+    if s.sensors_by_rom > 0 {
+        println!(
+            "  {} sensor(s) named by 1-Wire ROM code (the board reads each from its own sensor, whatever its channel)",
+            s.sensors_by_rom
+        );
+    }
     for (d, dev) in s.directions.iter().zip(&s.max_deviation_um) {
         println!(
             "  {d}: worst fixed-vs-float deviation {dev:.4} µm over {} admissible input samples",
             s.samples
+        );
+    }
+    if let Some(v) = &s.volumetric {
+        println!(
+            "  volumetric section: {} terms, {} sensor(s), {} bytes; served (0.1 µm) vs the f64 polynomial over {} grid points: worst {:.4} µm ({:.6} µm before the final rounding; stated bound {:.4} µm)",
+            v.terms,
+            v.sensors,
+            v.section_bytes,
+            v.grid_points,
+            v.max_error_um,
+            v.max_error_before_rounding_um,
+            v.bound_um
         );
     }
 }
@@ -118,6 +213,9 @@ pub enum Choice {
     /// The lagged MLR plus its residual networks (`hybrid`): a table and
     /// networks of the same direction, which the board sums.
     Hybrid,
+    /// `w·mlr + (1−w)·ga-bpn` (`blend`, `w` from the fit): the lagged MLR's
+    /// table scaled by `w` and the networks' output layers by `(1−w)/k`.
+    Blend,
 }
 
 impl Choice {
@@ -127,7 +225,10 @@ impl Choice {
             "mlr" => Choice::Mlr,
             "mlr-static" => Choice::MlrStatic,
             "hybrid" => Choice::Hybrid,
-            other => anyhow::bail!("unknown model `{other}` (ga-bpn, hybrid, mlr or mlr-static)"),
+            "blend" => Choice::Blend,
+            other => {
+                anyhow::bail!("unknown model `{other}` (ga-bpn, blend, hybrid, mlr or mlr-static)")
+            }
         })
     }
 }
@@ -304,8 +405,27 @@ pub fn float_model_from_fit(
             max_correction_um: opts.max_correction_um,
             max_rate_um_per_s: opts.max_rate_um_per_s,
         });
+        // Blend: the table's share `w`, the networks' `1 − w`.
+        let (w_table, w_nets) = match choice {
+            Choice::Blend => {
+                let w = *file.blend.get(ch).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no blend weight for channel {ch} in the fit file (fit with --blend)"
+                    )
+                })?;
+                anyhow::ensure!(
+                    (0.0..=1.0).contains(&w),
+                    "channel {ch}: blend weight {w} is outside [0, 1]"
+                );
+                (w, 1.0 - w)
+            }
+            _ => (1.0, 1.0),
+        };
         let members: Vec<_> = match choice {
             Choice::Net => file.nets.iter().filter(|n| &n.channel == ch).collect(),
+            Choice::Blend if w_nets > 0.0 => {
+                file.nets.iter().filter(|n| &n.channel == ch).collect()
+            }
             Choice::Hybrid => file
                 .hybrid_nets
                 .iter()
@@ -315,17 +435,20 @@ pub fn float_model_from_fit(
         };
         let mlr = match choice {
             Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
-            Choice::Mlr | Choice::Hybrid => file.mlr.iter().find(|m| &m.channel == ch),
+            Choice::Mlr | Choice::Hybrid | Choice::Blend => {
+                file.mlr.iter().find(|m| &m.channel == ch)
+            }
             Choice::Net => None,
         };
-        if matches!(choice, Choice::Net | Choice::Hybrid) {
+        let blend_nets = choice == Choice::Blend && w_nets > 0.0;
+        if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
             if members.is_empty() {
                 anyhow::bail!(
                     "no fitted {} network for channel {ch} (fit without --mlr-only)",
-                    if choice == Choice::Hybrid {
-                        "hybrid"
-                    } else {
-                        "ga-bpn"
+                    match choice {
+                        Choice::Hybrid => "hybrid",
+                        Choice::Blend => "blend",
+                        _ => "ga-bpn",
                     }
                 );
             }
@@ -335,8 +458,9 @@ pub fn float_model_from_fit(
                     members.len()
                 );
             }
-            // The ensemble's mean: each member's output layer scaled by 1/k.
-            let k = members.len() as f64;
+            // The ensemble's mean: each member's output layer scaled by 1/k
+            // (and by the blend's 1 − w).
+            let k = members.len() as f64 / w_nets;
             for n in members {
                 if n.features.len() > MAX_NET_INPUTS {
                     anyhow::bail!(
@@ -372,7 +496,8 @@ pub fn float_model_from_fit(
                 });
             }
         }
-        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) {
+        let blend_table = choice == Choice::Blend && w_table > 0.0;
+        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
             let Some(m) = mlr else {
                 anyhow::bail!("no fitted {choice:?} model for channel {ch}");
             };
@@ -382,9 +507,10 @@ pub fn float_model_from_fit(
                 );
             }
             let mut terms = vec![];
-            let mut c0 = m.c0;
+            let mut c0 = m.c0 * w_table;
             for (f, coef) in m.features.iter().zip(&m.coef) {
                 let (i, a, c) = input_of(f, &mut model)?;
+                let coef = coef * w_table;
                 c0 += coef * c;
                 terms.push(FloatTerm {
                     coef_um: coef * a,

@@ -41,6 +41,18 @@ enum Command {
         model_version: u32,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Add the volumetric correction: the JSON of `tcomp geometry table
+        /// --json` (image section kind 3; its sensors are found by name
+        /// among the --run file's T_ columns).
+        #[arg(long)]
+        geometry: Option<std::path::PathBuf>,
+        /// Tool length at full scale of the volumetric section (mm); longer
+        /// tools are held there and flagged.
+        #[arg(long, default_value_t = 500.0, requires = "geometry")]
+        tool_max_mm: f64,
+        /// Machine position (mm) of the volumetric polynomial's zero, per axis: x,y,z.
+        #[arg(long, default_value = "0,0,0", requires = "geometry")]
+        geometry_origin_mm: String,
         #[arg(short, long)]
         out: std::path::PathBuf,
         #[arg(long)]
@@ -221,21 +233,39 @@ fn one_line(e: &anyhow::Error) -> String {
 
 /// A model channel the run has no temperature column for would be a
 /// permanently failed sensor: the replay would show nothing of the model.
+/// A sensor named by ROM code that the run (recording ROM codes) does not
+/// hold is replayed as missing, as the board would, and said so.
 fn check_channels(
     model: &thermocomp_core::Model,
     run: &tcomp::runcsv::Run,
     image: &std::path::Path,
     run_path: &std::path::Path,
 ) -> anyhow::Result<()> {
-    let columns = run.temperature_columns().len();
-    for s in model.sensors.iter().filter(|s| s.rom == [0; 8]) {
-        anyhow::ensure!(
-            usize::from(s.channel) < columns,
-            "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
-            image.display(),
-            s.channel,
-            run_path.display()
-        );
+    let names: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    let roms = run
+        .sensor_roms()
+        .with_context(|| format!("in run file {}", run_path.display()))?;
+    let columns = names.len();
+    let resolved = tcomp::replay::sensor_columns(model, &names, &roms);
+    for (i, (s, c)) in model.sensors.iter().zip(&resolved).enumerate() {
+        match c {
+            Some(c) => anyhow::ensure!(
+                *c < columns,
+                "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
+                image.display(),
+                c,
+                run_path.display()
+            ),
+            None => eprintln!(
+                "note: model sensor {i} (ROM {}) is not in {}: replayed as a missing sensor",
+                tcomp::runcsv::format_rom(&s.rom),
+                run_path.display()
+            ),
+        }
     }
     Ok(())
 }
@@ -251,9 +281,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             max_rate_um_per_s,
             model_version,
             seed,
+            geometry,
+            tool_max_mm,
+            geometry_origin_mm,
             out,
             json,
         } => {
+            let run_for_geometry = run.clone();
             let float = match (demo, model) {
                 (true, _) => thermocomp_core::float::demo_model(seed),
                 (false, Some(path)) => {
@@ -264,11 +298,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     let run = run.ok_or_else(|| {
                         anyhow::anyhow!("--run <csv> gives the board's channel order")
                     })?;
-                    let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(&run)?
+                    let table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
+                    let columns: Vec<String> = table
                         .temperature_columns()
                         .iter()
                         .map(|c| c.to_string())
                         .collect();
+                    let roms = table
+                        .sensor_roms()
+                        .with_context(|| format!("in run file {}", run.display()))?;
                     let opts = tcomp::export::ExportOptions {
                         model_version,
                         max_correction_um,
@@ -276,13 +314,26 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         choices: tcomp::export::parse_choices(&r#use)?,
                         ..Default::default()
                     };
-                    tcomp::export::float_model_from_fit(&file, &columns, &opts)?
+                    let mut float = tcomp::export::float_model_from_fit(&file, &columns, &opts)?;
+                    tcomp::export::name_sensors_by_rom(&mut float, &columns, &roms)?;
+                    float
                 }
                 (false, None) => {
                     anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
                 }
             };
-            let summary = tcomp::export::export(&float, &out)?;
+            let section = match geometry {
+                Some(path) => Some(geometry_section(
+                    &path,
+                    &float,
+                    run_for_geometry.as_deref(),
+                    tool_max_mm,
+                    &geometry_origin_mm,
+                    max_correction_um,
+                )?),
+                None => None,
+            };
+            let summary = tcomp::export::export_with(&float, section, &out)?;
             tcomp::export::print_summary(&summary, &out, json);
         }
         Command::Replay {
@@ -366,6 +417,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "uploaded {} bytes; the board serves model version {} crc {}",
                     s.bytes, s.model_version, s.model_crc
                 );
+                if !s.sensors_not_on_board.is_empty() {
+                    println!(
+                        "  model sensor(s) {:?}: their ROM codes are on none of the board's channels; it serves without them (fallback or held) until they are on the bus",
+                        s.sensors_not_on_board
+                    );
+                }
             }
         }
         Command::Record {
@@ -429,4 +486,113 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `tcomp export --geometry`: read `geometry table --json`'s polynomial,
+/// find its sensors' board channels (the run's T_ columns, by name) and
+/// its X, Y, Z position slots (the model's axes of those names, else the
+/// first slots the model does not use), quantise it and report the cost.
+fn geometry_section(
+    path: &std::path::Path,
+    float: &thermocomp_core::float::FloatModel,
+    run: Option<&std::path::Path>,
+    tool_max_mm: f64,
+    origin: &str,
+    max_correction_um: f64,
+) -> anyhow::Result<tcomp::export::GeometrySection> {
+    use tcomp::geometry::board::{quantisation_report, quantize, BoardOptions};
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    let poly: tcomp::geometry::volumetric::VolumetricPoly =
+        serde_json::from_str(&text).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: not a `tcomp geometry table --json` output: {e}",
+                path.display()
+            )
+        })?;
+    let mut channels = Vec::new();
+    if !poly.sensors.is_empty() {
+        let run = run.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: the volumetric polynomial reads sensor(s) {}: --run <csv> gives their board channels",
+                path.display(),
+                poly.sensors.join(", ")
+            )
+        })?;
+        let columns: Vec<String> = tcomp::runcsv::Run::read_with_temperatures(run)?
+            .temperature_columns()
+            .iter()
+            .map(|c| c.to_string())
+            .collect();
+        for s in &poly.sensors {
+            let want = if s.starts_with("T_") {
+                s.clone()
+            } else {
+                format!("T_{s}")
+            };
+            let ch = columns
+                .iter()
+                .position(|c| *c == want || c == s)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "{}: sensor {s} of the volumetric polynomial is not among the T_ columns of {}",
+                        path.display(),
+                        run.display()
+                    )
+                })?;
+            let ch = u8::try_from(ch)
+                .ok()
+                .filter(|&c| usize::from(c) < thermocomp_core::limits::MAX_SENSORS)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "sensor {s} is board channel {ch}; the board reads channels 0..=19"
+                    )
+                })?;
+            channels.push(ch);
+        }
+    }
+    let o: Vec<f64> = origin
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .ok_or_else(|| {
+            anyhow::anyhow!("--geometry-origin-mm {origin:?}: expected three numbers x,y,z (mm)")
+        })?;
+    let mut slots = [0u8; 3];
+    let mut used: Vec<usize> = Vec::new();
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if let Some(i) = float
+            .axes
+            .iter()
+            .position(|a| a.name.eq_ignore_ascii_case(name))
+        {
+            slots[k] = i as u8;
+            used.push(i);
+        }
+    }
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if !float.axes.iter().any(|a| a.name.eq_ignore_ascii_case(name)) {
+            let free = (0..thermocomp_core::limits::MAX_AXES)
+                .find(|i| *i >= float.axes.len() && !used.contains(i))
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no free PLC position slot for axis {name} of the volumetric section"
+                    )
+                })?;
+            slots[k] = free as u8;
+            used.push(free);
+        }
+    }
+    let opts = BoardOptions {
+        channels,
+        slots,
+        origin_mm: [o[0], o[1], o[2]],
+        tool_max_mm,
+        max_correction_um,
+    };
+    let v = quantize(&poly, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let report = quantisation_report(&poly, &v, &opts);
+    Ok((v, report))
 }

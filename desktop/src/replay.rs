@@ -41,11 +41,23 @@ pub fn replay_failing(
         .filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
     let (_, head) = lines.next().ok_or_else(|| anyhow!("empty trace"))?;
     let header = TraceHeader::parse(head).map_err(|e| anyhow!("header: {e}"))?;
-    let channels: Vec<Option<usize>> = model
-        .sensors
-        .iter()
-        .map(|s| (s.rom == [0; 8]).then_some(usize::from(s.channel)))
+    let mut roms = std::collections::BTreeMap::new();
+    for line in csv.lines().filter_map(|l| l.strip_prefix('#')) {
+        if let Some((k, v)) = line.split_once(':') {
+            if let Some(column) = k.trim().strip_prefix(crate::runcsv::ROM_KEY_PREFIX) {
+                let rom = crate::runcsv::parse_rom(v)
+                    .with_context(|| format!("metadata `{}`", k.trim()))?;
+                roms.insert(column.to_string(), rom);
+            }
+        }
+    }
+    let names: Vec<String> = head
+        .split(',')
+        .map(str::trim)
+        .filter(|c| thermocomp::trace::is_temperature_column(c))
+        .map(str::to_string)
         .collect();
+    let channels = sensor_columns(&model, &names, &roms);
     let mut comp = Compensator::new(Some(model));
     let mut rows = Vec::new();
     for (n, line) in lines {
@@ -75,6 +87,30 @@ pub fn replay_failing(
         });
     }
     Ok(rows)
+}
+
+/// The temperature column (index among the run's `T_…` columns) each model
+/// sensor reads, as the board resolves it: a sensor named by channel reads
+/// that column; a sensor named by ROM code reads the column the run records
+/// that ROM for (`# rom.T_…:`), none when the run records ROM codes but not
+/// this one (a missing sensor, as on the board), and its training column
+/// when the run records no ROM codes at all.
+pub fn sensor_columns(
+    model: &Model,
+    temperature_columns: &[String],
+    roms: &std::collections::BTreeMap<String, [u8; 8]>,
+) -> Vec<Option<usize>> {
+    model
+        .sensors
+        .iter()
+        .map(|s| {
+            if s.rom == [0; 8] || roms.is_empty() {
+                return Some(usize::from(s.channel));
+            }
+            let column = roms.iter().find(|(_, r)| **r == s.rom)?.0;
+            temperature_columns.iter().position(|c| c == column)
+        })
+        .collect()
 }
 
 /// Read a trace file and a model image file and replay.

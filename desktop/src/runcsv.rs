@@ -199,6 +199,31 @@ impl Run {
             .map(|(_, v)| v.as_str())
     }
 
+    /// The 1-Wire ROM code each temperature column was recorded from
+    /// (`# rom.T_<name>: 28FF4C1A0216035E`, written by `tcomp record`): 16
+    /// hex digits, bytes in bus order (family code first, CRC-8 last).
+    /// Columns without such a key are absent; a malformed or CRC-failing
+    /// code, or one given for two columns, is an error naming its key.
+    pub fn sensor_roms(&self) -> Result<BTreeMap<String, [u8; 8]>> {
+        let mut out: BTreeMap<String, [u8; 8]> = BTreeMap::new();
+        for (k, v) in &self.meta {
+            let Some(column) = k.strip_prefix(ROM_KEY_PREFIX) else {
+                continue;
+            };
+            let rom = parse_rom(v).with_context(|| format!("metadata `{k}`"))?;
+            if let Some((other, _)) = out.iter().find(|(_, r)| **r == rom) {
+                bail!("metadata `{k}`: the same ROM code as `{ROM_KEY_PREFIX}{other}`");
+            }
+            out.insert(column.to_string(), rom);
+        }
+        Ok(out)
+    }
+
+    /// Record the ROM code of temperature column `column` (`T_…`).
+    pub fn set_sensor_rom(&mut self, column: &str, rom: &[u8; 8]) {
+        self.set_meta(&format!("{ROM_KEY_PREFIX}{column}"), &format_rom(rom));
+    }
+
     pub fn set_meta(&mut self, key: &str, value: &str) {
         match self.meta.iter_mut().find(|(k, _)| k == key) {
             Some(kv) => kv.1 = value.to_string(),
@@ -285,6 +310,30 @@ impl Run {
     pub fn meta_map(&self) -> BTreeMap<String, String> {
         self.meta.iter().cloned().collect()
     }
+}
+
+/// Metadata key prefix naming a temperature column's sensor by ROM code.
+pub const ROM_KEY_PREFIX: &str = "rom.";
+
+/// A ROM code as 16 hex digits, bytes in bus order (`28FF4C1A0216035E`).
+pub fn format_rom(rom: &[u8; 8]) -> String {
+    rom.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+/// 16 hex digits (bus order) into a ROM code whose CRC-8 checks.
+pub fn parse_rom(text: &str) -> Result<[u8; 8]> {
+    let t = text.trim();
+    if t.len() != 16 || !t.bytes().all(|c| c.is_ascii_hexdigit()) {
+        bail!("ROM code `{t}` is not 16 hex digits");
+    }
+    let mut rom = [0u8; 8];
+    for (i, b) in rom.iter_mut().enumerate() {
+        *b = u8::from_str_radix(&t[2 * i..2 * i + 2], 16)?;
+    }
+    if rom == [0; 8] || thermocomp_core::image::rom_crc8(&rom[..7]) != rom[7] {
+        bail!("ROM code `{t}` fails its CRC-8 (last byte)");
+    }
+    Ok(rom)
 }
 
 /// Coldest and hottest temperature a run may hold, °C: beyond any machine

@@ -359,3 +359,89 @@ fn a_lagging_sensor_is_named_against_its_body() {
     assert!(names.iter().any(|n| n.starts_with("bearing_nonlinear")));
     assert!(d.findings.iter().all(|f| f.name != "ambient_drift"));
 }
+
+fn untestable_reason(d: &tcomp::diagnose::Diagnosis, prefix: &str) -> String {
+    d.to_json()["untestable"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|u| u["name"].as_str().unwrap().starts_with(prefix))
+        .map(|u| u["reason"].as_str().unwrap().to_string())
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_steeper_speed_law_across_two_speeds_is_tried_and_listed_never_guessed() {
+    // bearing heat 100 W·(n/n_max)^3 on top of the machine's own law, in a
+    // light run (3000-6000 rpm) and a heavy one (9000-12000 rpm)
+    let runs = truth_runs(&[TruthEffect::BearingNonlinear { k_w: 100.0, p: 3.0 }], 87);
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    // the runs differ in speed, so the candidate is fitted and reported ...
+    let tried = d
+        .tried
+        .iter()
+        .find(|f| f.name == "bearing_nonlinear")
+        .expect("tried across runs of different speeds");
+    assert_eq!(tried.params_json()["faster_runs"][0], "truth1");
+    // ... but a law the same in every run is part of the identified nominal
+    // (which absorbs it): listed as untestable with the reason, no guess
+    assert!(
+        d.findings.is_empty(),
+        "guessed: {:?}",
+        d.findings
+            .iter()
+            .map(|f| (&f.name, f.params_json()))
+            .collect::<Vec<_>>()
+    );
+    let why = untestable_reason(&d, "bearing_nonlinear");
+    assert!(why.contains("never claimed"), "{why}");
+}
+
+#[test]
+fn runs_of_one_speed_band_cannot_test_the_speed_law_and_say_so() {
+    // both runs in the same band: the speed law is not tried at all
+    let duty = vec![
+        (0.0, 0.0, 0.0),
+        (900.0, 6000.0, 0.3),
+        (5400.0, 6500.0, 0.5),
+        (9000.0, 0.0, 0.0),
+        (10800.0, 6000.0, 0.2),
+    ];
+    let runs: Vec<(String, Run)> = (0..2)
+        .map(|i| {
+            (
+                format!("same{i}"),
+                simulate(&duty, &[], 4.0, 10.0, 91 + i as u64).run,
+            )
+        })
+        .collect();
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(d.tried.iter().all(|f| f.name != "bearing_nonlinear"));
+    assert!(d.findings.is_empty());
+    let why = untestable_reason(&d, "bearing_nonlinear");
+    assert!(why.contains("mean speeds differ"), "{why}");
+}
+
+#[test]
+fn three_clean_runs_of_different_duty_name_nothing() {
+    let mut runs = truth_runs(&[], 93);
+    // a third run at one constant speed
+    let steady = vec![(0.0, 0.0, 0.0), (600.0, 7500.0, 0.4)];
+    runs.push(("steady".into(), simulate(&steady, &[], 4.0, 10.0, 95).run));
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(
+        d.findings.is_empty(),
+        "false alarm: {:?}",
+        d.findings
+            .iter()
+            .map(|f| (&f.name, f.params_json()))
+            .collect::<Vec<_>>()
+    );
+    // every run took part in the fit and the scoring
+    assert!(
+        d.notes.iter().any(|n| n.contains("on 3 run(s)")),
+        "{:?}",
+        d.notes
+    );
+    assert!(d.tried.iter().any(|f| f.name == "sensor_lag"));
+}

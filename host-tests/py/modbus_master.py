@@ -16,6 +16,10 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
                                          unlock, write holding registers (one FC06 each), read 0-31
   inputs   --port P --addr A [--count N] input registers as a list
   fault    --port P                      status and the fault record (input registers 160-168)
+  volumetric --port P --at X,Y,Z,L [--at ...]
+                                         per point: write the positions (FC16 6-11) and the
+                                         tool length (FC16 34-35), all µm, then read input
+                                         registers 180-199 (the volumetric block)
   flood    --pipe BASE [--bytes N] [--gap-ms G]
                                          N bytes of garbage into the board's UART (QEMU
                                          -serial pipe:BASE), then one good request; how
@@ -378,6 +382,30 @@ def cmd_fault(a):
                       "detail": u32(w[7], w[8]), "reserved": w[9:]}))
 
 
+def cmd_volumetric(a):
+    m = Master(a.port)
+    out = []
+    for at in a.at:
+        x, y, z, tool = (int(v) for v in at.split(","))
+        regs = []
+        for v in (x, y, z):
+            regs += list(struct.unpack(">HH", struct.pack(">i", v)))
+        w1 = m.call("write_registers", 6, regs)
+        w2 = m.call("write_registers", 34, list(struct.unpack(">HH", struct.pack(">i", tool))))
+        r = m.call("read_input_registers", 180, count=20)
+        if None in (w1, w2, r) or w1.isError() or w2.isError() or r.isError():
+            out.append({"error": str((w1, w2, r))})
+            continue
+        w = r.registers
+        out.append({"at": [x, y, z, tool],
+                    "correction": [s32(w[2 * d], w[2 * d + 1]) for d in range(3)],
+                    "status": w[6], "terms": w[7], "tool_um": s32(w[8], w[9]),
+                    "temps_16": [struct.unpack(">h", struct.pack(">H", t))[0] for t in w[10:14]],
+                    "sequence": u32(w[14], w[15])})
+    m.close()
+    print(json.dumps(out))
+
+
 def main():
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -397,9 +425,12 @@ def main():
     i = sub.add_parser("inputs"); i.add_argument("--port", type=int, required=True)
     i.add_argument("--addr", type=int, required=True); i.add_argument("--count", type=int, default=1)
     g = sub.add_parser("fault"); g.add_argument("--port", type=int, required=True); g.add_argument("--timeout", type=float, default=3.0)
+    v = sub.add_parser("volumetric"); v.add_argument("--port", type=int, required=True)
+    v.add_argument("--at", action="append", required=True, help="x,y,z,tool in µm")
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
-     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold, "inputs": cmd_inputs}[a.cmd](a)
+     "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold, "inputs": cmd_inputs,
+     "volumetric": cmd_volumetric}[a.cmd](a)
 
 
 if __name__ == "__main__":

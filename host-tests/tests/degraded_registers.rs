@@ -24,8 +24,10 @@ fn active_model_registers_name_the_model_per_direction() {
     assert_eq!(r(IR_DEGRADED_DIRECTIONS), 0b100);
     assert_eq!(r(IR_HELD_DIRECTIONS), 0b010, "only the model's directions");
     assert_eq!((r(158), r(159)), (0, 0));
-    // 160–179 are the board-safety block; the map ends after it.
-    assert_eq!(s.input_register(IR_SAFETY_LAST + 1), None);
+    // 160–179 are the board-safety block; the map ends at IR_LAST after it.
+    // The volumetric block follows it (180: x, not available without a section).
+    assert_eq!(s.input_register(IR_SAFETY_LAST + 1), Some(NOT_AVAILABLE));
+    assert_eq!(s.input_register(IR_LAST + 1), None);
     // Before any model: no model serves any direction.
     let d = Snapshot::default();
     assert_eq!(d.input_register(IR_ACTIVE_MODEL), Some(0xFFFF));

@@ -146,6 +146,14 @@ impl Compensator {
         self.features.rereference();
     }
 
+    /// Restart from this reference sample (per model sensor, 1/16 °C;
+    /// `None`: that sensor gets no reference) at the next step, instead of
+    /// the step's readings or the image's stored reference: the board's kept
+    /// reference ([`FeatureState::preset_reference`]).
+    pub fn preset_reference(&mut self, refs: &[Option<i32>]) {
+        self.features.preset_reference(refs);
+    }
+
     /// The reference temperatures (1/16 °C) per model sensor, once taken.
     pub fn reference(&self) -> Option<&[i32]> {
         let n = self.model.as_ref()?.sensors.len();

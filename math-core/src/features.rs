@@ -13,8 +13,10 @@
 //!    filter update). The next valid step catches up (rule 4).
 //! 3. **Reference sample**: temperature rises are taken against the first
 //!    step at which every sensor the inputs read is valid (or against the
-//!    image's stored reference with `FLAG_FIXED_REFERENCE`); the lag filters
-//!    start from that sample. [`FeatureState::rereference`] takes a new one.
+//!    image's stored reference with `FLAG_FIXED_REFERENCE`, or the one the
+//!    board kept, [`FeatureState::preset_reference`], before either); the
+//!    lag filters start from that sample. [`FeatureState::rereference`]
+//!    takes a new one.
 //! 4. **Lag filters** advance in whole model steps (`step_ms`) since the last
 //!    update, the newest sample held over the elapsed steps (exact for any
 //!    gap length): y ← u + dⁿ (y − u), d = exp(−step/τ) in Q30.
@@ -51,6 +53,10 @@ pub struct FeatureState {
     unstarted: u16,
     /// Sensors without a reference sample (invalid when it was taken).
     unreferenced: u32,
+    /// A reference sample given from outside ([`FeatureState::preset_reference`]):
+    /// bit i set, sensor i takes `preset[i]` at the next reference.
+    preset_mask: Option<u32>,
+    preset: [i32; MAX_SENSORS],
 }
 
 impl Default for FeatureState {
@@ -71,6 +77,8 @@ impl FeatureState {
             frozen_clock_ms: [0; MAX_INPUTS],
             unstarted: 0,
             unreferenced: 0,
+            preset_mask: None,
+            preset: [0; MAX_SENSORS],
         }
     }
 
@@ -80,6 +88,34 @@ impl FeatureState {
         self.frozen = 0;
         self.unstarted = 0;
         self.unreferenced = 0;
+        self.preset_mask = None;
+    }
+
+    /// Restart at the next step (as [`FeatureState::rereference`]) with
+    /// this reference sample instead of the step's readings or the image's
+    /// stored reference: `refs` per model sensor (1/16 °C); a sensor with
+    /// `None` gets no reference (its rises stay invalid until the next
+    /// one). The board's kept reference (rule 3), applied at boot.
+    pub fn preset_reference(&mut self, refs: &[Option<i32>]) {
+        self.rereference();
+        let mut mask = 0u32;
+        for (i, (p, r)) in self.preset.iter_mut().zip(refs).enumerate() {
+            *p = r.unwrap_or(0);
+            if r.is_some() {
+                mask |= 1 << (i % 32);
+            }
+        }
+        self.preset_mask = Some(mask);
+    }
+
+    /// Sensors without a reference: those invalid when it was taken, or,
+    /// before a preset reference is taken, those it does not cover.
+    #[inline]
+    fn unreferenced_now(&self) -> u32 {
+        match (self.reference_ms, self.preset_mask) {
+            (None, Some(mask)) => !mask,
+            _ => self.unreferenced,
+        }
     }
 
     /// Bit i: input i of `model` can be computed now (its sensors are valid
@@ -87,11 +123,12 @@ impl FeatureState {
     #[inline]
     pub fn valid_mask(&self, model: &Model, temps: &[Option<i32>]) -> u16 {
         let temp = |s: u8| temps.get(usize::from(s)).copied().flatten();
+        let unreferenced = self.unreferenced_now();
         let mut valid = 0u16;
         for (i, inp) in model.inputs.iter().enumerate() {
             let ok = match inp.kind {
                 InputKind::SensorRise { a } => {
-                    temp(a).is_some() && self.unreferenced & (1 << (a % 32)) == 0
+                    temp(a).is_some() && unreferenced & (1 << (a % 32)) == 0
                 }
                 InputKind::SensorDiff { a, b } => temp(a).is_some() && temp(b).is_some(),
                 InputKind::Spindle => true,
@@ -161,7 +198,13 @@ impl FeatureState {
                 .zip(self.reference.iter_mut())
                 .enumerate()
             {
-                *r = if model.flags & FLAG_FIXED_REFERENCE != 0 {
+                let preset = self.preset_mask.map(|m| m & (1 << (i % 32)) != 0);
+                *r = if let Some(covered) = preset {
+                    if !covered {
+                        self.unreferenced |= 1 << (i % 32);
+                    }
+                    self.preset[i % MAX_SENSORS]
+                } else if model.flags & FLAG_FIXED_REFERENCE != 0 {
                     s.ref_temp
                 } else {
                     match temp(i as u8) {

@@ -45,6 +45,10 @@
 //! image limits every input's envelope to ±2^23 raw units, so the clamp to
 //! the envelope happens before anything saturates matters. The envelope
 //! mapping ([`Span`]) multiplies a value < 2^32 by a gain ≤ 2^26.
+//!
+//! The volumetric section (image kind 3) has its own formats and overflow
+//! argument in [`crate::volumetric`]: Q24 variables in [0, 1], coefficients
+//! in pm, an i64 accumulator in 1/16 pm bounded by 2^52.
 
 include!(concat!(env!("OUT_DIR"), "/sigmoid_table.rs"));
 

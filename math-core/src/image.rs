@@ -11,6 +11,9 @@
 //!                step_ms u32, warmup_s u32, n_sensors u8, n_inputs u8, n_nets u8,
 //!                n_tables u8, n_directions u8, n_axes u8, units u8, reserved u8
 //! sensor   16 B  rom [8] (all zero: by channel), channel u8, 3 × 0, ref_temp i32 (1/16 °C)
+//!                (a ROM code names the physical sensor: the board reads the
+//!                channel its channel map holds that ROM on, never `channel`,
+//!                which then records the run column it was trained on)
 //! direction 16 B name [8] (ASCII, zero-padded), max_correction i32 (0.1 µm),
 //!                max_rate i32 (0.1 µm/s)
 //! axis     20 B  name [8], pos_min i32, pos_max i32, ref_pos i32 (µm or 0.001°)
@@ -34,7 +37,32 @@
 //! kind 1  fallback models: n u8, 3 × 0, then per fallback (priority order):
 //!         direction u8, excluded sensor a u8, excluded sensor b u8 (0xFF: none),
 //!         n_terms u8, term × n_terms (the table term encoding; position power 0)
+//! kind 3  volumetric correction (issue 14, crate::volumetric):
+//!         n_sensors u8, 0, n_terms u16, position slot of X, Y, Z u8 × 3
+//!         (index into HR_POSITIONS), 0, tool_max i32 (µm),
+//!         per direction x, y, z: origin i32 (µm), stroke i32 (µm),
+//!                                max_correction i32 (0.1 µm),
+//!         sensor × n_sensors (16 B): rom [8] (all zero: by channel), channel u8,
+//!                0, ref i16, min i16, max i16 (1/16 °C),
+//!         term × n_terms (16 B): exponents u8 (u | v << 2 | w << 4 | l << 6),
+//!                sensor u8 (0xFF: constant), 0, 0, coef x, y, z i32
+//!                (pm at full scale, or pm per kelvin of the sensor)
 //! ```
+//!
+//! The volumetric section is read on its own: it names its sensors like
+//! the image's sensor records do (ROM code, or a channel) with their own
+//! reference temperatures and envelope, so an image with it and without
+//! any thermal model is valid, and the main model's behaviour does not
+//! depend on it. Size: 48 B + 16 B per sensor + 16 B per term (the 156
+//! terms of a three-axis machine's static geometry: 2,544 B). Beyond the
+//! layout the parser refuses (each with its own [`ImageError`]) a position
+//! slot ≥ `MAX_AXES`, a stroke outside 2 µm … 100 m (or whose end does not
+//! fit an i32), a tool-length scale outside 2 µm … 10 m, a max correction
+//! outside 1..=[`MAX_CORRECTION`], a sensor's reference or envelope outside
+//! the DS18B20 range (−55 … 125 °C) or an envelope whose minimum is not
+//! below its maximum, a term naming no section sensor, non-zero padding,
+//! and 0 or more than 256 terms: the premises of the overflow argument in
+//! [`crate::volumetric`].
 //!
 //! A fallback is one static polynomial table over the image's inputs that
 //! serves its direction without the excluded sensor(s): it may not use an
@@ -45,7 +73,8 @@
 //! [`MAX_IMAGE_BYTES`] (8192), checked by the parser and by `tcomp export`.
 //!
 //! Beyond the layout, the parser refuses (each with its own [`ImageError`]):
-//! bytes after the CRC; model version 0 ("no model" on the register map); a
+//! bytes after the CRC; a sensor ROM code that fails its CRC-8 or names a
+//! sensor twice; model version 0 ("no model" on the register map); a
 //! sensor channel ≥ [`MAX_SENSORS`]; `max_correction` outside
 //! 1..=[`MAX_CORRECTION`] (10 mm) and `max_rate` outside 1..=`MAX_RATE`
 //! (100 mm/s); tables on one axis with Σ |coef| · max(1, position power) >
@@ -54,6 +83,9 @@
 
 use crate::fixed::{Span, FEATURE_FRAC_BITS};
 use crate::limits::*;
+use crate::volumetric::{
+    VolSensor, VolTerm, Volumetric, VolumetricSpec, MAX_VOL_SENSORS, MAX_VOL_TERMS,
+};
 use heapless::Vec;
 
 pub const MAGIC: [u8; 4] = *b"TCMI";
@@ -61,6 +93,8 @@ pub const MAGIC: [u8; 4] = *b"TCMI";
 pub const FORMAT_VERSION: u16 = 2;
 /// Section kind: fallback models (degraded-mode compensation).
 pub const SECTION_FALLBACKS: u8 = 1;
+/// Section kind: volumetric correction (issue 14, [`crate::volumetric`]).
+pub const SECTION_VOLUMETRIC: u8 = 3;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.
@@ -70,6 +104,13 @@ pub const HEADER_LEN: usize = 32;
 pub const NONE: u8 = 0xFF;
 
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+/// The 1-Wire ROM code's CRC-8 (Dallas/Maxim, x^8 + x^5 + x^4 + 1).
+const CRC8_MAXIM: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_MAXIM_DOW);
+
+/// CRC-8 of a ROM code's first seven bytes (its eighth byte must equal it).
+pub fn rom_crc8(bytes: &[u8]) -> u8 {
+    CRC8_MAXIM.checksum(bytes)
+}
 
 /// CRC-32 of a byte string (the image's checksum, also shown over Modbus).
 pub fn crc32(bytes: &[u8]) -> u32 {
@@ -165,6 +206,41 @@ pub enum ImageError {
         fallback: u8,
         sensor: u8,
     },
+    /// A sensor named by a ROM code whose CRC-8 byte does not match (a
+    /// mistyped or corrupted code would name no sensor on any bus).
+    BadSensorRom {
+        sensor: u8,
+    },
+    /// Two sensors named by the same ROM code (one physical sensor cannot
+    /// be two model sensors).
+    DuplicateSensorRom {
+        sensor: u8,
+        first: u8,
+    },
+    /// Volumetric section: a direction's position slot is not a PLC axis (≥ `MAX_AXES`).
+    VolumetricAxisSlot {
+        axis: u8,
+        slot: u8,
+    },
+    /// Volumetric section: a stroke outside 2 µm … 100 m, or origin + stroke beyond i32.
+    VolumetricStroke {
+        axis: u8,
+        value: i32,
+    },
+    /// Volumetric section: the tool-length scale outside 2 µm … 10 m.
+    VolumetricTool {
+        value: i32,
+    },
+    /// Volumetric section: a sensor's reference or envelope outside −55 … 125 °C,
+    /// or its envelope's minimum not below its maximum.
+    VolumetricTemperature {
+        sensor: u8,
+    },
+    /// Volumetric section: a max correction outside 1..=[`MAX_CORRECTION`].
+    VolumetricMaxCorrection {
+        direction: u8,
+        value: i32,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -233,7 +309,7 @@ impl core::fmt::Display for ImageError {
             ),
             ImageError::UnknownSection { kind } => write!(
                 f,
-                "image section kind {kind} not known to this build (it reads kind {SECTION_FALLBACKS})"
+                "image section kind {kind} not known to this build (it reads kinds {SECTION_FALLBACKS} and {SECTION_VOLUMETRIC})"
             ),
             ImageError::SectionLength { kind } => write!(
                 f,
@@ -245,6 +321,37 @@ impl core::fmt::Display for ImageError {
             ImageError::FallbackUsesExcluded { fallback, sensor } => write!(
                 f,
                 "fallback model {fallback} uses sensor {sensor}, which it is meant to do without"
+            ),
+            ImageError::BadSensorRom { sensor } => write!(
+                f,
+                "sensor {sensor}: ROM code fails its CRC-8 (not a 1-Wire ROM code)"
+            ),
+            ImageError::DuplicateSensorRom { sensor, first } => write!(
+                f,
+                "sensor {sensor} has the same ROM code as sensor {first}"
+            ),
+            ImageError::VolumetricAxisSlot { axis, slot } => write!(
+                f,
+                "volumetric direction {axis} reads position slot {slot}; the PLC writes slots 0-{}",
+                MAX_AXES - 1
+            ),
+            ImageError::VolumetricStroke { axis, value } => write!(
+                f,
+                "volumetric direction {axis}: stroke {value} um outside 2..={} (or its end beyond the i32 range)",
+                crate::volumetric::MAX_VOL_STROKE_UM
+            ),
+            ImageError::VolumetricTool { value } => write!(
+                f,
+                "volumetric tool-length scale {value} um outside 2..={}",
+                crate::volumetric::MAX_VOL_TOOL_UM
+            ),
+            ImageError::VolumetricTemperature { sensor } => write!(
+                f,
+                "volumetric sensor {sensor}: reference or envelope outside -55..125 C, or minimum not below maximum"
+            ),
+            ImageError::VolumetricMaxCorrection { direction, value } => write!(
+                f,
+                "volumetric direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
             ),
         }
     }
@@ -382,6 +489,8 @@ pub struct Model {
     /// Fallback models in priority order (format v2; empty in v1 images).
     pub fallbacks: Vec<Fallback, MAX_FALLBACKS>,
     pub fallback_terms: Vec<Term, MAX_FALLBACK_TERMS>,
+    /// The volumetric correction (format v2, section kind 3), if any.
+    pub volumetric: Option<Volumetric>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
     pub(crate) input_span: [Span; MAX_INPUTS],
@@ -426,6 +535,7 @@ impl Model {
             tables: Vec::new(),
             fallbacks: Vec::new(),
             fallback_terms: Vec::new(),
+            volumetric: None,
             input_span: [Span::default(); MAX_INPUTS],
             axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
@@ -517,6 +627,17 @@ impl Model {
                     sensor: i as u8,
                     channel,
                 });
+            }
+            if rom != [0; 8] {
+                if rom_crc8(&rom[..7]) != rom[7] {
+                    return Err(ImageError::BadSensorRom { sensor: i as u8 });
+                }
+                if let Some(first) = m.sensors.iter().position(|s| s.rom == rom) {
+                    return Err(ImageError::DuplicateSensorRom {
+                        sensor: i as u8,
+                        first: first as u8,
+                    });
+                }
             }
             push(
                 &mut m.sensors,
@@ -822,10 +943,17 @@ impl Model {
 
     /// Size of the v2 sections (0 when there are none: the image is v1).
     fn sections_len(&self) -> usize {
-        if self.fallbacks.is_empty() {
+        let fallbacks = self.fallbacks_payload_len().map_or(0, |n| 4 + n);
+        let volumetric = self.volumetric.as_ref().map_or(0, |v| 4 + v.encoded_len());
+        if fallbacks + volumetric == 0 {
             return 0;
         }
-        4 + 4 + 4 + self.fallbacks.len() * 4 + self.fallback_terms.len() * 8
+        4 + fallbacks + volumetric
+    }
+
+    fn fallbacks_payload_len(&self) -> Option<usize> {
+        (!self.fallbacks.is_empty())
+            .then(|| 4 + self.fallbacks.len() * 4 + self.fallback_terms.len() * 8)
     }
 
     /// Size of the encoded image in bytes.
@@ -931,10 +1059,12 @@ impl Model {
             }
         }
         if self.sections_len() > 0 {
-            w.put(&[1, 0, 0, 0]);
-            let payload = (self.sections_len() - 8) as u16;
+            let n = u8::from(!self.fallbacks.is_empty()) + u8::from(self.volumetric.is_some());
+            w.put(&[n, 0, 0, 0]);
+        }
+        if let Some(payload) = self.fallbacks_payload_len() {
             w.put(&[SECTION_FALLBACKS, 0]);
-            w.put(&payload.to_le_bytes());
+            w.put(&(payload as u16).to_le_bytes());
             w.put(&[self.fallbacks.len() as u8, 0, 0, 0]);
             for k in 0..self.fallbacks.len() {
                 let f = self.fallbacks[k];
@@ -942,6 +1072,38 @@ impl Model {
                 for term in self.fallback_terms_of(k) {
                     w.put(&term.coef.to_le_bytes());
                     w.put(&[term.input, term.input_power, term.position_power, 0]);
+                }
+            }
+        }
+        if let Some(v) = &self.volumetric {
+            w.put(&[SECTION_VOLUMETRIC, 0]);
+            w.put(&(v.encoded_len() as u16).to_le_bytes());
+            w.put(&[v.sensors.len() as u8, 0]);
+            w.put(&(v.terms.len() as u16).to_le_bytes());
+            w.put(&[v.slots[0], v.slots[1], v.slots[2], 0]);
+            w.put(&v.tool_max_um.to_le_bytes());
+            for k in 0..3 {
+                w.put(&v.origin_um[k].to_le_bytes());
+                w.put(&v.stroke_um[k].to_le_bytes());
+                w.put(&v.max_correction[k].to_le_bytes());
+            }
+            for s in &v.sensors {
+                w.put(&s.sensor.rom);
+                w.put(&[s.sensor.channel, 0]);
+                w.put(&(s.sensor.ref_temp as i16).to_le_bytes());
+                w.put(&s.min.to_le_bytes());
+                w.put(&s.max.to_le_bytes());
+            }
+            for t in &v.terms {
+                let [a, b, c, e] = t.exps;
+                w.put(&[
+                    (a & 3) | (b & 3) << 2 | (c & 3) << 4 | (e & 3) << 6,
+                    t.sensor,
+                    0,
+                    0,
+                ]);
+                for c in t.coef {
+                    w.put(&c.to_le_bytes());
                 }
             }
         }
@@ -1000,7 +1162,7 @@ fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
             .filter(|&e| e <= r.b.len())
             .ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
-        if kind != SECTION_FALLBACKS {
+        if kind != SECTION_FALLBACKS && kind != SECTION_VOLUMETRIC {
             return Err(ImageError::UnknownSection { kind });
         }
         if seen & bit != 0 {
@@ -1011,7 +1173,11 @@ fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
             b: &r.b[..end],
             at: start,
         };
-        parse_fallbacks(&mut sr, m).map_err(|e| match e {
+        let parsed = match kind {
+            SECTION_VOLUMETRIC => parse_volumetric(&mut sr, m),
+            _ => parse_fallbacks(&mut sr, m),
+        };
+        parsed.map_err(|e| match e {
             ImageError::LengthMismatch => ImageError::SectionLength { kind },
             e => e,
         })?;
@@ -1020,6 +1186,88 @@ fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
         }
         r.at = end;
     }
+    Ok(())
+}
+
+/// Section kind 3: the volumetric correction (validated by [`Volumetric::new`]).
+fn parse_volumetric(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n_sensors = r.count("volumetric sensors", MAX_VOL_SENSORS)?;
+    let pad = r.u8()?;
+    let n_terms = usize::from(r.u16()?);
+    let slots = r.array::<3>()?;
+    let pad2 = r.u8()?;
+    if pad != 0 || pad2 != 0 {
+        return Err(ImageError::BadValue {
+            what: "volumetric section padding",
+        });
+    }
+    if n_terms == 0 || n_terms > MAX_VOL_TERMS {
+        return Err(ImageError::TooMany {
+            what: "volumetric terms",
+            count: n_terms,
+            max: MAX_VOL_TERMS,
+        });
+    }
+    let tool_max_um = r.i32()?;
+    let (mut origin_um, mut stroke_um, mut max_correction) = ([0i32; 3], [0i32; 3], [0i32; 3]);
+    for k in 0..3 {
+        origin_um[k] = r.i32()?;
+        stroke_um[k] = r.i32()?;
+        max_correction[k] = r.i32()?;
+    }
+    let mut sensors: Vec<VolSensor, MAX_VOL_SENSORS> = Vec::new();
+    for _ in 0..n_sensors {
+        let rom = r.array::<8>()?;
+        let channel = r.u8()?;
+        let pad = r.u8()?;
+        let ref_temp = i16::from_le_bytes(r.array()?);
+        let min = i16::from_le_bytes(r.array()?);
+        let max = i16::from_le_bytes(r.array()?);
+        if pad != 0 {
+            return Err(ImageError::BadValue {
+                what: "volumetric section padding",
+            });
+        }
+        push(
+            &mut sensors,
+            VolSensor {
+                sensor: SensorRef {
+                    rom,
+                    channel,
+                    ref_temp: i32::from(ref_temp),
+                },
+                min,
+                max,
+            },
+        )?;
+    }
+    let mut terms: Vec<VolTerm, MAX_VOL_TERMS> = Vec::new();
+    for _ in 0..n_terms {
+        let [x, sensor, p1, p2] = r.array::<4>()?;
+        if p1 != 0 || p2 != 0 {
+            return Err(ImageError::BadValue {
+                what: "volumetric section padding",
+            });
+        }
+        let coef = [r.i32()?, r.i32()?, r.i32()?];
+        push(
+            &mut terms,
+            VolTerm {
+                exps: [x & 3, (x >> 2) & 3, (x >> 4) & 3, x >> 6],
+                sensor,
+                coef,
+            },
+        )?;
+    }
+    m.volumetric = Some(Volumetric::new(&VolumetricSpec {
+        slots,
+        origin_um,
+        stroke_um,
+        tool_max_um,
+        max_correction,
+        sensors: &sensors,
+        terms: &terms,
+    })?);
     Ok(())
 }
 

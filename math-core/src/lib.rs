@@ -12,6 +12,8 @@
 //! - [`compensator`]: the state machine around them (features, training
 //!   envelope, clamps, rate limit, status bits).
 //! - `float` (feature `std`): the same model in f64 and the quantizer.
+//! - [`volumetric`]: the geometric-thermal tool-tip correction (image
+//!   section kind 3), integers only.
 //! - [`golden`]: golden vectors checked on the board (generated on the host).
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
@@ -25,6 +27,7 @@ pub mod float;
 pub mod golden;
 pub mod image;
 pub mod limits;
+pub mod volumetric;
 
 pub use compensator::{Compensator, StepInput, StepOutput};
 pub use features::FeatureState;

@@ -149,3 +149,48 @@ fn golden_vectors_reproduce_and_a_changed_expectation_is_caught() {
         Err(golden::GoldenError::Malformed)
     );
 }
+
+#[test]
+fn a_preset_reference_replaces_the_first_sample_and_one_it_lacks_is_no_reference() {
+    let m = model();
+    // The board's kept reference: rises against 300, though the first sample reads 400.
+    let mut kept = Compensator::new(Some(m.clone()));
+    kept.preset_reference(&[Some(300); 6]);
+    let o = step(&mut kept, 1000, &temps(400), 0);
+    assert!(o.status & VALID != 0);
+    assert_eq!(kept.reference().unwrap(), &[300; 6]);
+    // Same as an image whose stored (fixed) reference is 300, and the preset wins over it.
+    let mut fixed = m.clone();
+    fixed.flags |= thermocomp_core::image::FLAG_FIXED_REFERENCE;
+    for s in fixed.sensors.iter_mut() {
+        s.ref_temp = 300;
+    }
+    let mut plain = Compensator::new(Some(fixed.clone()));
+    let p = step(&mut plain, 1000, &temps(400), 0);
+    for s in fixed.sensors.iter_mut() {
+        s.ref_temp = 0;
+    }
+    let mut over = Compensator::new(Some(fixed));
+    over.preset_reference(&[Some(300); 6]);
+    assert_eq!(step(&mut over, 1000, &temps(400), 0).predicted, p.predicted);
+    assert_eq!(o.predicted, p.predicted);
+    assert_ne!(o.predicted, [0; 6], "a real rise, not the first sample");
+    // A sensor the preset does not cover gets no reference: the main model
+    // (every sensor) cannot serve, however valid its reading.
+    let mut partial = Compensator::new(Some(m.clone()));
+    let mut refs = vec![Some(300); 6];
+    refs[2] = None;
+    partial.preset_reference(&refs);
+    let o = step(&mut partial, 1000, &temps(400), 0);
+    assert_eq!(
+        o.status & (SENSOR_FAULT | VALID),
+        SENSOR_FAULT,
+        "{:#x}",
+        o.status
+    );
+    // A re-reference drops the preset: the next sample is the reference.
+    partial.rereference();
+    let o = step(&mut partial, 2000, &temps(400), 0);
+    assert!(o.status & VALID != 0);
+    assert_eq!(partial.reference().unwrap(), &[400; 6]);
+}

@@ -193,6 +193,54 @@ fn a_sensor_channel_beyond_the_board_is_refused() {
     assert!(encoded(last).is_ok(), "the last channel is fine");
 }
 
+/// A DS18B20 ROM code with a valid CRC-8 (family 0x28, serial `n`).
+fn rom(n: u8) -> [u8; 8] {
+    let mut r = [0x28, n, 0x4C, 0x1A, 0x02, 0x16, 0x03, 0];
+    r[7] = thermocomp_core::image::rom_crc8(&r[..7]);
+    r
+}
+
+#[test]
+fn sensors_named_by_rom_code_round_trip_and_bad_or_twice_named_codes_are_refused() {
+    let (m, _) = demo_image();
+    // The datasheet's own example check: CRC-8/MAXIM of "123456789" is 0xA1.
+    assert_eq!(thermocomp_core::image::rom_crc8(b"123456789"), 0xA1);
+    let mut named = m.clone();
+    for (i, s) in named.sensors.iter_mut().enumerate() {
+        s.rom = rom(i as u8 + 1);
+    }
+    let back = encoded(named.clone()).unwrap();
+    assert_eq!(back.sensors, named.sensors, "ROM codes and channels kept");
+    // Some by ROM, some by channel: fine.
+    let mut mixed = m.clone();
+    mixed.sensors[0].rom = rom(9);
+    assert!(encoded(mixed).is_ok());
+    let mut bad = named.clone();
+    bad.sensors[3].rom[7] ^= 1;
+    assert_eq!(encoded(bad), Err(ImageError::BadSensorRom { sensor: 3 }));
+    let mut twice = named.clone();
+    twice.sensors[4].rom = twice.sensors[1].rom;
+    assert_eq!(
+        encoded(twice),
+        Err(ImageError::DuplicateSensorRom {
+            sensor: 4,
+            first: 1
+        })
+    );
+    assert_eq!(
+        ImageError::DuplicateSensorRom {
+            sensor: 4,
+            first: 1
+        }
+        .to_string(),
+        "sensor 4 has the same ROM code as sensor 1"
+    );
+    assert_eq!(
+        ImageError::BadSensorRom { sensor: 3 }.to_string(),
+        "sensor 3: ROM code fails its CRC-8 (not a 1-Wire ROM code)"
+    );
+}
+
 #[test]
 fn model_version_0_is_refused() {
     let (m, _) = demo_image();

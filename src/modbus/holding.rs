@@ -22,7 +22,11 @@ pub const HR_CLAMP: u16 = 20;
 pub const HR_RATE: u16 = 26;
 /// Length in bytes of the staged model image.
 pub const HR_STAGED_LEN: u16 = 32;
-pub const HR_LAST_PLAIN: u16 = HR_STAGED_LEN;
+/// Tool length for the volumetric correction, int32 µm, high word first
+/// (written by the PLC like the positions; 36–39 reserved).
+pub const HR_TOOL_LENGTH: u16 = 34;
+/// Last register of the plain block (33 and 36–39 reserved, read 0).
+pub const HR_LAST_PLAIN: u16 = 39;
 /// Model staging area: 2 bytes per register (first byte in the high half).
 pub const HR_STAGING: u16 = 1000;
 pub const STAGING_REGS: u16 = (MAX_IMAGE_BYTES / 2) as u16;
@@ -50,6 +54,16 @@ pub const CMD_TEST_PANIC: u16 = 8;
 /// Test builds only (feature `test-faults`): the measurement loop stops
 /// making progress, so the watchdog must trip.
 pub const CMD_TEST_STALL: u16 = 9;
+/// Keep a reference sample across reboots (a machine with a fixed
+/// reference): the next cycle at which every model sensor reads fresh is
+/// the new reference sample (per channel), used from then on and at every
+/// boot, and stored with the settings (HR_RESULT 50, then 23, then 0 or 22).
+/// While a reference is kept (or the image has a fixed reference),
+/// [`CMD_REREFERENCE`] does the same.
+pub const CMD_KEEP_REFERENCE: u16 = 10;
+/// Forget the kept reference (stored); the reference in use stays until
+/// the next boot or command 2.
+pub const CMD_FORGET_REFERENCE: u16 = 11;
 
 /// Command results (HR_RESULT): one code per reason a commit is refused.
 pub mod result {
@@ -111,6 +125,19 @@ pub mod result {
     pub const DUPLICATE_SECTION: u16 = 32;
     /// A fallback model reads a sensor it is meant to do without.
     pub const FALLBACK_USES_EXCLUDED: u16 = 33;
+    /// Command 10 (or 2 with a kept reference) accepted: the reference is
+    /// taken at the next cycle with every model sensor fresh, then stored.
+    pub const REFERENCE_PENDING: u16 = 50;
+    /// The image names a sensor by a ROM code that fails its CRC-8.
+    pub const SENSOR_ROM: u16 = 51;
+    /// The image names two sensors by the same ROM code.
+    pub const DUPLICATE_SENSOR_ROM: u16 = 52;
+    /// Volumetric section: a position slot, stroke or tool-length scale out of range.
+    pub const VOLUMETRIC_RANGE: u16 = 40;
+    /// Volumetric section: a sensor's reference or envelope outside −55 … 125 °C.
+    pub const VOLUMETRIC_TEMPERATURE: u16 = 41;
+    /// Volumetric section: a max correction outside 1..=MAX_CORRECTION.
+    pub const VOLUMETRIC_MAX_CORRECTION: u16 = 42;
 
     /// The name of a result code (as in the README's table), for messages.
     pub fn name(code: u16) -> &'static str {
@@ -143,6 +170,12 @@ pub mod result {
             SECTION_LENGTH => "SECTION_LENGTH",
             DUPLICATE_SECTION => "DUPLICATE_SECTION",
             FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
+            REFERENCE_PENDING => "REFERENCE_PENDING",
+            SENSOR_ROM => "SENSOR_ROM",
+            DUPLICATE_SENSOR_ROM => "DUPLICATE_SENSOR_ROM",
+            VOLUMETRIC_RANGE => "VOLUMETRIC_RANGE",
+            VOLUMETRIC_TEMPERATURE => "VOLUMETRIC_TEMPERATURE",
+            VOLUMETRIC_MAX_CORRECTION => "VOLUMETRIC_MAX_CORRECTION",
             _ => "unknown",
         }
     }
@@ -171,6 +204,13 @@ pub mod result {
             ImageError::SectionLength { .. } => SECTION_LENGTH,
             ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
             ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
+            ImageError::BadSensorRom { .. } => SENSOR_ROM,
+            ImageError::DuplicateSensorRom { .. } => DUPLICATE_SENSOR_ROM,
+            ImageError::VolumetricAxisSlot { .. }
+            | ImageError::VolumetricStroke { .. }
+            | ImageError::VolumetricTool { .. } => VOLUMETRIC_RANGE,
+            ImageError::VolumetricTemperature { .. } => VOLUMETRIC_TEMPERATURE,
+            ImageError::VolumetricMaxCorrection { .. } => VOLUMETRIC_MAX_CORRECTION,
         }
     }
 }
@@ -227,6 +267,10 @@ pub enum Command {
     TestPanic,
     /// Command 9 (feature `test-faults`): stall the measurement loop.
     TestStall,
+    /// Command 10: take a reference sample and keep it.
+    KeepReference,
+    /// Command 11: forget the kept reference.
+    ForgetReference,
 }
 
 pub struct Holding {
@@ -234,6 +278,10 @@ pub struct Holding {
     pub baud: u32,
     pub spindle_rpm: u16,
     pub positions: [i32; MAX_AXES],
+    /// Tool length, µm (HR_TOOL_LENGTH).
+    pub tool_length_um: i32,
+    /// The PLC has written positions (or the tool length) since boot.
+    pub positions_written: bool,
     /// ms time of the PLC's last write of speed or positions.
     pub plc_written_ms: Option<u64>,
     pub clamp: [u16; MAX_DIRECTIONS],
@@ -255,6 +303,8 @@ impl Holding {
             baud,
             spindle_rpm: 0,
             positions: [0; MAX_AXES],
+            tool_length_um: 0,
+            positions_written: false,
             plc_written_ms: None,
             clamp: [u16::MAX; MAX_DIRECTIONS],
             rate: [u16::MAX; MAX_DIRECTIONS],
@@ -299,6 +349,8 @@ impl Holding {
             HR_BAUD => (self.baud / 100) as u16,
             HR_SPINDLE => self.spindle_rpm,
             a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => pos(a)?,
+            HR_TOOL_LENGTH => (self.tool_length_um as u32 >> 16) as u16,
+            a if a == HR_TOOL_LENGTH + 1 => self.tool_length_um as u16,
             a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
                 self.clamp[usize::from(a - HR_CLAMP)]
             }
@@ -350,17 +402,22 @@ impl Holding {
                 command = c;
             }
         }
-        if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&addr)
-            || addr <= HR_SPINDLE && end > HR_SPINDLE
-        {
+        let touches = |first: u16, n: u16| addr < first + n && end > first;
+        let geometry = touches(HR_POSITIONS, 2 * MAX_AXES as u16) || touches(HR_TOOL_LENGTH, 2);
+        if geometry || touches(HR_SPINDLE, 1) {
             self.plc_written_ms = Some(now_ms);
+        }
+        if geometry {
+            self.positions_written = true;
         }
         Ok(command)
     }
 
-    /// Registers the PLC writes in normal operation (spindle speed, positions).
+    /// Registers the PLC writes in normal operation (spindle speed, positions, tool length).
     fn plc_register(a: u16) -> bool {
-        a == HR_SPINDLE || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+        a == HR_SPINDLE
+            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+            || (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a)
     }
 
     /// Writes that change what a commit in progress stores.
@@ -373,6 +430,8 @@ impl Holding {
                         | CMD_ROLLBACK_MODEL
                         | CMD_CLEAR_STAGING
                         | CMD_RESTORE_DEFAULTS
+                        | CMD_KEEP_REFERENCE
+                        | CMD_FORGET_REFERENCE
                 ))
             || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
@@ -386,7 +445,7 @@ impl Holding {
         let writable = matches!(
             a,
             HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN
-        ) || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+        ) || Self::plc_register(a)
             || (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
@@ -413,6 +472,8 @@ impl Holding {
                         | CMD_ROLLBACK_MODEL
                         | CMD_CLEAR_FAULT
                         | CMD_RESTORE_DEFAULTS
+                        | CMD_KEEP_REFERENCE
+                        | CMD_FORGET_REFERENCE
                 ) || (cfg!(feature = "test-faults") && matches!(v, CMD_TEST_PANIC | CMD_TEST_STALL))
             }
             HR_UNIT => (1..=247).contains(&v),
@@ -449,6 +510,14 @@ impl Holding {
                 let p = &mut self.positions[k / 2];
                 let u = *p as u32;
                 *p = if k % 2 == 0 {
+                    ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
+                } else {
+                    ((u & 0xFFFF_0000) | u32::from(v)) as i32
+                };
+            }
+            a if (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a) => {
+                let u = self.tool_length_um as u32;
+                self.tool_length_um = if a == HR_TOOL_LENGTH {
                     ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
                 } else {
                     ((u & 0xFFFF_0000) | u32::from(v)) as i32
@@ -506,6 +575,8 @@ impl Holding {
             CMD_RESTORE_DEFAULTS => Ok(Command::RestoreDefaults),
             CMD_TEST_PANIC => Ok(Command::TestPanic),
             CMD_TEST_STALL => Ok(Command::TestStall),
+            CMD_KEEP_REFERENCE => Ok(Command::KeepReference),
+            CMD_FORGET_REFERENCE => Ok(Command::ForgetReference),
             _ => {
                 self.unlocked_until_ms = None;
                 Ok(Command::None)

@@ -5,7 +5,8 @@
 //! 32-bit values: high word first (register n = bits 31..16).
 
 use thermocomp_core::eval::AxisPair;
-use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
+use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_SENSORS};
+use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 
 use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
@@ -48,9 +49,28 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register: the end of the board-safety block (158–159 and
-/// 169, 174–179 reserved, read 0).
-pub const IR_LAST: u16 = IR_SAFETY_LAST;
+/// Last input register: the end of the sensor-identity block (158–159,
+/// 169, 174–179, 196–199 and 293–299 reserved, read 0).
+pub const IR_LAST: u16 = IR_IDENTITY_LAST;
+
+/// "Not available" for 32-bit measurements: reads 0x8000, 0x0000 (i32::MIN).
+pub const NOT_AVAILABLE_32: i32 = i32::MIN;
+/// The volumetric correction (image section kind 3, issue 14): x, y, z,
+/// int32 0.1 µm each ([`NOT_AVAILABLE_32`] unless status bit 0), 180–185.
+pub const IR_VOL_CORRECTION: u16 = 180;
+/// Volumetric status bits ([`thermocomp_core::volumetric::vstatus`]).
+pub const IR_VOL_STATUS: u16 = 186;
+/// Terms of the image's volumetric section (0: none).
+pub const IR_VOL_TERMS: u16 = 187;
+/// Tool length the correction used (after clamping), int32 µm.
+pub const IR_VOL_TOOL: u16 = 188;
+/// Temperatures the correction used, per section sensor, int16 1/16 °C
+/// (the sensor's own unit; 0x8000 none), 190–193.
+pub const IR_VOL_TEMPS: u16 = 190;
+/// Evaluations since boot, u32 (a PLC that wrote positions waits for it to move).
+pub const IR_VOL_SEQUENCE: u16 = 194;
+/// Last register of the volumetric block (180–199).
+pub const IR_VOL_LAST: u16 = 199;
 
 /// Status bit 9: a fault record from before the last reset is held (input
 /// registers 160–168) until command 6 clears it.
@@ -71,6 +91,25 @@ pub const IR_MAP_MISSING: u16 = 170;
 pub const IR_MAP_ADDED: u16 = 172;
 /// Last register of the board-safety block (160–179).
 pub const IR_SAFETY_LAST: u16 = 179;
+
+/// Sensor identity block (200–299). ROM code of each channel's sensor, 4
+/// registers per channel (channel c at 200 + 4c), the 8 bytes in bus order
+/// (family code first: high byte of the first register, CRC last); all
+/// zero for an unmapped channel.
+pub const IR_CHANNEL_ROMS: u16 = 200;
+/// The channel each model sensor reads, two per register (sensor 2k in the
+/// high byte, 2k + 1 in the low byte; 0xFF: none — its ROM is not in the
+/// channel map, or no such sensor), registers 280–289.
+pub const IR_SENSOR_CHANNELS: u16 = 280;
+/// Model sensors with no answering sensor (u32, bit i = model sensor i:
+/// its ROM is not on the bus or its channel does not answer); their inputs
+/// are invalid (degraded mode or held), never another sensor's value.
+pub const IR_SENSORS_MISSING: u16 = 290;
+/// The kept reference (commands 10/11): 0 none, 1 kept and in use, 2 to be
+/// taken at the next cycle with every model sensor fresh.
+pub const IR_REFERENCE_STATE: u16 = 292;
+/// Last register of the identity block (293–299 reserved, read 0).
+pub const IR_IDENTITY_LAST: u16 = 299;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Snapshot {
@@ -102,6 +141,43 @@ pub struct Snapshot {
     pub map_added: u32,
     /// Per direction, the model serving it ([`thermocomp_core::compensator::ACTIVE_NONE`]: none).
     pub active: [u8; MAX_DIRECTIONS],
+    /// ROM code per channel, bus order (all zero: unmapped).
+    pub roms: [[u8; 8]; MAX_CHANNELS],
+    /// Channel of each model sensor (0xFF: none).
+    pub sensor_channels: [u8; MAX_SENSORS],
+    /// Model sensors with no answering sensor (bit per model sensor).
+    pub sensors_missing: u32,
+    /// 0 no kept reference, 1 kept, 2 pending.
+    pub reference_state: u16,
+    /// The volumetric correction (input registers 180–199).
+    pub vol: VolSnapshot,
+}
+
+/// The volumetric block of the snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VolSnapshot {
+    /// 0.1 µm; [`NOT_AVAILABLE_32`] unless `status` has VALID.
+    pub corrections: [i32; 3],
+    pub status: u16,
+    pub terms: u16,
+    /// µm; [`NOT_AVAILABLE_32`] unless VALID.
+    pub tool_um: i32,
+    /// 1/16 °C per section sensor; `None`: no value (or no such sensor).
+    pub temps: [Option<i16>; MAX_VOL_SENSORS],
+    pub sequence: u32,
+}
+
+impl Default for VolSnapshot {
+    fn default() -> Self {
+        VolSnapshot {
+            corrections: [NOT_AVAILABLE_32; 3],
+            status: thermocomp_core::volumetric::vstatus::NO_SECTION,
+            terms: 0,
+            tool_um: NOT_AVAILABLE_32,
+            temps: [None; MAX_VOL_SENSORS],
+            sequence: 0,
+        }
+    }
 }
 
 impl Default for Snapshot {
@@ -128,6 +204,11 @@ impl Default for Snapshot {
             map_missing: 0,
             map_added: 0,
             active: [thermocomp_core::compensator::ACTIVE_NONE; MAX_DIRECTIONS],
+            roms: [[0; 8]; MAX_CHANNELS],
+            sensor_channels: [0xFF; MAX_SENSORS],
+            sensors_missing: 0,
+            reference_state: 0,
+            vol: VolSnapshot::default(),
         }
     }
 }
@@ -162,6 +243,12 @@ impl Snapshot {
     pub fn input_register(&self, addr: u16) -> Option<u16> {
         if (IR_FAULT_KIND..=IR_SAFETY_LAST).contains(&addr) {
             return Some(self.safety_register(addr));
+        }
+        if (IR_CHANNEL_ROMS..=IR_IDENTITY_LAST).contains(&addr) {
+            return Some(self.identity_register(addr));
+        }
+        if (IR_VOL_CORRECTION..=IR_VOL_LAST).contains(&addr) {
+            return Some(self.vol_register(addr));
         }
         if addr > IR_LAST {
             return None;
@@ -260,6 +347,49 @@ impl Snapshot {
 }
 
 impl Snapshot {
+    /// Input registers 200–299: sensor identity and the kept reference.
+    fn identity_register(&self, addr: u16) -> u16 {
+        let k = usize::from(addr.saturating_sub(IR_CHANNEL_ROMS));
+        if let Some(rom) = self.roms.get(k / 4) {
+            let i = 2 * (k % 4);
+            return u16::from_be_bytes([rom[i], rom[i + 1]]);
+        }
+        let k = usize::from(addr.saturating_sub(IR_SENSOR_CHANNELS));
+        if addr >= IR_SENSOR_CHANNELS && k < MAX_SENSORS / 2 {
+            let ch = |i: usize| self.sensor_channels.get(i).copied().unwrap_or(0xFF);
+            return u16::from_be_bytes([ch(2 * k), ch(2 * k + 1)]);
+        }
+        if let Some(w) = word32(addr, IR_SENSORS_MISSING, self.sensors_missing) {
+            return w;
+        }
+        if addr == IR_REFERENCE_STATE {
+            return self.reference_state;
+        }
+        0
+    }
+
+    /// Input registers 180–199: the volumetric correction.
+    fn vol_register(&self, addr: u16) -> u16 {
+        let v = &self.vol;
+        let k = addr.wrapping_sub(IR_VOL_CORRECTION);
+        if k < 6 {
+            let c = v.corrections[usize::from(k / 2) % 3] as u32;
+            return if k.is_multiple_of(2) { hi(c) } else { lo(c) };
+        }
+        if addr == IR_VOL_STATUS {
+            v.status
+        } else if addr == IR_VOL_TERMS {
+            v.terms
+        } else if let Some(w) = word32(addr, IR_VOL_TOOL, v.tool_um as u32) {
+            w
+        } else if (IR_VOL_TEMPS..IR_VOL_TEMPS + MAX_VOL_SENSORS as u16).contains(&addr) {
+            v.temps[usize::from(addr - IR_VOL_TEMPS) % MAX_VOL_SENSORS]
+                .map_or(NOT_AVAILABLE, |t| t as u16)
+        } else {
+            word32(addr, IR_VOL_SEQUENCE, v.sequence).unwrap_or_default()
+        }
+    }
+
     /// Input registers 160–179: the fault record (0 without one).
     fn safety_register(&self, addr: u16) -> u16 {
         if let Some(w) = word32(addr, IR_MAP_MISSING, self.map_missing) {

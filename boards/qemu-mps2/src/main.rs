@@ -20,7 +20,7 @@
 //!   sensor by a new one (another ROM code) at that trace row. A fault in
 //!   this mode resets the board (fault record, as in the field); the CMSDK
 //!   watchdog runs.
-//! - `bench [golden.bin]`: instruction counts (run QEMU with `-icount
+//! - `bench [golden.bin] [model.img]`: instruction counts (run QEMU with `-icount
 //!   shift=0`) of the calibration loop and, with the golden file's model, of
 //!   one full evaluation and one compensator step, printed as one JSON line.
 #![no_std]
@@ -765,15 +765,52 @@ async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static st
     }
     // A fitted model exported by tcomp (e.g. the FL_THERMAL demo model).
     if let Some(model) = model_path.and_then(load_model) {
+        // Its volumetric section (issue 14), if it has one.
+        let vol = model
+            .volumetric
+            .as_ref()
+            .map(|v| (bench_volumetric(v), v.terms.len(), v.sensors.len()));
         let (eval, step, _, _) = bench_model(model);
         let _ = write!(
             line,
             ",\"image_model_evaluate_insn_x100\":{},\"image_model_step_insn_x100\":{}",
             eval, step
         );
+        if let Some((insn, terms, sensors)) = vol {
+            let _ = write!(
+                line,
+                ",\"volumetric_evaluate_insn_x100\":{},\"volumetric_terms\":{},\"volumetric_sensors\":{}",
+                insn, terms, sensors
+            );
+        }
     }
     log!("{}}}", line);
     semihost::exit(exit_code::OK)
+}
+
+/// Instructions of one volumetric evaluation (section kind 3: every term,
+/// x, y and z) at a third of each stroke, 200 mm of tool and every sensor
+/// 5 K above its reference, averaged over many calls.
+fn bench_volumetric(v: &thermocomp_core::volumetric::Volumetric) -> u64 {
+    const RUNS: u32 = 500;
+    let mut positions = [0i32; MAX_AXES];
+    for k in 0..3 {
+        if let Some(p) = positions.get_mut(usize::from(v.slots[k])) {
+            *p = v.origin_um[k] + v.stroke_um[k] / 3;
+        }
+    }
+    let temps: heapless::Vec<Option<i32>, { thermocomp_core::volumetric::MAX_VOL_SENSORS }> = v
+        .sensors
+        .iter()
+        .map(|s| Some(s.sensor.ref_temp + 80))
+        .collect();
+    cycles::instructions_x100(RUNS, || {
+        core::hint::black_box(v.evaluate(
+            core::hint::black_box(&positions),
+            core::hint::black_box(200_000),
+            core::hint::black_box(&temps),
+        ));
+    })
 }
 
 /// Instructions of one full evaluation (all networks and tables) and of one

@@ -4,6 +4,8 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
+use super::stats::r4;
+
 use super::{diagnose, Options};
 use crate::sim::{sim_run, Duty, Effect, Gauss, Machine, SimOptions, EFFECT_NAMES};
 
@@ -270,14 +272,9 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
 /// the separate truth model (`truth.rs`): each testable effect kind at
 /// random strengths, plus clean cases, one 8 h run (or `hours`) per case.
 pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
-    use super::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
-    let mut g = Gauss::new(cfg.seed ^ 0x5eed);
-    let n = cfg.cases.max(6);
-    let n_clean = (n / 6).max(1);
-    let mut plan: Vec<Option<&str>> = (0..n - n_clean)
-        .map(|i| Some(TRUTH_EFFECTS[i % TRUTH_EFFECTS.len()]))
-        .collect();
-    plan.extend(std::iter::repeat_n(None, n_clean));
+    use super::truth::TruthEffect;
+    let cases = open_cases(cfg);
+    let n_clean = cases.iter().filter(|c| c.kind.is_none()).count();
     let opt = Options {
         threads: cfg.threads,
         ..Options::default()
@@ -286,31 +283,19 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let (mut ok, mut n_eff, mut false_alarms) = (0usize, 0usize, 0usize);
     let (mut shrink_c, mut shrink_um, mut times) = (Vec::new(), Vec::new(), Vec::new());
     let mut misses = Vec::new();
-    for (ci, kind) in plan.iter().enumerate() {
-        // two runs of half the case's hours: a light and a heavy duty
-        let half = cfg.hours / 2.0;
-        let effects: Vec<TruthEffect> = kind
-            .iter()
-            .map(|k| TruthEffect::random(k, &mut g, half))
-            .collect();
-        let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
-            .iter()
-            .enumerate()
-            .map(|(ri, &(lo, hi))| {
-                let duty = truth_duty(&mut g, half, lo, hi);
-                let seed = 5000 + 2 * ci as u64 + ri as u64;
-                // a sensor fault happens once: in the second run only
-                let eff: Vec<TruthEffect> = effects
-                    .iter()
-                    .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
-                    .cloned()
-                    .collect();
-                (
-                    format!("open{ci}-{ri}"),
-                    simulate(&duty, &eff, half, cfg.sample_period_s, seed).run,
-                )
-            })
-            .collect();
+    let mut visibility: std::collections::BTreeMap<String, Vec<(f64, f64, bool)>> =
+        Default::default();
+    let mut redraws = 0usize;
+    let n_cases = cases.len();
+    for (ci, case) in cases.into_iter().enumerate() {
+        let OpenCase {
+            kind,
+            effects,
+            runs,
+            visibility: vis,
+            redrawn,
+        } = case;
+        redraws += redrawn;
         let t = std::time::Instant::now();
         let d = super::fitmode::diagnose_fit(&runs, &opt)?;
         times.push(t.elapsed().as_secs_f64());
@@ -334,6 +319,10 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             Some(k) => {
                 n_eff += 1;
                 ok += correct as usize;
+                visibility
+                    .entry(k.to_string())
+                    .or_default()
+                    .push((vis.max_c, vis.max_um, correct));
                 let e = per.entry(k.to_string()).or_default();
                 e.0 += 1;
                 e.1 += correct as usize;
@@ -358,6 +347,8 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         if !correct {
             misses.push(json!({
                 "case": ci,
+                "effect_rms_c": r4(vis.max_c),
+                "effect_rms_um": r4(vis.max_um),
                 "truth": effects.iter().map(TruthEffect::describe).collect::<Vec<_>>(),
                 "got": d.findings.iter().map(|f| json!({"name": f.name, "params": f.params_json()})).collect::<Vec<_>>(),
             }));
@@ -379,7 +370,9 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
                 );
             }
             eprintln!(
-                "open {ci:3} truth {:50} got {:40} {} ({:.2} s)",
+                "open {ci:3} effect rms {:.3} °C {:.3} µm truth {:50} got {:40} {} ({:.2} s)",
+                vis.max_c,
+                vis.max_um,
                 effects
                     .first()
                     .map_or("clean".into(), TruthEffect::describe),
@@ -420,7 +413,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let testable = ok_t as f64 / n_t.max(1) as f64;
     Ok(json!({
         "mode": "diagnose fit (no machine file), truth model diagnose/truth.rs, two runs per case (light and heavy duty)",
-        "cases": plan.len(),
+        "cases": n_cases,
         "effect_cases": n_eff,
         "clean_cases": n_clean,
         "top1_rate": ok as f64 / n_eff.max(1) as f64,
@@ -434,7 +427,90 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         "hours_per_case": cfg.hours,
         "sample_period_s": cfg.sample_period_s,
         "misses": misses,
+        "effect_visibility": visibility_json(&visibility),
+        "visibility_rule": format!("an effect case is drawn again (at most 20 times) until its data differ from the same runs without it by ≥ {VISIBLE_C} °C RMS on a sensor or ≥ {VISIBLE_UM} µm RMS on a probe"),
+        "redrawn_effects": redraws,
     }))
+}
+
+/// How far an effect moves a case's data: the largest RMS difference
+/// (over channels and runs) between the run with the effect and the same
+/// run (same duty, same noise) without it, in °C and in µm.
+#[derive(Default)]
+pub struct Visibility {
+    pub max_c: f64,
+    pub max_um: f64,
+}
+
+/// Smallest RMS change an effect case must make on some sensor [°C]
+/// (≈ 4 × the truth model's sensor noise: 0.02 °C plus 1/16 °C steps) or
+/// on some probe [µm] (2.5 × its 0.2 µm noise).
+pub const VISIBLE_C: f64 = 0.1;
+pub const VISIBLE_UM: f64 = 0.5;
+
+impl Visibility {
+    fn visible(&self) -> bool {
+        self.max_c >= VISIBLE_C || self.max_um >= VISIBLE_UM
+    }
+
+    fn add(&mut self, with: &crate::runcsv::Run, clean: &crate::runcsv::Run) {
+        for name in &with.columns {
+            let is_t = crate::runcsv::is_temperature_column(name) && name != "T_ambient";
+            let is_d = crate::runcsv::is_error_column(name);
+            if !is_t && !is_d {
+                continue;
+            }
+            let (Some(a), Some(b)) = (with.col(name), clean.col(name)) else {
+                continue;
+            };
+            let (s, n) = a
+                .iter()
+                .zip(b)
+                .filter_map(|(x, y)| Some((x.as_ref()? - y.as_ref()?).powi(2)))
+                .fold((0.0, 0usize), |acc, d| (acc.0 + d, acc.1 + 1));
+            let rms = if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
+            if is_t {
+                self.max_c = self.max_c.max(rms);
+            } else {
+                self.max_um = self.max_um.max(rms);
+            }
+        }
+    }
+}
+
+/// Per effect kind: median effect RMS (°C, µm) of the cases found and missed.
+fn visibility_json(v: &std::collections::BTreeMap<String, Vec<(f64, f64, bool)>>) -> Value {
+    let median = |mut x: Vec<f64>| -> Option<Value> {
+        if x.is_empty() {
+            return None;
+        }
+        x.sort_by(|a, b| a.total_cmp(b));
+        Some(r4(x[x.len() / 2]))
+    };
+    v.iter()
+        .map(|(k, cases)| {
+            let pick = |found: bool, um: bool| {
+                median(
+                    cases
+                        .iter()
+                        .filter(|c| c.2 == found)
+                        .map(|c| if um { c.1 } else { c.0 })
+                        .collect(),
+                )
+            };
+            (
+                k.clone(),
+                json!({
+                    "rule": "largest RMS difference over channels and runs between the case's run and the same run without the effect",
+                    "found_median_rms_c": pick(true, false),
+                    "found_median_rms_um": pick(true, true),
+                    "missed_median_rms_c": pick(false, false),
+                    "missed_median_rms_um": pick(false, true),
+                }),
+            )
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
 }
 
 /// One open-world case: the truth effect kind (None = clean), the effects
@@ -443,9 +519,13 @@ pub struct OpenCase {
     pub kind: Option<&'static str>,
     pub effects: Vec<super::truth::TruthEffect>,
     pub runs: Vec<(String, crate::runcsv::Run)>,
+    /// How far the effect moves the data (against the same runs without it).
+    pub visibility: Visibility,
+    /// Draws rejected as invisible before this one.
+    pub redrawn: usize,
 }
 
-/// The open-world cases of `run_open_bench` (same seed, same cases).
+/// The open-world cases both open benches diagnose (same seed, same cases).
 pub fn open_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
     use super::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
     let mut g = Gauss::new(cfg.seed ^ 0x5eed);
@@ -455,38 +535,55 @@ pub fn open_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
         .map(|i| Some(TRUTH_EFFECTS[i % TRUTH_EFFECTS.len()]))
         .collect();
     plan.extend(std::iter::repeat_n(None, n_clean));
-    plan.into_iter()
-        .enumerate()
-        .map(|(ci, kind)| {
-            let half = cfg.hours / 2.0;
+    let mut cases = Vec::with_capacity(plan.len());
+    for (ci, kind) in plan.into_iter().enumerate() {
+        // two runs of half the case's hours: a light and a heavy duty
+        let half = cfg.hours / 2.0;
+        // an effect case must move its data by a visible amount somewhere
+        // (see `VISIBLE_C`): drawn again when it does not (a lag on a sensor
+        // whose body changes slowly reads like the body itself)
+        let mut redrawn = 0usize;
+        loop {
             let effects: Vec<TruthEffect> = kind
                 .iter()
                 .map(|k| TruthEffect::random(k, &mut g, half))
                 .collect();
-            let runs = [(0.15, 0.55), (0.5, 1.0)]
+            let mut visibility = Visibility::default();
+            let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
                 .iter()
                 .enumerate()
                 .map(|(ri, &(lo, hi))| {
                     let duty = truth_duty(&mut g, half, lo, hi);
                     let seed = 5000 + 2 * ci as u64 + ri as u64;
+                    // a sensor fault happens once: in the second run only
                     let eff: Vec<TruthEffect> = effects
                         .iter()
                         .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
                         .cloned()
                         .collect();
-                    (
-                        format!("open{ci}-{ri}"),
-                        simulate(&duty, &eff, half, cfg.sample_period_s, seed).run,
-                    )
+                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
+                    if !eff.is_empty() {
+                        // the same run without the effect (same duty, same noise)
+                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
+                        visibility.add(&run, &clean);
+                    }
+                    (format!("open{ci}-{ri}"), run)
                 })
                 .collect();
-            OpenCase {
-                kind,
-                effects,
-                runs,
+            if effects.is_empty() || visibility.visible() || redrawn >= 20 {
+                cases.push(OpenCase {
+                    kind,
+                    effects,
+                    runs,
+                    visibility,
+                    redrawn,
+                });
+                break;
             }
-        })
-        .collect()
+            redrawn += 1;
+        }
+    }
+    cases
 }
 
 /// Whether a diagnosis' selected effect names the truth effect (and, for

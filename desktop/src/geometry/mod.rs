@@ -10,6 +10,7 @@ pub use errors::{Axis, Component, GeometricErrors, Poly, Squareness, Term};
 pub use kinematics::{
     sensitivity, tool_tip_error_exact, tool_tip_error_linear, Sensitivity, Structure,
 };
+pub mod board;
 pub mod check;
 pub mod five_axis;
 pub mod identify;

@@ -19,7 +19,7 @@
 //! (0, 0, L): the usual tool-length offset of the CNC.
 
 use anyhow::{bail, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::errors::GeometricErrors;
 use super::kinematics::{tool_tip_error_linear, Structure};
@@ -60,7 +60,7 @@ fn monomial_value(m: &Monomial, u: [f64; 3], l_m: f64) -> f64 {
 
 /// One polynomial term: coefficient per direction [µm], for the constant
 /// part or per kelvin of one sensor.
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct VolTerm {
     pub monomial: Monomial,
     /// `None`: the constant part; `Some(i)`: per kelvin of sensor i.
@@ -68,7 +68,7 @@ pub struct VolTerm {
     pub coef_um: [f64; 3],
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct VolumetricPoly {
     pub structure: String,
     pub stroke_mm: [f64; 3],
