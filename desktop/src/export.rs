@@ -213,6 +213,9 @@ pub enum Choice {
     /// The lagged MLR plus its residual networks (`hybrid`): a table and
     /// networks of the same direction, which the board sums.
     Hybrid,
+    /// `w·mlr + (1−w)·ga-bpn` (`blend`, `w` from the fit): the lagged MLR's
+    /// table scaled by `w` and the networks' output layers by `(1−w)/k`.
+    Blend,
 }
 
 impl Choice {
@@ -222,7 +225,10 @@ impl Choice {
             "mlr" => Choice::Mlr,
             "mlr-static" => Choice::MlrStatic,
             "hybrid" => Choice::Hybrid,
-            other => anyhow::bail!("unknown model `{other}` (ga-bpn, hybrid, mlr or mlr-static)"),
+            "blend" => Choice::Blend,
+            other => {
+                anyhow::bail!("unknown model `{other}` (ga-bpn, blend, hybrid, mlr or mlr-static)")
+            }
         })
     }
 }
@@ -399,8 +405,27 @@ pub fn float_model_from_fit(
             max_correction_um: opts.max_correction_um,
             max_rate_um_per_s: opts.max_rate_um_per_s,
         });
+        // Blend: the table's share `w`, the networks' `1 − w`.
+        let (w_table, w_nets) = match choice {
+            Choice::Blend => {
+                let w = *file.blend.get(ch).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no blend weight for channel {ch} in the fit file (fit with --blend)"
+                    )
+                })?;
+                anyhow::ensure!(
+                    (0.0..=1.0).contains(&w),
+                    "channel {ch}: blend weight {w} is outside [0, 1]"
+                );
+                (w, 1.0 - w)
+            }
+            _ => (1.0, 1.0),
+        };
         let members: Vec<_> = match choice {
             Choice::Net => file.nets.iter().filter(|n| &n.channel == ch).collect(),
+            Choice::Blend if w_nets > 0.0 => {
+                file.nets.iter().filter(|n| &n.channel == ch).collect()
+            }
             Choice::Hybrid => file
                 .hybrid_nets
                 .iter()
@@ -410,17 +435,20 @@ pub fn float_model_from_fit(
         };
         let mlr = match choice {
             Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
-            Choice::Mlr | Choice::Hybrid => file.mlr.iter().find(|m| &m.channel == ch),
+            Choice::Mlr | Choice::Hybrid | Choice::Blend => {
+                file.mlr.iter().find(|m| &m.channel == ch)
+            }
             Choice::Net => None,
         };
-        if matches!(choice, Choice::Net | Choice::Hybrid) {
+        let blend_nets = choice == Choice::Blend && w_nets > 0.0;
+        if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
             if members.is_empty() {
                 anyhow::bail!(
                     "no fitted {} network for channel {ch} (fit without --mlr-only)",
-                    if choice == Choice::Hybrid {
-                        "hybrid"
-                    } else {
-                        "ga-bpn"
+                    match choice {
+                        Choice::Hybrid => "hybrid",
+                        Choice::Blend => "blend",
+                        _ => "ga-bpn",
                     }
                 );
             }
@@ -430,8 +458,9 @@ pub fn float_model_from_fit(
                     members.len()
                 );
             }
-            // The ensemble's mean: each member's output layer scaled by 1/k.
-            let k = members.len() as f64;
+            // The ensemble's mean: each member's output layer scaled by 1/k
+            // (and by the blend's 1 − w).
+            let k = members.len() as f64 / w_nets;
             for n in members {
                 if n.features.len() > MAX_NET_INPUTS {
                     anyhow::bail!(
@@ -467,7 +496,8 @@ pub fn float_model_from_fit(
                 });
             }
         }
-        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) {
+        let blend_table = choice == Choice::Blend && w_table > 0.0;
+        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
             let Some(m) = mlr else {
                 anyhow::bail!("no fitted {choice:?} model for channel {ch}");
             };
@@ -477,9 +507,10 @@ pub fn float_model_from_fit(
                 );
             }
             let mut terms = vec![];
-            let mut c0 = m.c0;
+            let mut c0 = m.c0 * w_table;
             for (f, coef) in m.features.iter().zip(&m.coef) {
                 let (i, a, c) = input_of(f, &mut model)?;
+                let coef = coef * w_table;
                 c0 += coef * c;
                 terms.push(FloatTerm {
                     coef_um: coef * a,

@@ -62,6 +62,8 @@ fn finds_a_sensor_offset_on_the_right_sensor() {
         vec![Effect::SensorOffset {
             sensor: "T07".into(),
             offset_c: -0.8,
+            at_s: 0.0,
+            run: None,
         }],
         12,
     );
@@ -88,10 +90,20 @@ fn claims_nothing_on_clean_runs() {
 }
 
 #[test]
-fn two_runs_hold_out_the_second() {
+fn two_runs_hold_out_the_end_of_every_hour_of_each() {
     let m = turning();
     let a = run_with(&m, vec![Effect::Convection { h_w_per_m2k: 12.0 }], 31);
     let b = run_with(&m, vec![Effect::Convection { h_w_per_m2k: 12.0 }], 32);
+    let runs = [("a".to_string(), a.clone()), ("b".to_string(), b.clone())];
+    let ps = tcomp::diagnose::prepare_all(&m, &runs, &Options::default()).unwrap();
+    for p in &ps {
+        let dt = p.inputs.dt;
+        for (k, held) in p.held.iter().enumerate() {
+            // 20 s rows: minutes 36–60 of every hour are held out
+            let minute = (k as f64 * dt / 60.0) % 60.0;
+            assert_eq!(*held, minute >= 36.0 - 1e-9, "row {k} ({minute} min)");
+        }
+    }
     let d = diagnose(
         &m,
         &[("a".into(), a), ("b".into(), b)],

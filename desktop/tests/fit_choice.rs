@@ -1,10 +1,13 @@
 //! Model choice by blocked time cross-validation on the training rows:
 //! it never reads the validation rows, the hybrid (lagged MLR + networks on
-//! its residual) wins where a drift and a bounded nonlinearity add up, and
-//! dropping a network candidate early never changes the choice.
+//! its residual) wins where a drift and a bounded nonlinearity add up,
+//! dropping a network candidate early never changes the choice, the blend's
+//! weight comes from the out-of-fold predictions (and its export replays on
+//! the board's fixed point as validated), and a network that fails the
+//! latest block is not admissible.
 
 use tcomp::fit::net::NetOpts;
-use tcomp::fit::run::{fit_plan, FeatureChoice, FitConfig, FitReport, Plan};
+use tcomp::fit::run::{choose_model, fit_plan, FeatureChoice, FitConfig, FitReport, Plan};
 use tcomp::fit::*;
 use tcomp::runcsv::Run;
 
@@ -132,6 +135,7 @@ fn the_choice_never_reads_the_validation_rows() {
         features: inputs(),
         net: quick_net(),
         hybrid: true,
+        blend: true,
         ..FitConfig::default()
     };
     let fit = |run: Run| {
@@ -160,6 +164,7 @@ fn the_choice_never_reads_the_validation_rows() {
     assert_eq!(ra.chosen, rb.chosen);
     assert_eq!(ra.model_file, rb.model_file);
     assert!(!ra.model_file.nets.is_empty() && !ra.model_file.hybrid_nets.is_empty());
+    assert!(ra.model_file.blend.contains_key("dx_um"));
 }
 
 #[test]
@@ -254,4 +259,165 @@ fn dropping_a_network_that_cannot_win_keeps_the_choice() {
     assert!(dropped > 0, "{cd:?}");
     // The linear figures do not depend on it.
     assert_eq!(cf["mlr"].rms_um.to_bits(), cd["mlr"].rms_um.to_bits());
+}
+
+#[test]
+fn the_blend_weight_is_the_least_squares_mixture() {
+    let a: Vec<f64> = (0..200).map(|k| (k as f64 * 0.37).sin() * 5.0).collect();
+    let b: Vec<f64> = (0..200)
+        .map(|k| (k as f64 * 0.11).cos() * 3.0 + 1.0)
+        .collect();
+    let w_of = |y: &[f64]| blend_weight(y.iter().zip(&a).zip(&b).map(|((y, a), b)| (y, a, b)));
+    let mix = |w: f64| -> Vec<f64> {
+        a.iter()
+            .zip(&b)
+            .map(|(a, b)| w * a + (1.0 - w) * b)
+            .collect()
+    };
+    assert!((w_of(&mix(0.3)) - 0.3).abs() < 1e-12);
+    assert!((w_of(&mix(0.85)) - 0.85).abs() < 1e-12);
+    assert_eq!(w_of(&a), 1.0);
+    assert_eq!(w_of(&b), 0.0);
+    // Outside [0, 1] it is clamped (the board's table and networks are
+    // never extrapolated past either model).
+    assert_eq!(w_of(&mix(1.7)), 1.0);
+    assert_eq!(w_of(&mix(-0.4)), 0.0);
+    // Noise that neither model explains does not move it far.
+    let noisy: Vec<f64> = mix(0.6)
+        .iter()
+        .enumerate()
+        .map(|(k, v)| v + 0.2 * (((k * 7919) % 101) as f64 / 50.0 - 1.0))
+        .collect();
+    assert!((w_of(&noisy) - 0.6).abs() < 0.02, "{}", w_of(&noisy));
+    // Two models that never differ: all weight on the first (the table).
+    let same = blend_weight(a.iter().zip(&a).zip(&a).map(|((y, a), b)| (y, a, b)));
+    assert_eq!(same, 1.0);
+}
+
+fn blend_fit(nonlinear: bool) -> (Run, FitReport) {
+    let run = drift_and_cycles(nonlinear, 0.0);
+    let plan = Plan::new(vec![run.clone()], vec!["syn".into()], 1, Some((0.7, 1.0))).unwrap();
+    let cfg = FitConfig {
+        split_chrono: Some((0.7, 1.0)),
+        features: inputs(),
+        net: quick_net(),
+        blend: true,
+        ..FitConfig::default()
+    };
+    (run, fit_1thread(&plan, &cfg))
+}
+
+#[test]
+fn the_blend_leans_on_the_model_the_folds_favour() {
+    // Every regime in every time block. A bounded nonlinearity (tanh of
+    // T_b): the network follows it, the MLR cannot, so the out-of-fold
+    // weight leans on the network and the nested blend beats the MLR.
+    let (_, rep) = blend_fit(true);
+    let cv = &rep.inputs[0].cv;
+    let w = cv["blend"].weight.unwrap();
+    assert!(cv["ga-bpn"].rms_um < cv["mlr"].rms_um, "{cv:?}");
+    assert!(w < 0.5, "{cv:?}");
+    assert_eq!(cv["blend"].fold_rms_um.len(), 5);
+    assert_eq!(cv["ga-bpn"].fold_rms_um.len(), 5);
+    assert!(!cv["ga-bpn"].dropped);
+    assert!(cv["blend"].rms_um < cv["mlr"].rms_um, "{cv:?}");
+    assert_eq!(rep.model_file.blend["dx_um"], w);
+    // A linear target: the MLR is exact up to the probe noise, the weight
+    // leans on it.
+    let (_, lin) = blend_fit(false);
+    let cv = &lin.inputs[0].cv;
+    assert!(cv["blend"].weight.unwrap() > 0.5, "{cv:?}");
+    assert_eq!(lin.chosen["dx_um"], "mlr", "{cv:?}");
+}
+
+#[test]
+fn an_exported_blend_replays_on_the_board_as_validated() {
+    let (run, rep) = blend_fit(true);
+    let mut file = rep.model_file.clone();
+    // A weight well inside (0, 1), so both the table and the networks count.
+    file.blend.insert("dx_um".into(), 0.4);
+    let opts = tcomp::export::ExportOptions {
+        choices: tcomp::export::parse_choices("dx_um=blend").unwrap(),
+        ..tcomp::export::ExportOptions::default()
+    };
+    let columns = vec!["T_a".to_string(), "T_b".to_string()];
+    let float = tcomp::export::float_model_from_fit(&file, &columns, &opts).unwrap();
+    // One direction: the MLR's table (terms × 0.4) and the networks
+    // (output layers × 0.6 / k), which the board sums.
+    assert_eq!(float.tables.len(), 1);
+    assert_eq!(float.nets.len(), quick_net().ensemble);
+    let plain = tcomp::export::float_model_from_fit(
+        &file,
+        &columns,
+        &tcomp::export::ExportOptions {
+            choices: tcomp::export::parse_choices("dx_um=mlr").unwrap(),
+            ..tcomp::export::ExportOptions::default()
+        },
+    )
+    .unwrap();
+    for (t, p) in float.tables[0].terms.iter().zip(&plain.tables[0].terms) {
+        assert!((t.coef_um - 0.4 * p.coef_um).abs() <= 1e-12 * p.coef_um.abs().max(1.0));
+    }
+    let (model, _) = float.quantize().unwrap();
+    let mut csv = Vec::new();
+    run.write_to(&mut csv).unwrap();
+    let csv = String::from_utf8(csv).unwrap();
+    let rows = tcomp::replay::replay(&csv, model).unwrap();
+    let blend = Blend::of(&file, "dx_um").unwrap();
+    assert_eq!(blend.w, 0.4);
+    // The fit's own rows and features; the board's prediction per row.
+    let plan = Plan::new(vec![run], vec!["syn".into()], 1, Some((0.7, 1.0))).unwrap();
+    let kinds: Vec<_> = blend
+        .features()
+        .iter()
+        .map(|f| (f.kind.clone(), f.tau_s))
+        .collect();
+    let cache = SeriesCache::new(&plan.runs, kinds).unwrap();
+    let idx: Vec<usize> = (0..blend.features().len()).collect();
+    let mut worst = 0.0f64;
+    let mut n = 0;
+    for segs in [&plan.train, &plan.val] {
+        let s = cache.samples(&plan.runs, segs, &idx, "dx_um").unwrap();
+        for (x, &(_, r)) in s.x.iter().zip(&s.rows) {
+            let out = rows[r].out;
+            assert!(out.status & thermocomp_core::compensator::status::VALID != 0);
+            let board = f64::from(out.predicted[0]) / 10.0;
+            worst = worst.max((board - blend.predict_raw(x)).abs());
+            n += 1;
+        }
+    }
+    assert!(n > 2500, "{n}");
+    // 0.05 µm: the board rounds to 0.1 µm; the rest is the Q8/Q24/Q16
+    // quantisation of the weights and the sigmoid table (≤ 0.02 µm here).
+    eprintln!("blend: worst |board − fit| {worst:.4} µm over {n} rows");
+    assert!(worst <= 0.07, "worst |board − fit| {worst:.4} µm");
+}
+
+#[test]
+fn a_network_that_fails_the_latest_block_is_not_admissible() {
+    use std::collections::BTreeMap;
+    use tcomp::fit::run::{latest_block_rule, CvScore};
+    let sc = |folds: &[f64]| {
+        let rms = (folds.iter().map(|f| f * f).sum::<f64>() / folds.len() as f64).sqrt();
+        CvScore {
+            rms_um: rms,
+            fold_rms_um: folds.to_vec(),
+            ..CvScore::default()
+        }
+    };
+    let mut cv: BTreeMap<String, CvScore> = BTreeMap::new();
+    cv.insert("mlr-static".into(), sc(&[3.0, 3.0, 3.0, 3.0, 9.0]));
+    cv.insert("mlr".into(), sc(&[4.0, 4.0, 4.0, 4.0, 4.0]));
+    // Better pooled, much worse on the latest block: out.
+    cv.insert("ga-bpn".into(), sc(&[1.0, 1.0, 1.0, 1.0, 6.0]));
+    // Within the margin on the latest block: stays.
+    cv.insert("blend".into(), sc(&[2.0, 2.0, 2.0, 2.0, 4.05]));
+    let out = latest_block_rule(&mut cv, 0.02);
+    assert_eq!(out, vec![("ga-bpn".to_string(), 6.0, 4.0)]);
+    assert!(cv.contains_key("blend") && !cv.contains_key("ga-bpn"));
+    assert_eq!(choose_model(&cv, 0.02).as_deref(), Some("blend"));
+    // A hair over the margin is out too.
+    cv.insert("blend".into(), sc(&[2.0, 2.0, 2.0, 2.0, 4.09]));
+    assert_eq!(latest_block_rule(&mut cv, 0.02).len(), 1);
+    assert_eq!(choose_model(&cv, 0.02).as_deref(), Some("mlr"));
 }

@@ -187,7 +187,10 @@ fn each_effect_changes_the_output_in_its_documented_direction() {
     assert!((e.temps[2][last] - base.temps[2][last] - 0.5 * base.t[last] / 3600.0).abs() < 1e-9);
     assert!(e.temps[1][last] > base.temps[1][last] + 0.5);
     // sensor lag: reading behind a rising temperature, same at rest
-    let e = sim_with(&[Effect::SensorLag { tau_s: 300.0 }]);
+    let e = sim_with(&[Effect::SensorLag {
+        tau_s: 300.0,
+        sensor: None,
+    }]);
     assert!(e.temps[0][mid] < base.temps[0][mid] - 0.1);
     assert!((e.temps[0][100] - base.temps[0][100]).abs() < 1e-9);
     // extra bearing heat: no bearing in the two-node machine → use the turning center below
@@ -212,6 +215,8 @@ fn each_effect_changes_the_output_in_its_documented_direction() {
     let e = sim_with(&[Effect::SensorOffset {
         sensor: "T02".into(),
         offset_c: 0.75,
+        at_s: 0.0,
+        run: None,
     }]);
     assert!(e.temps[1]
         .iter()
@@ -228,7 +233,11 @@ fn bearing_nonlinear_heats_the_bearings() {
     let b = simulate(
         &m,
         &inp,
-        &[Effect::BearingNonlinear { k_w: 40.0, p: 2.0 }],
+        &[Effect::BearingNonlinear {
+            k_w: 40.0,
+            p: 2.0,
+            node: None,
+        }],
         1,
     )
     .unwrap();

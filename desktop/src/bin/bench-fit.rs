@@ -166,6 +166,7 @@ fn main() -> Result<()> {
             "chosen_mae_um": rep.chosen.get(ch).and_then(|m| mae(m, ch)),
             "mlr_static_mae_um": mae("mlr-static", ch), "mlr_mae_um": mae("mlr", ch),
             "hybrid_mae_um": mae("hybrid", ch), "ga_bpn_mae_um": mae("ga-bpn", ch),
+            "blend_mae_um": mae("blend", ch),
             "cv": info.map(|i| &i.cv),
             "inputs": info.map(|i| i.features.clone()).unwrap_or_default(),
         }));
@@ -371,8 +372,8 @@ fn main() -> Result<()> {
         "FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)"
     );
     println!(
-        "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
-        "channel", "published", "MLR static", "MLR", "hybrid", "GA-BPN", "chosen"
+        "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
+        "channel", "published", "MLR static", "MLR", "blend", "hybrid", "GA-BPN", "chosen"
     );
     for row in &table {
         let f = |k: &str| {
@@ -381,11 +382,12 @@ fn main() -> Result<()> {
                 .map_or("-".to_string(), |v| format!("{v:.2}"))
         };
         println!(
-            "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8}  {:<10} {}",
+            "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8}  {:<10} {}",
             row["channel"].as_str().unwrap_or(""),
             f("published_seq2seq_attention_mae_um"),
             f("mlr_static_mae_um"),
             f("mlr_mae_um"),
+            f("blend_mae_um"),
             f("hybrid_mae_um"),
             f("ga_bpn_mae_um"),
             row["chosen"].as_str().unwrap_or("-"),

@@ -40,8 +40,15 @@ fn main() -> Result<()> {
                         rate_c_per_h: 0.1,
                         period_h: 24.0,
                     },
-                    Effect::SensorLag { tau_s: 120.0 },
-                    Effect::BearingNonlinear { k_w: 40.0, p: 1.8 },
+                    Effect::SensorLag {
+                        tau_s: 120.0,
+                        sensor: None,
+                    },
+                    Effect::BearingNonlinear {
+                        k_w: 40.0,
+                        p: 1.8,
+                        node: None,
+                    },
                     Effect::Coolant {
                         g_w_per_k: 15.0,
                         offset_c: -2.0,

@@ -71,10 +71,12 @@ pub fn random_effect(g: &mut Gauss, m: &Machine, kind: &str) -> Effect {
         },
         "sensor_lag" => Effect::SensorLag {
             tau_s: (lu(g, 60f64.ln(), 400f64.ln())).exp(),
+            sensor: None,
         },
         "bearing_nonlinear" => Effect::BearingNonlinear {
             k_w: lu(g, 20.0, 80.0),
             p: lu(g, 1.5, 2.0),
+            node: None,
         },
         "coolant" => Effect::Coolant {
             g_w_per_k: (lu(g, 5f64.ln(), 40f64.ln())).exp(),
@@ -94,6 +96,8 @@ pub fn random_effect(g: &mut Gauss, m: &Machine, kind: &str) -> Effect {
             Effect::SensorOffset {
                 sensor: m.sensor_cols[i].clone(),
                 offset_c: sign * lu(g, 0.3, 1.5),
+                at_s: 0.0,
+                run: None,
             }
         }
     }
@@ -268,14 +272,9 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
 /// the separate truth model (`truth.rs`): each testable effect kind at
 /// random strengths, plus clean cases, one 8 h run (or `hours`) per case.
 pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
-    use super::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
-    let mut g = Gauss::new(cfg.seed ^ 0x5eed);
-    let n = cfg.cases.max(6);
-    let n_clean = (n / 6).max(1);
-    let mut plan: Vec<Option<&str>> = (0..n - n_clean)
-        .map(|i| Some(TRUTH_EFFECTS[i % TRUTH_EFFECTS.len()]))
-        .collect();
-    plan.extend(std::iter::repeat_n(None, n_clean));
+    use super::truth::TruthEffect;
+    let cases = open_cases(cfg);
+    let n_clean = cases.iter().filter(|c| c.kind.is_none()).count();
     let opt = Options {
         threads: cfg.threads,
         ..Options::default()
@@ -287,45 +286,15 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let mut visibility: std::collections::BTreeMap<String, Vec<(f64, f64, bool)>> =
         Default::default();
     let mut redraws = 0usize;
-    for (ci, kind) in plan.iter().enumerate() {
-        // two runs of half the case's hours: a light and a heavy duty
-        let half = cfg.hours / 2.0;
-        // an effect case must move its data by a visible amount somewhere
-        // (see `VISIBLE_C`): drawn again when it does not (a lag on a sensor
-        // whose body changes slowly reads like the body itself)
-        let mut redrawn = 0usize;
-        let (effects, runs, vis) = loop {
-            let effects: Vec<TruthEffect> = kind
-                .iter()
-                .map(|k| TruthEffect::random(k, &mut g, half))
-                .collect();
-            let mut vis = Visibility::default();
-            let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
-                .iter()
-                .enumerate()
-                .map(|(ri, &(lo, hi))| {
-                    let duty = truth_duty(&mut g, half, lo, hi);
-                    let seed = 5000 + 2 * ci as u64 + ri as u64;
-                    // a sensor fault happens once: in the second run only
-                    let eff: Vec<TruthEffect> = effects
-                        .iter()
-                        .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
-                        .cloned()
-                        .collect();
-                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
-                    if !eff.is_empty() {
-                        // the same run without the effect (same duty, same noise)
-                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
-                        vis.add(&run, &clean);
-                    }
-                    (format!("open{ci}-{ri}"), run)
-                })
-                .collect();
-            if effects.is_empty() || vis.visible() || redrawn >= 20 {
-                break (effects, runs, vis);
-            }
-            redrawn += 1;
-        };
+    let n_cases = cases.len();
+    for (ci, case) in cases.into_iter().enumerate() {
+        let OpenCase {
+            kind,
+            effects,
+            runs,
+            visibility: vis,
+            redrawn,
+        } = case;
         redraws += redrawn;
         let t = std::time::Instant::now();
         let d = super::fitmode::diagnose_fit(&runs, &opt)?;
@@ -444,7 +413,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let testable = ok_t as f64 / n_t.max(1) as f64;
     Ok(json!({
         "mode": "diagnose fit (no machine file), truth model diagnose/truth.rs, two runs per case (light and heavy duty)",
-        "cases": plan.len(),
+        "cases": n_cases,
         "effect_cases": n_eff,
         "clean_cases": n_clean,
         "top1_rate": ok as f64 / n_eff.max(1) as f64,
@@ -468,9 +437,9 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
 /// (over channels and runs) between the run with the effect and the same
 /// run (same duty, same noise) without it, in °C and in µm.
 #[derive(Default)]
-struct Visibility {
-    max_c: f64,
-    max_um: f64,
+pub struct Visibility {
+    pub max_c: f64,
+    pub max_um: f64,
 }
 
 /// Smallest RMS change an effect case must make on some sensor [°C]
@@ -542,4 +511,209 @@ fn visibility_json(v: &std::collections::BTreeMap<String, Vec<(f64, f64, bool)>>
         })
         .collect::<serde_json::Map<_, _>>()
         .into()
+}
+
+/// One open-world case: the truth effect kind (None = clean), the effects
+/// and the two runs (light and heavy duty), as `run_open_bench` draws them.
+pub struct OpenCase {
+    pub kind: Option<&'static str>,
+    pub effects: Vec<super::truth::TruthEffect>,
+    pub runs: Vec<(String, crate::runcsv::Run)>,
+    /// How far the effect moves the data (against the same runs without it).
+    pub visibility: Visibility,
+    /// Draws rejected as invisible before this one.
+    pub redrawn: usize,
+}
+
+/// The open-world cases both open benches diagnose (same seed, same cases).
+pub fn open_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
+    use super::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
+    let mut g = Gauss::new(cfg.seed ^ 0x5eed);
+    let n = cfg.cases.max(6);
+    let n_clean = (n / 6).max(1);
+    let mut plan: Vec<Option<&'static str>> = (0..n - n_clean)
+        .map(|i| Some(TRUTH_EFFECTS[i % TRUTH_EFFECTS.len()]))
+        .collect();
+    plan.extend(std::iter::repeat_n(None, n_clean));
+    let mut cases = Vec::with_capacity(plan.len());
+    for (ci, kind) in plan.into_iter().enumerate() {
+        // two runs of half the case's hours: a light and a heavy duty
+        let half = cfg.hours / 2.0;
+        // an effect case must move its data by a visible amount somewhere
+        // (see `VISIBLE_C`): drawn again when it does not (a lag on a sensor
+        // whose body changes slowly reads like the body itself)
+        let mut redrawn = 0usize;
+        loop {
+            let effects: Vec<TruthEffect> = kind
+                .iter()
+                .map(|k| TruthEffect::random(k, &mut g, half))
+                .collect();
+            let mut visibility = Visibility::default();
+            let runs: Vec<(String, crate::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
+                .iter()
+                .enumerate()
+                .map(|(ri, &(lo, hi))| {
+                    let duty = truth_duty(&mut g, half, lo, hi);
+                    let seed = 5000 + 2 * ci as u64 + ri as u64;
+                    // a sensor fault happens once: in the second run only
+                    let eff: Vec<TruthEffect> = effects
+                        .iter()
+                        .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                        .cloned()
+                        .collect();
+                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
+                    if !eff.is_empty() {
+                        // the same run without the effect (same duty, same noise)
+                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
+                        visibility.add(&run, &clean);
+                    }
+                    (format!("open{ci}-{ri}"), run)
+                })
+                .collect();
+            if effects.is_empty() || visibility.visible() || redrawn >= 20 {
+                cases.push(OpenCase {
+                    kind,
+                    effects,
+                    runs,
+                    visibility,
+                    redrawn,
+                });
+                break;
+            }
+            redrawn += 1;
+        }
+    }
+    cases
+}
+
+/// Whether a diagnosis' selected effect names the truth effect (and, for
+/// sensor effects, its sensor): the machine-file mode's rule.
+pub fn names_truth(d: &super::Diagnosis, truth: Option<&super::truth::TruthEffect>) -> bool {
+    use super::truth::TruthEffect;
+    let top = d.findings.first();
+    let Some(t) = truth else {
+        return top.is_none();
+    };
+    let Some(f) = top else {
+        return false;
+    };
+    let sensor_is = |i: usize| f.params_json()["sensor"] == format!("T_T{i}").as_str();
+    match t {
+        TruthEffect::SensorStep { sensor, .. } => f.name == "sensor_offset" && sensor_is(*sensor),
+        TruthEffect::SensorLag { sensor, .. } => f.name == "sensor_lag" && sensor_is(*sensor),
+        TruthEffect::ChillerCycling { .. } => f.name == "chiller" || f.name == "coolant",
+        other => f.name == other.diagnosis_name(),
+    }
+}
+
+/// Open-world blind check of `tcomp diagnose` WITH an effect-free machine
+/// file written from the truth machine's design
+/// (`desktop/machines/vertical-mc-truth.toml`): the same cases as
+/// `run_open_bench` (two runs per case, no `coolant_on` column).
+pub fn run_open_machine_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
+    use super::truth::TruthEffect;
+    let opt = Options {
+        threads: cfg.threads,
+        ..Options::default()
+    };
+    let cases = open_cases(cfg);
+    let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+    let (mut ok, mut n_eff, mut false_alarms, mut n_clean) = (0usize, 0usize, 0usize, 0usize);
+    let (mut shrink_c, mut shrink_um, mut times) = (Vec::new(), Vec::new(), Vec::new());
+    let mut misses = Vec::new();
+    for (ci, case) in cases.iter().enumerate() {
+        let t = std::time::Instant::now();
+        let d = diagnose(m, &case.runs, &opt)?;
+        times.push(t.elapsed().as_secs_f64());
+        let truth = case.effects.first();
+        let correct = names_truth(&d, truth);
+        match case.kind {
+            Some(k) => {
+                n_eff += 1;
+                ok += correct as usize;
+                let e = per.entry(k.to_string()).or_default();
+                e.0 += 1;
+                e.1 += correct as usize;
+                let top = d.findings.first();
+                // held-out shrink in each unit (0 when nothing is named)
+                if let Some((b, _)) = d.nominal_gap_c {
+                    let a = top.and_then(|f| f.gap_c).map_or(b, |g| g.1 .0);
+                    if b > 0.0 {
+                        shrink_c.push(1.0 - a / b);
+                    }
+                }
+                if let Some((b, _)) = d.nominal_gap_um {
+                    let a = top.and_then(|f| f.gap_um).map_or(b, |g| g.1 .0);
+                    if b > 0.0 {
+                        shrink_um.push(1.0 - a / b);
+                    }
+                }
+            }
+            None => {
+                n_clean += 1;
+                false_alarms += (!d.findings.is_empty()) as usize;
+            }
+        }
+        if !correct {
+            misses.push(json!({
+                "case": ci,
+                "truth": case.effects.iter().map(TruthEffect::describe).collect::<Vec<_>>(),
+                "got": d.findings.iter().map(|f| json!({"name": f.name, "params": f.params_json()})).collect::<Vec<_>>(),
+            }));
+        }
+        if cfg.verbose {
+            for f in &d.tried {
+                eprintln!(
+                    "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {}",
+                    f.name,
+                    f.m_before,
+                    f.m_after,
+                    f.dbic,
+                    f.gap_um.map(|g| (g.0 .0, g.1 .0)),
+                    f.gap_c.map(|g| (g.0 .0, g.1 .0)),
+                    f.params_json(),
+                );
+            }
+            eprintln!(
+                "machine {ci:3} truth {:50} got {:40} {} ({:.2} s)",
+                truth.map_or("clean".into(), TruthEffect::describe),
+                d.findings
+                    .iter()
+                    .map(|f| format!("{} {}", f.name, f.params_json()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if correct {
+                    "ok"
+                } else if case.kind.is_some() {
+                    "MISS"
+                } else {
+                    "FALSE ALARM"
+                },
+                times.last().copied().unwrap_or(0.0)
+            );
+        }
+    }
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    Ok(json!({
+        "mode": format!("tcomp diagnose {} (effect-free, from the design), truth model diagnose/truth.rs, two runs per case, no coolant_on; held out: the last 40 % of every hour of every run", m.spec.name),
+        "cases": cases.len(),
+        "effect_cases": n_eff,
+        "clean_cases": n_clean,
+        "top1_rate": ok as f64 / n_eff.max(1) as f64,
+        "per_effect": per.iter().map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok}))).collect::<serde_json::Map<_, _>>(),
+        "mean_heldout_gap_shrink_c": mean(&shrink_c),
+        "mean_heldout_gap_shrink_um": mean(&shrink_um),
+        "false_alarms": false_alarms,
+        "mean_diagnosis_seconds": mean(&times),
+        "max_diagnosis_seconds": times.iter().copied().fold(0.0, f64::max),
+        "hours_per_case": cfg.hours,
+        "sample_period_s": cfg.sample_period_s,
+        "misses": misses,
+    }))
 }

@@ -57,7 +57,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     }
     for o in &opt.only {
         anyhow::ensure!(
-            crate::sim::EFFECT_NAMES.contains(&o.as_str()),
+            crate::sim::ALL_EFFECT_NAMES.contains(&o.as_str()),
             "--only: unknown effect `{o}`"
         );
     }

@@ -4,7 +4,7 @@
 use anyhow::Result;
 
 use super::prep::{Kind, Prepared};
-use crate::sim::{simulate, Effect, Machine};
+use crate::sim::{apply_sensor_effects, simulate, Effect, Machine, SimOut};
 
 /// Per (run, channel) sums on the fit rows and the held-out rows.
 #[derive(Clone, Debug)]
@@ -79,14 +79,40 @@ impl Stats {
 pub struct Evaluator<'a> {
     pub m: &'a Machine,
     pub runs: &'a [Prepared],
+    /// The nominal output per run (sensor effects are applied to it
+    /// without re-simulating the network).
+    pub nominal: Vec<SimOut>,
 }
 
 impl<'a> Evaluator<'a> {
+    pub fn new(m: &'a Machine, runs: &'a [Prepared]) -> Result<Evaluator<'a>> {
+        let nominal = runs
+            .iter()
+            .map(|p| simulate(m, &p.inputs, &[], 1))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Evaluator { m, runs, nominal })
+    }
+
     /// Residuals measured − simulated: run → channel → row (NaN where missing).
     pub fn residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
         let mut all = Vec::with_capacity(self.runs.len());
         for p in self.runs {
-            let out = simulate(self.m, &p.inputs, effects, 1)?;
+            // an effect located in one run (a sensor step) acts there only
+            let mine: Vec<Effect> = effects
+                .iter()
+                .filter(|e| match e {
+                    Effect::SensorOffset { run: Some(r), .. } => *r == p.name,
+                    _ => true,
+                })
+                .cloned()
+                .collect();
+            let out = if mine.iter().all(Effect::is_sensor_only) {
+                let mut o = self.nominal[all.len()].clone();
+                apply_sensor_effects(self.m, &mine, &mut o, p.inputs.dt)?;
+                o
+            } else {
+                simulate(self.m, &p.inputs, &mine, 1)?
+            };
             let mut rr = Vec::with_capacity(p.channels.len());
             for c in &p.channels {
                 let sim = match c.kind {
@@ -119,7 +145,7 @@ impl<'a> Evaluator<'a> {
                     if !v.is_finite() {
                         continue;
                     }
-                    if k < p.split {
+                    if p.is_fit(k) {
                         s.sse_fit += v * v;
                         s.n_fit += 1;
                     } else {
@@ -182,6 +208,11 @@ pub fn params_of(kind: &str) -> Vec<Param> {
             p("rate_c_per_h", -1.0, 1.0, false),
         ],
         "sensor_lag" => vec![p("tau_s", 3.0, 2000.0, true)],
+        "chiller" => vec![
+            p("band_c", 0.1, 3.0, false),
+            p("power_w", 50.0, 20000.0, true),
+            p("load_frac", 0.05, 0.95, false),
+        ],
         "bearing_nonlinear" => vec![p("k_w", 0.5, 400.0, true), p("p", 1.1, 3.5, false)],
         "coolant" => vec![
             p("g_w_per_k", 0.3, 150.0, true),
@@ -194,8 +225,9 @@ pub fn params_of(kind: &str) -> Vec<Param> {
     }
 }
 
-/// Build an effect from physical parameter values.
-pub fn build(kind: &str, v: &[f64], sensor: &str) -> Effect {
+/// Build an effect from physical parameter values (`c` places the sensor
+/// effects: which sensor, from when, in which run).
+pub fn build(kind: &str, v: &[f64], c: &Cand) -> Effect {
     match kind {
         "convection" => Effect::Convection { h_w_per_m2k: v[0] },
         "ambient_drift" => Effect::AmbientDrift {
@@ -204,8 +236,20 @@ pub fn build(kind: &str, v: &[f64], sensor: &str) -> Effect {
             rate_c_per_h: v[2],
             period_h: 24.0,
         },
-        "sensor_lag" => Effect::SensorLag { tau_s: v[0] },
-        "bearing_nonlinear" => Effect::BearingNonlinear { k_w: v[0], p: v[1] },
+        "sensor_lag" => Effect::SensorLag {
+            tau_s: v[0],
+            sensor: (!c.sensor.is_empty()).then(|| c.sensor.clone()),
+        },
+        "chiller" => Effect::Chiller {
+            band_c: v[0],
+            power_w: v[1],
+            load_frac: v[2],
+        },
+        "bearing_nonlinear" => Effect::BearingNonlinear {
+            k_w: v[0],
+            p: v[1],
+            node: (!c.node.is_empty()).then(|| c.node.clone()),
+        },
         "coolant" => Effect::Coolant {
             g_w_per_k: v[0],
             offset_c: v[1],
@@ -215,17 +259,44 @@ pub fn build(kind: &str, v: &[f64], sensor: &str) -> Effect {
         "ballscrew" => Effect::Ballscrew { k_w: v[0] },
         "bending" => Effect::Bending { k_um_per_k: v[0] },
         _ => Effect::SensorOffset {
-            sensor: sensor.to_string(),
+            sensor: c.sensor.clone(),
             offset_c: v[0],
+            at_s: c.at_s,
+            run: c.run.clone(),
         },
     }
 }
 
-/// A candidate (one effect kind, its sensor when `sensor_offset`).
-#[derive(Clone, Debug)]
+/// A candidate: one effect kind and, for the sensor effects, where it was
+/// located (the sensor; for a step also its onset and run).
+#[derive(Clone, Debug, Default)]
 pub struct Cand {
     pub kind: &'static str,
     pub sensor: String,
+    pub at_s: f64,
+    pub run: Option<String>,
+    /// The node a located heat effect acts on (empty: all its sites).
+    pub node: String,
+    /// Start values (physical) estimated from the data, else a grid.
+    pub init: Vec<f64>,
+}
+
+impl Cand {
+    pub fn new(kind: &'static str) -> Cand {
+        Cand {
+            kind,
+            ..Cand::default()
+        }
+    }
+
+    /// Choices made when locating it (sensor, onset, run), counted as
+    /// parameters by BIC.
+    pub fn located(&self) -> usize {
+        usize::from(!self.sensor.is_empty())
+            + usize::from(!self.node.is_empty())
+            + usize::from(self.at_s > 0.0)
+            + usize::from(self.run.is_some())
+    }
 }
 
 /// Turn a joint u-vector into effects.
@@ -240,7 +311,7 @@ pub fn effects_of(cands: &[Cand], u: &[f64]) -> Vec<Effect> {
             .map(|(j, p)| p.from_u(u[i + j]))
             .collect();
         i += ps.len();
-        out.push(build(c.kind, &v, &c.sensor));
+        out.push(build(c.kind, &v, c));
     }
     out
 }
@@ -372,7 +443,14 @@ pub fn fit_cands(
         }
     };
     let mut evals = 0;
-    let x0 = match start {
+    let init = (cands.len() == 1 && cands[0].init.len() == d).then(|| {
+        params_of(cands[0].kind)
+            .iter()
+            .zip(&cands[0].init)
+            .map(|(p, v)| p.to_u(*v))
+            .collect::<Vec<f64>>()
+    });
+    let x0 = match start.or(init) {
         Some(s) => s,
         None => {
             let g: usize = match d {
@@ -407,7 +485,7 @@ pub fn fit_cands(
         effects: effects_of(cands, &u),
         u,
         j,
-        k: d + cands.iter().filter(|c| c.kind == "sensor_offset").count(),
+        k: d + cands.iter().map(Cand::located).sum::<usize>(),
         evals,
     }
 }

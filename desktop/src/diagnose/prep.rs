@@ -30,8 +30,8 @@ pub struct Prepared {
     pub name: String,
     pub inputs: Inputs,
     pub channels: Vec<Channel>,
-    /// Rows `[0, split)` are used to fit, `[split, n)` are held out.
-    pub split: usize,
+    /// Rows held out (scored, never fitted); the others are fitted.
+    pub held: Vec<bool>,
     /// Decimation factor applied to the run's rows.
     pub decimation: usize,
     pub notes: Vec<String>,
@@ -40,6 +40,18 @@ pub struct Prepared {
 impl Prepared {
     pub fn rows(&self) -> usize {
         self.inputs.len()
+    }
+
+    /// Whether row `k` is used to fit.
+    pub fn is_fit(&self, k: usize) -> bool {
+        !self.held[k]
+    }
+
+    /// Hold out rows `[from, n)`.
+    pub fn hold_from(&mut self, from: usize) {
+        for (k, h) in self.held.iter_mut().enumerate() {
+            *h = k >= from;
+        }
     }
 }
 
@@ -163,7 +175,7 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
         name: name.to_string(),
         inputs,
         channels,
-        split: nr,
+        held: vec![false; nr],
         decimation: f,
         notes,
     })

@@ -73,6 +73,12 @@ pub struct FitArgs {
     /// cross-validation on FL_THERMAL and doubles the network time).
     #[arg(long)]
     pub hybrid: bool,
+    /// Also score and offer the blend `w·mlr + (1−w)·ga-bpn` (weight `w`
+    /// from the cross-validation's out-of-fold predictions; scores the
+    /// network on every fold; off by default: on FL_THERMAL it wins the
+    /// training CV on ch5 for some seeds and loses on the test block).
+    #[arg(long)]
+    pub blend: bool,
     /// Cross-validate every network candidate on every fold (by default one
     /// is dropped as soon as its error bound shows it cannot be chosen).
     #[arg(long)]
@@ -159,6 +165,7 @@ impl FitArgs {
         cfg.skip_net = self.mlr_only;
         cfg.hybrid = self.hybrid;
         cfg.cv_drop = !self.full_cv;
+        cfg.blend = self.blend;
         cfg.fallbacks = !self.no_fallbacks;
         cfg.fallback_pairs = self.fallback_pairs;
         Ok(cfg)

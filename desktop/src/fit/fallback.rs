@@ -199,6 +199,7 @@ pub fn fit_fallbacks(
                     super::run::NetCandidates {
                         net: false,
                         hybrid: false,
+                        blend: false,
                     },
                 )?
             } else {

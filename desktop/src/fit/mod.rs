@@ -93,6 +93,11 @@ pub struct ModelFile {
     /// table and networks of the same direction, so it ships as both.
     #[serde(default)]
     pub hybrid_nets: Vec<NetParams>,
+    /// Per channel, the blend's weight `w` on the lagged MLR (model name
+    /// `blend`: `w·mlr + (1−w)·ga-bpn`, the same inputs), chosen on the
+    /// out-of-fold predictions of the blocked cross-validation.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub blend: std::collections::BTreeMap<String, f64>,
     /// Per channel, models without each of its sensors (degraded mode, issue 15).
     #[serde(default)]
     pub fallbacks: Vec<fallback::FallbackParams>,
@@ -100,8 +105,59 @@ pub struct ModelFile {
 
 /// Model names, simplest first (the order ties are broken in): the hybrid is
 /// anchored on the lagged MLR (its network only corrects the residual), so it
-/// is taken as simpler than the free network.
-pub const MODEL_NAMES: [&str; 4] = ["mlr-static", "mlr", "hybrid", "ga-bpn"];
+/// is taken as simpler than the free network; the blend carries both the
+/// lagged MLR's table and the networks, so it comes last: it is chosen only
+/// when it beats each of its parts by more than the margin.
+pub const MODEL_NAMES: [&str; 5] = ["mlr-static", "mlr", "hybrid", "ga-bpn", "blend"];
+
+/// `w·mlr + (1−w)·ensemble` on the same inputs (model name `blend`). The
+/// board ships it as the MLR's table with every term scaled by `w` and the
+/// networks with their output layers scaled by `(1−w)/k`: one direction's
+/// table and networks, which it sums.
+pub struct Blend<'a> {
+    pub mlr: &'a MlrParams,
+    pub nets: NetEnsemble<'a>,
+    pub w: f64,
+}
+
+impl<'a> Blend<'a> {
+    /// The blend of `channel` in a fit file (None without its parts).
+    pub fn of(file: &'a ModelFile, channel: &str) -> Option<Self> {
+        let mlr = file.mlr.iter().find(|m| m.channel == channel)?;
+        let nets = NetEnsemble::of(&file.nets, channel)?;
+        let w = *file.blend.get(channel)?;
+        Some(Blend { mlr, nets, w })
+    }
+}
+
+impl Model for Blend<'_> {
+    fn features(&self) -> &[FeatureSpec] {
+        &self.mlr.features
+    }
+    fn channel(&self) -> &str {
+        &self.mlr.channel
+    }
+    fn predict_norm(&self, xn: &[f64]) -> f64 {
+        self.w * self.mlr.predict_norm(xn) + (1.0 - self.w) * self.nets.predict_norm(xn)
+    }
+}
+
+/// The weight `w ∈ [0, 1]` minimising `Σ (y − w·a − (1−w)·b)²` over the
+/// given `(y, a, b)` rows (least squares in one unknown, clamped); 1 (all
+/// `a`) when `a` and `b` never differ.
+pub fn blend_weight<'a>(rows: impl Iterator<Item = (&'a f64, &'a f64, &'a f64)>) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (y, a, b) in rows {
+        let d = a - b;
+        num += (y - b) * d;
+        den += d * d;
+    }
+    if den > 0.0 && num.is_finite() {
+        (num / den).clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
 
 /// Lagged MLR plus a network ensemble on its residual, same inputs.
 pub struct Hybrid<'a> {

@@ -59,6 +59,10 @@ pub struct FitConfig {
     pub hybrid: bool,
     /// Stop a network candidate's cross-validation once it cannot be chosen.
     pub cv_drop: bool,
+    /// Also score (and offer) the blend `w·mlr + (1−w)·ga-bpn` (off by
+    /// default: on FL_THERMAL its cross-validated edge on ch5 does not hold
+    /// on the test block, and it scores the network on every fold).
+    pub blend: bool,
     /// Fit fallback models without each model sensor (`fallback.rs`).
     pub fallbacks: bool,
     /// ... and without each pair of model sensors.
@@ -83,6 +87,7 @@ impl Default for FitConfig {
             choice_margin: 0.02,
             hybrid: false,
             cv_drop: true,
+            blend: false,
             fallbacks: true,
             fallback_pairs: false,
         }
@@ -395,6 +400,11 @@ pub struct CvScore {
     /// figures cover only the folds it ran, latest first).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub dropped: bool,
+    /// `blend` only: the weight on the lagged MLR the fit ships, chosen on
+    /// every fold's out-of-fold predictions. The figures above are nested:
+    /// each fold is scored with the weight chosen on the other folds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weight: Option<f64>,
 }
 
 /// Errors collected over folds.
@@ -428,6 +438,7 @@ impl CvAcc {
             rows: self.n,
             fold_rms_um: self.folds.clone(),
             dropped: false,
+            weight: None,
         })
     }
 }
@@ -500,6 +511,9 @@ pub struct NetCandidates {
     pub net: bool,
     /// Lagged MLR + GA-BPN ensemble on its residual (`hybrid`).
     pub hybrid: bool,
+    /// `w·mlr + (1−w)·ga-bpn` with `w` from the out-of-fold predictions
+    /// (`blend`; needs `net`, and scores the network on every fold).
+    pub blend: bool,
 }
 
 /// Blocked time cross-validation of every candidate model of one channel on
@@ -513,6 +527,12 @@ pub struct NetCandidates {
 /// RMS at or above the best linear model's RMS / (1 + margin) (the choice
 /// would then take the linear model). A dropped candidate reports the folds
 /// it ran and `dropped: true`, and is not admissible.
+///
+/// With `with.blend` the network is scored on every fold (never dropped)
+/// and the blend `w·mlr + (1−w)·ga-bpn` is scored from the same
+/// out-of-fold predictions: fold `f` with the weight that minimises the
+/// squared error on the other folds (nested, so the one fitted parameter
+/// does not flatter its figure); `weight` is the one chosen on all folds.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn cross_validate(
     cache: &SeriesCache,
@@ -556,14 +576,18 @@ pub(crate) fn cross_validate(
     }
     let n_total = acc_mlr.n;
     let linear_best = out.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
+    // Out-of-fold network predictions per kept fold (for the blend).
+    let mut net_preds: Vec<Option<Vec<f64>>> = vec![None; kept.len()];
+    let with_blend = with.blend && with.net;
     for (name, on) in [("hybrid", with.hybrid), ("ga-bpn", with.net)] {
         if !on {
             continue;
         }
+        let may_drop = cfg.cv_drop && !(with_blend && name == "ga-bpn");
         let bar = linear_best / (1.0 + cfg.choice_margin);
         let mut acc = CvAcc::default();
         let mut dropped = false;
-        for (f, specs, m, tr, va, p_mlr) in kept.iter().rev() {
+        for (j, (f, specs, m, tr, va, p_mlr)) in kept.iter().enumerate().rev() {
             let fit = &folds[*f].0;
             let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
             let inner_s = cache.samples_capped(&plan.runs, &inner, idx, ch, cfg.net.max_rows)?;
@@ -608,7 +632,10 @@ pub(crate) fn cross_validate(
                     .collect()
             };
             acc.add_fold(&va.y, &p);
-            if cfg.cv_drop && n_total > 0 && (acc.sq / n_total as f64).sqrt() >= bar {
+            if name == "ga-bpn" {
+                net_preds[j] = Some(p);
+            }
+            if may_drop && n_total > 0 && (acc.sq / n_total as f64).sqrt() >= bar {
                 dropped = acc.n < n_total;
                 break;
             }
@@ -618,6 +645,35 @@ pub(crate) fn cross_validate(
         if let Some(mut sc) = acc.score() {
             sc.dropped = dropped;
             out.insert(name.to_string(), sc);
+        }
+    }
+    if with_blend && kept.len() >= 2 && net_preds.iter().all(Option::is_some) {
+        let rows = |skip: Option<usize>| {
+            kept.iter()
+                .zip(&net_preds)
+                .enumerate()
+                .filter(move |(j, _)| Some(*j) != skip)
+                .flat_map(|(_, (k, pn))| {
+                    let (va, pm) = (&k.4, &k.5);
+                    va.y.iter()
+                        .zip(pm.iter())
+                        .zip(pn.iter().flatten())
+                        .map(|((y, a), b)| (y, a, b))
+                })
+        };
+        let mut acc = CvAcc::default();
+        for (j, (k, pn)) in kept.iter().zip(&net_preds).enumerate() {
+            let w = blend_weight(rows(Some(j)));
+            let p: Vec<f64> =
+                k.5.iter()
+                    .zip(pn.iter().flatten())
+                    .map(|(a, b)| w * a + (1.0 - w) * b)
+                    .collect();
+            acc.add_fold(&k.4.y, &p);
+        }
+        if let Some(mut sc) = acc.score() {
+            sc.weight = Some(blend_weight(rows(None)));
+            out.insert("blend".to_string(), sc);
         }
     }
     Ok(out)
@@ -634,6 +690,42 @@ pub fn choose_model(cv: &BTreeMap<String, CvScore>, margin: f64) -> Option<Strin
                 .is_some_and(|s| s.rms_um <= best * (1.0 + margin))
         })
         .map(|n| n.to_string())
+}
+
+/// Models that carry networks (the others are linear tables).
+pub const NET_MODELS: [&str; 3] = ["blend", "hybrid", "ga-bpn"];
+
+/// The latest-block rule: a candidate with networks stays admissible only
+/// if, on the latest time block (the one fold whose fit rows all precede
+/// it, as the board's future follows its training), its RMS is within
+/// `margin` of the linear model the choice would otherwise take. The pooled
+/// CV lets earlier blocks, fitted with later data on both sides,
+/// outvote the one block that forecasts forward; a network that cannot
+/// extrapolate past its training envelope shows only there. Removes them
+/// from `cv` and returns `(name, its latest-block RMS, the linear one's)`.
+pub fn latest_block_rule(
+    cv: &mut BTreeMap<String, CvScore>,
+    margin: f64,
+) -> Vec<(String, f64, f64)> {
+    let mut linear = cv.clone();
+    linear.retain(|n, _| !NET_MODELS.contains(&n.as_str()));
+    let Some(lin) = choose_model(&linear, margin) else {
+        return vec![];
+    };
+    let Some(bar) = linear[&lin].fold_rms_um.last().copied() else {
+        return vec![];
+    };
+    let mut out = Vec::new();
+    for name in NET_MODELS {
+        let latest = cv.get(name).and_then(|s| s.fold_rms_um.last().copied());
+        if let Some(r) = latest {
+            if r > bar * (1.0 + margin) {
+                cv.remove(name);
+                out.push((name.to_string(), r, bar));
+            }
+        }
+    }
+    out
 }
 
 /// Time span of the longest training segment, seconds.
@@ -833,6 +925,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         let with = NetCandidates {
             net: !cfg.skip_net,
             hybrid: !cfg.skip_net && cfg.hybrid,
+            blend: !cfg.skip_net && cfg.blend,
         };
         let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
         let cv = if folds.len() > 1 {
@@ -888,6 +981,20 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                         .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
                 }
                 info.net = infos.into_iter().next();
+                if let Some(w) = cv.get("blend").and_then(|s| s.weight) {
+                    let b = Blend {
+                        mlr: &mlr,
+                        nets: NetEnsemble {
+                            members: members.iter().collect(),
+                        },
+                        w,
+                    };
+                    if let Some(r) = reports.get_mut("blend") {
+                        r.channels
+                            .insert(ch.clone(), validate(&b, &val, plan, &mut r.per_run));
+                    }
+                    file.blend.insert(ch.clone(), w);
+                }
                 file.nets.extend(members);
             }
             if with.hybrid {
@@ -922,7 +1029,12 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         // The choice: cross-validated on training rows, within the board's networks.
         let mut admissible = cv.clone();
         admissible.retain(|_, s| !s.dropped);
-        for name in ["ga-bpn", "hybrid"] {
+        for (name, r, bar) in latest_block_rule(&mut admissible, cfg.choice_margin) {
+            notes.push(format!(
+                "{ch}: {name} is not admissible: RMS {r:.2} µm on the latest training block (the one fold that forecasts forward) against the linear model's {bar:.2} µm"
+            ));
+        }
+        for name in NET_MODELS {
             if admissible.contains_key(name) && nets_left < ens {
                 admissible.remove(name);
                 notes.push(format!(
@@ -937,7 +1049,15 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             // The final hybrid kept no networks: it is the lagged MLR.
             chosen = "mlr".into();
         }
-        if chosen == "ga-bpn" || chosen == "hybrid" {
+        if chosen == "blend" {
+            // All weight on one part: the blend is that part.
+            match file.blend.get(ch) {
+                Some(w) if *w >= 1.0 => chosen = "mlr".into(),
+                Some(w) if *w <= 0.0 => chosen = "ga-bpn".into(),
+                _ => {}
+            }
+        }
+        if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
             nets_left -= ens;
         }
         let used_idx: &[usize] = if chosen == "mlr-static" {

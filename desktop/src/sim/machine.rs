@@ -127,7 +127,20 @@ impl BearingSpec {
     }
 }
 
-/// Generic speed-dependent heat source Q = w_at_nmax · (n / n_max)^exponent.
+/// What drives a generic heat source.
+#[derive(Deserialize, Serialize, Clone, Copy, Debug, Default, PartialEq)]
+#[serde(rename_all = "snake_case")]
+pub enum Driver {
+    /// Q = w_at_nmax · (n / n_max)^exponent (spindle losses).
+    #[default]
+    Spindle,
+    /// Q = w_at_nmax · feed_activity^exponent (ball-screw nut, axis drive).
+    Feed,
+}
+
+/// Generic heat source Q = w_at_nmax · (drive)^exponent, the drive being
+/// n / n_max (`driver = "spindle"`, the default) or `feed_activity`
+/// (`driver = "feed"`); `w_at_nmax` is the heat at full drive.
 #[derive(Deserialize, Serialize, Clone, Debug)]
 #[serde(deny_unknown_fields)]
 pub struct SourceSpec {
@@ -135,6 +148,50 @@ pub struct SourceSpec {
     pub w_at_nmax: f64,
     #[serde(default = "one")]
     pub exponent: f64,
+    #[serde(default)]
+    pub driver: Driver,
+}
+
+/// When the coolant of a `[coolant]` circuit flows.
+#[derive(Deserialize, Serialize, Clone, Copy, Debug, Default, PartialEq)]
+#[serde(rename_all = "snake_case")]
+pub enum Flow {
+    /// While the spindle turns (pump switched with the spindle).
+    #[default]
+    Spindle,
+    /// While the run's `coolant_on` column is 1.
+    CoolantOn,
+    /// All the time.
+    Always,
+}
+
+/// A coolant jacket: conductance from a node to the coolant while it flows.
+#[derive(Deserialize, Serialize, Clone, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct JacketSpec {
+    pub node: String,
+    pub g_w_per_k: f64,
+}
+
+/// A chiller-held coolant circuit: jackets exchange heat with coolant at
+/// `supply_c` while it flows. The tank (capacity, loss to air) is used by
+/// the `chiller` effect, which lets a thermostat cycle instead of holding.
+/// A sensor with `node = "coolant"` reads the coolant.
+#[derive(Deserialize, Serialize, Clone, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct CoolantSpec {
+    /// Chiller set point [°C] (absolute, not relative to ambient).
+    pub supply_c: f64,
+    #[serde(default)]
+    pub flows: Flow,
+    #[serde(default)]
+    pub jacket: Vec<JacketSpec>,
+    /// Heat capacity of the coolant in the tank [J/K].
+    #[serde(default)]
+    pub tank_c_j_per_k: f64,
+    /// Tank loss to ambient air [W/K].
+    #[serde(default)]
+    pub tank_g_amb_w_per_k: f64,
 }
 
 #[derive(Deserialize, Serialize, Clone, Debug)]
@@ -208,6 +265,9 @@ pub struct EffectSites {
     pub coolant_nodes: Vec<String>,
     #[serde(default)]
     pub ballscrew_nodes: Vec<String>,
+    /// Where `bearing_nonlinear` adds heat (default: the `[[bearing]]` nodes).
+    #[serde(default)]
+    pub bearing_nodes: Vec<String>,
     #[serde(default)]
     pub bending: Option<BendingSite>,
 }
@@ -247,6 +307,8 @@ pub struct MachineSpec {
     pub sensors: Vec<SensorSpec>,
     #[serde(rename = "direction", default)]
     pub directions: Vec<DirectionSpec>,
+    #[serde(default)]
+    pub coolant: Option<CoolantSpec>,
     #[serde(default)]
     pub effects: EffectSites,
 }
@@ -295,6 +357,14 @@ impl MachineSpec {
             self.effects.ballscrew_nodes.len(),
             limits::MAX_NODES,
         )?;
+        limits::count(
+            "effects.bearing_nodes",
+            self.effects.bearing_nodes.len(),
+            limits::MAX_NODES,
+        )?;
+        if let Some(c) = &self.coolant {
+            limits::count("coolant.jacket", c.jacket.len(), limits::MAX_NODES)?;
+        }
         Ok(())
     }
 
@@ -343,6 +413,21 @@ impl MachineSpec {
             within(key("w_at_nmax"), s.w_at_nmax, 0.0, 1e6, "W")?;
             within(key("exponent"), s.exponent, 0.0, 10.0, "")?;
         }
+        if let Some(c) = &self.coolant {
+            within("coolant.supply_c", c.supply_c, t_lo, t_hi, "°C")?;
+            within("coolant.tank_c_j_per_k", c.tank_c_j_per_k, 0.0, 1e9, "J/K")?;
+            within(
+                "coolant.tank_g_amb_w_per_k",
+                c.tank_g_amb_w_per_k,
+                0.0,
+                1e6,
+                "W/K",
+            )?;
+            for j in &c.jacket {
+                let key = format!("coolant.jacket `{}`: g_w_per_k", j.node);
+                within(key, j.g_w_per_k, 0.0, 1e6, "W/K")?;
+            }
+        }
         if let Some(r) = &self.rod {
             positive("rod.length_mm", r.length_mm, 1e4, "mm")?;
             positive("rod.diameter_mm", r.diameter_mm, 2_000.0, "mm")?;
@@ -371,6 +456,19 @@ impl MachineSpec {
 pub enum Probe {
     Node(usize),
     Ambient,
+    /// The coolant of the `[coolant]` circuit.
+    Coolant,
+}
+
+/// A compiled `[coolant]` circuit.
+#[derive(Clone, Debug)]
+pub struct Circuit {
+    pub supply_c: f64,
+    pub flows: Flow,
+    /// (node, conductance while flowing [W/K])
+    pub jacket: Vec<(usize, f64)>,
+    pub tank_c: f64,
+    pub tank_g_amb: f64,
 }
 
 /// The compiled network: node `i < n_lumped` are lumped nodes, then rod
@@ -388,7 +486,10 @@ pub struct Machine {
     pub links: Vec<(usize, usize, f64)>,
     pub motor_node: Option<usize>,
     pub bearing_nodes: Vec<usize>,
+    /// Where `bearing_nonlinear` acts (`effects.bearing_nodes`, else the bearings).
+    pub bnl_nodes: Vec<usize>,
     pub source_nodes: Vec<usize>,
+    pub coolant: Option<Circuit>,
     pub sensor_cols: Vec<String>,
     pub sensor_probe: Vec<Probe>,
     pub dir_cols: Vec<String>,
@@ -524,6 +625,11 @@ impl Machine {
             sensor_cols.push(col);
             sensor_probe.push(if s.node == "ambient" {
                 Probe::Ambient
+            } else if s.node == "coolant" && spec.coolant.is_some() {
+                if names.iter().any(|n| n == "coolant") {
+                    bail!("node name `coolant` is reserved when [coolant] is given");
+                }
+                Probe::Coolant
             } else {
                 Probe::Node(find(&s.node, &format!("sensor {}", s.name))?)
             });
@@ -564,6 +670,35 @@ impl Machine {
             .iter()
             .map(|x| find(x, "effects.ballscrew_nodes"))
             .collect::<Result<Vec<_>>>()?;
+        let bnl_nodes = if spec.effects.bearing_nodes.is_empty() {
+            bearing_nodes.clone()
+        } else {
+            spec.effects
+                .bearing_nodes
+                .iter()
+                .map(|x| find(x, "effects.bearing_nodes"))
+                .collect::<Result<Vec<_>>>()?
+        };
+        let coolant = match &spec.coolant {
+            Some(c) => {
+                let mut jacket = Vec::new();
+                for j in &c.jacket {
+                    let i = find(&j.node, "coolant.jacket")?;
+                    if jacket.iter().any(|(k, _)| *k == i) {
+                        bail!("coolant.jacket: node `{}` listed twice", j.node);
+                    }
+                    jacket.push((i, j.g_w_per_k));
+                }
+                Some(Circuit {
+                    supply_c: c.supply_c,
+                    flows: c.flows,
+                    jacket,
+                    tank_c: c.tank_c_j_per_k,
+                    tank_g_amb: c.tank_g_amb_w_per_k,
+                })
+            }
+            None => None,
+        };
         let bending = match &spec.effects.bending {
             Some(b) => {
                 let di = spec
@@ -592,7 +727,9 @@ impl Machine {
             links,
             motor_node,
             bearing_nodes,
+            bnl_nodes,
             source_nodes,
+            coolant,
             sensor_cols,
             sensor_probe,
             dir_cols,
@@ -603,7 +740,32 @@ impl Machine {
         })
     }
 
-    /// Nominal heat input per node [W] at speed `n_rpm`.
+    /// Whether the `[coolant]` circuit flows with these inputs.
+    pub fn coolant_flows(&self, rpm: f64, coolant_on: f64) -> bool {
+        match &self.coolant {
+            Some(c) => match c.flows {
+                Flow::Spindle => rpm.abs() > 0.0,
+                Flow::CoolantOn => coolant_on > 0.5,
+                Flow::Always => true,
+            },
+            None => false,
+        }
+    }
+
+    /// Nominal heat of the feed-driven sources per node [W], added to `q`.
+    pub fn heat_feed(&self, feed: f64, q: &mut [f64]) {
+        if feed <= 0.0 {
+            return;
+        }
+        for (s, &node) in self.spec.sources.iter().zip(&self.source_nodes) {
+            if s.driver == Driver::Feed {
+                q[node] += s.w_at_nmax * feed.powf(s.exponent);
+            }
+        }
+    }
+
+    /// Nominal spindle-driven heat input per node [W] at speed `n_rpm`
+    /// (feed-driven sources: [`Machine::heat_feed`]).
     pub fn heat_nominal(&self, n_rpm: f64, q: &mut [f64]) {
         q.iter_mut().for_each(|v| *v = 0.0);
         let n = n_rpm.abs();
@@ -617,7 +779,9 @@ impl Machine {
             q[node] += b.heat_w(n);
         }
         for (s, &node) in self.spec.sources.iter().zip(&self.source_nodes) {
-            q[node] += s.w_at_nmax * (n / self.spec.n_max_rpm).powf(s.exponent);
+            if s.driver == Driver::Spindle {
+                q[node] += s.w_at_nmax * (n / self.spec.n_max_rpm).powf(s.exponent);
+            }
         }
     }
 }

@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_core::{RngCore, SeedableRng};
 
 pub use duty::{Duty, Inputs};
-pub use effects::{Effect, EFFECT_NAMES};
+pub use effects::{Effect, ALL_EFFECT_NAMES, EFFECT_NAMES};
 pub use machine::{Machine, Probe};
 
 use crate::linalg::{discretize, solve};
@@ -38,16 +38,32 @@ pub struct SimOut {
 struct Active {
     h: f64,
     drift: Vec<(f64, f64, f64, f64)>,
-    lag: Option<f64>,
-    bnl: Vec<(f64, f64)>,
+    /// Lag per sensor [s] (0 = none).
+    lag: Vec<f64>,
+    /// (k, p, nodes)
+    bnl: Vec<(f64, f64, Vec<usize>)>,
     cool: Option<(f64, f64, f64, f64)>,
+    /// (band, power, load fraction) of a cycling chiller.
+    chiller: Option<(f64, f64, f64)>,
     screw: f64,
     bend: f64,
-    offsets: Vec<(usize, f64)>,
+    /// (sensor, offset, from time)
+    offsets: Vec<(usize, f64, f64)>,
+}
+
+fn sensor_index(m: &Machine, sensor: &str, what: &str) -> Result<usize> {
+    let col = machine::sensor_column(sensor);
+    m.sensor_cols
+        .iter()
+        .position(|c| *c == col || c == sensor)
+        .ok_or_else(|| anyhow::anyhow!("effect {what}: unknown sensor `{sensor}`"))
 }
 
 fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
-    let mut a = Active::default();
+    let mut a = Active {
+        lag: vec![0.0; m.sensor_cols.len()],
+        ..Active::default()
+    };
     for e in effects {
         e.validate()?;
         match e {
@@ -58,8 +74,32 @@ fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
                 rate_c_per_h,
                 period_h,
             } => a.drift.push((*amp_c, *phase_h, *rate_c_per_h, *period_h)),
-            Effect::SensorLag { tau_s } => a.lag = Some(a.lag.unwrap_or(0.0) + tau_s),
-            Effect::BearingNonlinear { k_w, p } => a.bnl.push((*k_w, *p)),
+            Effect::SensorLag { tau_s, sensor } => match sensor {
+                Some(sn) => a.lag[sensor_index(m, sn, "sensor_lag")?] += tau_s,
+                None => a.lag.iter_mut().for_each(|l| *l += tau_s),
+            },
+            Effect::Chiller {
+                band_c,
+                power_w,
+                load_frac,
+            } => {
+                if !m.coolant.as_ref().is_some_and(|c| c.tank_c > 0.0) {
+                    bail!(
+                        "effect chiller: machine `{}` has no [coolant] circuit with tank_c_j_per_k > 0",
+                        m.spec.name
+                    );
+                }
+                a.chiller = Some((*band_c, *power_w, *load_frac));
+            }
+            Effect::BearingNonlinear { k_w, p, node } => {
+                let at = match node {
+                    Some(nn) => vec![m.names.iter().position(|x| x == nn).ok_or_else(|| {
+                        anyhow::anyhow!("effect bearing_nonlinear: unknown node `{nn}`")
+                    })?],
+                    None => m.bnl_nodes.clone(),
+                };
+                a.bnl.push((*k_w, *p, at));
+            }
             Effect::Coolant {
                 g_w_per_k,
                 offset_c,
@@ -92,16 +132,14 @@ fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
                 }
                 a.bend += k_um_per_k
             }
-            Effect::SensorOffset { sensor, offset_c } => {
-                let col = machine::sensor_column(sensor);
-                let i = m
-                    .sensor_cols
-                    .iter()
-                    .position(|c| *c == col || c == sensor)
-                    .ok_or_else(|| {
-                        anyhow::anyhow!("effect sensor_offset: unknown sensor `{sensor}`")
-                    })?;
-                a.offsets.push((i, *offset_c));
+            Effect::SensorOffset {
+                sensor,
+                offset_c,
+                at_s,
+                ..
+            } => {
+                let i = sensor_index(m, sensor, "sensor_offset")?;
+                a.offsets.push((i, *offset_c, *at_s));
             }
         }
     }
@@ -167,22 +205,51 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     let n = m.n;
     let dt = inp.dt;
     let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
-    let zeros = vec![0.0; n];
-    let (phi0, psi0) = discretize(&state_matrix(m, &g_amb, &zeros), dt)?;
+    // conductance to the coolant per node: the circuit's jackets while it
+    // flows, the `coolant` effect while it is on; Φ, Ψ per combination
+    let mut g_jacket = vec![0.0; n];
+    if let Some(c) = &m.coolant {
+        for &(i, g) in &c.jacket {
+            g_jacket[i] += g;
+        }
+    }
     let mut g_cool = vec![0.0; n];
-    let cool_mats = if let Some((g, ..)) = act.cool {
+    if let Some((g, ..)) = act.cool {
         for &i in &m.coolant_nodes {
             g_cool[i] += g / m.coolant_nodes.len() as f64;
         }
-        Some(discretize(&state_matrix(m, &g_amb, &g_cool), dt)?)
-    } else {
-        None
-    };
+    }
+    let mut mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4] = Default::default();
+    for (key, slot) in mats.iter_mut().enumerate() {
+        let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
+        if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
+            continue;
+        }
+        let g: Vec<f64> = (0..n)
+            .map(|i| (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 })
+            .collect();
+        *slot = Some(discretize(&state_matrix(m, &g_amb, &g), dt)?);
+    }
+    let circuit = m.coolant.as_ref();
+    let supply = circuit.map_or(0.0, |c| c.supply_c);
+    // coolant temperature (the set point unless the chiller cycles)
+    let mut t_cool = supply;
+    let mut chiller_on = false;
     // initial equilibrium at rest
+    // (a circuit that flows `always` holds its jackets towards the supply)
     let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
-    let rhs: Vec<f64> = (0..n).map(|i| g_amb[i] * (ta0 + m.amb_offset[i])).collect();
+    let at_rest = circuit.is_some_and(|c| c.flows == machine::Flow::Always);
+    let g_rest: Vec<f64> = (0..n)
+        .map(|i| g_amb[i] + if at_rest { g_jacket[i] } else { 0.0 })
+        .collect();
+    let rhs: Vec<f64> = (0..n)
+        .map(|i| {
+            g_amb[i] * (ta0 + m.amb_offset[i]) + if at_rest { g_jacket[i] * supply } else { 0.0 }
+        })
+        .collect();
     let mut x = DVector::from_vec(
-        solve(conductance(m, &g_amb), &rhs).map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
+        solve(conductance(m, &g_rest), &rhs)
+            .map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
     );
     let x0 = x.clone();
     let k_total = inp.len();
@@ -198,6 +265,15 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     let n_max = m.spec.n_max_rpm;
     let n_screw = m.ballscrew_nodes.len().max(1) as f64;
     let mut last_rpm = f64::NAN;
+    let base = mats[0]
+        .take()
+        .ok_or_else(|| anyhow::anyhow!("thermal network: no base discretisation"))?;
+    let feed_sources = m
+        .spec
+        .sources
+        .iter()
+        .any(|s| s.driver == machine::Driver::Feed);
+    let mut qf = vec![0.0; n];
     for k in 0..k_total {
         let t = inp.time(k);
         if k % stride == 0 {
@@ -207,6 +283,7 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
                 temps[s].push(match probe {
                     Probe::Node(i) => x[*i],
                     Probe::Ambient => amb_now,
+                    Probe::Coolant => t_cool,
                 });
             }
             for (d, terms) in m.dir_terms.iter().enumerate() {
@@ -230,9 +307,9 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
         if rpm != last_rpm {
             m.heat_nominal(rpm, &mut q);
             if rpm > 0.0 {
-                for &(kw, p) in &act.bnl {
-                    let extra = kw * (rpm / n_max).powf(p);
-                    for &bn in &m.bearing_nodes {
+                for (kw, p, at) in &act.bnl {
+                    let extra = kw * (rpm / n_max).powf(*p);
+                    for &bn in at {
                         q[bn] += extra;
                     }
                 }
@@ -243,49 +320,130 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
         for i in 0..n {
             b[i] = (q[i] + g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
         }
+        if feed_sources && inp.feed[k] > 0.0 {
+            qf.iter_mut().for_each(|v| *v = 0.0);
+            m.heat_feed(inp.feed[k], &mut qf);
+            for i in 0..n {
+                b[i] += qf[i] / m.c[i];
+            }
+        }
         if act.screw != 0.0 && inp.feed[k] != 0.0 {
             for &i in &m.ballscrew_nodes {
                 b[i] += act.screw * inp.feed[k] / n_screw / m.c[i];
             }
         }
-        let (phi, psi) = match (&cool_mats, act.cool) {
-            (Some((pc, sc)), Some((_, off, amp, per))) if inp.coolant[k] > 0.5 => {
-                let tc = ta + off + saw(tm, amp, per);
-                for &i in &m.coolant_nodes {
-                    b[i] += g_cool[i] * tc / m.c[i];
+        let flowing = m.coolant_flows(rpm, inp.coolant[k]);
+        if flowing {
+            for (i, g) in g_jacket.iter().enumerate() {
+                if *g > 0.0 {
+                    b[i] += g * t_cool / m.c[i];
                 }
-                (pc, sc)
             }
-            _ => (&phi0, &psi0),
+        }
+        let cool_on = match act.cool {
+            Some((_, off, amp, per)) => {
+                let on = if circuit.is_some() {
+                    flowing
+                } else {
+                    inp.coolant[k] > 0.5
+                };
+                if on {
+                    let tc = ta + off + saw(tm, amp, per);
+                    for &i in &m.coolant_nodes {
+                        b[i] += g_cool[i] * tc / m.c[i];
+                    }
+                }
+                on
+            }
+            None => false,
         };
+        let key = usize::from(flowing) | (usize::from(cool_on) << 1);
+        let (phi, psi) = mats[key].as_ref().unwrap_or(&base);
+        // the tank under a cycling chiller (its time constant is hours:
+        // the jackets' heat is taken at the step's start; the thermostat
+        // switches at the exact crossing of its band within the step)
+        if let (Some((band, power, load)), Some(c)) = (act.chiller, circuit) {
+            let mut g_in = 0.0;
+            let mut q_in = c.tank_g_amb * ta + load * power;
+            if flowing {
+                for &(i, g) in &c.jacket {
+                    g_in += g;
+                    q_in += g * x[i];
+                }
+            }
+            let g_tot = c.tank_g_amb + g_in;
+            let (lo, hi) = (supply - band / 2.0, supply + band / 2.0);
+            let mut rem = dt;
+            for _ in 0..3 {
+                let slope =
+                    (q_in - g_tot * t_cool - if chiller_on { power } else { 0.0 }) / c.tank_c;
+                let end = t_cool + slope * rem;
+                if chiller_on && slope < 0.0 && end < lo {
+                    rem -= (lo - t_cool) / slope;
+                    t_cool = lo;
+                    chiller_on = false;
+                } else if !chiller_on && slope > 0.0 && end > hi {
+                    rem -= (hi - t_cool) / slope;
+                    t_cool = hi;
+                    chiller_on = true;
+                } else {
+                    t_cool = end;
+                    break;
+                }
+            }
+        }
         next.gemv(1.0, phi, &x, 0.0);
         next.gemv(1.0, psi, &b, 1.0);
         std::mem::swap(&mut x, &mut next);
     }
-    // sensor lag (first-order, exact for a signal linear between samples)
-    if let Some(tau) = act.lag {
-        if tau > 0.0 {
-            let h = dt * stride as f64;
+    let mut out = SimOut { temps, disp, t: ts };
+    sensor_post(&act, &mut out, dt * stride as f64);
+    Ok(out)
+}
+
+/// Sensor lag (first-order, exact for a signal linear between samples)
+/// and offsets, on output sampled every `h` seconds.
+fn sensor_post(act: &Active, out: &mut SimOut, h: f64) {
+    for (s, &tau) in out.temps.iter_mut().zip(&act.lag) {
+        if tau > 0.0 && !s.is_empty() {
             let e = (-h / tau).exp();
             let c = 1.0 - tau / h * (1.0 - e);
-            for s in temps.iter_mut() {
-                let mut y = s[0];
-                let mut xp = s[0];
-                for v in s.iter_mut() {
-                    let xn = *v;
-                    y = e * y + (1.0 - e) * xp + (xn - xp) * c;
-                    xp = xn;
-                    *v = y;
-                }
+            let mut y = s[0];
+            let mut xp = s[0];
+            for v in s.iter_mut() {
+                let xn = *v;
+                y = e * y + (1.0 - e) * xp + (xn - xp) * c;
+                xp = xn;
+                *v = y;
             }
         }
     }
-    for &(i, off) in &act.offsets {
-        for v in temps[i].iter_mut() {
-            *v += off;
+    for &(i, off, from) in &act.offsets {
+        for (v, t) in out.temps[i].iter_mut().zip(&out.t) {
+            if *t >= from {
+                *v += off;
+            }
         }
     }
-    Ok(SimOut { temps, disp, t: ts })
+}
+
+/// Apply the sensor effects among `effects` (`sensor_lag`,
+/// `sensor_offset`) to an output without them, sampled every `h` seconds:
+/// the same as simulating with them, without re-simulating the network.
+pub fn apply_sensor_effects(
+    m: &Machine,
+    effects: &[Effect],
+    out: &mut SimOut,
+    h: f64,
+) -> Result<()> {
+    let sensor: Vec<Effect> = effects
+        .iter()
+        .filter(|e| e.is_sensor_only())
+        .cloned()
+        .collect();
+    let act = activate(m, &sensor)?;
+    sensor_post(&act, out, h);
+    Ok(())
 }
 
 /// Seeded Gaussian source (ChaCha8 + Box–Muller).
