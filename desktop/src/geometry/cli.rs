@@ -127,6 +127,10 @@ pub struct FitThermalArgs {
     pub sensors: Option<String>,
     #[arg(long)]
     pub stroke: Option<String>,
+    /// Also write the board's volumetric polynomial with its per-kelvin
+    /// terms (the JSON `geometry table --json` writes; `export --geometry` reads it).
+    #[arg(long)]
+    pub table: Option<PathBuf>,
     #[arg(long)]
     pub json: bool,
 }
@@ -827,14 +831,35 @@ fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
     let model = fit(&st, &states, &sensors, degrees, stroke)?;
     let held = leave_one_out(&st, &states, &sensors, degrees, stroke)?;
     let sens = sensitivities(&model);
+    let table = match &a.table {
+        Some(path) => {
+            let errors = model.errors_at(&model.t_ref);
+            let p = super::volumetric::build(&st, stroke, &errors, Some(&model))?;
+            std::fs::write(path, table_json(&p)?.to_string())
+                .with_context(|| format!("writing {}", path.display()))?;
+            Some((
+                path.display().to_string(),
+                p.terms.len(),
+                p.max_fit_error_um,
+            ))
+        }
+        None => None,
+    };
     if a.json {
         let s: BTreeMap<_, _> = sens.iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         println!(
             "{}",
             serde_json::json!({"sensors": sensors, "states": states.len(), "t_ref_c": model.t_ref,
-                "sensitivity_per_kelvin_at_stroke_end": s, "held_out": held})
+                "sensitivity_per_kelvin_at_stroke_end": s, "held_out": held,
+                "table": table.as_ref().map(|(path, terms, err)| serde_json::json!(
+                    {"path": path, "terms": terms, "max_fit_error_um": err}))})
         );
         return Ok(());
+    }
+    if let Some((path, terms, err)) = &table {
+        println!(
+            "wrote {path}: the volumetric polynomial with per-kelvin terms, {terms} terms (largest difference to the first-order kinematics {err:.4} µm)"
+        );
     }
     println!(
         "{} states, sensors {}; reference temperatures {:?} °C",
@@ -925,20 +950,29 @@ fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
     Ok(())
 }
 
+/// The volumetric polynomial as `geometry table --json` and
+/// `fit-thermal --table` write it.
+fn table_json(p: &super::volumetric::VolumetricPoly) -> Result<serde_json::Value> {
+    let mut v = serde_json::to_value(p)?;
+    if let Some(o) = v.as_object_mut() {
+        // On the board a term is 4 exponent/sensor bytes + 3 × i32 coefficients.
+        o.insert(
+            "bytes_on_board".into(),
+            serde_json::json!(p.terms.len() * 16),
+        );
+        o.insert("unit".into(), serde_json::json!("um"));
+    }
+    Ok(v)
+}
+
 fn table_cmd(a: TableArgs) -> Result<()> {
     let ej = ErrorsJson::read(&a.model)?;
     let st = Structure::parse(&ej.structure)
         .with_context(|| format!("{}: structure", a.model.display()))?;
     let p = super::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
-    // On the board a term will be 4 exponent/sensor bytes + 3 × i32 coefficients.
     let bytes = p.terms.len() * 16;
     if a.json {
-        let mut v = serde_json::to_value(&p)?;
-        if let Some(o) = v.as_object_mut() {
-            o.insert("bytes_on_board".into(), serde_json::json!(bytes));
-            o.insert("unit".into(), serde_json::json!("um"));
-        }
-        println!("{v}");
+        println!("{}", table_json(&p)?);
         return Ok(());
     }
     println!(
