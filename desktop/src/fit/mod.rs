@@ -459,31 +459,24 @@ impl SeriesCache {
         channel: &str,
         max_rows: usize,
     ) -> Result<Samples> {
-        let mut cols = Vec::with_capacity(segs.len());
-        let mut total = 0usize;
+        // One pass finds the usable rows (every feature computed, a target
+        // present); the stride then picks from them without testing again.
+        let mut usable: Vec<(usize, usize, f64)> = Vec::new();
         for seg in segs {
             let y = runs[seg.run]
                 .col(channel)
                 .with_context(|| format!("run {} has no column `{channel}`", seg.run + 1))?;
-            total += (seg.start..seg.end)
-                .filter(|&r| y[r].is_some() && self.usable(idx, seg.run, r))
-                .count();
-            cols.push(y);
+            usable.extend((seg.start..seg.end).filter_map(|r| {
+                let t = y[r]?;
+                self.usable(idx, seg.run, r).then_some((seg.run, r, t))
+            }));
         }
-        let stride = total.div_ceil(max_rows.max(1)).max(1);
+        let stride = usable.len().div_ceil(max_rows.max(1)).max(1);
         let mut s = Samples::default();
-        let mut k = 0usize;
-        for (seg, y) in segs.iter().zip(cols) {
-            for r in seg.start..seg.end {
-                if let (Some(t), true) = (y[r], self.usable(idx, seg.run, r)) {
-                    if k.is_multiple_of(stride) {
-                        s.x.push(idx.iter().map(|&f| self.series[f][seg.run][r]).collect());
-                        s.y.push(t);
-                        s.rows.push((seg.run, r));
-                    }
-                    k += 1;
-                }
-            }
+        for &(run, r, t) in usable.iter().step_by(stride) {
+            s.x.push(idx.iter().map(|&f| self.series[f][run][r]).collect());
+            s.y.push(t);
+            s.rows.push((run, r));
         }
         Ok(s)
     }
