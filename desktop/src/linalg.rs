@@ -153,6 +153,40 @@ pub fn solve(a: DMatrix<f64>, b: &[f64]) -> Result<Vec<f64>> {
     }
 }
 
+/// `ridge` for several right-hand sides (columns of `y`) at once.
+///
+/// Beside [`least_squares`] because the diagnosis' grey-box identification
+/// solves thousands of small, well-posed systems: Cholesky on the scaled
+/// Gram matrix (SVD only when it fails) is the fast path there.
+pub fn ridge_multi(x: &DMatrix<f64>, y: &DMatrix<f64>, lambda: f64) -> Option<DMatrix<f64>> {
+    let p = x.ncols();
+    let mut scale = DVector::zeros(p);
+    for j in 0..p {
+        let n = x.column(j).norm();
+        scale[j] = if n > 0.0 { 1.0 / n } else { 0.0 };
+    }
+    let xs = x * DMatrix::from_diagonal(&scale);
+    let mut g = xs.tr_mul(&xs);
+    for j in 0..p {
+        g[(j, j)] += lambda.max(1e-12);
+    }
+    let rhs = xs.tr_mul(y);
+    let b = match g.clone().cholesky() {
+        Some(c) => c.solve(&rhs),
+        None => g.svd(true, true).solve(&rhs, 1e-12).ok()?,
+    };
+    let b = DMatrix::from_diagonal(&scale) * b;
+    b.iter().all(|v| v.is_finite()).then_some(b)
+}
+
+/// Ridge least squares with column scaling: `argmin |y − Xb|² + λ|Db|²`,
+/// `D` the column norms (so λ is relative): [`ridge_multi`] with one
+/// right-hand side.
+pub fn ridge(x: &DMatrix<f64>, y: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let y = DMatrix::from_column_slice(y.len(), 1, y.as_slice());
+    ridge_multi(x, &y, lambda).map(|b| b.column(0).into_owned())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

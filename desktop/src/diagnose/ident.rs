@@ -24,6 +24,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use super::series::Dataset;
+use crate::linalg::{ridge, ridge_multi};
 
 /// Candidate time constants [s] (2 min … 5.3 h).
 pub const TAU_GRID: [f64; 8] = [120.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0, 9600.0, 19200.0];
@@ -717,36 +718,6 @@ impl<'a> Problem<'a> {
         };
         (st, fit)
     }
-}
-
-/// `ridge` for several right-hand sides (columns of `y`) at once.
-pub fn ridge_multi(x: &DMatrix<f64>, y: &DMatrix<f64>, lambda: f64) -> Option<DMatrix<f64>> {
-    let p = x.ncols();
-    let mut scale = DVector::zeros(p);
-    for j in 0..p {
-        let n = x.column(j).norm();
-        scale[j] = if n > 0.0 { 1.0 / n } else { 0.0 };
-    }
-    let xs = x * DMatrix::from_diagonal(&scale);
-    let mut g = xs.tr_mul(&xs);
-    for j in 0..p {
-        g[(j, j)] += lambda.max(1e-12);
-    }
-    let rhs = xs.tr_mul(y);
-    let b = match g.clone().cholesky() {
-        Some(c) => c.solve(&rhs),
-        None => g.svd(true, true).solve(&rhs, 1e-12).ok()?,
-    };
-    let b = DMatrix::from_diagonal(&scale) * b;
-    b.iter().all(|v| v.is_finite()).then_some(b)
-}
-
-/// Ridge least squares with column scaling: `argmin |y − Xb|² + λ|Db|²`,
-/// `D` the column norms (so λ is relative): [`ridge_multi`] with one
-/// right-hand side.
-pub fn ridge(x: &DMatrix<f64>, y: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
-    let y = DMatrix::from_column_slice(y.len(), 1, y.as_slice());
-    ridge_multi(x, &y, lambda).map(|b| b.column(0).into_owned())
 }
 
 #[cfg(test)]

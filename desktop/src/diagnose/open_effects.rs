@@ -249,7 +249,7 @@ fn lagged_body_map(p: &Problem, o: usize, tau: f64, own: Option<usize>) -> OutFi
         let x = nalgebra::DMatrix::from_fn(rows.len(), k, |i, j| val(rows[i].0, rows[i].1, j));
         let y =
             nalgebra::DVector::from_iterator(rows.len(), rows.iter().map(|&(r, kk)| target[r][kk]));
-        super::ident::ridge(&x, &y, 1e-6)
+        crate::linalg::ridge(&x, &y, 1e-6)
     } else {
         None
     };
@@ -697,7 +697,7 @@ pub fn ambient_drift(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Cand
             }
         });
         let yv = nalgebra::DVector::from_vec(y);
-        let c = super::ident::ridge(&x, &yv, 1e-6)?;
+        let c = crate::linalg::ridge(&x, &yv, 1e-6)?;
         shapes.push(
             run.time
                 .iter()
