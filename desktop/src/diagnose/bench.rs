@@ -239,13 +239,6 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
             );
         }
     }
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
     let identified = ok_single + ok_pair;
     Ok(json!({
         "cases": plan.len(),
@@ -354,51 +347,19 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             }));
         }
         if cfg.verbose {
-            for f in &d.tried {
-                eprintln!(
-                    "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {} {}",
-                    f.name,
-                    f.m_before,
-                    f.m_after,
-                    f.dbic,
-                    f.gap_um.map(|g| (g.0 .0, g.1 .0)),
-                    f.gap_c.map(|g| (g.0 .0, g.1 .0)),
-                    f.params_json(),
-                    f.evidence
-                        .get("fit_rel_gain")
-                        .map_or(String::new(), |g| format!("fit gain {g}"))
-                );
-            }
-            eprintln!(
-                "open {ci:3} effect rms {:.3} °C {:.3} µm truth {:50} got {:40} {} ({:.2} s)",
-                vis.max_c,
-                vis.max_um,
-                effects
-                    .first()
-                    .map_or("clean".into(), TruthEffect::describe),
-                d.findings
-                    .iter()
-                    .map(|f| format!("{} {}", f.name, f.params_json()))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                if correct {
-                    "ok"
-                } else if kind.is_some() {
-                    "MISS"
-                } else {
-                    "FALSE ALARM"
-                },
-                times.last().copied().unwrap_or(0.0)
+            eprint_case(
+                &format!(
+                    "open {ci:3} effect rms {:.3} °C {:.3} µm",
+                    vis.max_c, vis.max_um
+                ),
+                effects.first(),
+                &d,
+                correct,
+                kind.is_some(),
+                times.last().copied().unwrap_or(0.0),
             );
         }
     }
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
     // the kinds a nominal identified from the data cannot absorb (the
     // issue's target set): step, lag, periodic chiller, speed law
     let (n_t, ok_t) = [
@@ -511,6 +472,58 @@ fn visibility_json(v: &std::collections::BTreeMap<String, Vec<(f64, f64, bool)>>
         })
         .collect::<serde_json::Map<_, _>>()
         .into()
+}
+
+/// Mean of a list of figures (NaN for none).
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// `--verbose` lines of one open-world case: every effect tried, then the
+/// verdict (both open benches print the same form).
+fn eprint_case(
+    head: &str,
+    truth: Option<&super::truth::TruthEffect>,
+    d: &super::Diagnosis,
+    correct: bool,
+    has_effect: bool,
+    seconds: f64,
+) {
+    for f in &d.tried {
+        eprintln!(
+            "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {} {}",
+            f.name,
+            f.m_before,
+            f.m_after,
+            f.dbic,
+            f.gap_um.map(|g| (g.0 .0, g.1 .0)),
+            f.gap_c.map(|g| (g.0 .0, g.1 .0)),
+            f.params_json(),
+            f.evidence
+                .get("fit_rel_gain")
+                .map_or(String::new(), |g| format!("fit gain {g}"))
+        );
+    }
+    eprintln!(
+        "{head} truth {:50} got {:40} {} ({seconds:.2} s)",
+        truth.map_or("clean".into(), super::truth::TruthEffect::describe),
+        d.findings
+            .iter()
+            .map(|f| format!("{} {}", f.name, f.params_json()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        if correct {
+            "ok"
+        } else if has_effect {
+            "MISS"
+        } else {
+            "FALSE ALARM"
+        },
+    );
 }
 
 /// One open-world case: the truth effect kind (None = clean), the effects
@@ -662,44 +675,16 @@ pub fn run_open_machine_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
             }));
         }
         if cfg.verbose {
-            for f in &d.tried {
-                eprintln!(
-                    "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {}",
-                    f.name,
-                    f.m_before,
-                    f.m_after,
-                    f.dbic,
-                    f.gap_um.map(|g| (g.0 .0, g.1 .0)),
-                    f.gap_c.map(|g| (g.0 .0, g.1 .0)),
-                    f.params_json(),
-                );
-            }
-            eprintln!(
-                "machine {ci:3} truth {:50} got {:40} {} ({:.2} s)",
-                truth.map_or("clean".into(), TruthEffect::describe),
-                d.findings
-                    .iter()
-                    .map(|f| format!("{} {}", f.name, f.params_json()))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                if correct {
-                    "ok"
-                } else if case.kind.is_some() {
-                    "MISS"
-                } else {
-                    "FALSE ALARM"
-                },
-                times.last().copied().unwrap_or(0.0)
+            eprint_case(
+                &format!("machine {ci:3}"),
+                truth,
+                &d,
+                correct,
+                case.kind.is_some(),
+                times.last().copied().unwrap_or(0.0),
             );
         }
     }
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
     Ok(json!({
         "mode": format!("tcomp diagnose {} (effect-free, from the design), truth model diagnose/truth.rs, two runs per case, no coolant_on; held out: the last 40 % of every hour of every run", m.spec.name),
         "cases": cases.len(),
