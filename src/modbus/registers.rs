@@ -11,11 +11,8 @@ use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
 
-/// Version of this register map (input register 2). 2: input registers
-/// 150–299 (degraded mode, board safety, volumetric correction, sensor
-/// identity), holding registers 34–35, commands 6–11; version 1 ended at
-/// input register 149, and every register it had keeps its meaning.
-pub const MAP_VERSION: u16 = 2;
+/// Version of this register map (input register 2).
+pub const MAP_VERSION: u16 = 1;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;
