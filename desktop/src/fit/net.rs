@@ -186,62 +186,93 @@ fn solve_output(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
     s / y.len().max(1) as f64
 }
 
-/// GA fitness: as [`solve_output`], but by the normal equations of the
-/// (n_hidden + 1)-column hidden layer and a Cholesky factorization with a
-/// small ridge — an O(n·nh²) accumulation instead of an SVD of the n×(nh+1)
-/// matrix per genome. Only ranks genomes; the winner's output layer is
-/// solved again by SVD on all rows.
-fn fitness(net: &mut Net, x: &[Vec<f64>], y: &[f64]) -> f64 {
+/// The GA's fitness rows in column layout (one slice per input), so the
+/// hidden layer of a genome is computed column by column over all rows.
+struct GaRows {
+    cols: Vec<Vec<f64>>,
+    y: nalgebra::DVector<f64>,
+}
+
+impl GaRows {
+    fn new(x: &[Vec<f64>], y: &[f64]) -> GaRows {
+        let n_in = x.first().map_or(0, Vec::len);
+        let cols = (0..n_in)
+            .map(|i| x.iter().map(|r| r[i]).collect())
+            .collect();
+        GaRows {
+            cols,
+            y: nalgebra::DVector::from_column_slice(y),
+        }
+    }
+}
+
+/// The board's logistic sigmoid (`thermocomp_core::fixed::sigmoid_q17`: a
+/// table at step 1/32 with linear interpolation, within 2.5e-5 of σ) in f64:
+/// what the GA ranks genomes with — cheaper than `exp`, and the very
+/// activation the fixed-point core will compute.
+#[inline]
+pub fn sigmoid_board(z: f64) -> f64 {
+    let zq = (z * 65536.0).clamp(-1.0e12, 1.0e12) as i64;
+    f64::from(thermocomp_core::fixed::sigmoid_q17(zq)) * (1.0 / 131072.0)
+}
+
+/// GA fitness: the training MSE with the output layer least-squares fitted
+/// to the genome's hidden layer. The hidden layer is built column by column
+/// (n rows × (n_hidden + 1), the board's sigmoid), its normal equations by
+/// nalgebra's matrix product and solved by Cholesky with a small ridge, and
+/// the SSE from the same products (yᵀy − 2cᵀHᵀy + cᵀHᵀHc) — no second pass
+/// over the rows. Only ranks genomes; the winner's output layer is solved
+/// again by SVD on all rows.
+fn fitness(net: &mut Net, d: &GaRows) -> f64 {
+    use nalgebra::DMatrix;
     let (n_in, nh) = (net.n_in, net.nh);
     let k = n_in + 1;
     let m = nh + 1;
-    let mut ata = vec![0.0; m * m];
-    let mut aty = vec![0.0; m];
-    let mut h = vec![0.0; m];
-    h[0] = 1.0;
-    let mut hs: Vec<f64> = Vec::with_capacity(x.len() * m);
-    for (r, &t) in x.iter().zip(y) {
-        for j in 0..nh {
-            let w = &net.theta[j * k..j * k + k];
-            let mut z = w[n_in];
-            for i in 0..n_in {
-                z += w[i] * r[i];
-            }
-            h[1 + j] = sigmoid(z);
-        }
-        for a in 0..m {
-            let ha = h[a];
-            aty[a] += ha * t;
-            for b in 0..=a {
-                ata[a * m + b] += ha * h[b];
+    let n = d.y.len();
+    if n == 0 {
+        return f64::INFINITY;
+    }
+    // Columns: 1, the nh hidden units, y; one product gives HᵀH, Hᵀy, yᵀy.
+    let mut h = DMatrix::<f64>::zeros(n, m + 1);
+    h.column_mut(0).fill(1.0);
+    h.column_mut(m).copy_from(&d.y);
+    for j in 0..nh {
+        let w = &net.theta[j * k..j * k + k];
+        let mut col = h.column_mut(j + 1);
+        let c = col.as_mut_slice();
+        c.fill(w[n_in]);
+        for (i, xc) in d.cols.iter().enumerate() {
+            let wi = w[i];
+            for (v, x) in c.iter_mut().zip(xc) {
+                *v += wi * x;
             }
         }
-        hs.extend_from_slice(&h);
-    }
-    let ridge = 1e-6 * y.len().max(1) as f64;
-    for a in 0..m {
-        for b in 0..a {
-            ata[b * m + a] = ata[a * m + b];
-        }
-        if a > 0 {
-            ata[a * m + a] += ridge;
+        for v in c.iter_mut() {
+            *v = sigmoid_board(*v);
         }
     }
-    let Ok(c) = solve_spd(&ata, &aty, m) else {
+    let g = h.tr_mul(&h);
+    let hth = g.view((0, 0), (m, m)).into_owned();
+    let hty = g.view((0, m), (m, 1)).column(0).into_owned();
+    let ridge = 1e-6 * n as f64;
+    let mut a = hth.clone();
+    for i in 1..m {
+        a[(i, i)] += ridge;
+    }
+    let Some(ch) = a.cholesky() else {
         return f64::INFINITY;
     };
+    let c = ch.solve(&hty);
+    if c.iter().any(|v| !v.is_finite()) {
+        return f64::INFINITY;
+    }
     let o = net.out_off();
     net.theta[o + nh] = c[0];
-    net.theta[o..o + nh].copy_from_slice(&c[1..]);
-    let sse: f64 = hs
-        .chunks_exact(m)
-        .zip(y)
-        .map(|(hr, &t)| {
-            let p: f64 = hr.iter().zip(&c).map(|(a, b)| a * b).sum();
-            (p - t) * (p - t)
-        })
-        .sum();
-    let v = sse / y.len().max(1) as f64;
+    for j in 0..nh {
+        net.theta[o + j] = c[j + 1];
+    }
+    let sse = g[(m, m)] - 2.0 * c.dot(&hty) + c.dot(&(&hth * &c));
+    let v = sse.max(0.0) / n as f64;
     if v.is_finite() {
         v
     } else {
@@ -260,6 +291,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
     let stride = x.len().div_ceil(opts.ga_rows.max(1)).max(1);
     let xs: Vec<Vec<f64>> = x.iter().step_by(stride).cloned().collect();
     let ys: Vec<f64> = y.iter().step_by(stride).copied().collect();
+    let rows = GaRows::new(&xs, &ys);
 
     let new_net = |rng: &mut Rng| {
         let mut n = Net::zeros(n_in, nh);
@@ -271,8 +303,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
     let mut pop: Vec<(Net, f64)> = (0..opts.population.max(2))
         .map(|_| (new_net(&mut rng), f64::INFINITY))
         .collect();
-    pop.par_iter_mut()
-        .for_each(|(n, f)| *f = fitness(n, &xs, &ys));
+    pop.par_iter_mut().for_each(|(n, f)| *f = fitness(n, &rows));
     let mut history = Vec::new();
     for gen in 0..opts.generations {
         pop.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -308,7 +339,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
         }
         next[opts.elites..]
             .par_iter_mut()
-            .for_each(|(n, f)| *f = fitness(n, &xs, &ys));
+            .for_each(|(n, f)| *f = fitness(n, &rows));
         pop = next;
         pb.inc(1);
     }
