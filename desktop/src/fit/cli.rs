@@ -44,9 +44,9 @@ pub struct FitArgs {
     pub hidden: usize,
     #[arg(long, default_value_t = 3)]
     pub seed: u64,
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 30)]
     pub population: usize,
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 30)]
     pub generations: usize,
     /// Maximum Levenberg–Marquardt steps.
     #[arg(long, default_value_t = 300)]
@@ -62,9 +62,10 @@ pub struct FitArgs {
     /// fraction of the best.
     #[arg(long, default_value_t = 0.02)]
     pub choice_margin: f64,
-    /// Keep the early-stopped weights instead of refitting on all training rows.
+    /// After early stopping, retrain each network on all training rows for
+    /// the best number of steps (by default the early-stopped weights are kept).
     #[arg(long)]
-    pub no_refit: bool,
+    pub refit_full: bool,
     /// Only the MLR models.
     #[arg(long)]
     pub mlr_only: bool,
@@ -149,7 +150,7 @@ impl FitArgs {
             population: self.population.max(4),
             generations: self.generations,
             lm_iters: self.lm_iters,
-            refit_full: !self.no_refit,
+            refit_full: self.refit_full,
             l2: self.l2,
             ensemble: self.ensemble.max(1),
             ..NetOpts::default()
