@@ -76,8 +76,7 @@ fn main() -> Result<()> {
         println!("{v}");
         return Ok(());
     }
-    let open_machine_path =
-        open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
+    let open_machine_path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
     let truth_machine = Machine::load(&open_machine_path)?;
     let mut open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
     open_machine["machine_file"] = serde_json::json!(open_machine_path.display().to_string());

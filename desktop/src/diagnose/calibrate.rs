@@ -118,7 +118,9 @@ fn knobs(m: &Machine) -> Vec<Knob> {
         });
     }
     if let Some(c) = &m.coolant {
-        let js: Vec<usize> = (0..c.jacket.len()).filter(|&j| c.jacket[j].1 > 0.0).collect();
+        let js: Vec<usize> = (0..c.jacket.len())
+            .filter(|&j| c.jacket[j].1 > 0.0)
+            .collect();
         for &j in &js {
             element.push(Knob {
                 name: format!("jacket {}", node(c.jacket[j].0)),
@@ -138,10 +140,16 @@ fn knobs(m: &Machine) -> Vec<Knob> {
     // heat effects (bearing heat, ball-screw heat) act, and a gain per
     // source would absorb them.
     let spindle: Vec<usize> = (0..m.spec.sources.len())
-        .filter(|&s| m.spec.sources[s].driver == crate::sim::machine::Driver::Spindle && m.spec.sources[s].w_at_nmax > 0.0)
+        .filter(|&s| {
+            m.spec.sources[s].driver == crate::sim::machine::Driver::Spindle
+                && m.spec.sources[s].w_at_nmax > 0.0
+        })
         .collect();
     let feed: Vec<usize> = (0..m.spec.sources.len())
-        .filter(|&s| m.spec.sources[s].driver == crate::sim::machine::Driver::Feed && m.spec.sources[s].w_at_nmax > 0.0)
+        .filter(|&s| {
+            m.spec.sources[s].driver == crate::sim::machine::Driver::Feed
+                && m.spec.sources[s].w_at_nmax > 0.0
+        })
         .collect();
     let motor = m.motor_node.is_some() && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
     if !spindle.is_empty() || !m.spec.bearings.is_empty() || motor {
@@ -215,7 +223,9 @@ fn apply(m: &Machine, ks: &[Knob], theta: &[f64]) -> Machine {
                 bearings,
                 motor,
             } => {
-                sources.iter().for_each(|&s| c.spec.sources[s].w_at_nmax *= f);
+                sources
+                    .iter()
+                    .for_each(|&s| c.spec.sources[s].w_at_nmax *= f);
                 for &b in bearings {
                     c.spec.bearings[b].f0 *= f;
                     c.spec.bearings[b].f1 *= f;
@@ -245,7 +255,12 @@ struct Eval {
     j: f64,
 }
 
-fn eval(m: &Machine, ps: &[Prepared], stride: usize, w: Option<&[f64]>) -> Result<(Eval, Vec<f64>)> {
+fn eval(
+    m: &Machine,
+    ps: &[Prepared],
+    stride: usize,
+    w: Option<&[f64]>,
+) -> Result<(Eval, Vec<f64>)> {
     let ev = Evaluator::new(m, ps)?;
     let res = ev.residuals(&[])?;
     let st = ev.stats_of(&res);
@@ -337,12 +352,13 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         let cur = apply(m, &ks, &theta);
         let (base, w) = eval(&cur, ps, stride, None)?;
         // Jacobian of the weighted residual by forward differences
-        let cols: Vec<Result<Vec<f64>>> = super::par_map(&(0..nk).collect::<Vec<_>>(), threads, |&i| {
-            let mut t = theta.clone();
-            t[i] += h;
-            let (e, _) = eval(&apply(m, &ks, &t), ps, stride, Some(&w))?;
-            Ok(e.r.iter().zip(&base.r).map(|(a, b)| (a - b) / h).collect())
-        });
+        let cols: Vec<Result<Vec<f64>>> =
+            super::par_map(&(0..nk).collect::<Vec<_>>(), threads, |&i| {
+                let mut t = theta.clone();
+                t[i] += h;
+                let (e, _) = eval(&apply(m, &ks, &t), ps, stride, Some(&w))?;
+                Ok(e.r.iter().zip(&base.r).map(|(a, b)| (a - b) / h).collect())
+            });
         sims += nk + 1;
         let cols = cols.into_iter().collect::<Result<Vec<_>>>()?;
         // normal equations of  |r − J δ|² + |θ + δ|²/σ²

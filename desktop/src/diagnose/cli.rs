@@ -83,6 +83,13 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         for m in &d.missing {
             println!("missing: {m}");
         }
+        for n in d
+            .notes
+            .iter()
+            .filter(|n| n.starts_with("machine file calibrated"))
+        {
+            println!("{n}");
+        }
         if d.findings.is_empty() {
             println!("no candidate effect is supported by the data");
         }

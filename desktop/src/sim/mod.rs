@@ -177,12 +177,7 @@ fn discretize_cached(a: &DMatrix<f64>, dt: f64) -> Result<(DMatrix<f64>, DMatrix
     key.push(a.nrows() as u64);
     key.push(dt.to_bits());
     key.extend(a.iter().map(|v| v.to_bits()));
-    if let Some(hit) = CACHE.with(|c| {
-        c.borrow()
-            .iter()
-            .find(|e| e.0 == key)
-            .map(|e| e.1.clone())
-    }) {
+    if let Some(hit) = CACHE.with(|c| c.borrow().iter().find(|e| e.0 == key).map(|e| e.1.clone())) {
         return Ok(hit);
     }
     let d = discretize(a, dt)?;
