@@ -274,3 +274,95 @@ fn diagnoses_speed_dependent_bearing_heat_at_the_nose_and_nothing_on_a_clean_cas
         clean.findings.iter().map(|f| &f.name).collect::<Vec<_>>()
     );
 }
+
+fn design_error() -> Machine {
+    let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("machines/vertical-mc-design-error.toml");
+    Machine::load(&p).unwrap()
+}
+
+#[test]
+fn the_design_error_file_is_the_design_off_by_10_to_20_percent_everywhere() {
+    let (t, e) = (design(), design_error());
+    let mut ratios = Vec::new();
+    for (a, b) in t.spec.nodes.iter().zip(&e.spec.nodes) {
+        assert_eq!(a.name, b.name);
+        ratios.push(b.c_j_per_k / a.c_j_per_k);
+        ratios.push(b.g_amb_w_per_k / a.g_amb_w_per_k);
+        assert_eq!(a.area_m2, b.area_m2);
+    }
+    for (a, b) in t.spec.links.iter().zip(&e.spec.links) {
+        ratios.push(b.g_w_per_k / a.g_w_per_k);
+    }
+    for (a, b) in t.spec.sources.iter().zip(&e.spec.sources) {
+        ratios.push(b.w_at_nmax / a.w_at_nmax);
+        assert_eq!(a.exponent, b.exponent);
+    }
+    let (ca, cb) = (
+        t.spec.coolant.as_ref().unwrap(),
+        e.spec.coolant.as_ref().unwrap(),
+    );
+    ratios.push(cb.tank_c_j_per_k / ca.tank_c_j_per_k);
+    ratios.push(cb.tank_g_amb_w_per_k / ca.tank_g_amb_w_per_k);
+    for (a, b) in ca.jacket.iter().zip(&cb.jacket) {
+        ratios.push(b.g_w_per_k / a.g_w_per_k);
+    }
+    for (a, b) in t.spec.directions.iter().zip(&e.spec.directions) {
+        for (x, y) in a.terms.iter().zip(&b.terms) {
+            ratios.push(y.length_mm / x.length_mm);
+        }
+    }
+    assert_eq!(ratios.len(), 99);
+    for r in &ratios {
+        let off = (r - 1.0).abs();
+        assert!((0.099..=0.201).contains(&off), "factor {r}");
+    }
+    assert!(ratios.iter().filter(|r| **r > 1.0).count() >= 40);
+    assert!(ratios.iter().filter(|r| **r < 1.0).count() >= 40);
+}
+
+#[test]
+fn a_wrong_design_is_calibrated_on_the_fit_rows_and_a_clean_case_names_nothing() {
+    let m = design_error();
+    let runs = case(&[], 51);
+    // taken as exact, the wrong design leaves a gap an effect would absorb
+    let opt = Options {
+        calibrate: true,
+        ..Options::default()
+    };
+    let ps = tcomp::diagnose::prepare_all(&m, &runs, &opt).unwrap();
+    let cal = tcomp::diagnose::calibrate::calibrate(&m, &ps, 2).unwrap();
+    let before = cal.json["held_out_norm_gap_design"].as_f64().unwrap();
+    let after = cal.json["held_out_norm_gap_calibrated"].as_f64().unwrap();
+    assert!(after < 0.5 * before, "held-out gap {before} → {after}");
+    assert!(cal.json["on_bound"].is_array());
+    let d = diagnose(&m, &runs, &opt).unwrap();
+    assert!(
+        d.findings.is_empty(),
+        "clean case named {:?}",
+        d.findings.iter().map(|f| &f.name).collect::<Vec<_>>()
+    );
+    assert!(d.notes.iter().any(|n| n.contains("calibrated")));
+    assert_eq!(d.to_json()["nominal"]["calibration"]["parameters"], 95);
+}
+
+#[test]
+fn a_wrong_design_still_finds_a_sensor_step_on_its_sensor() {
+    let m = design_error();
+    let runs = case(
+        &[TruthEffect::SensorStep {
+            sensor: 6,
+            step_c: 0.8,
+            at_s: 7000.0,
+        }],
+        61,
+    );
+    let opt = Options {
+        calibrate: true,
+        ..Options::default()
+    };
+    let d = diagnose(&m, &runs, &opt).unwrap();
+    let top = d.findings.first().expect("an effect");
+    assert_eq!(top.name, "sensor_offset");
+    assert_eq!(top.params_json()["sensor"], "T_T6");
+}

@@ -3,7 +3,14 @@
 //! held-out gap shrink, false alarms, and the time of a full diagnosis of an
 //! 8 h run sampled at 1 s.
 //!
-//! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR]`
+//! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR] [--machine FILE]`
+//!
+//! `--machine FILE`: the machine file of the open-world machine-file column
+//! (default `machines/vertical-mc-truth.toml`, the truth's own numbers;
+//! `machines/vertical-mc-design-error.toml` is the same design off by
+//! ±10–20 %). The column calibrates the file's design values on each
+//! case's fit rows first (as `tcomp diagnose` does); `--no-calibrate` takes
+//! the file as exact.
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp::diagnose::bench::{run_bench, run_open_bench, run_open_machine_bench, BenchConfig};
@@ -19,18 +26,24 @@ fn main() -> Result<()> {
     let mut machine_only = false;
     let mut closed_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
+    let mut open_machine_file: Option<PathBuf> = None;
+    let mut calibrate = true;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--cases" => cases = args.next().context("--cases N")?.parse().context("--cases N")?,
             "--seed" => seed = args.next().context("--seed S")?.parse().context("--seed S")?,
             "--machines" => dir = PathBuf::from(args.next().context("--machines DIR")?),
+            "--machine" => {
+                open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
+            }
             "--json" => json = true,
+            "--no-calibrate" => calibrate = false,
             "--verbose" => verbose = true,
             "--open-only" => open_only = true,
             "--open-machine-only" => machine_only = true,
             "--closed-only" => closed_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR)"),
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR, --machine FILE, --no-calibrate)"),
         }
     }
     let machines = vec![
@@ -45,6 +58,7 @@ fn main() -> Result<()> {
         sample_period_s: 10.0,
         threads,
         verbose,
+        calibrate,
     };
     if closed_only {
         let v = run_bench(
@@ -56,13 +70,16 @@ fn main() -> Result<()> {
                 sample_period_s: 10.0,
                 threads,
                 verbose,
+                calibrate: false,
             },
         )?;
         println!("{v}");
         return Ok(());
     }
-    let truth_machine = Machine::load(&dir.join("vertical-mc-truth.toml"))?;
-    let open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
+    let open_machine_path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
+    let truth_machine = Machine::load(&open_machine_path)?;
+    let mut open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
+    open_machine["machine_file"] = serde_json::json!(open_machine_path.display().to_string());
     if machine_only {
         println!("{open_machine}");
         return Ok(());
@@ -81,6 +98,7 @@ fn main() -> Result<()> {
             sample_period_s: 10.0,
             threads,
             verbose,
+            calibrate: false,
         },
     )?;
     // full diagnosis of one 8 h run sampled at 1 s, all candidates
@@ -130,7 +148,7 @@ fn main() -> Result<()> {
     let mut with_machine = pick(&open_machine);
     with_machine["per_effect"] = open_machine["per_effect"].clone();
     with_machine["max_seconds_per_case"] = open_machine["max_diagnosis_seconds"].clone();
-    with_machine["machine_file"] = serde_json::json!("desktop/machines/vertical-mc-truth.toml");
+    with_machine["machine_file"] = open_machine["machine_file"].clone();
     v["side_by_side"] = serde_json::json!({
         "closed_world": pick(&v),
         "open_world_fit": open_fit,

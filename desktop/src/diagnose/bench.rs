@@ -110,6 +110,8 @@ pub struct BenchConfig {
     pub sample_period_s: f64,
     pub threads: usize,
     pub verbose: bool,
+    /// Machine-file column: calibrate the file's design values first.
+    pub calibrate: bool,
 }
 
 /// Run the blind check; returns the summary JSON.
@@ -627,6 +629,7 @@ pub fn run_open_machine_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
     use super::truth::TruthEffect;
     let opt = Options {
         threads: cfg.threads,
+        calibrate: cfg.calibrate,
         ..Options::default()
     };
     let cases = open_cases(cfg);
@@ -686,7 +689,8 @@ pub fn run_open_machine_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
         }
     }
     Ok(json!({
-        "mode": format!("tcomp diagnose {} (effect-free, from the design), truth model diagnose/truth.rs, two runs per case, no coolant_on; held out: the last 40 % of every hour of every run", m.spec.name),
+        "mode": format!("tcomp diagnose {} (effect-free, from the design{}), truth model diagnose/truth.rs, two runs per case, no coolant_on; held out: the last 40 % of every hour of every run", m.spec.name, if cfg.calibrate { ", calibrated on the fit rows first" } else { ", taken as exact" }),
+        "calibrate": cfg.calibrate,
         "cases": cases.len(),
         "effect_cases": n_eff,
         "clean_cases": n_clean,

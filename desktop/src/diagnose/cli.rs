@@ -31,6 +31,11 @@ pub struct DiagnoseArgs {
     /// Threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Take the machine file as exact: no calibration of its design values
+    /// (capacities, conductances, losses, heat gains, displacement lengths)
+    /// on the fit rows before the effect search.
+    #[arg(long)]
+    pub no_calibrate: bool,
 }
 
 pub fn main(a: DiagnoseArgs) -> Result<()> {
@@ -50,6 +55,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     let mut opt = Options {
         fit_fraction: a.fit_fraction,
         only: a.only.clone(),
+        calibrate: !a.no_calibrate,
         ..Options::default()
     };
     if let Some(t) = a.threads {
@@ -76,6 +82,13 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     } else {
         for m in &d.missing {
             println!("missing: {m}");
+        }
+        for n in d
+            .notes
+            .iter()
+            .filter(|n| n.starts_with("machine file calibrated"))
+        {
+            println!("{n}");
         }
         if d.findings.is_empty() {
             println!("no candidate effect is supported by the data");

@@ -4,6 +4,7 @@
 //! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
 
 pub mod bench;
+pub mod calibrate;
 pub mod cli;
 pub mod fit;
 pub mod fitmode;
@@ -72,6 +73,9 @@ pub struct Options {
     pub threads: usize,
     /// Restrict the candidates (empty = all applicable).
     pub only: Vec<String>,
+    /// Calibrate the machine file's design values on the fit rows before
+    /// the effect search (`calibrate.rs`); off: the file is taken as exact.
+    pub calibrate: bool,
 }
 
 impl Default for Options {
@@ -89,6 +93,7 @@ impl Default for Options {
                 .map_or(1, |n| n.get())
                 .min(8),
             only: Vec::new(),
+            calibrate: false,
         }
     }
 }
@@ -892,7 +897,16 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
 pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
     let ps = prepare_all(m, runs, opt)?;
-    let mut d = diagnose_prepared(m, &ps, opt)?;
+    let mut d = if opt.calibrate {
+        let cal = calibrate::calibrate(m, &ps, opt.threads)?;
+        let mut d = diagnose_prepared(&cal.machine, &ps, opt)?;
+        d.sims += cal.sims;
+        d.notes.push(cal.note);
+        d.nominal = json!({"kind": "machine description, calibrated", "name": m.spec.name, "calibration": cal.json});
+        d
+    } else {
+        diagnose_prepared(m, &ps, opt)?
+    };
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
 }

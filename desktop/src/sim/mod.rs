@@ -162,6 +162,35 @@ fn saw(t: f64, amp: f64, period: f64) -> f64 {
     amp * ((t / period).rem_euclid(1.0) - 0.5)
 }
 
+/// [`discretize`] with a small per-thread cache keyed by the exact bits of
+/// `A` and `dt`: a diagnosis re-simulates the same network many times with
+/// other heat inputs (heat effects, heat-gain calibration), and the matrix
+/// exponential is most of a coarse simulation's cost. Same result, bit for bit.
+fn discretize_cached(a: &DMatrix<f64>, dt: f64) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    type Entry = (Vec<u64>, (DMatrix<f64>, DMatrix<f64>));
+    thread_local! {
+        static CACHE: std::cell::RefCell<std::collections::VecDeque<Entry>> =
+            const { std::cell::RefCell::new(std::collections::VecDeque::new()) };
+    }
+    const KEEP: usize = 16;
+    let mut key: Vec<u64> = Vec::with_capacity(a.len() + 2);
+    key.push(a.nrows() as u64);
+    key.push(dt.to_bits());
+    key.extend(a.iter().map(|v| v.to_bits()));
+    if let Some(hit) = CACHE.with(|c| c.borrow().iter().find(|e| e.0 == key).map(|e| e.1.clone())) {
+        return Ok(hit);
+    }
+    let d = discretize(a, dt)?;
+    CACHE.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.len() >= KEEP {
+            c.pop_front();
+        }
+        c.push_back((key, d.clone()));
+    });
+    Ok(d)
+}
+
 /// The state matrix `A` (dx/dt = A x + b) for the given ambient and
 /// coolant conductances.
 fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> DMatrix<f64> {
@@ -228,7 +257,7 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
         let g: Vec<f64> = (0..n)
             .map(|i| (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 })
             .collect();
-        *slot = Some(discretize(&state_matrix(m, &g_amb, &g), dt)?);
+        *slot = Some(discretize_cached(&state_matrix(m, &g_amb, &g), dt)?);
     }
     let circuit = m.coolant.as_ref();
     let supply = circuit.map_or(0.0, |c| c.supply_c);
