@@ -8,9 +8,9 @@
 //! `--machine FILE`: the machine file of the open-world machine-file column
 //! (default `machines/vertical-mc-truth.toml`, the truth's own numbers;
 //! `machines/vertical-mc-design-error.toml` is the same design off by
-//! ±10–20 %). The column calibrates the file's design values on each
-//! case's fit rows first (as `tcomp diagnose` does); `--no-calibrate` takes
-//! the file as exact.
+//! ±10–20 %). The column takes the file as exact (as `tcomp diagnose`
+//! does by default); `--calibrate` calibrates its design values on each
+//! case's fit rows first (`tcomp diagnose --calibrate`).
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp::diagnose::bench::{run_bench, run_open_bench, run_open_machine_bench, BenchConfig};
@@ -27,7 +27,7 @@ fn main() -> Result<()> {
     let mut closed_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
     let mut open_machine_file: Option<PathBuf> = None;
-    let mut calibrate = true;
+    let mut calibrate = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -38,12 +38,12 @@ fn main() -> Result<()> {
                 open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
             }
             "--json" => json = true,
-            "--no-calibrate" => calibrate = false,
+            "--calibrate" => calibrate = true,
             "--verbose" => verbose = true,
             "--open-only" => open_only = true,
             "--open-machine-only" => machine_only = true,
             "--closed-only" => closed_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR, --machine FILE, --no-calibrate)"),
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR, --machine FILE, --calibrate)"),
         }
     }
     let machines = vec![
