@@ -199,12 +199,9 @@ fn score(
     let no_worse =
         |g: Option<((f64, f64), (f64, f64))>| g.is_none_or(|g| g.1 .0 <= g.0 .0 * (1.0 + 1e-9));
     // sensor lag is judged against the lagged body map, which is itself
-    // approximate: it must halve the gap it is judged on
-    let min_rel = if c.name == "sensor_lag" {
-        0.5
-    } else {
-        FIT_MIN_REL
-    };
+    // approximate: the relative held-out shrink of the other effects
+    // (its fit rows must also shrink by `LAG_MIN_FIT_REL`, below)
+    let min_rel = FIT_MIN_REL;
     let periodic_ok = c.name != "coolant"
         || c.evidence["peak_over_median_power"]
             .as_f64()
@@ -222,6 +219,9 @@ fn score(
         c.evidence["fit_rel_gain"]
             .as_f64()
             .is_some_and(|g| g >= LAG_MIN_FIT_REL)
+            && c.evidence["fit_rel_gain_least_run"]
+                .as_f64()
+                .is_some_and(|g| g >= LAG_MIN_RUN_REL)
     } else {
         m_b - m_a >= FIT_MIN_ABS
     };
@@ -334,6 +334,9 @@ pub const FIT_MIN_REL: f64 = 0.3;
 pub const FIT_MIN_ABS: f64 = 1.0;
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag.
 pub const LAG_MIN_FIT_REL: f64 = 0.2;
+/// ... and in every run at least half of that: a lag is the sensor's and
+/// shows in every run, heat that differs between runs does not.
+pub const LAG_MIN_RUN_REL: f64 = 0.1;
 
 /// Diagnose runs without a machine file.
 pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
@@ -382,7 +385,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     // each lag candidate is scored against its own reference (the body map
     // lagged by its tau), so their absolute shrinks do not compare: the lag
     // family is ranked by its best absolute shrink, and within it by the
-    // relative held-out shrink
+    // relative fit-row shrink of the body map (the detector's own
+    // statistic, on the most rows; the unsensed neighbour of a lagged
+    // sensor shows a smaller share of the same gain)
     let lag_gain = scored
         .iter()
         .filter(|s| s.finding.name == "sensor_lag")
@@ -392,7 +397,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         if s.finding.name == "sensor_lag" {
             (
                 lag_gain,
-                1.0 - s.finding.m_after / s.finding.m_before.max(1e-12),
+                s.finding.evidence["fit_rel_gain"]
+                    .as_f64()
+                    .unwrap_or(f64::NEG_INFINITY),
             )
         } else {
             (s.gain, 0.0)
@@ -449,7 +456,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
         ranking_rule: format!(
-            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {}, the held-out gap of the outputs it changes shrinks by ≥ {:.0} % and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative held-out shrink",
+            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {}, the held-out gap of the outputs it changes shrinks by ≥ {:.0} % and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 20 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
             opt.min_dbic, FIT_MIN_REL * 100.0, FIT_MIN_ABS
         ),
     })
