@@ -220,7 +220,7 @@ pub struct FitReport {
     pub models: Vec<ModelReport>,
     /// Per channel, the model cross-validation chose (what `export` ships).
     pub chosen: BTreeMap<String, String>,
-    /// What the board's limits ruled out.
+    /// What the board's limits ruled out, and how the runs were read.
     pub notes: Vec<String>,
     pub inputs: Vec<ChannelInfo>,
     pub selection: Option<Selection>,
@@ -380,12 +380,19 @@ pub fn candidates(
 pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
     let mut runs = Vec::new();
     let mut labels = Vec::new();
+    let mut notes = Vec::new();
     for p in train.iter().chain(validate_runs) {
-        runs.push(Run::read(p)?);
+        let mut run = Run::read(p)?;
+        // The model predicts rises from the run's start (what the board serves).
+        notes.extend(run.errors_as_rises(&p.display().to_string()));
+        runs.push(run);
         labels.push(p.display().to_string());
     }
     let plan = Plan::new(runs, labels, train.len(), cfg.split_chrono)?;
-    fit_plan(&plan, cfg)
+    let mut report = fit_plan(&plan, cfg)?;
+    notes.append(&mut report.notes);
+    report.notes = notes;
+    Ok(report)
 }
 
 /// Cross-validated figures of one model on one channel (training rows only).
@@ -1119,6 +1126,9 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
 
 /// Plain-text report.
 pub fn print_report(r: &FitReport) {
+    for n in &r.notes {
+        println!("note: {n}");
+    }
     if let Some(s) = &r.selection {
         println!("selected sensors (training rows): {}", s.chosen.join(","));
     }
