@@ -659,9 +659,20 @@ impl<'a> Problem<'a> {
             blocks.push((shared, own, ex));
         }
         let n_shared = blocks.first().map_or(0, |b| b.0.len());
-        let n_own = blocks.first().map_or(0, |b| b.1.len());
+        // Each run's own columns (level, free decays) are its own: their
+        // number follows the run's span, so runs of different lengths differ.
+        let own_len: Vec<usize> = blocks.iter().map(|b| b.1.len()).collect();
+        let own_off: Vec<usize> = own_len
+            .iter()
+            .scan(0, |acc, &l| {
+                let at = *acc;
+                *acc += l;
+                Some(at)
+            })
+            .collect();
+        let n_own_all: usize = own_len.iter().sum();
         let n_extra = blocks.iter().map(|b| b.2.len()).max().unwrap_or(0);
-        let p = n_shared + nr * n_own + n_extra;
+        let p = n_shared + n_own_all + n_extra;
         // fit rows
         let mut rows = Vec::new();
         for (r, run) in self.ds.runs.iter().enumerate() {
@@ -674,16 +685,16 @@ impl<'a> Problem<'a> {
         let value = |r: usize, k: usize, j: usize| -> f64 {
             let b = &blocks[r];
             if j < n_shared {
-                b.0[j][k]
-            } else if j < n_shared + nr * n_own {
+                b.0.get(j).map_or(0.0, |c| c[k])
+            } else if j < n_shared + n_own_all {
                 let jj = j - n_shared;
-                if jj / n_own == r {
-                    b.1[jj % n_own][k]
+                if (own_off[r]..own_off[r] + own_len[r]).contains(&jj) {
+                    b.1[jj - own_off[r]][k]
                 } else {
                     0.0
                 }
             } else {
-                b.2.get(j - n_shared - nr * n_own).map_or(0.0, |c| c[k])
+                b.2.get(j - n_shared - n_own_all).map_or(0.0, |c| c[k])
             }
         };
         let mut fit = OutFit {
@@ -712,7 +723,7 @@ impl<'a> Problem<'a> {
             return OutFit::failed(p, &sizes, rows.len(), held);
         };
         fit.extra_coef = (0..n_extra)
-            .map(|j| coef[n_shared + nr * n_own + j])
+            .map(|j| coef[n_shared + n_own_all + j])
             .collect();
         for (r, run) in self.ds.runs.iter().enumerate() {
             let mut res = Vec::with_capacity(run.rows());
