@@ -17,7 +17,7 @@ fn write_run(dir: &Path, name: &str, rows: usize, dt: f64, spindle: bool, gaps: 
     let (mut a, mut b, mut c) = (20.0f64, 20.0f64, 20.0f64);
     for k in 0..rows {
         let t = k as f64 * dt;
-        let rpm = if ((t / 3600.0) as usize) % 2 == 0 {
+        let rpm = if ((t / 3600.0) as usize).is_multiple_of(2) {
             4000.0
         } else {
             0.0
