@@ -61,6 +61,11 @@ fn main() -> Result<()> {
         println!("{v}");
         return Ok(());
     }
+    if open_only {
+        // the open world alone: `diagnose fit`, no machine-file pass
+        println!("{}", run_open_bench(&open_cfg)?);
+        return Ok(());
+    }
     let truth_machine = Machine::load(&dir.join("vertical-mc-truth.toml"))?;
     let open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
     if machine_only {
@@ -68,10 +73,6 @@ fn main() -> Result<()> {
         return Ok(());
     }
     let open = run_open_bench(&open_cfg)?;
-    if open_only {
-        println!("{open}");
-        return Ok(());
-    }
     let mut v = run_bench(
         &machines,
         &BenchConfig {
