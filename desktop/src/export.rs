@@ -216,6 +216,9 @@ pub enum Choice {
     /// `w·mlr + (1−w)·ga-bpn` (`blend`, `w` from the fit): the lagged MLR's
     /// table scaled by `w` and the networks' output layers by `(1−w)/k`.
     Blend,
+    /// No compensation (`none`): the direction is served as 0 about the
+    /// run's reference; the fit chose it when no model beat it in CV.
+    None,
 }
 
 impl Choice {
@@ -226,8 +229,11 @@ impl Choice {
             "mlr-static" => Choice::MlrStatic,
             "hybrid" => Choice::Hybrid,
             "blend" => Choice::Blend,
+            "none" => Choice::None,
             other => {
-                anyhow::bail!("unknown model `{other}` (ga-bpn, blend, hybrid, mlr or mlr-static)")
+                anyhow::bail!(
+                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static or none)"
+                )
             }
         })
     }
@@ -438,7 +444,7 @@ pub fn float_model_from_fit(
             Choice::Mlr | Choice::Hybrid | Choice::Blend => {
                 file.mlr.iter().find(|m| &m.channel == ch)
             }
-            Choice::Net => None,
+            Choice::Net | Choice::None => None,
         };
         let blend_nets = choice == Choice::Blend && w_nets > 0.0;
         if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
@@ -531,6 +537,12 @@ pub fn float_model_from_fit(
                 terms,
             });
         }
+    }
+    if model.tables.is_empty() && model.nets.is_empty() {
+        anyhow::bail!(
+            "no channel has a model to ship: the fit chose `none` (no model beat no compensation in its cross-validation) for {}; `--use CHANNEL=mlr` ships one anyway",
+            channels.join(", ")
+        );
     }
     // Fallback models (image v2) in the board's priority order: the board
     // serves a direction with the first fallback whose sensors are all

@@ -345,7 +345,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             json,
         } => {
             // Run file first, then image: each refusal names its own file.
-            let table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
+            let mut table = tcomp::runcsv::Run::read_with_temperatures(&run)?;
+            // Scored as rises from the run's start, as the board compensates.
+            let notes: Vec<String> = table
+                .errors_as_rises(&run.display().to_string())
+                .into_iter()
+                .collect();
             let bytes = std::fs::read(&image)
                 .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
             let model = thermocomp_core::Model::parse(&bytes)
@@ -367,10 +372,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if json {
                 println!(
                     "{}",
-                    serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags})
+                    serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags, "notes": notes})
                 );
             } else {
                 println!("{} samples compensated; scored rows {a}..{b}", n);
+                for note in &notes {
+                    println!("  note: {note}");
+                }
                 for r in &res {
                     println!(
                         "  {}: about the run's reference (what the board compensates): MAE {:.2} µm, RMS {:.2} µm (uncompensated {:.2}), peak {:.2} µm, RMS reduction {:.1} %",

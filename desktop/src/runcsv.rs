@@ -192,6 +192,41 @@ impl Run {
             .collect()
     }
 
+    /// The format's error reference: error columns are rises from the run's
+    /// first sample unless the metadata says `error_reference: absolute`.
+    /// For such a run, subtract each error column's first valid sample (the
+    /// format's rule for tools that need rises) and return a one-line note
+    /// saying so; `None` when the run is already relative. The metadata is
+    /// rewritten to `relative`, so a second call changes nothing.
+    pub fn errors_as_rises(&mut self, label: &str) -> Option<String> {
+        if self.meta("error_reference") != Some("absolute") {
+            return None;
+        }
+        let mut zeroed = Vec::new();
+        for (c, name) in self.columns.iter().enumerate() {
+            if !is_error_column(name) {
+                continue;
+            }
+            let col = &mut self.data[c];
+            let Some(first) = col.iter().flatten().copied().next() else {
+                continue;
+            };
+            for v in col.iter_mut().flatten() {
+                *v -= first;
+            }
+            zeroed.push(format!("{name} {first:+} µm"));
+        }
+        self.set_meta("error_reference", "relative");
+        Some(format!(
+            "{label}: error_reference is absolute; error columns taken as rises from their first valid samples ({})",
+            if zeroed.is_empty() {
+                "no error column".to_string()
+            } else {
+                zeroed.join(", ")
+            }
+        ))
+    }
+
     pub fn meta(&self, key: &str) -> Option<&str> {
         self.meta
             .iter()

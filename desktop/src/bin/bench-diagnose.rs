@@ -76,6 +76,11 @@ fn main() -> Result<()> {
         println!("{v}");
         return Ok(());
     }
+    if open_only {
+        // the open world alone: `diagnose fit`, no machine-file pass
+        println!("{}", run_open_bench(&open_cfg)?);
+        return Ok(());
+    }
     let open_machine_path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
     let truth_machine = Machine::load(&open_machine_path)?;
     let mut open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
@@ -85,10 +90,6 @@ fn main() -> Result<()> {
         return Ok(());
     }
     let open = run_open_bench(&open_cfg)?;
-    if open_only {
-        println!("{open}");
-        return Ok(());
-    }
     let mut v = run_bench(
         &machines,
         &BenchConfig {

@@ -223,6 +223,15 @@ pub struct Problem<'a> {
     pub n_max: f64,
     /// Without rpm: run → output → driver signals (rises, before lags).
     drivers: Vec<Vec<Vec<Vec<f64>>>>,
+    /// With rpm: run → inputs switched with the spindle (before lags;
+    /// empty for the nominal, see `switch_with_spindle`).
+    switched: Vec<Vec<Vec<f64>>>,
+    /// Candidate exponents of the friction heat (`EXPONENTS` for the
+    /// nominal).
+    pub exponents: Vec<f64>,
+    /// A third spindle heat input `(n/n_max)^steep` (the speed-law test's
+    /// alternative; `None` for the nominal).
+    pub steep: Option<f64>,
 }
 
 impl<'a> Problem<'a> {
@@ -271,11 +280,75 @@ impl<'a> Problem<'a> {
             meas,
             n_max,
             drivers: Vec::new(),
+            switched: Vec::new(),
+            exponents: EXPONENTS.to_vec(),
+            steep: None,
         };
         if !ds.has_rpm {
             p.drivers = p.temperature_drivers();
         }
         p
+    }
+
+    /// Add inputs that switch with the spindle (used by the speed-law
+    /// test's reference, not by the nominal): the running state, and the
+    /// running state times the `pcs` leading principal components (fit
+    /// rows) of the sensor rises — a conductance that acts only while the
+    /// spindle runs (a coolant jacket fed by the spindle's pump) removes
+    /// heat in proportion to how far its node stands above the coolant,
+    /// which no linear network with fixed conductances carries.
+    pub fn switch_with_spindle(&mut self, pcs: usize) {
+        self.switched = Vec::new();
+        if !self.ds.has_rpm {
+            return;
+        }
+        let nr = self.ds.runs.len();
+        let ns = self.ds.sensors.len();
+        let rises: Vec<Vec<Vec<f64>>> = (0..nr).map(|r| self.rises(r)).collect();
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        if pcs > 0 && ns > 0 {
+            let rows: Vec<(usize, usize)> = self
+                .ds
+                .runs
+                .iter()
+                .enumerate()
+                .flat_map(|(r, run)| {
+                    (0..run.rows())
+                        .filter(|&k| !run.held[k])
+                        .map(move |k| (r, k))
+                })
+                .collect();
+            let x = DMatrix::from_fn(rows.len(), ns, |i, j| rises[rows[i].0][j][rows[i].1]);
+            let svd = x.svd(false, true);
+            if let Some(vt) = svd.v_t {
+                let mut idx: Vec<usize> = (0..svd.singular_values.len()).collect();
+                idx.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+                basis = idx
+                    .iter()
+                    .take(pcs)
+                    .map(|&i| vt.row(i).iter().copied().collect())
+                    .collect();
+            }
+        }
+        self.switched = (0..nr)
+            .map(|r| {
+                let run = &self.ds.runs[r];
+                let on: Vec<f64> = run
+                    .rpm
+                    .as_ref()
+                    .map(|v| v.iter().map(|n| (n.abs() > 0.0) as u8 as f64).collect())
+                    .unwrap_or_else(|| vec![0.0; run.rows()]);
+                let mut v = vec![on.clone()];
+                for w in &basis {
+                    v.push(
+                        (0..run.rows())
+                            .map(|k| on[k] * (0..ns).map(|i| w[i] * rises[r][i][k]).sum::<f64>())
+                            .collect(),
+                    );
+                }
+                v
+            })
+            .collect();
     }
 
     pub fn cross(&self) -> bool {
@@ -382,6 +455,19 @@ impl<'a> Problem<'a> {
                     .map(|n| (n.abs() / self.n_max).powf(exponent))
                     .collect(),
             ));
+        }
+        if let (Some(rpm), Some(pw)) = (&run.rpm, self.steep) {
+            v.push((
+                "spindle_steep",
+                rpm.iter()
+                    .map(|n| (n.abs() / self.n_max).powf(pw))
+                    .collect(),
+            ));
+        }
+        if let Some(sw) = self.switched.get(r) {
+            for u in sw {
+                v.push(("switched", u.clone()));
+            }
         }
         if let Some(f) = &run.feed {
             v.push(("feed", f.clone()));
@@ -573,9 +659,20 @@ impl<'a> Problem<'a> {
             blocks.push((shared, own, ex));
         }
         let n_shared = blocks.first().map_or(0, |b| b.0.len());
-        let n_own = blocks.first().map_or(0, |b| b.1.len());
+        // Each run's own columns (level, free decays) are its own: their
+        // number follows the run's span, so runs of different lengths differ.
+        let own_len: Vec<usize> = blocks.iter().map(|b| b.1.len()).collect();
+        let own_off: Vec<usize> = own_len
+            .iter()
+            .scan(0, |acc, &l| {
+                let at = *acc;
+                *acc += l;
+                Some(at)
+            })
+            .collect();
+        let n_own_all: usize = own_len.iter().sum();
         let n_extra = blocks.iter().map(|b| b.2.len()).max().unwrap_or(0);
-        let p = n_shared + nr * n_own + n_extra;
+        let p = n_shared + n_own_all + n_extra;
         // fit rows
         let mut rows = Vec::new();
         for (r, run) in self.ds.runs.iter().enumerate() {
@@ -588,16 +685,16 @@ impl<'a> Problem<'a> {
         let value = |r: usize, k: usize, j: usize| -> f64 {
             let b = &blocks[r];
             if j < n_shared {
-                b.0[j][k]
-            } else if j < n_shared + nr * n_own {
+                b.0.get(j).map_or(0.0, |c| c[k])
+            } else if j < n_shared + n_own_all {
                 let jj = j - n_shared;
-                if jj / n_own == r {
-                    b.1[jj % n_own][k]
+                if (own_off[r]..own_off[r] + own_len[r]).contains(&jj) {
+                    b.1[jj - own_off[r]][k]
                 } else {
                     0.0
                 }
             } else {
-                b.2.get(j - n_shared - nr * n_own).map_or(0.0, |c| c[k])
+                b.2.get(j - n_shared - n_own_all).map_or(0.0, |c| c[k])
             }
         };
         let mut fit = OutFit {
@@ -626,7 +723,7 @@ impl<'a> Problem<'a> {
             return OutFit::failed(p, &sizes, rows.len(), held);
         };
         fit.extra_coef = (0..n_extra)
-            .map(|j| coef[n_shared + nr * n_own + j])
+            .map(|j| coef[n_shared + n_own_all + j])
             .collect();
         for (r, run) in self.ds.runs.iter().enumerate() {
             let mut res = Vec::with_capacity(run.rows());
@@ -665,7 +762,7 @@ impl<'a> Problem<'a> {
             (f.bic(&self.outputs), f)
         };
         let exps: Vec<f64> = if self.ds.has_rpm {
-            EXPONENTS.to_vec()
+            self.exponents.clone()
         } else {
             vec![1.0]
         };

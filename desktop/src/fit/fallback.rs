@@ -60,6 +60,7 @@ pub struct Context<'a> {
 /// Sensor columns a fitted channel's chosen model reads.
 pub fn model_sensors(file: &ModelFile, channel: &str) -> Vec<String> {
     let feats: Vec<&FeatureSpec> = match file.chosen.get(channel).map(String::as_str) {
+        Some("none") => vec![],
         Some("ga-bpn") => file
             .nets
             .iter()

@@ -277,6 +277,7 @@ pub fn chosen_kinds(file: &super::ModelFile) -> Vec<(FeatureKind, Option<f64>)> 
             "mlr" => inputs(&file.mlr, ch).collect(),
             "mlr-static" => inputs(&file.mlr_static, ch).collect(),
             "ga-bpn" => inputs(&file.nets, ch).collect(),
+            "none" => vec![],
             // Any other model (e.g. a table plus networks): every input the channel has.
             _ => inputs(&file.mlr, ch)
                 .chain(inputs(&file.nets, ch))

@@ -103,12 +103,15 @@ pub struct ModelFile {
     pub fallbacks: Vec<fallback::FallbackParams>,
 }
 
-/// Model names, simplest first (the order ties are broken in): the hybrid is
+/// Model names, simplest first (the order ties are broken in): `none` (no
+/// compensation: the board serves 0 about the run's reference) is the
+/// simplest of all, so a model must beat it by more than the margin to ship;
+/// the hybrid is
 /// anchored on the lagged MLR (its network only corrects the residual), so it
 /// is taken as simpler than the free network; the blend carries both the
 /// lagged MLR's table and the networks, so it comes last: it is chosen only
 /// when it beats each of its parts by more than the margin.
-pub const MODEL_NAMES: [&str; 5] = ["mlr-static", "mlr", "hybrid", "ga-bpn", "blend"];
+pub const MODEL_NAMES: [&str; 6] = ["none", "mlr-static", "mlr", "hybrid", "ga-bpn", "blend"];
 
 /// `w·mlr + (1−w)·ensemble` on the same inputs (model name `blend`). The
 /// board ships it as the MLR's table with every term scaled by `w` and the

@@ -220,7 +220,7 @@ pub struct FitReport {
     pub models: Vec<ModelReport>,
     /// Per channel, the model cross-validation chose (what `export` ships).
     pub chosen: BTreeMap<String, String>,
-    /// What the board's limits ruled out.
+    /// What the board's limits ruled out, and how the runs were read.
     pub notes: Vec<String>,
     pub inputs: Vec<ChannelInfo>,
     pub selection: Option<Selection>,
@@ -380,12 +380,19 @@ pub fn candidates(
 pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
     let mut runs = Vec::new();
     let mut labels = Vec::new();
+    let mut notes = Vec::new();
     for p in train.iter().chain(validate_runs) {
-        runs.push(Run::read(p)?);
+        let mut run = Run::read(p)?;
+        // The model predicts rises from the run's start (what the board serves).
+        notes.extend(run.errors_as_rises(&p.display().to_string()));
+        runs.push(run);
         labels.push(p.display().to_string());
     }
     let plan = Plan::new(runs, labels, train.len(), cfg.split_chrono)?;
-    fit_plan(&plan, cfg)
+    let mut report = fit_plan(&plan, cfg)?;
+    notes.append(&mut report.notes);
+    report.notes = notes;
+    Ok(report)
 }
 
 /// Cross-validated figures of one model on one channel (training rows only).
@@ -547,6 +554,8 @@ pub(crate) fn cross_validate(
     let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
     let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
     let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
+    // No compensation: the target is the error about the run's start, so 0.
+    let mut acc_none = CvAcc::default();
     // Per usable fold: (fold index, specs, fitted MLR, fit rows, held-out rows).
     let mut kept = Vec::new();
     for (f, (fit, val)) in folds.iter().enumerate() {
@@ -559,6 +568,7 @@ pub(crate) fn cross_validate(
         let m = fit_mlr(specs.clone(), &tr, ch)?;
         let p_mlr: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
         acc_mlr.add_fold(&va.y, &p_mlr);
+        acc_none.add_fold(&va.y, &vec![0.0; va.y.len()]);
         if !static_idx.is_empty() {
             let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
             let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
@@ -569,7 +579,11 @@ pub(crate) fn cross_validate(
         kept.push((f, specs, m, tr, va, p_mlr));
     }
     let mut out = BTreeMap::new();
-    for (name, acc) in [("mlr-static", &acc_static), ("mlr", &acc_mlr)] {
+    for (name, acc) in [
+        ("none", &acc_none),
+        ("mlr-static", &acc_static),
+        ("mlr", &acc_mlr),
+    ] {
         if let Some(sc) = acc.score() {
             out.insert(name.to_string(), sc);
         }
@@ -1060,10 +1074,17 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
             nets_left -= ens;
         }
-        let used_idx: &[usize] = if chosen == "mlr-static" {
-            &static_ok
-        } else {
-            &idx
+        if chosen == "none" {
+            notes.push(format!(
+                "{ch}: no model beats no compensation by more than {:.0} % in the training CV (RMS {:.2} µm without compensation): the board serves 0 for it (`export --use {ch}=mlr` ships the lagged MLR anyway)",
+                100.0 * cfg.choice_margin,
+                admissible.get("none").map_or(f64::NAN, |s| s.rms_um)
+            ));
+        }
+        let used_idx: &[usize] = match chosen.as_str() {
+            "mlr-static" => &static_ok,
+            "none" => &[],
+            _ => &idx,
         };
         for &i in used_idx {
             if !in_use.contains(&i) {
@@ -1119,6 +1140,9 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
 
 /// Plain-text report.
 pub fn print_report(r: &FitReport) {
+    for n in &r.notes {
+        println!("note: {n}");
+    }
     if let Some(s) = &r.selection {
         println!("selected sensors (training rows): {}", s.chosen.join(","));
     }

@@ -307,7 +307,14 @@ pub fn main(args: SelectArgs) -> Result<()> {
     let runs = args
         .runs
         .iter()
-        .map(|p| Run::read_with_temperatures(p))
+        .map(|p| {
+            let mut run = Run::read_with_temperatures(p)?;
+            // Correlations are taken on rises from the run's start.
+            if let Some(note) = run.errors_as_rises(&p.display().to_string()) {
+                eprintln!("note: {note}");
+            }
+            Ok(run)
+        })
         .collect::<Result<Vec<_>>>()?;
     let s = select(&runs, args.groups, args.seed)?;
     if args.json {
