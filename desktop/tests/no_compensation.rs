@@ -77,6 +77,21 @@ fn fit(run: &Path, out: &Path) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
+/// `tcomp export --model FIT --run RUN -o IMG` plus `more`.
+fn export(fit: &Path, run: &Path, img: &Path, more: &[&str]) -> std::process::Output {
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "export".as_ref(),
+        "--model".as_ref(),
+        fit.as_os_str(),
+        "--run".as_ref(),
+        run.as_os_str(),
+        "-o".as_ref(),
+        img.as_os_str(),
+    ];
+    args.extend(more.iter().map(|a| std::ffi::OsStr::new(*a)));
+    tcomp(&args)
+}
+
 fn replay(run: &Path, img: &Path) -> serde_json::Value {
     let o = tcomp(&[
         "replay".as_ref(),
@@ -119,16 +134,7 @@ fn a_channel_no_model_predicts_ships_as_no_compensation() {
     );
 
     let img = dir.path().join("m.img");
-    let o = tcomp(&[
-        "export".as_ref(),
-        "--model".as_ref(),
-        fit_file.as_os_str(),
-        "--run".as_ref(),
-        run.as_os_str(),
-        "-o".as_ref(),
-        img.as_os_str(),
-        "--json".as_ref(),
-    ]);
+    let o = export(&fit_file, &run, &img, &["--json"]);
     ok(&o);
     let shipped: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let r = replay(&run, &img);
@@ -141,18 +147,7 @@ fn a_channel_no_model_predicts_ships_as_no_compensation() {
 
     // `--use` still ships the lagged MLR for it on request.
     let img2 = dir.path().join("m2.img");
-    let o = tcomp(&[
-        "export".as_ref(),
-        "--model".as_ref(),
-        fit_file.as_os_str(),
-        "--run".as_ref(),
-        run.as_os_str(),
-        "--use".as_ref(),
-        "dz_um=mlr".as_ref(),
-        "-o".as_ref(),
-        img2.as_os_str(),
-        "--json".as_ref(),
-    ]);
+    let o = export(&fit_file, &run, &img2, &["--use", "dz_um=mlr", "--json"]);
     ok(&o);
     let forced: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     // The z table is in the image now (more bytes, a quantised z model).
@@ -176,15 +171,7 @@ fn export_refuses_an_image_with_no_model_in_it() {
     assert_eq!(v["chosen"]["dx_um"], "none", "{}", v["chosen"]);
     assert_eq!(v["chosen"]["dz_um"], "none", "{}", v["chosen"]);
     let img = dir.path().join("m.img");
-    let o = tcomp(&[
-        "export".as_ref(),
-        "--model".as_ref(),
-        fit_file.as_os_str(),
-        "--run".as_ref(),
-        run.as_os_str(),
-        "-o".as_ref(),
-        img.as_os_str(),
-    ]);
+    let o = export(&fit_file, &run, &img, &[]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(err.trim().lines().count(), 1, "{err}");

@@ -307,17 +307,7 @@ impl<'a> Problem<'a> {
         let rises: Vec<Vec<Vec<f64>>> = (0..nr).map(|r| self.rises(r)).collect();
         let mut basis: Vec<Vec<f64>> = Vec::new();
         if pcs > 0 && ns > 0 {
-            let rows: Vec<(usize, usize)> = self
-                .ds
-                .runs
-                .iter()
-                .enumerate()
-                .flat_map(|(r, run)| {
-                    (0..run.rows())
-                        .filter(|&k| !run.held[k])
-                        .map(move |k| (r, k))
-                })
-                .collect();
+            let rows = self.fit_rows();
             let x = DMatrix::from_fn(rows.len(), ns, |i, j| rises[rows[i].0][j][rows[i].1]);
             let svd = x.svd(false, true);
             if let Some(vt) = svd.v_t {
@@ -367,6 +357,20 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
+    /// (run, row) of every fit row (not held out) of every run.
+    fn fit_rows(&self) -> Vec<(usize, usize)> {
+        self.ds
+            .runs
+            .iter()
+            .enumerate()
+            .flat_map(|(r, run)| {
+                (0..run.rows())
+                    .filter(|&k| !run.held[k])
+                    .map(move |k| (r, k))
+            })
+            .collect()
+    }
+
     /// For each output, the leading principal components (fit rows of all
     /// runs) of the sensors other than itself.
     fn temperature_drivers(&self) -> Vec<Vec<Vec<Vec<f64>>>> {
@@ -380,17 +384,7 @@ impl<'a> Problem<'a> {
                 if src.is_empty() {
                     return vec![Vec::new(); self.ds.runs.len()];
                 }
-                let rows: Vec<(usize, usize)> = self
-                    .ds
-                    .runs
-                    .iter()
-                    .enumerate()
-                    .flat_map(|(r, run)| {
-                        (0..run.rows())
-                            .filter(|&k| !run.held[k])
-                            .map(move |k| (r, k))
-                    })
-                    .collect();
+                let rows = self.fit_rows();
                 let x = DMatrix::from_fn(rows.len(), src.len(), |i, j| {
                     rises[rows[i].0][src[j]][rows[i].1]
                 });

@@ -607,6 +607,27 @@ pub const PALMGREN_EXPONENT: f64 = 5.0 / 3.0;
 /// textbook bearing law (≤ n²), the one the fit rows support best is taken.
 pub const STEEP_EXPONENTS: [f64; 3] = [2.5, 3.0, 4.0];
 
+/// The steeper heat's extra columns of run `r`: `(n/n_max)^pw` through each
+/// mode's lag (none for a run without `spindle_rpm`).
+fn steep_columns(
+    ds: &super::series::Dataset,
+    n_max: f64,
+    pw: f64,
+    modes: Vec<f64>,
+) -> impl Fn(usize, usize) -> Vec<Vec<f64>> + Sync + '_ {
+    move |_o: usize, r: usize| -> Vec<Vec<f64>> {
+        let run = &ds.runs[r];
+        let Some(rpm) = &run.rpm else {
+            return Vec::new();
+        };
+        let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(pw)).collect();
+        modes
+            .iter()
+            .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
+            .collect()
+    }
+}
+
 /// Speed nonlinearity seen across runs of different speeds: spindle heat
 /// steeper in speed than the textbook law, `c·(n/n_max)^p` with `p` above
 /// 2, through the same modes, on top of a reference that carries the
@@ -634,18 +655,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
     let tries: Vec<(f64, ModelFit, Vec<usize>, f64)> = STEEP_EXPONENTS
         .iter()
         .filter_map(|&pw| {
-            let modes = st.modes.clone();
-            let extra = move |_o: usize, r: usize| -> Vec<Vec<f64>> {
-                let run = &ds.runs[r];
-                let Some(rpm) = &run.rpm else {
-                    return Vec::new();
-                };
-                let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(pw)).collect();
-                modes
-                    .iter()
-                    .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
-                    .collect()
-            };
+            let extra = steep_columns(ds, n_max, pw, st.modes.clone());
             let (fit, took) = rp.fit_where_supported(&st, &extra, &reference);
             if took.is_empty() {
                 return None;
@@ -663,20 +673,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
     ap.steep = Some(pw);
     ap.switch_with_spindle(1);
     let (st1, _) = ap.identify();
-    let extra = {
-        let modes = st1.modes.clone();
-        move |_o: usize, r: usize| -> Vec<Vec<f64>> {
-            let run = &ds.runs[r];
-            let Some(rpm) = &run.rpm else {
-                return Vec::new();
-            };
-            let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(pw)).collect();
-            modes
-                .iter()
-                .map(|&tau| super::ident::lag(&u, run.dt, tau, 0.0))
-                .collect()
-        }
-    };
+    let extra = steep_columns(ds, n_max, pw, st1.modes.clone());
     let (fit, took) = rp.fit_where_supported(&st1, &extra, &reference);
     if took.is_empty() {
         return None;
