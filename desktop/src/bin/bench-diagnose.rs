@@ -60,19 +60,13 @@ fn main() -> Result<()> {
         verbose,
         calibrate,
     };
+    // the closed world searches the simulator it was drawn from: never calibrated
+    let closed_cfg = BenchConfig {
+        calibrate: false,
+        ..open_cfg
+    };
     if closed_only {
-        let v = run_bench(
-            &machines,
-            &BenchConfig {
-                cases,
-                seed,
-                hours: 8.0,
-                sample_period_s: 10.0,
-                threads,
-                verbose,
-                calibrate: false,
-            },
-        )?;
+        let v = run_bench(&machines, &closed_cfg)?;
         println!("{v}");
         return Ok(());
     }
@@ -90,18 +84,7 @@ fn main() -> Result<()> {
         return Ok(());
     }
     let open = run_open_bench(&open_cfg)?;
-    let mut v = run_bench(
-        &machines,
-        &BenchConfig {
-            cases,
-            seed,
-            hours: 8.0,
-            sample_period_s: 10.0,
-            threads,
-            verbose,
-            calibrate: false,
-        },
-    )?;
+    let mut v = run_bench(&machines, &closed_cfg)?;
     // full diagnosis of one 8 h run sampled at 1 s, all candidates
     let m = &machines[1];
     let duty = Duty::load(&PathBuf::from(concat!(

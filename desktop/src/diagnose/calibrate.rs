@@ -331,7 +331,6 @@ fn coarsen(p: &Prepared, max_rows: usize) -> Prepared {
 
 /// Calibrate the machine's uncertain parameters on the fit rows.
 pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calibration> {
-    let t_start = std::time::Instant::now();
     let ps: Vec<Prepared> = full.iter().map(|p| coarsen(p, CAL_ROWS)).collect();
     let ps = &ps[..];
     let ks = knobs(m);
@@ -446,12 +445,6 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
             format!("; on a bound: {}", on_bound.join(", "))
         }
     );
-    if std::env::var_os("TCOMP_CAL_DEBUG").is_some() {
-        eprintln!(
-            "calibration: {nk} knobs, {sims} sims, {:.3} s, {note}",
-            t_start.elapsed().as_secs_f64()
-        );
-    }
     Ok(Calibration {
         machine: cal,
         json,
