@@ -25,7 +25,7 @@ use thermocomp::modbus::holding::{
 use thermocomp::modbus::registers::{
     IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
     IR_PREDICTIONS, IR_PROBE, IR_PROBE_STATE, IR_SAMPLE_TIME, IR_STATES, IR_TEMPERATURES,
-    NOT_AVAILABLE,
+    MAP_VERSION, NOT_AVAILABLE, TEST_PATTERN,
 };
 use thermocomp::modbus::server::MAX_WRITE_REGISTERS;
 use thermocomp::process_image::{ChannelState, MAX_CHANNELS};
@@ -270,6 +270,31 @@ pub enum Commit {
     Rollback,
 }
 
+/// Whether input registers 0–2 (test pattern, map version) come from a
+/// thermocomp board whose map has every block this tool reads: an older map
+/// would answer the newer addresses with exceptions or zeros. A newer map
+/// keeps every address of this one, so it is accepted.
+pub fn check_register_map(first: &[u16]) -> Result<()> {
+    let [hi, lo, version, ..] = first else {
+        bail!(
+            "the board answered {} of the 3 identification registers",
+            first.len()
+        );
+    };
+    let pattern = u32::from(*hi) << 16 | u32::from(*lo);
+    if pattern != TEST_PATTERN {
+        bail!(
+            "input registers 0-1 read {pattern:#010x}, not the test pattern {TEST_PATTERN:#010x}: not a thermocomp board, or the word order is swapped"
+        );
+    }
+    if *version < MAP_VERSION {
+        bail!(
+            "the board serves register map version {version}; this tcomp needs version {MAP_VERSION} or later (update the board's firmware)"
+        );
+    }
+    Ok(())
+}
+
 /// Validate locally, check the size, stage, commit, and check that the board
 /// now serves it. Any failure after the unlock relocks the board, so a
 /// failed upload never leaves it open to configuration writes.
@@ -283,6 +308,7 @@ pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<Uplo
     }
     let model = thermocomp_core::Model::parse(image)
         .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
+    check_register_map(&link.read_inputs(0, 3)?).context("not sent")?;
     match stage_and_commit(link, image, commit) {
         Ok(result) => verify(link, image, &model, result),
         Err(e) => {
@@ -419,6 +445,7 @@ pub fn record(
     append: bool,
 ) -> Result<usize> {
     let snap = link.read_inputs(0, SNAPSHOT_LEN)?;
+    check_register_map(&snap)?;
     let block = link.read_inputs(IR_TEMPERATURES, CHANNEL_BLOCK)?;
     let state_of = |block: &[u16], c: usize| block[usize::from(IR_STATES - IR_TEMPERATURES) + c];
     let n_dir = usize::from(snap[usize::from(IR_N_DIRECTIONS)]).min(MAX_DIRECTIONS);

@@ -150,11 +150,11 @@ fn an_image_larger_than_the_staging_area_is_refused_before_anything_is_sent() {
 #[test]
 fn a_failed_upload_relocks_the_board() {
     let image = demo_image_bytes(2);
-    // Unlock is request 0, staging 1.., then the length and the commit: fail
-    // each of them in turn; the board must end locked and keep its staging
-    // from being committed by anyone else.
+    // The map check is request 0, unlock 1, staging 2.., then the length and
+    // the commit: fail each write after the unlock in turn; the board must
+    // end locked and keep its staging from being committed by anyone else.
     let n_staging = (image.len().div_ceil(2)).div_ceil(100);
-    for fault_at in 1..=n_staging + 2 {
+    for fault_at in 2..=n_staging + 3 {
         let (addr, board) = inspectable_board(None, Some(fault_at));
         let mut link = BoardLink::tcp(&addr, 1).unwrap();
         let e = format!(
@@ -274,4 +274,61 @@ fn upload_and_record_against_the_bench_board() {
         "{}",
         board.log()
     );
+}
+
+/// A device that answers every FC04 read with `regs` from address 0 (and
+/// logs how many requests it saw): an older board, or not a board at all.
+fn fixed_input_device(regs: Vec<u16>) -> (String, Arc<Mutex<usize>>) {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap().to_string();
+    let seen = Arc::new(Mutex::new(0usize));
+    let log = seen.clone();
+    std::thread::spawn(move || {
+        let (mut s, _) = l.accept().unwrap();
+        let mut req = [0u8; 8];
+        while s.read_exact(&mut req).is_ok() {
+            *log.lock().unwrap() += 1;
+            let (start, count) = (
+                usize::from(u16::from_be_bytes([req[2], req[3]])),
+                usize::from(u16::from_be_bytes([req[4], req[5]])),
+            );
+            let mut reply = vec![req[0], 4, (2 * count) as u8];
+            for a in start..start + count {
+                reply.extend(regs.get(a).copied().unwrap_or(0).to_be_bytes());
+            }
+            let crc = crc16(&reply);
+            reply.extend(crc.to_le_bytes());
+            s.write_all(&reply).unwrap();
+        }
+    });
+    (addr, seen)
+}
+
+#[test]
+fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
+    use thermocomp::modbus::registers::MAP_VERSION;
+    let image = demo_image_bytes(2);
+    let (addr, seen) = fixed_input_device(vec![0x1234, 0x5678, MAP_VERSION - 1]);
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    let e = format!(
+        "{:#}",
+        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+    );
+    assert!(
+        e.contains(&format!("register map version {}", MAP_VERSION - 1)) && e.contains("not sent"),
+        "{e}"
+    );
+    assert_eq!(*seen.lock().unwrap(), 1, "only the identification was read");
+    let (addr, _) = fixed_input_device(vec![0x5678, 0x1234, MAP_VERSION]);
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    let e = format!(
+        "{:#}",
+        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+    );
+    assert!(e.contains("0x56781234") && e.contains("word order"), "{e}");
+    // the board's own server serves the current version: accepted
+    let (addr, board) = inspectable_board(None, None);
+    let mut link = BoardLink::tcp(&addr, 1).unwrap();
+    upload(&mut link, &image, Commit::NewerOnly).unwrap();
+    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
 }

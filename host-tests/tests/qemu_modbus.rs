@@ -252,7 +252,7 @@ fn mbpoll_reads_the_test_pattern_over_a_pty() {
     assert!(
         text.contains("[1]: \t0x1234")
             && text.contains("[2]: \t0x5678")
-            && text.contains("[3]: \t0x0001"),
+            && text.contains("[3]: \t0x0002"),
         "{text}"
     );
 }

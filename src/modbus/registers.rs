@@ -11,8 +11,10 @@ use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 use crate::fault::FaultRecord;
 use crate::process_image::MAX_CHANNELS;
 
-/// Version of this register map (input register 2).
-pub const MAP_VERSION: u16 = 1;
+/// Version of this register map (input register 2), so a PLC can tell which
+/// blocks the board serves. 2 added input registers 150–299, status bits 8–9,
+/// holding registers 34–35 and commands 6–11 to version 1 (README).
+pub const MAP_VERSION: u16 = 2;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;
