@@ -205,6 +205,50 @@ fn a_sensor_step_on_an_unseen_machine_is_named_where_it_is() {
     assert!(j["effects"][0]["gap_after_c"].as_f64().is_some());
 }
 
+/// A step named on `sensor` of the heavy run, near `at_s`.
+fn assert_step_named(runs: &[(String, Run)], sensor: &str, step_c: f64, at_s: f64) {
+    let d = diagnose_fit(runs, &Options::default()).unwrap();
+    let top = d.findings.first().expect("an effect");
+    let p = top.params_json();
+    assert_eq!(top.name, "sensor_offset", "{p}");
+    assert_eq!(p["sensor"], sensor);
+    assert_eq!(p["run"], "truth1");
+    assert!(
+        (p["offset_c"].as_f64().unwrap() - step_c).abs() < 0.2,
+        "{p}"
+    );
+    assert!((p["from_s"].as_f64().unwrap() - at_s).abs() < 120.0, "{p}");
+}
+
+#[test]
+fn a_sensor_step_as_the_duty_changes_is_named_where_it_is() {
+    // the heavy run's speed changes at 4800 s: the fault is within a row of it
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 6,
+            step_c: -0.9,
+            at_s: 4805.0,
+        }],
+        73,
+    );
+    assert_step_named(&runs, "T_T6", -0.9, 4805.0);
+}
+
+#[test]
+fn a_sensor_step_late_in_a_run_is_named_by_its_held_out_rows() {
+    // held-out block 8640-11520 s, then only the last fit block follows,
+    // where the nominal's slow modes absorb a constant
+    let runs = truth_runs(
+        &[TruthEffect::SensorStep {
+            sensor: 4,
+            step_c: 0.4,
+            at_s: 10000.0,
+        }],
+        80,
+    );
+    assert_step_named(&runs, "T_T4", 0.4, 10000.0);
+}
+
 #[test]
 fn chiller_cycling_is_found_from_the_sensors_own_spectrum() {
     let runs = truth_runs(

@@ -55,6 +55,11 @@ pub const STEP_MIN_C: f64 = 0.125;
 /// and the steps the scan found on clean runs at ≤ 4.2×.
 pub const STEP_MIN_MISFIT: f64 = 5.0;
 
+/// A jump near an input change is taken for a step only by its excess over
+/// this many times the sensor's largest jump near any other input change (on
+/// clean open-world runs the first start from cold jumps up to 2× the rest).
+const STEP_OVER_CHANGE_JUMPS: f64 = 3.0;
+
 /// Rows on each side of a jump.
 const JUMP_W: usize = 3;
 
@@ -96,21 +101,52 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             continue;
         }
         // the sharpest jump of the nominal residual (mean of 3 rows after
-        // minus 3 rows before), away from input changes, where the model's
-        // fast dynamics may miss; the rows place the time only, the size is
-        // fitted on the fit rows
+        // minus 3 rows before); the rows place the time only, the size is
+        // fitted on the fit rows. Near an input change the model's fast
+        // dynamics may miss, so there a jump counts only by how far it
+        // exceeds `STEP_OVER_CHANGE_JUMPS` × this sensor's largest jump near
+        // every other input change (a fault that happens as the duty changes
+        // is still found; a run's first start from cold, which the model
+        // misses most, is not taken for one)
         let mut best: Option<(f64, usize, usize)> = None;
+        // (run, row, |jump|, segment of rows near one input change or None)
+        let mut jumps: Vec<(usize, usize, f64, Option<usize>)> = Vec::new();
+        let mut segments = 0usize;
         for (r, run) in ds.runs.iter().enumerate() {
             let e = &nom.outs[o].resid[r];
             let quiet = quiet_rows(run);
+            let mut in_segment = false;
             for k in JUMP_W..run.rows().saturating_sub(JUMP_W) {
-                if !quiet[k] {
-                    continue;
+                if !quiet[k] && !in_segment {
+                    segments += 1;
                 }
+                in_segment = !quiet[k];
                 let j = (window_mean(e, k, k + JUMP_W) - window_mean(e, k - JUMP_W, k)).abs();
-                if j.is_finite() && best.is_none_or(|b| j > b.0) {
-                    best = Some((j, r, k));
+                if j.is_finite() {
+                    jumps.push((r, k, j, (!quiet[k]).then(|| segments - 1)));
                 }
+            }
+        }
+        let mut segment_max = vec![0.0f64; segments];
+        for &(_, _, j, seg) in &jumps {
+            if let Some(g) = seg {
+                segment_max[g] = segment_max[g].max(j);
+            }
+        }
+        for &(r, k, j, seg) in &jumps {
+            let score = match seg {
+                None => j,
+                Some(g) => {
+                    let others = segment_max
+                        .iter()
+                        .enumerate()
+                        .filter(|&(h, _)| h != g)
+                        .fold(0.0f64, |m, (_, &v)| m.max(v));
+                    j - STEP_OVER_CHANGE_JUMPS * others
+                }
+            };
+            if best.is_none_or(|b| score > b.0) {
+                best = Some((score, r, k));
             }
         }
         let Some((_, r, start)) = best else {
@@ -147,6 +183,10 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             continue;
         }
         let t_s = run.time[start] - run.time[0];
+        // fit rows after the step: within one block's worth, the nominal's
+        // slow modes can absorb it there (the held-out rows then decide)
+        let fit_rows_after = (start..run.rows()).filter(|&k| !run.held[k]).count();
+        let few_fit_rows_after = fit_rows_after * super::series::BLOCKS <= run.rows();
         let fit = with_outputs(nom, vec![(o, of)]);
         out.push(Candidate {
             name: "sensor_offset",
@@ -156,7 +196,7 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             // size + location (run, time)
             k_extra: 3,
             at_bound: Vec::new(),
-            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
+            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "fit_rows_after": fit_rows_after, "few_fit_rows_after": few_fit_rows_after, "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
         });
     }
     out
