@@ -232,6 +232,12 @@ pub struct Problem<'a> {
     /// A third spindle heat input `(n/n_max)^steep` (the speed-law test's
     /// alternative; `None` for the nominal).
     pub steep: Option<f64>,
+    /// The switched conductance inputs (running × sensor-rise components)
+    /// may only remove heat: a temperature output whose fitted steady gain
+    /// from them is positive is fitted again without them (an active-set
+    /// step for the sign constraint; otherwise the term soaks up any extra
+    /// heat that grows with the body's rise while the spindle runs).
+    pub removes_heat: bool,
 }
 
 impl<'a> Problem<'a> {
@@ -283,6 +289,7 @@ impl<'a> Problem<'a> {
             switched: Vec::new(),
             exponents: EXPONENTS.to_vec(),
             steep: None,
+            removes_heat: false,
         };
         if !ds.has_rpm {
             p.drivers = p.temperature_drivers();
@@ -313,10 +320,21 @@ impl<'a> Problem<'a> {
             if let Some(vt) = svd.v_t {
                 let mut idx: Vec<usize> = (0..svd.singular_values.len()).collect();
                 idx.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+                // each component oriented so that the machine warming up
+                // (rises > 0) reads positive: a conductance to the coolant
+                // then removes heat with a negative gain (`removes_heat`)
                 basis = idx
                     .iter()
                     .take(pcs)
-                    .map(|&i| vt.row(i).iter().copied().collect())
+                    .map(|&i| {
+                        let w: Vec<f64> = vt.row(i).iter().copied().collect();
+                        let sign = if w.iter().sum::<f64>() < 0.0 {
+                            -1.0
+                        } else {
+                            1.0
+                        };
+                        w.iter().map(|x| sign * x).collect()
+                    })
                     .collect();
             }
         }
@@ -516,7 +534,7 @@ impl<'a> Problem<'a> {
         extra: Option<Extra>,
         lagged: Option<(usize, f64)>,
     ) -> ModelFit {
-        if extra.is_none() && lagged.is_none() && !self.cross() {
+        if extra.is_none() && lagged.is_none() && !self.cross() && !self.conductance_constrained() {
             if let Some(f) = self.fit_shared(st) {
                 return f;
             }
@@ -630,6 +648,28 @@ impl<'a> Problem<'a> {
         (out, took)
     }
 
+    /// Whether the switched conductance's sign constraint is in force.
+    fn conductance_constrained(&self) -> bool {
+        self.removes_heat && !self.cross() && self.switched.iter().any(|s| s.len() > 1)
+    }
+
+    /// Shared-column indices of the switched conductance inputs (every
+    /// switched input after the running state), in `columns`' order.
+    fn conductance_columns(&self, st: &Structure) -> std::ops::Range<usize> {
+        let names: Vec<&str> = self
+            .inputs(0, st.exponent)
+            .into_iter()
+            .map(|(n, _)| n)
+            .collect();
+        let nm = st.modes.len();
+        let first = names.iter().position(|&n| n == "switched");
+        let count = names.iter().filter(|&&n| n == "switched").count();
+        match first {
+            Some(i) if count > 1 => (i + 1) * nm..(i + count) * nm,
+            _ => 0..0,
+        }
+    }
+
     /// Fit one output (see `fit`).
     pub fn fit_output(
         &self,
@@ -638,11 +678,38 @@ impl<'a> Problem<'a> {
         extra: Option<Extra>,
         lag_tau: Option<f64>,
     ) -> OutFit {
+        if !self.conductance_constrained() || self.outputs[o].is_disp {
+            return self.fit_output_without(st, o, extra, lag_tau, 0..0).0;
+        }
+        let cols = self.conductance_columns(st);
+        let (fit, coef) = self.fit_output_without(st, o, extra, lag_tau, 0..0);
+        // each modal column has unit steady gain: their sum is the steady gain
+        let gain: f64 = coef.map_or(0.0, |c| cols.clone().map(|j| c[j]).sum());
+        if gain > 0.0 {
+            self.fit_output_without(st, o, extra, lag_tau, cols).0
+        } else {
+            fit
+        }
+    }
+
+    /// Fit one output without the shared columns `drop`; also returns the
+    /// coefficients (`None` when the fit failed).
+    fn fit_output_without(
+        &self,
+        st: &Structure,
+        o: usize,
+        extra: Option<Extra>,
+        lag_tau: Option<f64>,
+        drop: std::ops::Range<usize>,
+    ) -> (OutFit, Option<DVector<f64>>) {
         let nr = self.ds.runs.len();
         // per run: shared columns, own columns, extra columns
         let mut blocks = Vec::with_capacity(nr);
         for r in 0..nr {
             let (mut shared, mut own) = self.columns(st, o, r);
+            if !drop.is_empty() && drop.end <= shared.len() {
+                shared.drain(drop.clone());
+            }
             let mut ex = extra.map(|f| f(o, r)).unwrap_or_default();
             if let Some(tau) = lag_tau {
                 let dt = self.ds.runs[r].dt;
@@ -714,7 +781,7 @@ impl<'a> Problem<'a> {
                 })
                 .sum();
             let sizes: Vec<usize> = self.ds.runs.iter().map(|r| r.rows()).collect();
-            return OutFit::failed(p, &sizes, rows.len(), held);
+            return (OutFit::failed(p, &sizes, rows.len(), held), None);
         };
         fit.extra_coef = (0..n_extra)
             .map(|j| coef[n_shared + n_own_all + j])
@@ -734,7 +801,7 @@ impl<'a> Problem<'a> {
             }
             fit.resid.push(res);
         }
-        fit
+        (fit, Some(coef))
     }
 
     /// Choose the speed exponent and the modes by BIC on the fit blocks

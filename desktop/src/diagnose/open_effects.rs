@@ -686,6 +686,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
     let mut rp = Problem::new(ds);
     rp.exponents = vec![PALMGREN_EXPONENT];
     rp.switch_with_spindle(1);
+    rp.removes_heat = true;
     let (st, reference) = rp.identify();
     if reference.outs.iter().any(|f| f.failed) {
         return None;
@@ -712,6 +713,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
     ap.exponents = vec![PALMGREN_EXPONENT];
     ap.steep = Some(pw);
     ap.switch_with_spindle(1);
+    ap.removes_heat = true;
     let (st1, _) = ap.identify();
     let extra = steep_columns(ds, n_max, pw, st1.modes.clone());
     let (fit, took) = rp.fit_where_supported(&st1, &extra, &reference);
