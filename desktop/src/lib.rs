@@ -6,6 +6,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 pub mod board_link;
+pub mod cli_error;
 pub mod diagnose;
 pub mod export;
 pub mod fit;

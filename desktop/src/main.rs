@@ -213,22 +213,10 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
         Err(e) => {
-            eprintln!("error: {}", one_line(&e));
+            eprintln!("error: {}", tcomp::cli_error::one_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
-}
-
-/// The error and its causes on one line, `outer: inner: root`; line breaks
-/// inside a message (some parsers' snippets) become spaces.
-fn one_line(e: &anyhow::Error) -> String {
-    let text = format!("{e:#}");
-    let lines: Vec<&str> = text
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty())
-        .collect();
-    lines.join(" ")
 }
 
 /// A model channel the run has no temperature column for would be a

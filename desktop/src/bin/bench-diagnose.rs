@@ -17,7 +17,11 @@ use tcomp::diagnose::bench::{run_bench, run_open_bench, run_open_machine_bench, 
 use tcomp::diagnose::{diagnose, Options};
 use tcomp::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    tcomp::cli_error::run_main(run)
+}
+
+fn run() -> Result<()> {
     let mut cases = 60usize;
     let mut seed = 7u64;
     let mut json = false;

@@ -108,8 +108,23 @@ fn cpu_s() -> Option<f64> {
     Some((utime + stime) / 100.0)
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    tcomp::cli_error::run_main(run)
+}
+
+fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    tcomp::cli_error::check_args(
+        &args,
+        &["--json", "--no-sklearn"],
+        &[
+            "--data",
+            "--ensemble",
+            "--seeds",
+            "--big-rows",
+            "--write-big",
+        ],
+    )?;
     let json = args.iter().any(|a| a == "--json");
     let no_sklearn = args.iter().any(|a| a == "--no-sklearn");
     let opt = |name: &str| {

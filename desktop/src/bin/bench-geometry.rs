@@ -152,8 +152,17 @@ fn board_figures(
     Ok(serde_json::Value::Object(out))
 }
 
-fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().collect();
+fn main() -> std::process::ExitCode {
+    tcomp::cli_error::run_main(run)
+}
+
+fn run() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    tcomp::cli_error::check_args(
+        &args,
+        &["--json", "--board-only"],
+        &["--firmware", "--seeds"],
+    )?;
     let json = args.iter().any(|a| a == "--json");
     let board_only = args.iter().any(|a| a == "--board-only");
     let elf: std::path::PathBuf = args
@@ -171,7 +180,9 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .position(|a| a == "--seeds")
         .and_then(|i| args.get(i + 1))
-        .and_then(|s| s.parse().ok())
+        .map(|s| s.parse())
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--seeds: {e}"))?
         .unwrap_or(10);
     let stroke = [800.0, 500.0, 400.0];
     let st = Structure::parse("XY/Z")?;

@@ -4,7 +4,11 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp::sim::{simulate, Duty, Effect, Machine};
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    tcomp::cli_error::run_main(run)
+}
+
+fn run() -> Result<()> {
     let mut json = false;
     let mut repeat = 5usize;
     let mut args = std::env::args().skip(1);
