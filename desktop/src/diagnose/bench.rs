@@ -497,7 +497,7 @@ fn eprint_case(
 ) {
     for f in &d.tried {
         eprintln!(
-            "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {} {}",
+            "      tried {:18} m {:.2} -> {:.2} dbic {:.1} um {:?} c {:?} {} {}{}",
             f.name,
             f.m_before,
             f.m_after,
@@ -507,7 +507,11 @@ fn eprint_case(
             f.params_json(),
             f.evidence
                 .get("fit_rel_gain")
-                .map_or(String::new(), |g| format!("fit gain {g}"))
+                .map_or(String::new(), |g| format!("fit gain {g}")),
+            // the speed law must also beat the nominal (its m, as a gap)
+            f.evidence
+                .get("held_out_norm_gap_nominal")
+                .map_or(String::new(), |g| format!("nominal gap {g}"))
         );
     }
     eprintln!(
