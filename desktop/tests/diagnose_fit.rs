@@ -372,11 +372,13 @@ fn without_spindle_rpm_temperatures_drive_and_a_step_is_still_found() {
 
 #[test]
 fn a_lagging_sensor_is_named_against_its_body() {
-    // the spindle-nose sensor glued through a contact resistance (10 min)
+    // the spindle-nose sensor glued through a contact resistance (15 min;
+    // a 10 min lag on these duties moves the body map's fit rows by 0.21,
+    // inside what clean runs show (≤ 0.22), and is no longer claimed)
     let runs = truth_runs(
         &[TruthEffect::SensorLag {
             sensor: 0,
-            tau_s: 600.0,
+            tau_s: 900.0,
         }],
         85,
     );
@@ -385,8 +387,11 @@ fn a_lagging_sensor_is_named_against_its_body() {
     assert_eq!(top.name, "sensor_lag");
     let p = top.params_json();
     assert_eq!(p["sensor"], "T_T0");
+    // the grid's long end (1500 s) is reported as a lower bound
     let tau = p["tau_s"].as_f64().unwrap();
-    assert!((300.0..=1000.0).contains(&tau), "tau {tau}");
+    assert!(tau >= 450.0, "tau {tau}");
+    let bound = top.evidence["tau_s_is_lower_bound"].as_bool().unwrap();
+    assert_eq!(bound, tau >= 1500.0, "tau {tau} lower bound {bound}");
     // scored in µm on the lagged body map: the held-out mean square at
     // least halves (RMS × 1/√2)
     let ((ub, _), (ua, _)) = top.gap_um.unwrap();
@@ -495,6 +500,25 @@ fn clean_runs_of_two_speeds_name_no_speed_law() {
         let d = diagnose_fit(&two_speed_band_runs(&[], seed), &Options::default()).unwrap();
         assert!(
             d.findings.iter().all(|f| f.name != "bearing_nonlinear"),
+            "seed {seed}: {:?}",
+            d.findings
+                .iter()
+                .map(|f| (&f.name, f.params_json()))
+                .collect::<Vec<_>>()
+        );
+    }
+}
+
+#[test]
+fn clean_runs_whose_misfit_reads_as_a_step_or_a_lag_name_nothing() {
+    // clean pairs of this generator on which the nominal's own misfit was
+    // once claimed: as a step on T_T0 (draws 16, 22: the step took 35–37 %
+    // of the held-out gap; a sensor fault must take 40 %) or as a lag of
+    // T_T3 (draws 7, 31: body-map fit-row shrink 0.22; a lag must reach 0.25)
+    for seed in [7, 16, 22, 31] {
+        let d = diagnose_fit(&two_speed_band_runs(&[], seed), &Options::default()).unwrap();
+        assert!(
+            d.findings.is_empty(),
             "seed {seed}: {:?}",
             d.findings
                 .iter()

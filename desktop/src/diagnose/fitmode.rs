@@ -209,7 +209,15 @@ fn score(
     // sensor lag is judged against the lagged body map, which is itself
     // approximate: the relative held-out shrink of the other effects
     // (its fit rows must also shrink by `LAG_MIN_FIT_REL`, below)
-    let min_rel = FIT_MIN_REL;
+    // a sensor fault belongs to one channel: modelled, it takes most of that
+    // channel's gap away (found steps and lags on the open-world cases left
+    // ≤ 0.57 of it; on clean runs the nominal's misfit read as a step or a
+    // lag that left 0.63–0.70)
+    let min_rel = if matches!(c.name, "sensor_offset" | "sensor_lag") {
+        SENSOR_MIN_REL
+    } else {
+        FIT_MIN_REL
+    };
     let periodic_ok = c.name != "coolant"
         || c.evidence["peak_over_median_power"]
             .as_f64()
@@ -379,10 +387,14 @@ pub const SPEED_HELD_REL: f64 = 0.5;
 
 /// Relative held-out shrink (noise units, affected outputs) to claim an effect.
 pub const FIT_MIN_REL: f64 = 0.3;
+/// Relative held-out shrink to claim a sensor step or lag (see `score`).
+pub const SENSOR_MIN_REL: f64 = 0.4;
 /// Absolute held-out shrink (noise-variance units) to claim an effect.
 pub const FIT_MIN_ABS: f64 = 1.0;
-/// Relative fit-row shrink of the lagged body map to claim a sensor lag.
-pub const LAG_MIN_FIT_REL: f64 = 0.2;
+/// Relative fit-row shrink of the lagged body map to claim a sensor lag:
+/// above the largest seen on clean runs (0.19 on the open-world benchmark's
+/// clean cases, 0.22 on 90 clean two-speed pairs of its duty generator).
+pub const LAG_MIN_FIT_REL: f64 = 0.25;
 /// ... and in every run at least half of that: a lag is the sensor's and
 /// shows in every run, heat that differs between runs does not.
 pub const LAG_MIN_RUN_REL: f64 = 0.1;
@@ -505,8 +517,11 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
         ranking_rule: format!(
-            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {} (a sensor step with at most one block of fit rows after it, where slow modes absorb a constant: or its held-out gap halves), the held-out gap of the outputs it changes shrinks by ≥ {:.0} % and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 20 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
-            opt.min_dbic, FIT_MIN_REL * 100.0, FIT_MIN_ABS
+            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {} (a sensor step with at most one block of fit rows after it, where slow modes absorb a constant: or its held-out gap halves), the held-out gap of the outputs it changes shrinks by ≥ {:.0} % (a sensor step or lag: ≥ {:.0} %) and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 25 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
+            opt.min_dbic,
+            FIT_MIN_REL * 100.0,
+            SENSOR_MIN_REL * 100.0,
+            FIT_MIN_ABS
         ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks",
     })
 }
