@@ -272,14 +272,7 @@ fn clean_runs_of_an_unseen_machine_name_nothing_and_say_why() {
     let dir = tempfile::tempdir().unwrap();
     let runs = truth_runs(&[], 75);
     let d = diagnose_fit(&runs, &Options::default()).unwrap();
-    assert!(
-        d.findings.is_empty(),
-        "false alarm: {:?}",
-        d.findings
-            .iter()
-            .map(|f| (&f.name, f.params_json()))
-            .collect::<Vec<_>>()
-    );
+    assert!(d.findings.is_empty(), "false alarm: {:?}", named(&d));
     let j = d.to_json();
     assert_eq!(j["effects"].as_array().unwrap().len(), 0);
     let untestable: Vec<&str> = j["untestable"]
@@ -347,14 +340,7 @@ fn without_inputs(runs: Vec<(String, Run)>) -> Vec<(String, Run)> {
 fn without_spindle_rpm_temperatures_drive_and_a_step_is_still_found() {
     let clean = without_inputs(truth_runs(&[], 81));
     let d = diagnose_fit(&clean, &Options::default()).unwrap();
-    assert!(
-        d.findings.is_empty(),
-        "false alarm: {:?}",
-        d.findings
-            .iter()
-            .map(|f| (&f.name, f.params_json()))
-            .collect::<Vec<_>>()
-    );
+    assert!(d.findings.is_empty(), "false alarm: {:?}", named(&d));
     assert!(d.missing.iter().any(|m| m.starts_with("no spindle_rpm")));
     let step = without_inputs(truth_runs(
         &[TruthEffect::SensorStep {
@@ -412,6 +398,14 @@ fn a_lagging_sensor_is_named_against_its_body() {
     // two runs of different mean speed: the speed law is tested, not listed
     assert!(names.iter().all(|n| !n.starts_with("bearing_nonlinear")));
     assert!(d.findings.iter().all(|f| f.name != "ambient_drift"));
+}
+
+/// The effects a diagnosis names, with their parameters (for messages).
+fn named(d: &tcomp::diagnose::Diagnosis) -> Vec<(&str, serde_json::Value)> {
+    d.findings
+        .iter()
+        .map(|f| (f.name.as_str(), f.params_json()))
+        .collect()
 }
 
 fn untestable_reason(d: &tcomp::diagnose::Diagnosis, prefix: &str) -> String {
@@ -501,10 +495,7 @@ fn clean_runs_of_two_speeds_name_no_speed_law() {
         assert!(
             d.findings.iter().all(|f| f.name != "bearing_nonlinear"),
             "seed {seed}: {:?}",
-            d.findings
-                .iter()
-                .map(|f| (&f.name, f.params_json()))
-                .collect::<Vec<_>>()
+            named(&d)
         );
     }
 }
@@ -517,14 +508,7 @@ fn clean_runs_whose_misfit_reads_as_a_step_or_a_lag_name_nothing() {
     // T_T3 (draws 7, 31: body-map fit-row shrink 0.22; a lag must reach 0.25)
     for seed in [7, 16, 22, 31] {
         let d = diagnose_fit(&two_speed_band_runs(&[], seed), &Options::default()).unwrap();
-        assert!(
-            d.findings.is_empty(),
-            "seed {seed}: {:?}",
-            d.findings
-                .iter()
-                .map(|f| (&f.name, f.params_json()))
-                .collect::<Vec<_>>()
-        );
+        assert!(d.findings.is_empty(), "seed {seed}: {:?}", named(&d));
     }
 }
 
@@ -560,14 +544,7 @@ fn three_clean_runs_of_different_duty_name_nothing() {
     let steady = vec![(0.0, 0.0, 0.0), (600.0, 7500.0, 0.4)];
     runs.push(("steady".into(), simulate(&steady, &[], 4.0, 10.0, 95).run));
     let d = diagnose_fit(&runs, &Options::default()).unwrap();
-    assert!(
-        d.findings.is_empty(),
-        "false alarm: {:?}",
-        d.findings
-            .iter()
-            .map(|f| (&f.name, f.params_json()))
-            .collect::<Vec<_>>()
-    );
+    assert!(d.findings.is_empty(), "false alarm: {:?}", named(&d));
     // every run took part in the fit and the scoring
     assert!(
         d.notes.iter().any(|n| n.contains("on 3 run(s)")),
