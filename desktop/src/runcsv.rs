@@ -41,7 +41,12 @@ impl Run {
                 bail!("no header row (file is empty or only metadata)");
             };
             let line = line.with_context(|| format!("line {}: not UTF-8 text", n + 1))?;
-            let t = line.trim();
+            // a spreadsheet's UTF-8 export starts with a byte-order mark
+            let t = if n == 0 {
+                line.trim_start_matches('\u{feff}').trim()
+            } else {
+                line.trim()
+            };
             if t.is_empty() {
                 continue;
             }
@@ -53,19 +58,26 @@ impl Run {
             }
             break t.to_string();
         };
-        run.columns = header.split(',').map(|s| s.trim().to_string()).collect();
-        if run.columns.first().map(String::as_str) != Some("time_s") {
-            bail!(
-                "line with header: first column must be `time_s`, found {:?}",
-                run.columns.first()
-            );
-        }
+        // names as written, spreadsheet quotes removed
+        let names: Vec<String> = header.split(',').map(|s| unquote(s).to_string()).collect();
         let mut seen = std::collections::HashSet::new();
-        for c in &run.columns {
+        for c in &names {
             if !seen.insert(c) {
                 bail!("header: column `{c}` appears twice");
             }
         }
+        // `time_s` may stand anywhere in the file; the run keeps it first
+        // (the order every writer uses), the other columns in file order
+        let Some(time_at) = names.iter().position(|c| c == "time_s") else {
+            bail!(
+                "header has no `time_s` column (columns: {})",
+                names.join(",")
+            );
+        };
+        let order: Vec<usize> = std::iter::once(time_at)
+            .chain((0..names.len()).filter(|&i| i != time_at))
+            .collect();
+        run.columns = order.iter().map(|&i| names[i].clone()).collect();
         run.data = vec![Vec::new(); run.columns.len()];
         let ranges: Vec<_> = run.columns.iter().map(|c| plausible_range(c)).collect();
         for (n, line) in lines {
@@ -74,23 +86,23 @@ impl Run {
             if t.is_empty() || t.starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = t.split(',').collect();
-            if fields.len() != run.columns.len() {
+            let in_file: Vec<&str> = t.split(',').collect();
+            if in_file.len() != run.columns.len() {
                 bail!(
                     "line {}: {} fields, header has {} columns",
                     n + 1,
-                    fields.len(),
+                    in_file.len(),
                     run.columns.len()
                 );
             }
-            for (c, f) in fields.iter().enumerate() {
-                let f = f.trim();
+            for (c, &i) in order.iter().enumerate() {
+                let f = unquote(in_file[i]);
                 let v = if f.is_empty() {
                     None
                 } else {
                     let v: f64 = f.parse().map_err(|_| {
                         anyhow::anyhow!(
-                            "line {}, column `{}`: cannot parse {:?} as a number",
+                            "line {}, column `{}`: cannot parse `{}` as a number",
                             n + 1,
                             run.columns[c],
                             f
@@ -98,7 +110,7 @@ impl Run {
                     })?;
                     if !v.is_finite() {
                         bail!(
-                            "line {}, column `{}`: {:?} is not a finite number (a missing value is an empty field)",
+                            "line {}, column `{}`: `{}` is not a finite number (a missing value is an empty field)",
                             n + 1,
                             run.columns[c],
                             f
@@ -418,6 +430,15 @@ pub fn is_temperature_column(name: &str) -> bool {
             && name[1..].bytes().all(|b| b.is_ascii_digit()))
 }
 
+/// A field without surrounding blanks and without the double quotes a
+/// spreadsheet may put around it (the format has no commas inside fields).
+fn unquote(field: &str) -> &str {
+    let t = field.trim();
+    t.strip_prefix('"')
+        .and_then(|u| u.strip_suffix('"'))
+        .map_or(t, str::trim)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -437,6 +458,31 @@ mod tests {
         run.write_to(&mut out).unwrap();
         let again = Run::from_reader(out.as_slice()).unwrap();
         assert_eq!(again, run);
+    }
+
+    #[test]
+    fn reads_a_spreadsheet_export_with_a_bom_quotes_crlf_and_time_s_not_first() {
+        let text =
+            "\u{feff}# run: excel\r\n\"T_01\",\"time_s\",dx_um\r\n\"20.5\",0,1\r\n20.75,10,\r\n";
+        let run = Run::from_reader(text.as_bytes()).unwrap();
+        assert_eq!(run.meta("run"), Some("excel"));
+        assert_eq!(run.columns, vec!["time_s", "T_01", "dx_um"]);
+        assert_eq!(run.time_s(), vec![0.0, 10.0]);
+        assert_eq!(run.col("T_01").unwrap(), &[Some(20.5), Some(20.75)][..]);
+        assert_eq!(run.col("dx_um").unwrap()[1], None);
+        let err = format!(
+            "{:#}",
+            Run::from_reader("T_01,dx_um\n1,2\n".as_bytes()).unwrap_err()
+        );
+        assert!(
+            err.contains("no `time_s` column") && err.contains("T_01,dx_um"),
+            "{err}"
+        );
+        let err = format!(
+            "{:#}",
+            Run::from_reader("time_s,T_01\n0,abc\n".as_bytes()).unwrap_err()
+        );
+        assert!(err.contains("cannot parse `abc`"), "{err}");
     }
 
     #[test]
