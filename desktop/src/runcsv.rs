@@ -432,7 +432,7 @@ pub fn is_temperature_column(name: &str) -> bool {
 
 /// A field without surrounding blanks and without the double quotes a
 /// spreadsheet may put around it (the format has no commas inside fields).
-fn unquote(field: &str) -> &str {
+pub fn unquote(field: &str) -> &str {
     let t = field.trim();
     t.strip_prefix('"')
         .and_then(|u| u.strip_suffix('"'))

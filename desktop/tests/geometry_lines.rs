@@ -43,6 +43,24 @@ fn reads_the_format_example() {
 }
 
 #[test]
+fn a_spreadsheet_export_with_a_bom_quotes_and_crlf_reads_as_the_plain_file() {
+    let plain = LineFile::parse(EXAMPLE, Path::new("L01.csv")).unwrap();
+    let excel = format!(
+        "\u{feff}{}",
+        EXAMPLE
+            .replace(
+                "s_mm,pos_x,pos_y,pos_z,disp_um",
+                "\"s_mm\",\"pos_x\",\"pos_y\",\"pos_z\",\"disp_um\""
+            )
+            .replace("50,50,0,0,1.84", "\"50\",50,0,0,\"1.84\"")
+            .replace('\n', "\r\n")
+    );
+    assert_ne!(excel, EXAMPLE);
+    let read = LineFile::parse(&excel, Path::new("L01.csv")).unwrap();
+    assert_eq!(read.to_text(), plain.to_text());
+}
+
+#[test]
 fn bad_input_gives_one_line_errors_with_file_and_line() {
     let cases = [
         (
@@ -59,7 +77,7 @@ fn bad_input_gives_one_line_errors_with_file_and_line() {
         ),
         (
             EXAMPLE.replace("50,50,0,0,1.84", "50,50,0,0,abc"),
-            "bad.csv:9: disp_um: \"abc\" is not a number",
+            "bad.csv:9: disp_um: `abc` is not a number",
         ),
         (
             EXAMPLE.replace("50,50,0,0,1.84", "50,60,0,0,1.84"),

@@ -133,7 +133,7 @@ fn triple(path: &Path, lineno: usize, key: &str, v: &str) -> Result<[f64; 3]> {
     let parts: Vec<&str> = v.split(',').map(str::trim).collect();
     if parts.len() != 3 {
         bail!(
-            "{}:{lineno}: {key} needs three comma-separated numbers, got {v:?}",
+            "{}:{lineno}: {key} needs three comma-separated numbers, got `{v}`",
             path.display()
         );
     }
@@ -144,7 +144,7 @@ fn triple(path: &Path, lineno: usize, key: &str, v: &str) -> Result<[f64; 3]> {
             .ok()
             .filter(|x| x.is_finite())
             .ok_or_else(|| {
-                anyhow::anyhow!("{}:{lineno}: {key}: {p:?} is not a number", path.display())
+                anyhow::anyhow!("{}:{lineno}: {key}: `{p}` is not a number", path.display())
             })?;
     }
     Ok(out)
@@ -163,6 +163,8 @@ impl LineFile {
         let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
         let mut header: Option<(usize, Vec<String>)> = None;
         let mut data: Vec<(usize, &str)> = Vec::new();
+        // a spreadsheet's UTF-8 export starts with a byte-order mark
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         for (i, raw) in text.lines().enumerate() {
             let lineno = i + 1;
             let l = raw.trim();
@@ -174,11 +176,16 @@ impl LineFile {
                     continue; // comments after the header are allowed and ignored
                 }
                 let Some((k, v)) = m.split_once(':') else {
-                    bail!("{p}:{lineno}: metadata line must be '# key: value', got {l:?}");
+                    bail!("{p}:{lineno}: metadata line must be '# key: value', got `{l}`");
                 };
                 meta.insert(k.trim().to_string(), (lineno, v.trim().to_string()));
             } else if header.is_none() {
-                header = Some((lineno, l.split(',').map(|c| c.trim().to_string()).collect()));
+                header = Some((
+                    lineno,
+                    l.split(',')
+                        .map(|c| crate::runcsv::unquote(c).to_string())
+                        .collect(),
+                ));
             } else {
                 data.push((lineno, l));
             }
@@ -195,7 +202,7 @@ impl LineFile {
         let dir = triple(path, n, "direction", v)?;
         let norm = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
         if !((norm - 1.0).abs() < 1e-3) {
-            bail!("{p}:{n}: direction {v:?} is not a unit vector (length {norm:.4})");
+            bail!("{p}:{n}: direction `{v}` is not a unit vector (length {norm:.4})");
         }
         let direction = dir.map(|c| c / norm);
         let (n, v) = get("tool_offset_mm")?;
@@ -204,13 +211,13 @@ impl LineFile {
         let structure = Structure::parse(v).with_context(|| format!("{p}:{n}"))?;
         let (n, source) = get("source")?;
         if source != "measured" && source != "simulated" {
-            bail!("{p}:{n}: source must be 'measured' or 'simulated', got {source:?}");
+            bail!("{p}:{n}: source must be 'measured' or 'simulated', got `{source}`");
         }
         let run = match meta.get("run") {
             None => Run::Single,
             Some((_, r)) if r == "forward" => Run::Forward,
             Some((_, r)) if r == "backward" => Run::Backward,
-            Some((n, r)) => bail!("{p}:{n}: run must be 'forward' or 'backward', got {r:?}"),
+            Some((n, r)) => bail!("{p}:{n}: run must be 'forward' or 'backward', got `{r}`"),
         };
         let temperature_state = meta.get("temperature_state").map(|(_, v)| v.clone());
 
@@ -253,7 +260,7 @@ impl LineFile {
             temps: tcols.iter().map(|(_, n)| (n.clone(), Vec::new())).collect(),
         };
         for (lineno, l) in data {
-            let cells: Vec<&str> = l.split(',').map(str::trim).collect();
+            let cells: Vec<&str> = l.split(',').map(crate::runcsv::unquote).collect();
             if cells.len() != cols.len() {
                 bail!(
                     "{p}:{lineno}: {} fields, the header has {}",
@@ -267,7 +274,7 @@ impl LineFile {
                     .ok()
                     .filter(|x| x.is_finite())
                     .ok_or_else(|| {
-                        anyhow::anyhow!("{p}:{lineno}: {}: {:?} is not a number", cols[i], cells[i])
+                        anyhow::anyhow!("{p}:{lineno}: {}: `{}` is not a number", cols[i], cells[i])
                     })
             };
             let s = num(cs)?;
