@@ -585,3 +585,26 @@ fn a_steeper_speed_law_the_fit_rows_cannot_tell_is_named_by_its_held_out_rows() 
     let ((cb, _), (ca, _)) = top.gap_c.unwrap();
     assert!(ca < cb, "°C gap {cb} -> {ca}");
 }
+
+#[test]
+fn a_dead_sensor_is_left_out_and_said_not_a_failed_fit() {
+    // T_T4 unplugged in the second run: every field empty
+    let mut runs = truth_runs(&[], 75);
+    let run = &mut runs[1].1;
+    let c = run.columns.iter().position(|c| c == "T_T4").unwrap();
+    run.data[c].iter_mut().for_each(|v| *v = None);
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    let j = d.to_json();
+    let missing: Vec<&str> = j["missing"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m.as_str().unwrap())
+        .collect();
+    assert!(
+        missing.iter().any(|m| m.starts_with("T_T4 reads in 0 of")),
+        "{missing:?}"
+    );
+    assert!(d.findings.is_empty(), "{:?}", named(&d));
+    assert!(!j["where"].to_string().contains("T_T4"));
+}

@@ -101,3 +101,44 @@ fn select_groups_sensors_and_picks_the_most_correlated() {
     let b = [Some(2.0), Some(4.0), Some(0.0), Some(6.0)];
     assert!((pearson(&a, &b) - 1.0).abs() < 1e-12);
 }
+
+#[test]
+fn a_dead_or_frozen_sensor_is_left_out_and_never_chosen() {
+    let mut run = clustered_run();
+    let n = run.rows();
+    // an unplugged sensor (every field empty), one that reads in a third of
+    // the rows, and one stuck at a value
+    for (name, col) in [
+        ("T_dead", vec![None; n]),
+        (
+            "T_flaky",
+            (0..n)
+                .map(|k| (k % 3 == 0).then_some(20.0 + k as f64 * 0.01))
+                .collect(),
+        ),
+        ("T_stuck", vec![Some(21.5); n]),
+    ] {
+        run.columns.push(name.into());
+        run.data.push(col);
+    }
+    // four groups: a dead sensor would otherwise form a group of its own
+    let s = select(&[run], 4, 0).unwrap();
+    for name in ["T_dead", "T_flaky", "T_stuck"] {
+        assert!(
+            s.left_out.contains_key(name),
+            "{name} not left out: {:?}",
+            s.left_out
+        );
+        assert!(!s.chosen.iter().any(|c| c == name), "{name} chosen");
+        assert!(!s.clusters.iter().flatten().any(|c| c == name));
+    }
+    assert!(s.left_out["T_flaky"].contains("reads in 200 of 600 rows"));
+    assert_eq!(s.chosen.len(), 4);
+    // more groups than usable sensors: said, not refused
+    let mut run = clustered_run();
+    run.columns.push("T_dead".into());
+    run.data.push(vec![None; n]);
+    let s = select(&[run], 10, 0).unwrap();
+    assert_eq!(s.clusters.len(), 9);
+    assert!(s.notes[0].contains("9 usable sensors"), "{:?}", s.notes);
+}

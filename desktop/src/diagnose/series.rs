@@ -276,6 +276,33 @@ pub fn load(runs: &[(String, Run)], max_rows: usize) -> Result<Dataset> {
         ));
     }
     let mut missing = Vec::new();
+    // a channel that reads in fewer than half the rows of some run (a dead
+    // or unplugged sensor) cannot be identified there: it is left out of the
+    // whole diagnosis and said so, rather than failing the fit
+    let mut sparse: Vec<(String, String, usize, usize)> = Vec::new();
+    for r in &out {
+        for sig in r.sensors.iter().chain(&r.disps) {
+            let valid = sig.values.iter().filter(|x| x.is_finite()).count();
+            if valid * 2 < sig.values.len() && !sparse.iter().any(|x| x.0 == sig.name) {
+                sparse.push((sig.name.clone(), r.name.clone(), valid, sig.values.len()));
+            }
+        }
+    }
+    for (c, run, valid, rows) in &sparse {
+        missing.push(format!(
+            "{c} reads in {valid} of the {rows} identification rows of run {run}: left out (a channel must read in at least half the rows of every run)"
+        ));
+    }
+    let kept = |n: &String| !sparse.iter().any(|x| &x.0 == n);
+    sensors.retain(kept);
+    disps.retain(kept);
+    for r in &mut out {
+        r.sensors.retain(|sig| kept(&sig.name));
+        r.disps.retain(|sig| kept(&sig.name));
+    }
+    if sensors.is_empty() {
+        bail!("no temperature sensor reads in at least half the rows of every run");
+    }
     let partly = |c: &str| if any(c) { " in every run" } else { "" };
     if !has_rpm {
         missing.push(format!(

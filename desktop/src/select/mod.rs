@@ -148,6 +148,11 @@ pub struct Selection {
     /// Best-scoring sensor of each group (same order as `clusters`).
     pub chosen: Vec<String>,
     pub inertia: f64,
+    /// Sensors left out of the grouping, with why (a dead or unplugged
+    /// sensor, or one that never changes, carries nothing to select).
+    pub left_out: BTreeMap<String, String>,
+    /// What the selection had to adapt, in words (empty when nothing).
+    pub notes: Vec<String>,
 }
 
 /// Select sensors over one or more runs (series concatenated; temperatures as
@@ -185,6 +190,58 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
             }
         }
     }
+    // A sensor must read in at least half the rows of every run and change
+    // at all: otherwise it is left out (its gap-filled series would be a
+    // constant that K-means puts in a group of its own and "chooses").
+    let mut left_out = BTreeMap::new();
+    for (i, r) in runs.iter().enumerate() {
+        for name in &sensors {
+            let col = r.col(name).unwrap_or(&[]);
+            let valid: Vec<f64> = col.iter().flatten().copied().collect();
+            if left_out.contains_key(name) {
+                continue;
+            }
+            if valid.len() * 2 < col.len() {
+                left_out.insert(
+                    name.clone(),
+                    format!(
+                        "reads in {} of {} rows of run {}",
+                        valid.len(),
+                        col.len(),
+                        i + 1
+                    ),
+                );
+            }
+        }
+    }
+    for name in &sensors {
+        let all: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.col(name).unwrap_or(&[]).iter().flatten().copied())
+            .collect();
+        let constant = all.windows(2).all(|w| w[0] == w[1]);
+        if constant && !left_out.contains_key(name) {
+            left_out.insert(name.clone(), "never changes".to_string());
+        }
+    }
+    let sensors: Vec<String> = sensors
+        .into_iter()
+        .filter(|n| !left_out.contains_key(n))
+        .collect();
+    let mut notes = Vec::new();
+    if sensors.is_empty() {
+        bail!("select: no temperature sensor reads in at least half the rows of every run and changes");
+    }
+    let groups = if groups > sensors.len() {
+        notes.push(format!(
+            "{groups} groups asked, {} usable sensors: {} groups",
+            sensors.len(),
+            sensors.len()
+        ));
+        sensors.len()
+    } else {
+        groups
+    };
     // Concatenated rise series (None kept) and error series.
     let mut temp: Vec<Vec<Option<f64>>> = vec![Vec::new(); sensors.len()];
     let mut err: Vec<Vec<Option<f64>>> = vec![Vec::new(); directions.len()];
@@ -262,6 +319,8 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
         correlations,
         chosen,
         inertia,
+        left_out,
+        notes,
     })
 }
 
@@ -285,6 +344,12 @@ pub fn print_selection(s: &Selection) {
         );
     }
     println!("chosen: {}", s.chosen.join(","));
+    for (n, why) in &s.left_out {
+        println!("left out: {n} ({why})");
+    }
+    for n in &s.notes {
+        println!("note: {n}");
+    }
 }
 
 /// Command-line arguments of `tcomp select`.
