@@ -106,9 +106,9 @@ fn export_by_rom(run: &tcomp::runcsv::Run) -> Vec<u8> {
         tcomp::export::name_sensors_by_rom(&mut fm, &columns, &roms).unwrap(),
         6
     );
-    let dir = std::env::temp_dir().join(format!("thermocomp-rom-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("by-rom.img");
+    // a directory of its own: the tests of this file run side by side
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("by-rom.img");
     let summary = tcomp::export::export(&fm, &path).unwrap();
     assert_eq!(summary.sensors_by_rom, 6);
     std::fs::read(&path).unwrap()
