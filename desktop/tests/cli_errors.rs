@@ -453,3 +453,30 @@ fn sim_and_diagnose_refuse_impossible_machines_duties_and_options() {
     }
     assert!(!d.join("x.csv").exists());
 }
+
+#[test]
+fn fit_names_an_input_that_never_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = String::from("time_s,spindle_rpm,T_a,T_dead,dx_um\n");
+    for k in 0..60 {
+        let t = 20.0 + 0.1 * k as f64;
+        s.push_str(&format!("{},3000,{t},,{}\n", k * 10, k));
+    }
+    let run = write(dir.path(), "dead.csv", &s);
+    let run = run.to_str().unwrap();
+    let out = dir.path().join("m.json");
+    refuses(
+        dir.path(),
+        &[
+            "fit",
+            run,
+            "--split-chrono",
+            "0.6,0.8",
+            "--features",
+            "T_a,T_dead",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["input T_dead has no values in the training rows"],
+    );
+}

@@ -919,6 +919,20 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
         let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
         if full.y.is_empty() || val.y.is_empty() {
+            // name the cause: an input column that never reads there, else
+            // the channel itself
+            for (part, segs) in [("training", &plan.train), ("validation", &plan.val)] {
+                for c in kinds.iter().flat_map(|k| k.0.columns()) {
+                    let reads = segs.iter().any(|s| {
+                        plan.runs[s.run]
+                            .col(c)
+                            .is_some_and(|v| v[s.start..s.end].iter().any(Option::is_some))
+                    });
+                    if !reads {
+                        bail!("fit: input {c} has no values in the {part} rows");
+                    }
+                }
+            }
             bail!("fit: channel {ch} has no values in the training or validation rows");
         }
         // Static inputs the board can still take.
