@@ -194,34 +194,22 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
     // at all: otherwise it is left out (its gap-filled series would be a
     // constant that K-means puts in a group of its own and "chooses").
     let mut left_out = BTreeMap::new();
-    for (i, r) in runs.iter().enumerate() {
-        for name in &sensors {
-            let col = r.col(name).unwrap_or(&[]);
-            let valid: Vec<f64> = col.iter().flatten().copied().collect();
-            if left_out.contains_key(name) {
-                continue;
-            }
-            if valid.len() * 2 < col.len() {
-                left_out.insert(
-                    name.clone(),
-                    format!(
-                        "reads in {} of {} rows of run {}",
-                        valid.len(),
-                        col.len(),
-                        i + 1
-                    ),
-                );
-            }
-        }
-    }
     for name in &sensors {
-        let all: Vec<f64> = runs
-            .iter()
-            .flat_map(|r| r.col(name).unwrap_or(&[]).iter().flatten().copied())
-            .collect();
-        let constant = all.windows(2).all(|w| w[0] == w[1]);
-        if constant && !left_out.contains_key(name) {
-            left_out.insert(name.clone(), "never changes".to_string());
+        let cols: Vec<&[Option<f64>]> = runs.iter().map(|r| r.col(name).unwrap_or(&[])).collect();
+        let sparse = cols.iter().enumerate().find_map(|(i, col)| {
+            let valid = col.iter().flatten().count();
+            (valid * 2 < col.len())
+                .then(|| format!("reads in {valid} of {} rows of run {}", col.len(), i + 1))
+        });
+        let mut values = cols.iter().flat_map(|c| c.iter().flatten());
+        let first = values.next();
+        let why = sparse.or_else(|| {
+            values
+                .all(|v| Some(v) == first)
+                .then(|| "never changes".to_string())
+        });
+        if let Some(why) = why {
+            left_out.insert(name.clone(), why);
         }
     }
     let sensors: Vec<String> = sensors
