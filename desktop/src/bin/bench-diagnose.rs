@@ -4,6 +4,11 @@
 //! 8 h run sampled at 1 s.
 //!
 //! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR] [--machine FILE]`
+//! (`--open-only`, `--open-machine-only`, `--closed-only`, `--cross-only`:
+//! one column alone)
+//!
+//! The cross-model column runs `diagnose fit` on cases of the first
+//! simulator (`crate::sim`), which the fit mode was never tuned on.
 //!
 //! `--machine FILE`: the machine file of the open-world machine-file column
 //! (default `machines/vertical-mc-truth.toml`, the truth's own numbers;
@@ -13,7 +18,9 @@
 //! case's fit rows first (`tcomp diagnose --calibrate`).
 use anyhow::{Context, Result};
 use std::path::PathBuf;
-use tcomp::diagnose::bench::{run_bench, run_open_bench, run_open_machine_bench, BenchConfig};
+use tcomp::diagnose::bench::{
+    run_bench, run_cross_bench, run_open_bench, run_open_machine_bench, BenchConfig,
+};
 use tcomp::diagnose::{diagnose, Options};
 use tcomp::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
@@ -29,6 +36,7 @@ fn run() -> Result<()> {
     let mut open_only = false;
     let mut machine_only = false;
     let mut closed_only = false;
+    let mut cross_only = false;
     let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
     let mut open_machine_file: Option<PathBuf> = None;
     let mut calibrate = false;
@@ -47,7 +55,8 @@ fn run() -> Result<()> {
             "--open-only" => open_only = true,
             "--open-machine-only" => machine_only = true,
             "--closed-only" => closed_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --machines DIR, --machine FILE, --calibrate)"),
+            "--cross-only" => cross_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --machines DIR, --machine FILE, --calibrate)"),
         }
     }
     let machines = vec![
@@ -74,6 +83,11 @@ fn run() -> Result<()> {
         println!("{v}");
         return Ok(());
     }
+    if cross_only {
+        // diagnose fit on the first simulator's machines (never tuned on)
+        println!("{}", run_cross_bench(&machines, &open_cfg)?);
+        return Ok(());
+    }
     if open_only {
         // the open world alone: `diagnose fit`, no machine-file pass
         println!("{}", run_open_bench(&open_cfg)?);
@@ -88,6 +102,7 @@ fn run() -> Result<()> {
         return Ok(());
     }
     let open = run_open_bench(&open_cfg)?;
+    let cross = run_cross_bench(&machines, &open_cfg)?;
     let mut v = run_bench(&machines, &closed_cfg)?;
     // full diagnosis of one 8 h run sampled at 1 s, all candidates
     let m = &machines[1];
@@ -141,7 +156,15 @@ fn run() -> Result<()> {
         "closed_world": pick(&v),
         "open_world_fit": open_fit,
         "open_world_with_machine_file": with_machine,
+        "cross_model_fit": {
+            "top1_rate": cross["top1_rate"],
+            "per_effect": cross["per_effect"],
+            "false_alarms": cross["false_alarms"],
+            "clean_cases": cross["clean_cases"],
+            "seconds_per_case": cross["mean_diagnosis_seconds"],
+        },
     });
+    v["cross_model_fit"] = cross.clone();
     v["open_world_machine_file"] = open_machine.clone();
     v["open_world"] = open.clone();
     if json {
@@ -167,6 +190,14 @@ fn run() -> Result<()> {
             open["false_alarms"], open["clean_cases"],
             open["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
             open["per_effect"]
+        );
+        println!(
+            "cross model (diagnose fit on the first simulator's machines): {} cases: top-1 {:.1} %, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+            cross["cases"],
+            cross["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            cross["false_alarms"], cross["clean_cases"],
+            cross["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+            cross["per_effect"]
         );
         if let Some(ms) = v["misses"].as_array() {
             for m in ms {

@@ -266,7 +266,15 @@ fn score(
             && c.evidence["few_fit_rows_after"].as_bool() == Some(true)
             && m_a.is_finite()
             && m_a <= STEP_HELD_REL * m_b);
+    // the speed law against the nominal itself must halve its gap: the
+    // nominal's own speed terms may have absorbed part of the law, and a
+    // misfit that grows with load reads as a steeper law (on clean runs the
+    // heat-adding law left ≥ 54 % of the gap on the truth model, 4 seeds,
+    // and ≥ 60 % on the first simulator's machines, 2 seeds)
+    let nominal_ref_ok =
+        c.evidence["against_nominal"].as_bool() != Some(true) || m_a <= SPEED_NOMINAL_REL * m_b;
     let claimed = claimable
+        && nominal_ref_ok
         && beats_nominal
         && bic_ok
         && m_a.is_finite()
@@ -385,6 +393,10 @@ pub const STEP_HELD_REL: f64 = 0.5;
 /// without its fit-row BIC (see `nominal_halved`).
 pub const SPEED_HELD_REL: f64 = 0.5;
 
+/// Held-out gap after / before at which the speed law scored against the
+/// nominal itself is claimed (see `nominal_ref_ok`).
+pub const SPEED_NOMINAL_REL: f64 = 0.5;
+
 /// Relative held-out shrink (noise units, affected outputs) to claim an effect.
 pub const FIT_MIN_REL: f64 = 0.3;
 /// Relative held-out shrink to claim a sensor step or lag (see `score`).
@@ -434,6 +446,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     }
     if only("bearing_nonlinear") {
         cands.extend(open_effects::speed_nonlinearity(&p).map(|(c, b)| (c, Some(b))));
+        cands.extend(
+            open_effects::speed_nonlinearity_against_nominal(&p, &st, &fit).map(|c| (c, None)),
+        );
     }
     if only("ambient_drift") {
         cands.extend(open_effects::ambient_drift(&p, &st, &fit).map(|c| (c, None)));
@@ -470,8 +485,15 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         let (ka, kb) = (key(a), key(b));
         kb.0.total_cmp(&ka.0).then(kb.1.total_cmp(&ka.1))
     });
-    let mut findings = Vec::new();
+    // the speed law is tried against two references: reported once, in its
+    // best-ranked claimed form
+    let mut findings: Vec<Finding> = Vec::new();
     for s in scored.iter().filter(|s| s.claimed) {
+        if s.finding.name == "bearing_nonlinear"
+            && findings.iter().any(|f| f.name == s.finding.name)
+        {
+            continue;
+        }
         let mut f = s.finding.clone();
         if let Some(o) = f.evidence.as_object_mut() {
             o.insert(
@@ -522,6 +544,6 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             FIT_MIN_REL * 100.0,
             SENSOR_MIN_REL * 100.0,
             FIT_MIN_ABS
-        ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks",
+        ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes), claimed there only when it halves the held-out gap, and reported once, in the better-ranked form",
     })
 }

@@ -23,7 +23,8 @@ const TANK: usize = BED + 2;
 const NODES: usize = BED + 3;
 /// Sensor sites (node per sensor `T_T<i>`).
 const SITES: [usize; 10] = [1, 3, 5, 8, 10, 13, 17, BED, TABLE, TANK];
-const N_MAX: f64 = 12000.0;
+/// The truth machine's maximum spindle speed [rpm].
+pub const N_MAX: f64 = 12000.0;
 
 /// An effect of the truth model (its own implementations).
 #[derive(Clone, Debug, PartialEq)]
