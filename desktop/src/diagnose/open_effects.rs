@@ -75,7 +75,15 @@ fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
     }
 }
 
-/// Rows at least `JUMP_W + 1` rows away from any change of an input.
+/// How long after a run's first spindle start the nominal's misfit of the
+/// start from cold may still read as a jump [s]: 2.5 × the shortest time
+/// constant of its grid (on the first simulator's turning centre a heated
+/// sensor read as a 0.18 °C step 100 s after the start). Other input
+/// changes keep `JUMP_W + 1` rows: a longer window there hid real steps.
+const AFTER_FIRST_START_S: f64 = 2.5 * super::ident::TAU_GRID[0];
+
+/// Rows at least `JUMP_W + 1` rows away from any change of an input, and
+/// `AFTER_FIRST_START_S` after the run's first spindle start.
 fn quiet_rows(run: &super::series::RunData) -> Vec<bool> {
     let n = run.rows();
     let mut quiet = vec![true; n];
@@ -87,6 +95,16 @@ fn quiet_rows(run: &super::series::RunData) -> Vec<bool> {
                 quiet[a..b].iter_mut().for_each(|q| *q = false);
             }
         }
+    }
+    if let Some(k) = run
+        .rpm
+        .as_ref()
+        .and_then(|rpm| (1..n).find(|&k| rpm[k - 1] == 0.0 && rpm[k] != 0.0))
+    {
+        let after = ((AFTER_FIRST_START_S / run.dt).ceil() as usize).max(JUMP_W + 1);
+        quiet[k..(k + after).min(n)]
+            .iter_mut()
+            .for_each(|q| *q = false);
     }
     quiet
 }
@@ -906,4 +924,47 @@ pub fn ambient_drift(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Cand
             },
         }),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_start_from_cold_is_not_quiet_for_longer_than_later_changes() {
+        // 10 s rows: spindle starts at row 20, stops at row 60, starts again
+        // at row 100
+        let n = 200;
+        let rpm: Vec<f64> = (0..n)
+            .map(|k| {
+                if (20..60).contains(&k) || k >= 100 {
+                    6000.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let run = super::super::series::RunData {
+            name: "r".into(),
+            dt: 10.0,
+            decimation: 1,
+            time: (0..n).map(|k| k as f64 * 10.0).collect(),
+            rpm: Some(rpm),
+            feed: None,
+            coolant: None,
+            ambient: None,
+            sensors: Vec::new(),
+            disps: Vec::new(),
+            held: vec![false; n],
+        };
+        let quiet = quiet_rows(&run);
+        let after = (AFTER_FIRST_START_S / 10.0).ceil() as usize;
+        assert!(after > JUMP_W + 1);
+        // the first start: not quiet for AFTER_FIRST_START_S
+        assert!((20..20 + after).all(|k| !quiet[k]));
+        assert!(quiet[20 + after]);
+        // a later change: JUMP_W + 1 rows on each side only
+        assert!((96..100 + JUMP_W + 1).all(|k| !quiet[k]));
+        assert!(quiet[100 + JUMP_W + 1] && quiet[95]);
+    }
 }
