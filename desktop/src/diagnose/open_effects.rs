@@ -686,6 +686,51 @@ fn steep_columns(
     }
 }
 
+/// The steeper heat's exponent the fit rows support best against
+/// `reference` (structure `st`): for each of `STEEP_EXPONENTS` the extra
+/// columns where each output's BIC takes them, the lowest total ΔBIC.
+fn steepest_supported(
+    p: &Problem,
+    st: &Structure,
+    reference: &ModelFit,
+) -> Option<(f64, ModelFit, Vec<usize>)> {
+    let n_fit = reference.n_fit().max(2) as f64;
+    STEEP_EXPONENTS
+        .iter()
+        .filter_map(|&pw| {
+            let extra = steep_columns(p.ds, p.n_max, pw, st.modes.clone());
+            let (fit, took) = p.fit_where_supported(st, &extra, reference);
+            if took.is_empty() {
+                return None;
+            }
+            let dbic = fit.j_fit(&p.outputs) - reference.j_fit(&p.outputs)
+                + (st.modes.len() * took.len()) as f64 * n_fit.ln();
+            Some((pw, fit, took, dbic))
+        })
+        .min_by(|a, b| a.3.total_cmp(&b.3))
+        .map(|(pw, fit, took, _)| (pw, fit, took))
+}
+
+/// Steady-state rise of the extra heat term per sensor (each modal column
+/// has unit DC gain), where it is largest, and the bound it ends on when
+/// it comes out as cooling (friction only adds heat: c ≥ 0).
+fn strongest_extra_heat(
+    p: &Problem,
+    fit: &ModelFit,
+    took: &[usize],
+) -> (Option<(usize, f64)>, Vec<String>) {
+    let strongest = took
+        .iter()
+        .filter(|&&o| !p.outputs[o].is_disp)
+        .map(|&o| (o, fit.outs[o].extra_coef.iter().sum::<f64>()))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+    let mut at_bound = Vec::new();
+    if strongest.is_none_or(|s| s.1 <= 0.0) {
+        at_bound.push("extra heat c at its bound 0 (fitted as cooling)".to_string());
+    }
+    (strongest, at_bound)
+}
+
 /// Speed nonlinearity seen across runs of different speeds: spindle heat
 /// steeper in speed than the textbook law, `c·(n/n_max)^p` with `p` above
 /// 2, through the same modes, on top of a reference that carries the
@@ -710,21 +755,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
         return None;
     }
     let n_max = p.n_max;
-    let n_fit = reference.n_fit().max(2) as f64;
-    let tries: Vec<(f64, ModelFit, Vec<usize>, f64)> = STEEP_EXPONENTS
-        .iter()
-        .filter_map(|&pw| {
-            let extra = steep_columns(ds, n_max, pw, st.modes.clone());
-            let (fit, took) = rp.fit_where_supported(&st, &extra, &reference);
-            if took.is_empty() {
-                return None;
-            }
-            let dbic = fit.j_fit(&rp.outputs) - reference.j_fit(&rp.outputs)
-                + (st.modes.len() * took.len()) as f64 * n_fit.ln();
-            Some((pw, fit, took, dbic))
-        })
-        .collect();
-    let (pw, _, _, _) = tries.into_iter().min_by(|a, b| a.3.total_cmp(&b.3))?;
+    let (pw, _, _) = steepest_supported(&rp, &st, &reference)?;
     // the alternative identified as the reference is (its own order): the
     // steeper heat as a third spindle input
     let mut ap = Problem::new(ds);
@@ -738,18 +769,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
     if took.is_empty() {
         return None;
     }
-    // steady-state rise of the extra term per sensor (each modal column
-    // has unit DC gain), where it is largest
-    let strongest = took
-        .iter()
-        .filter(|&&o| !p.outputs[o].is_disp)
-        .map(|&o| (o, fit.outs[o].extra_coef.iter().sum::<f64>()))
-        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-    let mut at_bound = Vec::new();
-    if strongest.is_none_or(|s| s.1 <= 0.0) {
-        // friction only adds heat: c ≥ 0 is the term's bound
-        at_bound.push("extra heat c at its bound 0 (fitted as cooling)".to_string());
-    }
+    let (strongest, at_bound) = strongest_extra_heat(p, &fit, &took);
     let i_pw = STEEP_EXPONENTS.iter().position(|&e| e == pw).unwrap_or(0);
     let lo_hi = (
         STEEP_EXPONENTS[0],
@@ -800,29 +820,8 @@ pub fn speed_nonlinearity_against_nominal(
     if !ds.has_rpm || speed_levels(p).len() < 3 || !runs_of_different_speeds(p) {
         return None;
     }
-    let n_fit = nom.n_fit().max(2) as f64;
-    let (pw, fit, took, _) = STEEP_EXPONENTS
-        .iter()
-        .filter_map(|&pw| {
-            let extra = steep_columns(ds, p.n_max, pw, st.modes.clone());
-            let (fit, took) = p.fit_where_supported(st, &extra, nom);
-            if took.is_empty() {
-                return None;
-            }
-            let dbic = fit.j_fit(&p.outputs) - nom.j_fit(&p.outputs)
-                + (st.modes.len() * took.len()) as f64 * n_fit.ln();
-            Some((pw, fit, took, dbic))
-        })
-        .min_by(|a, b| a.3.total_cmp(&b.3))?;
-    let strongest = took
-        .iter()
-        .filter(|&&o| !p.outputs[o].is_disp)
-        .map(|&o| (o, fit.outs[o].extra_coef.iter().sum::<f64>()))
-        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-    let mut at_bound = Vec::new();
-    if strongest.is_none_or(|s| s.1 <= 0.0) {
-        at_bound.push("extra heat c at its bound 0 (fitted as cooling)".to_string());
-    }
+    let (pw, fit, took) = steepest_supported(p, st, nom)?;
+    let (strongest, at_bound) = strongest_extra_heat(p, &fit, &took);
     Some(Candidate {
         name: "bearing_nonlinear",
         params: json!({
