@@ -865,7 +865,6 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
             redrawn,
         } = case;
         let m = &machines[machine];
-        let kind = &kind;
         redraws += redrawn;
         let t = std::time::Instant::now();
         let d = super::fitmode::diagnose_fit(&runs, &opt)?;
@@ -882,7 +881,7 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
                     }) => Some(sensor.as_str()),
                     _ => None,
                 };
-                f.name == *k && sensor.is_none_or(|s| f.params_json()["sensor"] == s)
+                f.name == k && sensor.is_none_or(|s| f.params_json()["sensor"] == s)
             }),
         };
         match kind {

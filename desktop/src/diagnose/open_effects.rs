@@ -657,6 +657,12 @@ pub fn runs_of_different_speeds(p: &Problem) -> bool {
     means.len() >= 2 && hi - lo >= 0.2 * p.n_max
 }
 
+/// Whether the data can test a speed law: `spindle_rpm`, at least three
+/// speed levels, and runs of different mean speed.
+fn speed_law_testable(p: &Problem) -> bool {
+    p.ds.has_rpm && speed_levels(p).len() >= 3 && runs_of_different_speeds(p)
+}
+
 /// Exponent of the friction heat in the speed-law test's reference: a
 /// bearing's viscous friction torque grows as (ν·n)^(2/3) (Palmgren), its
 /// heat as n^(5/3); motor losses and load-dependent friction grow as n.
@@ -743,7 +749,7 @@ fn strongest_extra_heat(
 /// adds heat): the steady rise of the extra term where it is largest.
 pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> {
     let ds = p.ds;
-    if !ds.has_rpm || speed_levels(p).len() < 3 || !runs_of_different_speeds(p) {
+    if !speed_law_testable(p) {
         return None;
     }
     let mut rp = Problem::new(ds);
@@ -816,8 +822,7 @@ pub fn speed_nonlinearity_against_nominal(
     st: &Structure,
     nom: &ModelFit,
 ) -> Option<Candidate> {
-    let ds = p.ds;
-    if !ds.has_rpm || speed_levels(p).len() < 3 || !runs_of_different_speeds(p) {
+    if !speed_law_testable(p) {
         return None;
     }
     let (pw, fit, took) = steepest_supported(p, st, nom)?;
