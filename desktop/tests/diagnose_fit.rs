@@ -538,6 +538,28 @@ fn runs_of_one_speed_band_cannot_test_the_speed_law_and_say_so() {
 }
 
 #[test]
+fn runs_of_two_speeds_only_cannot_test_the_speed_law_and_say_so() {
+    // a light and a heavy run whose mean speeds differ, but each at one
+    // speed: two running speeds in all, through which the nominal's own
+    // speed terms fit any law. Not tried, and said why
+    let runs: Vec<(String, Run)> = [3000.0, 9000.0]
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| {
+            let duty = vec![(0.0, 0.0, 0.0), (600.0, n, 0.4), (10800.0, 0.0, 0.0)];
+            (
+                format!("at{n}"),
+                simulate(&duty, &[], 4.0, 10.0, 97 + i as u64).run,
+            )
+        })
+        .collect();
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(d.tried.iter().all(|f| f.name != "bearing_nonlinear"));
+    let why = untestable_reason(&d, "bearing_nonlinear");
+    assert!(why.contains("found 2"), "{why}");
+}
+
+#[test]
 fn three_clean_runs_of_different_duty_name_nothing() {
     let mut runs = truth_runs(&[], 93);
     // a third run at one constant speed

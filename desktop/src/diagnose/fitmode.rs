@@ -41,10 +41,19 @@ pub fn untestable(p: &Problem) -> Vec<(String, String)> {
             "no spindle_rpm column: the heat input is not observed, temperatures drive the nominal"
                 .into(),
         ));
-    } else if open_effects::runs_of_different_speeds(p) {
-        // tested (`open_effects::speed_nonlinearity`): not listed
-    } else {
+    } else if !open_effects::runs_of_different_speeds(p) {
         v.push((speed, "needs at least two runs whose mean speeds differ by 20 % of the maximum: within one run a steeper speed law cannot be told from other heat that comes with running".into()));
+    } else if open_effects::speed_levels(p).len() < open_effects::MIN_SPEED_LEVELS {
+        v.push((
+            speed,
+            format!(
+                "needs at least {} spindle speeds each held for 5 % of the rows (found {}): the nominal's two speed terms (n and n^1.5 or n^2) pass through the heat of any law at two running speeds, so a steeper law leaves no gap",
+                open_effects::MIN_SPEED_LEVELS,
+                open_effects::speed_levels(p).len()
+            ),
+        ));
+    } else {
+        // tested (`open_effects::speed_nonlinearity`): not listed
     }
     if ds.has_ambient {
         v.push(("ambient_drift (beyond T_ambient)".into(), "tried and reported under `tried`, never claimed: a slow drift of the air that T_ambient does not show reaches every sensor through the same slow modes as the machine's own heating, which the identified nominal (levels and decays per run) absorbs; on the open-world truth model it was not told apart from clean runs".into()));

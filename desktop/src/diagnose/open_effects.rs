@@ -657,10 +657,14 @@ pub fn runs_of_different_speeds(p: &Problem) -> bool {
     means.len() >= 2 && hi - lo >= 0.2 * p.n_max
 }
 
-/// Whether the data can test a speed law: `spindle_rpm`, at least three
-/// speed levels, and runs of different mean speed.
+/// Speed levels a speed law needs: through two points every law is a line.
+pub const MIN_SPEED_LEVELS: usize = 3;
+
+/// Whether the data can test a speed law: `spindle_rpm`, at least
+/// [`MIN_SPEED_LEVELS`] speed levels, and runs of different mean speed.
+/// `fitmode::untestable` names whichever condition fails.
 fn speed_law_testable(p: &Problem) -> bool {
-    p.ds.has_rpm && speed_levels(p).len() >= 3 && runs_of_different_speeds(p)
+    p.ds.has_rpm && speed_levels(p).len() >= MIN_SPEED_LEVELS && runs_of_different_speeds(p)
 }
 
 /// Exponent of the friction heat in the speed-law test's reference: a
