@@ -281,6 +281,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
     let mut visibility: std::collections::BTreeMap<String, Vec<(f64, f64, bool)>> =
         Default::default();
     let mut redraws = 0usize;
+    let mut lag_reach = LagReachTally::default();
     let n_cases = cases.len();
     for (ci, case) in cases.into_iter().enumerate() {
         let OpenCase {
@@ -310,6 +311,9 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             }
             None => got.is_none(),
         };
+        if let Some(TruthEffect::SensorLag { sensor, tau_s }) = effects.first() {
+            lag_reach.add(&d, &format!("T_T{sensor}"), *tau_s, correct);
+        }
         match kind {
             Some(k) => {
                 n_eff += 1;
@@ -393,7 +397,44 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         "effect_visibility": visibility_json(&visibility),
         "visibility_rule": format!("an effect case is drawn again (at most 20 times) until its data differ from the same runs without it by ≥ {VISIBLE_C} °C RMS on a sensor or ≥ {VISIBLE_UM} µm RMS on a probe"),
         "redrawn_effects": redraws,
+        "lag_by_reach": lag_reach.json(),
     }))
+}
+
+/// Lag cases by outcome: named; missed but listed under `untestable` (the
+/// lag test's reach, `Diagnosis::lag_reach`, does not cover the drawn lag
+/// on that sensor: the honest "cannot tell"); missed and not listed.
+#[derive(Default)]
+struct LagReachTally {
+    cases: usize,
+    named: usize,
+    missed_listed: usize,
+    missed_unlisted: usize,
+}
+
+impl LagReachTally {
+    fn add(&mut self, d: &super::Diagnosis, sensor: &str, tau_s: f64, named: bool) {
+        self.cases += 1;
+        // a sensor the diagnosis does not know is not listed
+        let reach = d.lag_reach.iter().find(|(n, _)| n == sensor).map(|e| e.1);
+        if named {
+            self.named += 1;
+        } else if reach.is_some_and(|r| r.is_none_or(|r| r > tau_s)) {
+            self.missed_listed += 1;
+        } else {
+            self.missed_unlisted += 1;
+        }
+    }
+
+    fn json(&self) -> Value {
+        json!({
+            "rule": "a missed lag is listed when diagnose fit names its sensor under untestable for the drawn tau (sensor_lag_reach_s above it, or none)",
+            "cases": self.cases,
+            "named": self.named,
+            "missed_listed_untestable": self.missed_listed,
+            "missed_not_listed": self.missed_unlisted,
+        })
+    }
 }
 
 /// How far an effect moves a case's data: the largest RMS difference
@@ -854,6 +895,7 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
     let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
     let (mut false_alarms, mut times, mut misses) = (0usize, Vec::new(), Vec::new());
     let mut redraws = 0usize;
+    let mut lag_reach = LagReachTally::default();
     let n_cases = cases.len();
     for (ci, case) in cases.into_iter().enumerate() {
         let CrossCase {
@@ -884,6 +926,13 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
                 f.name == k && sensor.is_none_or(|s| f.params_json()["sensor"] == s)
             }),
         };
+        if let Some(Effect::SensorLag {
+            sensor: Some(sensor),
+            tau_s,
+        }) = effects.first()
+        {
+            lag_reach.add(&d, sensor, *tau_s, correct);
+        }
         match kind {
             Some(k) => {
                 let e = per.entry(k.to_string()).or_default();
@@ -953,6 +1002,7 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
         "hours_per_case": cfg.hours,
         "sample_period_s": cfg.sample_period_s,
         "redrawn_effects": redraws,
+        "lag_by_reach": lag_reach.json(),
         "misses": misses,
     }))
 }

@@ -16,7 +16,7 @@ use super::{Diagnosis, Finding, Options};
 use crate::runcsv::Run;
 
 /// Effects an identified nominal absorbs (or the data cannot show), with why.
-pub fn untestable(p: &Problem) -> Vec<(String, String)> {
+pub fn untestable(p: &Problem, lag_reach: &[Option<f64>]) -> Vec<(String, String)> {
     let ds = p.ds;
     let mut v = vec![
         ("convection".to_string(), "a different convection level only changes the gains and time constants the nominal is identified with; without a machine file it is not a gap".to_string()),
@@ -60,6 +60,56 @@ pub fn untestable(p: &Problem) -> Vec<(String, String)> {
     }
     if ds.disps.is_empty() {
         v.push(("sensor_lag".into(), "no displacement column: a sensor's lag is only visible against its body, and an identified nominal absorbs any lag of a sensor's own reading".into()));
+    }
+    v.extend(lag_reach_untestable(p, lag_reach));
+    v
+}
+
+/// The sensors whose lag the body-map test cannot see (`lag_reach`): one
+/// entry for those it cannot test at any lag of the grid, one per shortest
+/// lag it sees on the others (when above the grid's start).
+fn lag_reach_untestable(p: &Problem, lag_reach: &[Option<f64>]) -> Vec<(String, String)> {
+    let longest = open_effects::LAG_GRID[open_effects::LAG_GRID.len() - 1];
+    let names = |pick: &dyn Fn(Option<f64>) -> bool| -> Vec<&str> {
+        p.ds.sensors
+            .iter()
+            .zip(lag_reach)
+            .filter(|(_, r)| pick(**r))
+            .map(|(n, _)| n.as_str())
+            .collect()
+    };
+    let why = |tau: f64| {
+        format!(
+        "put on these sensors' readings, a lag of {tau:.0} s would shrink the lagged body map's fit rows by less than the {:.0} % a claim needs: the displacements carry too little of them, so a lagging sensor is not told from a slower node without a machine file",
+        LAG_MIN_FIT_REL * 100.0
+    )
+    };
+    let mut v = Vec::new();
+    let none = names(&|r| r.is_none());
+    if !none.is_empty() {
+        v.push((format!("sensor_lag on {}", none.join(", ")), why(longest)));
+    }
+    let mut shortest: Vec<f64> = lag_reach
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|t| *t > open_effects::LAG_GRID[0])
+        .collect();
+    shortest.sort_by(f64::total_cmp);
+    shortest.dedup();
+    for t in shortest {
+        let i = open_effects::LAG_GRID
+            .iter()
+            .position(|g| *g == t)
+            .unwrap_or(1);
+        let below = open_effects::LAG_GRID[i.saturating_sub(1)];
+        v.push((
+            format!(
+                "sensor_lag shorter than {t:.0} s on {}",
+                names(&|r| r == Some(t)).join(", ")
+            ),
+            why(below),
+        ));
     }
     v
 }
@@ -462,6 +512,25 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     if only("ambient_drift") {
         cands.extend(open_effects::ambient_drift(&p, &st, &fit).map(|c| (c, None)));
     }
+    // where the test itself saw a lag at a tau, that sensor is testable
+    // there (the injected-lag probe of `lag_reach` under-rates a sensor that
+    // already lags: its own lag stays in the probe's data)
+    let mut lag_reach = if only("sensor_lag") {
+        open_effects::lag_reach(&p)
+    } else {
+        Vec::new()
+    };
+    for (c, _) in cands.iter().filter(|(c, _)| c.name == "sensor_lag") {
+        let s =
+            p.ds.sensors
+                .iter()
+                .position(|n| c.evidence["channel"] == n.as_str());
+        if let (Some(s), Some(tau)) = (s, c.evidence["shortest_tau_seen_s"].as_f64()) {
+            if let Some(r) = lag_reach.get_mut(s) {
+                *r = Some(r.map_or(tau, |t| t.min(tau)));
+            }
+        }
+    }
     let n_cands = cands.len();
     let mut scored: Vec<Scored> = cands
         .into_iter()
@@ -542,7 +611,14 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         notes,
         seconds: t0.elapsed().as_secs_f64(),
         sims: n_cands,
-        untestable: untestable(&p),
+        untestable: untestable(&p, &lag_reach),
+        lag_reach: p
+            .ds
+            .sensors
+            .iter()
+            .cloned()
+            .zip(lag_reach.iter().copied())
+            .collect(),
         missing: ds.missing.clone(),
         nominal: nominal_json(&p, &st, &fit),
         no_effect: no_effect_evidence(&p, &fit),

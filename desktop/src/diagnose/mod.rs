@@ -157,6 +157,10 @@ pub struct Diagnosis {
     pub sims: usize,
     /// Effects the data cannot test, with the reason.
     pub untestable: Vec<(String, String)>,
+    /// `diagnose fit`: per sensor, the shortest lag [s] the body-map test
+    /// would see on it (`None`: none up to the grid's longest). Empty in
+    /// machine-file mode and without a displacement.
+    pub lag_reach: Vec<(String, Option<f64>)>,
     /// One line per missing input: what is missing and what that costs.
     pub missing: Vec<String>,
     /// The nominal model and its own held-out fit.
@@ -178,6 +182,7 @@ impl Diagnosis {
             "gap_before_um": self.nominal_gap_um.map(|g| g.0),
             "gap_before_c": self.nominal_gap_c.map(|g| g.0),
             "untestable": self.untestable.iter().map(|(n, r)| json!({"name": n, "reason": r})).collect::<Vec<_>>(),
+            "sensor_lag_reach_s": self.lag_reach.iter().map(|(n, t)| (n.clone(), json!(t))).collect::<serde_json::Map<_, _>>(),
             "missing": self.missing,
             "nominal": self.nominal,
             "no_effect": self.no_effect,
@@ -885,6 +890,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         seconds: t0.elapsed().as_secs_f64(),
         sims,
         untestable: Vec::new(),
+        lag_reach: Vec::new(),
         missing: Vec::new(),
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,

@@ -241,8 +241,16 @@ fn held(v: &[f64]) -> Vec<f64> {
 /// enters as read: if that sensor already lags its body by `tau`, its
 /// reading is the lagged body temperature and the map becomes exact; for
 /// any other sensor, taking it un-lagged only adds a lead. Per-run level +
-/// Σ L_i·rise_i, ridge least squares on the fit rows.
-fn lagged_body_map(p: &Problem, o: usize, tau: f64, own: Option<usize>) -> OutFit {
+/// Σ L_i·rise_i, ridge least squares on the fit rows. `injected` puts a
+/// lag of its own on one sensor's reading first (the test's power, see
+/// `lag_reach`).
+fn lagged_body_map(
+    p: &Problem,
+    o: usize,
+    tau: f64,
+    own: Option<usize>,
+    injected: Option<(usize, f64)>,
+) -> OutFit {
     let ds = p.ds;
     let ns = ds.sensors.len();
     let nr = ds.runs.len();
@@ -258,7 +266,10 @@ fn lagged_body_map(p: &Problem, o: usize, tau: f64, own: Option<usize>) -> OutFi
         .map(|(r, run)| {
             (0..ns)
                 .map(|i| {
-                    let x = rise(&p.meas[r][i]);
+                    let mut x = rise(&p.meas[r][i]);
+                    if let Some((_, t)) = injected.filter(|j| j.0 == i) {
+                        x = super::ident::lag_signal(&x, run.dt, t);
+                    }
                     if own == Some(i) {
                         x
                     } else {
@@ -342,6 +353,98 @@ fn lagged_body_map(p: &Problem, o: usize, tau: f64, own: Option<usize>) -> OutFi
     f
 }
 
+/// Fit-row cost of body-map fits of the displacements `disp` (noise units).
+fn body_cost(p: &Problem, disp: &[usize], fits: &[OutFit]) -> f64 {
+    fits.iter()
+        .zip(disp)
+        .map(|(f, &o)| f.sse_fit / p.outputs[o].noise.powi(2))
+        .sum()
+}
+
+/// The same cost on the fit rows of run `r` alone.
+fn body_cost_run(p: &Problem, disp: &[usize], fits: &[OutFit], r: usize) -> f64 {
+    let held = &p.ds.runs[r].held;
+    fits.iter()
+        .zip(disp)
+        .map(|(f, &o)| {
+            f.resid.get(r).map_or(0.0, |res| {
+                res.iter()
+                    .zip(held)
+                    .filter(|(e, &h)| !h && e.is_finite())
+                    .map(|(e, _)| e * e)
+                    .sum::<f64>()
+            }) / p.outputs[o].noise.powi(2)
+        })
+        .sum()
+}
+
+/// The body map's relative fit-row gain (all runs, least run) for sensor
+/// `s` taken as read against every signal lagged by `tau`.
+fn body_gain(p: &Problem, disp: &[usize], base: &[OutFit], own: &[OutFit]) -> (f64, f64) {
+    let all = 1.0 - body_cost(p, disp, own) / body_cost(p, disp, base).max(1e-12);
+    let least = (0..p.ds.runs.len())
+        .map(|r| 1.0 - body_cost_run(p, disp, own, r) / body_cost_run(p, disp, base, r).max(1e-12))
+        .fold(f64::INFINITY, f64::min);
+    (all, least)
+}
+
+/// Reach of the lag test on each sensor: the shortest lag of `LAG_GRID`
+/// that, put on that sensor's reading, the body-map test would see
+/// (relative fit-row gain ≥ `LAG_MIN_FIT_REL`, and ≥ `LAG_MIN_RUN_REL` in
+/// every run); `None` when not even the longest would be seen (the
+/// displacements weigh that sensor too little: a lagging sensor cannot be
+/// told from a slower node). The runs' own lags, if any, stay in: this
+/// measures how much the displacements carry the sensor, not whether it
+/// lags. Empty without a displacement.
+pub fn lag_reach(p: &Problem) -> Vec<Option<f64>> {
+    use super::fitmode::{LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
+    use rayon::prelude::*;
+    let disp: Vec<usize> = (0..p.outputs.len())
+        .filter(|&o| p.outputs[o].is_disp)
+        .collect();
+    let ns = p.ds.sensors.len();
+    if disp.is_empty() || ns < 2 {
+        return Vec::new();
+    }
+    let seen = |s: usize, tau: f64| -> bool {
+        let inj = Some((s, tau));
+        let base: Vec<OutFit> = disp
+            .iter()
+            .map(|&o| lagged_body_map(p, o, tau, None, inj))
+            .collect();
+        let own: Vec<OutFit> = disp
+            .iter()
+            .map(|&o| lagged_body_map(p, o, tau, Some(s), inj))
+            .collect();
+        let (all, least) = body_gain(p, &disp, &base, &own);
+        all >= LAG_MIN_FIT_REL && least >= LAG_MIN_RUN_REL
+    };
+    (0..ns)
+        .into_par_iter()
+        .map(|s| {
+            // the gain grows with the lag: the longest first, then the
+            // shortest seen by bisection over the grid
+            let last = LAG_GRID.len() - 1;
+            if !seen(s, LAG_GRID[last]) {
+                return None;
+            }
+            let (mut lo, mut hi) = (0usize, last);
+            if seen(s, LAG_GRID[0]) {
+                return Some(LAG_GRID[0]);
+            }
+            while hi - lo > 1 {
+                let mid = (lo + hi) / 2;
+                if seen(s, LAG_GRID[mid]) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            Some(LAG_GRID[hi])
+        })
+        .collect()
+}
+
 /// Lag grid [s] for `sensor_lag`.
 pub const LAG_GRID: [f64; 9] = [
     60.0, 90.0, 135.0, 200.0, 300.0, 450.0, 675.0, 1000.0, 1500.0,
@@ -371,64 +474,51 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
             })
             .collect(),
     };
-    let j_of = |fits: &[OutFit]| -> f64 {
-        fits.iter()
-            .zip(&disp)
-            .map(|(f, &o)| f.sse_fit / p.outputs[o].noise.powi(2))
-            .sum()
-    };
     // per tau: reference fits, then per sensor the fits with it as read
     let per_tau: Vec<(Vec<OutFit>, Vec<Vec<OutFit>>)> = LAG_GRID
         .par_iter()
         .map(|&tau| {
             let base: Vec<OutFit> = disp
                 .iter()
-                .map(|&o| lagged_body_map(p, o, tau, None))
+                .map(|&o| lagged_body_map(p, o, tau, None, None))
                 .collect();
             let own: Vec<Vec<OutFit>> = (0..ns)
                 .map(|s| {
                     disp.iter()
-                        .map(|&o| lagged_body_map(p, o, tau, Some(s)))
+                        .map(|&o| lagged_body_map(p, o, tau, Some(s), None))
                         .collect()
                 })
                 .collect();
             (base, own)
         })
         .collect();
-    // the same figure on the fit rows of one run
-    let j_run = |fits: &[OutFit], r: usize| -> f64 {
-        let held = &p.ds.runs[r].held;
-        fits.iter()
-            .zip(&disp)
-            .map(|(f, &o)| {
-                f.resid.get(r).map_or(0.0, |res| {
-                    res.iter()
-                        .zip(held)
-                        .filter(|(e, &h)| !h && e.is_finite())
-                        .map(|(e, _)| e * e)
-                        .sum::<f64>()
-                }) / p.outputs[o].noise.powi(2)
-            })
-            .sum()
-    };
     let mut out = Vec::new();
     for s in 0..ns {
-        let Some((ti, gain)) = per_tau
+        // the tau of the largest relative gain; a lag belongs to the sensor,
+        // so it shows in every run: also the least gain over the runs (heat
+        // that differs between runs, e.g. a speed law, bends the static map
+        // in one run only)
+        let gains: Vec<(f64, f64)> = per_tau
+            .iter()
+            .map(|(base, own)| body_gain(p, &disp, base, &own[s]))
+            .collect();
+        let Some((ti, &(gain, run_gain))) = gains
             .iter()
             .enumerate()
-            .map(|(ti, (base, own))| (ti, 1.0 - j_of(&own[s]) / j_of(base).max(1e-12)))
-            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0))
         else {
             continue;
         };
+        // the shortest tau whose gain would pass the claim's margins (the
+        // reach of the test on this sensor, `lag_reach`)
+        let shortest_seen = gains
+            .iter()
+            .position(|&(g, least)| {
+                g >= super::fitmode::LAG_MIN_FIT_REL && least >= super::fitmode::LAG_MIN_RUN_REL
+            })
+            .map(|i| LAG_GRID[i]);
         let tau = LAG_GRID[ti];
         let (base, own) = &per_tau[ti];
-        // a lag belongs to the sensor, so it shows in every run: the least
-        // relative fit-row gain over the runs (heat that differs between
-        // runs, e.g. a speed law, bends the static map in one run only)
-        let run_gain = (0..p.ds.runs.len())
-            .map(|r| 1.0 - j_run(&own[s], r) / j_run(base, r).max(1e-12))
-            .fold(f64::INFINITY, f64::min);
         // a best tau at the grid's short end is no lag at all (flagged, never
         // claimed); at the long end the sensor is still located (the gain is
         // a property of the sensor, the reference only gets smoother with
@@ -451,6 +541,7 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
                     "fit_rel_gain": r4(gain),
                     "tau_s_is_lower_bound": tau_lower_bound,
                     "fit_rel_gain_least_run": r4(run_gain),
+                    "shortest_tau_seen_s": shortest_seen,
                     "reference": "body map: each displacement as a static linear map of the sensor rises; with every signal seen through a first-order lag of tau_s (reference) against the same with this sensor taken as read (it already lags its body by tau_s)",
                 }),
             },
