@@ -534,8 +534,32 @@ impl<'a> Problem<'a> {
         extra: Option<Extra>,
         lagged: Option<(usize, f64)>,
     ) -> ModelFit {
-        if extra.is_none() && lagged.is_none() && !self.cross() && !self.conductance_constrained() {
-            if let Some(f) = self.fit_shared(st) {
+        if extra.is_none() && lagged.is_none() && !self.cross() {
+            if let Some((mut f, coef)) = self.fit_shared(st) {
+                if self.conductance_constrained() {
+                    // the sign constraint of `fit_output`, on the shared fit:
+                    // a temperature output whose steady gain from the
+                    // conductance inputs is positive is fitted without them
+                    let cols = self.conductance_columns(st);
+                    let redo: Vec<usize> = (0..self.outputs.len())
+                        .filter(|&o| {
+                            !self.outputs[o].is_disp
+                                && cols.clone().map(|j| coef[(j, o)]).sum::<f64>() > 0.0
+                        })
+                        .collect();
+                    let refits: Vec<(usize, OutFit)> = redo
+                        .into_par_iter()
+                        .map(|o| {
+                            (
+                                o,
+                                self.fit_output_without(st, o, None, None, cols.clone()).0,
+                            )
+                        })
+                        .collect();
+                    for (o, r) in refits {
+                        f.outs[o] = r;
+                    }
+                }
                 return f;
             }
         }
@@ -548,7 +572,9 @@ impl<'a> Problem<'a> {
 
     /// Input-driven outputs share one design: one Gram matrix and one
     /// factorisation for all of them (`None` when their missing rows differ).
-    fn fit_shared(&self, st: &Structure) -> Option<ModelFit> {
+    /// Also returns the coefficients (shared columns first, one column per
+    /// output).
+    fn fit_shared(&self, st: &Structure) -> Option<(ModelFit, DMatrix<f64>)> {
         let nr = self.ds.runs.len();
         let no = self.outputs.len();
         let blocks: Vec<Columns> = (0..nr).map(|r| self.columns(st, 0, r)).collect();
@@ -613,7 +639,7 @@ impl<'a> Problem<'a> {
                 f.resid.push(res);
             }
         }
-        Some(ModelFit { outs })
+        Some((ModelFit { outs }, coef))
     }
 
     /// Fit with extra columns, keeping them only in the outputs whose
