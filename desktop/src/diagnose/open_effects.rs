@@ -353,6 +353,15 @@ fn lagged_body_map(
     f
 }
 
+/// The displacement outputs a body map explains (`None` without one, or
+/// with fewer than two sensors: no lag test).
+fn body_map_outputs(p: &Problem) -> Option<Vec<usize>> {
+    let disp: Vec<usize> = (0..p.outputs.len())
+        .filter(|&o| p.outputs[o].is_disp)
+        .collect();
+    (!disp.is_empty() && p.ds.sensors.len() >= 2).then_some(disp)
+}
+
 /// Fit-row cost of body-map fits of the displacements `disp` (noise units).
 fn body_cost(p: &Problem, disp: &[usize], fits: &[OutFit]) -> f64 {
     fits.iter()
@@ -399,13 +408,10 @@ fn body_gain(p: &Problem, disp: &[usize], base: &[OutFit], own: &[OutFit]) -> (f
 pub fn lag_reach(p: &Problem) -> Vec<Option<f64>> {
     use super::fitmode::{LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
     use rayon::prelude::*;
-    let disp: Vec<usize> = (0..p.outputs.len())
-        .filter(|&o| p.outputs[o].is_disp)
-        .collect();
-    let ns = p.ds.sensors.len();
-    if disp.is_empty() || ns < 2 {
+    let Some(disp) = body_map_outputs(p) else {
         return Vec::new();
-    }
+    };
+    let ns = p.ds.sensors.len();
     let seen = |s: usize, tau: f64| -> bool {
         let inj = Some((s, tau));
         let base: Vec<OutFit> = disp
@@ -457,13 +463,10 @@ pub const LAG_GRID: [f64; 9] = [
 /// fit-row gain. Returns the candidates and, for each, its reference fit.
 pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
     use rayon::prelude::*;
-    let disp: Vec<usize> = (0..p.outputs.len())
-        .filter(|&o| p.outputs[o].is_disp)
-        .collect();
-    let ns = p.ds.sensors.len();
-    if disp.is_empty() || ns < 2 {
+    let Some(disp) = body_map_outputs(p) else {
         return Vec::new();
-    }
+    };
+    let ns = p.ds.sensors.len();
     let no = p.outputs.len();
     let assemble = |fits: Vec<OutFit>| ModelFit {
         outs: (0..no)
