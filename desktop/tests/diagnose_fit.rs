@@ -98,6 +98,12 @@ fn a_run_without_spindle_rpm_is_diagnosed_and_says_what_it_costs() {
         .collect();
     assert_eq!(lines.len(), 1, "{stdout}");
     assert!(lines[0].contains("cannot be tested"), "{}", lines[0]);
+    // the text report also names what these runs cannot test
+    let untestable = stdout
+        .lines()
+        .find(|l| l.starts_with("not testable from these runs"))
+        .unwrap_or_else(|| panic!("no untestable line: {stdout}"));
+    assert!(untestable.contains("bearing_nonlinear"), "{untestable}");
     let out = std::process::Command::new(exe)
         .args(["diagnose", "fit", "--json"])
         .arg(data("norpm-a.csv"))

@@ -109,6 +109,13 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
                 f.dbic
             );
         }
+        if !d.untestable.is_empty() {
+            let names: Vec<&str> = d.untestable.iter().map(|(n, _)| n.as_str()).collect();
+            println!(
+                "not testable from these runs (why: --json or --report): {}",
+                names.join("; ")
+            );
+        }
         if a.machine == "fit" {
             println!(
                 "({} candidate effects tried against the identified nominal, {:.2} s)",
