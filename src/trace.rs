@@ -13,7 +13,7 @@ pub const MAX_COLUMNS: usize = 48;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TraceError {
-    /// The header's first column is not `time_s`.
+    /// The header has no `time_s` column.
     NoTimeColumn,
     /// More columns than [`MAX_COLUMNS`].
     TooManyColumns,
@@ -33,7 +33,7 @@ impl core::fmt::Display for TraceError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
             TraceError::NoTimeColumn => {
-                write!(f, "the first column of the header must be `time_s`")
+                write!(f, "the header has no `time_s` column")
             }
             TraceError::TooManyColumns => write!(f, "more than {MAX_COLUMNS} columns"),
             TraceError::FieldCount => write!(f, "the number of fields differs from the header's"),
@@ -54,6 +54,8 @@ impl core::fmt::Display for TraceError {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TraceHeader {
     columns: usize,
+    /// Column index of `time_s` (the run format does not fix its place).
+    time_column: u8,
     /// Column index of each temperature channel, in file order (`T_*`, `T01`).
     temperature_columns: heapless::Vec<u8, MAX_CHANNELS>,
     spindle_column: Option<u8>,
@@ -63,19 +65,21 @@ impl TraceHeader {
     pub fn parse(line: &str) -> Result<TraceHeader, TraceError> {
         let mut header = TraceHeader {
             columns: 0,
+            time_column: 0,
             temperature_columns: heapless::Vec::new(),
             spindle_column: None,
         };
-        for (i, name) in line.trim().split(',').enumerate() {
+        let mut time_seen = false;
+        for (i, name) in line.trim_start_matches(BOM).trim().split(',').enumerate() {
             let name = name.trim();
             let idx = u8::try_from(i).map_err(|_| TraceError::TooManyColumns)?;
             if i >= MAX_COLUMNS {
                 return Err(TraceError::TooManyColumns);
             }
-            if i == 0 && name != "time_s" {
-                return Err(TraceError::NoTimeColumn);
-            }
-            if is_temperature_column(name) {
+            if name == "time_s" && !time_seen {
+                header.time_column = idx;
+                time_seen = true;
+            } else if is_temperature_column(name) {
                 // Channels beyond MAX_CHANNELS are ignored, as a board with 20
                 // inputs would ignore a 21st sensor.
                 let _ = header.temperature_columns.push(idx);
@@ -84,12 +88,26 @@ impl TraceHeader {
             }
             header.columns = i + 1;
         }
+        if !time_seen {
+            return Err(TraceError::NoTimeColumn);
+        }
         Ok(header)
     }
 
     pub fn channels(&self) -> usize {
         self.temperature_columns.len()
     }
+}
+
+/// The UTF-8 byte-order mark some spreadsheet exports put before the first
+/// line of a file.
+const BOM: char = '\u{feff}';
+
+/// Whether a run-file line carries no row: blank, or `#` metadata (a
+/// byte-order mark before it does not count).
+pub fn is_comment_or_blank(line: &str) -> bool {
+    let l = line.trim_start_matches(BOM);
+    l.trim().is_empty() || l.starts_with('#')
 }
 
 /// `T_<name>` or `T<digits>`.
@@ -125,7 +143,7 @@ impl TraceSample {
             }
             let field = field.trim();
             let col = i as u8; // i < columns <= MAX_COLUMNS < 256
-            if i == 0 {
+            if col == header.time_column {
                 let ms = decimal_scaled(field, 1000, col)?.ok_or(TraceError::MissingTime)?;
                 sample.time_ms = u64::try_from(ms).map_err(|_| TraceError::OutOfRange(col))?;
                 time_seen = true;
@@ -231,5 +249,23 @@ mod tests {
             Err(TraceError::MissingTime)
         );
         assert_eq!(TraceHeader::parse("t,T1"), Err(TraceError::NoTimeColumn));
+    }
+
+    #[test]
+    fn a_spreadsheet_export_with_a_byte_order_mark_and_time_elsewhere_is_read() {
+        // the run format fixes column names, not their order
+        assert!(is_comment_or_blank("\u{feff}# machine: vmc"));
+        assert!(!is_comment_or_blank("\u{feff}time_s,T_a"));
+        let h = TraceHeader::parse("\u{feff}T_a,spindle_rpm,time_s,T_ambient").unwrap();
+        assert_eq!(h.channels(), 2);
+        let s = TraceSample::parse(&h, "20.5,3000,10,19.0").unwrap();
+        assert_eq!(s.time_ms, 10_000);
+        assert_eq!(s.temperatures[0], Some(328));
+        assert_eq!(s.temperatures[1], Some(304));
+        assert_eq!(s.spindle_rpm, Some(3000));
+        assert_eq!(
+            TraceSample::parse(&h, "20.5,3000,,19.0"),
+            Err(TraceError::MissingTime)
+        );
     }
 }

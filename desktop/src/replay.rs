@@ -38,7 +38,7 @@ pub fn replay_failing(
     let mut lines = csv
         .lines()
         .enumerate()
-        .filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
+        .filter(|(_, l)| !thermocomp::trace::is_comment_or_blank(l));
     let (_, head) = lines.next().ok_or_else(|| anyhow!("empty trace"))?;
     let header = TraceHeader::parse(head).map_err(|e| anyhow!("header: {e}"))?;
     let mut roms = std::collections::BTreeMap::new();

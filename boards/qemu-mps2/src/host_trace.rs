@@ -1,7 +1,7 @@
 //! The bench board's emulated sensors: a recorded run (run CSV on the host,
 //! read through semihosting) replayed sample by sample.
 
-use thermocomp::trace::{TraceError, TraceHeader, TraceSample, MAX_LINE};
+use thermocomp::trace::{is_comment_or_blank, TraceError, TraceHeader, TraceSample, MAX_LINE};
 
 use crate::semihost::HostFile;
 
@@ -46,7 +46,7 @@ impl HostTrace {
                 .next_line(&mut line)?
                 .ok_or(ReplayError::Parse(t.line_no, TraceError::NoTimeColumn))?;
             let text = core::str::from_utf8(&line[..n]).map_err(|_| ReplayError::NotText)?;
-            if text.trim().is_empty() || text.starts_with('#') {
+            if is_comment_or_blank(text) {
                 continue;
             }
             t.header = TraceHeader::parse(text).map_err(|e| ReplayError::Parse(t.line_no, e))?;
@@ -66,7 +66,7 @@ impl HostTrace {
                 return Ok(None);
             };
             let text = core::str::from_utf8(&line[..n]).map_err(|_| ReplayError::NotText)?;
-            if text.trim().is_empty() || text.starts_with('#') {
+            if is_comment_or_blank(text) {
                 continue;
             }
             return TraceSample::parse(&self.header, text)

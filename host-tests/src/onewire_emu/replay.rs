@@ -17,7 +17,7 @@ pub fn parse_run(text: &str) -> Result<Run, String> {
     let mut lines = text
         .lines()
         .enumerate()
-        .filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty());
+        .filter(|(_, l)| !thermocomp::trace::is_comment_or_blank(l));
     let (_, head) = lines.next().ok_or("empty run file")?;
     let header = TraceHeader::parse(head).map_err(|e| format!("header: {e:?}"))?;
     let mut samples = Vec::new();
