@@ -766,4 +766,16 @@ fn a_dead_sensor_is_left_out_and_said_not_a_failed_fit() {
     );
     assert!(d.findings.is_empty(), "{:?}", named(&d));
     assert!(!j["where"].to_string().contains("T_T4"));
+    // stuck at the DS18B20's power-on value instead: left out the same way
+    let run = &mut runs[1].1;
+    run.data[c].iter_mut().for_each(|v| *v = Some(85.0));
+    let d = diagnose_fit(&runs, &Options::default()).unwrap();
+    assert!(
+        d.missing
+            .iter()
+            .any(|m| m.starts_with("T_T4 reads 85 °C in all") && m.contains("(stuck)")),
+        "{:?}",
+        d.missing
+    );
+    assert!(d.findings.is_empty(), "{:?}", named(&d));
 }

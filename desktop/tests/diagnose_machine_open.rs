@@ -235,6 +235,40 @@ fn diagnoses_a_sensor_step_on_its_sensor_and_the_run_it_happened_in() {
 }
 
 #[test]
+fn a_stuck_or_dead_sensor_is_left_out_of_its_run_and_said_and_a_real_step_is_still_found() {
+    // the step case above, with T_T4 in the second run stuck at the
+    // DS18B20's power-on 85 °C, or unplugged: that channel is left out of
+    // that run (said in `missing`), and the step on T_T5 is still named
+    // (with the stuck value fitted as is, nothing was named)
+    let m = design();
+    for stuck in [Some(85.0), None] {
+        let mut runs = case(
+            &[TruthEffect::SensorStep {
+                sensor: 5,
+                step_c: 0.6,
+                at_s: 6000.0,
+            }],
+            21,
+        );
+        let run = &mut runs[1].1;
+        let c = run.columns.iter().position(|c| c == "T_T4").unwrap();
+        run.data[c].iter_mut().for_each(|v| *v = stuck);
+        let d = diagnose(&m, &runs, &Options::default()).unwrap();
+        let said: Vec<&String> = d
+            .missing
+            .iter()
+            .filter(|l| l.starts_with("T_T4 "))
+            .collect();
+        assert_eq!(said.len(), 1, "{:?}", d.missing);
+        assert!(said[0].contains("run1"), "{}", said[0]);
+        assert_eq!(said[0].contains("(stuck)"), stuck.is_some(), "{}", said[0]);
+        let top = d.findings.first().expect("an effect");
+        assert_eq!(top.name, "sensor_offset");
+        assert_eq!(top.params_json()["sensor"], "T_T5");
+    }
+}
+
+#[test]
 fn diagnoses_a_cycling_chiller_without_a_coolant_on_column() {
     let m = design();
     let runs = case(

@@ -891,7 +891,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         sims,
         untestable: Vec::new(),
         lag_reach: Vec::new(),
-        missing: Vec::new(),
+        missing: ps.iter().flat_map(|p| p.missing.clone()).collect(),
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,

@@ -35,6 +35,8 @@ pub struct Prepared {
     /// Decimation factor applied to the run's rows.
     pub decimation: usize,
     pub notes: Vec<String>,
+    /// Channels left out of this run, with why (dead or stuck).
+    pub missing: Vec<String>,
 }
 
 impl Prepared {
@@ -163,6 +165,27 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
             });
         }
     }
+    // a dead or stuck channel is left out of this run (NaN: neither fitted
+    // nor scored) and said so, rather than fitted as a frozen value
+    let mut missing = Vec::new();
+    for ch in channels.iter_mut() {
+        let raw: Vec<f64> = run
+            .col(&ch.name)
+            .map(|c| c.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
+            .unwrap_or_default();
+        let unit = if matches!(ch.kind, Kind::Temp(_)) {
+            "°C"
+        } else {
+            "µm"
+        };
+        if let Some(why) = super::stats::unusable_channel(&raw, unit) {
+            missing.push(format!(
+                "{} {why} of run {name}: left out of that run",
+                ch.name
+            ));
+            ch.meas.iter_mut().for_each(|v| *v = f64::NAN);
+        }
+    }
     if channels.is_empty() {
         bail!(
             "run {name}: none of the machine's columns ({}, {}) is in the run",
@@ -178,5 +201,6 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
         held: vec![false; nr],
         decimation: f,
         notes,
+        missing,
     })
 }

@@ -276,21 +276,24 @@ pub fn load(runs: &[(String, Run)], max_rows: usize) -> Result<Dataset> {
         ));
     }
     let mut missing = Vec::new();
-    // a channel that reads in fewer than half the rows of some run (a dead
-    // or unplugged sensor) cannot be identified there: it is left out of the
-    // whole diagnosis and said so, rather than failing the fit
-    let mut sparse: Vec<(String, String, usize, usize)> = Vec::new();
+    // a channel that is dead or stuck in some run (`unusable_channel`)
+    // cannot be identified there: it is left out of the whole diagnosis and
+    // said so, rather than failing the fit or fitting a frozen value
+    let mut sparse: Vec<(String, String, String)> = Vec::new();
     for r in &out {
-        for sig in r.sensors.iter().chain(&r.disps) {
-            let valid = sig.values.iter().filter(|x| x.is_finite()).count();
-            if valid * 2 < sig.values.len() && !sparse.iter().any(|x| x.0 == sig.name) {
-                sparse.push((sig.name.clone(), r.name.clone(), valid, sig.values.len()));
+        let temps = r.sensors.iter().map(|s| (s, "°C"));
+        for (sig, unit) in temps.chain(r.disps.iter().map(|s| (s, "µm"))) {
+            if sparse.iter().any(|x| x.0 == sig.name) {
+                continue;
+            }
+            if let Some(why) = super::stats::unusable_channel(&sig.values, unit) {
+                sparse.push((sig.name.clone(), r.name.clone(), why));
             }
         }
     }
-    for (c, run, valid, rows) in &sparse {
+    for (c, run, why) in &sparse {
         missing.push(format!(
-            "{c} reads in {valid} of the {rows} identification rows of run {run}: left out (a channel must read in at least half the rows of every run)"
+            "{c} {why} of run {run} (identification rows): left out (a channel must read, and change, in at least half the rows of every run)"
         ));
     }
     let kept = |n: &String| !sparse.iter().any(|x| &x.0 == n);

@@ -328,6 +328,23 @@ fn erfc(x: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn dead_and_stuck_channels_are_told_apart_from_steady_ones() {
+        let stuck = vec![85.0; STUCK_MIN_ROWS];
+        assert!(unusable_channel(&stuck, "°C").unwrap().contains("(stuck)"));
+        // a short steady stretch is not stuck
+        assert!(unusable_channel(&stuck[1..], "°C").is_none());
+        let mut moving = stuck.clone();
+        moving[7] = 85.0625;
+        assert!(unusable_channel(&moving, "°C").is_none());
+        let mut dead = vec![f64::NAN; 10];
+        dead[0] = 20.0;
+        assert_eq!(
+            unusable_channel(&dead, "°C").as_deref(),
+            Some("reads in 1 of the 10 rows")
+        );
+    }
+
     use super::*;
 
     #[test]
@@ -350,3 +367,26 @@ mod tests {
         assert!((chi2_sf(2.558, 10.0) - 0.99).abs() < 0.003);
     }
 }
+
+/// Why a channel cannot be used in a run, if it cannot: it reads in fewer
+/// than half the rows (a dead or unplugged sensor), or it reads the same
+/// value in every row (stuck: a DS18B20 that answers its power-on 85 °C, a
+/// frozen logger); a real sensor over a run that long moves by at least
+/// one count. `values` NaN where missing; `unit` for the message.
+pub fn unusable_channel(values: &[f64], unit: &str) -> Option<String> {
+    let valid: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if valid.len() * 2 < values.len() {
+        return Some(format!(
+            "reads in {} of the {} rows",
+            valid.len(),
+            values.len()
+        ));
+    }
+    let first = *valid.first()?;
+    (valid.len() >= STUCK_MIN_ROWS && valid.iter().all(|&v| v == first))
+        .then(|| format!("reads {first} {unit} in all {} rows (stuck)", valid.len()))
+}
+
+/// Rows of one value that make a channel stuck (fewer: a short run that may
+/// be steady).
+pub const STUCK_MIN_ROWS: usize = 30;
