@@ -326,6 +326,29 @@ fn erfc(x: f64) -> f64 {
     }
 }
 
+/// Why a channel cannot be used in a run, if it cannot: it reads in fewer
+/// than half the rows (a dead or unplugged sensor), or it reads the same
+/// value in every row (stuck: a DS18B20 that answers its power-on 85 °C, a
+/// frozen logger); a real sensor over a run that long moves by at least
+/// one count. `values` NaN where missing; `unit` for the message.
+pub fn unusable_channel(values: &[f64], unit: &str) -> Option<String> {
+    let valid: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if valid.len() * 2 < values.len() {
+        return Some(format!(
+            "reads in {} of the {} rows",
+            valid.len(),
+            values.len()
+        ));
+    }
+    let first = *valid.first()?;
+    (valid.len() >= STUCK_MIN_ROWS && valid.iter().all(|&v| v == first))
+        .then(|| format!("reads {first} {unit} in all {} rows (stuck)", valid.len()))
+}
+
+/// Rows of one value that make a channel stuck (fewer: a short run that may
+/// be steady).
+pub const STUCK_MIN_ROWS: usize = 30;
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -367,26 +390,3 @@ mod tests {
         assert!((chi2_sf(2.558, 10.0) - 0.99).abs() < 0.003);
     }
 }
-
-/// Why a channel cannot be used in a run, if it cannot: it reads in fewer
-/// than half the rows (a dead or unplugged sensor), or it reads the same
-/// value in every row (stuck: a DS18B20 that answers its power-on 85 °C, a
-/// frozen logger); a real sensor over a run that long moves by at least
-/// one count. `values` NaN where missing; `unit` for the message.
-pub fn unusable_channel(values: &[f64], unit: &str) -> Option<String> {
-    let valid: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    if valid.len() * 2 < values.len() {
-        return Some(format!(
-            "reads in {} of the {} rows",
-            valid.len(),
-            values.len()
-        ));
-    }
-    let first = *valid.first()?;
-    (valid.len() >= STUCK_MIN_ROWS && valid.iter().all(|&v| v == first))
-        .then(|| format!("reads {first} {unit} in all {} rows (stuck)", valid.len()))
-}
-
-/// Rows of one value that make a channel stuck (fewer: a short run that may
-/// be steady).
-pub const STUCK_MIN_ROWS: usize = 30;
