@@ -168,17 +168,22 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
     // a dead or stuck channel is left out of this run (NaN: neither fitted
     // nor scored) and said so, rather than fitted as a frozen value
     let mut missing = Vec::new();
-    for ch in channels.iter_mut() {
-        let raw: Vec<f64> = run
-            .col(&ch.name)
+    let raw_of = |name: &str| -> Vec<f64> {
+        run.col(name)
             .map(|c| c.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
-            .unwrap_or_default();
-        let unit = if matches!(ch.kind, Kind::Temp(_)) {
-            "°C"
-        } else {
-            "µm"
-        };
-        if let Some(why) = super::stats::unusable_channel(&raw, unit) {
+            .unwrap_or_default()
+    };
+    let moving = channels
+        .iter()
+        .filter(|c| matches!(c.kind, Kind::Temp(_)) && super::stats::moves(&raw_of(&c.name)))
+        .count();
+    for ch in channels.iter_mut() {
+        let raw = raw_of(&ch.name);
+        let temp = matches!(ch.kind, Kind::Temp(_));
+        let unit = if temp { "°C" } else { "µm" };
+        // a still channel is stuck only if some other temperature moves
+        let others_move = moving > usize::from(temp && super::stats::moves(&raw));
+        if let Some(why) = super::stats::unusable_channel(&raw, unit, others_move) {
             missing.push(format!(
                 "{} {why} of run {name}: left out of that run",
                 ch.name

@@ -281,12 +281,19 @@ pub fn load(runs: &[(String, Run)], max_rows: usize) -> Result<Dataset> {
     // said so, rather than failing the fit or fitting a frozen value
     let mut sparse: Vec<(String, String, String)> = Vec::new();
     for r in &out {
-        let temps = r.sensors.iter().map(|s| (s, "°C"));
-        for (sig, unit) in temps.chain(r.disps.iter().map(|s| (s, "µm"))) {
+        let moving = r
+            .sensors
+            .iter()
+            .filter(|s| super::stats::moves(&s.values))
+            .count();
+        let temps = r.sensors.iter().map(|s| (s, "°C", true));
+        for (sig, unit, temp) in temps.chain(r.disps.iter().map(|s| (s, "µm", false))) {
             if sparse.iter().any(|x| x.0 == sig.name) {
                 continue;
             }
-            if let Some(why) = super::stats::unusable_channel(&sig.values, unit) {
+            // a still channel is stuck only if some other temperature moves
+            let others_move = moving > usize::from(temp && super::stats::moves(&sig.values));
+            if let Some(why) = super::stats::unusable_channel(&sig.values, unit, others_move) {
                 sparse.push((sig.name.clone(), r.name.clone(), why));
             }
         }

@@ -329,9 +329,11 @@ fn erfc(x: f64) -> f64 {
 /// Why a channel cannot be used in a run, if it cannot: it reads in fewer
 /// than half the rows (a dead or unplugged sensor), or it reads the same
 /// value in every row (stuck: a DS18B20 that answers its power-on 85 °C, a
-/// frozen logger); a real sensor over a run that long moves by at least
-/// one count. `values` NaN where missing; `unit` for the message.
-pub fn unusable_channel(values: &[f64], unit: &str) -> Option<String> {
+/// frozen logger) while `others_move` (another temperature of the run
+/// changes: in a run where every sensor stands still, as on an idle
+/// machine in a steady room, a still sensor is not a fault). `values` NaN
+/// where missing; `unit` for the message.
+pub fn unusable_channel(values: &[f64], unit: &str, others_move: bool) -> Option<String> {
     let valid: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
     if valid.len() * 2 < values.len() {
         return Some(format!(
@@ -341,8 +343,14 @@ pub fn unusable_channel(values: &[f64], unit: &str) -> Option<String> {
         ));
     }
     let first = *valid.first()?;
-    (valid.len() >= STUCK_MIN_ROWS && valid.iter().all(|&v| v == first))
+    (others_move && valid.len() >= STUCK_MIN_ROWS && !moves(values))
         .then(|| format!("reads {first} {unit} in all {} rows (stuck)", valid.len()))
+}
+
+/// Whether a channel's readings (NaN where missing) take more than one value.
+pub fn moves(values: &[f64]) -> bool {
+    let mut valid = values.iter().filter(|v| v.is_finite());
+    valid.next().is_some_and(|first| valid.any(|v| v != first))
 }
 
 /// Rows of one value that make a channel stuck (fewer: a short run that may
@@ -354,16 +362,21 @@ mod tests {
     #[test]
     fn dead_and_stuck_channels_are_told_apart_from_steady_ones() {
         let stuck = vec![85.0; STUCK_MIN_ROWS];
-        assert!(unusable_channel(&stuck, "°C").unwrap().contains("(stuck)"));
-        // a short steady stretch is not stuck
-        assert!(unusable_channel(&stuck[1..], "°C").is_none());
+        assert!(unusable_channel(&stuck, "°C", true)
+            .unwrap()
+            .contains("(stuck)"));
+        // a short steady stretch is not stuck, nor a still sensor in a run
+        // where no other sensor moves either
+        assert!(unusable_channel(&stuck[1..], "°C", true).is_none());
+        assert!(unusable_channel(&stuck, "°C", false).is_none());
         let mut moving = stuck.clone();
         moving[7] = 85.0625;
-        assert!(unusable_channel(&moving, "°C").is_none());
+        assert!(moves(&moving) && !moves(&stuck));
+        assert!(unusable_channel(&moving, "°C", true).is_none());
         let mut dead = vec![f64::NAN; 10];
         dead[0] = 20.0;
         assert_eq!(
-            unusable_channel(&dead, "°C").as_deref(),
+            unusable_channel(&dead, "°C", false).as_deref(),
             Some("reads in 1 of the 10 rows")
         );
     }
