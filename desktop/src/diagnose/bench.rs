@@ -274,14 +274,11 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         threads: cfg.threads,
         ..Options::default()
     };
-    let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
-    let (mut ok, mut n_eff, mut false_alarms) = (0usize, 0usize, 0usize);
-    let (mut shrink_c, mut shrink_um, mut times) = (Vec::new(), Vec::new(), Vec::new());
+    let mut tally = FitTally::default();
+    let (mut shrink_c, mut shrink_um) = (Vec::new(), Vec::new());
     let mut misses = Vec::new();
     let mut visibility: std::collections::BTreeMap<String, Vec<(f64, f64, bool)>> =
         Default::default();
-    let mut redraws = 0usize;
-    let mut lag_reach = LagReachTally::default();
     let n_cases = cases.len();
     for (ci, case) in cases.into_iter().enumerate() {
         let OpenCase {
@@ -291,10 +288,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             visibility: vis,
             redrawn,
         } = case;
-        redraws += redrawn;
-        let t = std::time::Instant::now();
-        let d = super::fitmode::diagnose_fit(&runs, &opt)?;
-        times.push(t.elapsed().as_secs_f64());
+        let d = tally.diagnose(&runs, &opt, redrawn)?;
         let got = d.findings.first().map(|f| f.name.clone());
         // sensor effects must also name the right sensor
         let sensor_ok = match effects.first() {
@@ -312,36 +306,31 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
             None => got.is_none(),
         };
         if let Some(TruthEffect::SensorLag { sensor, tau_s }) = effects.first() {
-            lag_reach.add(&d, &format!("T_T{sensor}"), *tau_s, correct);
+            tally
+                .lag_reach
+                .add(&d, &format!("T_T{sensor}"), *tau_s, correct);
         }
-        match kind {
-            Some(k) => {
-                n_eff += 1;
-                ok += correct as usize;
-                visibility
-                    .entry(k.to_string())
-                    .or_default()
-                    .push((vis.max_c, vis.max_um, correct));
-                let e = per.entry(k.to_string()).or_default();
-                e.0 += 1;
-                e.1 += correct as usize;
-                if let Some(f) = d.findings.first() {
-                    if let Some(((b, _), (a, _))) = f.gap_c {
-                        if b > 0.0 {
-                            shrink_c.push(1.0 - a / b);
-                        }
+        tally.score(kind, correct, &d);
+        if let Some(k) = kind {
+            visibility
+                .entry(k.to_string())
+                .or_default()
+                .push((vis.max_c, vis.max_um, correct));
+            if let Some(f) = d.findings.first() {
+                if let Some(((b, _), (a, _))) = f.gap_c {
+                    if b > 0.0 {
+                        shrink_c.push(1.0 - a / b);
                     }
-                    if let Some(((b, _), (a, _))) = f.gap_um {
-                        if b > 0.0 {
-                            shrink_um.push(1.0 - a / b);
-                        }
-                    }
-                } else {
-                    shrink_c.push(0.0);
-                    shrink_um.push(0.0);
                 }
+                if let Some(((b, _), (a, _))) = f.gap_um {
+                    if b > 0.0 {
+                        shrink_um.push(1.0 - a / b);
+                    }
+                }
+            } else {
+                shrink_c.push(0.0);
+                shrink_um.push(0.0);
             }
-            None => false_alarms += (!d.findings.is_empty()) as usize,
         }
         if !correct {
             misses.push(json!({
@@ -362,7 +351,7 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
                 &d,
                 correct,
                 kind.is_some(),
-                times.last().copied().unwrap_or(0.0),
+                tally.times.last().copied().unwrap_or(0.0),
             );
         }
     }
@@ -375,30 +364,97 @@ pub fn run_open_bench(cfg: &BenchConfig) -> Result<Value> {
         "bearing_nonlinear",
     ]
     .iter()
-    .filter_map(|k| per.get(*k))
+    .filter_map(|k| tally.per.get(*k))
     .fold((0usize, 0usize), |a, (n, k)| (a.0 + n, a.1 + k));
     let testable = ok_t as f64 / n_t.max(1) as f64;
-    Ok(json!({
+    Ok(tally.with_figures(json!({
         "mode": "diagnose fit (no machine file), truth model diagnose/truth.rs, two runs per case (light and heavy duty)",
         "cases": n_cases,
-        "effect_cases": n_eff,
         "clean_cases": n_clean,
-        "top1_rate": ok as f64 / n_eff.max(1) as f64,
         "top1_rate_fit_testable": testable,
-        "per_effect": per.iter().map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok}))).collect::<serde_json::Map<_, _>>(),
         "mean_heldout_gap_shrink_c": mean(&shrink_c),
         "mean_heldout_gap_shrink_um": mean(&shrink_um),
-        "false_alarms": false_alarms,
-        "mean_diagnosis_seconds": mean(&times),
-        "max_diagnosis_seconds": times.iter().copied().fold(0.0, f64::max),
         "hours_per_case": cfg.hours,
         "sample_period_s": cfg.sample_period_s,
         "misses": misses,
         "effect_visibility": visibility_json(&visibility),
         "visibility_rule": format!("an effect case is drawn again (at most 20 times) until its data differ from the same runs without it by ≥ {VISIBLE_C} °C RMS on a sensor or ≥ {VISIBLE_UM} µm RMS on a probe"),
-        "redrawn_effects": redraws,
-        "lag_by_reach": lag_reach.json(),
-    }))
+    })))
+}
+
+/// Tallies the two `diagnose fit` benches (open world, cross model) share:
+/// top-1 per effect kind, false alarms on clean cases, time per case,
+/// redraws, lag cases by reach.
+#[derive(Default)]
+struct FitTally {
+    /// kind → (cases, top-1 correct)
+    per: std::collections::BTreeMap<String, (usize, usize)>,
+    false_alarms: usize,
+    times: Vec<f64>,
+    redraws: usize,
+    lag_reach: LagReachTally,
+}
+
+impl FitTally {
+    /// `diagnose fit` on one case's runs, timed.
+    fn diagnose(
+        &mut self,
+        runs: &[(String, crate::runcsv::Run)],
+        opt: &Options,
+        redrawn: usize,
+    ) -> Result<super::Diagnosis> {
+        self.redraws += redrawn;
+        let t = std::time::Instant::now();
+        let d = super::fitmode::diagnose_fit(runs, opt)?;
+        self.times.push(t.elapsed().as_secs_f64());
+        Ok(d)
+    }
+
+    /// Count one case: an effect case of `kind` (named right or not), or a
+    /// clean case (a false alarm when anything is named).
+    fn score(&mut self, kind: Option<&str>, correct: bool, d: &super::Diagnosis) {
+        match kind {
+            Some(k) => {
+                let e = self.per.entry(k.to_string()).or_default();
+                e.0 += 1;
+                e.1 += correct as usize;
+            }
+            None => self.false_alarms += (!d.findings.is_empty()) as usize,
+        }
+    }
+
+    /// `fields` with the tallied figures added.
+    fn with_figures(&self, mut fields: Value) -> Value {
+        let (n_eff, ok) = self
+            .per
+            .values()
+            .fold((0usize, 0usize), |a, (n, k)| (a.0 + n, a.1 + k));
+        if let Some(o) = fields.as_object_mut() {
+            for (k, v) in [
+                ("effect_cases", json!(n_eff)),
+                ("top1_rate", json!(ok as f64 / n_eff.max(1) as f64)),
+                (
+                    "per_effect",
+                    json!(self
+                        .per
+                        .iter()
+                        .map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok})))
+                        .collect::<serde_json::Map<_, _>>()),
+                ),
+                ("false_alarms", json!(self.false_alarms)),
+                ("mean_diagnosis_seconds", json!(mean(&self.times))),
+                (
+                    "max_diagnosis_seconds",
+                    json!(self.times.iter().copied().fold(0.0, f64::max)),
+                ),
+                ("redrawn_effects", json!(self.redraws)),
+                ("lag_by_reach", self.lag_reach.json()),
+            ] {
+                o.insert(k.into(), v);
+            }
+        }
+        fields
+    }
 }
 
 /// Lag cases by outcome: named; missed but listed under `untestable` (the
@@ -892,10 +948,8 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
         threads: cfg.threads,
         ..Options::default()
     };
-    let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
-    let (mut false_alarms, mut times, mut misses) = (0usize, Vec::new(), Vec::new());
-    let mut redraws = 0usize;
-    let mut lag_reach = LagReachTally::default();
+    let mut tally = FitTally::default();
+    let mut misses = Vec::new();
     let n_cases = cases.len();
     for (ci, case) in cases.into_iter().enumerate() {
         let CrossCase {
@@ -907,10 +961,7 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
             redrawn,
         } = case;
         let m = &machines[machine];
-        redraws += redrawn;
-        let t = std::time::Instant::now();
-        let d = super::fitmode::diagnose_fit(&runs, &opt)?;
-        times.push(t.elapsed().as_secs_f64());
+        let d = tally.diagnose(&runs, &opt, redrawn)?;
         let top = d.findings.first();
         let correct = match (kind, effects.first()) {
             (None, _) => top.is_none(),
@@ -931,16 +982,9 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
             tau_s,
         }) = effects.first()
         {
-            lag_reach.add(&d, sensor, *tau_s, correct);
+            tally.lag_reach.add(&d, sensor, *tau_s, correct);
         }
-        match kind {
-            Some(k) => {
-                let e = per.entry(k.to_string()).or_default();
-                e.0 += 1;
-                e.1 += correct as usize;
-            }
-            None => false_alarms += top.is_some() as usize,
-        }
+        tally.score(kind, correct, &d);
         let got: Vec<Value> = d
             .findings
             .iter()
@@ -982,27 +1026,16 @@ pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value>
                 } else {
                     "FALSE ALARM"
                 },
-                times.last().copied().unwrap_or(0.0)
+                tally.times.last().copied().unwrap_or(0.0)
             );
         }
     }
-    let (n_eff, ok) = per
-        .values()
-        .fold((0usize, 0usize), |a, (n, k)| (a.0 + n, a.1 + k));
-    Ok(json!({
+    Ok(tally.with_figures(json!({
         "mode": "diagnose fit (no machine file) on cases of the first simulator (crate::sim: turning-center-16, five-axis-20), two runs per case (light and heavy duty), no coolant_on column",
         "cases": n_cases,
-        "effect_cases": n_eff,
         "clean_cases": n_clean,
-        "top1_rate": ok as f64 / n_eff.max(1) as f64,
-        "per_effect": per.iter().map(|(k, (n, ok))| (k.clone(), json!({"cases": n, "top1": ok}))).collect::<serde_json::Map<_, _>>(),
-        "false_alarms": false_alarms,
-        "mean_diagnosis_seconds": mean(&times),
-        "max_diagnosis_seconds": times.iter().copied().fold(0.0, f64::max),
         "hours_per_case": cfg.hours,
         "sample_period_s": cfg.sample_period_s,
-        "redrawn_effects": redraws,
-        "lag_by_reach": lag_reach.json(),
         "misses": misses,
-    }))
+    })))
 }
