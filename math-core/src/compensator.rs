@@ -36,8 +36,8 @@ use crate::features::FeatureState;
 use crate::image::Model;
 use crate::limits::*;
 
-/// Largest rate limit, 0.1 µm/s (100 mm/s: no thermal drift comes near it).
-pub const MAX_RATE: i32 = 1_000_000;
+/// Kept here for its old path; defined with the other limits.
+pub use crate::limits::MAX_RATE;
 
 /// Status bits (one Modbus register).
 pub mod status {

@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub mod compensator;
+pub mod crc;
 pub mod eval;
 pub mod features;
 pub mod fixed;

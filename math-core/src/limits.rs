@@ -39,3 +39,16 @@ pub const MAX_FALLBACKS: usize = 32;
 pub const MAX_FALLBACK_TERMS: usize = 256;
 /// Typed sections after the tables (format v2).
 pub const MAX_SECTIONS: usize = 8;
+/// Largest rate limit a direction may set, 0.1 µm/s (100 mm/s: no thermal
+/// drift comes near it; keeps the compensator's rate · ms below 2^32).
+pub const MAX_RATE: i32 = 1_000_000;
+/// Sensors one volumetric section (image section kind 3) may read.
+pub const MAX_VOL_SENSORS: usize = 4;
+/// Terms of one volumetric section (each carries x, y and z coefficients).
+pub const MAX_VOL_TERMS: usize = 256;
+/// Highest exponent of a volumetric variable (2 bits in the image).
+pub const MAX_VOL_POWER: u8 = 3;
+/// Longest volumetric stroke, µm (100 m).
+pub const MAX_VOL_STROKE_UM: i32 = 100_000_000;
+/// Longest volumetric tool-length scale, µm (10 m).
+pub const MAX_VOL_TOOL_UM: i32 = 10_000_000;

@@ -58,19 +58,17 @@
 //! quantisation of the coefficients themselves).
 
 use crate::fixed::{mul_q24, Span, ONE_Q24};
-use crate::image::{ImageError, SensorRef, NONE};
+use crate::image::error::ImageError;
+use crate::image::format::NONE;
+use crate::image::types::SensorRef;
+use crate::limits::{MAX_AXES, MAX_CORRECTION, MAX_SENSORS};
 use heapless::Vec;
 
-/// Sensors one volumetric section may read.
-pub const MAX_VOL_SENSORS: usize = 4;
-/// Terms of one volumetric section (each carries x, y and z coefficients).
-pub const MAX_VOL_TERMS: usize = 256;
-/// Highest exponent of a variable (2 bits in the image).
-pub const MAX_VOL_POWER: u8 = 3;
-/// Longest stroke, µm (100 m).
-pub const MAX_VOL_STROKE_UM: i32 = 100_000_000;
-/// Longest tool-length scale, µm (10 m).
-pub const MAX_VOL_TOOL_UM: i32 = 10_000_000;
+/// Kept here for their old paths; defined with the other limits.
+pub use crate::limits::{
+    MAX_VOL_POWER, MAX_VOL_SENSORS, MAX_VOL_STROKE_UM, MAX_VOL_TERMS, MAX_VOL_TOOL_UM,
+};
+
 /// The DS18B20's range in 1/16 °C (−55 … 125 °C): envelopes and references stay inside.
 pub const TEMP_MIN_16: i32 = -55 * 16;
 pub const TEMP_MAX_16: i32 = 125 * 16;
@@ -169,7 +167,7 @@ impl Volumetric {
     pub fn new(s: &VolumetricSpec<'_>) -> Result<Volumetric, ImageError> {
         let mut spans = [Span::default(); 4];
         for k in 0..3 {
-            if usize::from(s.slots[k]) >= crate::limits::MAX_AXES {
+            if usize::from(s.slots[k]) >= MAX_AXES {
                 return Err(ImageError::VolumetricAxisSlot {
                     axis: k as u8,
                     slot: s.slots[k],
@@ -188,7 +186,7 @@ impl Volumetric {
                     axis: k as u8,
                     value: stroke,
                 })?;
-            if !(1..=crate::limits::MAX_CORRECTION).contains(&s.max_correction[k]) {
+            if !(1..=MAX_CORRECTION).contains(&s.max_correction[k]) {
                 return Err(ImageError::VolumetricMaxCorrection {
                     direction: k as u8,
                     value: s.max_correction[k],
@@ -205,7 +203,7 @@ impl Volumetric {
         })?;
         let mut sensors = Vec::new();
         for (i, vs) in s.sensors.iter().enumerate() {
-            if usize::from(vs.sensor.channel) >= crate::limits::MAX_SENSORS {
+            if usize::from(vs.sensor.channel) >= MAX_SENSORS {
                 return Err(ImageError::SensorChannelOutOfRange {
                     sensor: i as u8,
                     channel: vs.sensor.channel,

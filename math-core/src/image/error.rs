@@ -1,0 +1,273 @@
+//! Why an image is refused ([`ImageError`], one line each for users) or
+//! cannot be written ([`EncodeError`]).
+
+use super::format::{FORMAT_VERSION, SECTION_FALLBACKS, SECTION_VOLUMETRIC, UNITS_V1};
+use crate::limits::{
+    MAX_AXES, MAX_CORRECTION, MAX_IMAGE_BYTES, MAX_RATE, MAX_SENSORS, MAX_VOL_STROKE_UM,
+    MAX_VOL_TOOL_UM,
+};
+use heapless::Vec;
+
+/// Why an image was refused. Every variant is a clean refusal; the board then
+/// keeps (or serves "no model" instead of) the refused image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageError {
+    /// Fewer bytes than the header or than `total_len` says.
+    TooShort {
+        needed: usize,
+        got: usize,
+    },
+    /// Larger than [`MAX_IMAGE_BYTES`].
+    TooLong {
+        len: usize,
+    },
+    BadMagic,
+    UnsupportedVersion(u16),
+    UnsupportedUnits(u8),
+    BadCrc {
+        stored: u32,
+        computed: u32,
+    },
+    /// A count above its fixed maximum (`what` names it).
+    TooMany {
+        what: &'static str,
+        count: usize,
+        max: usize,
+    },
+    /// A reference to a sensor, input, direction or axis that does not exist.
+    BadIndex {
+        what: &'static str,
+        index: u8,
+    },
+    /// A range whose minimum is not below its maximum (or narrower than 2 LSB).
+    NonMonotoneRange {
+        what: &'static str,
+        index: u8,
+    },
+    /// A field outside its documented domain.
+    BadValue {
+        what: &'static str,
+    },
+    /// The sections end before or after `total_len − 4`.
+    LengthMismatch,
+    /// Bytes after the sealed image (`total_len` and its CRC): a staged
+    /// length that does not match the image, or garbage appended to it.
+    TrailingBytes {
+        image_len: usize,
+        got: usize,
+    },
+    /// A sensor names a bus channel the board does not have (≥ [`MAX_SENSORS`]).
+    SensorChannelOutOfRange {
+        sensor: u8,
+        channel: u8,
+    },
+    /// Model version 0 is what the register map shows for "no model".
+    ZeroModelVersion,
+    /// `max_rate` outside 1..=[`MAX_RATE`] (0 would freeze the correction).
+    MaxRateOutOfRange {
+        direction: u8,
+        value: i32,
+    },
+    /// `max_correction` outside 1..=[`MAX_CORRECTION`].
+    MaxCorrectionOutOfRange {
+        direction: u8,
+        value: i32,
+    },
+    /// The tables of one axis have coefficients so large that the evaluation's
+    /// i64 sums could overflow (above [`MAX_AXIS_TABLE_WEIGHT`]).
+    TableSumTooLarge {
+        axis: u8,
+    },
+    /// A v2 section of a kind this build does not know.
+    UnknownSection {
+        kind: u8,
+    },
+    /// A v2 section's payload does not match its declared length (or its
+    /// header is malformed).
+    SectionLength {
+        kind: u8,
+    },
+    /// The same section kind twice.
+    DuplicateSection {
+        kind: u8,
+    },
+    /// A fallback model uses an input that reads a sensor it is meant to do without.
+    FallbackUsesExcluded {
+        fallback: u8,
+        sensor: u8,
+    },
+    /// A sensor named by a ROM code whose CRC-8 byte does not match (a
+    /// mistyped or corrupted code would name no sensor on any bus).
+    BadSensorRom {
+        sensor: u8,
+    },
+    /// Two sensors named by the same ROM code (one physical sensor cannot
+    /// be two model sensors).
+    DuplicateSensorRom {
+        sensor: u8,
+        first: u8,
+    },
+    /// Volumetric section: a direction's position slot is not a PLC axis (≥ `MAX_AXES`).
+    VolumetricAxisSlot {
+        axis: u8,
+        slot: u8,
+    },
+    /// Volumetric section: a stroke outside 2 µm … 100 m, or origin + stroke beyond i32.
+    VolumetricStroke {
+        axis: u8,
+        value: i32,
+    },
+    /// Volumetric section: the tool-length scale outside 2 µm … 10 m.
+    VolumetricTool {
+        value: i32,
+    },
+    /// Volumetric section: a sensor's reference or envelope outside −55 … 125 °C,
+    /// or its envelope's minimum not below its maximum.
+    VolumetricTemperature {
+        sensor: u8,
+    },
+    /// Volumetric section: a max correction outside 1..=[`MAX_CORRECTION`].
+    VolumetricMaxCorrection {
+        direction: u8,
+        value: i32,
+    },
+}
+
+impl core::fmt::Display for ImageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            ImageError::TooShort { needed, got } => {
+                write!(f, "image too short: {got} bytes, needs {needed}")
+            }
+            ImageError::TooLong { len } => write!(
+                f,
+                "image too long: {len} bytes, the board takes at most {MAX_IMAGE_BYTES}"
+            ),
+            ImageError::BadMagic => write!(f, "not a model image (it does not start with TCMI)"),
+            ImageError::UnsupportedVersion(v) => write!(
+                f,
+                "image format version {v} not supported (this build reads 1 and {FORMAT_VERSION})"
+            ),
+            ImageError::UnsupportedUnits(u) => write!(
+                f,
+                "units code {u} not supported (this build reads {UNITS_V1})"
+            ),
+            ImageError::BadCrc { stored, computed } => write!(
+                f,
+                "CRC-32 mismatch: stored {stored:#010x}, computed {computed:#010x} (image corrupted)"
+            ),
+            ImageError::TooMany { what, count, max } => {
+                write!(f, "{count} {what}, at most {max} allowed")
+            }
+            ImageError::BadIndex { what, index } => {
+                write!(f, "{what} index {index} refers to nothing in the image")
+            }
+            ImageError::NonMonotoneRange { what, index } => write!(
+                f,
+                "{what} {index}: range minimum is not at least 2 below its maximum"
+            ),
+            ImageError::BadValue { what } => write!(f, "invalid {what}"),
+            ImageError::LengthMismatch => {
+                write!(f, "the image's sections do not fill its length exactly")
+            }
+            ImageError::TrailingBytes { image_len, got } => write!(
+                f,
+                "{} bytes after the end of the {image_len}-byte image",
+                got.saturating_sub(image_len)
+            ),
+            ImageError::SensorChannelOutOfRange { sensor, channel } => write!(
+                f,
+                "sensor {sensor} names bus channel {channel}; the board has channels 0-{}",
+                MAX_SENSORS - 1
+            ),
+            ImageError::ZeroModelVersion => write!(
+                f,
+                "model version 0 is reserved for \"no model\"; versions start at 1"
+            ),
+            ImageError::MaxRateOutOfRange { direction, value } => write!(
+                f,
+                "direction {direction}: max rate {value} (0.1 um/s) outside 1..={}",
+                MAX_RATE
+            ),
+            ImageError::MaxCorrectionOutOfRange { direction, value } => write!(
+                f,
+                "direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
+            ),
+            ImageError::TableSumTooLarge { axis } => write!(
+                f,
+                "tables of axis {axis}: coefficients too large (sum of |coef| x max(1, position power) above 2^37); the evaluation could overflow"
+            ),
+            ImageError::UnknownSection { kind } => write!(
+                f,
+                "image section kind {kind} not known to this build (it reads kinds {SECTION_FALLBACKS} and {SECTION_VOLUMETRIC})"
+            ),
+            ImageError::SectionLength { kind } => write!(
+                f,
+                "image section kind {kind}: contents do not match its declared length"
+            ),
+            ImageError::DuplicateSection { kind } => {
+                write!(f, "image section kind {kind} appears more than once")
+            }
+            ImageError::FallbackUsesExcluded { fallback, sensor } => write!(
+                f,
+                "fallback model {fallback} uses sensor {sensor}, which it is meant to do without"
+            ),
+            ImageError::BadSensorRom { sensor } => write!(
+                f,
+                "sensor {sensor}: ROM code fails its CRC-8 (not a 1-Wire ROM code)"
+            ),
+            ImageError::DuplicateSensorRom { sensor, first } => write!(
+                f,
+                "sensor {sensor} has the same ROM code as sensor {first}"
+            ),
+            ImageError::VolumetricAxisSlot { axis, slot } => write!(
+                f,
+                "volumetric direction {axis} reads position slot {slot}; the PLC writes slots 0-{}",
+                MAX_AXES - 1
+            ),
+            ImageError::VolumetricStroke { axis, value } => write!(
+                f,
+                "volumetric direction {axis}: stroke {value} um outside 2..={} (or its end beyond the i32 range)",
+                MAX_VOL_STROKE_UM
+            ),
+            ImageError::VolumetricTool { value } => write!(
+                f,
+                "volumetric tool-length scale {value} um outside 2..={}",
+                MAX_VOL_TOOL_UM
+            ),
+            ImageError::VolumetricTemperature { sensor } => write!(
+                f,
+                "volumetric sensor {sensor}: reference or envelope outside -55..125 C, or minimum not below maximum"
+            ),
+            ImageError::VolumetricMaxCorrection { direction, value } => write!(
+                f,
+                "volumetric direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
+            ),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EncodeError {
+    BufferTooSmall { needed: usize },
+}
+
+impl core::fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            EncodeError::BufferTooSmall { needed } => {
+                write!(f, "image buffer too small: the image needs {needed} bytes")
+            }
+        }
+    }
+}
+
+/// Push onto a fixed-capacity vector; a full one is a [`ImageError::TooMany`].
+pub(crate) fn push<T, const N: usize>(v: &mut Vec<T, N>, x: T) -> Result<(), ImageError> {
+    v.push(x).map_err(|_| ImageError::TooMany {
+        what: "entries",
+        count: N + 1,
+        max: N,
+    })
+}

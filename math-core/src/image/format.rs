@@ -1,0 +1,23 @@
+//! The format's constants and checksums (the layout is in the module docs
+//! of [`crate::image`]).
+
+/// Kept under their old names here: the image's CRC-32, and the ROM code's
+/// CRC-8 that sensor records are checked with.
+pub use crate::crc::{crc32, crc8_maxim as rom_crc8};
+
+pub const MAGIC: [u8; 4] = *b"TCMI";
+/// The newest format this build reads and writes (it also reads version 1).
+pub const FORMAT_VERSION: u16 = 2;
+/// Section kind: fallback models (degraded-mode compensation).
+pub const SECTION_FALLBACKS: u8 = 1;
+/// Section kind: volumetric correction (issue 14, [`crate::volumetric`]).
+pub const SECTION_VOLUMETRIC: u8 = 3;
+/// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
+pub const UNITS_V1: u8 = 1;
+/// Flag: use the stored reference temperatures instead of the first valid sample.
+pub const FLAG_FIXED_REFERENCE: u16 = 1 << 0;
+pub const HEADER_LEN: usize = 32;
+/// "No input" / "no axis" marker in tables.
+pub const NONE: u8 = 0xFF;
+/// Bytes of the CRC-32 that ends an image.
+pub(crate) const CRC_LEN: usize = 4;

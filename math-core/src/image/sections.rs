@@ -1,0 +1,190 @@
+//! The typed sections after the tables (format v2): the section list, and
+//! one reader per kind (1: fallback models, 3: volumetric correction).
+
+use super::error::{push, ImageError};
+use super::format::{NONE, SECTION_FALLBACKS, SECTION_VOLUMETRIC};
+use super::model::Model;
+use super::reader::Reader;
+use super::terms::{read_terms, TermRule};
+use super::types::{InputKind, SensorRef};
+use crate::limits::{MAX_FALLBACKS, MAX_SECTIONS, MAX_TERMS, MAX_VOL_SENSORS, MAX_VOL_TERMS};
+use crate::volumetric::{VolSensor, VolTerm, Volumetric, VolumetricSpec};
+use heapless::Vec;
+
+/// The v2 sections after the tables (see the module docs): each kind at
+/// most once, each payload read exactly to its declared length.
+pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n = r.count("sections", MAX_SECTIONS)?;
+    let _pad = r.array::<3>()?;
+    let mut seen = 0u32;
+    for _ in 0..n {
+        let [kind, _pad] = r.array()?;
+        let len = usize::from(r.u16()?);
+        let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
+        let bit = 1u32 << (kind % 32);
+        if kind != SECTION_FALLBACKS && kind != SECTION_VOLUMETRIC {
+            return Err(ImageError::UnknownSection { kind });
+        }
+        if seen & bit != 0 {
+            return Err(ImageError::DuplicateSection { kind });
+        }
+        seen |= bit;
+        let parsed = match kind {
+            SECTION_VOLUMETRIC => parse_volumetric(&mut payload, m),
+            _ => parse_fallbacks(&mut payload, m),
+        };
+        parsed.map_err(|e| match e {
+            ImageError::LengthMismatch => ImageError::SectionLength { kind },
+            e => e,
+        })?;
+        if !payload.is_at_end() {
+            return Err(ImageError::SectionLength { kind });
+        }
+    }
+    Ok(())
+}
+
+const VOL_PADDING: ImageError = ImageError::BadValue {
+    what: "volumetric section padding",
+};
+
+/// Section kind 3: the volumetric correction (validated by [`Volumetric::new`]).
+fn parse_volumetric(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n_sensors = r.count("volumetric sensors", MAX_VOL_SENSORS)?;
+    let pad = r.u8()?;
+    let n_terms = usize::from(r.u16()?);
+    let slots = r.array::<3>()?;
+    let pad2 = r.u8()?;
+    if pad != 0 || pad2 != 0 {
+        return Err(VOL_PADDING);
+    }
+    if n_terms == 0 || n_terms > MAX_VOL_TERMS {
+        return Err(ImageError::TooMany {
+            what: "volumetric terms",
+            count: n_terms,
+            max: MAX_VOL_TERMS,
+        });
+    }
+    let tool_max_um = r.i32()?;
+    let (mut origin_um, mut stroke_um, mut max_correction) = ([0i32; 3], [0i32; 3], [0i32; 3]);
+    for ((origin, stroke), max) in origin_um
+        .iter_mut()
+        .zip(stroke_um.iter_mut())
+        .zip(max_correction.iter_mut())
+    {
+        *origin = r.i32()?;
+        *stroke = r.i32()?;
+        *max = r.i32()?;
+    }
+    let sensors = read_vol_sensors(r, n_sensors)?;
+    let terms = read_vol_terms(r, n_terms)?;
+    m.volumetric = Some(Volumetric::new(&VolumetricSpec {
+        slots,
+        origin_um,
+        stroke_um,
+        tool_max_um,
+        max_correction,
+        sensors: &sensors,
+        terms: &terms,
+    })?);
+    Ok(())
+}
+
+/// Volumetric sensor records (16 B): identity as the image's sensors, then
+/// reference and envelope as i16.
+fn read_vol_sensors(
+    r: &mut Reader<'_>,
+    n: u8,
+) -> Result<Vec<VolSensor, MAX_VOL_SENSORS>, ImageError> {
+    let mut sensors = Vec::new();
+    for _ in 0..n {
+        let rom = r.array::<8>()?;
+        let [channel, pad] = r.array()?;
+        let ref_temp = r.i16()?;
+        let min = r.i16()?;
+        let max = r.i16()?;
+        if pad != 0 {
+            return Err(VOL_PADDING);
+        }
+        let sensor = SensorRef {
+            rom,
+            channel,
+            ref_temp: i32::from(ref_temp),
+        };
+        push(&mut sensors, VolSensor { sensor, min, max })?;
+    }
+    Ok(sensors)
+}
+
+/// Volumetric terms (16 B): packed exponents, sensor, padding, x, y, z.
+fn read_vol_terms(r: &mut Reader<'_>, n: usize) -> Result<Vec<VolTerm, MAX_VOL_TERMS>, ImageError> {
+    let mut terms = Vec::new();
+    for _ in 0..n {
+        let [x, sensor, p1, p2] = r.array()?;
+        if p1 != 0 || p2 != 0 {
+            return Err(VOL_PADDING);
+        }
+        let coef = [r.i32()?, r.i32()?, r.i32()?];
+        let exps = [x & 3, (x >> 2) & 3, (x >> 4) & 3, x >> 6];
+        push(&mut terms, VolTerm { exps, sensor, coef })?;
+    }
+    Ok(terms)
+}
+
+/// Section kind 1: fallback models, in priority order.
+fn parse_fallbacks(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let n = r.count("fallbacks", MAX_FALLBACKS)?;
+    let _pad = r.array::<3>()?;
+    for fallback in 0..n {
+        let [direction, a, b, n_terms] = r.array()?;
+        let excluded = [a, b];
+        if usize::from(direction) >= m.directions.len() {
+            return Err(ImageError::BadIndex {
+                what: "fallback direction",
+                index: direction,
+            });
+        }
+        // The first slot names a sensor; the second may be NONE.
+        for s in core::iter::once(a).chain((b != NONE).then_some(b)) {
+            if usize::from(s) >= m.sensors.len() {
+                return Err(ImageError::BadIndex {
+                    what: "fallback excluded sensor",
+                    index: s,
+                });
+            }
+        }
+        if n_terms == 0 || usize::from(n_terms) > MAX_TERMS {
+            return Err(ImageError::TooMany {
+                what: "fallback terms",
+                count: usize::from(n_terms),
+                max: MAX_TERMS,
+            });
+        }
+        let rule = TermRule {
+            n_inputs: m.inputs.len(),
+            has_axis: false,
+            input_what: "fallback term input",
+            power_what: "fallback term power",
+            no_variable_what: "fallback term power",
+        };
+        let terms = read_terms(r, n_terms, &rule, |t| {
+            match reads_excluded(m, t.input, excluded) {
+                Some(sensor) => Err(ImageError::FallbackUsesExcluded { fallback, sensor }),
+                None => Ok(()),
+            }
+        })?;
+        m.push_fallback(direction, excluded, &terms)?;
+    }
+    Ok(())
+}
+
+/// The first of `excluded` that model input `input` reads, if any.
+fn reads_excluded(m: &Model, input: u8, excluded: [u8; 2]) -> Option<u8> {
+    let inp = m.inputs.get(usize::from(input))?;
+    let reads = |s: u8| match inp.kind {
+        InputKind::SensorRise { a } => a == s,
+        InputKind::SensorDiff { a, b } => a == s || b == s,
+        InputKind::Spindle => false,
+    };
+    excluded.into_iter().find(|&s| s != NONE && reads(s))
+}
