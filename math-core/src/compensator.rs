@@ -201,7 +201,8 @@ impl Compensator {
                         .fallbacks
                         .iter()
                         .position(|f| usize::from(f.direction) == d && f.input_mask & !valid == 0)
-                        .map_or(ACTIVE_NONE, |k| (k + 1) as u8)
+                        .and_then(|k| u8::try_from(k + 1).ok())
+                        .unwrap_or(ACTIVE_NONE)
                 };
                 servable |= *act != ACTIVE_NONE;
             }
@@ -218,8 +219,12 @@ impl Compensator {
 
         // Features (reference sample, gaps, lag filters): the shared pipeline.
         let mut features = [0i32; MAX_INPUTS];
-        let n_in = model.inputs.len();
-        features[..n_in].copy_from_slice(self.features.step_masked(
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "inputs.len() <= MAX_INPUTS (checked at parse)"
+        )]
+        let features = &mut features[..model.inputs.len()];
+        features.copy_from_slice(self.features.step_masked(
             model,
             input.now_ms,
             input.temps,
@@ -228,10 +233,14 @@ impl Compensator {
         ));
         let reference_ms = self.features.reference_ms().unwrap_or(input.now_ms);
         let positions = input.positions;
-        let mut eval = model.evaluate(&features[..model.inputs.len()], positions);
-        if out.active[..n_dir].iter().any(|&a| a != 0) {
-            let n = model.normalise(&features[..model.inputs.len()], positions);
-            for (c, &a) in eval.corrections.iter_mut().zip(&out.active[..n_dir]) {
+        let mut eval = model.evaluate(features, positions);
+        if out.active.iter().take(n_dir).any(|&a| a != 0) {
+            let n = model.normalise(features, positions);
+            for (c, &a) in eval
+                .corrections
+                .iter_mut()
+                .zip(out.active.iter().take(n_dir))
+            {
                 match a {
                     0 => {}
                     ACTIVE_NONE => {
@@ -252,10 +261,8 @@ impl Compensator {
         }
         // Elapsed whole seconds and remaining ms in u32 so the rate limit needs
         // no 64-bit division (max_rate ≤ MAX_RATE keeps rate·ms < 2^32).
-        let dt_ms = input
-            .now_ms
-            .saturating_sub(self.last_step_ms)
-            .min(u64::from(u32::MAX)) as u32;
+        let dt_ms =
+            u32::try_from(input.now_ms.saturating_sub(self.last_step_ms)).unwrap_or(u32::MAX);
         let (dt_s, dt_rem) = (dt_ms / 1000, dt_ms % 1000);
         let per_direction = self
             .served
@@ -281,7 +288,13 @@ impl Compensator {
                 target = prev + (target - prev).clamp(-max_step, max_step);
                 out.status |= status::RATE_LIMITED;
             }
-            *served = target as i32;
+            #[allow(
+                clippy::cast_possible_truncation,
+                reason = "|target| <= max(|prev|, max_c): both within i32"
+            )]
+            {
+                *served = target as i32;
+            }
         }
         self.last_step_ms = input.now_ms;
         self.last_eval = eval;
@@ -291,7 +304,7 @@ impl Compensator {
         if out.status & status::SENSOR_FAULT == 0 {
             out.status |= status::VALID;
         }
-        for a in out.active[n_dir..].iter_mut() {
+        for a in out.active.iter_mut().skip(n_dir) {
             *a = ACTIVE_NONE;
         }
         out

@@ -50,6 +50,10 @@ impl Model {
         // leaves its input at the envelope's centre.)
         let k = self.inputs.len().min(MAX_INPUTS).min(features_q8.len());
         let mut outside = false;
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "k <= MAX_INPUTS = x.len() = input_span.len(), k <= features_q8.len()"
+        )]
         for ((x, &v), span) in n.x[..k]
             .iter_mut()
             .zip(&features_q8[..k])
@@ -60,6 +64,10 @@ impl Model {
             outside |= out;
         }
         let a_n = self.axes.len().min(MAX_AXES);
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "a_n <= MAX_AXES = p.len() = axis_span.len()"
+        )]
         for (a, ((p, span), axis)) in n.p[..a_n]
             .iter_mut()
             .zip(&self.axis_span[..a_n])
@@ -116,6 +124,10 @@ impl Model {
             }
         }
         let n_dir = self.directions.len().min(MAX_DIRECTIONS);
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "n_dir <= MAX_DIRECTIONS = corrections.len() = acc.len()"
+        )]
         for (c, &a) in e.corrections[..n_dir].iter_mut().zip(&acc[..n_dir]) {
             *c = sat_i32(round_shift(a, 25));
         }
@@ -171,6 +183,10 @@ impl Model {
 /// One network: Q24 inputs → Q25 accumulator of 0.1 µm. Kept out of line:
 /// its own register allocation keeps the inner loop at load-load-SMLAL.
 #[inline(never)]
+#[allow(
+    clippy::indexing_slicing,
+    reason = "n_in <= MAX_NET_INPUTS = xs.len() = row.len(), h <= MAX_HIDDEN = w1.len() = b1.len() = w2.len()"
+)]
 pub fn eval_net_q25(net: &Net, x: &[i32; MAX_INPUTS]) -> i64 {
     // Gather the network's inputs once so the inner loop is load-load-SMLAL.
     let n_in = net.inputs.len().min(MAX_NET_INPUTS);
@@ -236,12 +252,18 @@ fn eval_table_at(t: &Table, x: &[i32; MAX_INPUTS], p: i32) -> i64 {
     let mut value = 0i64;
     for term in &t.terms {
         let k = usize::from(term.position_power).min(3);
-        value += i64::from(term.coef) * i64::from(mul_q24(input_power(term, x), pp[k]));
+        #[allow(clippy::indexing_slicing, reason = "k <= 3 < pp.len() = 4")]
+        let pk = pp[k];
+        value += i64::from(term.coef) * i64::from(mul_q24(input_power(term, x), pk));
     }
     value
 }
 
 /// A table's value and d/dp at `p_ref` (Q32 accumulators).
+#[allow(
+    clippy::indexing_slicing,
+    reason = "k <= 3 < pr.len() = 4, k - 1 only when k > 0"
+)]
 fn eval_table_pair(t: &Table, x: &[i32; MAX_INPUTS], p_ref: i32) -> (i64, i64) {
     let pr = powers(p_ref);
     let (mut off, mut der) = (0i64, 0i64);
@@ -259,6 +281,10 @@ fn eval_table_pair(t: &Table, x: &[i32; MAX_INPUTS], p_ref: i32) -> (i64, i64) {
 }
 
 #[inline(always)]
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "clamped to the i32 range first"
+)]
 fn sat_i32(v: i64) -> i32 {
     v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }

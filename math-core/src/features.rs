@@ -141,7 +141,12 @@ impl FeatureState {
     /// Mask of every input of `model`.
     #[inline]
     pub fn all_inputs(model: &Model) -> u16 {
-        ((1u32 << model.inputs.len()) as u16).wrapping_sub(1)
+        #[allow(
+            clippy::cast_possible_truncation,
+            reason = "inputs.len() <= MAX_INPUTS = 12 < 16 (checked at parse)"
+        )]
+        let bits = (1u32 << model.inputs.len()) as u16;
+        bits.wrapping_sub(1)
     }
 
     /// When the reference sample was taken (ms), once taken.
@@ -152,7 +157,7 @@ impl FeatureState {
     /// The reference temperatures (1/16 °C) of the first `n` model sensors, once taken.
     pub fn reference(&self, n: usize) -> Option<&[i32]> {
         self.reference_ms
-            .map(|_| &self.reference[..n.min(MAX_SENSORS)])
+            .and(self.reference.get(..n.min(MAX_SENSORS)))
     }
 
     /// One sample: `temps` per model sensor (1/16 °C, `None` = invalid),
@@ -189,33 +194,9 @@ impl FeatureState {
     ) -> &[i32] {
         let temp = |s: u8| temps.get(usize::from(s)).copied().flatten();
         let all = Self::all_inputs(model);
-        let mut first = false;
-        if self.reference_ms.is_none() {
-            first = true;
-            for (i, (s, r)) in model
-                .sensors
-                .iter()
-                .zip(self.reference.iter_mut())
-                .enumerate()
-            {
-                let preset = self.preset_mask.map(|m| m & (1 << (i % 32)) != 0);
-                *r = if let Some(covered) = preset {
-                    if !covered {
-                        self.unreferenced |= 1 << (i % 32);
-                    }
-                    self.preset[i % MAX_SENSORS]
-                } else if model.flags & FLAG_FIXED_REFERENCE != 0 {
-                    s.ref_temp
-                } else {
-                    match temp(i as u8) {
-                        Some(v) => v,
-                        None => {
-                            self.unreferenced |= 1 << (i % 32);
-                            0
-                        }
-                    }
-                };
-            }
+        let first = self.reference_ms.is_none();
+        if first {
+            self.take_reference(model, &temp);
             self.unstarted = !valid & all;
             self.reference_ms = Some(now_ms);
             self.filter_clock_ms = now_ms;
@@ -233,6 +214,11 @@ impl FeatureState {
         let t = |s: u8| i64::from(temp(s).unwrap_or(0));
         // Inputs needing more than the plain update (invalid, recovering, not started).
         let special = (!valid & all) | self.frozen | self.unstarted;
+        #[allow(
+            clippy::indexing_slicing,
+            clippy::cast_possible_truncation,
+            reason = "i < inputs.len() <= MAX_INPUTS = frozen_clock_ms.len(); casts after a clamp to the i32 range"
+        )]
         for (i, (inp, (feature, filter))) in model
             .inputs
             .iter()
@@ -296,6 +282,40 @@ impl FeatureState {
             *feature = (value_q16 >> (16 - FEATURE_FRAC_BITS))
                 .clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
         }
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "inputs.len() <= MAX_INPUTS = features.len() (checked at parse)"
+        )]
         &self.features[..model.inputs.len()]
+    }
+
+    /// The reference sample (rule 3): per model sensor the preset value, the
+    /// image's stored reference, or the first reading; a sensor without one
+    /// is marked unreferenced.
+    fn take_reference(&mut self, model: &Model, temp: &impl Fn(u8) -> Option<i32>) {
+        let per_sensor = model
+            .sensors
+            .iter()
+            .zip(self.reference.iter_mut().zip(&self.preset))
+            .zip(0u8..);
+        for ((s, (r, &preset)), i) in per_sensor {
+            let bit = 1u32 << (i % 32);
+            *r = if let Some(mask) = self.preset_mask {
+                if mask & bit == 0 {
+                    self.unreferenced |= bit;
+                }
+                preset
+            } else if model.flags & FLAG_FIXED_REFERENCE != 0 {
+                s.ref_temp
+            } else {
+                match temp(i) {
+                    Some(v) => v,
+                    None => {
+                        self.unreferenced |= bit;
+                        0
+                    }
+                }
+            };
+        }
     }
 }

@@ -69,6 +69,11 @@ pub const SIGMOID_MAX_ERROR: f64 = 2.5e-5;
 /// Logistic sigmoid of `z_q16` (Q16) in Q17, by table and linear interpolation.
 /// Symmetric: σ(−z) = 1 − σ(z). Total for every i64.
 #[inline]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::indexing_slicing,
+    reason = "mag <= 16 << 16 fits u32; indices are capped at 512 < SIGMOID_Q17.len() = 513"
+)]
 pub fn sigmoid_q17(z_q16: i64) -> i32 {
     let mag = z_q16.unsigned_abs().min(SIG_Z_MAX_Q16 as u64) as u32;
     let idx = (mag >> SIG_STEP_SHIFT) as usize;
@@ -101,6 +106,7 @@ pub struct Span {
 
 impl Span {
     /// `None` unless hi − lo ≥ 2.
+    #[allow(clippy::cast_possible_truncation, reason = "gain <= 2^26 (see below)")]
     pub fn new(lo: i32, hi: i32) -> Option<Span> {
         let span = i64::from(hi) - i64::from(lo);
         if span < 2 {
@@ -120,6 +126,10 @@ impl Span {
     /// `a / (hi − lo)` rounded, for |a| < 2^56, by the reciprocal: a · gain
     /// / 2^(25+L) (the gain's relative error 2^-26 stays far below 1 for
     /// the slopes this serves).
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "the result is about a / (hi - lo) with |a| < 2^56"
+    )]
     pub fn divide(&self, a: i64) -> i64 {
         let bits = 32 - self.pre_shift; // L
         let shift = 25 + bits; // ≤ 57
@@ -150,12 +160,20 @@ pub const FEATURE_FRAC_BITS: u32 = 8;
 
 /// Multiply two Q24 values (both within [-1, 1]) to Q24, rounding to nearest.
 #[inline(always)]
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "both factors within [-1, 1] Q24: the product is within ±2^24"
+)]
 pub fn mul_q24(a: i32, b: i32) -> i32 {
     ((i64::from(a) * i64::from(b) + (1 << 23)) >> 24) as i32
 }
 
 /// decay^n in Q30 for a decay in [0, 1) Q30, by square-and-multiply (exact
 /// integer steps, so the board and the host agree; n may be any gap length).
+#[allow(
+    clippy::cast_possible_truncation,
+    reason = "result starts at 2^30 and only shrinks (base < 2^30)"
+)]
 pub fn decay_pow_q30(decay_q30: u32, mut n: u64) -> u32 {
     if n == 1 {
         return decay_q30; // the common case: one step per sample

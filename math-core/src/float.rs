@@ -99,7 +99,7 @@ impl core::fmt::Display for QuantizeError {
             QuantizeError::OutOfRange { what, value } => {
                 write!(f, "{what} = {value} does not fit its fixed-point format")
             }
-            QuantizeError::Image(e) => write!(f, "quantized model is not a valid image: {e:?}"),
+            QuantizeError::Image(e) => write!(f, "quantized model is not a valid image: {e}"),
         }
     }
 }
@@ -125,23 +125,35 @@ fn normalise(v: f64, min: f64, max: f64) -> f64 {
     2.0 * (v.clamp(min, max) - min) / (max - min) - 1.0
 }
 
+// Host-side f64 reference: a float model's indices come from the fit and
+// are checked by `FloatModel::quantize` (through `Model::parse`); an
+// inconsistent one is the caller's bug and panics on the desktop (the
+// indexing allowed below).
 impl FloatNet {
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "x has one entry per model input; net input indices are below"
+    )]
     pub fn evaluate_um(&self, x: &[f64]) -> f64 {
         let mut y = self.b2;
-        for (j, row) in self.w1.iter().enumerate() {
-            let z = self.b1[j]
+        for ((row, &b1), &w2) in self.w1.iter().zip(&self.b1).zip(&self.w2) {
+            let z = b1
                 + row
                     .iter()
                     .zip(&self.inputs)
                     .map(|(w, &i)| w * x[usize::from(i)])
                     .sum::<f64>();
-            y += self.w2[j] * sigmoid(z);
+            y += w2 * sigmoid(z);
         }
         y
     }
 }
 
 impl FloatTable {
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "x has one entry per model input; term input indices are below"
+    )]
     fn evaluate_um(&self, x: &[f64], p: f64, derivative: bool) -> f64 {
         let mut y = 0.0;
         for t in &self.terms {
@@ -173,6 +185,10 @@ impl FloatModel {
     }
 
     /// Predicted error per direction (µm) for features (raw units, after lags) and positions.
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "directions of nets and tables are below directions.len()"
+    )]
     pub fn evaluate_um(&self, features: &[f64], positions: &[f64]) -> Vec<f64> {
         let x = self.normalise(features);
         let mut y = vec![0.0; self.directions.len()];
@@ -191,10 +207,10 @@ impl FloatModel {
         let x = self.normalise(features);
         self.axes
             .iter()
-            .enumerate()
-            .map(|(a, ax)| {
+            .zip(0u8..)
+            .map(|(ax, a)| {
                 let pr = normalise(ax.ref_pos, ax.pos_min, ax.pos_max);
-                let tables = self.tables.iter().filter(|t| t.axis == Some(a as u8));
+                let tables = self.tables.iter().filter(|t| t.axis == Some(a));
                 let (mut off, mut der) = (0.0, 0.0);
                 for t in tables {
                     off += t.evaluate_um(&x, pr, false);
@@ -205,6 +221,7 @@ impl FloatModel {
             .collect()
     }
 
+    #[allow(clippy::indexing_slicing, reason = "table axes are below axes.len()")]
     fn position_norm(&self, axis: Option<u8>, positions: &[f64]) -> f64 {
         match axis {
             Some(a) => {
@@ -279,16 +296,29 @@ impl FloatModel {
             m.inputs.push(spec).map_err(|_| too_many("inputs"))?;
         }
         for n in &self.nets {
-            let mut net = Net::new(n.direction, &n.inputs, n.w1.len() as u8);
             if n.w1.len() > MAX_HIDDEN || n.inputs.len() > MAX_NET_INPUTS {
                 return Err(too_many("net neurons"));
             }
-            for (j, row) in n.w1.iter().enumerate() {
-                for (k, w) in row.iter().enumerate() {
-                    net.w1[j][k] = q(*w, 65536.0, "W1")?;
+            // (Was a panic: a row longer than the board's inputs, or fewer
+            // biases or output weights than hidden neurons.)
+            let shape_ok = n.b1.len() >= n.w1.len()
+                && n.w2.len() >= n.w1.len()
+                && n.w1.iter().all(|row| row.len() <= MAX_NET_INPUTS);
+            let n_hidden = u8::try_from(n.w1.len()).ok().filter(|_| shape_ok);
+            let mut net = Net::new(
+                n.direction,
+                &n.inputs,
+                n_hidden.ok_or_else(|| too_many("net weights"))?,
+            );
+            let hidden = net.w1.iter_mut().zip(&mut net.b1).zip(&mut net.w2);
+            for (((dst, b1), w2), ((row, &fb1), &fw2)) in
+                hidden.zip(n.w1.iter().zip(&n.b1).zip(&n.w2))
+            {
+                for (d, w) in dst.iter_mut().zip(row) {
+                    *d = q(*w, 65536.0, "W1")?;
                 }
-                net.b1[j] = q(n.b1[j], 65536.0, "b1")?;
-                net.w2[j] = q(n.w2[j] * 10.0, 256.0, "w2")?;
+                *b1 = q(fb1, 65536.0, "b1")?;
+                *w2 = q(fw2 * 10.0, 256.0, "w2")?;
             }
             net.b2 = q(n.b2 * 10.0, 256.0, "b2")?;
             m.nets.push(net).map_err(|_| too_many("nets"))?;
@@ -339,6 +369,12 @@ impl FloatModel {
     /// input box, sweeps of each input across its range with the others at
     /// the centre, and seeded random interior points; each sample lies on the
     /// board's Q8 grid so both sides see the very same input.
+    #[allow(
+        clippy::indexing_slicing,
+        clippy::cast_possible_truncation,
+        reason = "every point has n_in + n_ax coordinates and d < that; one deviation per direction; \
+                  features and positions lie in the envelope, far inside i32"
+    )]
     pub fn deviation(&self, model: &Model) -> QuantReport {
         let n_in = self.inputs.len();
         let n_ax = self.axes.len();
@@ -435,6 +471,10 @@ pub fn lag(tau_s: f64, step_ms: u32) -> Result<Lag, QuantizeError> {
         });
     }
     let d = (-(f64::from(step_ms) / 1000.0) / tau_s).exp();
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "0 < tau_s < u32::MAX (checked above); the decay is capped below 2^30"
+    )]
     Ok(Lag {
         tau_s: tau_s.round() as u32,
         decay_q30: q(d, (1u64 << 30) as f64, "lag decay")?.min((1 << 30) - 1) as u32,
@@ -450,6 +490,10 @@ fn q(v: f64, scale: f64, what: &str) -> Result<i32, QuantizeError> {
             value: v,
         });
     }
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "s is within the i32 range (checked above)"
+    )]
     Ok(s as i32)
 }
 

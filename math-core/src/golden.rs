@@ -35,19 +35,19 @@ struct Cursor<'a> {
 
 impl<'a> Cursor<'a> {
     fn take(&mut self, n: usize) -> Result<&'a [u8], GoldenError> {
-        let s = self
-            .b
-            .get(self.at..self.at + n)
-            .ok_or(GoldenError::Malformed)?;
-        self.at += n;
+        let end = self.at.checked_add(n).ok_or(GoldenError::Malformed)?;
+        let s = self.b.get(self.at..end).ok_or(GoldenError::Malformed)?;
+        self.at = end;
         Ok(s)
     }
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], GoldenError> {
+        <[u8; N]>::try_from(self.take(N)?).map_err(|_| GoldenError::Malformed)
+    }
     fn u32(&mut self) -> Result<u32, GoldenError> {
-        let s = self.take(4)?;
-        Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+        Ok(u32::from_le_bytes(self.array()?))
     }
     fn i32(&mut self) -> Result<i32, GoldenError> {
-        Ok(self.u32()? as i32)
+        Ok(i32::from_le_bytes(self.array()?))
     }
     fn u64(&mut self) -> Result<u64, GoldenError> {
         Ok(u64::from(self.u32()?) | (u64::from(self.u32()?) << 32))
@@ -63,12 +63,8 @@ pub fn check(bytes: &[u8]) -> Result<u32, GoldenError> {
     let image_len = c.u32()? as usize;
     let model = Model::parse(c.take(image_len)?).map_err(GoldenError::Image)?;
     let n_steps = c.u32()?;
-    let dims = c.take(4)?;
-    let (ns, na, nd) = (
-        usize::from(dims[0]),
-        usize::from(dims[1]),
-        usize::from(dims[2]),
-    );
+    let [ns, na, nd, _] = c.array()?;
+    let (ns, na, nd) = (usize::from(ns), usize::from(na), usize::from(nd));
     if ns > MAX_SENSORS || na > MAX_AXES || nd > MAX_DIRECTIONS {
         return Err(GoldenError::Malformed);
     }
@@ -85,25 +81,27 @@ pub fn check(bytes: &[u8]) -> Result<u32, GoldenError> {
         for p in pos.iter_mut().take(na) {
             *p = c.i32()?;
         }
-        let stale = c.take(4)?[0] != 0;
+        let [stale, _, _, _] = c.array()?;
         let out = comp.step(&StepInput {
             now_ms,
-            temps: &temps[..ns],
+            temps: temps.get(..ns).ok_or(GoldenError::Malformed)?,
             spindle_rpm: rpm,
-            positions: &pos[..na],
-            stale,
+            positions: pos.get(..na).ok_or(GoldenError::Malformed)?,
+            stale: stale != 0,
         });
-        let status = c.u32()? as u16;
-        let mut ok = status == out.status;
-        for d in 0..nd {
-            ok &= c.i32()? == out.corrections[d];
+        // The status is stored as a u32; its low half is the u16.
+        let [lo, hi, _, _] = c.array()?;
+        let mut ok = u16::from_le_bytes([lo, hi]) == out.status;
+        // nd ≤ MAX_DIRECTIONS and na ≤ MAX_AXES (checked above): `take` takes exactly.
+        for &v in out.corrections.iter().take(nd) {
+            ok &= c.i32()? == v;
         }
-        for d in 0..nd {
-            ok &= c.i32()? == out.predicted[d];
+        for &v in out.predicted.iter().take(nd) {
+            ok &= c.i32()? == v;
         }
-        for a in 0..na {
-            ok &= c.i32()? == out.axes[a].offset;
-            ok &= c.i32()? == out.axes[a].slope;
+        for a in out.axes.iter().take(na) {
+            ok &= c.i32()? == a.offset;
+            ok &= c.i32()? == a.slope;
         }
         if !ok {
             return Err(GoldenError::Mismatch { step });
@@ -128,13 +126,13 @@ pub fn write_step(out: &mut Vec<u8>, input: &StepInput, result: &StepOutput, n_d
     }
     out.extend_from_slice(&[u8::from(input.stale), 0, 0, 0]);
     out.extend_from_slice(&u32::from(result.status).to_le_bytes());
-    for d in 0..n_dir {
-        out.extend_from_slice(&result.corrections[d].to_le_bytes());
+    for c in result.corrections.iter().take(n_dir) {
+        out.extend_from_slice(&c.to_le_bytes());
     }
-    for d in 0..n_dir {
-        out.extend_from_slice(&result.predicted[d].to_le_bytes());
+    for p in result.predicted.iter().take(n_dir) {
+        out.extend_from_slice(&p.to_le_bytes());
     }
-    for a in &result.axes[..input.positions.len()] {
+    for a in result.axes.iter().take(input.positions.len()) {
         out.extend_from_slice(&a.offset.to_le_bytes());
         out.extend_from_slice(&a.slope.to_le_bytes());
     }
@@ -160,10 +158,12 @@ pub fn generate(n_steps: u32, seed: u64) -> Result<Vec<u8>, std::string::String>
     let mut out = Vec::new();
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&1u32.to_le_bytes());
-    out.extend_from_slice(&(image.len() as u32).to_le_bytes());
+    let image_len = u32::try_from(image.len()).map_err(|_| "image too long".to_string())?;
+    out.extend_from_slice(&image_len.to_le_bytes());
     out.extend_from_slice(&image);
     out.extend_from_slice(&n_steps.to_le_bytes());
-    out.extend_from_slice(&[ns as u8, na as u8, nd as u8, 0]);
+    let dim = |n: usize| u8::try_from(n).map_err(|_| "model too large".to_string());
+    out.extend_from_slice(&[dim(ns)?, dim(na)?, dim(nd)?, 0]);
     let mut comp = Compensator::new(Some(model));
     let mut rng = seed | 1;
     let mut next = move || {
@@ -173,7 +173,7 @@ pub fn generate(n_steps: u32, seed: u64) -> Result<Vec<u8>, std::string::String>
         rng
     };
     let mut now = 0u64;
-    let mut temps: Vec<i32> = (0..ns).map(|i| 20 * 16 + i as i32).collect();
+    let mut temps: Vec<i32> = (20 * 16..).take(ns).collect();
     let mut rpm = 0i32;
     for step in 0..n_steps {
         now += match next() % 10 {
@@ -191,12 +191,20 @@ pub fn generate(n_steps: u32, seed: u64) -> Result<Vec<u8>, std::string::String>
             *t = (*t).clamp(-55 * 16, 125 * 16);
         }
         if next() % 8 == 0 {
-            rpm = [0, 3000, 6000, 9000, 12000][(next() % 5) as usize];
+            rpm = match next() % 5 {
+                0 => 0,
+                1 => 3000,
+                2 => 6000,
+                3 => 9000,
+                _ => 12000,
+            };
         }
         let mut t_in: Vec<Option<i32>> = temps.iter().map(|&t| Some(t)).collect();
         if step % 37 == 5 {
-            let k = (next() % ns as u64) as usize;
-            t_in[k] = None;
+            let k = next() % ns as u64;
+            if let Some(t) = usize::try_from(k).ok().and_then(|k| t_in.get_mut(k)) {
+                *t = None;
+            }
         }
         let pos: Vec<i32> = (0..na)
             .map(|_| (next() % 900_000) as i32 - 50_000)

@@ -163,33 +163,33 @@ pub struct VolOutput {
 impl Volumetric {
     /// Validate a section: every premise of the overflow argument (module
     /// docs) is checked here, each refusal a named [`ImageError`].
-    #[allow(clippy::needless_range_loop)] // five parallel per-axis arrays
     pub fn new(s: &VolumetricSpec<'_>) -> Result<Volumetric, ImageError> {
         let mut spans = [Span::default(); 4];
-        for k in 0..3 {
-            if usize::from(s.slots[k]) >= MAX_AXES {
-                return Err(ImageError::VolumetricAxisSlot {
-                    axis: k as u8,
-                    slot: s.slots[k],
-                });
+        let per_axis = spans
+            .iter_mut()
+            .zip(s.slots)
+            .zip(s.origin_um.iter().zip(s.stroke_um))
+            .zip(s.max_correction);
+        for ((((span, slot), (&origin, stroke)), max_correction), axis) in per_axis.zip(0u8..) {
+            if usize::from(slot) >= MAX_AXES {
+                return Err(ImageError::VolumetricAxisSlot { axis, slot });
             }
-            let stroke = s.stroke_um[k];
-            let end = i64::from(s.origin_um[k]) + i64::from(stroke);
+            let bad_stroke = ImageError::VolumetricStroke {
+                axis,
+                value: stroke,
+            };
+            let end = i64::from(origin) + i64::from(stroke);
             if !(2..=MAX_VOL_STROKE_UM).contains(&stroke) || end > i64::from(i32::MAX) {
-                return Err(ImageError::VolumetricStroke {
-                    axis: k as u8,
-                    value: stroke,
-                });
+                return Err(bad_stroke);
             }
-            spans[k] =
-                Span::new(s.origin_um[k], end as i32).ok_or(ImageError::VolumetricStroke {
-                    axis: k as u8,
-                    value: stroke,
-                })?;
-            if !(1..=MAX_CORRECTION).contains(&s.max_correction[k]) {
+            *span = i32::try_from(end)
+                .ok()
+                .and_then(|end| Span::new(origin, end))
+                .ok_or(bad_stroke)?;
+            if !(1..=MAX_CORRECTION).contains(&max_correction) {
                 return Err(ImageError::VolumetricMaxCorrection {
-                    direction: k as u8,
-                    value: s.max_correction[k],
+                    direction: axis,
+                    value: max_correction,
                 });
             }
         }
@@ -202,10 +202,10 @@ impl Volumetric {
             value: s.tool_max_um,
         })?;
         let mut sensors = Vec::new();
-        for (i, vs) in s.sensors.iter().enumerate() {
+        for (vs, i) in s.sensors.iter().zip(0u8..) {
             if usize::from(vs.sensor.channel) >= MAX_SENSORS {
                 return Err(ImageError::SensorChannelOutOfRange {
-                    sensor: i as u8,
+                    sensor: i,
                     channel: vs.sensor.channel,
                 });
             }
@@ -215,7 +215,7 @@ impl Volumetric {
                 || !inside(i32::from(vs.max))
                 || vs.min >= vs.max
             {
-                return Err(ImageError::VolumetricTemperature { sensor: i as u8 });
+                return Err(ImageError::VolumetricTemperature { sensor: i });
             }
             sensors.push(*vs).map_err(|_| ImageError::TooMany {
                 what: "volumetric sensors",
@@ -284,6 +284,10 @@ impl Volumetric {
         }
         // Powers 0..=3 of u, v, w, l in Q24.
         let mut pow = [[ONE_Q24; 4]; 4];
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "k < 4 = spans.len(); slots and origin_um (len 3) only when k < 3"
+        )]
         for (k, p) in pow.iter_mut().enumerate() {
             let raw = if k < 3 {
                 positions
@@ -316,6 +320,7 @@ impl Volumetric {
         let mut sum = [[0i64; 3]; MAX_VOL_SENSORS + 1];
         for t in &self.terms {
             let [a, b, c, e] = t.exps;
+            #[allow(clippy::indexing_slicing, reason = "each index is masked to 0..=3 < 4")]
             let m = mul_q24(
                 mul_q24(
                     mul_q24(pow[0][usize::from(a & 3)], pow[1][usize::from(b & 3)]),
@@ -336,6 +341,10 @@ impl Volumetric {
             }
         }
         let mut acc = [0i64; 3];
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "d < 3 = the length of every row of sum"
+        )]
         for (d, a) in acc.iter_mut().enumerate() {
             *a = sum[0][d] << 4;
             for (g, r) in sum[1..].iter().zip(&rise) {
@@ -355,7 +364,13 @@ impl Volumetric {
             if clamped != v {
                 out.status |= vstatus::CLAMPED;
             }
-            *c = clamped as i32;
+            #[allow(
+                clippy::cast_possible_truncation,
+                reason = "clamped to ±max_correction, an i32"
+            )]
+            {
+                *c = clamped as i32;
+            }
         }
         out.status |= vstatus::VALID;
         out

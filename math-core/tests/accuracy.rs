@@ -1,4 +1,10 @@
 //! Fixed point against the f64 reference over the whole admissible input range.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 use thermocomp_core::float::demo_model;
 use thermocomp_core::limits::*;
 

@@ -1,4 +1,10 @@
 //! The compensator's rules: no model, reference, lags, faults, limits, golden vectors.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 use thermocomp_core::compensator::status::*;
 use thermocomp_core::float::demo_model;
 use thermocomp_core::golden;

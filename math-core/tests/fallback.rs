@@ -1,5 +1,11 @@
 //! Image format v2 (typed sections, fallback models) and degraded-mode
 //! compensation: a model sensor lost → the best valid fallback, no jump.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 use thermocomp_core::compensator::status::*;
 use thermocomp_core::compensator::ACTIVE_NONE;
 use thermocomp_core::float::{demo_model, FloatFallback, FloatModel, FloatTerm};

@@ -1,4 +1,10 @@
 //! Q-format primitives: sigmoid error bound, normalisation, lag decay, overflow.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 use proptest::prelude::*;
 use thermocomp_core::fixed::*;
 

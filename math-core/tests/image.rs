@@ -1,4 +1,10 @@
 //! Model image: round trip, every typed refusal, and fuzzed bytes never panic.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 use proptest::prelude::*;
 use thermocomp_core::float::demo_model;
 use thermocomp_core::image::*;

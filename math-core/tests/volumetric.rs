@@ -2,6 +2,12 @@
 //! without it unchanged, the integer evaluation against the f64 polynomial
 //! of the same coefficients within the stated bound, the overflow bound at
 //! the extremes (tests run with overflow checks), every refusal typed.
+#![allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation,
+    reason = "tests: a panic is a failed test"
+)]
 // Per-direction loops index several parallel [x, y, z] arrays.
 #![allow(clippy::needless_range_loop)]
 use proptest::prelude::*;
