@@ -6,7 +6,7 @@
 //! bytes = channel unused), then a CRC-8 over everything before it:
 //! [`CHANNEL_MAP_BYTES`] = 165 bytes.
 
-use super::crc::crc8;
+use thermocomp_core::crc::crc8_maxim;
 use super::rom::RomCode;
 use crate::process_image::MAX_CHANNELS;
 
@@ -136,7 +136,7 @@ impl ChannelMap {
                 chunk.copy_from_slice(&r.0);
             }
         }
-        out[CHANNEL_MAP_BYTES - 1] = crc8(&out[..CHANNEL_MAP_BYTES - 1]);
+        out[CHANNEL_MAP_BYTES - 1] = crc8_maxim(&out[..CHANNEL_MAP_BYTES - 1]);
         out
     }
 
@@ -145,7 +145,7 @@ impl ChannelMap {
         if bytes.len() != CHANNEL_MAP_BYTES || bytes.get(..4) != Some(&MAGIC[..]) {
             return Err(MapError::BadFormat);
         }
-        if crc8(bytes) != 0 {
+        if crc8_maxim(bytes) != 0 {
             return Err(MapError::BadCrc);
         }
         let mut map = ChannelMap::new();

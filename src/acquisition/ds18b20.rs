@@ -4,7 +4,7 @@
 //! resolution; below 12 bits the lowest bits are undefined and are masked
 //! here (not divided again, the `ds18b20` 0.1.1 defect).
 
-use super::crc::crc8;
+use thermocomp_core::crc::crc8_maxim;
 use crate::process_image::ChannelState;
 
 /// DS18B20 family code.
@@ -97,7 +97,7 @@ pub fn decode(bytes: &[u8; 9]) -> Result<Scratchpad, ChannelState> {
     if bytes.iter().all(|&b| b == 0) {
         return Err(ChannelState::AllZero);
     }
-    if crc8(bytes) != 0 {
+    if crc8_maxim(bytes) != 0 {
         return Err(ChannelState::CrcError);
     }
     let resolution = Resolution::from_config(bytes[4]);
@@ -126,7 +126,7 @@ pub fn encode(raw: i16, th: u8, tl: u8, resolution: Resolution) -> [u8; 9] {
     ];
     let mut head = [0u8; 8];
     head.copy_from_slice(&b[..8]);
-    b[8] = crc8(&head);
+    b[8] = crc8_maxim(&head);
     b
 }
 

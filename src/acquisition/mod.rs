@@ -2,7 +2,6 @@
 //! eddy-current displacement probe on an ADC.
 //!
 //! - [`bitbang`]: the slot timing on an open-drain pin + busy delay.
-//! - [`crc`]: Dallas/Maxim CRC-8 (ROM codes, scratchpads, the channel map).
 //! - [`rom`]: 64-bit ROM codes and the ROM search.
 //! - [`ds18b20`]: DS18B20 commands, scratchpad decoding and the scratchpad
 //!   faults that the CRC does not catch.
@@ -38,7 +37,6 @@
 
 pub mod bitbang;
 pub mod channel_map;
-pub mod crc;
 pub mod ds18b20;
 pub mod probe;
 pub mod rom;

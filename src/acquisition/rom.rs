@@ -1,6 +1,6 @@
 //! 64-bit ROM codes and the ROM search (Maxim application note 187).
 
-use super::crc::crc8;
+use thermocomp_core::crc::crc8_maxim;
 use crate::hal::onewire::{BusError, OneWireBus};
 
 /// Search ROM.
@@ -22,7 +22,7 @@ impl RomCode {
     /// A ROM code whose CRC byte matches and which is not all zero (zeros
     /// pass the CRC but are what a shorted line reads).
     pub fn is_valid(&self) -> bool {
-        self.0 != [0; 8] && crc8(&self.0) == 0
+        self.0 != [0; 8] && crc8_maxim(&self.0) == 0
     }
 
     /// The family code (0x28 for DS18B20).
@@ -41,7 +41,7 @@ impl RomCode {
             head[i] = b[i];
             i += 1;
         }
-        b[7] = crc8(&head);
+        b[7] = crc8_maxim(&head);
         RomCode(b)
     }
 

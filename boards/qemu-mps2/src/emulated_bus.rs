@@ -8,10 +8,10 @@
 //!
 //! Hand-written: no crate emulates 1-Wire devices on a no_std target.
 
-use thermocomp::acquisition::crc::crc8;
 use thermocomp::acquisition::ds18b20::{self, Resolution};
 use thermocomp::acquisition::rom::{RomCode, MATCH_ROM, READ_ROM, SEARCH_ROM, SKIP_ROM};
 use thermocomp::hal::onewire::{BusError, OneWireBus};
+use thermocomp_core::crc::crc8_maxim;
 use thermocomp::process_image::MAX_CHANNELS;
 
 struct Device {
@@ -121,7 +121,7 @@ impl EmulatedBus {
     fn scratchpad(d: &Device) -> [u8; 9] {
         let t = d.latched_raw.to_le_bytes();
         let mut s = [t[0], t[1], d.th, d.tl, d.config, 0xFF, 0x0C, 0x10, 0];
-        s[8] = crc8(&s[..8]);
+        s[8] = crc8_maxim(&s[..8]);
         s
     }
 
