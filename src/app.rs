@@ -1,7 +1,8 @@
 //! The compensator application state shared by its two activities: the
 //! measurement cycle (acquisition → compensation → snapshot) and the Modbus
 //! server (requests → registers, commands, model upload). Board code holds
-//! one `App` behind a mutex and never awaits while holding it.
+//! one `App` behind a mutex ([`crate::runtime::SharedApp`]) and never
+//! awaits while holding it.
 
 use embedded_storage::nor_flash::NorFlash;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
@@ -13,20 +14,22 @@ use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::acquisition::temperature::Validity;
 use crate::compensation::{Compensation, PlcInputs};
-use crate::fault::{FaultBoard, FaultRecord};
+use crate::fault::FaultRecord;
 use crate::hal::flash::BackgroundErase;
-use crate::modbus::holding::{result, Command};
-use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot, NOT_AVAILABLE_32};
-use crate::modbus::server::MAX_FRAME;
+use crate::modbus::holding::Command;
+use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot};
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::model_store::MAX_SETTINGS_BYTES;
-use crate::process_image::ChannelState;
-use crate::process_image::MAX_CHANNELS;
 use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
 use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
+use thermocomp_protocol::holding::result;
+use thermocomp_protocol::registers::NOT_AVAILABLE_32;
+use thermocomp_protocol::rtu::MAX_FRAME;
+use thermocomp_protocol::states::ChannelState;
+use thermocomp_protocol::MAX_CHANNELS;
 
 // The slots' settings block holds the settings, the channel map and a kept reference.
 const _: () = assert!(
@@ -49,6 +52,11 @@ pub struct App<F: NorFlash> {
     pub progress: Progress,
     /// Set by the test-only command 9: the measurement loop must stop.
     pub stall_requested: bool,
+    /// The measurement loop has booted (sensors searched, channel map and
+    /// fault record settled): until then Modbus frames get no answer, as
+    /// from a board still booting, and the watchdog is fed unconditionally
+    /// ([`crate::runtime`]).
+    pub booted: bool,
     /// The board's settings without stored ones (command 7 goes back to them).
     defaults: Settings,
     /// The flash write in progress ([`App::poll_flash`]).
@@ -95,48 +103,65 @@ impl<F: BackgroundErase> App<F> {
     /// Load the newest valid model and the settings and channel map stored
     /// with it from the slots (none: "no model"; `unit` and `baud` with no
     /// clamp or rate override when no settings are stored; `map` when no
-    /// channel map is stored).
+    /// channel map is stored): [`App::unloaded`], then [`App::load_stored`].
     pub fn new(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
-        let mut server = Server::new(unit, baud);
-        let mut store = ModelStore::new(flash, slot_size);
-        let model = store.load(server.holding.scratch());
-        let defaults = Settings {
-            unit,
-            baud,
-            ..Settings::default()
-        };
-        let blob = store.settings();
-        let stored = blob
-            .and_then(|b| b.get(..SETTINGS_LEN))
-            .and_then(Settings::decode);
-        let map = blob
-            .and_then(|b| b.get(SETTINGS_LEN..SETTINGS_LEN + CHANNEL_MAP_BYTES))
-            .and_then(|b| ChannelMap::from_bytes(b).ok())
-            .unwrap_or(map);
-        let kept = blob
-            .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
-            .and_then(KeptReference::decode);
-        apply_settings(&mut server.holding, &stored.unwrap_or(defaults));
-        let mut app = App {
-            server,
+        let mut app = Self::unloaded(flash, slot_size, unit, baud, map);
+        app.load_stored();
+        app
+    }
+
+    /// The app before [`App::load_stored`]: no model, the board's settings
+    /// and `map`. A board builds this straight into its static and loads
+    /// it there, so the app never sits on the stack with a model in it.
+    // Inlined into the board's (not inlined) builder, where the app is
+    // built once and copied into the static, not again on the way out.
+    #[inline(always)]
+    pub fn unloaded(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
+        App {
+            server: Server::new(unit, baud),
             snapshot: Snapshot::default(),
             compensation: Compensation::new(None, &map),
-            store,
+            store: ModelStore::new(flash, slot_size),
             map,
             progress: Progress::default(),
             stall_requested: false,
-            defaults,
+            booted: false,
+            defaults: Settings {
+                unit,
+                baud,
+                ..Settings::default()
+            },
             job: None,
-            kept,
+            kept: None,
             reference_pending: false,
             vol_temps: [None; MAX_VOL_SENSORS],
             vol_held: false,
             vol_uptime_ms: 0,
-        };
-        app.snapshot.reference_state = u16::from(kept.is_some());
-        app.publish_map();
-        app.install(model);
-        app
+        }
+    }
+
+    /// The newest valid model from the slots and the settings, channel map
+    /// and kept reference stored with it, in force.
+    #[inline(never)]
+    pub fn load_stored(&mut self) {
+        let model = self.store.load(self.server.holding.scratch());
+        let blob = self.store.settings();
+        let stored = blob
+            .and_then(|b| b.get(..SETTINGS_LEN))
+            .and_then(Settings::decode);
+        if let Some(map) = blob
+            .and_then(|b| b.get(SETTINGS_LEN..SETTINGS_LEN + CHANNEL_MAP_BYTES))
+            .and_then(|b| ChannelMap::from_bytes(b).ok())
+        {
+            self.map = map;
+        }
+        self.kept = blob
+            .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
+            .and_then(KeptReference::decode);
+        apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
+        self.snapshot.reference_state = u16::from(self.kept.is_some());
+        self.publish_map();
+        self.install(model);
     }
 
     /// The settings in force (unit, baud, clamp and rate overrides).
@@ -306,6 +331,8 @@ impl<F: BackgroundErase> App<F> {
     /// force, magic last), swaps it in and sets HR_RESULT. Modbus requests
     /// are answered meanwhile; writes that would change what is being
     /// stored get exception 06 (busy). Returns true while a job remains.
+    // Not inlined: a model install's temporaries stay out of the feeder's frame.
+    #[inline(never)]
     pub fn poll_flash(&mut self) -> bool {
         let Some(job) = self.job else {
             return false;
@@ -365,6 +392,7 @@ impl<F: BackgroundErase> App<F> {
     }
 
     /// Store an image (factory programming, or the bench's initial model) and use it.
+    #[inline(never)]
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
         let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
         if matches!(self.job, Some(FlashJob::Model { .. })) {
@@ -382,6 +410,21 @@ impl<F: BackgroundErase> App<F> {
         }
         self.install(Some(model));
         Ok(())
+    }
+
+    /// The compensator as it was right after [`App::load_stored`] (never
+    /// stepped), for a board that timed compensator steps on the app's own
+    /// compensator at boot: call it before anything else changed the app.
+    pub fn restart_compensation(&mut self) {
+        self.clear_compensation();
+        self.load_stored();
+    }
+
+    /// No model and a fresh compensator. Not inlined: the new compensator's
+    /// temporaries are gone before a model is loaded.
+    #[inline(never)]
+    fn clear_compensation(&mut self) {
+        self.compensation = Compensation::new(None, &self.map);
     }
 
     fn install(&mut self, model: Option<Model>) {
@@ -553,6 +596,12 @@ impl<F: BackgroundErase> App<F> {
         out
     }
 
+    /// A cycle without a sample (the bench's trace has ended): the loop is
+    /// alive, so the watchdog sees progress, but nothing is measured.
+    pub fn idle_cycle(&mut self) {
+        self.progress.cycles = self.progress.cycles.wrapping_add(1);
+    }
+
     /// Publish the eddy-current probe's latest reading (0.1 µm and state code).
     pub fn set_probe(&mut self, reading: &crate::acquisition::probe::ProbeReading) {
         self.snapshot.probe = reading.tenth_um.unwrap_or(0);
@@ -657,75 +706,4 @@ fn apply_settings(h: &mut crate::modbus::holding::Holding, s: &Settings) {
     h.baud = s.baud;
     h.clamp = s.clamp;
     h.rate = s.rate;
-}
-
-/// The app state as the boards share it between their two tasks.
-pub type SharedApp<M, F> =
-    embassy_sync::blocking_mutex::Mutex<M, core::cell::RefCell<Option<App<F>>>>;
-
-/// The Modbus task of every board: one frame in, at most one reply out, from
-/// the shared app state (locked only between awaits). A frame that arrives
-/// before the app is set up gets no answer, as from a board still booting.
-/// `B` is the board's fault path (command 6 clears its record; the
-/// test-only command 8 panics into it once the reply is out).
-pub async fn serve_modbus<B, P, F, M>(
-    port: &mut P,
-    shared: &SharedApp<M, F>,
-    uptime_ms: impl Fn() -> u64,
-) -> !
-where
-    B: FaultBoard,
-    P: crate::hal::serial::RtuPort,
-    F: BackgroundErase,
-    M: embassy_sync::blocking_mutex::raw::RawMutex,
-{
-    let mut frame = [0u8; MAX_FRAME + 1];
-    let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
-    // The baud rate the port runs at: the board's default until the app
-    // (with its stored settings) is up.
-    let mut applied_baud: Option<u32> = None;
-    loop {
-        let want = shared.lock(|a| a.borrow().as_ref().map(|app| app.server.holding.baud));
-        if let Some(b) = want.filter(|b| applied_baud != Some(*b)) {
-            port.set_baud(b);
-            applied_baud = Some(b);
-        }
-        let Ok(n) = port.read_frame(&mut frame).await else {
-            continue;
-        };
-        let Some(request) = frame.get(..n) else {
-            continue;
-        };
-        let now = uptime_ms();
-        reply.clear();
-        let change = shared.lock(|a| {
-            a.borrow_mut().as_mut().map(|app| {
-                app.progress.modbus_busy = true;
-                app.request(request, now, &mut reply)
-            })
-        });
-        if !reply.is_empty() {
-            port.write_frame(&reply).await;
-        }
-        shared.lock(|a| {
-            if let Some(app) = a.borrow_mut().as_mut() {
-                app.progress.modbus_busy = false;
-                app.progress.requests = app.progress.requests.wrapping_add(1);
-            }
-        });
-        match change {
-            Some(LinkChange::Reconfigure { baud }) => {
-                port.set_baud(baud);
-                applied_baud = Some(baud);
-            }
-            Some(LinkChange::ClearFaultRecord) => crate::fault::clear::<B>(),
-            // On purpose, and only in the bench build: command 8 exists to drive
-            // the real panic → fault record → reset path under QEMU. Without
-            // `test-faults` (every field board) holding.rs refuses the command
-            // and this arm is not compiled.
-            #[cfg(feature = "test-faults")]
-            Some(LinkChange::TestPanic) => panic!("test panic requested by command 8"),
-            _ => {}
-        }
-    }
 }

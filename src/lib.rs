@@ -12,7 +12,6 @@ pub mod fault;
 pub mod hal;
 pub mod modbus;
 pub mod model_store;
-pub mod process_image;
+pub mod runtime;
 pub mod settings;
-pub mod trace;
 pub mod watchdog;

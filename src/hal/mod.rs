@@ -11,9 +11,11 @@
 //! - parameter storage: `embedded_storage::nor_flash::NorFlash` (the model
 //!   slots, [`crate::model_store`]), with [`flash::BackgroundErase`] so a
 //!   commit's erase runs outside the app lock.
+//! - [`watchdog`]: the hardware watchdog the feeder pets.
 
 pub mod adc;
 pub mod clock;
 pub mod flash;
 pub mod onewire;
 pub mod serial;
+pub mod watchdog;
