@@ -11,6 +11,7 @@ mod onewire;
 mod probe_adc;
 mod rtu_port;
 mod safety;
+mod stack;
 
 use core::cell::RefCell;
 use defmt::{info, warn};
@@ -23,12 +24,15 @@ use embassy_stm32::usart::{self, Uart};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
-use embassy_time::{Duration, Instant, Timer};
+use embassy_time::{Delay, Duration, Instant, Timer};
+use static_cell::StaticCell;
 use thermocomp::acquisition::channel_map::ChannelMap;
-use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig};
+use thermocomp::acquisition::probe::{self, Calibration, ProbeConfig, ProbeReading};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
 use thermocomp::fault;
+use thermocomp::hal::clock::Clock;
+use thermocomp::runtime::{self, CycleDone, CycleInput, CycleSource, SharedApp};
 
 const SYSCLK_HZ: u32 = 168_000_000;
 /// Modbus unit address and baud rate at power-on.
@@ -41,10 +45,10 @@ bind_interrupts!(struct Irqs {
     DMA2_STREAM2 => dma::InterruptHandler<peripherals::DMA2_CH2>;
 });
 
-/// The application state shared by the measurement and Modbus tasks (never
-/// locked across an await).
-static APP: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<App<model_flash::SlotFlash>>>> =
-    BlockingMutex::new(RefCell::new(None));
+/// The application state the measurement, Modbus and watchdog loops share:
+/// built in place once, before the tasks start (never locked across an await).
+type Shared = SharedApp<CriticalSectionRawMutex, model_flash::SlotFlash>;
+static APP: StaticCell<Shared> = StaticCell::new();
 /// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
 /// (BENCHMARKS.md, sensor acquisition).
 const CYCLE_PERIOD: Duration = Duration::from_secs(1);
@@ -75,10 +79,6 @@ fn clock_config() -> Config {
     config
 }
 
-/// Boot (1-Wire search, sensor configuration, model load) must be done
-/// within this long; until then the watchdog is fed unconditionally.
-const BOOT_DEADLINE_MS: u64 = 20_000;
-
 /// Sets everything up, then stays as the watchdog feeder: `main` never
 /// returns, and an initialisation that fails is a fault (record + reset),
 /// never a silent exit.
@@ -87,9 +87,7 @@ async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clock_config());
     info!("thermocomp on NUCLEO-F446RE, 168 MHz");
     safety::note_watchdog_reset();
-    let mut watchdog =
-        embassy_stm32::wdg::IndependentWatchdog::new(p.IWDG, safety::WATCHDOG_TIMEOUT_US);
-    watchdog.unleash();
+    let mut watchdog = safety::Iwdg::start(p.IWDG);
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
     let bus = onewire::new_bus(p.PC7, SYSCLK_HZ);
     let probe = probe_adc::ProbeInput::new(p.ADC1, p.PA0);
@@ -113,7 +111,14 @@ async fn main(spawner: Spawner) {
     };
     let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
     let port = rtu_port::Rs485Port::new(uart, driver_enable);
-    match (heartbeat(led), acquisition(bus, probe, flash), modbus(port)) {
+    let app = build_app(flash);
+    // Loaded in place: the model never sits on the stack inside an app.
+    app.lock(|a| a.borrow_mut().load_stored());
+    match (
+        heartbeat(led),
+        acquisition(app, bus, probe),
+        modbus(app, port),
+    ) {
         (Ok(t1), Ok(t2), Ok(t3)) => {
             spawner.spawn(t1);
             spawner.spawn(t2);
@@ -124,53 +129,40 @@ async fn main(spawner: Spawner) {
             fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::SPAWN)
         }
     }
-    feed_watchdog(watchdog).await
+    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay).await
 }
 
-/// Feeds the IWDG while booting (up to [`BOOT_DEADLINE_MS`]), then only when
-/// both the measurement loop and the Modbus task made progress
-/// ([`thermocomp::watchdog::Feeder`]).
-async fn feed_watchdog(
-    mut watchdog: embassy_stm32::wdg::IndependentWatchdog<'static, peripherals::IWDG>,
-) -> ! {
-    // Each look also drives a flash commit in progress (erase outside the
-    // lock, then programming): `App::poll_flash`.
-    let progress = || {
-        APP.lock(|a| {
-            a.borrow_mut().as_mut().map(|app| {
-                app.poll_flash();
-                app.progress
-            })
-        })
-    };
-    let mut feeder: Option<thermocomp::watchdog::Feeder> = None;
-    loop {
-        Timer::after(Duration::from_millis(safety::FEED_CHECK_MS)).await;
-        match (progress(), feeder.as_mut()) {
-            (Some(p), Some(f)) => match f.check(&p) {
-                Ok(()) => {
-                    safety::set_watchdog_hint(0);
-                    watchdog.pet();
-                }
-                Err(bits) => safety::set_watchdog_hint(bits),
-            },
-            (Some(p), None) => {
-                feeder = Some(thermocomp::watchdog::Feeder::new(&p));
-                watchdog.pet();
-            }
-            (None, _) if Instant::now().as_millis() < BOOT_DEADLINE_MS => watchdog.pet(),
-            (None, _) => {}
-        }
+/// The app state in its static: the model, settings and channel map
+/// stored in the slots (the first search only adds new sensors on free
+/// channels, never renumbers the known ones). Not inlined, so that its
+/// temporaries take stack only while it runs, not in `main`'s frame, which
+/// lives on as the watchdog feeder.
+#[inline(never)]
+fn build_app(flash: model_flash::SlotFlash) -> &'static Shared {
+    APP.init_with(|| {
+        BlockingMutex::new(RefCell::new(App::unloaded(
+            flash,
+            model_flash::SLOT_SIZE,
+            UNIT,
+            BAUD,
+            ChannelMap::new(),
+        )))
+    })
+}
+
+/// Milliseconds since boot (embassy-time).
+struct Uptime;
+
+impl Clock for Uptime {
+    fn now_ms(&self) -> u64 {
+        Instant::now().as_millis()
     }
 }
 
 /// Modbus RTU server: the application's loop on this board's port.
 #[embassy_executor::task]
-async fn modbus(mut port: rtu_port::Rs485Port) {
-    thermocomp::app::serve_modbus::<safety::Nucleo, _, _, _>(&mut port, &APP, || {
-        Instant::now().as_millis()
-    })
-    .await
+async fn modbus(app: &'static Shared, mut port: rtu_port::Rs485Port) {
+    runtime::modbus_loop::<safety::Nucleo, _, _, _, _>(&mut port, app, &Uptime).await
 }
 
 type Bus =
@@ -180,24 +172,25 @@ type Bus =
 /// the probe read alongside.
 #[embassy_executor::task]
 async fn acquisition(
+    app: &'static Shared,
     mut bus: Bus,
-    mut probe_input: probe_adc::ProbeInput<'static>,
-    flash: model_flash::SlotFlash,
+    probe_input: probe_adc::ProbeInput<'static>,
 ) {
-    // The channel map stored with the model first: a search then only adds
-    // new sensors on free channels, never renumbers the known ones.
-    let mut app = App::new(flash, model_flash::SLOT_SIZE, UNIT, BAUD, ChannelMap::new());
-    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), app.channel_map());
-    match acq.discover(&mut bus).await {
+    let map = app.lock(|a| a.borrow().channel_map());
+    let mut acq = TemperatureAcquisition::new(AcquisitionConfig::default(), map);
+    let start = runtime::start_sensors(&mut acq, &mut bus, None).await;
+    match start.found {
         Ok(n) => info!("1-Wire: {} sensor(s) found", n),
         Err(e) => warn!("1-Wire search failed: {}", e),
     }
-    if !matches!(acq.configure(&mut bus).await, Ok(true)) {
+    if !start.configured {
         warn!("1-Wire: could not set the resolution (no sensor answered)");
     }
-    app.update_channel_map(*acq.map());
-    let record = fault::recorded::<safety::Nucleo>();
-    if let Some(r) = record {
+    // Timed before the boot report changes anything: the app's compensator
+    // is then restarted from the slots exactly as it was loaded.
+    let step = app.lock(|a| step_cycles(&mut a.borrow_mut()));
+    let boot = runtime::boot_report::<safety::Nucleo, _, _>(app, *acq.map());
+    if let Some(r) = boot.fault {
         warn!(
             "fault record: {} at pc={:x}, uptime {} ms, fault #{}, detail {:x}",
             fault::kind::name(r.kind),
@@ -207,9 +200,7 @@ async fn acquisition(
             r.detail
         );
     }
-    app.set_fault_record(record);
-    if let Some(model) = app.compensation.model() {
-        let (cycles, runs) = step_cycles(model.clone());
+    if let Some((cycles, runs)) = step {
         info!(
             "one compensator step of the stored model: {} cycles (DWT, mean of {} steps) = {} us at 168 MHz; QEMU counts instructions for the same step (BENCHMARKS.md)",
             cycles,
@@ -218,78 +209,104 @@ async fn acquisition(
         );
     }
     info!(
-        "model: version {} crc {:x}",
-        app.snapshot.model_version, app.snapshot.model_crc
+        "model: version {} crc {:x}; stack high-water so far {} B",
+        boot.model_version,
+        boot.model_crc,
+        stack::high_water()
     );
-    APP.lock(|a| *a.borrow_mut() = Some(app));
-    // Eddy-current probe: 2 mm range over 0..10 V -> 4096 codes after the divider.
-    let probe_config = Calibration::linear(0, 20_000, 4096).map(|calibration| ProbeConfig {
-        oversample: 64,
-        saturation_margin: 8,
-        calibration,
-        min_tenth_um: 0,
-        max_tenth_um: 20_000,
-    });
-    let mut cycles = 0u32;
-    loop {
-        let start = Instant::now();
-        let now_ms = start.as_millis();
-        cycles = cycles.wrapping_add(1);
-        if cycles.is_multiple_of(REDISCOVER_CYCLES) {
-            // Sensors added at run time go to free channels (reported in
-            // input registers 172-173); missing ones keep their channel and
-            // read "no presence" (170-171), never another sensor's value.
-            if acq.discover(&mut bus).await.is_ok() {
-                APP.lock(|a| {
-                    if let Some(app) = a.borrow_mut().as_mut() {
-                        app.update_channel_map(*acq.map());
-                    }
-                });
-            }
+    let mut source = FieldCycles {
+        next: None,
+        started_ms: 0,
+        probe_input,
+        // Eddy-current probe: 2 mm range over 0..10 V -> 4096 codes after the divider.
+        probe_config: Calibration::linear(0, 20_000, 4096).map(|calibration| ProbeConfig {
+            oversample: 64,
+            saturation_margin: 8,
+            calibration,
+            min_tenth_um: 0,
+            max_tenth_um: 20_000,
+        }),
+    };
+    runtime::measurement_loop(
+        app,
+        &mut acq,
+        &mut bus,
+        &mut Delay,
+        &mut source,
+        REDISCOVER_CYCLES,
+    )
+    .await
+}
+
+/// The field's cycles: one per [`CYCLE_PERIOD`], at the board's uptime, the
+/// probe read after each.
+struct FieldCycles {
+    next: Option<Instant>,
+    started_ms: u64,
+    probe_input: probe_adc::ProbeInput<'static>,
+    probe_config: Option<ProbeConfig>,
+}
+
+impl CycleSource<Bus> for FieldCycles {
+    async fn next_cycle(&mut self, _bus: &mut Bus) -> Option<CycleInput> {
+        if let Some(at) = self.next {
+            Timer::at(at).await;
         }
-        let report = acq.cycle(&mut bus, &mut embassy_time::Delay, now_ms).await;
-        let out = APP.lock(|a| {
-            a.borrow_mut()
-                .as_mut()
-                .map(|app| app.cycle(&acq, now_ms, now_ms, None))
-        });
+        let start = Instant::now();
+        self.next = Some(start + CYCLE_PERIOD);
+        self.started_ms = start.as_millis();
+        Some(CycleInput {
+            now_ms: self.started_ms,
+            spindle_override: None,
+        })
+    }
+
+    fn uptime_ms(&mut self, _input: &CycleInput) -> u64 {
+        self.started_ms
+    }
+
+    fn cycle_done(&mut self, done: &CycleDone<'_>) {
         info!(
             "cycle: {} ok, {} faulty, {} retries; status {:x} corrections {}",
-            report.ok,
-            report.faulty,
-            report.retries,
-            out.map(|o| o.status),
-            out.map(|o| o.corrections)
+            done.report.ok,
+            done.report.faulty,
+            done.report.retries,
+            done.out.status,
+            done.out.corrections
         );
-        if let Some(cfg) = &probe_config {
-            let reading = probe::measure(&mut probe_input, cfg).await;
-            APP.lock(|a| {
-                if let Some(app) = a.borrow_mut().as_mut() {
-                    app.set_probe(&reading);
-                }
-            });
-            info!("probe: {} {}", reading.state, reading.tenth_um);
+        if done.cycle.is_multiple_of(REDISCOVER_CYCLES) {
+            info!("stack high-water: {} B", stack::high_water());
         }
-        Timer::at(start + CYCLE_PERIOD).await;
+    }
+
+    async fn probe(&mut self) -> Option<ProbeReading> {
+        let cfg = self.probe_config.as_ref()?;
+        let reading = probe::measure(&mut self.probe_input, cfg).await;
+        info!("probe: {} {}", reading.state, reading.tenth_um);
+        Some(reading)
     }
 }
 
-/// Mean DWT cycle count of one `Compensator::step` of `model` at mid-range
-/// inputs (all sensors 25 °C, 6000 rpm), measured on this chip at boot, with
-/// flash wait states and the ART accelerator as they are in operation.
-fn step_cycles(model: thermocomp_core::Model) -> (u32, u32) {
+/// Mean DWT cycle count of one `Compensator::step` of the stored model at
+/// mid-range inputs (all sensors 25 °C, 6000 rpm), measured on this chip at
+/// boot, with flash wait states and the ART accelerator as they are in
+/// operation. It steps the app's own compensator (no copy of the model),
+/// then restarts it as it was loaded ([`App::restart_compensation`]). `None`: no model. Not inlined:
+/// its buffers stay out of the measurement task's frame.
+#[inline(never)]
+fn step_cycles<F: thermocomp::hal::flash::BackgroundErase>(app: &mut App<F>) -> Option<(u32, u32)> {
     use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
-    use thermocomp_core::{Compensator, StepInput};
+    use thermocomp_core::StepInput;
     const RUNS: u32 = 100;
+    let n = app.compensation.model()?.sensors.len();
     // SAFETY: enabling the cycle counter (DEMCR.TRCENA, DWT.CTRL.CYCCNTENA)
     // at boot; nothing else on this board uses the DWT.
     let mut cp = unsafe { cortex_m::Peripherals::steal() };
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
-    let n = model.sensors.len();
     let temps = [Some(400i32); MAX_SENSORS];
     let positions = [0i32; MAX_AXES];
-    let mut comp = Compensator::new(Some(model));
+    let comp = app.compensation.compensator();
     let mut now = 0u64;
     let start = cortex_m::peripheral::DWT::cycle_count();
     for _ in 0..RUNS {
@@ -304,7 +321,8 @@ fn step_cycles(model: thermocomp_core::Model) -> (u32, u32) {
         core::hint::black_box(comp.step(core::hint::black_box(&input)));
     }
     let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
-    (cycles / RUNS, RUNS)
+    app.restart_compensation();
+    Some((cycles / RUNS, RUNS))
 }
 
 /// LD2 blinks at 1 Hz while the executor runs.

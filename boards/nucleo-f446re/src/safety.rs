@@ -15,8 +15,10 @@
 
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
-use embassy_stm32::pac;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{pac, peripherals, Peri};
 use thermocomp::fault::{self, FaultBoard, WORDS};
+use thermocomp::hal::watchdog::Watchdog;
 
 extern "C" {
     /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
@@ -25,11 +27,28 @@ extern "C" {
     static mut __watchdog_hint: u32;
 }
 
-/// What the feeder saw stalled at its last look (0: fed), kept over the
-/// IWDG's reset, which gives no interrupt to record it in.
-pub fn set_watchdog_hint(bits: u32) {
-    // SAFETY: a word of NOINIT RAM only this module touches.
-    unsafe { write_volatile(addr_of_mut!(__watchdog_hint), bits) };
+/// The IWDG as the application's feeder sees it.
+pub struct Iwdg(IndependentWatchdog<'static, peripherals::IWDG>);
+
+impl Iwdg {
+    /// Start the IWDG ([`WATCHDOG_TIMEOUT_US`]); it cannot be stopped again.
+    pub fn start(iwdg: Peri<'static, peripherals::IWDG>) -> Self {
+        let mut watchdog = IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US);
+        watchdog.unleash();
+        Iwdg(watchdog)
+    }
+}
+
+impl Watchdog for Iwdg {
+    fn pet(&mut self) {
+        self.0.pet();
+    }
+
+    /// Kept over the IWDG's reset, which gives no interrupt to record it in.
+    fn note_stalled(&mut self, bits: u32) {
+        // SAFETY: a word of NOINIT RAM only this module touches.
+        unsafe { write_volatile(addr_of_mut!(__watchdog_hint), bits) };
+    }
 }
 
 /// IWDG timeout: 10 s nominal. The longest legitimate gap between two feeds
@@ -40,8 +59,6 @@ pub fn set_watchdog_hint(bits: u32) {
 /// (datasheet), so 10 s nominal is between 6.8 s and 18.8 s: always longer
 /// than 5 s, and a stall is still caught within 20 s.
 pub const WATCHDOG_TIMEOUT_US: u32 = 10_000_000;
-/// How often the feeder looks at the progress counters.
-pub const FEED_CHECK_MS: u64 = 100;
 
 pub struct Nucleo;
 
@@ -88,7 +105,7 @@ impl FaultBoard for Nucleo {
 pub fn note_watchdog_reset() {
     let csr = pac::RCC.csr().read();
     if csr.wdgrstf() {
-        // SAFETY: as in `set_watchdog_hint`; only the two stall bits count
+        // SAFETY: as in `Iwdg::note_stalled`; only the two stall bits count
         // (the word is power-on garbage until the feeder's first look).
         let hint = unsafe { read_volatile(addr_of_mut!(__watchdog_hint)) } & 0b11;
         fault::record::<Nucleo>(fault::kind::WATCHDOG, 0, hint);

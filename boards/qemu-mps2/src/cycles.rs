@@ -46,3 +46,20 @@ fn measure(f: &mut dyn FnMut()) -> u64 {
         elapsed_counts(start, end)
     })
 }
+
+/// A loop of exactly 1000 iterations of (nop, subs, bne): 3000 instructions
+/// plus a few for setup; it calibrates the counting method itself.
+#[inline(never)]
+pub fn known_loop() {
+    // SAFETY: only a register counter and nops.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "nop",
+            "subs {n}, {n}, #1",
+            "bne 2b",
+            n = inout(reg) 1000u32 => _,
+            options(nomem, nostack),
+        );
+    }
+}

@@ -12,7 +12,7 @@ use thermocomp::acquisition::ds18b20::{self, Resolution};
 use thermocomp::acquisition::rom::{RomCode, MATCH_ROM, READ_ROM, SEARCH_ROM, SKIP_ROM};
 use thermocomp::hal::onewire::{BusError, OneWireBus};
 use thermocomp_core::crc::crc8_maxim;
-use thermocomp::process_image::MAX_CHANNELS;
+use thermocomp_protocol::MAX_CHANNELS;
 
 struct Device {
     rom: RomCode,

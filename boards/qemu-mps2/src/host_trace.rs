@@ -1,7 +1,9 @@
 //! The bench board's emulated sensors: a recorded run (run CSV on the host,
 //! read through semihosting) replayed sample by sample.
 
-use thermocomp::trace::{is_comment_or_blank, TraceError, TraceHeader, TraceSample, MAX_LINE};
+use thermocomp_protocol::trace::{
+    is_comment_or_blank, TraceError, TraceHeader, TraceSample, MAX_LINE,
+};
 
 use crate::semihost::HostFile;
 

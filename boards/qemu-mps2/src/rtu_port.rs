@@ -18,7 +18,7 @@
 
 use embassy_time::{with_timeout, Duration};
 use thermocomp::hal::serial::{Overrun, RtuPort};
-use thermocomp::modbus::server::{crc16, expected_request_len};
+use thermocomp_protocol::rtu::{crc16, expected_request_len};
 
 use crate::uart::Uart0;
 

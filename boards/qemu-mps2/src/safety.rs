@@ -19,6 +19,7 @@ use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use thermocomp::fault::{self, FaultBoard, WORDS};
+use thermocomp::hal::watchdog::Watchdog;
 
 extern "C" {
     /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
@@ -84,8 +85,6 @@ pub static STALLED: AtomicU32 = AtomicU32::new(0);
 /// sector, done outside the lock). 4 s also covers a loaded 2-core host
 /// slowing QEMU down by 2–3x.
 pub const WATCHDOG_TIMEOUT_MS: u32 = 4_000;
-/// How often the feeder looks at the progress counters.
-pub const FEED_CHECK_MS: u64 = 100;
 
 mod wdog {
     pub const BASE: usize = 0x4000_8000;
@@ -98,8 +97,29 @@ mod wdog {
     pub const RESEN: u32 = 1 << 1;
 }
 
+/// The CMSDK watchdog as the application's feeder sees it.
+pub struct CmsdkWatchdog;
+
+impl CmsdkWatchdog {
+    /// Start it ([`WATCHDOG_TIMEOUT_MS`]).
+    pub fn start() -> Self {
+        watchdog_start();
+        CmsdkWatchdog
+    }
+}
+
+impl Watchdog for CmsdkWatchdog {
+    fn pet(&mut self) {
+        watchdog_feed();
+    }
+
+    fn note_stalled(&mut self, bits: u32) {
+        STALLED.store(bits, Ordering::Relaxed);
+    }
+}
+
 /// Start the watchdog (interrupt and reset enabled), then lock its registers.
-pub fn watchdog_start() {
+fn watchdog_start() {
     let ticks = WATCHDOG_TIMEOUT_MS * (crate::time_driver::CORE_CLOCK_HZ / 1000);
     // SAFETY: MMIO writes to the CMSDK watchdog, used by this module alone.
     unsafe {
@@ -111,7 +131,7 @@ pub fn watchdog_start() {
 }
 
 /// Feed: clear the interrupt and reload the counter.
-pub fn watchdog_feed() {
+fn watchdog_feed() {
     // SAFETY: as in `watchdog_start`.
     unsafe {
         write_volatile(wdog::LOCK, wdog::UNLOCK_KEY);

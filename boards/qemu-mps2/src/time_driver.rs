@@ -78,3 +78,12 @@ impl SysTickDriver {
 fn SysTick() {
     DRIVER.on_tick();
 }
+
+/// Milliseconds since boot, as the application reads them.
+pub struct Uptime;
+
+impl thermocomp::hal::clock::Clock for Uptime {
+    fn now_ms(&self) -> u64 {
+        embassy_time::Instant::now().as_millis()
+    }
+}

@@ -1,0 +1,245 @@
+//! The `serve` mode: the Modbus RTU bench. The board runs the application's
+//! own loops ([`thermocomp::runtime`]) as a field board does; only the
+//! cycles come from a run CSV (one sample every `pace_ms`) on emulated
+//! sensors instead of a 1 s period on a real bus.
+
+use core::cell::RefCell;
+use embassy_executor::Spawner;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex as BlockingMutex;
+use embassy_time::{Delay, Duration, Instant, Timer};
+use static_cell::StaticCell;
+use thermocomp::acquisition::channel_map::ChannelMap;
+use thermocomp::app::App;
+use thermocomp::fault;
+use thermocomp::runtime::{self, CycleDone, CycleInput, CycleSource, SharedApp};
+use thermocomp_core::limits::MAX_IMAGE_BYTES;
+use thermocomp_protocol::trace::TraceSample;
+
+use crate::emulated_bus::EmulatedBus;
+use crate::host_files::{next_sample_or_exit, open_trace, read_host_file};
+use crate::host_trace::HostTrace;
+use crate::replay::log_correction;
+use crate::sensors::{put_sample, Sensors};
+use crate::time_driver::Uptime;
+use crate::{flash, log, rtu_port, safety, stack};
+
+/// The application state the serve tasks share: built in place once,
+/// before they start (never locked across an await).
+type Shared = SharedApp<CriticalSectionRawMutex, flash::RamNor>;
+static APP: StaticCell<Shared> = StaticCell::new();
+
+/// Modbus unit address and baud rate the bench board starts with.
+const UNIT: u8 = 1;
+const BAUD: u32 = 115_200;
+/// The bench searches its bus again every this many trace rows.
+const REDISCOVER_ROWS: u32 = 10;
+/// Every this many rows one correction is logged.
+const LOG_EVERY_ROWS: u32 = 50;
+
+/// What the command line asks of the serve mode.
+pub struct ServeArgs {
+    pub trace: &'static str,
+    pub model: Option<&'static str>,
+    pub pace_ms: u64,
+    /// `(sensor, row)`: that emulated sensor is replaced by a new one
+    /// (another ROM code) at that trace row.
+    pub swap: Option<(usize, u32)>,
+}
+
+/// Open the trace, build the app (model, settings and channel map from the
+/// slots; the trace columns' map when none is stored), spawn the tasks.
+pub fn start(spawner: Spawner, args: ServeArgs) {
+    let trace = open_trace(args.trace);
+    let (sensors, map) = Sensors::emulate(trace.header().channels());
+    let Some(flash) = flash::RamNor::take() else {
+        fault::fault::<safety::Bench>(fault::kind::INIT_FAILED, 0, fault::init_step::FLASH)
+    };
+    let app = build_app(flash, map);
+    // Loaded in place: the model never sits on the stack inside an app.
+    app.lock(|a| a.borrow_mut().load_stored());
+    match (
+        measure(app, trace, sensors, map, args),
+        modbus(app),
+        watchdog(app),
+    ) {
+        (Ok(t1), Ok(t2), Ok(t3)) => {
+            spawner.spawn(t1);
+            spawner.spawn(t2);
+            spawner.spawn(t3);
+        }
+        _ => fault::fault::<safety::Bench>(fault::kind::INIT_FAILED, 0, fault::init_step::SPAWN),
+    }
+}
+
+/// The app state in its static. Not inlined, so that its temporaries take
+/// stack only while it runs.
+#[inline(never)]
+fn build_app(flash: flash::RamNor, map: ChannelMap) -> &'static Shared {
+    APP.init_with(|| {
+        BlockingMutex::new(RefCell::new(App::unloaded(
+            flash,
+            flash::SLOT_SIZE,
+            UNIT,
+            BAUD,
+            map,
+        )))
+    })
+}
+
+#[embassy_executor::task]
+async fn measure(
+    app: &'static Shared,
+    trace: HostTrace,
+    mut sensors: Sensors,
+    map: ChannelMap,
+    args: ServeArgs,
+) {
+    sensors.start(map).await;
+    let boot = runtime::boot_report::<safety::Bench, _, _>(app, *sensors.acquisition.map());
+    if let Some(p) = args.model {
+        program(app, p);
+    }
+    if let Some(r) = boot.fault {
+        log!(
+            "fault record: {} at pc={:#010x}, uptime {} ms, fault #{} since cleared, detail {:#x}",
+            fault::kind::name(r.kind),
+            r.pc,
+            r.uptime_ms,
+            r.count,
+            r.detail
+        );
+    }
+    let (version, crc) = app.lock(|a| {
+        let s = &a.borrow().snapshot;
+        (s.model_version, s.model_crc)
+    });
+    log!(
+        "serving Modbus RTU on UART0: unit {}, {} baud, model version {} crc {:#010x}; replaying {} ({} channels), one sample per {} ms",
+        UNIT, BAUD, version, crc, args.trace, trace.header().channels(), args.pace_ms
+    );
+    let mut source = TraceCycles {
+        trace,
+        pace_ms: args.pace_ms,
+        swap: args.swap,
+        rows: 0,
+        sample: None,
+    };
+    let Sensors {
+        mut bus,
+        mut acquisition,
+        ..
+    } = sensors;
+    runtime::measurement_loop(
+        app,
+        &mut acquisition,
+        &mut bus,
+        &mut Delay,
+        &mut source,
+        REDISCOVER_ROWS,
+    )
+    .await
+}
+
+/// The bench's initial model from the host, programmed into the slots like
+/// a factory-programmed board's (with the channel map in force).
+fn program(app: &Shared, path: &str) {
+    static BUF: StaticCell<[u8; MAX_IMAGE_BYTES]> = StaticCell::new();
+    let Some(buf) = BUF.try_init([0; MAX_IMAGE_BYTES]) else {
+        fault::fault::<safety::Bench>(fault::kind::INIT_FAILED, 0, fault::init_step::BUFFER)
+    };
+    match read_host_file(path, buf).map(|img| app.lock(|a| a.borrow_mut().program(img))) {
+        Some(Ok(())) => log!("model {} programmed into the flash slots", path),
+        other => log!(
+            "model {} not programmed ({:?}); serving what the slots hold",
+            path,
+            other
+        ),
+    }
+}
+
+/// The bench's cycles: one trace row every `pace_ms`, at the row's time
+/// and recorded spindle speed.
+struct TraceCycles {
+    trace: HostTrace,
+    pace_ms: u64,
+    swap: Option<(usize, u32)>,
+    /// Rows read so far.
+    rows: u32,
+    /// The row being measured.
+    sample: Option<TraceSample>,
+}
+
+impl CycleSource<EmulatedBus> for TraceCycles {
+    async fn next_cycle(&mut self, bus: &mut EmulatedBus) -> Option<CycleInput> {
+        if self.rows > 0 {
+            Timer::after(Duration::from_millis(self.pace_ms)).await;
+        }
+        let sample = next_sample_or_exit(&mut self.trace)?;
+        self.rows += 1;
+        if let Some((k, _)) = self.swap.filter(|(_, row)| *row == self.rows) {
+            log!("sensor {} replaced by a new one (another ROM code)", k);
+            bus.replace(k);
+        }
+        let input = CycleInput {
+            now_ms: sample.time_ms,
+            spindle_override: sample.spindle_rpm,
+        };
+        self.sample = Some(sample);
+        Some(input)
+    }
+
+    fn prepare(&mut self, bus: &mut EmulatedBus, _input: &CycleInput) {
+        if let Some(sample) = &self.sample {
+            put_sample(bus, sample);
+        }
+    }
+
+    fn uptime_ms(&mut self, _input: &CycleInput) -> u64 {
+        Instant::now().as_millis()
+    }
+
+    fn cycle_done(&mut self, done: &CycleDone<'_>) {
+        if done.cycle % LOG_EVERY_ROWS == 1 {
+            let ch0 = done.acquisition.value(0, done.input.now_ms);
+            log_correction(
+                done.model,
+                done.input.now_ms,
+                done.report,
+                (ch0.usable(), ch0.state),
+                done.input.spindle_override.unwrap_or(0),
+                done.out,
+            );
+        }
+    }
+
+    fn stalled(&mut self) {
+        log!("measurement loop stalled on request (command 9)");
+    }
+
+    fn ended(&mut self, rows: u32) {
+        log!("trace done: {} samples; still serving", rows);
+        log!("stack high-water: {} B", stack::high_water());
+    }
+
+    async fn idle(&mut self) {
+        Timer::after(Duration::from_millis(self.pace_ms)).await;
+    }
+}
+
+#[embassy_executor::task]
+async fn modbus(app: &'static Shared) {
+    let mut port = rtu_port::QemuRtuPort::new(BAUD);
+    runtime::modbus_loop::<safety::Bench, _, _, _, _>(&mut port, app, &Uptime).await
+}
+
+/// The CMSDK watchdog, fed by the application's feeder.
+#[embassy_executor::task]
+async fn watchdog(app: &'static Shared) {
+    let mut watchdog = safety::CmsdkWatchdog::start();
+    log!(
+        "watchdog started: {} ms, fed when both tasks progressed",
+        safety::WATCHDOG_TIMEOUT_MS
+    );
+    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay).await
+}
