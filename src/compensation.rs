@@ -5,11 +5,11 @@
 use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::{TemperatureAcquisition, Validity};
-use crate::process_image::MAX_CHANNELS;
 use thermocomp_core::image::SensorRef;
 use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
 use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
+use thermocomp_protocol::MAX_CHANNELS;
 
 /// Machine data the PLC writes (spindle speed, axis positions), with its age.
 #[derive(Debug, Clone, Copy, Default)]

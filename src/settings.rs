@@ -8,8 +8,8 @@
 
 use thermocomp_core::limits::MAX_DIRECTIONS;
 
-use crate::modbus::holding::BAUD_RATES;
-use crate::process_image::MAX_CHANNELS;
+use thermocomp_protocol::holding::BAUD_RATES;
+use thermocomp_protocol::MAX_CHANNELS;
 
 /// Encoded size (bytes): version, unit, baud/100, clamp × 6, rate × 6.
 pub const ENCODED_LEN: usize = 1 + 1 + 2 + 2 * MAX_DIRECTIONS * 2;

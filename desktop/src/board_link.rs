@@ -15,21 +15,21 @@ use anyhow::{anyhow, bail, Context, Result};
 use rmodbus::client::ModbusRequest;
 use rmodbus::{ErrorKind, ModbusProto};
 
-// The register map comes from the board's own crate (README.md, "Modbus
-// register map"), so master and server cannot disagree on an address.
-use thermocomp::acquisition::probe::ProbeState;
-use thermocomp::modbus::holding::{
+// The register map comes from the board's wire-contract crate
+// (docs/register-map.md), so master and server cannot disagree on an address.
+use thermocomp_protocol::holding::{
     result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_RESULT, HR_SPINDLE,
     HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, STAGING_REGS, UNLOCK_CODE,
 };
-use thermocomp::modbus::registers::{
+use thermocomp_protocol::registers::{
     IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
     IR_PREDICTIONS, IR_PROBE, IR_PROBE_STATE, IR_SAMPLE_TIME, IR_STATES, IR_TEMPERATURES,
     MAP_VERSION, NOT_AVAILABLE, TEST_PATTERN,
 };
-use thermocomp::modbus::server::MAX_WRITE_REGISTERS;
-use thermocomp::process_image::{ChannelState, MAX_CHANNELS};
 use thermocomp_core::limits::MAX_DIRECTIONS;
+use thermocomp_protocol::rtu::MAX_WRITE_REGISTERS;
+use thermocomp_protocol::states::{ChannelState, ProbeState};
+use thermocomp_protocol::MAX_CHANNELS;
 
 /// Input registers 0 up to the predictions: one request, one snapshot.
 const SNAPSHOT_LEN: u16 = IR_PREDICTIONS + 2 * MAX_DIRECTIONS as u16;

@@ -5,9 +5,9 @@
 //! must equal these rows bit for bit.
 
 use anyhow::{anyhow, Context, Result};
-use thermocomp::trace::{TraceHeader, TraceSample};
 use thermocomp_core::limits::MAX_SENSORS;
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
+use thermocomp_protocol::trace::{TraceHeader, TraceSample};
 
 #[derive(Debug, Clone, Copy)]
 pub struct ReplayRow {
@@ -38,7 +38,7 @@ pub fn replay_failing(
     let mut lines = csv
         .lines()
         .enumerate()
-        .filter(|(_, l)| !thermocomp::trace::is_comment_or_blank(l));
+        .filter(|(_, l)| !thermocomp_protocol::trace::is_comment_or_blank(l));
     let (_, head) = lines.next().ok_or_else(|| anyhow!("empty trace"))?;
     let header = TraceHeader::parse(head).map_err(|e| anyhow!("header: {e}"))?;
     let mut roms = std::collections::BTreeMap::new();
@@ -54,7 +54,7 @@ pub fn replay_failing(
     let names: Vec<String> = head
         .split(',')
         .map(str::trim)
-        .filter(|c| thermocomp::trace::is_temperature_column(c))
+        .filter(|c| thermocomp_protocol::trace::is_temperature_column(c))
         .map(str::to_string)
         .collect();
     let channels = sensor_columns(&model, &names, &roms);

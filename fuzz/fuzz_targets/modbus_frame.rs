@@ -2,9 +2,9 @@
 //! silent, never panics or stalls. The first byte picks a valid CRC or not.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use thermocomp::modbus::holding::{HR_UNLOCK, UNLOCK_CODE};
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp::modbus::{Server, Snapshot};
+use thermocomp_protocol::holding::{HR_UNLOCK, UNLOCK_CODE};
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 fuzz_target!(|data: &[u8]| {
     let mut server = Server::new(1, 115_200);

@@ -7,7 +7,7 @@ use embedded_hal_02::blocking::delay::DelayMs;
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, EmuDelay, EmuPin, Fault};
 use one_wire_bus::{Address, OneWire};
 use thermocomp::acquisition::temperature::read_scratchpad;
-use thermocomp::process_image::ChannelState;
+use thermocomp_protocol::states::ChannelState;
 
 fn crate_bus(bus: &Bus) -> (OneWire<EmuPin>, EmuDelay, CrateSensor) {
     let ow = OneWire::new(bus.pin()).unwrap();

@@ -5,7 +5,8 @@ use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, Fault, MS
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::rom::{search, RomCode};
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition, Validity};
-use thermocomp::process_image::{ChannelState, MAX_CHANNELS};
+use thermocomp_protocol::states::ChannelState;
+use thermocomp_protocol::MAX_CHANNELS;
 
 fn roms(bus: &Bus) -> Vec<RomCode> {
     (0..bus.device_count())
@@ -92,14 +93,14 @@ fn generate_trace(period_s: u64, hours: u64) -> String {
 fn four_hour_trace_of_twenty_sensors_comes_back_exactly() {
     let csv = generate_trace(60, 4);
     let mut lines = csv.lines().filter(|l| !l.starts_with('#'));
-    let header = thermocomp::trace::TraceHeader::parse(lines.next().unwrap()).unwrap();
+    let header = thermocomp_protocol::trace::TraceHeader::parse(lines.next().unwrap()).unwrap();
     assert_eq!(header.channels(), 20);
     let (bus, mut acq) = setup(20, AcquisitionConfig::default());
     let mut rows = 0;
     let mut below_zero = 0;
     let mut checked = 0;
     for line in lines {
-        let sample = thermocomp::trace::TraceSample::parse(&header, line).unwrap();
+        let sample = thermocomp_protocol::trace::TraceSample::parse(&header, line).unwrap();
         // Trace column k feeds device k.
         for (k, t) in sample.temperatures.iter().take(20).enumerate() {
             let raw = i16::try_from(t.unwrap()).unwrap();

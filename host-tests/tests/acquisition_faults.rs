@@ -13,7 +13,7 @@ use thermocomp::acquisition::rom::{RomCode, SearchError};
 use thermocomp::acquisition::temperature::{
     AcquisitionConfig, CycleReport, TemperatureAcquisition, Validity, MARKER_TH, MARKER_TL,
 };
-use thermocomp::process_image::ChannelState;
+use thermocomp_protocol::states::ChannelState;
 
 /// 85.0 °C, the power-on register value, 1/16 °C.
 const POWER_ON: i16 = 85 * 16;

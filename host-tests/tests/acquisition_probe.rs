@@ -2,8 +2,9 @@
 //! range detection, against a simulated probe + 12-bit ADC.
 
 use host_tests::onewire_emu::block_on;
-use thermocomp::acquisition::probe::{measure, Calibration, ProbeConfig, ProbeState};
+use thermocomp::acquisition::probe::{measure, Calibration, ProbeConfig};
 use thermocomp::hal::adc::{AdcError, ProbeAdc};
+use thermocomp_protocol::states::ProbeState;
 
 /// A probe whose output code is `response(displacement)` plus deterministic
 /// uniform noise of ±`noise` codes, clipped at the ADC's rails.

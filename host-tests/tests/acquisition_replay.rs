@@ -8,7 +8,7 @@ use host_tests::onewire_emu::replay::{apply, parse_run};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition, Validity};
-use thermocomp::process_image::ChannelState;
+use thermocomp_protocol::states::ChannelState;
 
 #[test]
 fn measured_spindle_run_comes_back_exactly() {

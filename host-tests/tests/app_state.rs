@@ -3,11 +3,12 @@
 //! nothing; the probe reading reaches its registers; a reboot finds the model.
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use thermocomp::acquisition::channel_map::ChannelMap;
-use thermocomp::acquisition::probe::{ProbeReading, ProbeState};
+use thermocomp::acquisition::probe::ProbeReading;
 use thermocomp::app::App;
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::registers::*;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::registers::*;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
+use thermocomp_protocol::states::ProbeState;
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 

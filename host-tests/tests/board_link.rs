@@ -10,9 +10,9 @@ use std::sync::{Arc, Mutex};
 use tcomp::board_link::{record, upload, BoardLink, Commit};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::server::{crc16, expected_request_len, MAX_FRAME};
 use thermocomp::modbus::{Server, Snapshot};
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::rtu::{crc16, expected_request_len, MAX_FRAME};
 
 /// The board's frame handler behind a TCP socket (one client), in a thread.
 fn fake_board(answer: bool) -> String {
@@ -306,7 +306,7 @@ fn fixed_input_device(regs: Vec<u16>) -> (String, Arc<Mutex<usize>>) {
 
 #[test]
 fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
-    use thermocomp::modbus::registers::MAP_VERSION;
+    use thermocomp_protocol::registers::MAP_VERSION;
     let image = demo_image_bytes(2);
     let (addr, seen) = fixed_input_device(vec![0x1234, 0x5678, MAP_VERSION - 1]);
     let mut link = BoardLink::tcp(&addr, 1).unwrap();

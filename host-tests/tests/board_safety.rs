@@ -8,10 +8,10 @@ use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::{App, LinkChange};
 use thermocomp::fault::{self, kind, FaultBoard, FaultRecord, WORDS};
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::registers::*;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp::watchdog::{stalled, Feeder, Progress};
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::registers::*;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 thread_local! {
     static RAM: RefCell<[u32; WORDS]> = const { RefCell::new([0; WORDS]) };

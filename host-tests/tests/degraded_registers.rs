@@ -1,9 +1,10 @@
 //! Degraded mode on the register map (issue 15): input registers 150–157
 //! and the result codes of the image format v2 refusals.
-use thermocomp::modbus::holding::result;
 use thermocomp::modbus::registers::*;
 use thermocomp_core::compensator::ACTIVE_NONE;
 use thermocomp_core::ImageError;
+use thermocomp_protocol::holding::result;
+use thermocomp_protocol::registers::*;
 
 #[test]
 fn active_model_registers_name_the_model_per_direction() {

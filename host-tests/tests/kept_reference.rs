@@ -9,10 +9,10 @@ use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::registers::IR_REFERENCE_STATE;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp::settings::KeptReference;
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::registers::IR_REFERENCE_STATE;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 

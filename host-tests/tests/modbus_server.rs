@@ -3,11 +3,12 @@
 //! and random frames never panic it.
 use heapless::Vec as HVec;
 use proptest::prelude::*;
-use thermocomp::modbus::holding::*;
 use thermocomp::modbus::registers::*;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp::modbus::{Action, Server, Snapshot};
 use thermocomp_core::float::demo_model;
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::registers::*;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 fn frame(body: &[u8]) -> Vec<u8> {
     let mut f = body.to_vec();

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use host_tests::qemu::{free_tcp_port, BenchBoard};
 use tcomp::board_link::{record, upload, BoardLink, Commit};
-use thermocomp::modbus::registers::*;
+use thermocomp_protocol::registers::*;
 
 const BOOT: Duration = Duration::from_secs(60);
 
@@ -146,7 +146,7 @@ fn wait_for_boots(board: &BenchBoard, n: usize) {
 }
 
 fn command(link: &mut BoardLink, code: u16) {
-    use thermocomp::modbus::holding::{HR_COMMAND, HR_UNLOCK, UNLOCK_CODE};
+    use thermocomp_protocol::holding::{HR_COMMAND, HR_UNLOCK, UNLOCK_CODE};
     link.write_one(HR_UNLOCK, UNLOCK_CODE).unwrap();
     link.write_one(HR_COMMAND, code).unwrap();
 }
@@ -168,7 +168,7 @@ fn wait_input(link: &mut BoardLink, board: &BenchBoard, addr: u16, want: u16) {
 #[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
 fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
     let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
-    use thermocomp::modbus::holding::{
+    use thermocomp_protocol::holding::{
         result, CMD_FORGET_REFERENCE, CMD_KEEP_REFERENCE, HR_RESULT,
     };
     let dir = std::env::temp_dir().join(format!("thermocomp-qemu-ref-{}", std::process::id()));

@@ -17,9 +17,9 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::rom::RomCode;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition, Validity};
 use thermocomp::app::App;
-use thermocomp::modbus::registers::*;
-use thermocomp::modbus::server::{crc16, expected_request_len, MAX_FRAME};
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
+use thermocomp_protocol::registers::*;
+use thermocomp_protocol::rtu::{crc16, expected_request_len, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 

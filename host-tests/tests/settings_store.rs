@@ -6,12 +6,12 @@ use embedded_storage::nor_flash::NorFlash as _;
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp::model_store::ModelStore;
 use thermocomp::settings::Settings;
 use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_core::Model;
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 

@@ -6,12 +6,12 @@ use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
-use thermocomp::modbus::holding::*;
-use thermocomp::modbus::registers::*;
-use thermocomp::modbus::server::{crc16, MAX_FRAME};
 use thermocomp_core::image::{SensorRef, NONE};
 use thermocomp_core::volumetric::*;
 use thermocomp_core::ImageError;
+use thermocomp_protocol::holding::*;
+use thermocomp_protocol::registers::*;
+use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 

@@ -8,7 +8,7 @@
 
 use thermocomp_core::crc::crc8_maxim;
 use super::rom::RomCode;
-use crate::process_image::MAX_CHANNELS;
+use thermocomp_protocol::MAX_CHANNELS;
 
 /// Size of the persisted form.
 pub const CHANNEL_MAP_BYTES: usize = 4 + 8 * MAX_CHANNELS + 1;

@@ -5,7 +5,7 @@
 //! here (not divided again, the `ds18b20` 0.1.1 defect).
 
 use thermocomp_core::crc::crc8_maxim;
-use crate::process_image::ChannelState;
+use thermocomp_protocol::states::ChannelState;
 
 /// DS18B20 family code.
 pub const FAMILY: u8 = 0x28;

@@ -6,6 +6,8 @@
 //! evaluated in i128 with checked arithmetic. A result outside i32 is an
 //! error ([`ProbeState::CalibrationOverflow`]), never clamped.
 
+use thermocomp_protocol::states::ProbeState;
+
 use crate::hal::adc::ProbeAdc;
 
 /// Most samples averaged per reading.
@@ -65,40 +67,6 @@ pub struct ProbeConfig {
     /// Measuring range of the probe, 0.1 µm, inclusive.
     pub min_tenth_um: i32,
     pub max_tenth_um: i32,
-}
-
-/// The probe's state, a named value like the temperature channels'.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum ProbeState {
-    /// Reading good.
-    Ok,
-    /// At least one sample at the ADC's rail: target out of the probe's
-    /// range or probe disconnected.
-    Saturated,
-    /// Calibrated value outside the configured measuring range.
-    OutOfRange,
-    /// Calibrated value does not fit i32 (bad calibration).
-    CalibrationOverflow,
-    /// Oversample count outside 1..=MAX_OVERSAMPLE.
-    BadConfig,
-    /// The ADC failed.
-    AdcError,
-}
-
-impl ProbeState {
-    /// Stable code for the register map.
-    pub const fn code(self) -> u16 {
-        match self {
-            ProbeState::Ok => 2,
-            ProbeState::Saturated => 11,
-            ProbeState::OutOfRange => 8,
-            ProbeState::CalibrationOverflow => 12,
-            ProbeState::BadConfig => 13,
-            ProbeState::AdcError => 14,
-        }
-    }
 }
 
 /// One probe reading.

@@ -51,8 +51,9 @@ use super::channel_map::ChannelMap;
 use super::ds18b20::{self, Resolution, Scratchpad};
 use super::rom;
 use crate::hal::onewire::{BusError, OneWireBus};
-use crate::process_image::{ChannelState, MAX_CHANNELS};
 use embedded_hal_async::delay::DelayNs;
+use thermocomp_protocol::states::ChannelState;
+use thermocomp_protocol::MAX_CHANNELS;
 
 /// How the sensors are powered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

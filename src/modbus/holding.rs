@@ -3,220 +3,13 @@
 //! unlock code, commands, and the model staging area.
 //!
 //! Every write request is checked as a whole before any register changes:
-//! a refused request leaves everything as it was.
+//! a refused request leaves everything as it was. The addresses, codes and
+//! numbers are the wire contract's (`thermocomp_protocol::holding`).
 
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_IMAGE_BYTES};
 use thermocomp_core::Model;
-
-pub const HR_UNLOCK: u16 = 0;
-pub const HR_COMMAND: u16 = 1;
-pub const HR_RESULT: u16 = 2;
-pub const HR_UNIT: u16 = 3;
-pub const HR_BAUD: u16 = 4;
-pub const HR_SPINDLE: u16 = 5;
-/// Axis positions, int32 µm (or 0.001°), high word first, 2 registers each.
-pub const HR_POSITIONS: u16 = 6;
-/// Per-direction clamp override, 0.1 µm (0xFFFF: none, the image's limit).
-pub const HR_CLAMP: u16 = 20;
-/// Per-direction rate-limit override, 0.1 µm/s (0xFFFF: none).
-pub const HR_RATE: u16 = 26;
-/// Length in bytes of the staged model image.
-pub const HR_STAGED_LEN: u16 = 32;
-/// Tool length for the volumetric correction, int32 µm, high word first
-/// (written by the PLC like the positions; 36–39 reserved).
-pub const HR_TOOL_LENGTH: u16 = 34;
-/// Last register of the plain block (33 and 36–39 reserved, read 0).
-pub const HR_LAST_PLAIN: u16 = 39;
-/// Model staging area: 2 bytes per register (first byte in the high half).
-pub const HR_STAGING: u16 = 1000;
-pub const STAGING_REGS: u16 = (MAX_IMAGE_BYTES / 2) as u16;
-
-/// Write this to HR_UNLOCK to allow configuration and model writes for 60 s.
-pub const UNLOCK_CODE: u16 = 0xA5C3;
-pub const UNLOCK_MS: u64 = 60_000;
-
-pub const CMD_COMMIT_MODEL: u16 = 1;
-pub const CMD_REREFERENCE: u16 = 2;
-pub const CMD_CLEAR_STAGING: u16 = 3;
-pub const CMD_LOCK: u16 = 4;
-/// Commit the staged model even when its version is not newer than the
-/// running one (going back to an older model on purpose); every other check
-/// of [`CMD_COMMIT_MODEL`] still applies.
-pub const CMD_ROLLBACK_MODEL: u16 = 5;
-/// Forget the fault record (input registers 160–168, status bit 9).
-pub const CMD_CLEAR_FAULT: u16 = 6;
-/// Restore the default settings (unit 1, 115200 baud, no clamp or rate
-/// override, no fixed reference) and store them; link changes apply after the reply.
-pub const CMD_RESTORE_DEFAULTS: u16 = 7;
-/// Test builds only (feature `test-faults`, the QEMU bench board): panic
-/// after the reply, to show the fault path end to end.
-pub const CMD_TEST_PANIC: u16 = 8;
-/// Test builds only (feature `test-faults`): the measurement loop stops
-/// making progress, so the watchdog must trip.
-pub const CMD_TEST_STALL: u16 = 9;
-/// Keep a reference sample across reboots (a machine with a fixed
-/// reference): the next cycle at which every model sensor reads fresh is
-/// the new reference sample (per channel), used from then on and at every
-/// boot, and stored with the settings (HR_RESULT 50, then 23, then 0 or 22).
-/// While a reference is kept (or the image has a fixed reference),
-/// [`CMD_REREFERENCE`] does the same.
-pub const CMD_KEEP_REFERENCE: u16 = 10;
-/// Forget the kept reference (stored); the reference in use stays until
-/// the next boot or command 2.
-pub const CMD_FORGET_REFERENCE: u16 = 11;
-
-/// Command results (HR_RESULT): one code per reason a commit is refused.
-pub mod result {
-    use thermocomp_core::ImageError;
-
-    pub const OK: u16 = 0;
-    pub const NONE: u16 = 1;
-    /// Staged length outside 1..=MAX_IMAGE_BYTES.
-    pub const BAD_LENGTH: u16 = 2;
-    /// The image's CRC-32 does not match (corrupted in transfer).
-    pub const BAD_CRC: u16 = 3;
-    /// Writing the model to flash failed; the previous model still serves.
-    pub const STORE_FAILED: u16 = 4;
-    /// Shorter than its header or than its own total length.
-    pub const TOO_SHORT: u16 = 5;
-    /// Total length above the staging area.
-    pub const TOO_LONG: u16 = 6;
-    /// Not a model image (magic).
-    pub const BAD_MAGIC: u16 = 7;
-    /// Image format version this firmware does not read.
-    pub const UNSUPPORTED_FORMAT: u16 = 8;
-    /// Units code this firmware does not read.
-    pub const UNSUPPORTED_UNITS: u16 = 9;
-    /// A count above its fixed maximum (sensors, inputs, nets, terms …).
-    pub const TOO_MANY: u16 = 10;
-    /// A reference to a sensor, input, direction or axis that does not exist.
-    pub const BAD_INDEX: u16 = 11;
-    /// An envelope or axis range whose minimum is not below its maximum.
-    pub const BAD_RANGE: u16 = 12;
-    /// Another field outside its domain (flags, step, lag, power …).
-    pub const BAD_VALUE: u16 = 13;
-    /// The sections do not fill the image's length exactly.
-    pub const LENGTH_MISMATCH: u16 = 14;
-    /// Bytes after the sealed image (staged length longer than the image).
-    pub const TRAILING_BYTES: u16 = 15;
-    /// A sensor channel the board does not have.
-    pub const SENSOR_CHANNEL: u16 = 16;
-    /// Model version 0.
-    pub const ZERO_MODEL_VERSION: u16 = 17;
-    /// A direction's max correction outside 1..=MAX_CORRECTION.
-    pub const MAX_CORRECTION: u16 = 18;
-    /// A direction's max rate outside 1..=MAX_RATE (0 would freeze the correction).
-    pub const MAX_RATE: u16 = 19;
-    /// Table coefficients whose sums could overflow the evaluation.
-    pub const TABLE_SUM_TOO_LARGE: u16 = 20;
-    /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
-    pub const NOT_NEWER: u16 = 21;
-    /// A settings change (unit, baud, clamp, rate, command 7) is in force
-    /// but could not be stored in flash: it is lost at the next reboot.
-    pub const SETTINGS_NOT_STORED: u16 = 22;
-    /// A commit (model or settings) is being written to flash in the
-    /// background; poll until another code (0 OK, 4, 22).
-    pub const COMMIT_IN_PROGRESS: u16 = 23;
-    /// An image section (format v2) of a kind this firmware does not read.
-    pub const UNKNOWN_SECTION: u16 = 30;
-    /// An image section whose contents do not match its declared length.
-    pub const SECTION_LENGTH: u16 = 31;
-    /// The same image section kind twice.
-    pub const DUPLICATE_SECTION: u16 = 32;
-    /// A fallback model reads a sensor it is meant to do without.
-    pub const FALLBACK_USES_EXCLUDED: u16 = 33;
-    /// Command 10 (or 2 with a kept reference) accepted: the reference is
-    /// taken at the next cycle with every model sensor fresh, then stored.
-    pub const REFERENCE_PENDING: u16 = 50;
-    /// The image names a sensor by a ROM code that fails its CRC-8.
-    pub const SENSOR_ROM: u16 = 51;
-    /// The image names two sensors by the same ROM code.
-    pub const DUPLICATE_SENSOR_ROM: u16 = 52;
-    /// Volumetric section: a position slot, stroke or tool-length scale out of range.
-    pub const VOLUMETRIC_RANGE: u16 = 40;
-    /// Volumetric section: a sensor's reference or envelope outside −55 … 125 °C.
-    pub const VOLUMETRIC_TEMPERATURE: u16 = 41;
-    /// Volumetric section: a max correction outside 1..=MAX_CORRECTION.
-    pub const VOLUMETRIC_MAX_CORRECTION: u16 = 42;
-
-    /// The name of a result code (as in the README's table), for messages.
-    pub fn name(code: u16) -> &'static str {
-        match code {
-            OK => "OK",
-            NONE => "NONE",
-            BAD_LENGTH => "BAD_LENGTH",
-            BAD_CRC => "BAD_CRC",
-            STORE_FAILED => "STORE_FAILED",
-            TOO_SHORT => "TOO_SHORT",
-            TOO_LONG => "TOO_LONG",
-            BAD_MAGIC => "BAD_MAGIC",
-            UNSUPPORTED_FORMAT => "UNSUPPORTED_FORMAT",
-            UNSUPPORTED_UNITS => "UNSUPPORTED_UNITS",
-            TOO_MANY => "TOO_MANY",
-            BAD_INDEX => "BAD_INDEX",
-            BAD_RANGE => "BAD_RANGE",
-            BAD_VALUE => "BAD_VALUE",
-            LENGTH_MISMATCH => "LENGTH_MISMATCH",
-            TRAILING_BYTES => "TRAILING_BYTES",
-            SENSOR_CHANNEL => "SENSOR_CHANNEL",
-            ZERO_MODEL_VERSION => "ZERO_MODEL_VERSION",
-            MAX_CORRECTION => "MAX_CORRECTION",
-            MAX_RATE => "MAX_RATE",
-            TABLE_SUM_TOO_LARGE => "TABLE_SUM_TOO_LARGE",
-            NOT_NEWER => "NOT_NEWER",
-            SETTINGS_NOT_STORED => "SETTINGS_NOT_STORED",
-            COMMIT_IN_PROGRESS => "COMMIT_IN_PROGRESS",
-            UNKNOWN_SECTION => "UNKNOWN_SECTION",
-            SECTION_LENGTH => "SECTION_LENGTH",
-            DUPLICATE_SECTION => "DUPLICATE_SECTION",
-            FALLBACK_USES_EXCLUDED => "FALLBACK_USES_EXCLUDED",
-            REFERENCE_PENDING => "REFERENCE_PENDING",
-            SENSOR_ROM => "SENSOR_ROM",
-            DUPLICATE_SENSOR_ROM => "DUPLICATE_SENSOR_ROM",
-            VOLUMETRIC_RANGE => "VOLUMETRIC_RANGE",
-            VOLUMETRIC_TEMPERATURE => "VOLUMETRIC_TEMPERATURE",
-            VOLUMETRIC_MAX_CORRECTION => "VOLUMETRIC_MAX_CORRECTION",
-            _ => "unknown",
-        }
-    }
-
-    /// The result code of an image refusal.
-    pub fn of_image_error(e: &ImageError) -> u16 {
-        match e {
-            ImageError::TooShort { .. } => TOO_SHORT,
-            ImageError::TooLong { .. } => TOO_LONG,
-            ImageError::BadMagic => BAD_MAGIC,
-            ImageError::UnsupportedVersion(_) => UNSUPPORTED_FORMAT,
-            ImageError::UnsupportedUnits(_) => UNSUPPORTED_UNITS,
-            ImageError::BadCrc { .. } => BAD_CRC,
-            ImageError::TooMany { .. } => TOO_MANY,
-            ImageError::BadIndex { .. } => BAD_INDEX,
-            ImageError::NonMonotoneRange { .. } => BAD_RANGE,
-            ImageError::BadValue { .. } => BAD_VALUE,
-            ImageError::LengthMismatch => LENGTH_MISMATCH,
-            ImageError::TrailingBytes { .. } => TRAILING_BYTES,
-            ImageError::SensorChannelOutOfRange { .. } => SENSOR_CHANNEL,
-            ImageError::ZeroModelVersion => ZERO_MODEL_VERSION,
-            ImageError::MaxCorrectionOutOfRange { .. } => MAX_CORRECTION,
-            ImageError::MaxRateOutOfRange { .. } => MAX_RATE,
-            ImageError::TableSumTooLarge { .. } => TABLE_SUM_TOO_LARGE,
-            ImageError::UnknownSection { .. } => UNKNOWN_SECTION,
-            ImageError::SectionLength { .. } => SECTION_LENGTH,
-            ImageError::DuplicateSection { .. } => DUPLICATE_SECTION,
-            ImageError::FallbackUsesExcluded { .. } => FALLBACK_USES_EXCLUDED,
-            ImageError::BadSensorRom { .. } => SENSOR_ROM,
-            ImageError::DuplicateSensorRom { .. } => DUPLICATE_SENSOR_ROM,
-            ImageError::VolumetricAxisSlot { .. }
-            | ImageError::VolumetricStroke { .. }
-            | ImageError::VolumetricTool { .. } => VOLUMETRIC_RANGE,
-            ImageError::VolumetricTemperature { .. } => VOLUMETRIC_TEMPERATURE,
-            ImageError::VolumetricMaxCorrection { .. } => VOLUMETRIC_MAX_CORRECTION,
-        }
-    }
-}
-
-/// Baud rates the board accepts (HR_BAUD holds baud / 100).
-pub const BAUD_RATES: [u32; 6] = [9_600, 19_200, 38_400, 57_600, 115_200, 230_400];
+use thermocomp_protocol::holding::Command as WireCommand;
+use thermocomp_protocol::holding::*;
 
 /// Why a write was refused (mapped to a Modbus exception by the server).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -425,13 +218,15 @@ impl Holding {
         matches!(a, HR_UNIT | HR_BAUD | HR_STAGED_LEN)
             || (a == HR_COMMAND
                 && matches!(
-                    v,
-                    CMD_COMMIT_MODEL
-                        | CMD_ROLLBACK_MODEL
-                        | CMD_CLEAR_STAGING
-                        | CMD_RESTORE_DEFAULTS
-                        | CMD_KEEP_REFERENCE
-                        | CMD_FORGET_REFERENCE
+                    WireCommand::from_u16(v),
+                    Some(
+                        WireCommand::CommitModel
+                            | WireCommand::RollbackModel
+                            | WireCommand::ClearStaging
+                            | WireCommand::RestoreDefaults
+                            | WireCommand::KeepReference
+                            | WireCommand::ForgetReference
+                    )
                 ))
             || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
@@ -462,20 +257,8 @@ impl Holding {
             // A wrong key is refused, not echoed: the master must see that the
             // board stayed locked.
             HR_UNLOCK => v == UNLOCK_CODE,
-            HR_COMMAND => {
-                matches!(
-                    v,
-                    CMD_COMMIT_MODEL
-                        | CMD_REREFERENCE
-                        | CMD_CLEAR_STAGING
-                        | CMD_LOCK
-                        | CMD_ROLLBACK_MODEL
-                        | CMD_CLEAR_FAULT
-                        | CMD_RESTORE_DEFAULTS
-                        | CMD_KEEP_REFERENCE
-                        | CMD_FORGET_REFERENCE
-                ) || (cfg!(feature = "test-faults") && matches!(v, CMD_TEST_PANIC | CMD_TEST_STALL))
-            }
+            HR_COMMAND => WireCommand::from_u16(v)
+                .is_some_and(|c| !c.test_only() || cfg!(feature = "test-faults")),
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
@@ -541,8 +324,13 @@ impl Holding {
     }
 
     fn command(&mut self, v: u16) -> Result<Command, WriteError> {
-        match v {
-            CMD_COMMIT_MODEL | CMD_ROLLBACK_MODEL => {
+        // check() let only known commands through; anything else locks.
+        let Some(wire) = WireCommand::from_u16(v) else {
+            self.unlocked_until_ms = None;
+            return Ok(Command::None);
+        };
+        match wire {
+            WireCommand::CommitModel | WireCommand::RollbackModel => {
                 let len = usize::from(self.staged_len);
                 if len == 0 || len > MAX_IMAGE_BYTES {
                     self.result = result::BAD_LENGTH;
@@ -557,7 +345,7 @@ impl Holding {
                 };
                 // An older or the same version only on purpose: a stale
                 // upload must not replace a newer model by accident.
-                if v == CMD_COMMIT_MODEL && model.model_version <= self.running_version {
+                if wire == WireCommand::CommitModel && model.model_version <= self.running_version {
                     self.result = result::NOT_NEWER;
                     return Err(WriteError::ModelRefused);
                 }
@@ -565,22 +353,22 @@ impl Holding {
                 self.result = result::OK;
                 Ok(Command::CommitModel { len })
             }
-            CMD_REREFERENCE => Ok(Command::Rereference),
-            CMD_CLEAR_STAGING => {
+            WireCommand::Rereference => Ok(Command::Rereference),
+            WireCommand::ClearStaging => {
                 self.staging.fill(0);
                 self.staged_len = 0;
                 Ok(Command::None)
             }
-            CMD_CLEAR_FAULT => Ok(Command::ClearFault),
-            CMD_RESTORE_DEFAULTS => Ok(Command::RestoreDefaults),
-            CMD_TEST_PANIC => Ok(Command::TestPanic),
-            CMD_TEST_STALL => Ok(Command::TestStall),
-            CMD_KEEP_REFERENCE => Ok(Command::KeepReference),
-            CMD_FORGET_REFERENCE => Ok(Command::ForgetReference),
-            _ => {
+            WireCommand::Lock => {
                 self.unlocked_until_ms = None;
                 Ok(Command::None)
             }
+            WireCommand::ClearFault => Ok(Command::ClearFault),
+            WireCommand::RestoreDefaults => Ok(Command::RestoreDefaults),
+            WireCommand::TestPanic => Ok(Command::TestPanic),
+            WireCommand::TestStall => Ok(Command::TestStall),
+            WireCommand::KeepReference => Ok(Command::KeepReference),
+            WireCommand::ForgetReference => Ok(Command::ForgetReference),
         }
     }
 }

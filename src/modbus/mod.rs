@@ -1,4 +1,4 @@
-//! Modbus RTU server: the register map (documented in README.md), holding
+//! Modbus RTU server: the register map (documented in docs/register-map.md), holding
 //! registers with the unlock rule and the model staging area, and the frame
 //! handler. Framing, CRC-16 and exception replies come from `rmodbus`; this
 //! module decides what each register means.

@@ -45,7 +45,7 @@ pub struct BoardRows {
 }
 
 impl BoardRows {
-    /// What the trace parser (`thermocomp::trace`) makes of the run: decimal
+    /// What the trace parser (`thermocomp_protocol::trace`) makes of the run: decimal
     /// values rounded half away from zero to 1 ms, 1/16 °C and 1 rpm.
     pub fn new(run: &Run) -> Result<BoardRows> {
         let time_ms = run

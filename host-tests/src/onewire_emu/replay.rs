@@ -1,10 +1,10 @@
 //! Replays run CSVs (`shared/formats/run-csv.md`) into the emulated sensors:
 //! temperature column k (in file order) drives device k. Parsing and the
-//! rounding to 1/16 °C are the board's own (`thermocomp::trace`), so the
+//! rounding to 1/16 °C are the board's own (`thermocomp_protocol::trace`), so the
 //! emulator and the bench board quantise identically.
 
 use super::Bus;
-use thermocomp::trace::{TraceHeader, TraceSample};
+use thermocomp_protocol::trace::{TraceHeader, TraceSample};
 
 /// A parsed run: header plus every sample, or the line that failed.
 pub struct Run {
@@ -17,7 +17,7 @@ pub fn parse_run(text: &str) -> Result<Run, String> {
     let mut lines = text
         .lines()
         .enumerate()
-        .filter(|(_, l)| !thermocomp::trace::is_comment_or_blank(l));
+        .filter(|(_, l)| !thermocomp_protocol::trace::is_comment_or_blank(l));
     let (_, head) = lines.next().ok_or("empty run file")?;
     let header = TraceHeader::parse(head).map_err(|e| format!("header: {e:?}"))?;
     let mut samples = Vec::new();

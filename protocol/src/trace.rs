@@ -3,7 +3,7 @@
 //! out what the DS18B20s and the PLC would. Integer-only so the board and the
 //! desktop quantise identically (bit-exact comparisons downstream).
 
-use crate::process_image::MAX_CHANNELS;
+use crate::MAX_CHANNELS;
 
 /// Longest line the parser accepts (a 20-sensor row is about 250 bytes).
 pub const MAX_LINE: usize = 512;
@@ -112,8 +112,10 @@ pub fn is_comment_or_blank(line: &str) -> bool {
 
 /// `T_<name>` or `T<digits>`.
 pub fn is_temperature_column(name: &str) -> bool {
-    let b = name.as_bytes();
-    name.starts_with("T_") || (b.len() > 1 && b[0] == b'T' && b[1..].iter().all(u8::is_ascii_digit))
+    name.starts_with("T_")
+        || name
+            .strip_prefix('T')
+            .is_some_and(|n| !n.is_empty() && n.bytes().all(|c| c.is_ascii_digit()))
 }
 
 /// One sample as the board's inputs see it.
@@ -142,13 +144,19 @@ impl TraceSample {
                 continue; // counted, rejected below
             }
             let field = field.trim();
-            let col = i as u8; // i < columns <= MAX_COLUMNS < 256
+            // i < columns <= MAX_COLUMNS < 256: never the error.
+            let col = u8::try_from(i).map_err(|_| TraceError::TooManyColumns)?;
             if col == header.time_column {
                 let ms = decimal_scaled(field, 1000, col)?.ok_or(TraceError::MissingTime)?;
                 sample.time_ms = u64::try_from(ms).map_err(|_| TraceError::OutOfRange(col))?;
                 time_seen = true;
-            } else if let Some(ch) = header.temperature_columns.iter().position(|&c| c == col) {
-                sample.temperatures[ch] = match decimal_scaled(field, 16, col)? {
+            } else if let Some(slot) = header
+                .temperature_columns
+                .iter()
+                .position(|&c| c == col)
+                .and_then(|ch| sample.temperatures.get_mut(ch))
+            {
+                *slot = match decimal_scaled(field, 16, col)? {
                     Some(v) => Some(i32::try_from(v).map_err(|_| TraceError::OutOfRange(col))?),
                     None => None,
                 };
@@ -179,10 +187,12 @@ pub fn decimal_scaled(field: &str, scale: i64, col: u8) -> Result<Option<i64>, T
     }
     let bad = TraceError::BadNumber(col);
     let big = TraceError::OutOfRange(col);
-    let (neg, digits) = match field.as_bytes()[0] {
-        b'-' => (true, &field[1..]),
-        b'+' => (false, &field[1..]),
-        _ => (false, field),
+    let (neg, digits) = if let Some(d) = field.strip_prefix('-') {
+        (true, d)
+    } else if let Some(d) = field.strip_prefix('+') {
+        (false, d)
+    } else {
+        (false, field)
     };
     let (int_part, frac_part) = match digits.split_once('.') {
         Some((a, b)) => (a, b),
@@ -196,7 +206,7 @@ pub fn decimal_scaled(field: &str, scale: i64, col: u8) -> Result<Option<i64>, T
     }
     // value = mantissa / 10^frac_digits; keep at most 9 fractional digits
     // (beyond that the rounding to 1/16 or 1 ms cannot change).
-    let frac = &frac_part[..frac_part.len().min(9)];
+    let frac = frac_part.get(..9).unwrap_or(frac_part);
     let mut mantissa: i64 = 0;
     for c in int_part.bytes().chain(frac.bytes()) {
         mantissa = mantissa
@@ -204,7 +214,7 @@ pub fn decimal_scaled(field: &str, scale: i64, col: u8) -> Result<Option<i64>, T
             .and_then(|m| m.checked_add(i64::from(c - b'0')))
             .ok_or(big)?;
     }
-    let denom = 10i64.pow(frac.len() as u32);
+    let denom: i64 = frac.bytes().fold(1, |d, _| d * 10);
     let num = mantissa.checked_mul(scale).ok_or(big)?;
     // Round half away from zero on the magnitude, then apply the sign.
     let rounded = num.checked_add(denom / 2).ok_or(big)? / denom;
@@ -212,6 +222,7 @@ pub fn decimal_scaled(field: &str, scale: i64, col: u8) -> Result<Option<i64>, T
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

@@ -1,10 +1,5 @@
-//! The process image: the one snapshot of everything the board knows, written
-//! by acquisition and compensation, read by the Modbus server. Kept as plain
-//! data so a reader copies it out under a short critical section and so always
-//! sees a consistent set (one sequence number for the whole block).
-
-/// Most temperature channels on one board (seed 000 uses 20 DS18B20 sensors).
-pub const MAX_CHANNELS: usize = 20;
+//! State codes as the registers carry them: per temperature channel (input
+//! registers 130–149) and of the probe (input register 22).
 
 /// Why a channel's value can or cannot be used. A named state per channel, not
 /// a number: the register map exposes [`ChannelState::code`], the logs the name.
@@ -46,7 +41,7 @@ pub enum ChannelState {
 }
 
 impl ChannelState {
-    /// Stable numeric code for the register map (documented in README.md).
+    /// Stable numeric code for the register map (documented in docs/register-map.md).
     pub const fn code(self) -> u16 {
         match self {
             ChannelState::Unused => 0,
@@ -71,5 +66,39 @@ impl ChannelState {
             self,
             ChannelState::Unused | ChannelState::Pending | ChannelState::Ok
         )
+    }
+}
+
+/// The probe's state, a named value like the temperature channels'.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum ProbeState {
+    /// Reading good.
+    Ok,
+    /// At least one sample at the ADC's rail: target out of the probe's
+    /// range or probe disconnected.
+    Saturated,
+    /// Calibrated value outside the configured measuring range.
+    OutOfRange,
+    /// Calibrated value does not fit i32 (bad calibration).
+    CalibrationOverflow,
+    /// Oversample count outside 1..=MAX_OVERSAMPLE.
+    BadConfig,
+    /// The ADC failed.
+    AdcError,
+}
+
+impl ProbeState {
+    /// Stable code for the register map.
+    pub const fn code(self) -> u16 {
+        match self {
+            ProbeState::Ok => 2,
+            ProbeState::Saturated => 11,
+            ProbeState::OutOfRange => 8,
+            ProbeState::CalibrationOverflow => 12,
+            ProbeState::BadConfig => 13,
+            ProbeState::AdcError => 14,
+        }
     }
 }

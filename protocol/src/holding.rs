@@ -1,0 +1,289 @@
+//! Holding registers (FC03 read, FC06/FC16 write): what the PLC writes
+//! (spindle speed, axis positions), configuration and limits behind the
+//! unlock code, commands, and the model staging area.
+//!
+//! Commands and result codes are enums ([`Command`], [`ResultCode`]); the
+//! register holds their number. `CMD_*` and [`result`]'s constants are the
+//! same numbers as plain register words, for code that writes or matches
+//! raw words (a master's requests, tests).
+
+use thermocomp_core::limits::MAX_IMAGE_BYTES;
+use thermocomp_core::ImageError;
+
+pub const HR_UNLOCK: u16 = 0;
+pub const HR_COMMAND: u16 = 1;
+pub const HR_RESULT: u16 = 2;
+pub const HR_UNIT: u16 = 3;
+pub const HR_BAUD: u16 = 4;
+pub const HR_SPINDLE: u16 = 5;
+/// Axis positions, int32 µm (or 0.001°), high word first, 2 registers each.
+pub const HR_POSITIONS: u16 = 6;
+/// Per-direction clamp override, 0.1 µm (0xFFFF: none, the image's limit).
+pub const HR_CLAMP: u16 = 20;
+/// Per-direction rate-limit override, 0.1 µm/s (0xFFFF: none).
+pub const HR_RATE: u16 = 26;
+/// Length in bytes of the staged model image.
+pub const HR_STAGED_LEN: u16 = 32;
+/// Tool length for the volumetric correction, int32 µm, high word first
+/// (written by the PLC like the positions; 36–39 reserved).
+pub const HR_TOOL_LENGTH: u16 = 34;
+/// Last register of the plain block (33 and 36–39 reserved, read 0).
+pub const HR_LAST_PLAIN: u16 = 39;
+/// Model staging area: 2 bytes per register (first byte in the high half).
+pub const HR_STAGING: u16 = 1000;
+// The staging area must fit the address space above HR_STAGING.
+const _: () = assert!(MAX_IMAGE_BYTES / 2 <= (u16::MAX - HR_STAGING) as usize);
+#[allow(clippy::cast_possible_truncation)] // checked by the assertion above
+pub const STAGING_REGS: u16 = (MAX_IMAGE_BYTES / 2) as u16;
+
+/// Write this to HR_UNLOCK to allow configuration and model writes for 60 s.
+pub const UNLOCK_CODE: u16 = 0xA5C3;
+pub const UNLOCK_MS: u64 = 60_000;
+
+/// Baud rates the board accepts (HR_BAUD holds baud / 100).
+pub const BAUD_RATES: [u32; 6] = [9_600, 19_200, 38_400, 57_600, 115_200, 230_400];
+
+/// A `#[repr(u16)]` enum of wire codes, its conversions, and each code as
+/// a plain `u16` constant (one list, so the two cannot drift apart).
+macro_rules! wire_codes {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $( $(#[$vmeta:meta])* $variant:ident = $code:literal => $konst:ident, )*
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        #[repr(u16)]
+        pub enum $name {
+            $( $(#[$vmeta])* $variant = $code, )*
+        }
+
+        impl $name {
+            /// The number the register holds.
+            pub const fn code(self) -> u16 {
+                self as u16
+            }
+
+            /// The code with this number, `None` for a number the map does not define.
+            pub const fn from_u16(code: u16) -> Option<Self> {
+                match code {
+                    $( $code => Some($name::$variant), )*
+                    _ => None,
+                }
+            }
+
+            /// The code's name as docs/register-map.md spells it.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $( $name::$variant => stringify!($konst), )*
+                }
+            }
+        }
+
+        $( $(#[$vmeta])* pub const $konst: u16 = $code; )*
+    };
+}
+
+wire_codes! {
+    /// Commands (written to HR_COMMAND, alone: FC06 or a one-register FC16).
+    pub enum Command {
+        CommitModel = 1 => CMD_COMMIT_MODEL,
+        Rereference = 2 => CMD_REREFERENCE,
+        ClearStaging = 3 => CMD_CLEAR_STAGING,
+        Lock = 4 => CMD_LOCK,
+        /// Commit the staged model even when its version is not newer than the
+        /// running one (going back to an older model on purpose); every other check
+        /// of [`CMD_COMMIT_MODEL`] still applies.
+        RollbackModel = 5 => CMD_ROLLBACK_MODEL,
+        /// Forget the fault record (input registers 160–168, status bit 9).
+        ClearFault = 6 => CMD_CLEAR_FAULT,
+        /// Restore the default settings (unit 1, 115200 baud, no clamp or rate
+        /// override, no fixed reference) and store them; link changes apply after the reply.
+        RestoreDefaults = 7 => CMD_RESTORE_DEFAULTS,
+        /// Test builds only (feature `test-faults`, the QEMU bench board): panic
+        /// after the reply, to show the fault path end to end.
+        TestPanic = 8 => CMD_TEST_PANIC,
+        /// Test builds only (feature `test-faults`): the measurement loop stops
+        /// making progress, so the watchdog must trip.
+        TestStall = 9 => CMD_TEST_STALL,
+        /// Keep a reference sample across reboots (a machine with a fixed
+        /// reference): the next cycle at which every model sensor reads fresh is
+        /// the new reference sample (per channel), used from then on and at every
+        /// boot, and stored with the settings (HR_RESULT 50, then 23, then 0 or 22).
+        /// While a reference is kept (or the image has a fixed reference),
+        /// [`CMD_REREFERENCE`] does the same.
+        KeepReference = 10 => CMD_KEEP_REFERENCE,
+        /// Forget the kept reference (stored); the reference in use stays until
+        /// the next boot or command 2.
+        ForgetReference = 11 => CMD_FORGET_REFERENCE,
+    }
+}
+
+impl Command {
+    /// Commands only a `test-faults` build accepts.
+    pub const fn test_only(self) -> bool {
+        matches!(self, Command::TestPanic | Command::TestStall)
+    }
+}
+
+pub use result::ResultCode;
+
+/// Command results (HR_RESULT): one code per reason a commit is refused.
+pub mod result {
+    use super::ImageError;
+
+    wire_codes! {
+        /// What HR_RESULT says about the last command or commit.
+        pub enum ResultCode {
+            Ok = 0 => OK,
+            None = 1 => NONE,
+            /// Staged length outside 1..=MAX_IMAGE_BYTES.
+            BadLength = 2 => BAD_LENGTH,
+            /// The image's CRC-32 does not match (corrupted in transfer).
+            BadCrc = 3 => BAD_CRC,
+            /// Writing the model to flash failed; the previous model still serves.
+            StoreFailed = 4 => STORE_FAILED,
+            /// Shorter than its header or than its own total length.
+            TooShort = 5 => TOO_SHORT,
+            /// Total length above the staging area.
+            TooLong = 6 => TOO_LONG,
+            /// Not a model image (magic).
+            BadMagic = 7 => BAD_MAGIC,
+            /// Image format version this firmware does not read.
+            UnsupportedFormat = 8 => UNSUPPORTED_FORMAT,
+            /// Units code this firmware does not read.
+            UnsupportedUnits = 9 => UNSUPPORTED_UNITS,
+            /// A count above its fixed maximum (sensors, inputs, nets, terms …).
+            TooMany = 10 => TOO_MANY,
+            /// A reference to a sensor, input, direction or axis that does not exist.
+            BadIndex = 11 => BAD_INDEX,
+            /// An envelope or axis range whose minimum is not below its maximum.
+            BadRange = 12 => BAD_RANGE,
+            /// Another field outside its domain (flags, step, lag, power …).
+            BadValue = 13 => BAD_VALUE,
+            /// The sections do not fill the image's length exactly.
+            LengthMismatch = 14 => LENGTH_MISMATCH,
+            /// Bytes after the sealed image (staged length longer than the image).
+            TrailingBytes = 15 => TRAILING_BYTES,
+            /// A sensor channel the board does not have.
+            SensorChannel = 16 => SENSOR_CHANNEL,
+            /// Model version 0.
+            ZeroModelVersion = 17 => ZERO_MODEL_VERSION,
+            /// A direction's max correction outside 1..=MAX_CORRECTION.
+            MaxCorrection = 18 => MAX_CORRECTION,
+            /// A direction's max rate outside 1..=MAX_RATE (0 would freeze the correction).
+            MaxRate = 19 => MAX_RATE,
+            /// Table coefficients whose sums could overflow the evaluation.
+            TableSumTooLarge = 20 => TABLE_SUM_TOO_LARGE,
+            /// Version not newer than the running model's (CMD_ROLLBACK_MODEL commits it).
+            NotNewer = 21 => NOT_NEWER,
+            /// A settings change (unit, baud, clamp, rate, command 7) is in force
+            /// but could not be stored in flash: it is lost at the next reboot.
+            SettingsNotStored = 22 => SETTINGS_NOT_STORED,
+            /// A commit (model or settings) is being written to flash in the
+            /// background; poll until another code (0 OK, 4, 22).
+            CommitInProgress = 23 => COMMIT_IN_PROGRESS,
+            /// An image section (format v2) of a kind this firmware does not read.
+            UnknownSection = 30 => UNKNOWN_SECTION,
+            /// An image section whose contents do not match its declared length.
+            SectionLength = 31 => SECTION_LENGTH,
+            /// The same image section kind twice.
+            DuplicateSection = 32 => DUPLICATE_SECTION,
+            /// A fallback model reads a sensor it is meant to do without.
+            FallbackUsesExcluded = 33 => FALLBACK_USES_EXCLUDED,
+            /// Volumetric section: a position slot, stroke or tool-length scale out of range.
+            VolumetricRange = 40 => VOLUMETRIC_RANGE,
+            /// Volumetric section: a sensor's reference or envelope outside −55 … 125 °C.
+            VolumetricTemperature = 41 => VOLUMETRIC_TEMPERATURE,
+            /// Volumetric section: a max correction outside 1..=MAX_CORRECTION.
+            VolumetricMaxCorrection = 42 => VOLUMETRIC_MAX_CORRECTION,
+            /// Command 10 (or 2 with a kept reference) accepted: the reference is
+            /// taken at the next cycle with every model sensor fresh, then stored.
+            ReferencePending = 50 => REFERENCE_PENDING,
+            /// The image names a sensor by a ROM code that fails its CRC-8.
+            SensorRom = 51 => SENSOR_ROM,
+            /// The image names two sensors by the same ROM code.
+            DuplicateSensorRom = 52 => DUPLICATE_SENSOR_ROM,
+        }
+    }
+
+    impl ResultCode {
+        /// The result code of an image refusal.
+        pub fn of_image_error(e: &ImageError) -> ResultCode {
+            match e {
+                ImageError::TooShort { .. } => ResultCode::TooShort,
+                ImageError::TooLong { .. } => ResultCode::TooLong,
+                ImageError::BadMagic => ResultCode::BadMagic,
+                ImageError::UnsupportedVersion(_) => ResultCode::UnsupportedFormat,
+                ImageError::UnsupportedUnits(_) => ResultCode::UnsupportedUnits,
+                ImageError::BadCrc { .. } => ResultCode::BadCrc,
+                ImageError::TooMany { .. } => ResultCode::TooMany,
+                ImageError::BadIndex { .. } => ResultCode::BadIndex,
+                ImageError::NonMonotoneRange { .. } => ResultCode::BadRange,
+                ImageError::BadValue { .. } => ResultCode::BadValue,
+                ImageError::LengthMismatch => ResultCode::LengthMismatch,
+                ImageError::TrailingBytes { .. } => ResultCode::TrailingBytes,
+                ImageError::SensorChannelOutOfRange { .. } => ResultCode::SensorChannel,
+                ImageError::ZeroModelVersion => ResultCode::ZeroModelVersion,
+                ImageError::MaxCorrectionOutOfRange { .. } => ResultCode::MaxCorrection,
+                ImageError::MaxRateOutOfRange { .. } => ResultCode::MaxRate,
+                ImageError::TableSumTooLarge { .. } => ResultCode::TableSumTooLarge,
+                ImageError::UnknownSection { .. } => ResultCode::UnknownSection,
+                ImageError::SectionLength { .. } => ResultCode::SectionLength,
+                ImageError::DuplicateSection { .. } => ResultCode::DuplicateSection,
+                ImageError::FallbackUsesExcluded { .. } => ResultCode::FallbackUsesExcluded,
+                ImageError::BadSensorRom { .. } => ResultCode::SensorRom,
+                ImageError::DuplicateSensorRom { .. } => ResultCode::DuplicateSensorRom,
+                ImageError::VolumetricAxisSlot { .. }
+                | ImageError::VolumetricStroke { .. }
+                | ImageError::VolumetricTool { .. } => ResultCode::VolumetricRange,
+                ImageError::VolumetricTemperature { .. } => ResultCode::VolumetricTemperature,
+                ImageError::VolumetricMaxCorrection { .. } => ResultCode::VolumetricMaxCorrection,
+            }
+        }
+    }
+
+    /// The name of a result code (as docs/register-map.md spells it), for messages;
+    /// "unknown" for a number the map does not define.
+    pub fn name(code: u16) -> &'static str {
+        ResultCode::from_u16(code).map_or("unknown", ResultCode::name)
+    }
+
+    /// The result code of an image refusal, as the register holds it.
+    pub fn of_image_error(e: &ImageError) -> u16 {
+        ResultCode::of_image_error(e).code()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_round_trip_and_keep_their_numbers() {
+        for v in 0..=u16::from(u8::MAX) {
+            if let Some(c) = Command::from_u16(v) {
+                assert_eq!(c.code(), v);
+            }
+            if let Some(r) = ResultCode::from_u16(v) {
+                assert_eq!(r.code(), v);
+                assert_eq!(result::name(v), r.name());
+            }
+        }
+        assert_eq!(Command::from_u16(0), None);
+        assert_eq!(Command::from_u16(12), None);
+        assert_eq!(Command::KeepReference.code(), CMD_KEEP_REFERENCE);
+        assert_eq!(ResultCode::CommitInProgress.code(), 23);
+        assert_eq!(
+            ResultCode::DuplicateSensorRom.name(),
+            "DUPLICATE_SENSOR_ROM"
+        );
+        assert_eq!(result::name(24), "unknown");
+        assert_eq!(
+            result::of_image_error(&ImageError::BadMagic),
+            result::BAD_MAGIC
+        );
+    }
+}
