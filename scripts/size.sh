@@ -1,14 +1,46 @@
 #!/usr/bin/env bash
-# Flash and RAM use of each firmware image (release builds must exist).
+# Flash, RAM and stack use of each firmware image (release builds must exist).
 # Usage: scripts/size.sh [--json]
 # RAM is .data + .bss (static use); the stack grows down from the top of RAM
-# and is not counted here.
+# into the rest. Stack is the high-water mark of the painted stack (each
+# board paints it before RAM init, boards/*/src/stack.rs): measured here on
+# the QEMU board in its serve mode (boot, model programming, the shared
+# measurement/Modbus/watchdog loops over a short trace with a model). The
+# NUCLEO prints its own figure in its defmt log ("stack high-water"); it
+# needs the board, so this script shows the QEMU figure for the shared loop
+# beside it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 need_debian arm-none-eabi-size:binutils-arm-none-eabi >&2
 dir="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release"
 json=0; [ "${1:-}" = "--json" ] && json=1
+
+# Stack high-water of the QEMU board's serve mode, in bytes ("" if QEMU is missing).
+qemu_stack() {
+  command -v qemu-system-arm >/dev/null || return 0
+  local tmp pid n=""
+  tmp=$(mktemp -d)
+  head -n 40 demo/trace.csv >"$tmp/trace.csv"
+  qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic \
+    -semihosting-config enable=on,target=native -serial null -monitor none \
+    -icount shift=0,sleep=off -kernel "$dir/board-qemu-mps2" \
+    -append "serve $tmp/trace.csv fuzz/seeds/model_image/fl-thermal.img 10" \
+    >"$tmp/log" 2>&1 &
+  pid=$!
+  # The serve mode prints the figure at the trace's end, then keeps serving.
+  for _ in $(seq 1 300); do
+    n=$(sed -n 's/^stack high-water: \([0-9]*\) B$/\1/p' "$tmp/log" | head -n 1)
+    [ -n "$n" ] && break
+    kill -0 "$pid" 2>/dev/null || break
+    sleep 0.1
+  done
+  kill "$pid" 2>/dev/null || true
+  wait "$pid" 2>/dev/null || true
+  rm -rf "$tmp"
+  echo "$n"
+}
+[ -f "$dir/board-qemu-mps2" ] && qemu_stack_bytes=$(qemu_stack) || qemu_stack_bytes=""
 # board, flash budget KiB, RAM budget KiB (from each board-memory.x)
 boards=("board-nucleo-f446re 256 128" "board-qemu-mps2 3584 4096")
 out="{"; first=1
@@ -18,13 +50,22 @@ for entry in "${boards[@]}"; do
   [ -f "$elf" ] || die "$elf not built: cargo build -p $name --release --target $FW_TARGET"
   read -r text data bss _ < <(arm-none-eabi-size "$elf" | tail -n 1)
   flash=$((text + data)); ram=$((data + bss))
+  if [ "$name" = board-qemu-mps2 ]; then
+    stack="${qemu_stack_bytes:-null}"
+    stack_text="${qemu_stack_bytes:-n/a (no qemu-system-arm)}${qemu_stack_bytes:+ B (serve mode, measured)}"
+    note="measured under QEMU: painted stack, serve mode"
+  else
+    stack=null
+    stack_text="needs the board (defmt log); shared loop on QEMU: ${qemu_stack_bytes:-n/a}${qemu_stack_bytes:+ B}"
+    note="needs the board: the defmt log prints the painted stack's high-water; qemu_stack_bytes is the shared loop measured on the QEMU board"
+  fi
   if [ $json -eq 1 ]; then
     [ $first -eq 1 ] || out+=","
-    out+="\"$name\":{\"flash_bytes\":$flash,\"ram_bytes\":$ram,\"flash_budget_bytes\":$((flash_kib*1024)),\"ram_budget_bytes\":$((ram_kib*1024))}"
+    out+="\"$name\":{\"flash_bytes\":$flash,\"ram_bytes\":$ram,\"flash_budget_bytes\":$((flash_kib*1024)),\"ram_budget_bytes\":$((ram_kib*1024)),\"stack_high_water_bytes\":$stack,\"qemu_stack_bytes\":${qemu_stack_bytes:-null},\"stack_note\":\"$note\"}"
   else
-    printf '%-22s flash %7d B of %4d KiB (%5.1f %%)   RAM %6d B of %4d KiB (%5.1f %%)\n' \
+    printf '%-22s flash %7d B of %4d KiB (%5.1f %%)   RAM %6d B of %4d KiB (%5.1f %%)   stack %s\n' \
       "$name" "$flash" "$flash_kib" "$(awk "BEGIN{print 100*$flash/($flash_kib*1024)}")" \
-      "$ram" "$ram_kib" "$(awk "BEGIN{print 100*$ram/($ram_kib*1024)}")"
+      "$ram" "$ram_kib" "$(awk "BEGIN{print 100*$ram/($ram_kib*1024)}")" "$stack_text"
   fi
   first=0
 done
