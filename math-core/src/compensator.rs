@@ -234,13 +234,14 @@ impl Compensator {
         let reference_ms = self.features.reference_ms().unwrap_or(input.now_ms);
         let positions = input.positions;
         let mut eval = model.evaluate(features, positions);
-        if out.active.iter().take(n_dir).any(|&a| a != 0) {
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "n_dir <= MAX_DIRECTIONS = active.len()"
+        )]
+        let active = &out.active[..n_dir];
+        if active.iter().any(|&a| a != 0) {
             let n = model.normalise(features, positions);
-            for (c, &a) in eval
-                .corrections
-                .iter_mut()
-                .zip(out.active.iter().take(n_dir))
-            {
+            for (c, &a) in eval.corrections.iter_mut().zip(active) {
                 match a {
                     0 => {}
                     ACTIVE_NONE => {
@@ -304,7 +305,12 @@ impl Compensator {
         if out.status & status::SENSOR_FAULT == 0 {
             out.status |= status::VALID;
         }
-        for a in out.active.iter_mut().skip(n_dir) {
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "n_dir <= MAX_DIRECTIONS = active.len()"
+        )]
+        let unused = &mut out.active[n_dir..];
+        for a in unused {
             *a = ACTIVE_NONE;
         }
         out

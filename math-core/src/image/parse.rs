@@ -341,16 +341,10 @@ fn read_nets(r: &mut Reader<'_>, m: &mut Model, n: u8) -> Result<(), ImageError>
         }
         // n_in ≤ MAX_NET_INPUTS and h ≤ MAX_HIDDEN (checked above): `take` takes exactly.
         for row in net.w1.iter_mut().take(h) {
-            for w in row.iter_mut().take(n_in) {
-                *w = r.i32()?;
-            }
+            r.i32s(row.iter_mut().take(n_in))?;
         }
-        for w in net.b1.iter_mut().take(h) {
-            *w = r.i32()?;
-        }
-        for w in net.w2.iter_mut().take(h) {
-            *w = r.i32()?;
-        }
+        r.i32s(net.b1.iter_mut().take(h))?;
+        r.i32s(net.w2.iter_mut().take(h))?;
         net.b2 = r.i32()?;
         push(&mut m.nets, net)?;
     }

@@ -61,6 +61,20 @@ impl<'a> Reader<'a> {
         Ok(i32::from_le_bytes(self.array()?))
     }
 
+    /// Fill `dst` with i32s. Out of line: inlined, the weight loops (bounded
+    /// by the array sizes) are unrolled into the caller, and parsing is not
+    /// hot while flash is scarce.
+    #[inline(never)]
+    pub(super) fn i32s<'d>(
+        &mut self,
+        dst: impl Iterator<Item = &'d mut i32>,
+    ) -> Result<(), ImageError> {
+        for v in dst {
+            *v = self.i32()?;
+        }
+        Ok(())
+    }
+
     /// A one-byte count, refused above `max`.
     pub(super) fn count(&mut self, what: &'static str, max: usize) -> Result<u8, ImageError> {
         let n = self.u8()?;

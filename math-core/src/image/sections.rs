@@ -98,22 +98,29 @@ fn read_vol_sensors(
 ) -> Result<Vec<VolSensor, MAX_VOL_SENSORS>, ImageError> {
     let mut sensors = Vec::new();
     for _ in 0..n {
-        let rom = r.array::<8>()?;
-        let [channel, pad] = r.array()?;
-        let ref_temp = r.i16()?;
-        let min = r.i16()?;
-        let max = r.i16()?;
-        if pad != 0 {
-            return Err(VOL_PADDING);
-        }
-        let sensor = SensorRef {
-            rom,
-            channel,
-            ref_temp: i32::from(ref_temp),
-        };
-        push(&mut sensors, VolSensor { sensor, min, max })?;
+        push(&mut sensors, read_vol_sensor(r)?)?;
     }
     Ok(sensors)
+}
+
+/// One volumetric sensor record. Out of line, as the loop over at most
+/// four of them would otherwise be unrolled (flash is scarce, parsing not hot).
+#[inline(never)]
+fn read_vol_sensor(r: &mut Reader<'_>) -> Result<VolSensor, ImageError> {
+    let rom = r.array::<8>()?;
+    let [channel, pad] = r.array()?;
+    let ref_temp = r.i16()?;
+    let min = r.i16()?;
+    let max = r.i16()?;
+    if pad != 0 {
+        return Err(VOL_PADDING);
+    }
+    let sensor = SensorRef {
+        rom,
+        channel,
+        ref_temp: i32::from(ref_temp),
+    };
+    Ok(VolSensor { sensor, min, max })
 }
 
 /// Volumetric terms (16 B): packed exponents, sensor, padding, x, y, z.

@@ -23,6 +23,8 @@ pub(super) struct TermRule {
 }
 
 /// One term: coef i32, input u8, input power u8, position power u8, pad.
+/// Out of line: one copy for tables and fallbacks.
+#[inline(never)]
 fn read_term(r: &mut Reader<'_>) -> Result<Term, ImageError> {
     let coef = r.i32()?;
     let [input, input_power, position_power, _pad] = r.array()?;
