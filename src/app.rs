@@ -38,9 +38,6 @@ const _: () = assert!(
 
 /// PLC registers older than this make the inputs "stale".
 pub const PLC_TIMEOUT_MS: u64 = 10_000;
-/// Unit address and baud rate of a board with default settings.
-pub const DEFAULT_UNIT: u8 = 1;
-pub const DEFAULT_BAUD: u32 = 115_200;
 
 pub struct App<F: NorFlash> {
     pub server: Server,

@@ -14,6 +14,9 @@ use thermocomp_protocol::MAX_CHANNELS;
 /// Encoded size (bytes): version, unit, baud/100, clamp × 6, rate × 6.
 pub const ENCODED_LEN: usize = 1 + 1 + 2 + 2 * MAX_DIRECTIONS * 2;
 const VERSION: u8 = 1;
+/// Unit address and baud rate of a board with default settings.
+pub const DEFAULT_UNIT: u8 = 1;
+pub const DEFAULT_BAUD: u32 = 115_200;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -31,8 +34,8 @@ pub struct Settings {
 impl Default for Settings {
     fn default() -> Self {
         Settings {
-            unit: crate::app::DEFAULT_UNIT,
-            baud: crate::app::DEFAULT_BAUD,
+            unit: DEFAULT_UNIT,
+            baud: DEFAULT_BAUD,
             clamp: [u16::MAX; MAX_DIRECTIONS],
             rate: [u16::MAX; MAX_DIRECTIONS],
         }
