@@ -7,7 +7,7 @@ use std::time::Duration;
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use host_tests::qemu::{free_tcp_port, BenchBoard};
 use std::sync::{Arc, Mutex};
-use tcomp::board_link::{record, upload, BoardLink, Commit};
+use tcomp_link::board_link::{record, upload, BoardLink, Commit};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
 use thermocomp::modbus::{Server, Snapshot};
@@ -237,7 +237,7 @@ fn upload_and_record_against_the_bench_board() {
     for (v, p) in [(1u32, &v1), (2, &v2)] {
         let mut fm = thermocomp_core::float::demo_model(u64::from(v));
         fm.model_version = v;
-        tcomp::export::export(&fm, p).unwrap();
+        tcomp_model::export::export(&fm, p).unwrap();
     }
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
@@ -257,7 +257,7 @@ fn upload_and_record_against_the_bench_board() {
     let out = dir.join("recorded.csv");
     record(&mut link, &out, Duration::from_millis(300), 5, false).unwrap();
     record(&mut link, &out, Duration::from_millis(300), 2, true).unwrap();
-    let run = tcomp::runcsv::Run::read(&out).unwrap();
+    let run = tcomp_data::runcsv::Run::read(&out).unwrap();
     assert_eq!(run.rows(), 7, "5 + 2 appended");
     assert_eq!(run.meta("board_model_version"), Some("2"));
     assert!(run.col("T06").unwrap().iter().all(|v| v.is_some()));

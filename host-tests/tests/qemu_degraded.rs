@@ -86,7 +86,7 @@ fn a_sensor_lost_mid_run_is_degraded_over_modbus_and_the_correction_continues() 
             terms: vec![term(-6.0, Some(1)), term(1.0, None)],
         },
     ];
-    tcomp::export::export(&fm, &m).unwrap();
+    tcomp_model::export::export(&fm, &m).unwrap();
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
     let board = BenchBoard::start(

@@ -9,7 +9,7 @@
 use std::time::{Duration, Instant};
 
 use host_tests::qemu::{free_tcp_port, BenchBoard};
-use tcomp::board_link::{record, upload, BoardLink, Commit};
+use tcomp_link::board_link::{record, upload, BoardLink, Commit};
 use thermocomp_protocol::registers::*;
 
 const BOOT: Duration = Duration::from_secs(60);
@@ -43,7 +43,7 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     std::fs::write(&trace, csv).unwrap();
     let mut fm = thermocomp_core::float::demo_model(1);
     fm.model_version = 1;
-    tcomp::export::export(&fm, &v1).unwrap();
+    tcomp_model::export::export(&fm, &v1).unwrap();
     // Sensor 2 is swapped for a new one at row 300 (15 s of serving at 50 ms a row).
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
@@ -66,7 +66,7 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     // The calibration run: record names each column by its sensor's ROM code.
     let run_path = dir.join("recorded.csv");
     record(&mut link, &run_path, Duration::from_millis(200), 2, false).unwrap();
-    let run = tcomp::runcsv::Run::read(&run_path).unwrap();
+    let run = tcomp_data::runcsv::Run::read(&run_path).unwrap();
     let roms = run.sensor_roms().unwrap();
     assert_eq!(roms.len(), 6, "{:?}\n{}", run.meta, board.log());
     let columns: Vec<String> = run
@@ -78,10 +78,10 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     let mut fm = thermocomp_core::float::demo_model(2);
     fm.model_version = 2;
     assert_eq!(
-        tcomp::export::name_sensors_by_rom(&mut fm, &columns, &roms).unwrap(),
+        tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &roms).unwrap(),
         6
     );
-    let summary = tcomp::export::export(&fm, &v2).unwrap();
+    let summary = tcomp_model::export::export(&fm, &v2).unwrap();
     assert_eq!(summary.sensors_by_rom, 6);
     let s = upload(&mut link, &std::fs::read(&v2).unwrap(), Commit::NewerOnly).unwrap();
     assert_eq!(s.model_version, 2);
@@ -185,7 +185,7 @@ fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
     std::fs::write(&trace, csv).unwrap();
     let mut fm = thermocomp_core::float::demo_model(1);
     fm.model_version = 1;
-    tcomp::export::export(&fm, &img).unwrap();
+    tcomp_model::export::export(&fm, &img).unwrap();
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
     let board = BenchBoard::start(

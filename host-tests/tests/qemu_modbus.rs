@@ -39,7 +39,7 @@ fn scratch(name: &str) -> std::path::PathBuf {
 fn demo_image(seed: u64, version: u32, path: &std::path::Path) -> Vec<u8> {
     let mut fm = thermocomp_core::float::demo_model(seed);
     fm.model_version = version;
-    tcomp::export::export(&fm, path).unwrap();
+    tcomp_model::export::export(&fm, path).unwrap();
     std::fs::read(path).unwrap()
 }
 
@@ -95,7 +95,7 @@ fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
     // sees many distinct samples; the test stops as soon as it has 20.
     trace(&t, 1500);
     demo_image(1, 1, &m);
-    let expected = tcomp::replay::replay_files(&t, &m).unwrap();
+    let expected = tcomp_model::replay::replay_files(&t, &m).unwrap();
     let port = free_tcp_port();
     let board = boot(port, &t, &m, 30);
     let mut compared = std::collections::BTreeSet::new();

@@ -51,7 +51,7 @@ fn files(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     std::fs::write(&t, csv).unwrap();
     let mut fm = thermocomp_core::float::demo_model(1);
     fm.model_version = 1;
-    tcomp::export::export(&fm, &m).unwrap();
+    tcomp_model::export::export(&fm, &m).unwrap();
     (t, m)
 }
 
@@ -242,7 +242,7 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
     let v2 = dir.join("v2.img");
     let mut fm = thermocomp_core::float::demo_model(2);
     fm.model_version = 2;
-    tcomp::export::export(&fm, &v2).unwrap();
+    tcomp_model::export::export(&fm, &v2).unwrap();
     let p = port.to_string();
     let r = python(&[
         "upload",

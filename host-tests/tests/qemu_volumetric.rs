@@ -5,15 +5,15 @@
 //! trace is replayed on the emulated DS18B20s; pymodbus writes positions
 //! and tool lengths and reads input registers 180–199. Every served
 //! correction equals the desktop's prediction (the core's evaluation, via
-//! `tcomp::geometry::board::predict`) for the temperatures the board
+//! `tcomp_geometry::board::predict`) for the temperatures the board
 //! reports it used, bit for bit, at several positions and temperatures.
 use std::collections::BTreeSet;
 use std::process::Command;
 
 use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
 use serde_json::Value;
-use tcomp::geometry::board::{predict, quantisation_report, quantize, BoardOptions};
-use tcomp::geometry::volumetric::{VolTerm, VolumetricPoly};
+use tcomp_geometry::board::{predict, quantisation_report, quantize, BoardOptions};
+use tcomp_geometry::volumetric::{VolTerm, VolumetricPoly};
 use thermocomp_core::volumetric::vstatus;
 
 fn master(args: &[&str]) -> Value {
@@ -90,7 +90,7 @@ fn the_served_volumetric_correction_equals_the_desktop_bit_for_bit() {
     let v = quantize(&p, &opts).unwrap();
     let report = quantisation_report(&p, &v, &opts);
     assert!(report.max_error_um <= report.bound_um, "{report:?}");
-    let summary = tcomp::export::export_with(
+    let summary = tcomp_model::export::export_with(
         &thermocomp_core::float::demo_model(1),
         Some((v, report)),
         &m,

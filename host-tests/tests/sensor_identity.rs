@@ -69,7 +69,7 @@ fn config() -> AcquisitionConfig {
 
 /// The run a calibration recorded: columns T01…T06, sensor k on column
 /// T0(k+1), each named by its ROM code as `tcomp record` writes them.
-fn recorded_run(bus: &Bus) -> tcomp::runcsv::Run {
+fn recorded_run(bus: &Bus) -> tcomp_data::runcsv::Run {
     let mut csv = String::from("time_s,T01,T02,T03,T04,T05,T06,dx_um\n");
     for i in 0..20 {
         csv += &format!("{}", i * 60);
@@ -82,19 +82,19 @@ fn recorded_run(bus: &Bus) -> tcomp::runcsv::Run {
         }
         csv += ",0\n";
     }
-    let mut run = tcomp::runcsv::Run::from_reader(csv.as_bytes()).unwrap();
+    let mut run = tcomp_data::runcsv::Run::from_reader(csv.as_bytes()).unwrap();
     for k in 0..6 {
         run.set_sensor_rom(&format!("T{:02}", k + 1), &rom_of(bus, k).0);
     }
     // Written and read back: the metadata survives the file.
     let mut text = Vec::new();
     run.write_to(&mut text).unwrap();
-    tcomp::runcsv::Run::from_reader(text.as_slice()).unwrap()
+    tcomp_data::runcsv::Run::from_reader(text.as_slice()).unwrap()
 }
 
 /// The demo model (six sensors, sensor i trained on column i) named by the
 /// run's ROM codes through tcomp's export path; the image bytes.
-fn export_by_rom(run: &tcomp::runcsv::Run) -> Vec<u8> {
+fn export_by_rom(run: &tcomp_data::runcsv::Run) -> Vec<u8> {
     let mut fm = thermocomp_core::float::demo_model(7);
     let columns: Vec<String> = run
         .temperature_columns()
@@ -103,13 +103,13 @@ fn export_by_rom(run: &tcomp::runcsv::Run) -> Vec<u8> {
         .collect();
     let roms = run.sensor_roms().unwrap();
     assert_eq!(
-        tcomp::export::name_sensors_by_rom(&mut fm, &columns, &roms).unwrap(),
+        tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &roms).unwrap(),
         6
     );
     // a directory of its own: the tests of this file run side by side
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("by-rom.img");
-    let summary = tcomp::export::export(&fm, &path).unwrap();
+    let summary = tcomp_model::export::export(&fm, &path).unwrap();
     assert_eq!(summary.sensors_by_rom, 6);
     std::fs::read(&path).unwrap()
 }
@@ -336,14 +336,14 @@ fn export_refuses_a_run_with_rom_codes_for_only_some_sensors() {
         .map(|c| c.to_string())
         .collect();
     let mut fm = thermocomp_core::float::demo_model(7);
-    let e = tcomp::export::name_sensors_by_rom(&mut fm, &columns, &run.sensor_roms().unwrap())
+    let e = tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &run.sensor_roms().unwrap())
         .unwrap_err()
         .to_string();
     assert!(e.contains("not for T04") && !e.contains('\n'), "{e}");
     // None at all: by channel, as before.
     let none = BTreeMap::new();
     assert_eq!(
-        tcomp::export::name_sensors_by_rom(&mut fm, &columns, &none).unwrap(),
+        tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &none).unwrap(),
         0
     );
     assert!(fm.sensors.iter().all(|s| s.rom == [0; 8]));
@@ -401,9 +401,9 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     let dir = std::env::temp_dir().join(format!("thermocomp-rec-rom-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("recorded.csv");
-    let mut link = tcomp::board_link::BoardLink::tcp(&addr, 1).unwrap();
-    tcomp::board_link::record(&mut link, &out, Duration::from_millis(10), 2, false).unwrap();
-    let run = tcomp::runcsv::Run::read(&out).unwrap();
+    let mut link = tcomp_link::board_link::BoardLink::tcp(&addr, 1).unwrap();
+    tcomp_link::board_link::record(&mut link, &out, Duration::from_millis(10), 2, false).unwrap();
+    let run = tcomp_data::runcsv::Run::read(&out).unwrap();
     let roms = run.sensor_roms().unwrap();
     assert_eq!(roms.len(), 6);
     for (c, rom) in map.iter() {
@@ -412,7 +412,7 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     // Kept by the run reader and writer.
     let mut again = Vec::new();
     run.write_to(&mut again).unwrap();
-    let back = tcomp::runcsv::Run::from_reader(again.as_slice()).unwrap();
+    let back = tcomp_data::runcsv::Run::from_reader(again.as_slice()).unwrap();
     assert_eq!(back.sensor_roms().unwrap(), roms);
     // Upload a model named by these ROM codes, one of them on no channel:
     // the upload says which model sensor the board will serve without.
@@ -426,14 +426,14 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     let mut image = vec![0u8; model.encoded_len()];
     model.encode(&mut image).unwrap();
     let s =
-        tcomp::board_link::upload(&mut link, &image, tcomp::board_link::Commit::NewerOnly).unwrap();
+        tcomp_link::board_link::upload(&mut link, &image, tcomp_link::board_link::Commit::NewerOnly).unwrap();
     assert_eq!(s.sensors_not_on_board, vec![4]);
     // A sensor swapped on channel 0 before an append: refused, one line.
     let mut swapped = map;
     swapped.set(0, Some(Ds18b20::rom_for(0x5_1234))).unwrap();
     shared.lock().unwrap().update_channel_map(swapped);
     shared.lock().unwrap().poll_flash();
-    let e = tcomp::board_link::record(&mut link, &out, Duration::from_millis(10), 1, true)
+    let e = tcomp_link::board_link::record(&mut link, &out, Duration::from_millis(10), 1, true)
         .unwrap_err()
         .to_string();
     assert!(
@@ -452,16 +452,16 @@ fn replay_reads_sensors_named_by_rom_from_the_column_the_run_records_them_on() {
     for s in by_channel.sensors.iter_mut() {
         s.rom = [0; 8];
     }
-    let text = |run: &tcomp::runcsv::Run| {
+    let text = |run: &tcomp_data::runcsv::Run| {
         let mut t = Vec::new();
         run.write_to(&mut t).unwrap();
         String::from_utf8(t).unwrap()
     };
-    let outs = |rows: Vec<tcomp::replay::ReplayRow>| -> Vec<StepOutput> {
+    let outs = |rows: Vec<tcomp_model::replay::ReplayRow>| -> Vec<StepOutput> {
         rows.into_iter().map(|r| r.out).collect()
     };
-    let same = outs(tcomp::replay::replay(&text(&run), by_channel.clone()).unwrap());
-    assert!(outs(tcomp::replay::replay(&text(&run), by_rom.clone()).unwrap()) == same);
+    let same = outs(tcomp_model::replay::replay(&text(&run), by_channel.clone()).unwrap());
+    assert!(outs(tcomp_model::replay::replay(&text(&run), by_rom.clone()).unwrap()) == same);
     // The sensors of T01 and T02 recorded the other way round: by ROM the
     // replay follows the sensors, by channel it would not.
     let mut swapped = run.clone();
@@ -473,19 +473,19 @@ fn replay_reads_sensors_named_by_rom_from_the_column_the_run_records_them_on() {
     let (c1, c2) = (run.col_index("T01").unwrap(), run.col_index("T02").unwrap());
     swapped.data[c1] = t2;
     swapped.data[c2] = t1;
-    let by_rom_swapped = outs(tcomp::replay::replay(&text(&swapped), by_rom.clone()).unwrap());
+    let by_rom_swapped = outs(tcomp_model::replay::replay(&text(&swapped), by_rom.clone()).unwrap());
     assert!(
         by_rom_swapped == same,
         "by ROM the replay follows the sensors"
     );
     assert!(
-        outs(tcomp::replay::replay(&text(&swapped), by_channel).unwrap()) != same,
+        outs(tcomp_model::replay::replay(&text(&swapped), by_channel).unwrap()) != same,
         "by channel the replay reads the other sensor"
     );
     // A run recording ROM codes without sensor 3's: sensor 3 is missing.
     let mut partial = run.clone();
     partial.meta.retain(|(k, _)| k != "rom.T04");
-    let rows = outs(tcomp::replay::replay(&text(&partial), by_rom).unwrap());
+    let rows = outs(tcomp_model::replay::replay(&text(&partial), by_rom).unwrap());
     assert!(rows
         .iter()
         .all(|o| o.status & thermocomp_core::compensator::status::SENSOR_FAULT != 0));

@@ -1,0 +1,209 @@
+//! Blind check of `tcomp diagnose`: ≥ 50 generated cases (each effect, pairs,
+//! clean runs) at random strengths and duty cycles; top-1 identification,
+//! held-out gap shrink, false alarms, and the time of a full diagnosis of an
+//! 8 h run sampled at 1 s.
+//!
+//! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR] [--machine FILE]`
+//! (`--open-only`, `--open-machine-only`, `--closed-only`, `--cross-only`:
+//! one column alone)
+//!
+//! The cross-model column runs `diagnose fit` on cases of the first
+//! simulator (`tcomp_thermal::sim`), which the fit mode was never tuned on.
+//!
+//! `--machine FILE`: the machine file of the open-world machine-file column
+//! (default `machines/vertical-mc-truth.toml`, the truth's own numbers;
+//! `machines/vertical-mc-design-error.toml` is the same design off by
+//! ±10–20 %). The column takes the file as exact (as `tcomp diagnose`
+//! does by default); `--calibrate` calibrates its design values on each
+//! case's fit rows first (`tcomp diagnose --calibrate`).
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use tcomp_bench::harness::{
+    run_bench, run_cross_bench, run_open_bench, run_open_machine_bench, BenchConfig,
+};
+use tcomp_thermal::diagnose::{diagnose, Options};
+use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
+
+fn main() -> std::process::ExitCode {
+    tcomp_data::cli_error::run_main(run)
+}
+
+fn run() -> Result<()> {
+    let mut cases = 60usize;
+    let mut seed = 7u64;
+    let mut json = false;
+    let mut verbose = false;
+    let mut open_only = false;
+    let mut machine_only = false;
+    let mut closed_only = false;
+    let mut cross_only = false;
+    let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../machines"));
+    let mut open_machine_file: Option<PathBuf> = None;
+    let mut calibrate = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--cases" => cases = args.next().context("--cases N")?.parse().context("--cases N")?,
+            "--seed" => seed = args.next().context("--seed S")?.parse().context("--seed S")?,
+            "--machines" => dir = PathBuf::from(args.next().context("--machines DIR")?),
+            "--machine" => {
+                open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
+            }
+            "--json" => json = true,
+            "--calibrate" => calibrate = true,
+            "--verbose" => verbose = true,
+            "--open-only" => open_only = true,
+            "--open-machine-only" => machine_only = true,
+            "--closed-only" => closed_only = true,
+            "--cross-only" => cross_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --machines DIR, --machine FILE, --calibrate)"),
+        }
+    }
+    let machines = vec![
+        Machine::load(&dir.join("turning-center-16.toml"))?,
+        Machine::load(&dir.join("five-axis-20.toml"))?,
+    ];
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let open_cfg = BenchConfig {
+        cases,
+        seed,
+        hours: 8.0,
+        sample_period_s: 10.0,
+        threads,
+        verbose,
+        calibrate,
+    };
+    // the closed world searches the simulator it was drawn from: never calibrated
+    let closed_cfg = BenchConfig {
+        calibrate: false,
+        ..open_cfg
+    };
+    if closed_only {
+        let v = run_bench(&machines, &closed_cfg)?;
+        println!("{v}");
+        return Ok(());
+    }
+    if cross_only {
+        // diagnose fit on the first simulator's machines (never tuned on)
+        println!("{}", run_cross_bench(&machines, &open_cfg)?);
+        return Ok(());
+    }
+    if open_only {
+        // the open world alone: `diagnose fit`, no machine-file pass
+        println!("{}", run_open_bench(&open_cfg)?);
+        return Ok(());
+    }
+    let open_machine_path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
+    let truth_machine = Machine::load(&open_machine_path)?;
+    let mut open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
+    open_machine["machine_file"] = serde_json::json!(open_machine_path.display().to_string());
+    if machine_only {
+        println!("{open_machine}");
+        return Ok(());
+    }
+    let open = run_open_bench(&open_cfg)?;
+    let cross = run_cross_bench(&machines, &open_cfg)?;
+    let mut v = run_bench(&machines, &closed_cfg)?;
+    // full diagnosis of one 8 h run sampled at 1 s, all candidates
+    let m = &machines[1];
+    let duty = Duty::load(&PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../duty/production-mixed.toml"
+    )))?;
+    let run = sim_run(
+        m,
+        &duty,
+        &SimOptions {
+            effects: vec![Effect::Ballscrew { k_w: 80.0 }],
+            seed: 5,
+            hours: Some(8.0),
+            sample_period_s: Some(1.0),
+            noise: true,
+        },
+    )?;
+    let t = std::time::Instant::now();
+    let d = diagnose(
+        m,
+        &[("8h-1s".into(), run)],
+        &Options {
+            threads,
+            ..Options::default()
+        },
+    )?;
+    let secs = t.elapsed().as_secs_f64();
+    v["full_diagnosis_8h_1s_seconds"] = serde_json::json!(secs);
+    v["full_diagnosis_8h_1s_top"] = serde_json::json!(d.findings.first().map(|f| f.name.clone()));
+    v["threads"] = serde_json::json!(threads);
+    // closed world (machine file, the simulator the diagnoser searches) and
+    // open world (no machine file, the separate truth model) side by side
+    let pick = |j: &serde_json::Value| {
+        serde_json::json!({
+            "top1_rate": j["top1_rate"],
+            "heldout_gap_shrink_um": j["mean_heldout_gap_shrink_um"],
+            "heldout_gap_shrink_c": j.get("mean_heldout_gap_shrink_c").cloned().unwrap_or(j["mean_heldout_gap_shrink"].clone()),
+            "false_alarms": j["false_alarms"],
+            "clean_cases": j["clean_cases"],
+            "seconds_per_case": j["mean_diagnosis_seconds"],
+        })
+    };
+    let mut open_fit = pick(&open);
+    open_fit["top1_rate_fit_testable"] = open["top1_rate_fit_testable"].clone();
+    let mut with_machine = pick(&open_machine);
+    with_machine["per_effect"] = open_machine["per_effect"].clone();
+    with_machine["max_seconds_per_case"] = open_machine["max_diagnosis_seconds"].clone();
+    with_machine["machine_file"] = open_machine["machine_file"].clone();
+    v["side_by_side"] = serde_json::json!({
+        "closed_world": pick(&v),
+        "open_world_fit": open_fit,
+        "open_world_with_machine_file": with_machine,
+        "cross_model_fit": {
+            "top1_rate": cross["top1_rate"],
+            "per_effect": cross["per_effect"],
+            "false_alarms": cross["false_alarms"],
+            "clean_cases": cross["clean_cases"],
+            "seconds_per_case": cross["mean_diagnosis_seconds"],
+        },
+    });
+    v["cross_model_fit"] = cross.clone();
+    v["open_world_machine_file"] = open_machine.clone();
+    v["open_world"] = open.clone();
+    if json {
+        println!("{v}");
+    } else {
+        println!(
+            "bench-diagnose: {} cases ({} single, {} pair, {} clean): top-1 {:.1} % (single {:.1} %, pair {:.1} %), held-out gap shrink {:.1} % (µm channels {:.1} %), false alarms {}/{}; 8 h @ 1 s full diagnosis {:.2} s ({} threads)",
+            v["cases"], v["single_cases"], v["pair_cases"], v["clean_cases"],
+            v["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            v["top1_single_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            v["top1_pair_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            v["mean_heldout_gap_shrink"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            v["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            v["false_alarms"], v["clean_cases"], secs, threads
+        );
+        println!(
+            "open world (diagnose fit, no machine file, truth model diagnose/truth.rs): {} cases: top-1 {:.1} % (step/lag/chiller/speed kinds {:.1} %), held-out shrink {:.1} % °C / {:.1} % µm, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+            open["cases"],
+            open["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["top1_rate_fit_testable"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["mean_heldout_gap_shrink_c"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            open["false_alarms"], open["clean_cases"],
+            open["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+            open["per_effect"]
+        );
+        println!(
+            "cross model (diagnose fit on the first simulator's machines): {} cases: top-1 {:.1} %, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+            cross["cases"],
+            cross["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            cross["false_alarms"], cross["clean_cases"],
+            cross["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+            cross["per_effect"]
+        );
+        if let Some(ms) = v["misses"].as_array() {
+            for m in ms {
+                println!("  miss: {m}");
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,306 @@
+//! `bench-geometry [--json] [--seeds N]`: identification accuracy of the
+//! 14-line method vs reading noise. Per noise level, N random machines
+//! (default model degrees) are measured along the 14 lines with setup errors
+//! (beam misalignment 200 µrad, reflector offset 1 mm, lost motion), written
+//! to line files, read back and identified. Prints per term group the max
+//! and RMS recovery error (worst over the machines) and the RMS tool-point
+//! error over a held-out 6×6×6 grid before and after compensation.
+//!
+//! The board slice (issue 14 item 4): the volumetric section of a random
+//! machine's static geometry (`geometry table`) and a dense thermal one
+//! (all 52 monomials, constant and per kelvin of three sensors: 208 terms)
+//! are exported through `tcomp export`'s path, their quantisation error
+//! reported (served vs f64 polynomial over a grid, with the stated bound),
+//! and the instructions of one evaluation counted on the QEMU bench
+//! firmware (`bench` mode, `-icount shift=0`, the method of
+//! `scripts/bench-firmware.sh`). `--firmware <elf>` names the firmware
+//! (default `target/thumbv7em-none-eabihf/release/board-qemu-mps2`; build it
+//! with `cargo build -p board-qemu-mps2 --release --target
+//! thumbv7em-none-eabihf`); `--board-only` skips the identification.
+use std::collections::BTreeMap;
+use tcomp_data::rng::Rng;
+use tcomp_geometry::identify::{identify, Degrees, LineObs};
+use tcomp_geometry::lines::{average_runs, plan14, LineFile};
+use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
+use tcomp_geometry::study::{recovery, volumetric_residual};
+use tcomp_geometry::{Structure, Term};
+
+/// Instructions (×100) of one volumetric evaluation of `image` on the
+/// bench firmware, or why it could not be measured.
+fn count_on_board(elf: &std::path::Path, image: &std::path::Path) -> Result<f64, String> {
+    if !elf.exists() {
+        return Err(format!(
+            "no QEMU firmware at {} (cargo build -p board-qemu-mps2 --release --target thumbv7em-none-eabihf)",
+            elf.display()
+        ));
+    }
+    let out = std::process::Command::new("qemu-system-arm")
+        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"])
+        .args([
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-icount",
+            "shift=0",
+        ])
+        .arg("-kernel")
+        .arg(elf)
+        .arg("-append")
+        .arg(format!("bench no-golden-file {}", image.display()))
+        .output()
+        .map_err(|e| format!("qemu-system-arm: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .rfind(|l| l.starts_with('{'))
+        .ok_or_else(|| format!("the bench firmware printed no figures: {text}"))?;
+    let v: serde_json::Value = serde_json::from_str(line).map_err(|e| format!("{e}: {line}"))?;
+    v["volumetric_evaluate_insn_x100"]
+        .as_f64()
+        .map(|x| x / 100.0)
+        .ok_or_else(|| format!("no volumetric figure in {line}"))
+}
+
+/// Quantisation and instruction count of the static and a dense thermal section.
+fn board_figures(
+    st: &Structure,
+    stroke: [f64; 3],
+    elf: &std::path::Path,
+    dir: &std::path::Path,
+) -> anyhow::Result<serde_json::Value> {
+    use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
+    use tcomp_geometry::volumetric::{build, VolTerm, VolumetricPoly};
+    let truth = random_errors(stroke, &ErrorSizes::default(), &mut Rng::new(1000));
+    let static_poly = build(st, stroke, &truth, None)?;
+    // Dense thermal: every monomial of the full table (the static one's
+    // coefficient where it has one, else 0.3 µm), constant and per kelvin
+    // of three sensors (a tenth of it per kelvin).
+    let full = build(st, stroke, &truth, None).map(|mut p| {
+        p.terms.clear();
+        p
+    })?;
+    let mut terms = Vec::new();
+    for e in 0..=1u8 {
+        for a in 0..=3u8 {
+            for b in 0..=3u8 {
+                for c in 0..=3u8 {
+                    if a + b + c + e > 4 {
+                        continue;
+                    }
+                    let m = [a, b, c, e];
+                    let base = static_poly
+                        .terms
+                        .iter()
+                        .find(|t| t.monomial == m)
+                        .map_or([0.3, -0.3, 0.3], |t| t.coef_um);
+                    for sensor in [None, Some(0), Some(1), Some(2)] {
+                        let k = if sensor.is_some() { 0.1 } else { 1.0 };
+                        terms.push(VolTerm {
+                            monomial: m,
+                            sensor,
+                            coef_um: base.map(|c| c * k),
+                        });
+                    }
+                }
+            }
+        }
+    }
+    let dense = VolumetricPoly {
+        sensors: vec!["a".into(), "b".into(), "c".into()],
+        t_ref_c: vec![20.0, 21.0, 22.5],
+        terms,
+        ..full
+    };
+    let mut out = serde_json::Map::new();
+    // Targets: the static geometry of a three-axis machine within a few
+    // compensator steps; the densest section (208 of the 256 terms) within
+    // 30,000 instructions ≈ 0.27 ms at 168 MHz and ~1.5 cycles per
+    // instruction, well inside the reply to the PLC's position write.
+    for (name, poly, channels, target) in [
+        ("static", &static_poly, vec![], 5_000),
+        ("thermal_dense", &dense, vec![0u8, 1, 2], 30_000),
+    ] {
+        let opts = BoardOptions {
+            channels,
+            slots: [0, 1, 2],
+            origin_mm: [0.0; 3],
+            tool_max_mm: 500.0,
+            max_correction_um: 500.0,
+        };
+        let v = quantize(poly, &opts)?;
+        let report = quantisation_report(poly, &v, &opts);
+        let img = dir.join(format!("{name}.img"));
+        let summary = tcomp_model::export::export_with(
+            &thermocomp_core::float::demo_model(1),
+            Some((v, report.clone())),
+            &img,
+        )?;
+        let insn = count_on_board(elf, &img);
+        out.insert(
+            name.into(),
+            serde_json::json!({
+                "terms": report.terms,
+                "sensors": report.sensors,
+                "section_bytes": report.section_bytes,
+                "image_bytes": summary.bytes,
+                "quantisation": report,
+                "evaluate_instructions": insn.as_ref().ok(),
+                "evaluate_instructions_error": insn.as_ref().err(),
+                "target_instructions": target,
+            }),
+        );
+    }
+    Ok(serde_json::Value::Object(out))
+}
+
+fn main() -> std::process::ExitCode {
+    tcomp_data::cli_error::run_main(run)
+}
+
+fn run() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    tcomp_data::cli_error::check_args(
+        &args,
+        &["--json", "--board-only"],
+        &["--firmware", "--seeds"],
+    )?;
+    let json = args.iter().any(|a| a == "--json");
+    let board_only = args.iter().any(|a| a == "--board-only");
+    let elf: std::path::PathBuf = args
+        .iter()
+        .position(|a| a == "--firmware")
+        .and_then(|i| args.get(i + 1))
+        .map(Into::into)
+        .unwrap_or_else(|| {
+            std::path::Path::new(
+                &std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()),
+            )
+            .join("thumbv7em-none-eabihf/release/board-qemu-mps2")
+        });
+    let seeds: u64 = args
+        .iter()
+        .position(|a| a == "--seeds")
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse())
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--seeds: {e}"))?
+        .unwrap_or(10);
+    let stroke = [800.0, 500.0, 400.0];
+    let st = Structure::parse("XY/Z")?;
+    let plan = plan14(stroke, 100.0, 100.0);
+    // The readings go through real files, as a user's would.
+    let dir = std::env::temp_dir().join(format!("bench-geometry-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let t0 = std::time::Instant::now();
+    let mut rows = Vec::new();
+    let board = board_figures(&st, stroke, &elf, &dir)?;
+    let noises: &[f64] = if board_only {
+        &[]
+    } else {
+        &[0.0, 0.1, 0.25, 0.5, 1.0, 2.0]
+    };
+    for &noise in noises {
+        let mut worst: BTreeMap<&str, (f64, f64)> = BTreeMap::new();
+        let (mut before, mut after, mut worst_red) = (0.0, 0.0, f64::INFINITY);
+        let mut cond = 0.0;
+        for seed in 0..seeds {
+            let mut rng = Rng::new(1000 + seed);
+            let truth = random_errors(stroke, &ErrorSizes::default(), &mut rng);
+            let setup = MeasurementSetup {
+                noise_um: noise,
+                targets: 41,
+                ..Default::default()
+            };
+            let mut files = Vec::new();
+            for spec in &plan {
+                for f in measure_line(&st, &truth, spec, &setup, None, &mut rng) {
+                    let p = dir.join(format!("{}_{:?}.csv", spec.id, f.run));
+                    f.write(&p)?;
+                    files.push(LineFile::read(&p)?);
+                }
+            }
+            let obs: Vec<LineObs> = average_runs(&files)?.into_iter().map(|a| a.obs).collect();
+            let id = identify(&st, &obs, Degrees::default(), stroke)?;
+            cond = id.condition_number;
+            for (name, (mx, rms, _)) in recovery(&id.errors, &truth, stroke) {
+                let t = Term::parse(&name).expect("own term name");
+                let group = if t.component.is_angular() {
+                    "angular_urad"
+                } else {
+                    "translational_um"
+                };
+                let w = worst.entry(group).or_insert((0.0, 0.0));
+                w.0 = f64::max(w.0, mx);
+                w.1 = f64::max(w.1, rms);
+            }
+            let (b, a) = volumetric_residual(&st, &id.errors, &truth, stroke);
+            before += b / seeds as f64;
+            after += a / seeds as f64;
+            worst_red = f64::min(worst_red, 100.0 * (1.0 - a / b));
+        }
+        rows.push(serde_json::json!({
+            "noise_um": noise,
+            "translational_um": {"max": worst["translational_um"].0, "rms": worst["translational_um"].1},
+            "angular_urad": {"max": worst["angular_urad"].0, "rms": worst["angular_urad"].1},
+            "volumetric_rms_um": {"before": before, "after": after,
+                "reduction_pct": 100.0 * (1.0 - after / before), "worst_reduction_pct": worst_red},
+            "condition_number": cond,
+        }));
+    }
+    let el = t0.elapsed().as_secs_f64();
+    std::fs::remove_dir_all(&dir)?;
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"machines_per_level": seeds, "lines": 14, "rows": rows, "seconds": el,
+                "board_volumetric": board})
+        );
+        return Ok(());
+    }
+    println!("14-line identification, {seeds} random machines per noise level (worst over machines), {el:.1} s");
+    println!("noise µm | transl. max/RMS µm | angular max/RMS µrad | tool point RMS before → after µm (mean; worst reduction)");
+    for r in &rows {
+        println!(
+            "{:8.2} | {:6.2} / {:5.2} | {:6.2} / {:5.2} | {:5.2} → {:5.2} ({:.1} %; worst {:.1} %)",
+            r["noise_um"].as_f64().unwrap_or(0.0),
+            r["translational_um"]["max"].as_f64().unwrap_or(0.0),
+            r["translational_um"]["rms"].as_f64().unwrap_or(0.0),
+            r["angular_urad"]["max"].as_f64().unwrap_or(0.0),
+            r["angular_urad"]["rms"].as_f64().unwrap_or(0.0),
+            r["volumetric_rms_um"]["before"].as_f64().unwrap_or(0.0),
+            r["volumetric_rms_um"]["after"].as_f64().unwrap_or(0.0),
+            r["volumetric_rms_um"]["reduction_pct"]
+                .as_f64()
+                .unwrap_or(0.0),
+            r["volumetric_rms_um"]["worst_reduction_pct"]
+                .as_f64()
+                .unwrap_or(0.0),
+        );
+    }
+    println!(
+        "volumetric section on the board (QEMU bench firmware {}):",
+        elf.display()
+    );
+    for (name, b) in board.as_object().into_iter().flatten() {
+        let q = &b["quantisation"];
+        let insn = match b["evaluate_instructions"].as_f64() {
+            Some(x) => format!(
+                "{x:.0} instructions per evaluation (target ≤ {})",
+                b["target_instructions"]
+            ),
+            None => format!(
+                "instructions not measured: {}",
+                b["evaluate_instructions_error"].as_str().unwrap_or("?")
+            ),
+        };
+        println!(
+            "  {name}: {} terms, {} sensors, {} B; {insn}; served vs f64 worst {:.4} µm ({:.6} µm before rounding, bound {:.4} µm)",
+            b["terms"],
+            b["sensors"],
+            b["section_bytes"],
+            q["max_error_um"].as_f64().unwrap_or(f64::NAN),
+            q["max_error_before_rounding_um"].as_f64().unwrap_or(f64::NAN),
+            q["bound_um"].as_f64().unwrap_or(f64::NAN),
+        );
+    }
+    Ok(())
+}

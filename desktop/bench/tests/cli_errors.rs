@@ -1,0 +1,44 @@
+//! Bad arguments to the benchmark binaries: one `error:` line on stderr,
+//! a non-zero exit and no stack trace, as for `tcomp` (issue 13).
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Run one of the package's programs with RUST_BACKTRACE=1 set.
+fn program(exe: &str, dir: &Path, args: &[&str]) -> Output {
+    Command::new(exe)
+        .current_dir(dir)
+        .args(args)
+        .env("RUST_BACKTRACE", "1")
+        .env_remove("TCOMP_BACKTRACE")
+        .env_remove("RUST_LIB_BACKTRACE")
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn benchmarks_refuse_bad_arguments_with_one_line_too() {
+    let dir = tempfile::tempdir().unwrap();
+    for exe in [
+        env!("CARGO_BIN_EXE_bench-diagnose"),
+        env!("CARGO_BIN_EXE_bench-fit"),
+        env!("CARGO_BIN_EXE_bench-geometry"),
+        env!("CARGO_BIN_EXE_bench-sim"),
+    ] {
+        // a value that cannot be parsed: every benchmark reads its options first
+        let out = program(
+            exe,
+            dir.path(),
+            &["--seed", "x", "--cases", "x", "--repeat", "x"],
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let line = stderr.trim_end();
+        assert!(!out.status.success(), "{exe} exited 0: {line}");
+        assert!(
+            line.starts_with("error: ")
+                && !line.contains('\n')
+                && !line.contains("Stack backtrace"),
+            "{exe}: not one error line:\n{stderr}"
+        );
+    }
+}

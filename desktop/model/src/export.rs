@@ -1,0 +1,648 @@
+//! `tcomp export` and `tcomp golden`: quantize a float model through the
+//! core's quantizer into the model image the board loads, and write the
+//! golden vectors the board must reproduce bit for bit.
+
+use anyhow::{Context, Result};
+use std::path::Path;
+use thermocomp_core::float::{FloatModel, QuantReport};
+use thermocomp_core::Model;
+
+/// What an export produced, for the report and `--json`.
+#[derive(Debug, serde::Serialize)]
+pub struct ExportSummary {
+    pub bytes: usize,
+    pub crc32: String,
+    pub model_version: u32,
+    pub directions: Vec<String>,
+    /// Worst |fixed − float| per direction over the admissible inputs, µm.
+    pub max_deviation_um: Vec<f64>,
+    pub samples: usize,
+    /// Fallback models packed (image format v2 when > 0).
+    pub fallbacks: usize,
+    /// Sensors the image names by 1-Wire ROM code (the rest by channel).
+    pub sensors_by_rom: usize,
+    /// The volumetric section (`--geometry`) and what its quantisation costs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub volumetric: Option<tcomp_geometry::board::QuantisationReport>,
+}
+
+/// A volumetric section to add to the image, with its quantisation report.
+pub type GeometrySection = (
+    thermocomp_core::volumetric::Volumetric,
+    tcomp_geometry::board::QuantisationReport,
+);
+
+/// Quantize, encode and write an image; the image is parsed back before it
+/// is written, so only a valid image reaches the disk.
+pub fn export(model: &FloatModel, out: &Path) -> Result<ExportSummary> {
+    export_with(model, None, out)
+}
+
+/// [`export`] with a volumetric section (`tcomp export --geometry`): the
+/// section is required, so when the image would not fit the fallbacks go
+/// first (as without it) and then the export is refused, naming the limit.
+pub fn export_with(
+    model: &FloatModel,
+    geometry: Option<GeometrySection>,
+    out: &Path,
+) -> Result<ExportSummary> {
+    let quantize = |m: &FloatModel| -> Result<(Model, QuantReport)> {
+        let (mut fixed, report) = m.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
+        fixed.volumetric = geometry.as_ref().map(|(v, _)| v.clone());
+        Ok((fixed, report))
+    };
+    let (mut fixed, mut report) = quantize(model)?;
+    // Fallbacks are optional: drop the last (lowest priority) until the image fits.
+    let mut trimmed = model.clone();
+    while fixed.encoded_len() > thermocomp_core::limits::MAX_IMAGE_BYTES
+        && trimmed.fallbacks.pop().is_some()
+    {
+        (fixed, report) = quantize(&trimmed)?;
+    }
+    if trimmed.fallbacks.len() < model.fallbacks.len() {
+        eprintln!(
+            "note: {} fallback model(s) left out to keep the image within {} bytes",
+            model.fallbacks.len() - trimmed.fallbacks.len(),
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
+    let len = fixed.encoded_len();
+    if let (true, Some((v, _))) = (len > thermocomp_core::limits::MAX_IMAGE_BYTES, &geometry) {
+        anyhow::bail!(
+            "the image with the volumetric section ({} bytes, {} terms) would be {len} bytes; the board's upload staging area holds {} (MAX_IMAGE_BYTES)",
+            4 + v.encoded_len(),
+            v.terms.len(),
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
+    if len > thermocomp_core::limits::MAX_IMAGE_BYTES {
+        anyhow::bail!(
+            "the image would be {len} bytes; the board's upload staging area holds {} (MAX_IMAGE_BYTES)",
+            thermocomp_core::limits::MAX_IMAGE_BYTES
+        );
+    }
+    let bytes = encode(&mut fixed)?;
+    Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e}"))?;
+    std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    let mut s = summary(&fixed, &bytes, &report);
+    s.volumetric = geometry.map(|(_, r)| r);
+    Ok(s)
+}
+
+pub fn encode(model: &mut Model) -> Result<Vec<u8>> {
+    let mut bytes = vec![0u8; model.encoded_len()];
+    let n = model
+        .encode(&mut bytes)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    bytes.truncate(n);
+    Ok(bytes)
+}
+
+fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
+    ExportSummary {
+        bytes: bytes.len(),
+        crc32: format!("{:#010x}", m.crc),
+        model_version: m.model_version,
+        directions: (0..m.directions.len())
+            .map(|d| m.direction_name(d).to_string())
+            .collect(),
+        max_deviation_um: r.max_deviation_um.clone(),
+        samples: r.samples,
+        fallbacks: m.fallbacks.len(),
+        sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
+        volumetric: None,
+    }
+}
+
+/// Name the model's sensors by the ROM codes the run recorded for their
+/// columns (`# rom.T_<name>:`, [`tcomp_data::runcsv::Run::sensor_roms`]), so the
+/// board reads each from the physical sensor it was trained on, whatever
+/// channel that sensor has. Each sensor's `channel` (its run column) stays.
+/// A run with ROM codes for some of the model's sensors but not all is
+/// refused (a model half by ROM, half by channel would be trusted more than
+/// it deserves); a run without any leaves the model by channel. Returns how
+/// many sensors are named by ROM.
+pub fn name_sensors_by_rom(
+    model: &mut FloatModel,
+    temperature_columns: &[String],
+    roms: &std::collections::BTreeMap<String, [u8; 8]>,
+) -> Result<usize> {
+    let column = |ch: u8| temperature_columns.get(usize::from(ch));
+    let missing: Vec<&str> = model
+        .sensors
+        .iter()
+        .filter_map(|s| column(s.channel))
+        .filter(|c| !roms.contains_key(*c))
+        .map(String::as_str)
+        .collect();
+    if missing.len() == model.sensors.len() {
+        return Ok(0);
+    }
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "the run records ROM codes for some of the model's sensors but not for {}: record the run again with every sensor on the bus (tcomp record) or remove the rom.* lines",
+            missing.join(", ")
+        );
+    }
+    for s in &mut model.sensors {
+        if let Some(rom) = column(s.channel).and_then(|c| roms.get(c)) {
+            s.rom = *rom;
+        }
+    }
+    Ok(model.sensors.len())
+}
+
+pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
+    if json {
+        println!("{}", serde_json::to_string(s).unwrap_or_default());
+        return;
+    }
+    println!(
+        "wrote {} ({} bytes, CRC-32 {}, model version {})",
+        out.display(),
+        s.bytes,
+        s.crc32,
+        s.model_version
+    );
+    if s.fallbacks > 0 {
+        println!("  {} fallback model(s) for degraded mode", s.fallbacks);
+    }
+    if s.sensors_by_rom > 0 {
+        println!(
+            "  {} sensor(s) named by 1-Wire ROM code (the board reads each from its own sensor, whatever its channel)",
+            s.sensors_by_rom
+        );
+    }
+    for (d, dev) in s.directions.iter().zip(&s.max_deviation_um) {
+        println!(
+            "  {d}: worst fixed-vs-float deviation {dev:.4} µm over {} admissible input samples",
+            s.samples
+        );
+    }
+    if let Some(v) = &s.volumetric {
+        println!(
+            "  volumetric section: {} terms, {} sensor(s), {} bytes; served (0.1 µm) vs the f64 polynomial over {} grid points: worst {:.4} µm ({:.6} µm before the final rounding; stated bound {:.4} µm)",
+            v.terms,
+            v.sensors,
+            v.section_bytes,
+            v.grid_points,
+            v.max_error_um,
+            v.max_error_before_rounding_um,
+            v.bound_um
+        );
+    }
+}
+
+/// Write a golden-vector file (the demo model and `steps` steps).
+pub fn golden(out: &Path, steps: u32, seed: u64) -> Result<usize> {
+    let bytes = thermocomp_core::golden::generate(steps, seed)
+        .map_err(|e| anyhow::anyhow!("golden vectors: {e}"))?;
+    std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    Ok(bytes.len())
+}
+
+/// Which fitted model of a channel goes on the board.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Choice {
+    /// The GA-BPN ensemble (`ga-bpn`, alias `net`).
+    Net,
+    /// The lagged MLR (`mlr`).
+    Mlr,
+    /// The static MLR on the selected sensors (`mlr-static`).
+    MlrStatic,
+    /// The lagged MLR plus its residual networks (`hybrid`): a table and
+    /// networks of the same direction, which the board sums.
+    Hybrid,
+    /// `w·mlr + (1−w)·ga-bpn` (`blend`, `w` from the fit): the lagged MLR's
+    /// table scaled by `w` and the networks' output layers by `(1−w)/k`.
+    Blend,
+    /// No compensation (`none`): the direction is served as 0 about the
+    /// run's reference; the fit chose it when no model beat it in CV.
+    None,
+}
+
+impl Choice {
+    pub fn parse(s: &str) -> Result<Choice> {
+        Ok(match s.trim() {
+            "net" | "ga-bpn" => Choice::Net,
+            "mlr" => Choice::Mlr,
+            "mlr-static" => Choice::MlrStatic,
+            "hybrid" => Choice::Hybrid,
+            "blend" => Choice::Blend,
+            "none" => Choice::None,
+            other => {
+                anyhow::bail!(
+                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static or none)"
+                )
+            }
+        })
+    }
+}
+
+/// Board limits and identity for an exported model.
+#[derive(Debug, Clone)]
+pub struct ExportOptions {
+    pub model_version: u32,
+    pub max_correction_um: f64,
+    pub max_rate_um_per_s: f64,
+    pub warmup_s: u32,
+    /// Per channel (e.g. `dch5_um`) overrides of the fit's choice.
+    pub choices: Vec<(String, Choice)>,
+}
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        ExportOptions {
+            model_version: 1,
+            max_correction_um: 200.0,
+            max_rate_um_per_s: 1.0,
+            warmup_s: 1800,
+            choices: vec![],
+        }
+    }
+}
+
+/// The model a channel ships: the `--use` override, else the fit's
+/// cross-validated choice, else (an old fit file without one) the lagged MLR.
+pub fn choice_for(file: &crate::fit::ModelFile, opts: &ExportOptions, ch: &str) -> Result<Choice> {
+    if let Some((_, c)) = opts.choices.iter().find(|(c, _)| c == ch) {
+        return Ok(*c);
+    }
+    match file.chosen.get(ch) {
+        Some(name) => Choice::parse(name),
+        None => Ok(Choice::Mlr),
+    }
+}
+
+/// Build the board's float model from `tcomp fit --out` parameters.
+///
+/// Temperatures become 1/16 °C, the training envelope is widened to whole
+/// raw units (the image stores integers) and the normalisation change is
+/// folded into the first-layer weights and biases (MLR: into its terms), so
+/// the float model computes exactly what the fitted one did inside the
+/// original envelope. `temperature_columns` is the board's channel order
+/// (the run's `T_…` columns, as the bench maps them).
+pub fn float_model_from_fit(
+    file: &crate::fit::ModelFile,
+    temperature_columns: &[String],
+    opts: &ExportOptions,
+) -> Result<FloatModel> {
+    use crate::fit::{FeatureKind, FeatureSpec};
+    use thermocomp_core::float::{FloatDirection, FloatInput, FloatNet, FloatTable, FloatTerm};
+    use thermocomp_core::image::{InputKind, SensorRef};
+
+    let mut channels: Vec<String> = file
+        .nets
+        .iter()
+        .map(|n| n.channel.clone())
+        .chain(file.mlr.iter().map(|m| m.channel.clone()))
+        .chain(file.mlr_static.iter().map(|m| m.channel.clone()))
+        .collect();
+    channels.sort();
+    channels.dedup();
+    let mut model = FloatModel {
+        model_version: opts.model_version,
+        step_ms: crate::fit::features::STEP_MS,
+        warmup_s: opts.warmup_s,
+        fixed_reference: false,
+        sensors: vec![],
+        directions: vec![],
+        axes: vec![],
+        inputs: vec![],
+        nets: vec![],
+        tables: vec![],
+        fallbacks: vec![],
+    };
+    use thermocomp_core::limits::{
+        MAX_DIRECTIONS, MAX_FALLBACKS, MAX_FALLBACK_TERMS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS,
+        MAX_SENSORS, MAX_TABLES, MAX_TERMS,
+    };
+    if channels.len() > MAX_DIRECTIONS {
+        anyhow::bail!(
+            "the model has {} channels; the board serves at most {MAX_DIRECTIONS} directions (MAX_DIRECTIONS)",
+            channels.len()
+        );
+    }
+    let sensor_of = |name: &str, model: &mut FloatModel| -> Result<u8> {
+        let ch = temperature_columns
+            .iter()
+            .position(|c| c == name)
+            .ok_or_else(|| {
+                anyhow::anyhow!("sensor column {name} is not in the run's temperature columns")
+            })?;
+        if ch >= MAX_SENSORS {
+            anyhow::bail!(
+                "sensor {name} is board channel {ch}; the board reads channels 0..={} (MAX_SENSORS = {MAX_SENSORS})",
+                MAX_SENSORS - 1
+            );
+        }
+        if let Some(i) = model
+            .sensors
+            .iter()
+            .position(|s| usize::from(s.channel) == ch)
+        {
+            return Ok(i as u8);
+        }
+        model.sensors.push(SensorRef {
+            rom: [0; 8],
+            channel: ch as u8,
+            ref_temp: 0,
+        });
+        Ok((model.sensors.len() - 1) as u8)
+    };
+    // One model input per distinct (kind, lag); returns its index and the fold (a, c).
+    let input_of = |f: &FeatureSpec, model: &mut FloatModel| -> Result<(u8, f64, f64)> {
+        let (kind, scale) = match &f.kind {
+            FeatureKind::SensorRise(a) => (
+                InputKind::SensorRise {
+                    a: sensor_of(a, model)?,
+                },
+                16.0,
+            ),
+            FeatureKind::SensorDiff(a, b) => (
+                InputKind::SensorDiff {
+                    a: sensor_of(a, model)?,
+                    b: sensor_of(b, model)?,
+                },
+                16.0,
+            ),
+            FeatureKind::Spindle => (InputKind::Spindle, 1.0),
+        };
+        anyhow::ensure!(
+            f.max > f.min,
+            "feature {:?} has an empty training range",
+            f.kind
+        );
+        let (lo, hi) = (f.min * scale, f.max * scale);
+        let mut lo2 = lo.floor();
+        let mut hi2 = hi.ceil();
+        if hi2 - lo2 < 2.0 {
+            lo2 -= 1.0;
+            hi2 += 1.0;
+        }
+        let a = (hi2 - lo2) / (hi - lo);
+        let c = (lo2 + hi2 - lo - hi) / (hi - lo);
+        let spec = FloatInput {
+            kind,
+            tau_s: f.tau_s.filter(|t| *t > 0.0),
+            min: lo2,
+            max: hi2,
+        };
+        let idx = match model.inputs.iter().position(|i| *i == spec) {
+            Some(i) => i,
+            None => {
+                if model.inputs.len() >= MAX_INPUTS {
+                    anyhow::bail!(
+                        "the model needs more than {MAX_INPUTS} distinct inputs, the most a board image holds (MAX_INPUTS)"
+                    );
+                }
+                model.inputs.push(spec);
+                model.inputs.len() - 1
+            }
+        };
+        Ok((idx as u8, a, c))
+    };
+    for ch in &channels {
+        let choice = choice_for(file, opts, ch)?;
+        let d = model.directions.len() as u8;
+        let name = ch.trim_start_matches('d').trim_end_matches("_um");
+        model.directions.push(FloatDirection {
+            name: name.to_string(),
+            max_correction_um: opts.max_correction_um,
+            max_rate_um_per_s: opts.max_rate_um_per_s,
+        });
+        // Blend: the table's share `w`, the networks' `1 − w`.
+        let (w_table, w_nets) = match choice {
+            Choice::Blend => {
+                let w = *file.blend.get(ch).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no blend weight for channel {ch} in the fit file (fit with --blend)"
+                    )
+                })?;
+                anyhow::ensure!(
+                    (0.0..=1.0).contains(&w),
+                    "channel {ch}: blend weight {w} is outside [0, 1]"
+                );
+                (w, 1.0 - w)
+            }
+            _ => (1.0, 1.0),
+        };
+        let members: Vec<_> = match choice {
+            Choice::Net => file.nets.iter().filter(|n| &n.channel == ch).collect(),
+            Choice::Blend if w_nets > 0.0 => {
+                file.nets.iter().filter(|n| &n.channel == ch).collect()
+            }
+            Choice::Hybrid => file
+                .hybrid_nets
+                .iter()
+                .filter(|n| &n.channel == ch)
+                .collect(),
+            _ => vec![],
+        };
+        let mlr = match choice {
+            Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
+            Choice::Mlr | Choice::Hybrid | Choice::Blend => {
+                file.mlr.iter().find(|m| &m.channel == ch)
+            }
+            Choice::Net | Choice::None => None,
+        };
+        let blend_nets = choice == Choice::Blend && w_nets > 0.0;
+        if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
+            if members.is_empty() {
+                anyhow::bail!(
+                    "no fitted {} network for channel {ch} (fit without --mlr-only)",
+                    match choice {
+                        Choice::Hybrid => "hybrid",
+                        Choice::Blend => "blend",
+                        _ => "ga-bpn",
+                    }
+                );
+            }
+            if model.nets.len() + members.len() > MAX_NETS {
+                anyhow::bail!(
+                    "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
+                    members.len()
+                );
+            }
+            // The ensemble's mean: each member's output layer scaled by 1/k
+            // (and by the blend's 1 − w).
+            let k = members.len() as f64 / w_nets;
+            for n in members {
+                if n.features.len() > MAX_NET_INPUTS {
+                    anyhow::bail!(
+                        "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
+                        n.features.len()
+                    );
+                }
+                let mut inputs = vec![];
+                let mut folds = vec![];
+                for f in &n.features {
+                    let (i, a, c) = input_of(f, &mut model)?;
+                    inputs.push(i);
+                    folds.push((a, c));
+                }
+                let w1: Vec<Vec<f64>> =
+                    n.w1.iter()
+                        .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
+                        .collect();
+                let b1 =
+                    n.w1.iter()
+                        .zip(&n.b1)
+                        .map(|(row, b)| {
+                            b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
+                        })
+                        .collect();
+                model.nets.push(FloatNet {
+                    direction: d,
+                    inputs,
+                    w1,
+                    b1,
+                    w2: n.w2.iter().map(|w| w / k).collect(),
+                    b2: n.b2 / k,
+                });
+            }
+        }
+        let blend_table = choice == Choice::Blend && w_table > 0.0;
+        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
+            let Some(m) = mlr else {
+                anyhow::bail!("no fitted {choice:?} model for channel {ch}");
+            };
+            if model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
+                anyhow::bail!(
+                    "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
+                );
+            }
+            let mut terms = vec![];
+            let mut c0 = m.c0 * w_table;
+            for (f, coef) in m.features.iter().zip(&m.coef) {
+                let (i, a, c) = input_of(f, &mut model)?;
+                let coef = coef * w_table;
+                c0 += coef * c;
+                terms.push(FloatTerm {
+                    coef_um: coef * a,
+                    input: Some(i),
+                    input_power: 1,
+                    position_power: 0,
+                });
+            }
+            terms.push(FloatTerm {
+                coef_um: c0,
+                input: None,
+                input_power: 0,
+                position_power: 0,
+            });
+            model.tables.push(FloatTable {
+                direction: d,
+                axis: None,
+                terms,
+            });
+        }
+    }
+    if model.tables.is_empty() && model.nets.is_empty() {
+        anyhow::bail!(
+            "no channel has a model to ship: the fit chose `none` (no model beat no compensation in its cross-validation) for {}; `--use CHANNEL=mlr` ships one anyway",
+            channels.join(", ")
+        );
+    }
+    // Fallback models (image v2) in the board's priority order: the board
+    // serves a direction with the first fallback whose sensors are all
+    // valid, so per channel the lowest cross-validated RMS comes first
+    // (singles before pairs at equal CV; no CV figure: last). One that would
+    // need inputs beyond the board's is left out (said on stderr); `export`
+    // drops the last ones if the image would exceed MAX_IMAGE_BYTES.
+    let mut ordered: Vec<&crate::fit::FallbackParams> = file.fallbacks.iter().collect();
+    ordered.sort_by(|a, b| {
+        let key = |f: &crate::fit::FallbackParams| {
+            (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len())
+        };
+        let (ka, kb) = (key(a), key(b));
+        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
+    });
+    for fb in ordered {
+        let Some(d) = channels.iter().position(|c| *c == fb.channel) else {
+            continue;
+        };
+        // Only sensors the exported model reads: a fallback for any other is never used.
+        let excluded: Option<Vec<u8>> = fb
+            .excluded
+            .iter()
+            .map(|name| {
+                let ch = temperature_columns.iter().position(|c| c == name)?;
+                model
+                    .sensors
+                    .iter()
+                    .position(|s| usize::from(s.channel) == ch)
+                    .map(|i| i as u8)
+            })
+            .collect();
+        let Some(excluded) = excluded else { continue };
+        let held_terms: usize = model.fallbacks.iter().map(|f| f.terms.len()).sum();
+        if model.fallbacks.len() >= MAX_FALLBACKS
+            || held_terms + fb.params.features.len() + 1 > MAX_FALLBACK_TERMS
+        {
+            eprintln!(
+                "note: fallback of {} without {} left out: the image holds {MAX_FALLBACKS} fallbacks of {MAX_FALLBACK_TERMS} terms in all",
+                fb.channel,
+                fb.excluded.join("+")
+            );
+            continue;
+        }
+        let (n_sensors, n_inputs) = (model.sensors.len(), model.inputs.len());
+        let m = &fb.params;
+        let mut terms = vec![];
+        let mut c0 = m.c0;
+        let mut failed = None;
+        for (f, coef) in m.features.iter().zip(&m.coef) {
+            match input_of(f, &mut model) {
+                Ok((i, a, c)) => {
+                    c0 += coef * c;
+                    terms.push(FloatTerm {
+                        coef_um: coef * a,
+                        input: Some(i),
+                        input_power: 1,
+                        position_power: 0,
+                    });
+                }
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
+        }
+        if let Some(e) = failed {
+            model.sensors.truncate(n_sensors);
+            model.inputs.truncate(n_inputs);
+            eprintln!(
+                "note: fallback of {} without {} left out: {e}",
+                fb.channel,
+                fb.excluded.join("+")
+            );
+            continue;
+        }
+        terms.push(FloatTerm {
+            coef_um: c0,
+            input: None,
+            input_power: 0,
+            position_power: 0,
+        });
+        model.fallbacks.push(thermocomp_core::float::FloatFallback {
+            direction: d as u8,
+            excluded,
+            terms,
+        });
+    }
+    Ok(model)
+}
+
+/// Parse `dch5_um=mlr,dch3_um=ga-bpn` (`net` is an alias of `ga-bpn`).
+pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
+    s.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| {
+            let (ch, k) = p.split_once('=').ok_or_else(|| {
+                anyhow::anyhow!("expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static, got {p}")
+            })?;
+            Ok((ch.trim().to_string(), Choice::parse(k)?))
+        })
+        .collect()
+}

@@ -1,0 +1,610 @@
+//! The `fit` pipeline: plan the chronological / held-out split, choose the
+//! inputs, fit MLR and GA-BPN per channel, validate on held-out rows only.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+
+pub use super::choice::{
+    choose_model, latest_block_rule, train_ensemble, CvScore, NetCandidates, NetInfo, NET_MODELS,
+};
+use super::choice::{cross_validate, progress_bar, train_hybrid, training_span_s};
+use super::fallback;
+use super::features;
+pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
+use super::*;
+use crate::select::{self, Selection};
+use tcomp_data::runcsv::Run;
+
+/// Per-run figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunMetrics {
+    pub run: String,
+    pub channel: String,
+    #[serde(flatten)]
+    pub metrics: Metrics,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelReport {
+    pub name: String,
+    /// Pooled over all validation rows, per channel.
+    pub channels: BTreeMap<String, Metrics>,
+    pub per_run: Vec<RunMetrics>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelInfo {
+    pub channel: String,
+    pub features: Vec<String>,
+    pub train_rows: usize,
+    pub val_rows: usize,
+    /// Blocked cross-validation RMS of the MLR on the chosen inputs (training rows only).
+    pub cv_rms_um: Option<f64>,
+    /// Blocked cross-validation per candidate model (training rows only): what chose it.
+    pub cv: BTreeMap<String, CvScore>,
+    pub net: Option<NetInfo>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FitReport {
+    pub models: Vec<ModelReport>,
+    /// Per channel, the model cross-validation chose (what `export` ships).
+    pub chosen: BTreeMap<String, String>,
+    /// What the board's limits ruled out, and how the runs were read.
+    pub notes: Vec<String>,
+    pub inputs: Vec<ChannelInfo>,
+    pub selection: Option<Selection>,
+    pub train_segments: Vec<Segment>,
+    pub val_segments: Vec<Segment>,
+    /// Fallback models per channel and excluded sensor(s), with their figures.
+    pub fallbacks: Vec<fallback::FallbackReport>,
+    #[serde(skip)]
+    pub model_file: ModelFile,
+}
+
+fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetrics>) -> Metrics {
+    let pred: Vec<f64> = s.x.iter().map(|r| m.predict_raw(r)).collect();
+    for (ri, label) in plan.labels.iter().enumerate() {
+        let (y, p): (Vec<f64>, Vec<f64>) = s
+            .rows
+            .iter()
+            .zip(s.y.iter().zip(&pred))
+            .filter(|((r, _), _)| *r == ri)
+            .map(|(_, (y, p))| (*y, *p))
+            .unzip();
+        if !y.is_empty() {
+            per_run.push(RunMetrics {
+                run: label.clone(),
+                channel: m.channel().to_string(),
+                metrics: metrics(&y, &p),
+            });
+        }
+    }
+    metrics(&s.y, &pred)
+}
+
+/// Candidate inputs for `auto`.
+pub fn candidates(
+    sensors: &[String],
+    lags: &[f64],
+    with_spindle: bool,
+) -> Vec<(FeatureKind, Option<f64>)> {
+    let tau = |l: f64| if l > 0.0 { Some(l) } else { None };
+    let mut out = Vec::new();
+    for s in sensors {
+        for &l in lags {
+            out.push((FeatureKind::SensorRise(s.clone()), tau(l)));
+        }
+    }
+    if with_spindle {
+        for &l in lags {
+            out.push((FeatureKind::Spindle, tau(l)));
+        }
+    }
+    out
+}
+
+/// Read runs and fit.
+pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
+    let mut runs = Vec::new();
+    let mut labels = Vec::new();
+    let mut notes = Vec::new();
+    for p in train.iter().chain(validate_runs) {
+        let mut run = Run::read(p)?;
+        // The model predicts rises from the run's start (what the board serves).
+        notes.extend(run.errors_as_rises(&p.display().to_string()));
+        runs.push(run);
+        labels.push(p.display().to_string());
+    }
+    let plan = Plan::new(runs, labels, train.len(), cfg.split_chrono)?;
+    let mut report = fit_plan(&plan, cfg)?;
+    notes.append(&mut report.notes);
+    report.notes = notes;
+    Ok(report)
+}
+
+/// Fit on a planned split.
+pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
+    use thermocomp_core::limits::{
+        MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS,
+    };
+    let first = &plan.runs[plan.train[0].run];
+    let channels: Vec<String> = match &cfg.channels {
+        Some(c) => c.clone(),
+        None => first
+            .error_columns()
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+    };
+    if channels.is_empty() {
+        bail!("fit: the training run has no error columns (d<name>_um)");
+    }
+    if channels.len() > MAX_DIRECTIONS {
+        bail!(
+            "fit: {} error channels, the board serves at most {MAX_DIRECTIONS} directions: choose them with --channels",
+            channels.len()
+        );
+    }
+    if cfg.max_inputs == 0 || cfg.max_inputs > MAX_NET_INPUTS {
+        bail!(
+            "fit: the board takes 1..={MAX_NET_INPUTS} inputs per model, asked for {}",
+            cfg.max_inputs
+        );
+    }
+    if cfg.net.hidden == 0 || cfg.net.hidden > 16 {
+        bail!("fit: --hidden must be 1..=16, got {}", cfg.net.hidden);
+    }
+    let ens = cfg.net.ensemble.max(1);
+    if ens > MAX_NETS {
+        bail!("fit: --ensemble {ens} exceeds the board's {MAX_NETS} networks");
+    }
+    let folds = if cfg.select_folds <= 1 {
+        let (inner, block) = plan.inner_block(cfg.es_frac);
+        vec![(inner, block)]
+    } else {
+        blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
+    };
+    // The board reads temperature channels 0..MAX_SENSORS in the run's
+    // column order: sensors beyond are never candidates.
+    let board_sensors = features::board_channels(first);
+    let beyond = first
+        .temperature_columns()
+        .len()
+        .saturating_sub(MAX_SENSORS);
+    let mut notes = Vec::new();
+    if beyond > 0 {
+        notes.push(format!(
+            "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates"
+        ));
+    }
+    let span = training_span_s(plan);
+    let lags: Vec<f64> = cfg.lags.iter().copied().filter(|&l| l <= span).collect();
+    if lags.len() < cfg.lags.len() {
+        notes.push(format!(
+            "lags longer than the training span ({:.1} h) are not candidates",
+            span / 3600.0
+        ));
+    }
+    if lags.is_empty() {
+        bail!("fit: every candidate lag is longer than the training span ({span:.0} s)");
+    }
+    // Sensor selection on training rows only, among the board's channels.
+    let selection = if matches!(cfg.features, FeatureChoice::Auto) {
+        let slices: Vec<Run> = plan
+            .train
+            .iter()
+            .map(|s| {
+                plan.runs[s.run]
+                    .slice_rows(s.start, s.end)
+                    .keep_temperatures(&board_sensors)
+            })
+            .collect();
+        let groups = cfg.groups.min(board_sensors.len());
+        Some(select::select(&slices, groups, 0)?)
+    } else {
+        None
+    };
+    let has_spindle = first.col("spindle_rpm").is_some();
+    let mut reports: BTreeMap<&str, ModelReport> = MODEL_NAMES
+        .iter()
+        .map(|n| {
+            (
+                *n,
+                ModelReport {
+                    name: n.to_string(),
+                    channels: BTreeMap::new(),
+                    per_run: vec![],
+                },
+            )
+        })
+        .collect();
+    let mut inputs = Vec::new();
+    let mut file = ModelFile::default();
+
+    // Candidate cache shared by all channels.
+    let (cache, static_idx): (SeriesCache, Vec<usize>) = match (&cfg.features, &selection) {
+        (FeatureChoice::Auto, Some(sel)) => {
+            let sensors: Vec<String> = match cfg.candidates {
+                Candidates::Selected => sel.chosen.clone(),
+                Candidates::All => sel.sensors.clone(),
+            };
+            let kinds = candidates(&sensors, &lags, has_spindle);
+            let static_idx = sel
+                .chosen
+                .iter()
+                .filter_map(|s| {
+                    kinds
+                        .iter()
+                        .position(|k| *k == (FeatureKind::SensorRise(s.clone()), None))
+                })
+                .take(MAX_NET_INPUTS)
+                .collect();
+            (SeriesCache::new(&plan.runs, kinds)?, static_idx)
+        }
+        (FeatureChoice::List(kinds), _) => {
+            if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
+                bail!(
+                    "fit: --features needs 1..={MAX_NET_INPUTS} inputs, got {}",
+                    kinds.len()
+                );
+            }
+            for (k, _) in kinds {
+                for c in k.columns() {
+                    if c != "spindle_rpm" && !board_sensors.iter().any(|s| s == c) {
+                        bail!("fit: feature column {c} is not one of the board's {MAX_SENSORS} temperature channels");
+                    }
+                }
+            }
+            (SeriesCache::new(&plan.runs, kinds.clone())?, vec![])
+        }
+        (FeatureChoice::Auto, None) => bail!("internal: no selection"),
+    };
+
+    // Board resources shared by the channels: inputs and networks.
+    let mut in_use: Vec<usize> = Vec::new();
+    let mut nets_left = MAX_NETS;
+    for ch in &channels {
+        if first.col(ch).is_none() {
+            bail!("fit: training run has no column `{ch}`");
+        }
+        let budget = MAX_INPUTS.saturating_sub(in_use.len());
+        let (idx, cv_mse) = match cfg.features {
+            FeatureChoice::Auto => {
+                let (i, e) = greedy_select(
+                    &cache,
+                    &plan.runs,
+                    &folds,
+                    ch,
+                    cfg.max_inputs,
+                    &in_use,
+                    budget,
+                )?;
+                (i, Some(e))
+            }
+            FeatureChoice::List(_) => ((0..cache.kinds.len()).collect(), None),
+        };
+        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
+        let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
+        if full.y.is_empty() || val.y.is_empty() {
+            // name the cause: an input column that never reads there, else
+            // the channel itself
+            for (part, segs) in [("training", &plan.train), ("validation", &plan.val)] {
+                for c in kinds.iter().flat_map(|k| k.0.columns()) {
+                    let reads = segs.iter().any(|s| {
+                        plan.runs[s.run]
+                            .col(c)
+                            .is_some_and(|v| v[s.start..s.end].iter().any(Option::is_some))
+                    });
+                    if !reads {
+                        bail!("fit: input {c} has no values in the {part} rows");
+                    }
+                }
+            }
+            bail!("fit: channel {ch} has no values in the training or validation rows");
+        }
+        // Static inputs the board can still take.
+        let static_ok: Vec<usize> = static_idx
+            .iter()
+            .copied()
+            .filter(|i| in_use.contains(i) || idx.contains(i))
+            .chain(
+                static_idx
+                    .iter()
+                    .copied()
+                    .filter(|i| !in_use.contains(i) && !idx.contains(i))
+                    .take(
+                        budget.saturating_sub(idx.iter().filter(|i| !in_use.contains(i)).count()),
+                    ),
+            )
+            .collect();
+        let with = NetCandidates {
+            net: !cfg.skip_net,
+            hybrid: !cfg.skip_net && cfg.hybrid,
+            blend: !cfg.skip_net && cfg.blend,
+        };
+        let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
+        let cv = if folds.len() > 1 {
+            cross_validate(&cache, plan, &folds, &idx, &static_ok, ch, cfg, with)?
+        } else {
+            BTreeMap::new()
+        };
+        pb.finish_and_clear();
+
+        let specs = ranged_specs(&kinds, &full);
+        let mlr = fit_mlr(specs.clone(), &full, ch)?;
+        if let Some(r) = reports.get_mut("mlr") {
+            r.channels
+                .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
+        }
+        if !static_ok.is_empty() {
+            let fs = cache.samples(&plan.runs, &plan.train, &static_ok, ch)?;
+            let vs = cache.samples(&plan.runs, &plan.val, &static_ok, ch)?;
+            let sk: Vec<_> = static_ok.iter().map(|&i| cache.kinds[i].clone()).collect();
+            let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch)?;
+            if let Some(r) = reports.get_mut("mlr-static") {
+                r.channels
+                    .insert(ch.clone(), validate(&m, &vs, plan, &mut r.per_run));
+            }
+            file.mlr_static.push(m);
+        }
+
+        let mut info = ChannelInfo {
+            channel: ch.clone(),
+            features: specs.iter().map(FeatureSpec::name).collect(),
+            train_rows: full.y.len(),
+            val_rows: val.y.len(),
+            cv_rms_um: cv_mse.map(f64::sqrt),
+            cv: cv.clone(),
+            net: None,
+        };
+        let mut hybrid_empty = false;
+        if with.net || with.hybrid {
+            let (inner, block) = plan.inner_block(cfg.es_frac);
+            let inner_s = cache.samples_capped(&plan.runs, &inner, &idx, ch, cfg.net.max_rows)?;
+            let block_s = cache.samples_capped(&plan.runs, &block, &idx, ch, cfg.net.max_rows)?;
+            let full_s = full.strided(cfg.net.max_rows);
+            if with.net {
+                let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
+                let (members, infos) =
+                    train_ensemble(&specs, ch, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+                pb.finish_and_clear();
+                let ens = NetEnsemble {
+                    members: members.iter().collect(),
+                };
+                if let Some(r) = reports.get_mut("ga-bpn") {
+                    r.channels
+                        .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
+                }
+                info.net = infos.into_iter().next();
+                if let Some(w) = cv.get("blend").and_then(|s| s.weight) {
+                    let b = Blend {
+                        mlr: &mlr,
+                        nets: NetEnsemble {
+                            members: members.iter().collect(),
+                        },
+                        w,
+                    };
+                    if let Some(r) = reports.get_mut("blend") {
+                        r.channels
+                            .insert(ch.clone(), validate(&b, &val, plan, &mut r.per_run));
+                    }
+                    file.blend.insert(ch.clone(), w);
+                }
+                file.nets.extend(members);
+            }
+            if with.hybrid {
+                let pb = progress_bar(cfg.progress, 1, format!("hybrid {ch}"));
+                let members =
+                    train_hybrid(&mlr, &specs, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+                pb.finish_and_clear();
+                if members.is_empty() {
+                    notes.push(format!(
+                        "{ch}: the hybrid's residual networks did not lower the residual on the early-stopping block: the hybrid is the MLR alone"
+                    ));
+                    if let Some(r) = reports.get_mut("hybrid") {
+                        r.channels
+                            .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
+                    }
+                } else {
+                    let hyb = Hybrid {
+                        mlr: &mlr,
+                        residual: NetEnsemble {
+                            members: members.iter().collect(),
+                        },
+                    };
+                    if let Some(r) = reports.get_mut("hybrid") {
+                        r.channels
+                            .insert(ch.clone(), validate(&hyb, &val, plan, &mut r.per_run));
+                    }
+                }
+                hybrid_empty = members.is_empty();
+                file.hybrid_nets.extend(members);
+            }
+        }
+        // The choice: cross-validated on training rows, within the board's networks.
+        let mut admissible = cv.clone();
+        admissible.retain(|_, s| !s.dropped);
+        for (name, r, bar) in latest_block_rule(&mut admissible, cfg.choice_margin) {
+            notes.push(format!(
+                "{ch}: {name} is not admissible: RMS {r:.2} µm on the latest training block (the one fold that forecasts forward) against the linear model's {bar:.2} µm"
+            ));
+        }
+        for name in NET_MODELS {
+            if admissible.contains_key(name) && nets_left < ens {
+                admissible.remove(name);
+                notes.push(format!(
+                    "{ch}: {name} is not admissible (the board holds {MAX_NETS} networks, {} in use)",
+                    MAX_NETS - nets_left
+                ));
+            }
+        }
+        let mut chosen =
+            choose_model(&admissible, cfg.choice_margin).unwrap_or_else(|| "mlr".into());
+        if chosen == "hybrid" && hybrid_empty {
+            // The final hybrid kept no networks: it is the lagged MLR.
+            chosen = "mlr".into();
+        }
+        if chosen == "blend" {
+            // All weight on one part: the blend is that part.
+            match file.blend.get(ch) {
+                Some(w) if *w >= 1.0 => chosen = "mlr".into(),
+                Some(w) if *w <= 0.0 => chosen = "ga-bpn".into(),
+                _ => {}
+            }
+        }
+        if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
+            nets_left -= ens;
+        }
+        if chosen == "none" {
+            notes.push(format!(
+                "{ch}: no model beats no compensation by more than {:.0} % in the training CV (RMS {:.2} µm without compensation): the board serves 0 for it (`export --use {ch}=mlr` ships the lagged MLR anyway)",
+                100.0 * cfg.choice_margin,
+                admissible.get("none").map_or(f64::NAN, |s| s.rms_um)
+            ));
+        }
+        let used_idx: &[usize] = match chosen.as_str() {
+            "mlr-static" => &static_ok,
+            "none" => &[],
+            _ => &idx,
+        };
+        for &i in used_idx {
+            if !in_use.contains(&i) {
+                in_use.push(i);
+            }
+        }
+        file.chosen.insert(ch.clone(), chosen);
+        inputs.push(info);
+        file.mlr.push(mlr);
+    }
+    // Sensor gaps: the board skips a step when any of the image's sensors is
+    // empty; say where that differs from what each channel trained on.
+    let image_kinds = features::chosen_kinds(&file);
+    if let Some(n) = features::image_gap_rows(&plan.runs, &plan.train, &image_kinds)? {
+        if n > 0 {
+            notes.push(format!(
+                "{n} training rows have a sensor gap in another channel's inputs: there the board's features for the exported model differ from the ones trained on (the board skips a step when any of its sensors is empty)"
+            ));
+        }
+    }
+    let mut fallbacks = Vec::new();
+    if cfg.fallbacks {
+        let ctx = fallback::Context {
+            cache: &cache,
+            plan,
+            folds: &folds,
+            static_idx: &static_idx,
+            cfg,
+        };
+        let pb = progress_bar(cfg.progress, 1, "fallback models".into());
+        let (params, reps) =
+            fallback::fit_fallbacks(&ctx, &file, &channels, &mut in_use, &mut notes)?;
+        pb.finish_and_clear();
+        file.fallbacks = params;
+        fallbacks = reps;
+    }
+    let models = reports
+        .into_values()
+        .filter(|r| !r.channels.is_empty())
+        .collect();
+    Ok(FitReport {
+        fallbacks,
+        models,
+        inputs,
+        chosen: file.chosen.clone(),
+        notes,
+        selection,
+        train_segments: plan.train.clone(),
+        val_segments: plan.val.clone(),
+        model_file: file,
+    })
+}
+
+/// Plain-text report.
+pub fn print_report(r: &FitReport) {
+    for n in &r.notes {
+        println!("note: {n}");
+    }
+    if let Some(s) = &r.selection {
+        println!("selected sensors (training rows): {}", s.chosen.join(","));
+    }
+    for i in &r.inputs {
+        print!(
+            "{}: inputs {} ({} train rows, {} validation rows)",
+            i.channel,
+            i.features.join(", "),
+            i.train_rows,
+            i.val_rows
+        );
+        if let Some(cv) = i.cv_rms_um {
+            print!("; training CV RMS {cv:.2} µm");
+        }
+        if let Some(n) = &i.net {
+            print!(
+                "; GA {:.1} s, LM {} steps (best {}) {:.1} s",
+                n.ga_s, n.lm_iters, n.best_iter, n.lm_s
+            );
+        }
+        println!();
+    }
+    println!();
+    println!(
+        "{:<11} {:<10} {:>9} {:>9} {:>9} {:>9} {:>10}",
+        "model", "channel", "MAE µm", "RMS µm", "peak µm", "raw RMS", "reduction"
+    );
+    for m in &r.models {
+        for (ch, x) in &m.channels {
+            println!(
+                "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%",
+                m.name, ch, x.mae_um, x.rms_um, x.peak_um, x.raw_rms_um, x.reduction_pct
+            );
+        }
+    }
+    if !r.fallbacks.is_empty() {
+        println!("\nfallback models (degraded mode; validation rows):");
+        for f in &r.fallbacks {
+            let cv = f.cv.get(&f.model).map_or(f64::NAN, |c| c.rms_um);
+            println!(
+                "{:<10} without {:<16} {:<10} CV RMS {:>6.2} µm, RMS {:>6.2} µm, reduction {:>5.1}%  ({})",
+                f.channel,
+                f.excluded.join("+"),
+                f.model,
+                cv,
+                f.validation.rms_um,
+                f.validation.reduction_pct,
+                f.features.join(", ")
+            );
+        }
+    }
+    let runs: std::collections::BTreeSet<&str> = r
+        .models
+        .iter()
+        .flat_map(|m| m.per_run.iter().map(|p| p.run.as_str()))
+        .collect();
+    if runs.len() > 1 {
+        println!("\nper held-out run:");
+        for m in &r.models {
+            for p in &m.per_run {
+                println!(
+                    "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%  {}",
+                    m.name,
+                    p.channel,
+                    p.metrics.mae_um,
+                    p.metrics.rms_um,
+                    p.metrics.peak_um,
+                    p.metrics.reduction_pct,
+                    p.run
+                );
+            }
+        }
+    }
+}
+
+/// `{"models": [{"name", "channels": {...}}], ...}` (validation figures only).
+pub fn report_json(r: &FitReport) -> serde_json::Value {
+    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
+}

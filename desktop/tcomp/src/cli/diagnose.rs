@@ -1,0 +1,129 @@
+//! `tcomp diagnose <machine.toml|fit> <runs...> [--json] [--report out.md]`
+
+use anyhow::Result;
+use std::path::PathBuf;
+
+use tcomp_data::runcsv::Run;
+use tcomp_thermal::diagnose::{diagnose, render, Options};
+use tcomp_thermal::sim::Machine;
+
+#[derive(clap::Args, Debug)]
+pub struct DiagnoseArgs {
+    /// Nominal machine description (TOML), or `fit` to identify the nominal
+    /// model from the runs themselves (no machine file).
+    pub machine: String,
+    /// Measured runs (run CSV).
+    #[arg(required = true)]
+    pub runs: Vec<PathBuf>,
+    /// Print `{"effects": [...], "where": {...}}`.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a markdown report here (plus `<name>-channels.svg` and
+    /// `<name>-phases.svg` beside it when an effect is selected).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Fraction of time (one run) or of runs (several) used to fit.
+    #[arg(long, default_value_t = 0.6)]
+    pub fit_fraction: f64,
+    /// Only try these effects (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Calibrate the machine file's design values (capacities, conductances,
+    /// losses, heat gains, displacement lengths) on the fit rows before the
+    /// effect search: for a design known to be off by 10-20 % (without it,
+    /// such a file names effects on clean runs; with it, an exact file loses
+    /// effects to the calibration: BENCHMARKS.md, issue 16). Off by default:
+    /// the file is taken as the design says.
+    #[arg(long)]
+    pub calibrate: bool,
+}
+
+pub fn main(a: DiagnoseArgs) -> Result<()> {
+    anyhow::ensure!(
+        a.fit_fraction > 0.05 && a.fit_fraction < 0.95,
+        "--fit-fraction = {}: allowed between 0.05 and 0.95",
+        a.fit_fraction
+    );
+    if let Some(t) = a.threads {
+        anyhow::ensure!((1..=1024).contains(&t), "--threads = {t}: allowed 1..=1024");
+    }
+    let runs = a
+        .runs
+        .iter()
+        .map(|p| Run::read_with_temperatures(p).map(|r| (p.display().to_string(), r)))
+        .collect::<Result<Vec<_>>>()?;
+    let mut opt = Options {
+        fit_fraction: a.fit_fraction,
+        only: a.only.clone(),
+        calibrate: a.calibrate,
+        ..Options::default()
+    };
+    if let Some(t) = a.threads {
+        opt.threads = t.max(1);
+    }
+    for o in &opt.only {
+        anyhow::ensure!(
+            tcomp_thermal::sim::ALL_EFFECT_NAMES.contains(&o.as_str()),
+            "--only: unknown effect `{o}`"
+        );
+    }
+    let d = if a.machine == "fit" {
+        tcomp_thermal::diagnose::fitmode::diagnose_fit(&runs, &opt)?
+    } else {
+        let machine = Machine::load(std::path::Path::new(&a.machine))?;
+        diagnose(&machine, &runs, &opt)?
+    };
+    let names: Vec<String> = runs.iter().map(|r| r.0.clone()).collect();
+    if let Some(p) = &a.report {
+        render::write_report(&d, &names, p)?;
+    }
+    if a.json {
+        println!("{}", d.to_json());
+    } else {
+        for m in &d.missing {
+            println!("missing: {m}");
+        }
+        for n in d
+            .notes
+            .iter()
+            .filter(|n| n.starts_with("machine file calibrated"))
+        {
+            println!("{n}");
+        }
+        if d.findings.is_empty() {
+            println!("no candidate effect is supported by the data");
+        }
+        for (i, f) in d.findings.iter().enumerate() {
+            println!(
+                "{}. {} {} — held-out gap {} µm → {} µm, {} °C → {} °C, ΔBIC {:.1}",
+                i + 1,
+                f.name,
+                f.params_json(),
+                f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
+                f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
+                f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
+                f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
+                f.dbic
+            );
+        }
+        if !d.untestable.is_empty() {
+            let names: Vec<&str> = d.untestable.iter().map(|(n, _)| n.as_str()).collect();
+            println!(
+                "not testable from these runs (why: --json or --report): {}",
+                names.join("; ")
+            );
+        }
+        if a.machine == "fit" {
+            println!(
+                "({} candidate effects tried against the identified nominal, {:.2} s)",
+                d.sims, d.seconds
+            );
+        } else {
+            println!("({} simulations, {:.2} s)", d.sims, d.seconds);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,197 @@
+//! Command-line arguments of `tcomp fit` (used by `main.rs`).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+
+use tcomp_model::fit::net::NetOpts;
+use tcomp_model::fit::parse_feature;
+use tcomp_model::fit::pipeline::{self as run, Candidates, FeatureChoice, FitConfig};
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct FitArgs {
+    /// Training runs (run CSVs).
+    #[arg(required = true)]
+    pub train: Vec<PathBuf>,
+    /// Held-out runs to validate on (never trained on).
+    #[arg(long, num_args = 1..)]
+    pub validate: Vec<PathBuf>,
+    /// Chronological split of each training run: train on [0,a), validate on [a,b).
+    #[arg(long, value_name = "A,B")]
+    pub split_chrono: Option<String>,
+    /// `auto`, or a comma list: `T_t3`, `T_t3@3600` (lag s), `T_t3-T_t5`, `rpm@1800`.
+    #[arg(long, default_value = "auto")]
+    pub features: String,
+    /// Candidate lags for `auto`, seconds (0 = no lag).
+    #[arg(long, default_value = "0,1800,3600,7200,10800,21600")]
+    pub lags: String,
+    /// `auto` candidates: `selected` (sensors chosen by `select`) or `all`.
+    #[arg(long, default_value = "selected")]
+    pub candidates: String,
+    /// Maximum number of inputs for `auto` (≤ 8).
+    #[arg(long, default_value_t = 5)]
+    pub max_inputs: usize,
+    /// Sensor groups for the selection.
+    #[arg(long, default_value_t = 5)]
+    pub groups: usize,
+    /// Channels to fit (comma list; default all `d..._um`).
+    #[arg(long)]
+    pub channels: Option<String>,
+    /// Blocked cross-validation folds over the training time for `auto` (1: last 15 % only).
+    #[arg(long, default_value_t = 5)]
+    pub select_folds: usize,
+    #[arg(long, default_value_t = 11)]
+    pub hidden: usize,
+    #[arg(long, default_value_t = 3)]
+    pub seed: u64,
+    #[arg(long, default_value_t = 30)]
+    pub population: usize,
+    #[arg(long, default_value_t = 30)]
+    pub generations: usize,
+    /// Maximum Levenberg–Marquardt steps.
+    #[arg(long, default_value_t = 300)]
+    pub lm_iters: usize,
+    /// L2 weight penalty (normalized units).
+    #[arg(long, default_value_t = 1e-5)]
+    pub l2: f64,
+    /// GA-BPN ensemble size per channel (seeds seed, seed+1, ...): the board
+    /// serves the members' mean (all channels' networks share the board's limit).
+    #[arg(long, default_value_t = 4)]
+    pub ensemble: usize,
+    /// A simpler model is chosen when its cross-validated RMS is within this
+    /// fraction of the best.
+    #[arg(long, default_value_t = 0.02)]
+    pub choice_margin: f64,
+    /// After early stopping, retrain each network on all training rows for
+    /// the best number of steps (by default the early-stopped weights are kept).
+    #[arg(long)]
+    pub refit_full: bool,
+    /// Only the MLR models.
+    #[arg(long)]
+    pub mlr_only: bool,
+    /// Also fit and cross-validate the hybrid candidate (lagged MLR +
+    /// networks on its residual; off by default: it never won the
+    /// cross-validation on FL_THERMAL and doubles the network time).
+    #[arg(long)]
+    pub hybrid: bool,
+    /// Also score and offer the blend `w·mlr + (1−w)·ga-bpn` (weight `w`
+    /// from the cross-validation's out-of-fold predictions; scores the
+    /// network on every fold; off by default: on FL_THERMAL it wins the
+    /// training CV on ch5 for some seeds and loses on the test block).
+    #[arg(long)]
+    pub blend: bool,
+    /// Cross-validate every network candidate on every fold (by default one
+    /// is dropped as soon as its error bound shows it cannot be chosen).
+    #[arg(long)]
+    pub full_cv: bool,
+    /// Do not fit fallback models (degraded mode: models without each model sensor).
+    #[arg(long)]
+    pub no_fallbacks: bool,
+    /// Also fit fallbacks without each pair of a channel's model sensors.
+    #[arg(long, conflicts_with = "no_fallbacks")]
+    pub fallback_pairs: bool,
+    /// Write the fitted models (MLR and networks, JSON).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_list(s: &str, what: &str) -> Result<Vec<f64>> {
+    s.split(',')
+        .filter(|t| !t.trim().is_empty())
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .with_context(|| format!("{what}: `{t}` is not a number"))
+        })
+        .collect()
+}
+
+impl FitArgs {
+    pub fn config(&self) -> Result<FitConfig> {
+        let mut cfg = FitConfig::default();
+        if let Some(s) = &self.split_chrono {
+            let v = parse_list(s, "--split-chrono")?;
+            if v.len() != 2 {
+                bail!("--split-chrono needs two fractions a,b (e.g. 0.6,0.8), got `{s}`");
+            }
+            cfg.split_chrono = Some((v[0], v[1]));
+        }
+        cfg.features = if self.features.trim() == "auto" {
+            FeatureChoice::Auto
+        } else {
+            FeatureChoice::List(
+                self.features
+                    .split(',')
+                    .map(parse_feature)
+                    .collect::<Result<_>>()?,
+            )
+        };
+        cfg.lags = parse_list(&self.lags, "--lags")?;
+        if cfg.lags.is_empty() || cfg.lags.iter().any(|l| *l < 0.0) {
+            bail!("--lags: give one or more lags ≥ 0 s");
+        }
+        cfg.candidates = match self.candidates.as_str() {
+            "selected" => Candidates::Selected,
+            "all" => Candidates::All,
+            o => bail!("--candidates must be `selected` or `all`, got `{o}`"),
+        };
+        cfg.max_inputs = self.max_inputs;
+        cfg.groups = self.groups;
+        cfg.select_folds = self.select_folds;
+        cfg.channels = self
+            .channels
+            .as_ref()
+            .map(|c| c.split(',').map(|s| s.trim().to_string()).collect());
+        cfg.net = NetOpts {
+            hidden: self.hidden,
+            seed: self.seed,
+            population: self.population.max(4),
+            generations: self.generations,
+            lm_iters: self.lm_iters,
+            refit_full: self.refit_full,
+            l2: self.l2,
+            ensemble: self.ensemble.max(1),
+            ..NetOpts::default()
+        };
+        if !(self.choice_margin >= 0.0 && self.choice_margin < 1.0) {
+            bail!(
+                "--choice-margin must be in [0, 1), got {}",
+                self.choice_margin
+            );
+        }
+        cfg.choice_margin = self.choice_margin;
+        cfg.progress = !self.json;
+        cfg.skip_net = self.mlr_only;
+        cfg.hybrid = self.hybrid;
+        cfg.cv_drop = !self.full_cv;
+        cfg.blend = self.blend;
+        cfg.fallbacks = !self.no_fallbacks;
+        cfg.fallback_pairs = self.fallback_pairs;
+        Ok(cfg)
+    }
+}
+
+/// `tcomp fit`.
+pub fn main(args: FitArgs) -> Result<()> {
+    let cfg = args.config()?;
+    if args.split_chrono.is_some() && args.train.len() != 1 && args.validate.is_empty() {
+        // Allowed, but say what happens.
+        eprintln!("note: --split-chrono applies to each training run");
+    }
+    let report = run::run_fit(&args.train, &args.validate, &cfg)?;
+    if let Some(out) = &args.out {
+        let text = serde_json::to_string_pretty(&report.model_file)?;
+        std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    if args.json {
+        println!("{}", run::report_json(&report));
+    } else {
+        run::print_report(&report);
+        if let Some(out) = &args.out {
+            println!("\nwrote {}", out.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,833 @@
+//! `tcomp geometry simulate|identify|plan`.
+
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use super::geometry_check::{check_cmd, CheckArgs};
+use tcomp_data::rng::Rng;
+use tcomp_geometry::errors::{GeometricErrors, Term};
+use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
+use tcomp_geometry::kinematics::Structure;
+use tcomp_geometry::lines::{average_runs, plan14, LineFile};
+use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
+use tcomp_geometry::study::{recovery, volumetric_residual, ErrorsJson};
+
+#[derive(clap::Args, Debug)]
+pub struct GeometryArgs {
+    #[command(subcommand)]
+    pub command: GeometryCommand,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum GeometryCommand {
+    /// Write the 14 line files (forward and backward runs) of a machine with
+    /// random smooth errors (or the errors of --errors), and its errors as JSON.
+    #[command(alias = "sim")]
+    Simulate(SimulateArgs),
+    /// Identify the 21 errors from line files; prints the error functions,
+    /// the conditioning and what the lines cannot see.
+    Identify(IdentifyArgs),
+    /// Print the 14-line plan for a working volume and its conditioning.
+    Plan(PlanArgs),
+    /// Temperature dependence: per error coefficient a linear function of
+    /// sensor temperatures, fitted from lines at several temperature states;
+    /// each state held out in turn.
+    FitThermal(FitThermalArgs),
+    /// Volumetric check: predicted against measured (simulated, with noise)
+    /// tool-tip error over a held-out grid, before and after compensation;
+    /// from error files, or a whole simulated thermal check (--thermal-sim).
+    Check(CheckArgs),
+    /// Tool-tip error at one position of a three- or five-axis machine
+    /// (exact and first-order), in the workpiece frame.
+    Tooltip(TooltipArgs),
+    /// The volumetric correction polynomial the board will evaluate
+    /// (positions, tool length): its terms, size and fit to the kinematics.
+    Table(TableArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    /// Errors (errors.json or identify --json output).
+    #[arg(long)]
+    pub model: PathBuf,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TooltipArgs {
+    /// Linear-axis errors (errors.json or identify --json output); default none.
+    #[arg(long)]
+    pub errors: Option<PathBuf>,
+    /// Turntable file (five-axis): pivot, offsets and rotary errors.
+    #[arg(long)]
+    pub turntable: Option<PathBuf>,
+    /// Structure when --errors is not given.
+    #[arg(long, default_value = "XY/Z")]
+    pub structure: String,
+    /// Axis positions x,y,z [mm] or x,y,z,a,c [mm, deg].
+    #[arg(long)]
+    pub at: String,
+    /// Tool offset from the spindle gauge point x,y,z [mm].
+    #[arg(long, default_value = "0,0,100")]
+    pub tool: String,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct FitThermalArgs {
+    /// Line files with `temperature_state` metadata and `T_` columns.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    #[command(flatten)]
+    pub degrees: DegreeArgs,
+    /// Sensors to use, e.g. xscrew,column (default: every T_ column).
+    #[arg(long)]
+    pub sensors: Option<String>,
+    #[arg(long)]
+    pub stroke: Option<String>,
+    /// Also write the board's volumetric polynomial with its per-kelvin
+    /// terms (the JSON `geometry table --json` writes; `export --geometry` reads it).
+    #[arg(long)]
+    pub table: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct VolumeArgs {
+    /// Working volume X,Y,Z [mm] (the lines run in [0,X]×[0,Y]×[0,Z]).
+    #[arg(long, default_value = "800,500,400")]
+    pub stroke: String,
+    /// Reflector length below the spindle gauge point [mm].
+    #[arg(long, default_value_t = 100.0)]
+    pub tool: f64,
+    /// Lateral reflector offset on the lines that need one [mm].
+    #[arg(long, default_value_t = 100.0)]
+    pub side: f64,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct DegreeArgs {
+    /// Polynomial degree of positioning, pitch and yaw.
+    #[arg(long, default_value_t = Degrees::default().main)]
+    pub degree: usize,
+    /// Degree of the straightness errors (2 = one bow beyond the squareness line).
+    #[arg(long, default_value_t = Degrees::default().straightness)]
+    pub straightness_degree: usize,
+    /// Degree of the roll errors EAX, EBY, ECZ.
+    #[arg(long, default_value_t = Degrees::default().roll)]
+    pub roll_degree: usize,
+}
+
+impl DegreeArgs {
+    fn degrees(&self) -> Result<Degrees> {
+        if self.degree < 1 || self.roll_degree < 1 || self.straightness_degree < 2 {
+            bail!("degrees: --degree and --roll-degree must be ≥ 1, --straightness-degree ≥ 2");
+        }
+        if self
+            .degree
+            .max(self.roll_degree)
+            .max(self.straightness_degree)
+            > 8
+        {
+            bail!("degrees above 8 are not supported (the lines cannot carry them)");
+        }
+        Ok(Degrees {
+            main: self.degree,
+            straightness: self.straightness_degree,
+            roll: self.roll_degree,
+        })
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SimulateArgs {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Degrees of the random error polynomials.
+    #[command(flatten)]
+    pub degrees: DegreeArgs,
+    #[arg(long, default_value = "XY/Z")]
+    pub structure: String,
+    /// Errors to simulate (JSON as written by simulate or identify) instead of random ones.
+    #[arg(long)]
+    pub errors: Option<PathBuf>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Reading noise (standard deviation) [µm].
+    #[arg(long, default_value_t = 0.5)]
+    pub noise_um: f64,
+    /// Beam misalignment (standard deviation per tilt angle) [µrad].
+    #[arg(long, default_value_t = 200.0)]
+    pub misalign_urad: f64,
+    /// Reflector position error (standard deviation per coordinate) [mm].
+    #[arg(long, default_value_t = 1.0)]
+    pub reflector_mm: f64,
+    /// Lost motion of X,Y,Z [µm] (backward minus forward run).
+    #[arg(long, default_value = "3,2,4")]
+    pub reversal_um: String,
+    /// Targets per line, ends included.
+    #[arg(long, default_value_t = 41)]
+    pub targets: usize,
+    /// Temperature states to simulate (0: one state, no temperatures). With
+    /// N > 0 the machine's errors change with three sensors (T_xscrew,
+    /// T_column, T_bed) and files are named S1_L01_forward.csv ….
+    #[arg(long, default_value_t = 0)]
+    pub states: usize,
+    /// Output directory (created): L01_forward.csv … L14_backward.csv, errors.json.
+    #[arg(short, long)]
+    pub out: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct IdentifyArgs {
+    /// Line files (forward/backward runs of a line are averaged).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    #[command(flatten)]
+    pub degrees: DegreeArgs,
+    /// Axis strokes X,Y,Z [mm] (default: the range the lines cover).
+    #[arg(long)]
+    pub stroke: Option<String>,
+    /// Tabulate the functions at this many positions per axis.
+    #[arg(long, default_value_t = 11)]
+    pub points: usize,
+    /// Errors of the simulated machine: adds the recovery error per term.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PlanArgs {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub degrees: DegreeArgs,
+    #[arg(long, default_value = "XY/Z")]
+    pub structure: String,
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn parse_triple(s: &str, what: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| {
+            anyhow::anyhow!("{what}: expected three numbers like 800,500,400, got {s:?}")
+        })?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        bail!("{what}: expected three numbers like 800,500,400, got {s:?}");
+    }
+    Ok([v[0], v[1], v[2]])
+}
+
+fn stroke_of(v: &VolumeArgs) -> Result<[f64; 3]> {
+    let s = parse_triple(&v.stroke, "--stroke")?;
+    if s.iter().any(|x| !(*x > 0.0)) {
+        bail!("--stroke: every axis stroke must be positive");
+    }
+    Ok(s)
+}
+
+pub fn main(a: GeometryArgs) -> Result<()> {
+    match a.command {
+        GeometryCommand::Simulate(s) => simulate(s),
+        GeometryCommand::Identify(i) => identify_cmd(i),
+        GeometryCommand::Plan(p) => plan_cmd(p),
+        GeometryCommand::FitThermal(f) => fit_thermal_cmd(f),
+        GeometryCommand::Check(c) => check_cmd(c),
+        GeometryCommand::Tooltip(t) => tooltip_cmd(t),
+        GeometryCommand::Table(t) => table_cmd(t),
+    }
+}
+
+fn simulate(a: SimulateArgs) -> Result<()> {
+    let stroke = stroke_of(&a.volume)?;
+    let st = Structure::parse(&a.structure).context("--structure")?;
+    let reversal_um = parse_triple(&a.reversal_um, "--reversal-um")?;
+    for (v, what) in [
+        (a.noise_um, "--noise-um"),
+        (a.misalign_urad, "--misalign-urad"),
+        (a.reflector_mm, "--reflector-mm"),
+    ] {
+        if !(v >= 0.0 && v.is_finite()) {
+            bail!("{what} must be ≥ 0");
+        }
+    }
+    if a.targets < 3 {
+        bail!("--targets must be at least 3");
+    }
+    let mut rng = Rng::new(a.seed);
+    let truth = match &a.errors {
+        Some(p) => ErrorsJson::read(p)?.to_errors()?,
+        None => random_errors(
+            stroke,
+            &ErrorSizes {
+                degrees: a.degrees.degrees()?,
+                ..Default::default()
+            },
+            &mut rng,
+        ),
+    };
+    let setup = MeasurementSetup {
+        noise_um: a.noise_um,
+        beam_misalignment_urad: a.misalign_urad,
+        reflector_offset_mm: a.reflector_mm,
+        reversal_um,
+        targets: a.targets,
+    };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let plan = plan14(stroke, a.volume.tool, a.volume.side);
+    if a.states > 0 {
+        let machine = tcomp_geometry::sim::ThermalMachine::random(
+            stroke,
+            &["xscrew", "column", "bed"],
+            &mut rng,
+        );
+        let mut n = 0;
+        for k in 1..=a.states {
+            let temps: Vec<f64> = (0..3).map(|_| rng.range(20.0, 32.0)).collect();
+            let name = format!("S{k}");
+            for f in tcomp_geometry::sim::measure_state(
+                &st, &machine, &temps, &name, &plan, &setup, &mut rng,
+            ) {
+                let run = if f.run == tcomp_geometry::lines::Run::Backward {
+                    "backward"
+                } else {
+                    "forward"
+                };
+                f.write(&a.out.join(format!("{name}_{}_{run}.csv", f.spec.id)))?;
+                n += 1;
+            }
+        }
+        let ej = ErrorsJson::from_errors(&machine.base, &st, stroke, 11);
+        let path = a.out.join("errors.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&ej)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "wrote {n} line files of {} temperature states and errors.json (errors at 20 °C) to {}",
+            a.states,
+            a.out.display()
+        );
+        return Ok(());
+    }
+    let mut n = 0;
+    for spec in &plan {
+        let [f, b] = measure_line(&st, &truth, spec, &setup, None, &mut rng);
+        f.write(&a.out.join(format!("{}_forward.csv", spec.id)))?;
+        b.write(&a.out.join(format!("{}_backward.csv", spec.id)))?;
+        n += 2;
+    }
+    let ej = ErrorsJson::from_errors(&truth, &st, stroke, 11);
+    let path = a.out.join("errors.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&ej)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "wrote {n} line files and errors.json to {} (noise {} µm, seed {})",
+        a.out.display(),
+        a.noise_um,
+        a.seed
+    );
+    Ok(())
+}
+
+fn identify_cmd(a: IdentifyArgs) -> Result<()> {
+    let degrees = a.degrees.degrees()?;
+    let files: Vec<LineFile> = a
+        .files
+        .iter()
+        .map(|p| LineFile::read(p))
+        .collect::<Result<_>>()?;
+    let st = files[0].structure.clone();
+    if let Some(f) = files.iter().find(|f| f.structure != st) {
+        bail!(
+            "line {}: structure {} differs from {} in the other files",
+            f.spec.id,
+            f.structure,
+            st
+        );
+    }
+    let avg = average_runs(&files)?;
+    let states: std::collections::BTreeSet<_> =
+        avg.iter().map(|a| a.temperature_state.clone()).collect();
+    if states.len() > 1 {
+        bail!("the files come from {} temperature states; identify one state at a time (or use fit-thermal)", states.len());
+    }
+    let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
+    let stroke = match &a.stroke {
+        Some(s) => parse_triple(s, "--stroke")?,
+        None => {
+            let mut m = [0.0f64; 3];
+            for l in &obs {
+                for p in &l.points {
+                    for k in 0..3 {
+                        m[k] = m[k].max(p.pos_mm[k].abs());
+                    }
+                }
+            }
+            m
+        }
+    };
+    if stroke.iter().any(|x| !(*x > 0.0)) {
+        bail!("the lines do not move every axis; give --stroke X,Y,Z");
+    }
+    let id = identify(&st, &obs, degrees, stroke)?;
+    let ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
+    let truth = match &a.truth {
+        Some(p) => Some(ErrorsJson::read(p)?.to_errors()?),
+        None => None,
+    };
+    let rec = truth.as_ref().map(|t| recovery(&id.errors, t, stroke));
+    let vol = truth
+        .as_ref()
+        .map(|t| volumetric_residual(&st, &id.errors, t, stroke));
+    let reversal: BTreeMap<String, f64> = avg
+        .iter()
+        .filter_map(|a| a.reversal_um.map(|r| (a.obs.id.clone(), r)))
+        .collect();
+    if a.json {
+        let mut v = serde_json::to_value(&ej)?;
+        let o = v
+            .as_object_mut()
+            .ok_or_else(|| anyhow::anyhow!("internal: errors JSON is not an object"))?;
+        o.insert("degrees".into(), serde_json::to_value(degrees)?);
+        o.insert("lines".into(), serde_json::json!(obs.len()));
+        o.insert("readings".into(), serde_json::json!(id.readings));
+        o.insert("unknowns".into(), serde_json::json!(id.basis.columns.len()));
+        o.insert("rank".into(), serde_json::json!(id.rank));
+        o.insert(
+            "condition_number".into(),
+            if id.condition_number.is_finite() {
+                serde_json::json!(id.condition_number)
+            } else {
+                serde_json::Value::Null
+            },
+        );
+        o.insert(
+            "singular_values".into(),
+            serde_json::json!(id.singular_values),
+        );
+        o.insert(
+            "unobservable".into(),
+            serde_json::to_value(&id.unobservable)?,
+        );
+        o.insert(
+            "residual_rms_um".into(),
+            serde_json::json!(id.residual_rms_um),
+        );
+        o.insert("reversal_um".into(), serde_json::json!(reversal));
+        if let Some(r) = &rec {
+            let m: BTreeMap<_, _> = r
+                .iter()
+                .map(|(k, (mx, rms, pk))| {
+                    (
+                        k.clone(),
+                        serde_json::json!({"max": mx, "rms": rms, "true_peak": pk}),
+                    )
+                })
+                .collect();
+            o.insert("recovery".into(), serde_json::json!(m));
+        }
+        if let Some((b, af)) = vol {
+            o.insert(
+                "volumetric_rms_um".into(),
+                serde_json::json!({"before": b, "after": af, "reduction_pct": 100.0 * (1.0 - af / b)}),
+            );
+        }
+        println!("{v}");
+        return Ok(());
+    }
+    print_identification(&id, &obs, stroke, &st, a.points);
+    for t in Term::all() {
+        let tj = &ej.errors[&t.name()];
+        let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
+        let rec_s = rec
+            .as_ref()
+            .map(|r| {
+                let (mx, rms, _) = r[&t.name()];
+                format!("   recovery max {mx:.2} rms {rms:.2}")
+            })
+            .unwrap_or_default();
+        println!("  {} [{:4}] {}{rec_s}", t.name(), tj.unit, vals.join(" "));
+    }
+    let s = id.errors.squareness;
+    println!(
+        "  squareness [urad]: EC0Y {:.2}, EB0Z {:.2}, EA0Z {:.2}",
+        s.c0y, s.b0z, s.a0z
+    );
+    if !reversal.is_empty() {
+        let r: Vec<String> = reversal
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.2}"))
+            .collect();
+        println!(
+            "  reversal (forward − backward, µm along the line): {}",
+            r.join(", ")
+        );
+    }
+    if let Some((b, af)) = vol {
+        println!(
+            "  held-out grid: tool-point error RMS {b:.2} µm before, {af:.2} µm after ({:.1} % less)",
+            100.0 * (1.0 - af / b)
+        );
+    }
+    Ok(())
+}
+
+fn print_identification(
+    id: &Identification,
+    obs: &[LineObs],
+    stroke: [f64; 3],
+    st: &Structure,
+    points: usize,
+) {
+    println!(
+        "{} lines ({} readings), structure {st}, strokes {:.0}×{:.0}×{:.0} mm",
+        obs.len(),
+        id.readings,
+        stroke[0],
+        stroke[1],
+        stroke[2]
+    );
+    let d = id.basis.degrees;
+    println!(
+        "model: degree {} (positioning, pitch, yaw), {} (straightness), {} (roll): {} unknowns",
+        d.main,
+        d.straightness,
+        d.roll,
+        id.basis.columns.len()
+    );
+    println!(
+        "rank {} of {}; condition number {}; residual RMS {:.3} µm",
+        id.rank,
+        id.basis.columns.len(),
+        if id.condition_number.is_finite() {
+            format!("{:.1}", id.condition_number)
+        } else {
+            "infinite".into()
+        },
+        id.residual_rms_um
+    );
+    if id.unobservable.is_empty() {
+        println!("every unknown is observable from these lines");
+    } else {
+        println!(
+            "NOT observable from these lines ({} combinations, left at zero):",
+            id.unobservable.len()
+        );
+        for u in &id.unobservable {
+            let c: Vec<String> = u
+                .combination
+                .iter()
+                .map(|(n, w)| format!("{w:+.2}·{n}"))
+                .collect();
+            println!("  {}", c.join(" "));
+        }
+    }
+    println!("error functions at {points} positions per axis:");
+}
+
+fn plan_cmd(a: PlanArgs) -> Result<()> {
+    let stroke = stroke_of(&a.volume)?;
+    let st = Structure::parse(&a.structure).context("--structure")?;
+    let degrees = a.degrees.degrees()?;
+    let plan = plan14(stroke, a.volume.tool, a.volume.side);
+    let obs: Vec<LineObs> = plan
+        .iter()
+        .map(|l| LineObs {
+            id: l.id.clone(),
+            direction: l.direction,
+            tool_offset_mm: l.tool_offset_mm,
+            points: l
+                .targets(41)
+                .into_iter()
+                .map(|(_, p)| tcomp_geometry::identify::Observation {
+                    pos_mm: p,
+                    disp_um: 0.0,
+                })
+                .collect(),
+        })
+        .collect();
+    let id = identify(&st, &obs, degrees, stroke)?;
+    if a.json {
+        let lines: Vec<_> = plan
+            .iter()
+            .map(|l| {
+                serde_json::json!({"line": l.id, "start_mm": l.start_mm, "direction": l.direction,
+                    "length_mm": l.length_mm, "tool_offset_mm": l.tool_offset_mm, "purpose": l.purpose})
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::json!({"lines": lines, "unknowns": id.basis.columns.len(), "rank": id.rank,
+                "condition_number": if id.condition_number.is_finite() { serde_json::json!(id.condition_number) } else { serde_json::Value::Null },
+                "unobservable": id.unobservable})
+        );
+        return Ok(());
+    }
+    for l in &plan {
+        let e = [0, 1, 2].map(|k| l.start_mm[k] + l.length_mm * l.direction[k]);
+        println!(
+            "{}  ({:.0},{:.0},{:.0}) → ({:.0},{:.0},{:.0})  reflector ({:.0},{:.0},{:.0})  {}",
+            l.id,
+            l.start_mm[0],
+            l.start_mm[1],
+            l.start_mm[2],
+            e[0],
+            e[1],
+            e[2],
+            l.tool_offset_mm[0],
+            l.tool_offset_mm[1],
+            l.tool_offset_mm[2],
+            l.purpose
+        );
+    }
+    println!(
+        "{} unknowns, rank {}, condition number {}",
+        id.basis.columns.len(),
+        id.rank,
+        if id.condition_number.is_finite() {
+            format!("{:.1}", id.condition_number)
+        } else {
+            "infinite".into()
+        }
+    );
+    for u in &id.unobservable {
+        let c: Vec<String> = u
+            .combination
+            .iter()
+            .map(|(n, w)| format!("{w:+.2}·{n}"))
+            .collect();
+        println!("  not observable: {}", c.join(" "));
+    }
+    Ok(())
+}
+
+fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
+    use tcomp_geometry::thermal::{fit, leave_one_out, sensitivities, State};
+    let degrees = a.degrees.degrees()?;
+    let files: Vec<LineFile> = a
+        .files
+        .iter()
+        .map(|p| LineFile::read(p))
+        .collect::<Result<_>>()?;
+    let st = files[0].structure.clone();
+    let avg = average_runs(&files)?;
+    let sensors: Vec<String> = match &a.sensors {
+        Some(s) => s
+            .split(',')
+            .map(|x| x.trim().trim_start_matches("T_").to_string())
+            .collect(),
+        None => avg[0].temps.iter().map(|(n, _)| n.clone()).collect(),
+    };
+    if sensors.is_empty() {
+        bail!("the line files have no T_ columns; fit-thermal needs sensor temperatures");
+    }
+    let mut by_state: BTreeMap<String, Vec<&tcomp_geometry::lines::Averaged>> = BTreeMap::new();
+    for l in &avg {
+        let Some(s) = &l.temperature_state else {
+            bail!("line {}: no temperature_state metadata", l.obs.id);
+        };
+        by_state.entry(s.clone()).or_default().push(l);
+    }
+    let mut states = Vec::new();
+    for (name, lines) in &by_state {
+        let mut temps = Vec::new();
+        for s in &sensors {
+            let v: Vec<f64> = lines
+                .iter()
+                .map(|l| l.temps.iter().find(|(n, _)| n == s).map(|(_, t)| *t))
+                .collect::<Option<_>>()
+                .ok_or_else(|| anyhow::anyhow!("state {name}: a line has no T_{s} column"))?;
+            temps.push(v.iter().sum::<f64>() / v.len() as f64);
+        }
+        states.push(State {
+            name: name.clone(),
+            lines: lines.iter().map(|l| l.obs.clone()).collect(),
+            temps,
+        });
+    }
+    let stroke = match &a.stroke {
+        Some(s) => parse_triple(s, "--stroke")?,
+        None => {
+            let mut m = [0.0f64; 3];
+            for l in &avg {
+                for p in &l.obs.points {
+                    for k in 0..3 {
+                        m[k] = m[k].max(p.pos_mm[k].abs());
+                    }
+                }
+            }
+            m
+        }
+    };
+    let model = fit(&st, &states, &sensors, degrees, stroke)?;
+    let held = leave_one_out(&st, &states, &sensors, degrees, stroke)?;
+    let sens = sensitivities(&model);
+    let table = match &a.table {
+        Some(path) => {
+            let errors = model.errors_at(&model.t_ref);
+            let p = tcomp_geometry::volumetric::build(&st, stroke, &errors, Some(&model))?;
+            std::fs::write(path, table_json(&p)?.to_string())
+                .with_context(|| format!("writing {}", path.display()))?;
+            Some((
+                path.display().to_string(),
+                p.terms.len(),
+                p.max_fit_error_um,
+            ))
+        }
+        None => None,
+    };
+    if a.json {
+        let s: BTreeMap<_, _> = sens.iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+        println!(
+            "{}",
+            serde_json::json!({"sensors": sensors, "states": states.len(), "t_ref_c": model.t_ref,
+                "sensitivity_per_kelvin_at_stroke_end": s, "held_out": held,
+                "table": table.as_ref().map(|(path, terms, err)| serde_json::json!(
+                    {"path": path, "terms": terms, "max_fit_error_um": err}))})
+        );
+        return Ok(());
+    }
+    if let Some((path, terms, err)) = &table {
+        println!(
+            "wrote {path}: the volumetric polynomial with per-kelvin terms, {terms} terms (largest difference to the first-order kinematics {err:.4} µm)"
+        );
+    }
+    println!(
+        "{} states, sensors {}; reference temperatures {:?} °C",
+        states.len(),
+        sensors.join(", "),
+        model
+            .t_ref
+            .iter()
+            .map(|t| (t * 100.0).round() / 100.0)
+            .collect::<Vec<_>>()
+    );
+    println!("sensitivity at the end of the stroke per kelvin of each sensor (µm/K or µrad/K):");
+    for (n, v) in &sens {
+        let s: Vec<String> = v.iter().map(|x| format!("{x:+7.3}")).collect();
+        println!("  {n:5} {}", s.join(" "));
+    }
+    println!("held-out states (fitted without them): line residual RMS, static geometry → with temperature terms (own fit):");
+    for h in &held {
+        println!(
+            "  {}: {:.2} → {:.2} µm ({:.2})",
+            h.state, h.static_rms_um, h.thermal_rms_um, h.own_fit_rms_um
+        );
+    }
+    Ok(())
+}
+
+fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
+    use tcomp_geometry::five_axis::{
+        tool_tip_error_exact5, tool_tip_error_linear5, RotaryPos, Turntable,
+    };
+    let (st, lin) = match &a.errors {
+        Some(p) => {
+            let ej = ErrorsJson::read(p)?;
+            let st = Structure::parse(&ej.structure)
+                .with_context(|| format!("{}: structure", p.display()))?;
+            (st, ej.to_errors()?)
+        }
+        None => (
+            Structure::parse(&a.structure).context("--structure")?,
+            GeometricErrors::zero(),
+        ),
+    };
+    let v: Vec<f64> = a
+        .at
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| anyhow::anyhow!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at))?;
+    if !(v.len() == 3 || v.len() == 5) || v.iter().any(|x| !x.is_finite()) {
+        bail!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at);
+    }
+    let tool = parse_triple(&a.tool, "--tool")?;
+    let turntable = match &a.turntable {
+        Some(p) => Turntable::read(p)?,
+        None if v.len() == 5 => bail!("--at gives rotary angles but no --turntable file"),
+        None => Turntable::default(),
+    };
+    let pos = [v[0], v[1], v[2]];
+    let r = RotaryPos {
+        a_deg: v.get(3).copied().unwrap_or(0.0),
+        c_deg: v.get(4).copied().unwrap_or(0.0),
+    };
+    let exact = tool_tip_error_exact5(&st, &lin, &turntable, pos, r, tool);
+    let linear = tool_tip_error_linear5(&st, &lin, &turntable, pos, r, tool);
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({"frame": "workpiece", "unit": "um",
+                "exact_um": [exact.x, exact.y, exact.z],
+                "first_order_um": [linear.x, linear.y, linear.z],
+                "length_um": exact.norm()})
+        );
+        return Ok(());
+    }
+    println!(
+        "tool-tip error at x,y,z {:.3},{:.3},{:.3} mm, A {:.3}°, C {:.3}°, tool {:?} mm (workpiece frame):",
+        pos[0], pos[1], pos[2], r.a_deg, r.c_deg, tool
+    );
+    println!(
+        "  exact        {:+9.3} {:+9.3} {:+9.3} µm (length {:.3} µm)",
+        exact.x,
+        exact.y,
+        exact.z,
+        exact.norm()
+    );
+    println!(
+        "  first order  {:+9.3} {:+9.3} {:+9.3} µm",
+        linear.x, linear.y, linear.z
+    );
+    Ok(())
+}
+
+/// The volumetric polynomial as `geometry table --json` and
+/// `fit-thermal --table` write it.
+fn table_json(p: &tcomp_geometry::volumetric::VolumetricPoly) -> Result<serde_json::Value> {
+    let mut v = serde_json::to_value(p)?;
+    if let Some(o) = v.as_object_mut() {
+        // On the board a term is 4 exponent/sensor bytes + 3 × i32 coefficients.
+        o.insert(
+            "bytes_on_board".into(),
+            serde_json::json!(p.terms.len() * 16),
+        );
+        o.insert("unit".into(), serde_json::json!("um"));
+    }
+    Ok(v)
+}
+
+fn table_cmd(a: TableArgs) -> Result<()> {
+    let ej = ErrorsJson::read(&a.model)?;
+    let st = Structure::parse(&ej.structure)
+        .with_context(|| format!("{}: structure", a.model.display()))?;
+    let p = tcomp_geometry::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
+    let bytes = p.terms.len() * 16;
+    if a.json {
+        println!("{}", table_json(&p)?);
+        return Ok(());
+    }
+    println!(
+        "volumetric polynomial of {} ({}, strokes {:?} mm): {} terms (of 52 monomials × 3 directions), about {bytes} bytes on the board",
+        a.model.display(),
+        st,
+        ej.stroke_mm,
+        p.terms.len()
+    );
+    println!(
+        "largest difference to the first-order kinematics on check points: {:.4} µm (terms below {} µm dropped)",
+        p.max_fit_error_um,
+        tcomp_geometry::volumetric::DROP_BELOW_UM
+    );
+    Ok(())
+}

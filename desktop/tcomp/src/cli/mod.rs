@@ -1,0 +1,9 @@
+//! The per-command argument structs and glue of `tcomp`: each parses its
+//! flags, calls the library crates and prints.
+
+pub mod diagnose;
+pub mod fit;
+pub mod geometry;
+pub mod geometry_check;
+pub mod select;
+pub mod sim;

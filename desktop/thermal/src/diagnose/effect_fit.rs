@@ -1,0 +1,546 @@
+//! Residual statistics, the candidate effects' parameterisations and a
+//! bounded Nelder–Mead fitter.
+
+use anyhow::Result;
+
+use super::prep::{Kind, Prepared};
+use crate::sim::{apply_sensor_effects, simulate, Effect, Machine, SimOut};
+
+/// Per (run, channel) sums on the fit rows and the held-out rows.
+#[derive(Clone, Debug)]
+pub struct ChStats {
+    pub run: usize,
+    pub ch: usize,
+    pub is_disp: bool,
+    pub s: f64,
+    pub sse_fit: f64,
+    pub n_fit: usize,
+    pub sse_held: f64,
+    pub n_held: usize,
+    pub peak_held: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Stats {
+    pub ch: Vec<ChStats>,
+}
+
+impl Stats {
+    /// −2·log-likelihood (up to a constant) of the fit rows with an unknown
+    /// variance per channel: Σ n·ln(SSE/n + (0.1·s)²).
+    pub fn j_fit(&self) -> f64 {
+        self.ch
+            .iter()
+            .filter(|c| c.n_fit > 0)
+            .map(|c| {
+                let n = c.n_fit as f64;
+                n * (c.sse_fit / n + (0.1 * c.s).powi(2)).ln()
+            })
+            .sum()
+    }
+
+    pub fn n_fit(&self) -> usize {
+        self.ch.iter().map(|c| c.n_fit).sum()
+    }
+
+    /// Held-out mean square gap in units of each channel's noise variance
+    /// (≈ 1 when only noise is left).
+    pub fn m_held(&self) -> f64 {
+        let v: Vec<f64> = self
+            .ch
+            .iter()
+            .filter(|c| c.n_held > 0)
+            .map(|c| c.sse_held / c.n_held as f64 / (c.s * c.s))
+            .collect();
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+
+    /// Held-out RMS and peak over the displacement (`true`) or temperature channels.
+    pub fn gap_held(&self, disp: bool) -> Option<(f64, f64)> {
+        let cs: Vec<&ChStats> = self
+            .ch
+            .iter()
+            .filter(|c| c.is_disp == disp && c.n_held > 0)
+            .collect();
+        if cs.is_empty() {
+            return None;
+        }
+        let sse: f64 = cs.iter().map(|c| c.sse_held).sum();
+        let n: usize = cs.iter().map(|c| c.n_held).sum();
+        let peak = cs.iter().map(|c| c.peak_held).fold(0.0, f64::max);
+        Some(((sse / n as f64).sqrt(), peak))
+    }
+}
+
+/// Simulates the prepared runs with a set of effects.
+pub struct Evaluator<'a> {
+    pub m: &'a Machine,
+    pub runs: &'a [Prepared],
+    /// The nominal output per run (sensor effects are applied to it
+    /// without re-simulating the network).
+    pub nominal: Vec<SimOut>,
+}
+
+impl<'a> Evaluator<'a> {
+    pub fn new(m: &'a Machine, runs: &'a [Prepared]) -> Result<Evaluator<'a>> {
+        let nominal = runs
+            .iter()
+            .map(|p| simulate(m, &p.inputs, &[], 1))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Evaluator { m, runs, nominal })
+    }
+
+    /// Residuals measured − simulated: run → channel → row (NaN where missing).
+    pub fn residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
+        let mut all = Vec::with_capacity(self.runs.len());
+        for p in self.runs {
+            // an effect located in one run (a sensor step) acts there only
+            let mine: Vec<Effect> = effects
+                .iter()
+                .filter(|e| match e {
+                    Effect::SensorOffset { run: Some(r), .. } => *r == p.name,
+                    _ => true,
+                })
+                .cloned()
+                .collect();
+            let out = if mine.iter().all(Effect::is_sensor_only) {
+                let mut o = self.nominal[all.len()].clone();
+                apply_sensor_effects(self.m, &mine, &mut o, p.inputs.dt)?;
+                o
+            } else {
+                simulate(self.m, &p.inputs, &mine, 1)?
+            };
+            let mut rr = Vec::with_capacity(p.channels.len());
+            for c in &p.channels {
+                let sim = match c.kind {
+                    Kind::Temp(i) => &out.temps[i],
+                    Kind::Disp(i) => &out.disp[i],
+                };
+                rr.push(c.meas.iter().zip(sim).map(|(a, b)| a - b).collect());
+            }
+            all.push(rr);
+        }
+        Ok(all)
+    }
+
+    pub fn stats_of(&self, res: &[Vec<Vec<f64>>]) -> Stats {
+        let mut ch = Vec::new();
+        for (ri, (p, rr)) in self.runs.iter().zip(res).enumerate() {
+            for (ci, (c, r)) in p.channels.iter().zip(rr).enumerate() {
+                let mut s = ChStats {
+                    run: ri,
+                    ch: ci,
+                    is_disp: matches!(c.kind, Kind::Disp(_)),
+                    s: c.s,
+                    sse_fit: 0.0,
+                    n_fit: 0,
+                    sse_held: 0.0,
+                    n_held: 0,
+                    peak_held: 0.0,
+                };
+                for (k, v) in r.iter().enumerate() {
+                    if !v.is_finite() {
+                        continue;
+                    }
+                    if p.is_fit(k) {
+                        s.sse_fit += v * v;
+                        s.n_fit += 1;
+                    } else {
+                        s.sse_held += v * v;
+                        s.n_held += 1;
+                        s.peak_held = s.peak_held.max(v.abs());
+                    }
+                }
+                ch.push(s);
+            }
+        }
+        Stats { ch }
+    }
+
+    pub fn stats(&self, effects: &[Effect]) -> Result<Stats> {
+        Ok(self.stats_of(&self.residuals(effects)?))
+    }
+}
+
+/// One fitted parameter: physical bounds, log or linear mapping from u ∈ [0, 1].
+#[derive(Clone, Copy, Debug)]
+pub struct Param {
+    pub name: &'static str,
+    pub lo: f64,
+    pub hi: f64,
+    pub log: bool,
+}
+
+impl Param {
+    pub fn from_u(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        if self.log {
+            (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp()
+        } else {
+            self.lo + u * (self.hi - self.lo)
+        }
+    }
+    pub fn to_u(&self, v: f64) -> f64 {
+        let u = if self.log {
+            (v.max(self.lo).ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        };
+        u.clamp(0.0, 1.0)
+    }
+}
+
+const fn p(name: &'static str, lo: f64, hi: f64, log: bool) -> Param {
+    Param { name, lo, hi, log }
+}
+
+/// The fitted parameters of each candidate (others keep their defaults:
+/// the chiller sawtooth is not fitted, it averages out).
+pub fn params_of(kind: &str) -> Vec<Param> {
+    match kind {
+        "convection" => vec![p("h", 0.3, 60.0, true)],
+        "ambient_drift" => vec![
+            p("amp_c", 0.0, 5.0, false),
+            p("phase_h", 0.0, 24.0, false),
+            p("rate_c_per_h", -1.0, 1.0, false),
+        ],
+        "sensor_lag" => vec![p("tau_s", 3.0, 2000.0, true)],
+        "chiller" => vec![
+            p("band_c", 0.1, 3.0, false),
+            p("power_w", 50.0, 20000.0, true),
+            p("load_frac", 0.05, 0.95, false),
+        ],
+        "bearing_nonlinear" => vec![p("k_w", 0.5, 400.0, true), p("p", 1.1, 3.5, false)],
+        "coolant" => vec![
+            p("g_w_per_k", 0.3, 150.0, true),
+            p("offset_c", -10.0, 5.0, false),
+        ],
+        "ballscrew" => vec![p("k_w", 1.0, 2000.0, true)],
+        "bending" => vec![p("k_um_per_k", -20.0, 20.0, false)],
+        "sensor_offset" => vec![p("offset_c", -5.0, 5.0, false)],
+        _ => vec![],
+    }
+}
+
+/// Build an effect from physical parameter values (`c` places the sensor
+/// effects: which sensor, from when, in which run).
+pub fn build(kind: &str, v: &[f64], c: &Cand) -> Effect {
+    match kind {
+        "convection" => Effect::Convection { h_w_per_m2k: v[0] },
+        "ambient_drift" => Effect::AmbientDrift {
+            amp_c: v[0],
+            phase_h: v[1],
+            rate_c_per_h: v[2],
+            period_h: 24.0,
+        },
+        "sensor_lag" => Effect::SensorLag {
+            tau_s: v[0],
+            sensor: (!c.sensor.is_empty()).then(|| c.sensor.clone()),
+        },
+        "chiller" => Effect::Chiller {
+            band_c: v[0],
+            power_w: v[1],
+            load_frac: v[2],
+        },
+        "bearing_nonlinear" => Effect::BearingNonlinear {
+            k_w: v[0],
+            p: v[1],
+            node: (!c.node.is_empty()).then(|| c.node.clone()),
+        },
+        "coolant" => Effect::Coolant {
+            g_w_per_k: v[0],
+            offset_c: v[1],
+            amp_c: 0.0,
+            period_s: 900.0,
+        },
+        "ballscrew" => Effect::Ballscrew { k_w: v[0] },
+        "bending" => Effect::Bending { k_um_per_k: v[0] },
+        _ => Effect::SensorOffset {
+            sensor: c.sensor.clone(),
+            offset_c: v[0],
+            at_s: c.at_s,
+            run: c.run.clone(),
+        },
+    }
+}
+
+/// A candidate: one effect kind and, for the sensor effects, where it was
+/// located (the sensor; for a step also its onset and run).
+#[derive(Clone, Debug, Default)]
+pub struct Cand {
+    pub kind: &'static str,
+    pub sensor: String,
+    pub at_s: f64,
+    pub run: Option<String>,
+    /// The node a located heat effect acts on (empty: all its sites).
+    pub node: String,
+    /// Start values (physical) estimated from the data, else a grid.
+    pub init: Vec<f64>,
+}
+
+impl Cand {
+    pub fn new(kind: &'static str) -> Cand {
+        Cand {
+            kind,
+            ..Cand::default()
+        }
+    }
+
+    /// Choices made when locating it (sensor, onset, run), counted as
+    /// parameters by BIC.
+    pub fn located(&self) -> usize {
+        usize::from(!self.sensor.is_empty())
+            + usize::from(!self.node.is_empty())
+            + usize::from(self.at_s > 0.0)
+            + usize::from(self.run.is_some())
+    }
+}
+
+/// Turn a joint u-vector into effects.
+pub fn effects_of(cands: &[Cand], u: &[f64]) -> Vec<Effect> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    for c in cands {
+        let ps = params_of(c.kind);
+        let v: Vec<f64> = ps
+            .iter()
+            .enumerate()
+            .map(|(j, p)| p.from_u(u[i + j]))
+            .collect();
+        i += ps.len();
+        out.push(build(c.kind, &v, c));
+    }
+    out
+}
+
+/// Bounded Nelder–Mead on [0,1]^d (points clamped). Returns (best u, value, evals).
+pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
+    f: &mut F,
+    x0: &[f64],
+    step: f64,
+    max_evals: usize,
+) -> (Vec<f64>, f64, usize) {
+    let d = x0.len();
+    let clamp = |x: &mut Vec<f64>| x.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    let mut pts: Vec<Vec<f64>> = vec![x0.to_vec()];
+    for i in 0..d {
+        let mut x = x0.to_vec();
+        x[i] = if x[i] + step <= 1.0 {
+            x[i] + step
+        } else {
+            x[i] - step
+        };
+        pts.push(x);
+    }
+    let mut evals = 0;
+    let mut vals: Vec<f64> = pts
+        .iter()
+        .map(|x| {
+            evals += 1;
+            f(x)
+        })
+        .collect();
+    while evals < max_evals {
+        let mut idx: Vec<usize> = (0..=d).collect();
+        idx.sort_by(|&a, &b| vals[a].total_cmp(&vals[b]));
+        pts = idx.iter().map(|&i| pts[i].clone()).collect();
+        vals = idx.iter().map(|&i| vals[i]).collect();
+        if (vals[d] - vals[0]).abs() < 1e-6 * (1.0 + vals[0].abs()) {
+            let spread = (0..d)
+                .map(|j| {
+                    pts.iter().map(|p| p[j]).fold(f64::MIN, f64::max)
+                        - pts.iter().map(|p| p[j]).fold(f64::MAX, f64::min)
+                })
+                .fold(0.0, f64::max);
+            if spread < 1e-4 {
+                break;
+            }
+        }
+        let cen: Vec<f64> = (0..d)
+            .map(|j| pts[..d].iter().map(|p| p[j]).sum::<f64>() / d as f64)
+            .collect();
+        let along = |t: f64| -> Vec<f64> {
+            let mut x: Vec<f64> = (0..d).map(|j| cen[j] + t * (pts[d][j] - cen[j])).collect();
+            clamp(&mut x);
+            x
+        };
+        let xr = along(-1.0);
+        let fr = f(&xr);
+        evals += 1;
+        if fr < vals[0] {
+            let xe = along(-2.0);
+            let fe = f(&xe);
+            evals += 1;
+            if fe < fr {
+                pts[d] = xe;
+                vals[d] = fe;
+            } else {
+                pts[d] = xr;
+                vals[d] = fr;
+            }
+        } else if fr < vals[d - 1] {
+            pts[d] = xr;
+            vals[d] = fr;
+        } else {
+            let (xc, fc) = if fr < vals[d] {
+                let x = along(-0.5);
+                let v = f(&x);
+                (x, v)
+            } else {
+                let x = along(0.5);
+                let v = f(&x);
+                (x, v)
+            };
+            evals += 1;
+            if fc < vals[d].min(fr) {
+                pts[d] = xc;
+                vals[d] = fc;
+            } else {
+                for i in 1..=d {
+                    for j in 0..d {
+                        pts[i][j] = pts[0][j] + 0.5 * (pts[i][j] - pts[0][j]);
+                    }
+                    vals[i] = f(&pts[i]);
+                    evals += 1;
+                }
+            }
+        }
+    }
+    let best = (0..=d)
+        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
+        .unwrap_or(0);
+    (pts[best].clone(), vals[best], evals)
+}
+
+/// Result of fitting a set of candidates.
+#[derive(Clone, Debug)]
+pub struct FitResult {
+    pub cands: Vec<Cand>,
+    pub u: Vec<f64>,
+    pub effects: Vec<Effect>,
+    pub j: f64,
+    pub k: usize,
+    pub evals: usize,
+}
+
+/// Fit candidates jointly: a coarse grid (when no start is given) then
+/// Nelder–Mead, minimising the fit-rows criterion.
+pub fn fit_cands(
+    ev: &Evaluator,
+    cands: &[Cand],
+    start: Option<Vec<f64>>,
+    budget: usize,
+) -> FitResult {
+    let d: usize = cands.iter().map(|c| params_of(c.kind).len()).sum();
+    let mut obj = |u: &[f64]| -> f64 {
+        let eff = effects_of(cands, u);
+        match ev.stats(&eff) {
+            Ok(s) => s.j_fit(),
+            Err(_) => f64::INFINITY,
+        }
+    };
+    let mut evals = 0;
+    let init = (cands.len() == 1 && cands[0].init.len() == d).then(|| {
+        params_of(cands[0].kind)
+            .iter()
+            .zip(&cands[0].init)
+            .map(|(p, v)| p.to_u(*v))
+            .collect::<Vec<f64>>()
+    });
+    let x0 = match start.or(init) {
+        Some(s) => s,
+        None => {
+            let g: usize = match d {
+                1 => 9,
+                2 => 4,
+                _ => 3,
+            };
+            let mut best = (vec![0.5; d], f64::INFINITY);
+            let total = g.pow(d as u32);
+            for idx in 0..total {
+                let mut r = idx;
+                let u: Vec<f64> = (0..d)
+                    .map(|_| {
+                        let i = r % g;
+                        r /= g;
+                        (i as f64 + 0.5) / g as f64
+                    })
+                    .collect();
+                let v = obj(&u);
+                evals += 1;
+                if v < best.1 {
+                    best = (u, v);
+                }
+            }
+            best.0
+        }
+    };
+    let (u, j, e) = nelder_mead(&mut obj, &x0, 0.5 / (d as f64 + 1.0).max(2.0), budget);
+    evals += e;
+    FitResult {
+        cands: cands.to_vec(),
+        effects: effects_of(cands, &u),
+        u,
+        j,
+        k: d + cands.iter().map(Cand::located).sum::<usize>(),
+        evals,
+    }
+}
+
+/// Add one candidate to an already fitted set: a coarse grid over the new
+/// parameters with the base fixed, then a joint Nelder–Mead polish.
+pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) -> FitResult {
+    let mut cands = base.cands.clone();
+    cands.push(add.clone());
+    let d = params_of(add.kind).len();
+    let g: usize = match d {
+        1 => 7,
+        2 => 3,
+        _ => 2,
+    };
+    let mut evals = 0;
+    let mut best = (vec![0.5; d], f64::INFINITY);
+    for idx in 0..g.pow(d as u32) {
+        let mut r = idx;
+        let ua: Vec<f64> = (0..d)
+            .map(|_| {
+                let i = r % g;
+                r /= g;
+                (i as f64 + 0.5) / g as f64
+            })
+            .collect();
+        let u: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
+        let v = ev
+            .stats(&effects_of(&cands, &u))
+            .map_or(f64::INFINITY, |s| s.j_fit());
+        evals += 1;
+        if v < best.1 {
+            best = (ua, v);
+        }
+    }
+    let start: Vec<f64> = base.u.iter().chain(&best.0).copied().collect();
+    let mut r = fit_cands(ev, &cands, Some(start), budget);
+    r.evals += evals;
+    r
+}
+
+/// `f` over `items` in parallel (rayon), keeping the order; `threads` caps
+/// the pool when it is smaller than rayon's.
+pub(crate) fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync + Send>(
+    items: &[T],
+    threads: usize,
+    f: F,
+) -> Vec<R> {
+    use rayon::prelude::*;
+    let run = || items.par_iter().map(&f).collect();
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+    {
+        Ok(pool) if threads < rayon::current_num_threads() => pool.install(run),
+        _ => run(),
+    }
+}

@@ -1,0 +1,615 @@
+//! Machine thermal simulator: a lumped thermal network (heat capacities,
+//! conductances, motor loss and Palmgren bearing heat) with a 1-D
+//! finite-difference spindle shaft, stepped with the exact zero-order-hold
+//! discretisation (`x ← Φx + Ψb`, stable for any step), thermal expansion
+//! mapped to displacement per direction, DS18B20 quantisation and seeded
+//! noise, and switchable candidate effects (`effects.rs`).
+
+pub mod duty;
+pub mod effects;
+pub mod limits;
+pub mod machine;
+
+use anyhow::{bail, Result};
+use tcomp_data::rng::Rng;
+
+pub use duty::{Duty, Inputs};
+pub use effects::{Effect, ALL_EFFECT_NAMES, EFFECT_NAMES};
+pub use machine::{Machine, Probe};
+
+use nalgebra::{DMatrix, DVector};
+use tcomp_data::linalg::{discretize, solve};
+
+/// Noise-free simulator output at the output samples.
+#[derive(Clone, Debug)]
+pub struct SimOut {
+    /// Per sensor (machine order), per sample [°C].
+    pub temps: Vec<Vec<f64>>,
+    /// Per direction (machine order), per sample [µm].
+    pub disp: Vec<Vec<f64>>,
+    /// Sample times [s].
+    pub t: Vec<f64>,
+}
+
+/// Effects pre-digested for the stepping loop.
+#[derive(Default)]
+struct Active {
+    h: f64,
+    drift: Vec<(f64, f64, f64, f64)>,
+    /// Lag per sensor [s] (0 = none).
+    lag: Vec<f64>,
+    /// (k, p, nodes)
+    bnl: Vec<(f64, f64, Vec<usize>)>,
+    cool: Option<(f64, f64, f64, f64)>,
+    /// (band, power, load fraction) of a cycling chiller.
+    chiller: Option<(f64, f64, f64)>,
+    screw: f64,
+    bend: f64,
+    /// (sensor, offset, from time)
+    offsets: Vec<(usize, f64, f64)>,
+}
+
+fn sensor_index(m: &Machine, sensor: &str, what: &str) -> Result<usize> {
+    let col = machine::sensor_column(sensor);
+    m.sensor_cols
+        .iter()
+        .position(|c| *c == col || c == sensor)
+        .ok_or_else(|| anyhow::anyhow!("effect {what}: unknown sensor `{sensor}`"))
+}
+
+fn activate(m: &Machine, effects: &[Effect]) -> Result<Active> {
+    let mut a = Active {
+        lag: vec![0.0; m.sensor_cols.len()],
+        ..Active::default()
+    };
+    for e in effects {
+        e.validate()?;
+        match e {
+            Effect::Convection { h_w_per_m2k } => a.h += h_w_per_m2k,
+            Effect::AmbientDrift {
+                amp_c,
+                phase_h,
+                rate_c_per_h,
+                period_h,
+            } => a.drift.push((*amp_c, *phase_h, *rate_c_per_h, *period_h)),
+            Effect::SensorLag { tau_s, sensor } => match sensor {
+                Some(sn) => a.lag[sensor_index(m, sn, "sensor_lag")?] += tau_s,
+                None => a.lag.iter_mut().for_each(|l| *l += tau_s),
+            },
+            Effect::Chiller {
+                band_c,
+                power_w,
+                load_frac,
+            } => {
+                if !m.coolant.as_ref().is_some_and(|c| c.tank_c > 0.0) {
+                    bail!(
+                        "effect chiller: machine `{}` has no [coolant] circuit with tank_c_j_per_k > 0",
+                        m.spec.name
+                    );
+                }
+                a.chiller = Some((*band_c, *power_w, *load_frac));
+            }
+            Effect::BearingNonlinear { k_w, p, node } => {
+                let at = match node {
+                    Some(nn) => vec![m.names.iter().position(|x| x == nn).ok_or_else(|| {
+                        anyhow::anyhow!("effect bearing_nonlinear: unknown node `{nn}`")
+                    })?],
+                    None => m.bnl_nodes.clone(),
+                };
+                a.bnl.push((*k_w, *p, at));
+            }
+            Effect::Coolant {
+                g_w_per_k,
+                offset_c,
+                amp_c,
+                period_s,
+            } => {
+                if m.coolant_nodes.is_empty() {
+                    bail!(
+                        "effect coolant: machine `{}` names no effects.coolant_nodes",
+                        m.spec.name
+                    );
+                }
+                a.cool = Some((*g_w_per_k, *offset_c, *amp_c, *period_s));
+            }
+            Effect::Ballscrew { k_w } => {
+                if m.ballscrew_nodes.is_empty() {
+                    bail!(
+                        "effect ballscrew: machine `{}` names no effects.ballscrew_nodes",
+                        m.spec.name
+                    );
+                }
+                a.screw += k_w
+            }
+            Effect::Bending { k_um_per_k } => {
+                if m.bending.is_none() {
+                    bail!(
+                        "effect bending: machine `{}` has no [effects.bending]",
+                        m.spec.name
+                    );
+                }
+                a.bend += k_um_per_k
+            }
+            Effect::SensorOffset {
+                sensor,
+                offset_c,
+                at_s,
+                ..
+            } => {
+                let i = sensor_index(m, sensor, "sensor_offset")?;
+                a.offsets.push((i, *offset_c, *at_s));
+            }
+        }
+    }
+    Ok(a)
+}
+
+/// Ambient deviation of the drift terms at time `t` [s].
+fn drift_at(d: &[(f64, f64, f64, f64)], t: f64) -> f64 {
+    d.iter()
+        .map(|&(amp, ph, rate, per)| {
+            let w = 2.0 * std::f64::consts::PI / (per * 3600.0);
+            let phi = 2.0 * std::f64::consts::PI * ph / per;
+            amp * ((w * t + phi).sin() - phi.sin()) + rate * t / 3600.0
+        })
+        .sum()
+}
+
+/// Chiller sawtooth in [-amp/2, amp/2).
+fn saw(t: f64, amp: f64, period: f64) -> f64 {
+    amp * ((t / period).rem_euclid(1.0) - 0.5)
+}
+
+/// [`discretize`] with a small per-thread cache keyed by the exact bits of
+/// `A` and `dt`: a diagnosis re-simulates the same network many times with
+/// other heat inputs (heat effects, heat-gain calibration), and the matrix
+/// exponential is most of a coarse simulation's cost. Same result, bit for bit.
+fn discretize_cached(a: &DMatrix<f64>, dt: f64) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    type Entry = (Vec<u64>, (DMatrix<f64>, DMatrix<f64>));
+    thread_local! {
+        static CACHE: std::cell::RefCell<std::collections::VecDeque<Entry>> =
+            const { std::cell::RefCell::new(std::collections::VecDeque::new()) };
+    }
+    const KEEP: usize = 16;
+    let mut key: Vec<u64> = Vec::with_capacity(a.len() + 2);
+    key.push(a.nrows() as u64);
+    key.push(dt.to_bits());
+    key.extend(a.iter().map(|v| v.to_bits()));
+    if let Some(hit) = CACHE.with(|c| c.borrow().iter().find(|e| e.0 == key).map(|e| e.1.clone())) {
+        return Ok(hit);
+    }
+    let d = discretize(a, dt)?;
+    CACHE.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.len() >= KEEP {
+            c.pop_front();
+        }
+        c.push_back((key, d.clone()));
+    });
+    Ok(d)
+}
+
+/// The state matrix `A` (dx/dt = A x + b) for the given ambient and
+/// coolant conductances.
+fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> DMatrix<f64> {
+    let mut a = -conductance(m, g_amb);
+    for i in 0..m.n {
+        a[(i, i)] -= g_cool[i];
+        a.row_mut(i).unscale_mut(m.c[i]);
+    }
+    a
+}
+
+/// The conductance matrix `L + diag(g_amb)` (W/K) of the network.
+fn conductance(m: &Machine, g_amb: &[f64]) -> DMatrix<f64> {
+    let mut l = DMatrix::from_diagonal(&DVector::from_column_slice(&g_amb[..m.n]));
+    for &(i, j, g) in &m.links {
+        l[(i, i)] += g;
+        l[(j, j)] += g;
+        l[(i, j)] -= g;
+        l[(j, i)] -= g;
+    }
+    l
+}
+
+/// Steady state of the network for heat `q` [W] and ambient `ta`
+/// (coolant off): solves `(L + diag g) T = q + g (ta + offset)`.
+pub fn steady_state(m: &Machine, q: &[f64], ta: f64, effects: &[Effect]) -> Result<Vec<f64>> {
+    let act = activate(m, effects)?;
+    let g_amb: Vec<f64> = (0..m.n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
+    let rhs: Vec<f64> = (0..m.n)
+        .map(|i| q[i] + g_amb[i] * (ta + m.amb_offset[i]))
+        .collect();
+    solve(conductance(m, &g_amb), &rhs)
+        .map_err(|e| anyhow::anyhow!("thermal network: {e} (a node without a path to ambient?)"))
+}
+
+/// Simulate without noise. Output every `stride`-th step, starting at row 0.
+/// The machine starts in equilibrium with the first ambient at rest.
+pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) -> Result<SimOut> {
+    let stride = stride.max(1);
+    let act = activate(m, effects)?;
+    let n = m.n;
+    let dt = inp.dt;
+    let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
+    // conductance to the coolant per node: the circuit's jackets while it
+    // flows, the `coolant` effect while it is on; Φ, Ψ per combination
+    let mut g_jacket = vec![0.0; n];
+    if let Some(c) = &m.coolant {
+        for &(i, g) in &c.jacket {
+            g_jacket[i] += g;
+        }
+    }
+    let mut g_cool = vec![0.0; n];
+    if let Some((g, ..)) = act.cool {
+        for &i in &m.coolant_nodes {
+            g_cool[i] += g / m.coolant_nodes.len() as f64;
+        }
+    }
+    let mut mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4] = Default::default();
+    for (key, slot) in mats.iter_mut().enumerate() {
+        let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
+        if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
+            continue;
+        }
+        let g: Vec<f64> = (0..n)
+            .map(|i| (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 })
+            .collect();
+        *slot = Some(discretize_cached(&state_matrix(m, &g_amb, &g), dt)?);
+    }
+    let circuit = m.coolant.as_ref();
+    let supply = circuit.map_or(0.0, |c| c.supply_c);
+    // coolant temperature (the set point unless the chiller cycles)
+    let mut t_cool = supply;
+    let mut chiller_on = false;
+    // initial equilibrium at rest
+    // (a circuit that flows `always` holds its jackets towards the supply)
+    let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
+    let at_rest = circuit.is_some_and(|c| c.flows == machine::Flow::Always);
+    let g_rest: Vec<f64> = (0..n)
+        .map(|i| g_amb[i] + if at_rest { g_jacket[i] } else { 0.0 })
+        .collect();
+    let rhs: Vec<f64> = (0..n)
+        .map(|i| {
+            g_amb[i] * (ta0 + m.amb_offset[i]) + if at_rest { g_jacket[i] * supply } else { 0.0 }
+        })
+        .collect();
+    let mut x = DVector::from_vec(
+        solve(conductance(m, &g_rest), &rhs)
+            .map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
+    );
+    let x0 = x.clone();
+    let k_total = inp.len();
+    let n_out = k_total.div_ceil(stride);
+    let ns = m.sensor_cols.len();
+    let nd = m.dir_cols.len();
+    let mut temps = vec![Vec::with_capacity(n_out); ns];
+    let mut disp = vec![Vec::with_capacity(n_out); nd];
+    let mut ts = Vec::with_capacity(n_out);
+    let mut q = vec![0.0; n];
+    let mut b = DVector::<f64>::zeros(n);
+    let mut next = DVector::<f64>::zeros(n);
+    let n_max = m.spec.n_max_rpm;
+    let n_screw = m.ballscrew_nodes.len().max(1) as f64;
+    let mut last_rpm = f64::NAN;
+    let base = mats[0]
+        .take()
+        .ok_or_else(|| anyhow::anyhow!("thermal network: no base discretisation"))?;
+    let feed_sources = m
+        .spec
+        .sources
+        .iter()
+        .any(|s| s.driver == machine::Driver::Feed);
+    let mut qf = vec![0.0; n];
+    for k in 0..k_total {
+        let t = inp.time(k);
+        if k % stride == 0 {
+            let amb_now = inp.ambient[k] + drift_at(&act.drift, t);
+            ts.push(t);
+            for (s, probe) in m.sensor_probe.iter().enumerate() {
+                temps[s].push(match probe {
+                    Probe::Node(i) => x[*i],
+                    Probe::Ambient => amb_now,
+                    Probe::Coolant => t_cool,
+                });
+            }
+            for (d, terms) in m.dir_terms.iter().enumerate() {
+                let mut v = 0.0;
+                for &(i, al) in terms {
+                    v += al * (x[i] - x0[i]);
+                }
+                if let Some((a, bn, di)) = m.bending {
+                    if di == d {
+                        v += act.bend * ((x[a] - x0[a]) - (x[bn] - x0[bn]));
+                    }
+                }
+                disp[d].push(v);
+            }
+        }
+        if k + 1 == k_total {
+            break;
+        }
+        let tm = t + 0.5 * dt;
+        let rpm = inp.rpm[k];
+        if rpm != last_rpm {
+            m.heat_nominal(rpm, &mut q);
+            if rpm > 0.0 {
+                for (kw, p, at) in &act.bnl {
+                    let extra = kw * (rpm / n_max).powf(*p);
+                    for &bn in at {
+                        q[bn] += extra;
+                    }
+                }
+            }
+            last_rpm = rpm;
+        }
+        let ta = inp.ambient[k] + drift_at(&act.drift, tm);
+        for i in 0..n {
+            b[i] = (q[i] + g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
+        }
+        if feed_sources && inp.feed[k] > 0.0 {
+            qf.iter_mut().for_each(|v| *v = 0.0);
+            m.heat_feed(inp.feed[k], &mut qf);
+            for i in 0..n {
+                b[i] += qf[i] / m.c[i];
+            }
+        }
+        if act.screw != 0.0 && inp.feed[k] != 0.0 {
+            for &i in &m.ballscrew_nodes {
+                b[i] += act.screw * inp.feed[k] / n_screw / m.c[i];
+            }
+        }
+        let flowing = m.coolant_flows(rpm, inp.coolant[k]);
+        if flowing {
+            for (i, g) in g_jacket.iter().enumerate() {
+                if *g > 0.0 {
+                    b[i] += g * t_cool / m.c[i];
+                }
+            }
+        }
+        let cool_on = match act.cool {
+            Some((_, off, amp, per)) => {
+                let on = if circuit.is_some() {
+                    flowing
+                } else {
+                    inp.coolant[k] > 0.5
+                };
+                if on {
+                    let tc = ta + off + saw(tm, amp, per);
+                    for &i in &m.coolant_nodes {
+                        b[i] += g_cool[i] * tc / m.c[i];
+                    }
+                }
+                on
+            }
+            None => false,
+        };
+        let key = usize::from(flowing) | (usize::from(cool_on) << 1);
+        let (phi, psi) = mats[key].as_ref().unwrap_or(&base);
+        // the tank under a cycling chiller (its time constant is hours:
+        // the jackets' heat is taken at the step's start; the thermostat
+        // switches at the exact crossing of its band within the step)
+        if let (Some((band, power, load)), Some(c)) = (act.chiller, circuit) {
+            let mut g_in = 0.0;
+            let mut q_in = c.tank_g_amb * ta + load * power;
+            if flowing {
+                for &(i, g) in &c.jacket {
+                    g_in += g;
+                    q_in += g * x[i];
+                }
+            }
+            let g_tot = c.tank_g_amb + g_in;
+            let (lo, hi) = (supply - band / 2.0, supply + band / 2.0);
+            let mut rem = dt;
+            for _ in 0..3 {
+                let slope =
+                    (q_in - g_tot * t_cool - if chiller_on { power } else { 0.0 }) / c.tank_c;
+                let end = t_cool + slope * rem;
+                if chiller_on && slope < 0.0 && end < lo {
+                    rem -= (lo - t_cool) / slope;
+                    t_cool = lo;
+                    chiller_on = false;
+                } else if !chiller_on && slope > 0.0 && end > hi {
+                    rem -= (hi - t_cool) / slope;
+                    t_cool = hi;
+                    chiller_on = true;
+                } else {
+                    t_cool = end;
+                    break;
+                }
+            }
+        }
+        next.gemv(1.0, phi, &x, 0.0);
+        next.gemv(1.0, psi, &b, 1.0);
+        std::mem::swap(&mut x, &mut next);
+    }
+    let mut out = SimOut { temps, disp, t: ts };
+    sensor_post(&act, &mut out, dt * stride as f64);
+    Ok(out)
+}
+
+/// Sensor lag (first-order, exact for a signal linear between samples)
+/// and offsets, on output sampled every `h` seconds.
+fn sensor_post(act: &Active, out: &mut SimOut, h: f64) {
+    for (s, &tau) in out.temps.iter_mut().zip(&act.lag) {
+        if tau > 0.0 && !s.is_empty() {
+            let e = (-h / tau).exp();
+            let c = 1.0 - tau / h * (1.0 - e);
+            let mut y = s[0];
+            let mut xp = s[0];
+            for v in s.iter_mut() {
+                let xn = *v;
+                y = e * y + (1.0 - e) * xp + (xn - xp) * c;
+                xp = xn;
+                *v = y;
+            }
+        }
+    }
+    for &(i, off, from) in &act.offsets {
+        for (v, t) in out.temps[i].iter_mut().zip(&out.t) {
+            if *t >= from {
+                *v += off;
+            }
+        }
+    }
+}
+
+/// Apply the sensor effects among `effects` (`sensor_lag`,
+/// `sensor_offset`) to an output without them, sampled every `h` seconds:
+/// the same as simulating with them, without re-simulating the network.
+pub fn apply_sensor_effects(
+    m: &Machine,
+    effects: &[Effect],
+    out: &mut SimOut,
+    h: f64,
+) -> Result<()> {
+    let sensor: Vec<Effect> = effects
+        .iter()
+        .filter(|e| e.is_sensor_only())
+        .cloned()
+        .collect();
+    let act = activate(m, &sensor)?;
+    sensor_post(&act, out, h);
+    Ok(())
+}
+
+/// Round to the DS18B20 step (1/16 °C by default).
+pub fn quantize(v: f64, step: f64) -> f64 {
+    if step > 0.0 {
+        (v / step).round() * step
+    } else {
+        v
+    }
+}
+
+/// Add the machine's sensor noise and quantisation (deterministic for `seed`).
+pub fn add_noise(m: &Machine, out: &mut SimOut, seed: u64) {
+    let mut g = Rng::paired(seed);
+    let nz = &m.spec.noise;
+    for s in out.temps.iter_mut() {
+        for v in s.iter_mut() {
+            *v = quantize(*v + nz.temp_c * g.normal(), nz.quant_c);
+        }
+    }
+    for d in out.disp.iter_mut() {
+        for v in d.iter_mut() {
+            *v = ((*v + nz.disp_um * g.normal()) * 1e4).round() / 1e4;
+        }
+    }
+}
+
+/// Build a run file from inputs and output (output sampled every `stride`).
+pub fn to_run(
+    m: &Machine,
+    inp: &Inputs,
+    out: &SimOut,
+    stride: usize,
+    meta: &[(&str, String)],
+) -> Result<tcomp_data::runcsv::Run> {
+    let stride = stride.max(1);
+    let mut run = tcomp_data::runcsv::Run {
+        meta: Vec::new(),
+        columns: Vec::new(),
+        data: Vec::new(),
+    };
+    run.set_meta("machine", &m.spec.name);
+    run.set_meta("source", "simulated");
+    run.set_meta("sample_period_s", &format!("{}", inp.dt * stride as f64));
+    for (k, v) in meta {
+        run.set_meta(k, v);
+    }
+    let pick =
+        |v: &[f64]| -> Vec<Option<f64>> { v.iter().step_by(stride).map(|x| Some(*x)).collect() };
+    run.push_column("time_s", out.t.iter().map(|t| Some(*t)).collect())?;
+    run.push_column("spindle_rpm", pick(&inp.rpm))?;
+    run.push_column("feed_activity", pick(&inp.feed))?;
+    run.push_column("coolant_on", pick(&inp.coolant))?;
+    for (c, v) in m.sensor_cols.iter().zip(&out.temps) {
+        run.push_column(c, v.iter().map(|x| Some(*x)).collect())?;
+    }
+    for (c, v) in m.dir_cols.iter().zip(&out.disp) {
+        run.push_column(c, v.iter().map(|x| Some(*x)).collect())?;
+    }
+    Ok(run)
+}
+
+/// Options of `tcomp sim`.
+pub struct SimOptions {
+    pub effects: Vec<Effect>,
+    pub seed: u64,
+    pub hours: Option<f64>,
+    /// Output sample period [s] (a multiple of the 1 s step).
+    pub sample_period_s: Option<f64>,
+    pub noise: bool,
+}
+
+/// Simulate a machine under a duty cycle into a run file (what `tcomp sim` does).
+pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<tcomp_data::runcsv::Run> {
+    let dt = 1.0;
+    if let Some(p) = opt.sample_period_s {
+        limits::within("--sample-period", p, 1.0, limits::MAX_SAMPLE_PERIOD_S, "s")?;
+    }
+    if let Some(h) = opt.hours {
+        limits::positive("--hours", h, limits::MAX_SIM_HOURS, "h")?;
+    }
+    let duration_s = opt
+        .hours
+        .map_or(duty.end_s - duty.t.first().copied().unwrap_or(0.0), |h| {
+            h * 3600.0
+        });
+    if !(duration_s <= limits::MAX_SIM_HOURS * 3600.0) {
+        bail!(
+            "duty `{}` lasts {:.1} h: at most {} h (give --hours)",
+            duty.name,
+            duration_s / 3600.0,
+            limits::MAX_SIM_HOURS
+        );
+    }
+    // A period taken from a duty CSV's sampling (not asked for) is only raised to the step.
+    let period = opt
+        .sample_period_s
+        .or(duty.sample_period_s)
+        .unwrap_or(1.0)
+        .clamp(1.0, limits::MAX_SAMPLE_PERIOD_S);
+    let stride = (period / dt).round().max(1.0) as usize;
+    if ((stride as f64) * dt - period).abs() > 1e-9 {
+        bail!("sample period {period} s is not a multiple of the 1 s step");
+    }
+    let rows = (duration_s / dt).ceil() as usize / stride;
+    if rows > limits::MAX_SIM_ROWS {
+        bail!(
+            "{rows} output rows at {period} s: at most {} (raise --sample-period or lower --hours)",
+            limits::MAX_SIM_ROWS
+        );
+    }
+    let inp = duty.inputs(dt, opt.hours.map(|h| h * 3600.0), m.spec.ambient_c);
+    let mut out = simulate(m, &inp, &opt.effects, stride)?;
+    if opt.noise {
+        add_noise(m, &mut out, opt.seed);
+    }
+    let eff = if opt.effects.is_empty() {
+        "none".to_string()
+    } else {
+        opt.effects
+            .iter()
+            .map(|e| e.to_spec())
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    to_run(
+        m,
+        &inp,
+        &out,
+        stride,
+        &[
+            (
+                "run",
+                format!("{}-{}-seed{}", m.spec.name, duty.name, opt.seed),
+            ),
+            ("duty", duty.name.clone()),
+            ("seed", opt.seed.to_string()),
+            ("effects", eff),
+            ("ambient", format!("{} °C nominal", m.spec.ambient_c)),
+        ],
+    )
+}
