@@ -37,7 +37,7 @@ fn run() -> Result<()> {
     let mut machine_only = false;
     let mut closed_only = false;
     let mut cross_only = false;
-    let mut dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../machines"));
+    let mut dir = desktop_dir().join("machines");
     let mut open_machine_file: Option<PathBuf> = None;
     let mut calibrate = false;
     let mut args = std::env::args().skip(1);
@@ -106,10 +106,7 @@ fn run() -> Result<()> {
     let mut v = run_bench(&machines, &closed_cfg)?;
     // full diagnosis of one 8 h run sampled at 1 s, all candidates
     let m = &machines[1];
-    let duty = Duty::load(&PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../duty/production-mixed.toml"
-    )))?;
+    let duty = Duty::load(&desktop_dir().join("duty/production-mixed.toml"))?;
     let run = sim_run(
         m,
         &duty,
@@ -206,4 +203,10 @@ fn run() -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `desktop/`, where the machine and duty files are (beside the crates).
+fn desktop_dir() -> PathBuf {
+    let bench = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    bench.parent().map_or(bench.clone(), |d| d.to_path_buf())
 }
