@@ -11,6 +11,14 @@ use thermocomp_core::Model;
 use thermocomp_protocol::holding::Command as WireCommand;
 use thermocomp_protocol::holding::*;
 
+/// Registers of the axis positions (two per axis).
+const POSITION_REGS: usize = 2 * MAX_AXES;
+
+/// The offset of register `a` in the block of `n` registers from `base`.
+fn in_block(a: u16, base: u16, n: usize) -> Option<usize> {
+    a.checked_sub(base).map(usize::from).filter(|&k| k < n)
+}
+
 /// Why a write was refused (mapped to a Modbus exception by the server).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WriteError {
@@ -116,7 +124,10 @@ impl Holding {
 
     /// The staged image bytes.
     pub fn staged(&self) -> &[u8] {
-        &self.staging[..usize::from(self.staged_len).min(MAX_IMAGE_BYTES)]
+        // A length past the buffer (refused by check()) stages all of it.
+        self.staging
+            .get(..usize::from(self.staged_len))
+            .unwrap_or(&self.staging)
     }
 
     /// Scratch buffer (the staging area) for reading a stored image at boot.
@@ -131,7 +142,7 @@ impl Holding {
             Some(if k % 2 == 0 {
                 (v >> 16) as u16
             } else {
-                v as u16
+                (v & 0xFFFF) as u16
             })
         };
         Some(match addr {
@@ -139,21 +150,25 @@ impl Holding {
             HR_COMMAND => 0,
             HR_RESULT => self.result,
             HR_UNIT => u16::from(self.unit),
-            HR_BAUD => (self.baud / 100) as u16,
+            // The baud rates the board accepts are below 6,553,600.
+            HR_BAUD => u16::try_from(self.baud / 100).unwrap_or(u16::MAX),
             HR_SPINDLE => self.spindle_rpm,
-            a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => pos(a)?,
+            a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => pos(a)?,
             HR_TOOL_LENGTH => (self.tool_length_um as u32 >> 16) as u16,
-            a if a == HR_TOOL_LENGTH + 1 => self.tool_length_um as u16,
-            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
-                self.clamp[usize::from(a - HR_CLAMP)]
+            a if a == HR_TOOL_LENGTH + 1 => (self.tool_length_um as u32 & 0xFFFF) as u16,
+            a if in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some() => {
+                *self.clamp.get(usize::from(a - HR_CLAMP))?
             }
-            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => {
-                self.rate[usize::from(a - HR_RATE)]
+            a if in_block(a, HR_RATE, MAX_DIRECTIONS).is_some() => {
+                *self.rate.get(usize::from(a - HR_RATE))?
             }
             HR_STAGED_LEN => self.staged_len,
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
-                u16::from_be_bytes([self.staging[i], self.staging[i + 1]])
+                match self.staging.get(i..i + 2)? {
+                    &[high, low] => u16::from_be_bytes([high, low]),
+                    _ => return None,
+                }
             }
             a if a <= HR_LAST_PLAIN => 0, // reserved
             _ => return None,
@@ -180,23 +195,22 @@ impl Holding {
             return Err(WriteError::Value);
         }
         // Check every register first.
-        for (i, &v) in values.iter().enumerate() {
-            let a = addr + i as u16;
+        for (a, &v) in (addr..end).zip(values) {
             self.check(a, v, now_ms)?;
             if addressing == Addressing::Broadcast && !Self::plc_register(a) {
                 return Err(WriteError::Locked);
             }
         }
         let mut command = Command::None;
-        for (i, &v) in values.iter().enumerate() {
-            let a = addr + i as u16;
+        for (a, &v) in (addr..end).zip(values) {
             let c = self.apply(a, v, now_ms)?;
             if c != Command::None {
                 command = c;
             }
         }
-        let touches = |first: u16, n: u16| addr < first + n && end > first;
-        let geometry = touches(HR_POSITIONS, 2 * MAX_AXES as u16) || touches(HR_TOOL_LENGTH, 2);
+        let touches =
+            |first: u16, n: usize| usize::from(addr) < usize::from(first) + n && end > first;
+        let geometry = touches(HR_POSITIONS, POSITION_REGS) || touches(HR_TOOL_LENGTH, 2);
         if geometry || touches(HR_SPINDLE, 1) {
             self.plc_written_ms = Some(now_ms);
         }
@@ -209,7 +223,7 @@ impl Holding {
     /// Registers the PLC writes in normal operation (spindle speed, positions, tool length).
     fn plc_register(a: u16) -> bool {
         a == HR_SPINDLE
-            || (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a)
+            || in_block(a, HR_POSITIONS, POSITION_REGS).is_some()
             || (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a)
     }
 
@@ -228,7 +242,8 @@ impl Holding {
                             | WireCommand::ForgetReference
                     )
                 ))
-            || (HR_CLAMP..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
+            || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
+            || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
     }
 
@@ -241,8 +256,8 @@ impl Holding {
             a,
             HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN
         ) || Self::plc_register(a)
-            || (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a)
-            || (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a)
+            || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
+            || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
         if !writable {
             return Err(WriteError::Address);
@@ -279,7 +294,8 @@ impl Holding {
             }
             HR_COMMAND => return self.command(v),
             HR_UNIT => {
-                self.unit = v as u8;
+                // check() let only 1..=247 through.
+                self.unit = u8::try_from(v).map_err(|_| WriteError::Value)?;
                 return Ok(Command::LinkChanged);
             }
             HR_BAUD => {
@@ -288,9 +304,9 @@ impl Holding {
             }
             HR_SPINDLE => self.spindle_rpm = v,
             HR_STAGED_LEN => self.staged_len = v,
-            a if (HR_POSITIONS..HR_POSITIONS + 2 * MAX_AXES as u16).contains(&a) => {
+            a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => {
                 let k = usize::from(a - HR_POSITIONS);
-                let p = &mut self.positions[k / 2];
+                let p = self.positions.get_mut(k / 2).ok_or(WriteError::Address)?;
                 let u = *p as u32;
                 *p = if k % 2 == 0 {
                     ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
@@ -306,17 +322,20 @@ impl Holding {
                     ((u & 0xFFFF_0000) | u32::from(v)) as i32
                 };
             }
-            a if (HR_CLAMP..HR_CLAMP + MAX_DIRECTIONS as u16).contains(&a) => {
-                self.clamp[usize::from(a - HR_CLAMP)] = v;
+            a if in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some() => {
+                let c = self.clamp.get_mut(usize::from(a - HR_CLAMP));
+                *c.ok_or(WriteError::Address)? = v;
                 return Ok(Command::LimitsChanged);
             }
-            a if (HR_RATE..HR_RATE + MAX_DIRECTIONS as u16).contains(&a) => {
-                self.rate[usize::from(a - HR_RATE)] = v;
+            a if in_block(a, HR_RATE, MAX_DIRECTIONS).is_some() => {
+                let r = self.rate.get_mut(usize::from(a - HR_RATE));
+                *r.ok_or(WriteError::Address)? = v;
                 return Ok(Command::LimitsChanged);
             }
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
-                self.staging[i..i + 2].copy_from_slice(&v.to_be_bytes());
+                let bytes = self.staging.get_mut(i..i + 2).ok_or(WriteError::Address)?;
+                bytes.copy_from_slice(&v.to_be_bytes());
             }
             _ => return Err(WriteError::Address),
         }
@@ -332,11 +351,11 @@ impl Holding {
         match wire {
             WireCommand::CommitModel | WireCommand::RollbackModel => {
                 let len = usize::from(self.staged_len);
-                if len == 0 || len > MAX_IMAGE_BYTES {
+                let Some(staged) = self.staging.get(..len).filter(|s| !s.is_empty()) else {
                     self.result = result::BAD_LENGTH;
                     return Err(WriteError::ModelRefused);
-                }
-                let model = match Model::parse(&self.staging[..len]) {
+                };
+                let model = match Model::parse(staged) {
                     Ok(m) => m,
                     Err(e) => {
                         self.result = result::of_image_error(&e);

@@ -120,7 +120,8 @@ impl Default for Snapshot {
 pub fn centidegrees(sixteenths: i16) -> i16 {
     let v = i32::from(sixteenths) * 25;
     let r = if v >= 0 { (v + 2) / 4 } else { (v - 2) / 4 };
-    r.clamp(i32::from(i16::MIN) + 1, i32::from(i16::MAX)) as i16
+    let saturated = r.clamp(i32::from(i16::MIN) + 1, i32::from(i16::MAX));
+    i16::try_from(saturated).unwrap_or(i16::MAX)
 }
 
 fn hi(v: u32) -> u16 {
@@ -128,7 +129,7 @@ fn hi(v: u32) -> u16 {
 }
 
 fn lo(v: u32) -> u16 {
-    v as u16
+    (v & 0xFFFF) as u16
 }
 
 /// Word `k` (0: high) of a 32-bit value starting at `base`, if `addr` is in it.
@@ -138,6 +139,21 @@ fn word32(addr: u16, base: u16, v: u32) -> Option<u16> {
         1 => Some(lo(v)),
         _ => None,
     }
+}
+
+/// Register `k` of consecutive 32-bit values: the high word when `k` is even.
+fn half(v: u32, k: usize) -> u16 {
+    if k.is_multiple_of(2) {
+        hi(v)
+    } else {
+        lo(v)
+    }
+}
+
+/// Register `k` of a block of 32-bit values (two registers each, high word
+/// first), or `None` past the block's end.
+fn block_word(values: &[i32], k: usize) -> Option<u16> {
+    values.get(k / 2).map(|&v| half(v as u32, k))
 }
 
 impl Snapshot {
@@ -156,7 +172,12 @@ impl Snapshot {
         if addr > IR_LAST {
             return None;
         }
-        let in_block = |base: u16, n: u16| addr >= base && addr < base + n;
+        // The offset of `addr` in the block at `base` of `n` registers.
+        let in_block = |base: u16, n: usize| {
+            addr.checked_sub(base)
+                .filter(|&k| usize::from(k) < n)
+                .map(usize::from)
+        };
         let v = if let Some(w) = word32(addr, IR_TEST_PATTERN, TEST_PATTERN) {
             w
         } else if addr == IR_MAP_VERSION {
@@ -190,55 +211,41 @@ impl Snapshot {
             w
         } else if addr == IR_PROBE_STATE {
             self.probe_state
-        } else if in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS as u16) {
-            let k = addr - IR_CORRECTIONS;
-            let v = self.corrections[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k.is_multiple_of(2) {
-                hi(v)
-            } else {
-                lo(v)
-            }
-        } else if in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS as u16) {
-            let k = addr - IR_PREDICTIONS;
-            let v = self.predictions[usize::from(k / 2) % MAX_DIRECTIONS] as u32;
-            if k.is_multiple_of(2) {
-                hi(v)
-            } else {
-                lo(v)
-            }
-        } else if in_block(IR_AXES, AXIS_BLOCK * MAX_AXES as u16) {
-            let k = addr - IR_AXES;
-            let a = self.axes[usize::from(k / AXIS_BLOCK) % MAX_AXES];
-            let field = [
-                a.offset as u32,
-                a.slope as u32,
-                a.ref_pos as u32,
-                self.sequence,
-            ];
-            let v = field[usize::from((k % AXIS_BLOCK) / 2)];
-            if k.is_multiple_of(2) {
-                hi(v)
-            } else {
-                lo(v)
-            }
-        } else if in_block(IR_TEMPERATURES, MAX_CHANNELS as u16) {
-            let t = self.temperatures[usize::from(addr - IR_TEMPERATURES) % MAX_CHANNELS];
+        } else if let Some(k) = in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS) {
+            block_word(&self.corrections, k).unwrap_or(0)
+        } else if let Some(k) = in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS) {
+            block_word(&self.predictions, k).unwrap_or(0)
+        } else if let Some(k) = in_block(IR_AXES, usize::from(AXIS_BLOCK) * MAX_AXES) {
+            let block = usize::from(AXIS_BLOCK);
+            let word = |a: &AxisPair| {
+                let field = [
+                    a.offset as u32,
+                    a.slope as u32,
+                    a.ref_pos as u32,
+                    self.sequence,
+                ];
+                field.get((k % block) / 2).map(|&v| half(v, k))
+            };
+            self.axes.get(k / block).and_then(word).unwrap_or(0)
+        } else if let Some(k) = in_block(IR_TEMPERATURES, MAX_CHANNELS) {
+            let t = self.temperatures.get(k).copied().flatten();
             t.map_or(NOT_AVAILABLE, |v| v as u16)
-        } else if in_block(IR_STATES, MAX_CHANNELS as u16) {
-            self.states[usize::from(addr - IR_STATES) % MAX_CHANNELS]
-        } else if in_block(IR_ACTIVE_MODEL, MAX_DIRECTIONS as u16) {
-            match self.active[usize::from(addr - IR_ACTIVE_MODEL) % MAX_DIRECTIONS] {
-                thermocomp_core::compensator::ACTIVE_NONE => 0xFFFF,
-                k => u16::from(k),
+        } else if let Some(k) = in_block(IR_STATES, MAX_CHANNELS) {
+            self.states.get(k).copied().unwrap_or(0)
+        } else if let Some(k) = in_block(IR_ACTIVE_MODEL, MAX_DIRECTIONS) {
+            match self.active.get(k).copied() {
+                Some(thermocomp_core::compensator::ACTIVE_NONE) | None => 0xFFFF,
+                Some(m) => u16::from(m),
             }
         } else if addr == IR_DEGRADED_DIRECTIONS || addr == IR_HELD_DIRECTIONS {
             let want = |a: u8| match addr {
                 IR_DEGRADED_DIRECTIONS => a != 0 && a != thermocomp_core::compensator::ACTIVE_NONE,
                 _ => a == thermocomp_core::compensator::ACTIVE_NONE,
             };
-            let n = usize::from(self.n_directions).min(MAX_DIRECTIONS);
-            self.active[..n]
+            let n = usize::from(self.n_directions);
+            self.active
                 .iter()
+                .take(n)
                 .enumerate()
                 .filter(|(_, &a)| want(a))
                 .fold(0u16, |m, (d, _)| m | (1 << d))
@@ -255,6 +262,10 @@ impl Snapshot {
         let k = usize::from(addr.saturating_sub(IR_CHANNEL_ROMS));
         if let Some(rom) = self.roms.get(k / 4) {
             let i = 2 * (k % 4);
+            #[allow(
+                clippy::indexing_slicing,
+                reason = "i + 1 <= 7 < 8 = rom.len() (k % 4 <= 3)"
+            )]
             return u16::from_be_bytes([rom[i], rom[i + 1]]);
         }
         let k = usize::from(addr.saturating_sub(IR_SENSOR_CHANNELS));
@@ -275,9 +286,8 @@ impl Snapshot {
     fn vol_register(&self, addr: u16) -> u16 {
         let v = &self.vol;
         let k = addr.wrapping_sub(IR_VOL_CORRECTION);
-        if k < 6 {
-            let c = v.corrections[usize::from(k / 2) % 3] as u32;
-            return if k.is_multiple_of(2) { hi(c) } else { lo(c) };
+        if let Some(w) = block_word(&v.corrections, usize::from(k)) {
+            return w;
         }
         if addr == IR_VOL_STATUS {
             v.status
@@ -285,9 +295,11 @@ impl Snapshot {
             v.terms
         } else if let Some(w) = word32(addr, IR_VOL_TOOL, v.tool_um as u32) {
             w
-        } else if (IR_VOL_TEMPS..IR_VOL_TEMPS + MAX_VOL_SENSORS as u16).contains(&addr) {
-            v.temps[usize::from(addr - IR_VOL_TEMPS) % MAX_VOL_SENSORS]
-                .map_or(NOT_AVAILABLE, |t| t as u16)
+        } else if let Some(t) = addr
+            .checked_sub(IR_VOL_TEMPS)
+            .and_then(|k| v.temps.get(usize::from(k)))
+        {
+            t.map_or(NOT_AVAILABLE, |t| t as u16)
         } else {
             word32(addr, IR_VOL_SEQUENCE, v.sequence).unwrap_or_default()
         }

@@ -65,21 +65,30 @@ impl Server {
             self.counters.broken += 1;
             return Action::None;
         }
-        let crc = u16::from_le_bytes([frame[n - 2], frame[n - 1]]);
-        if crc16(&frame[..n - 2]) != crc {
+        // The length check above leaves at least the address, the function
+        // and the CRC; the `else` arms only keep a short frame from panicking.
+        let Some((body, crc)) = frame.split_last_chunk::<2>() else {
+            self.counters.broken += 1;
+            return Action::None;
+        };
+        if crc16(body) != u16::from_le_bytes(*crc) {
             self.counters.crc_errors += 1;
             return Action::None;
         }
+        let &[address, function, ..] = body else {
+            self.counters.broken += 1;
+            return Action::None;
+        };
         let unit = self.holding.unit;
-        let addressed = frame[0] == unit || frame[0] == 0;
+        let addressed = address == unit || address == 0;
         if !addressed {
             return Action::None;
         }
         // A function code with the high bit set is never a request; rmodbus
         // would add 0x80 to it in a u8 (overflow), so answer it here.
-        if frame[1] & 0x80 != 0 {
-            if frame[0] != 0 {
-                exception(frame, 0x01, reply);
+        if function & 0x80 != 0 {
+            if address != 0 {
+                exception(address, function, 0x01, reply);
                 self.counters.exceptions += 1;
             }
             return Action::None;
@@ -87,25 +96,30 @@ impl Server {
         // FC15/16: the byte count must match the frame; FC16's register count
         // must be 1..=123 (spec §6.12) and match the byte count. The product is
         // formed in usize: a count >= 0x8000 would wrap `u16 * 2`.
-        if matches!(frame[1], 0x0F | 0x10) {
-            let consistent = n >= 9
-                && usize::from(frame[6]) + 9 == n
-                && (frame[1] != 0x10 || {
-                    let count = usize::from(u16::from_be_bytes([frame[4], frame[5]]));
-                    (1..=MAX_WRITE_REGISTERS).contains(&count) && count * 2 == usize::from(frame[6])
-                });
+        if matches!(function, 0x0F | 0x10) {
+            let consistent = match *body {
+                [_, _, _, _, count_high, count_low, bytes, ..] => {
+                    usize::from(bytes) + 9 == n
+                        && (function != 0x10 || {
+                            let count = usize::from(u16::from_be_bytes([count_high, count_low]));
+                            (1..=MAX_WRITE_REGISTERS).contains(&count)
+                                && count * 2 == usize::from(bytes)
+                        })
+                }
+                _ => false,
+            };
             if !consistent {
-                if frame[0] != 0 {
-                    exception(frame, 0x03, reply);
+                if address != 0 {
+                    exception(address, function, 0x03, reply);
                     self.counters.exceptions += 1;
                 }
                 return Action::None;
             }
         }
         // Count 0 is not a valid read (rmodbus only checks the upper limit).
-        if matches!(frame[1], 0x01..=0x04) && n == 8 && frame[4] == 0 && frame[5] == 0 {
-            if frame[0] != 0 {
-                exception(frame, 0x03, reply);
+        if matches!((function, body), (0x01..=0x04, [_, _, _, _, 0, 0])) {
+            if address != 0 {
+                exception(address, function, 0x03, reply);
                 self.counters.exceptions += 1;
             }
             return Action::None;
@@ -140,9 +154,11 @@ impl Server {
                     Ok(Write::Words(w)) => {
                         let mut values: Vec<u16, 125> = Vec::new();
                         for pair in w.data.chunks_exact(2) {
-                            let _ = values.push(u16::from_be_bytes([pair[0], pair[1]]));
+                            if let &[high, low] = pair {
+                                let _ = values.push(u16::from_be_bytes([high, low]));
+                            }
                         }
-                        let addressing = if frame[0] == 0 {
+                        let addressing = if address == 0 {
                             Addressing::Broadcast
                         } else {
                             Addressing::Unit
@@ -194,8 +210,9 @@ fn fill_words(
     value: impl Fn(u16) -> Option<u16>,
 ) -> Result<(), ErrorKind> {
     for (i, out) in buf.chunks_exact_mut(2).take(usize::from(count)).enumerate() {
-        let a = start
-            .checked_add(i as u16)
+        let a = u16::try_from(i)
+            .ok()
+            .and_then(|i| start.checked_add(i))
             .ok_or(ErrorKind::IllegalDataAddress)?;
         let v = value(a).ok_or(ErrorKind::IllegalDataAddress)?;
         out.copy_from_slice(&v.to_be_bytes());
@@ -204,9 +221,9 @@ fn fill_words(
 }
 
 /// An exception reply built here (before rmodbus parses) for malformed counts.
-fn exception(frame: &[u8], code: u8, reply: &mut Vec<u8, MAX_FRAME>) {
+fn exception(address: u8, function: u8, code: u8, reply: &mut Vec<u8, MAX_FRAME>) {
     reply.clear();
-    let _ = reply.extend_from_slice(&[frame[0], frame[1] | 0x80, code]);
+    let _ = reply.extend_from_slice(&[address, function | 0x80, code]);
     let crc = crc16(reply);
     let _ = reply.extend_from_slice(&crc.to_le_bytes());
 }
