@@ -12,6 +12,8 @@
 //! - [`compensator`]: the state machine around them (features, training
 //!   envelope, clamps, rate limit, status bits).
 //! - `float` (feature `std`): the same model in f64 and the quantizer.
+//! - [`reference`]: correction terms from probe references at a gauge
+//!   (Kalman bias + drift, gate, re-zero), issue 28.
 //! - [`volumetric`]: the geometric-thermal tool-tip correction (image
 //!   section kind 3), integers only.
 //! - [`golden`]: golden vectors checked on the board (generated on the host).
@@ -28,6 +30,7 @@ pub mod float;
 pub mod golden;
 pub mod image;
 pub mod limits;
+pub mod reference;
 pub mod volumetric;
 
 pub use compensator::{Compensator, StepInput, StepOutput};
