@@ -11,5 +11,6 @@
 pub mod export;
 pub mod fit;
 pub mod plots;
+pub mod reference_replay;
 pub mod replay;
 pub mod select;

@@ -1,0 +1,585 @@
+//! `tcomp replay --reference-every 1h` / `--reference-at T` (issue 28): the
+//! board's served correction with probe references at a gauge and operator
+//! re-zeros, by the math core's own update rule
+//! ([`thermocomp_core::reference`]), bit-exact with the board.
+//!
+//! The board's loop per sample: the compensator steps (the replay rows,
+//! [`crate::replay`]); when a reference is due, the probe reading at the
+//! gauge is compared with the compensator's served correction at that
+//! moment and the direction's [`ReferenceState`] is updated; when a re-zero
+//! is due the state takes it; the served value is
+//! [`ReferenceState::serve`]. The terms never feed back into the
+//! compensator (they are added after it), so running the core's update over
+//! the replay rows in time order is the board's loop exactly.
+//!
+//! Simulated readings: the run's measured error channel at that row (as a
+//! rise from the run's start, the model's frame) plus seeded Gaussian noise,
+//! rounded to 0.1 µm; a share of them corrupted by a fixed offset (a chip on
+//! the gauge). The noise of each reference does not depend on the outlier
+//! draw, so a corrupted run differs from the clean one only in the
+//! corrupted readings.
+
+use anyhow::{anyhow, bail, Result};
+use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceState};
+use thermocomp_core::Model;
+
+use crate::replay::ReplayRow;
+use tcomp_data::rng::Rng;
+use tcomp_data::runcsv::Run;
+
+/// Command-line flags of `tcomp replay` for references and re-zeros.
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct ReferenceArgs {
+    /// Simulate a probe reference at the gauge every this long (`1h`,
+    /// `30min`, `900s`, `900`), from the run's start.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-every", value_name = "DURATION")
+    )]
+    pub every: Option<String>,
+    /// σ of the simulated probe noise, µm (also the rule's σ_r unless
+    /// `--reference-param sigma_ref_um=` says otherwise).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-noise-um", default_value_t = 0.3)
+    )]
+    pub noise_um: f64,
+    /// Corrupt a share of the references: `5%:50` = 5 % of them +50 µm.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-outliers", value_name = "SHARE%:UM")
+    )]
+    pub outliers: Option<String>,
+    /// Seed of the simulated noise and outliers.
+    #[cfg_attr(feature = "cli", arg(long = "reference-seed", default_value_t = 1))]
+    pub seed: u64,
+    /// Operator re-zero (touch-off) at this time: seconds of the run or a
+    /// percentage of its rows (`60%`); repeatable.
+    #[cfg_attr(
+        feature = "cli",
+        arg(
+            long = "reference-at",
+            visible_alias = "rezero-at",
+            value_name = "TIME"
+        )
+    )]
+    pub rezero_at: Vec<String>,
+    /// A parameter of the update rule, NAME=VALUE: sigma_ref_um,
+    /// sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k,
+    /// gate_abs_um, max_step_um, max_bias_um, max_rate_um_h; repeatable.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-param", value_name = "NAME=VALUE")
+    )]
+    pub params: Vec<String>,
+    /// Write every row (time, per direction: measured, model, served with
+    /// references) to this CSV.
+    #[cfg_attr(feature = "cli", arg(long = "reference-dump", value_name = "CSV"))]
+    pub dump: Option<std::path::PathBuf>,
+}
+
+impl ReferenceArgs {
+    /// Any reference or re-zero asked for.
+    pub fn is_active(&self) -> bool {
+        self.every.is_some() || !self.rezero_at.is_empty()
+    }
+}
+
+/// Parse a duration: `1h`, `4h`, `30min`, `90s`, `900` (seconds).
+pub fn parse_duration_s(text: &str) -> Result<f64> {
+    let t = text.trim();
+    let (num, scale) = if let Some(v) = t.strip_suffix("min") {
+        (v, 60.0)
+    } else if let Some(v) = t.strip_suffix('h') {
+        (v, 3600.0)
+    } else if let Some(v) = t.strip_suffix("ms") {
+        (v, 0.001)
+    } else if let Some(v) = t.strip_suffix('s') {
+        (v, 1.0)
+    } else {
+        (t, 1.0)
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| anyhow!("{text}: expected a duration such as 1h, 30min, 900s"))?;
+    if !(v > 0.0 && v.is_finite()) {
+        bail!("{text}: a duration must be above 0");
+    }
+    Ok(v * scale)
+}
+
+fn um_to_nm(v: f64, name: &str) -> Result<u32> {
+    if !(v >= 0.0 && v * 1000.0 <= f64::from(u32::MAX)) {
+        bail!("--reference-param {name}: {v} out of range");
+    }
+    Ok((v * 1000.0).round() as u32)
+}
+
+fn hours_to_s(v: f64, name: &str) -> Result<u32> {
+    if !(v > 0.0 && v * 3600.0 <= f64::from(u32::MAX)) {
+        bail!("--reference-param {name}: {v} out of range");
+    }
+    Ok((v * 3600.0).round().max(1.0) as u32)
+}
+
+/// The rule's parameters: the core's defaults, σ_r from the simulated
+/// noise, then each `NAME=VALUE`.
+pub fn parse_params(args: &ReferenceArgs) -> Result<ReferenceParams> {
+    let mut p = ReferenceParams::DEFAULT;
+    p.sigma_ref_nm = um_to_nm(args.noise_um, "reference-noise-um")?;
+    for spec in &args.params {
+        let (name, value) = spec
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--reference-param {spec}: expected NAME=VALUE"))?;
+        let (name, value) = (name.trim(), value.trim());
+        let v: f64 = value
+            .parse()
+            .map_err(|_| anyhow!("--reference-param {spec}: {value} is not a number"))?;
+        match name {
+            "sigma_ref_um" => p.sigma_ref_nm = um_to_nm(v, name)?,
+            "sigma_bias_um" => p.sigma_bias_nm = um_to_nm(v, name)?,
+            "tau_bias_h" => p.tau_bias_s = hours_to_s(v, name)?,
+            "sigma_rate_um_h" => p.sigma_rate_nm_h = um_to_nm(v, name)?,
+            "tau_rate_h" => p.tau_rate_s = hours_to_s(v, name)?,
+            "gate_k" => {
+                if !(0.0..=6000.0).contains(&v) {
+                    bail!("--reference-param {spec}: gate_k out of range 0-6000");
+                }
+                p.gate_k_x10 = (v * 10.0).round() as u16
+            }
+            "gate_abs_um" => p.gate_abs_nm = um_to_nm(v, name)?,
+            "max_step_um" => p.max_step_nm = um_to_nm(v, name)?,
+            "max_bias_um" => p.max_bias_nm = um_to_nm(v, name)?,
+            "max_rate_um_h" => p.max_rate_nm_h = um_to_nm(v, name)?,
+            _ => bail!(
+                "--reference-param {spec}: unknown parameter {name} (sigma_ref_um, sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k, gate_abs_um, max_step_um, max_bias_um, max_rate_um_h)"
+            ),
+        }
+    }
+    Ok(p.sanitised())
+}
+
+/// `5%:50` → (0.05, 50.0).
+pub fn parse_outliers(spec: &str) -> Result<(f64, f64)> {
+    let (share, um) = spec
+        .split_once(':')
+        .ok_or_else(|| anyhow!("--reference-outliers {spec}: expected SHARE%:UM, e.g. 5%:50"))?;
+    let share: f64 = share
+        .trim()
+        .trim_end_matches('%')
+        .parse()
+        .map_err(|_| anyhow!("--reference-outliers {spec}: bad share"))?;
+    let um: f64 = um
+        .trim()
+        .parse()
+        .map_err(|_| anyhow!("--reference-outliers {spec}: bad offset"))?;
+    if !(0.0..=100.0).contains(&share) || !um.is_finite() {
+        bail!("--reference-outliers {spec}: share 0-100 %, a finite offset");
+    }
+    Ok((share / 100.0, um))
+}
+
+/// A time of the run: seconds or a percentage of its rows (as `--fail-sensor`).
+fn parse_time_ms(spec: &str, time_s: &[f64]) -> Result<u64> {
+    let at = spec.trim();
+    if let Some(p) = at.strip_suffix('%') {
+        let p: f64 = p
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("--reference-at {spec}: not a percentage"))?;
+        if !(0.0..=100.0).contains(&p) {
+            bail!("--reference-at {spec}: percentage outside 0-100");
+        }
+        let row = ((p / 100.0) * time_s.len() as f64) as usize;
+        Ok(time_s
+            .get(row)
+            .map_or(u64::MAX, |s| (s * 1000.0).round() as u64))
+    } else {
+        let s = parse_duration_s(at).or_else(|e| {
+            if at.trim_end_matches('s').trim().parse::<f64>() == Ok(0.0) {
+                Ok(0.0)
+            } else {
+                Err(e)
+            }
+        })?;
+        Ok((s * 1000.0).round() as u64)
+    }
+}
+
+/// One direction's figures over the scored block.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ChannelReference {
+    pub column: String,
+    pub rows: usize,
+    /// With references (and re-zeros): residual = measured − served.
+    pub mae_um: f64,
+    pub rms_um: f64,
+    pub peak_um: f64,
+    /// The model alone (re-zeros applied, no references).
+    pub mae_without_um: f64,
+    pub rms_without_um: f64,
+    /// The measured error itself (about the last re-zero, if any): no compensation.
+    pub raw_mae_um: f64,
+    pub raw_rms_um: f64,
+    /// References taken over the whole run, in the scored block, accepted, refused.
+    pub references: usize,
+    pub references_in_block: usize,
+    pub accepted: usize,
+    pub refused: usize,
+    /// Corrupted references, and how many of them were refused.
+    pub corrupted: usize,
+    pub corrupted_refused: usize,
+    /// Clean references refused by the gate.
+    pub clean_refused: usize,
+    /// RMS with references ≤ RMS of the model alone.
+    pub never_worse_than_model: bool,
+    /// RMS with references ≤ RMS of the raw error.
+    pub never_worse_than_raw: bool,
+    /// The final state as the board would store it (hex).
+    pub final_state: String,
+    /// Fingerprint of every served integer (FNV-1a), for bit-exactness checks.
+    pub served_hash: String,
+}
+
+/// What `--json` reports under `"references"`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ReferenceReport {
+    pub every_s: Option<f64>,
+    pub noise_um: f64,
+    pub outliers: Option<(f64, f64)>,
+    pub seed: u64,
+    pub rezero_ms: Vec<u64>,
+    pub params: ParamsJson,
+    pub channels: Vec<ChannelReference>,
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ParamsJson {
+    pub sigma_ref_um: f64,
+    pub sigma_bias_um: f64,
+    pub tau_bias_h: f64,
+    pub sigma_rate_um_h: f64,
+    pub tau_rate_h: f64,
+    pub gate_k: f64,
+    pub gate_abs_um: f64,
+    pub max_step_um: f64,
+    pub max_bias_um: f64,
+    pub max_rate_um_h: f64,
+}
+
+impl From<&ReferenceParams> for ParamsJson {
+    fn from(p: &ReferenceParams) -> Self {
+        let um = |v: u32| f64::from(v) / 1000.0;
+        ParamsJson {
+            sigma_ref_um: um(p.sigma_ref_nm),
+            sigma_bias_um: um(p.sigma_bias_nm),
+            tau_bias_h: f64::from(p.tau_bias_s) / 3600.0,
+            sigma_rate_um_h: um(p.sigma_rate_nm_h),
+            tau_rate_h: f64::from(p.tau_rate_s) / 3600.0,
+            gate_k: f64::from(p.gate_k_x10) / 10.0,
+            gate_abs_um: um(p.gate_abs_nm),
+            max_step_um: um(p.max_step_nm),
+            max_bias_um: um(p.max_bias_nm),
+            max_rate_um_h: um(p.max_rate_nm_h),
+        }
+    }
+}
+
+/// One simulated reference of one direction.
+#[derive(Debug, Clone, Copy)]
+pub struct SimReference {
+    pub row: usize,
+    pub reading: i32,
+    pub corrupted: bool,
+}
+
+/// The simulated references per direction: at k·every (k ≥ 1) from the
+/// run's first time, on the first row at or after it that has a measured value.
+pub fn simulate_references(
+    run: &Run,
+    model: &Model,
+    every_s: f64,
+    noise_um: f64,
+    outliers: Option<(f64, f64)>,
+    seed: u64,
+) -> Vec<Vec<SimReference>> {
+    let time = run.time_s();
+    let mut noise = Rng::new(seed);
+    let mut corrupt = Rng::new(seed ^ 0x9E37_79B9_7F4A_7C15);
+    let t0 = time.first().copied().unwrap_or(0.0);
+    let mut out = vec![vec![]; model.directions.len()];
+    let mut k = 1u64;
+    let mut row = 0usize;
+    loop {
+        let due = t0 + every_s * k as f64;
+        while row < time.len() && time[row] < due {
+            row += 1;
+        }
+        if row >= time.len() {
+            break;
+        }
+        for (d, refs) in out.iter_mut().enumerate() {
+            // Draw for every direction and instant, used or not: the
+            // sequence does not depend on which channels a run has.
+            let n = noise.normal() * noise_um;
+            let (share, off) = outliers.unwrap_or((0.0, 0.0));
+            let bad = corrupt.uniform() < share;
+            let column = format!("d{}_um", model.direction_name(d));
+            let Some(Some(m)) = run.col(&column).and_then(|c| c.get(row)) else {
+                continue;
+            };
+            let v = m + n + if bad { off } else { 0.0 };
+            refs.push(SimReference {
+                row,
+                reading: (v * 10.0)
+                    .round()
+                    .clamp(f64::from(i32::MIN), f64::from(i32::MAX))
+                    as i32,
+                corrupted: bad,
+            });
+        }
+        k += 1;
+    }
+    out
+}
+
+/// The board's loop for one direction: served correction per row (0.1 µm)
+/// with the given references and re-zero rows, and the final state.
+pub fn serve_direction(
+    rows: &[ReplayRow],
+    d: usize,
+    max_correction: i32,
+    params: &ReferenceParams,
+    refs: &[SimReference],
+    rezero_rows: &[usize],
+) -> (Vec<i32>, ReferenceState, Vec<ReferenceOutcome>) {
+    let mut st = ReferenceState::new(params);
+    let mut served = Vec::with_capacity(rows.len());
+    let mut outcomes = vec![];
+    let mut next = 0usize;
+    for (i, r) in rows.iter().enumerate() {
+        let m = r.out.corrections[d];
+        while next < refs.len() && refs[next].row == i {
+            outcomes.push(st.reference(params, r.time_ms, m, refs[next].reading));
+            next += 1;
+        }
+        if rezero_rows.contains(&i) {
+            st.rezero(params, r.time_ms, m);
+        }
+        served.push(st.serve(params, r.time_ms, m, max_correction));
+    }
+    (served, st, outcomes)
+}
+
+fn fnv(v: &[i32]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for x in v {
+        for b in x.to_le_bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+        }
+    }
+    h
+}
+
+fn stats(v: &[f64]) -> (f64, f64, f64) {
+    let n = v.len().max(1) as f64;
+    (
+        v.iter().map(|x| x.abs()).sum::<f64>() / n,
+        (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
+        v.iter().fold(0.0f64, |a, x| a.max(x.abs())),
+    )
+}
+
+/// Replay references and re-zeros over the compensator's rows and score
+/// rows `[from, to)`.
+pub fn score(
+    run: &Run,
+    rows: &[ReplayRow],
+    model: &Model,
+    args: &ReferenceArgs,
+    from: usize,
+    to: usize,
+) -> Result<ReferenceReport> {
+    let params = parse_params(args)?;
+    let outliers = args.outliers.as_deref().map(parse_outliers).transpose()?;
+    let every_s = args.every.as_deref().map(parse_duration_s).transpose()?;
+    if !(args.noise_um >= 0.0 && args.noise_um.is_finite()) {
+        bail!("--reference-noise-um must be 0 or more");
+    }
+    let time = run.time_s();
+    let mut rezero_ms = args
+        .rezero_at
+        .iter()
+        .map(|s| parse_time_ms(s, &time))
+        .collect::<Result<Vec<_>>>()?;
+    rezero_ms.sort_unstable();
+    let rezero_rows: Vec<usize> = rezero_ms
+        .iter()
+        .filter_map(|&t| rows.iter().position(|r| r.time_ms >= t))
+        .collect();
+    let refs = match every_s {
+        Some(e) => simulate_references(run, model, e, args.noise_um, outliers, args.seed),
+        None => vec![vec![]; model.directions.len()],
+    };
+    let mut channels = vec![];
+    let mut dump: Vec<(String, Vec<i32>)> = vec![];
+    for (d, dir) in model.directions.iter().enumerate() {
+        let column = format!("d{}_um", model.direction_name(d));
+        let Some(measured) = run.col(&column) else {
+            continue;
+        };
+        let (with, st, outcomes) =
+            serve_direction(rows, d, dir.max_correction, &params, &refs[d], &rezero_rows);
+        let (without, _, _) =
+            serve_direction(rows, d, dir.max_correction, &params, &[], &rezero_rows);
+        // The measured error in the operator's frame: about the last re-zero.
+        let mut zero = 0.0;
+        let (mut r_with, mut r_without, mut raw) = (vec![], vec![], vec![]);
+        for (i, m) in measured.iter().enumerate().take(rows.len()) {
+            if rezero_rows.contains(&i) {
+                zero = m.unwrap_or(zero);
+            }
+            let Some(m) = m else { continue };
+            if i < from || i >= to {
+                continue;
+            }
+            let e = m - zero;
+            raw.push(e);
+            r_with.push(e - f64::from(with[i]) / 10.0);
+            r_without.push(e - f64::from(without[i]) / 10.0);
+        }
+        if args.dump.is_some() {
+            dump.push((column.clone(), with.clone()));
+        }
+        if raw.is_empty() {
+            continue;
+        }
+        let (mae, rms, peak) = stats(&r_with);
+        let (mae0, rms0, _) = stats(&r_without);
+        let (raw_mae, raw_rms, _) = stats(&raw);
+        let refused_flags: Vec<bool> = outcomes
+            .iter()
+            .map(|o| matches!(o, ReferenceOutcome::Refused { .. }))
+            .collect();
+        let corrupted = refs[d].iter().filter(|r| r.corrupted).count();
+        let corrupted_refused = refs[d]
+            .iter()
+            .zip(&refused_flags)
+            .filter(|(r, &f)| r.corrupted && f)
+            .count();
+        let clean_refused = refs[d]
+            .iter()
+            .zip(&refused_flags)
+            .filter(|(r, &f)| !r.corrupted && f)
+            .count();
+        channels.push(ChannelReference {
+            column,
+            rows: raw.len(),
+            mae_um: mae,
+            rms_um: rms,
+            peak_um: peak,
+            mae_without_um: mae0,
+            rms_without_um: rms0,
+            raw_mae_um: raw_mae,
+            raw_rms_um: raw_rms,
+            references: refs[d].len(),
+            references_in_block: refs[d]
+                .iter()
+                .filter(|r| r.row >= from && r.row < to)
+                .count(),
+            accepted: usize::from(st.accepted),
+            refused: usize::from(st.refused),
+            corrupted,
+            corrupted_refused,
+            clean_refused,
+            never_worse_than_model: rms <= rms0,
+            never_worse_than_raw: rms <= raw_rms,
+            final_state: st.to_bytes().iter().map(|b| format!("{b:02x}")).collect(),
+            served_hash: format!("{:016x}", fnv(&with)),
+        });
+    }
+    if let Some(path) = &args.dump {
+        write_dump(path, run, rows, model, &dump)?;
+    }
+    Ok(ReferenceReport {
+        every_s,
+        noise_um: args.noise_um,
+        outliers,
+        seed: args.seed,
+        rezero_ms,
+        params: ParamsJson::from(&params),
+        channels,
+    })
+}
+
+fn write_dump(
+    path: &std::path::Path,
+    run: &Run,
+    rows: &[ReplayRow],
+    model: &Model,
+    served: &[(String, Vec<i32>)],
+) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut text = String::from("time_s");
+    for (c, _) in served {
+        let _ = write!(text, ",{c}_measured,{c}_model,{c}_served");
+    }
+    text.push('\n');
+    let cols: Vec<(usize, &[Option<f64>])> = served
+        .iter()
+        .filter_map(|(c, _)| {
+            let d = (0..model.directions.len())
+                .find(|&d| format!("d{}_um", model.direction_name(d)) == *c)?;
+            Some((d, run.col(c)?))
+        })
+        .collect();
+    for (i, r) in rows.iter().enumerate() {
+        let _ = write!(text, "{}", r.time_ms as f64 / 1000.0);
+        for ((d, m), (_, s)) in cols.iter().zip(served) {
+            let m = m
+                .get(i)
+                .copied()
+                .flatten()
+                .map_or(String::new(), |v| format!("{v}"));
+            let _ = write!(
+                text,
+                ",{m},{},{}",
+                f64::from(r.out.corrections[*d]) / 10.0,
+                f64::from(s[i]) / 10.0
+            );
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).map_err(|e| anyhow!("writing {}: {e}", path.display()))
+}
+
+impl ReferenceReport {
+    /// The text form of `tcomp replay`.
+    pub fn print(&self) {
+        match self.every_s {
+            Some(e) => println!(
+                "  references every {:.0} s (probe noise σ {} µm{}, seed {}); re-zeros at {:?} ms",
+                e,
+                self.noise_um,
+                self.outliers
+                    .map(|(s, o)| format!(", {:.1} % corrupted by {o:+} µm", s * 100.0))
+                    .unwrap_or_default(),
+                self.seed,
+                self.rezero_ms
+            ),
+            None => println!("  no references; re-zeros at {:?} ms", self.rezero_ms),
+        }
+        for c in &self.channels {
+            println!(
+                "  {}: with references MAE {:.2} µm, RMS {:.2} µm (peak {:.2}); model alone MAE {:.2}, RMS {:.2}; raw MAE {:.2}, RMS {:.2}",
+                c.column, c.mae_um, c.rms_um, c.peak_um, c.mae_without_um, c.rms_without_um, c.raw_mae_um, c.raw_rms_um
+            );
+            println!(
+                "  {}: {} references ({} in the block), {} accepted, {} refused ({} of {} corrupted refused, {} clean refused)",
+                c.column, c.references, c.references_in_block, c.accepted, c.refused, c.corrupted_refused, c.corrupted, c.clean_refused
+            );
+        }
+    }
+}
