@@ -101,34 +101,48 @@ impl<F: NorFlash> ModelStore<F> {
         if h.len == 0 {
             return None;
         }
-        Model::parse(&buf[..h.len as usize]).ok()
+        Model::parse(buf.get(..h.len as usize)?).ok()
+    }
+
+    /// Offset of slot `s` (0 or 1; any other index reads as slot 1).
+    fn slot_base(&self, s: usize) -> u32 {
+        if s == 0 {
+            self.slots[0]
+        } else {
+            self.slots[1]
+        }
     }
 
     /// Offset of slot `s`'s settings block after an image of `len` bytes.
     fn settings_offset(&self, s: usize, len: u32) -> u32 {
-        self.slots[s] + HEADER + len.div_ceil(4) * 4
+        self.slot_base(s) + HEADER + len.div_ceil(4) * 4
     }
 
     fn read_settings(&mut self, s: usize, len: u32) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
         let mut out = heapless::Vec::new();
         let at = self.settings_offset(s, len);
         let mut h = [0u8; 12];
-        if at + 12 > self.slots[s] + self.slot_size || self.flash.read(at, &mut h).is_err() {
+        if at + 12 > self.slot_base(s) + self.slot_size || self.flash.read(at, &mut h).is_err() {
             return out;
         }
-        let word = |i: usize| u32::from_le_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
-        let n = word(4) as usize;
-        if h[0..4] != SETTINGS_MAGIC || n == 0 || n > MAX_SETTINGS_BYTES {
+        let (words, _) = h.as_chunks::<4>();
+        let &[magic, n, crc] = words else {
             return out;
-        }
+        };
+        let n = u32::from_le_bytes(n);
         let mut payload = [0u8; MAX_SETTINGS_BYTES];
-        if at + 12 + n as u32 > self.slots[s] + self.slot_size
-            || self.flash.read(at + 12, &mut payload[..n]).is_err()
-            || crc32(&payload[..n]) != word(8)
+        let Some(payload) = payload.get_mut(..n as usize) else {
+            return out;
+        };
+        if magic != SETTINGS_MAGIC
+            || n == 0
+            || at + 12 + n > self.slot_base(s) + self.slot_size
+            || self.flash.read(at + 12, payload).is_err()
+            || crc32(payload) != u32::from_le_bytes(crc)
         {
             return out;
         }
-        let _ = out.extend_from_slice(&payload[..n]);
+        let _ = out.extend_from_slice(payload);
         out
     }
 
@@ -140,17 +154,20 @@ impl<F: NorFlash> ModelStore<F> {
     /// Reads slot `s`'s image into `buf` and returns its header when the slot
     /// holds a complete, CRC-correct image that parses.
     fn valid_header(&mut self, s: usize, buf: &mut [u8; MAX_IMAGE_BYTES]) -> Option<Header> {
-        let base = self.slots[s];
+        let base = self.slot_base(s);
         let mut h = [0u8; HEADER as usize];
         self.flash.read(base, &mut h).ok()?;
-        if h[0..4] != MAGIC {
+        let (words, _) = h.as_chunks::<4>();
+        let &[magic, generation, len, crc] = words else {
+            return None;
+        };
+        if magic != MAGIC {
             return None;
         }
-        let word = |i: usize| u32::from_le_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
         let header = Header {
-            generation: word(4),
-            len: word(8),
-            crc: word(12),
+            generation: u32::from_le_bytes(generation),
+            len: u32::from_le_bytes(len),
+            crc: u32::from_le_bytes(crc),
         };
         let len = header.len as usize;
         if len > MAX_IMAGE_BYTES || header.len + HEADER > self.slot_size {
@@ -160,8 +177,9 @@ impl<F: NorFlash> ModelStore<F> {
             // Settings only, no model.
             return (header.crc == crc32(&[])).then_some(header);
         }
-        self.flash.read(base + HEADER, &mut buf[..len]).ok()?;
-        if crc32(&buf[..len]) != header.crc || Model::parse(&buf[..len]).is_err() {
+        let image = buf.get_mut(..len)?;
+        self.flash.read(base + HEADER, image).ok()?;
+        if crc32(image) != header.crc || Model::parse(image).is_err() {
             return None;
         }
         Some(header)
@@ -209,7 +227,10 @@ impl<F: NorFlash> ModelStore<F> {
     /// Offsets of the inactive slot (the one the next commit writes).
     fn inactive_range(&self) -> (u32, u32) {
         let target = self.active.map_or(0, |(s, _)| 1 - s);
-        (self.slots[target], self.slots[target] + self.slot_size)
+        (
+            self.slot_base(target),
+            self.slot_base(target) + self.slot_size,
+        )
     }
 
     /// Second half of a commit after [`ModelStore::begin`] erased the
@@ -242,10 +263,14 @@ impl<F: NorFlash> ModelStore<F> {
         erase: bool,
     ) -> Result<(), StoreError> {
         let (len, crc) = match image {
-            Source::Bytes(b) => (b.len() as u32, crc32(b)),
+            Source::Bytes(b) => {
+                let len = u32::try_from(b.len()).map_err(|_| StoreError::TooLarge)?;
+                (len, crc32(b))
+            }
             Source::Slot { len, crc, .. } => (len, crc),
         };
-        let settings_end = HEADER + len.div_ceil(4) * 4 + 12 + settings.len() as u32;
+        let settings_len = u32::try_from(settings.len()).map_err(|_| StoreError::TooLarge)?;
+        let settings_end = HEADER + len.div_ceil(4) * 4 + 12 + settings_len;
         if settings_end > self.slot_size {
             return Err(StoreError::TooLarge);
         }
@@ -253,7 +278,7 @@ impl<F: NorFlash> ModelStore<F> {
             Some((s, g)) => (1 - s, g.wrapping_add(1)),
             None => (0, 1),
         };
-        let base = self.slots[target];
+        let base = self.slot_base(target);
         if erase {
             self.flash
                 .erase(base, base + self.slot_size)
@@ -263,34 +288,44 @@ impl<F: NorFlash> ModelStore<F> {
         let ws = F::WRITE_SIZE.max(1);
         let mut chunk = [0xFFu8; 64];
         let step = (chunk.len() / ws) * ws;
-        let mut off = 0usize;
-        while off < len as usize {
-            let n = (len as usize - off).min(step);
-            let padded = n.div_ceil(ws) * ws;
-            chunk[..padded].fill(0xFF);
+        let mut off = 0u32;
+        while off < len {
+            let n = ((len - off) as usize).min(step);
+            let padded = chunk
+                .get_mut(..n.div_ceil(ws) * ws)
+                .ok_or(StoreError::TooLarge)?;
+            padded.fill(0xFF);
+            let data = padded.get_mut(..n).ok_or(StoreError::TooLarge)?;
             match image {
-                Source::Bytes(b) => chunk[..n].copy_from_slice(&b[off..off + n]),
+                Source::Bytes(b) => {
+                    let start = off as usize;
+                    let bytes = b.get(start..start + n).ok_or(StoreError::TooLarge)?;
+                    data.copy_from_slice(bytes);
+                }
                 Source::Slot { s, .. } => self
                     .flash
-                    .read(self.slots[s] + HEADER + off as u32, &mut chunk[..n])
+                    .read(self.slot_base(s) + HEADER + off, data)
                     .map_err(|_| StoreError::Flash)?,
             }
             self.flash
-                .write(base + HEADER + off as u32, &chunk[..padded])
+                .write(base + HEADER + off, padded)
                 .map_err(|_| StoreError::Flash)?;
+            #[allow(clippy::cast_possible_truncation, reason = "n <= step <= 64")]
+            let n = n as u32;
             off += n;
         }
         // The settings block, before the header.
         if !settings.is_empty() {
             let mut block = [0xFFu8; 12 + MAX_SETTINGS_BYTES + 8];
-            block[0..4].copy_from_slice(&SETTINGS_MAGIC);
-            block[4..8].copy_from_slice(&(settings.len() as u32).to_le_bytes());
-            block[8..12].copy_from_slice(&crc32(settings).to_le_bytes());
-            block[12..12 + settings.len()].copy_from_slice(settings);
+            let (n, crc) = (settings_len.to_le_bytes(), crc32(settings).to_le_bytes());
+            let content = SETTINGS_MAGIC.iter().chain(&n).chain(&crc).chain(settings);
+            for (b, &v) in block.iter_mut().zip(content) {
+                *b = v;
+            }
             let total = (12 + settings.len()).div_ceil(ws) * ws;
             let at = self.settings_offset(target, len);
             self.flash
-                .write(at, &block[..total.min(block.len())])
+                .write(at, block.get(..total).unwrap_or(&block))
                 .map_err(|_| StoreError::Flash)?;
         }
         let mut h = [0u8; HEADER as usize];
@@ -308,7 +343,7 @@ impl<F: NorFlash> ModelStore<F> {
                 .map_err(|_| StoreError::Flash)?;
         } else {
             self.flash
-                .write(base, &h[..ws.min(16)])
+                .write(base, h.get(..ws).unwrap_or(&h))
                 .map_err(|_| StoreError::Flash)?;
         }
         self.active = Some((target, generation));

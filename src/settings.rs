@@ -45,11 +45,14 @@ impl Default for Settings {
 impl Settings {
     pub fn encode(&self) -> [u8; ENCODED_LEN] {
         let mut b = [0u8; ENCODED_LEN];
-        b[0] = VERSION;
-        b[1] = self.unit;
-        b[2..4].copy_from_slice(&((self.baud / 100) as u16).to_le_bytes());
-        for (i, v) in self.clamp.iter().chain(self.rate.iter()).enumerate() {
-            b[4 + 2 * i..6 + 2 * i].copy_from_slice(&v.to_le_bytes());
+        // The baud rates the board accepts are below 6,553,600.
+        let baud = u16::try_from(self.baud / 100).unwrap_or(u16::MAX);
+        let words = [baud].into_iter().chain(self.clamp).chain(self.rate);
+        let content = [VERSION, self.unit]
+            .into_iter()
+            .chain(words.flat_map(u16::to_le_bytes));
+        for (byte, v) in b.iter_mut().zip(content) {
+            *byte = v;
         }
         b
     }
@@ -57,23 +60,23 @@ impl Settings {
     /// Settings from stored bytes; `None` for another version or a value
     /// outside its range (the board then keeps its defaults).
     pub fn decode(b: &[u8]) -> Option<Settings> {
-        if b.len() != ENCODED_LEN || b[0] != VERSION {
+        let (&[version, unit, baud_low, baud_high], limits) = b.split_first_chunk::<4>()?;
+        if b.len() != ENCODED_LEN || version != VERSION {
             return None;
         }
-        let unit = b[1];
-        let baud = u32::from(u16::from_le_bytes([b[2], b[3]])) * 100;
+        let baud = u32::from(u16::from_le_bytes([baud_low, baud_high])) * 100;
         if !(1..=247).contains(&unit) || !BAUD_RATES.contains(&baud) {
             return None;
         }
-        let word = |i: usize| u16::from_le_bytes([b[4 + 2 * i], b[5 + 2 * i]]);
         let mut s = Settings {
             unit,
             baud,
             ..Settings::default()
         };
-        for d in 0..MAX_DIRECTIONS {
-            s.clamp[d] = word(d);
-            s.rate[d] = word(MAX_DIRECTIONS + d);
+        // Clamps then rates, one little-endian word each.
+        let (words, _) = limits.as_chunks::<2>();
+        for (limit, &w) in s.clamp.iter_mut().chain(s.rate.iter_mut()).zip(words) {
+            *limit = u16::from_le_bytes(w);
         }
         Some(s)
     }
@@ -100,16 +103,22 @@ pub struct KeptReference {
 impl KeptReference {
     pub fn encode(&self) -> [u8; REFERENCE_LEN] {
         let mut b = [0u8; REFERENCE_LEN];
-        b[0] = REFERENCE_TAG;
-        b[1] = REFERENCE_VERSION;
-        let mut mask = 0u32;
-        for (c, t) in self.temps.iter().enumerate() {
-            if let Some(v) = t {
-                mask |= 1 << c;
-                b[6 + 2 * c..8 + 2 * c].copy_from_slice(&v.to_le_bytes());
-            }
+        let mask = (0..MAX_CHANNELS)
+            .zip(self.temps)
+            .filter(|(_, t)| t.is_some())
+            .fold(0u32, |m, (c, _)| m | (1 << c));
+        // A channel without a reading stores 0 under a clear mask bit.
+        let temps = self
+            .temps
+            .into_iter()
+            .flat_map(|t| t.unwrap_or(0).to_le_bytes());
+        let content = [REFERENCE_TAG, REFERENCE_VERSION]
+            .into_iter()
+            .chain(mask.to_le_bytes())
+            .chain(temps);
+        for (byte, v) in b.iter_mut().zip(content) {
+            *byte = v;
         }
-        b[2..6].copy_from_slice(&mask.to_le_bytes());
         b
     }
 
@@ -117,17 +126,19 @@ impl KeptReference {
     /// or version, a channel bit beyond [`MAX_CHANNELS`], or a reading
     /// outside the DS18B20's range (−55…125 °C): the board then has none.
     pub fn decode(b: &[u8]) -> Option<KeptReference> {
-        if b.len() != REFERENCE_LEN || b[0] != REFERENCE_TAG || b[1] != REFERENCE_VERSION {
+        let (&[tag, version, m0, m1, m2, m3], readings) = b.split_first_chunk::<6>()?;
+        if b.len() != REFERENCE_LEN || tag != REFERENCE_TAG || version != REFERENCE_VERSION {
             return None;
         }
-        let mask = u32::from_le_bytes([b[2], b[3], b[4], b[5]]);
+        let mask = u32::from_le_bytes([m0, m1, m2, m3]);
         if mask >> MAX_CHANNELS != 0 {
             return None;
         }
         let mut temps = [None; MAX_CHANNELS];
-        for (c, t) in temps.iter_mut().enumerate() {
+        let (readings, _) = readings.as_chunks::<2>();
+        for (c, (t, &reading)) in temps.iter_mut().zip(readings).enumerate() {
             if mask & (1 << c) != 0 {
-                let v = i16::from_le_bytes([b[6 + 2 * c], b[7 + 2 * c]]);
+                let v = i16::from_le_bytes(reading);
                 if !(-55 * 16..=125 * 16).contains(&v) {
                     return None;
                 }
