@@ -5,7 +5,7 @@
 //! awaits while holding it.
 
 use embedded_storage::nor_flash::NorFlash;
-use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
+use thermocomp_core::limits::MAX_AXES;
 use thermocomp_core::{Model, StepOutput};
 
 use crate::acquisition::channel_map::ChannelMap;
@@ -255,7 +255,7 @@ impl<F: BackgroundErase> App<F> {
         });
         self.compensation
             .compensator()
-            .preset_reference(&refs[..n.min(MAX_SENSORS)]);
+            .preset_reference(refs.get(..n).unwrap_or(&refs));
     }
 
     /// The channel map's ROM codes into the identity registers (200–279).
@@ -300,13 +300,13 @@ impl<F: BackgroundErase> App<F> {
         let changes = model.as_ref().is_some_and(|m| {
             m.sensors
                 .iter()
-                .enumerate()
-                .any(|(i, s)| moved(s.rom, resolved_before[i]))
+                .zip(resolved_before)
+                .any(|(s, before)| moved(s.rom, before))
                 || m.volumetric.as_ref().is_some_and(|v| {
                     v.sensors
                         .iter()
-                        .enumerate()
-                        .any(|(i, s)| moved(s.sensor.rom, vol_before[i]))
+                        .zip(vol_before)
+                        .any(|(s, before)| moved(s.sensor.rom, before))
                 })
         });
         if changes {
@@ -354,7 +354,7 @@ impl<F: BackgroundErase> App<F> {
         let ok = match job {
             FlashJob::Model { len, .. } => {
                 let staged = self.server.holding.staged();
-                let staged = &staged[..len.min(staged.len())];
+                let staged = staged.get(..len).unwrap_or(staged);
                 match Model::parse(staged) {
                     Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
                         self.install(Some(m));
@@ -444,9 +444,9 @@ impl<F: BackgroundErase> App<F> {
         self.snapshot.model_version = v;
         self.server.holding.running_version = v;
         self.snapshot.model_crc = crc;
-        self.snapshot.n_directions = nd as u16;
-        self.snapshot.n_axes = na as u16;
-        self.snapshot.n_sensors = ns as u16;
+        self.snapshot.n_directions = register_count(nd);
+        self.snapshot.n_axes = register_count(na);
+        self.snapshot.n_sensors = register_count(ns);
         // No temperatures of the new section's sensors yet: "sensor fault"
         // (not available) until the next cycle, never the old model's values.
         self.vol_temps = [None; MAX_VOL_SENSORS];
@@ -476,7 +476,11 @@ impl<F: BackgroundErase> App<F> {
             return;
         };
         let n = v.sensors.len().min(MAX_VOL_SENSORS);
-        let out = v.evaluate(&h.positions, h.tool_length_um, &self.vol_temps[..n]);
+        let out = v.evaluate(
+            &h.positions,
+            h.tool_length_um,
+            self.vol_temps.get(..n).unwrap_or(&self.vol_temps),
+        );
         let mut status = out.status;
         if !h.positions_written {
             status = (status & !vstatus::VALID) | vstatus::NO_POSITIONS;
@@ -495,7 +499,7 @@ impl<F: BackgroundErase> App<F> {
                 [NOT_AVAILABLE_32; 3]
             },
             status,
-            terms: v.terms.len() as u16,
+            terms: register_count(v.terms.len()),
             tool_um: if valid { out.tool_um } else { NOT_AVAILABLE_32 },
             temps: core::array::from_fn(|i| {
                 self.vol_temps
@@ -512,18 +516,18 @@ impl<F: BackgroundErase> App<F> {
     fn apply_limits(&mut self) {
         let h = &self.server.holding;
         let (clamp, rate) = (h.clamp, h.rate);
-        for d in 0..MAX_DIRECTIONS {
-            let c = if clamp[d] == u16::MAX {
+        // 0xFFFF: no override.
+        let limit = |v: u16| {
+            if v == u16::MAX {
                 i32::MAX
             } else {
-                i32::from(clamp[d])
-            };
-            let r = if rate[d] == u16::MAX {
-                i32::MAX
-            } else {
-                i32::from(rate[d])
-            };
-            self.compensation.compensator().set_limit_override(d, c, r);
+                i32::from(v)
+            }
+        };
+        for (d, (&c, &r)) in clamp.iter().zip(rate.iter()).enumerate() {
+            self.compensation
+                .compensator()
+                .set_limit_override(d, limit(c), limit(r));
         }
     }
 
@@ -558,18 +562,20 @@ impl<F: BackgroundErase> App<F> {
         let s = &mut self.snapshot;
         s.sequence = s.sequence.wrapping_add(1);
         s.heartbeat = s.heartbeat.wrapping_add(1);
-        s.uptime_s = (uptime_ms / 1000) as u32;
-        s.sample_time_s = (now_ms / 1000) as u32;
+        // The registers hold the low 32 bits of the seconds (136 years).
+        s.uptime_s = ((uptime_ms / 1000) & 0xFFFF_FFFF) as u32;
+        s.sample_time_s = ((now_ms / 1000) & 0xFFFF_FFFF) as u32;
         s.status = out.status;
         s.corrections = out.corrections;
         s.predictions = out.predicted;
         s.axes = out.axes;
         s.map_missing = 0;
         s.active = out.active;
-        for c in 0..MAX_CHANNELS {
+        let channels = s.temperatures.iter_mut().zip(s.states.iter_mut());
+        for (c, (temperature, state)) in channels.enumerate() {
             let v = acq.value(c, now_ms);
-            s.temperatures[c] = v.usable().map(centidegrees);
-            s.states[c] = v.state.code();
+            *temperature = v.usable().map(centidegrees);
+            *state = v.state.code();
             if self.map.get(c).is_some()
                 && matches!(
                     v.state,
@@ -703,4 +709,9 @@ fn apply_settings(h: &mut crate::modbus::holding::Holding, s: &Settings) {
     h.baud = s.baud;
     h.clamp = s.clamp;
     h.rate = s.rate;
+}
+
+/// A model's count (directions, axes, sensors, terms: far below 65,535) as a register.
+fn register_count(n: usize) -> u16 {
+    u16::try_from(n).unwrap_or(u16::MAX)
 }

@@ -128,9 +128,14 @@ impl Compensation {
                 *t = v.usable().map(i32::from);
             }
         }
+        #[allow(
+            clippy::indexing_slicing,
+            reason = "n = sensors.len() <= MAX_SENSORS: heapless::Vec<_, MAX_SENSORS>"
+        )]
+        let temps = &temps[..n];
         self.compensator.step(&StepInput {
             now_ms,
-            temps: &temps[..n],
+            temps,
             spindle_rpm: plc.spindle_rpm,
             positions: &plc.positions,
             stale,

@@ -87,7 +87,7 @@ impl FaultRecord {
             MAGIC,
             u32::from(self.kind),
             self.pc,
-            self.uptime_ms as u32,
+            (self.uptime_ms & 0xFFFF_FFFF) as u32,
             (self.uptime_ms >> 32) as u32,
             self.count,
             self.detail,
@@ -104,7 +104,7 @@ impl FaultRecord {
             return None;
         }
         Some(FaultRecord {
-            kind: w[1] as u16,
+            kind: u16::try_from(w[1]).ok()?,
             pc: w[2],
             uptime_ms: u64::from(w[3]) | (u64::from(w[4]) << 32),
             count: w[5],

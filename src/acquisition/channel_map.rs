@@ -6,8 +6,8 @@
 //! bytes = channel unused), then a CRC-8 over everything before it:
 //! [`CHANNEL_MAP_BYTES`] = 165 bytes.
 
-use thermocomp_core::crc::crc8_maxim;
 use super::rom::RomCode;
+use thermocomp_core::crc::crc8_maxim;
 use thermocomp_protocol::MAX_CHANNELS;
 
 /// Size of the persisted form.
@@ -164,6 +164,11 @@ impl ChannelMap {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation
+)]
 mod tests {
     use super::*;
 

@@ -133,6 +133,11 @@ pub async fn measure<A: ProbeAdc>(adc: &mut A, config: &ProbeConfig) -> ProbeRea
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation
+)]
 mod tests {
     use super::*;
 

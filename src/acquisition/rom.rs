@@ -1,7 +1,7 @@
 //! 64-bit ROM codes and the ROM search (Maxim application note 187).
 
-use thermocomp_core::crc::crc8_maxim;
 use crate::hal::onewire::{BusError, OneWireBus};
+use thermocomp_core::crc::crc8_maxim;
 
 /// Search ROM.
 pub const SEARCH_ROM: u8 = 0xF0;
@@ -32,17 +32,9 @@ impl RomCode {
 
     /// Builds a ROM code with a valid CRC from a family code and serial.
     pub const fn from_serial(family: u8, serial: [u8; 6]) -> RomCode {
-        let mut b = [
-            family, serial[0], serial[1], serial[2], serial[3], serial[4], serial[5], 0,
-        ];
-        let mut head = [0u8; 7];
-        let mut i = 0;
-        while i < 7 {
-            head[i] = b[i];
-            i += 1;
-        }
-        b[7] = crc8_maxim(&head);
-        RomCode(b)
+        let [s0, s1, s2, s3, s4, s5] = serial;
+        let crc = crc8_maxim(&[family, s0, s1, s2, s3, s4, s5]);
+        RomCode([family, s0, s1, s2, s3, s4, s5, crc])
     }
 
     /// Bit `i` (0..64) in bus order.
