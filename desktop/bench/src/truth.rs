@@ -183,6 +183,146 @@ pub struct TruthRun {
     pub run: Run,
 }
 
+/// One backward-Euler step matrix, factorised:
+/// A(flow) = C/dt + L + diag(g_air) (+ diag(g_cool) to the tank's water).
+fn step_matrix(
+    nt: &Net,
+    dt: f64,
+    flow: bool,
+) -> Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    let mut a = DMatrix::<f64>::zeros(NODES, NODES);
+    for i in 0..NODES {
+        a[(i, i)] += nt.c[i] / dt + nt.g_air[i];
+    }
+    for &(i, j, g) in &nt.links {
+        a[(i, i)] += g;
+        a[(j, j)] += g;
+        a[(i, j)] -= g;
+        a[(j, i)] -= g;
+    }
+    if flow {
+        for i in 0..NODES {
+            let g = nt.g_cool[i];
+            if g > 0.0 {
+                a[(i, i)] += g;
+                a[(TANK, TANK)] += g;
+                a[(i, TANK)] -= g;
+                a[(TANK, i)] -= g;
+            }
+        }
+    }
+    Some(a.lu())
+}
+
+/// Columns written before the sensors.
+const LEAD_COLS: [&str; 3] = ["time_s", "spindle_rpm", "feed_activity"];
+
+/// Sensor readings follow their sites (lagged ones through contact).
+fn follow_sites(lagged: &mut [f64], x: &DVector<f64>, effects: &[TruthEffect], dt: f64) {
+    for (i, &s) in SITES.iter().enumerate() {
+        let tau = effects.iter().find_map(|e| match e {
+            TruthEffect::SensorLag { sensor, tau_s } if *sensor == i => Some(*tau_s),
+            _ => None,
+        });
+        lagged[i] = match tau {
+            Some(tau) => lagged[i] + (x[s] - lagged[i]) * (1.0 - (-dt / tau).exp()),
+            None => x[s],
+        };
+    }
+}
+
+/// The machine's state at one written instant.
+struct Sample<'a> {
+    t: f64,
+    rpm: f64,
+    feed: f64,
+    measured_ambient: f64,
+    lagged: &'a [f64],
+    x: &'a DVector<f64>,
+    x0: &'a DVector<f64>,
+}
+
+/// One written row: the duty, the sensors (steps, noise, 1/16 °C), the
+/// ambient sensor and the probes.
+fn record(data: &mut [Vec<Option<f64>>], g: &mut Rng, s: &Sample, effects: &[TruthEffect]) {
+    let Sample {
+        t,
+        rpm,
+        feed,
+        measured_ambient,
+        lagged,
+        x,
+        x0,
+    } = *s;
+    data[0].push(Some(t));
+    data[1].push(Some(rpm));
+    data[2].push(Some(feed));
+    for (i, _) in SITES.iter().enumerate() {
+        let step: f64 = effects
+            .iter()
+            .map(|e| match e {
+                TruthEffect::SensorStep {
+                    sensor,
+                    step_c,
+                    at_s,
+                } if *sensor == i && t >= *at_s => *step_c,
+                _ => 0.0,
+            })
+            .sum();
+        let v = lagged[i] + step + 0.02 * g.normal();
+        data[3 + i].push(Some((v * 16.0).round() / 16.0));
+    }
+    let amb = measured_ambient + 0.02 * g.normal();
+    data[3 + SITES.len()].push(Some((amb * 16.0).round() / 16.0));
+    // displacement: housing growth along the spindle (nose side of
+    // the fixed rear bearing), column growth and column bending
+    let rise = |i: usize| x[i] - x0[i];
+    let alpha = 11.5e-3; // µm per mm per K
+    let growth: f64 = (0..HOUSING).map(|i| 60.0 * rise(i)).sum::<f64>() * alpha * 0.6;
+    let col: f64 = (HOUSING..BED).map(|i| 110.0 * rise(i)).sum::<f64>() * alpha;
+    let tilt = 2.2 * (rise(BED - 1) - rise(HOUSING + 1));
+    let table = 300.0 * alpha * rise(TABLE);
+    let dz = -(growth + col) + table + 0.2 * g.normal();
+    let dx = tilt + 0.15 * growth + 0.2 * g.normal();
+    data[4 + SITES.len()].push(Some((dx * 1e4).round() / 1e4));
+    data[5 + SITES.len()].push(Some((dz * 1e4).round() / 1e4));
+}
+
+/// Heat: motor (∝ n) in the housing's middle, bearings (∝ n^1.5) at the
+/// nose and the rear, ballscrew nut (∝ feed) in the table.
+fn machine_heat(rpm: f64, feed: f64, effects: &[TruthEffect]) -> DVector<f64> {
+    let u = rpm / N_MAX;
+    let mut q = DVector::<f64>::zeros(NODES);
+    if rpm > 0.0 {
+        q[HOUSING / 2] += 110.0 * u;
+        q[1] += 75.0 * u.powf(1.5);
+        q[HOUSING - 2] += 40.0 * u.powf(1.5);
+        for e in effects {
+            if let TruthEffect::BearingNonlinear { k_w, p } = e {
+                q[1] += k_w * u.powf(*p);
+            }
+        }
+    }
+    q[TABLE] += 35.0 * feed;
+    q
+}
+
+/// The run as written: metadata and the columns in order.
+fn into_run(data: Vec<Vec<Option<f64>>>, period_s: f64) -> Run {
+    let mut run = Run::default();
+    run.set_meta("source", "simulated (diagnose open-world truth model)");
+    run.set_meta("machine", "vertical-mc-truth");
+    run.set_meta("sample_period_s", &format!("{period_s}"));
+    let mut names: Vec<String> = LEAD_COLS.iter().map(|s| s.to_string()).collect();
+    names.extend((0..SITES.len()).map(|i| format!("T_T{i}")));
+    names.extend(["T_ambient".to_string(), "dx_um".into(), "dz_um".into()]);
+    for (n, d) in names.iter().zip(data) {
+        // names are unique by construction
+        let _ = run.push_column(n, d);
+    }
+    run
+}
+
 /// Simulate `hours` of the duty with the effects, 1 s backward Euler,
 /// written every `period_s`.
 pub fn simulate(
@@ -196,32 +336,8 @@ pub fn simulate(
     let dt = 1.0;
     let steps = (hours * 3600.0 / dt) as usize;
     let stride = (period_s / dt).round().max(1.0) as usize;
-    // A(flow) = C/dt + L + diag(g_air) (+ diag(g_cool) to the tank's water)
-    let build = |flow: bool| -> Option<nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>> {
-        let mut a = DMatrix::<f64>::zeros(NODES, NODES);
-        for i in 0..NODES {
-            a[(i, i)] += nt.c[i] / dt + nt.g_air[i];
-        }
-        for &(i, j, g) in &nt.links {
-            a[(i, i)] += g;
-            a[(j, j)] += g;
-            a[(i, j)] -= g;
-            a[(j, i)] -= g;
-        }
-        if flow {
-            for i in 0..NODES {
-                let g = nt.g_cool[i];
-                if g > 0.0 {
-                    a[(i, i)] += g;
-                    a[(TANK, TANK)] += g;
-                    a[(i, TANK)] -= g;
-                    a[(TANK, i)] -= g;
-                }
-            }
-        }
-        Some(a.lu())
-    };
-    let (Some(lu_off), Some(lu_on)) = (build(false), build(true)) else {
+    let (Some(lu_off), Some(lu_on)) = (step_matrix(&nt, dt, false), step_matrix(&nt, dt, true))
+    else {
         return TruthRun {
             run: Run::default(),
         };
@@ -247,8 +363,7 @@ pub fn simulate(
     let mut chiller_on = false;
     let mut seg = 0;
     let mut lagged: Vec<f64> = SITES.iter().map(|&s| x[s]).collect();
-    let cols = ["time_s", "spindle_rpm", "feed_activity"];
-    let mut data: Vec<Vec<Option<f64>>> = vec![Vec::new(); cols.len() + SITES.len() + 3];
+    let mut data: Vec<Vec<Option<f64>>> = vec![Vec::new(); LEAD_COLS.len() + SITES.len() + 3];
     let x0 = x.clone();
     for k in 0..steps {
         let t = k as f64 * dt;
@@ -256,67 +371,21 @@ pub fn simulate(
             seg += 1;
         }
         let (_, rpm, feed) = duty[seg];
-        let u = rpm / N_MAX;
         let air = amb_meas(t) + drift * t / 3600.0;
-        // sensor readings follow their sites (lagged ones through contact)
-        for (i, &s) in SITES.iter().enumerate() {
-            let tau = effects.iter().find_map(|e| match e {
-                TruthEffect::SensorLag { sensor, tau_s } if *sensor == i => Some(*tau_s),
-                _ => None,
-            });
-            lagged[i] = match tau {
-                Some(tau) => lagged[i] + (x[s] - lagged[i]) * (1.0 - (-dt / tau).exp()),
-                None => x[s],
-            };
-        }
+        follow_sites(&mut lagged, &x, effects, dt);
         if k % stride == 0 {
-            data[0].push(Some(t));
-            data[1].push(Some(rpm));
-            data[2].push(Some(feed));
-            for (i, _) in SITES.iter().enumerate() {
-                let step: f64 = effects
-                    .iter()
-                    .map(|e| match e {
-                        TruthEffect::SensorStep {
-                            sensor,
-                            step_c,
-                            at_s,
-                        } if *sensor == i && t >= *at_s => *step_c,
-                        _ => 0.0,
-                    })
-                    .sum();
-                let v = lagged[i] + step + 0.02 * g.normal();
-                data[3 + i].push(Some((v * 16.0).round() / 16.0));
-            }
-            let amb = amb_meas(t) + 0.02 * g.normal();
-            data[3 + SITES.len()].push(Some((amb * 16.0).round() / 16.0));
-            // displacement: housing growth along the spindle (nose side of
-            // the fixed rear bearing), column growth and column bending
-            let rise = |i: usize| x[i] - x0[i];
-            let alpha = 11.5e-3; // µm per mm per K
-            let growth: f64 = (0..HOUSING).map(|i| 60.0 * rise(i)).sum::<f64>() * alpha * 0.6;
-            let col: f64 = (HOUSING..BED).map(|i| 110.0 * rise(i)).sum::<f64>() * alpha;
-            let tilt = 2.2 * (rise(BED - 1) - rise(HOUSING + 1));
-            let table = 300.0 * alpha * rise(TABLE);
-            let dz = -(growth + col) + table + 0.2 * g.normal();
-            let dx = tilt + 0.15 * growth + 0.2 * g.normal();
-            data[4 + SITES.len()].push(Some((dx * 1e4).round() / 1e4));
-            data[5 + SITES.len()].push(Some((dz * 1e4).round() / 1e4));
+            let sample = Sample {
+                t,
+                rpm,
+                feed,
+                measured_ambient: amb_meas(t),
+                lagged: &lagged,
+                x: &x,
+                x0: &x0,
+            };
+            record(&mut data, &mut g, &sample, effects);
         }
-        // heat: motor (∝ n) in the housing's middle, bearings (∝ n^1.5) at
-        // the nose and the rear, ballscrew nut (∝ feed) in the table
-        let mut q = DVector::<f64>::zeros(NODES);
-        if rpm > 0.0 {
-            q[HOUSING / 2] += 110.0 * u;
-            q[1] += 75.0 * u.powf(1.5);
-            q[HOUSING - 2] += 40.0 * u.powf(1.5);
-            for e in effects {
-                if let TruthEffect::BearingNonlinear { k_w, p } = e {
-                    q[1] += k_w * u.powf(*p);
-                }
-            }
-        }
-        q[TABLE] += 35.0 * feed;
+        let mut q = machine_heat(rpm, feed, effects);
         // coolant flows while the spindle runs; the tank is held at t_set by
         // an ideal chiller, or cycles bang-bang with the effect
         let flow = rpm > 0.0;
@@ -348,18 +417,9 @@ pub fn simulate(
             x[TANK] = t_set;
         }
     }
-    let mut run = Run::default();
-    run.set_meta("source", "simulated (diagnose open-world truth model)");
-    run.set_meta("machine", "vertical-mc-truth");
-    run.set_meta("sample_period_s", &format!("{period_s}"));
-    let mut names: Vec<String> = cols.iter().map(|s| s.to_string()).collect();
-    names.extend((0..SITES.len()).map(|i| format!("T_T{i}")));
-    names.extend(["T_ambient".to_string(), "dx_um".into(), "dz_um".into()]);
-    for (n, d) in names.iter().zip(data) {
-        // names are unique by construction
-        let _ = run.push_column(n, d);
+    TruthRun {
+        run: into_run(data, period_s),
     }
-    TruthRun { run }
 }
 
 #[cfg(test)]
