@@ -2,8 +2,10 @@
 //! flags, calls the library crates and prints.
 
 pub mod diagnose;
+pub mod export;
 pub mod fit;
 pub mod geometry;
 pub mod geometry_check;
+pub mod replay;
 pub mod select;
 pub mod sim;

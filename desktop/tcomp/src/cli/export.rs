@@ -1,0 +1,220 @@
+//! `tcomp export`: a fitted model (or the demo model), optionally with the
+//! volumetric section, quantized into the board's model image.
+
+use anyhow::Context;
+
+#[derive(clap::Args)]
+pub struct ExportArgs {
+    /// Export the built-in demonstration model (random weights from --seed).
+    #[arg(long)]
+    pub demo: bool,
+    /// Fitted parameters written by `tcomp fit --out`.
+    #[arg(long, conflicts_with = "demo")]
+    pub model: Option<std::path::PathBuf>,
+    /// A run CSV whose T_ columns give the board's channel order.
+    #[arg(long, requires = "model")]
+    pub run: Option<std::path::PathBuf>,
+    /// Per-channel override of the fit's cross-validated choice, e.g.
+    /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, hybrid, mlr, mlr-static).
+    #[arg(long, default_value = "")]
+    pub r#use: String,
+    #[arg(long, default_value_t = 200.0)]
+    pub max_correction_um: f64,
+    #[arg(long, default_value_t = 1.0)]
+    pub max_rate_um_per_s: f64,
+    #[arg(long, default_value_t = 1)]
+    pub model_version: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Add the volumetric correction: the JSON of `tcomp geometry table
+    /// --json` (image section kind 3; its sensors are found by name
+    /// among the --run file's T_ columns).
+    #[arg(long)]
+    pub geometry: Option<std::path::PathBuf>,
+    /// Tool length at full scale of the volumetric section (mm); longer
+    /// tools are held there and flagged.
+    #[arg(long, default_value_t = 500.0, requires = "geometry")]
+    pub tool_max_mm: f64,
+    /// Machine position (mm) of the volumetric polynomial's zero, per axis: x,y,z.
+    #[arg(long, default_value = "0,0,0", requires = "geometry")]
+    pub geometry_origin_mm: String,
+    #[arg(short, long)]
+    pub out: std::path::PathBuf,
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn main(args: ExportArgs) -> anyhow::Result<()> {
+    let ExportArgs {
+        demo,
+        model,
+        run,
+        r#use,
+        max_correction_um,
+        max_rate_um_per_s,
+        model_version,
+        seed,
+        geometry,
+        tool_max_mm,
+        geometry_origin_mm,
+        out,
+        json,
+    } = args;
+    let run_for_geometry = run.clone();
+    let float = match (demo, model) {
+        (true, _) => thermocomp_core::float::demo_model(seed),
+        (false, Some(path)) => {
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+            let file: tcomp_model::fit::ModelFile = serde_json::from_str(&text)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let run =
+                run.ok_or_else(|| anyhow::anyhow!("--run <csv> gives the board's channel order"))?;
+            let table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
+            let columns: Vec<String> = table
+                .temperature_columns()
+                .iter()
+                .map(|c| c.to_string())
+                .collect();
+            let roms = table
+                .sensor_roms()
+                .with_context(|| format!("in run file {}", run.display()))?;
+            let opts = tcomp_model::export::ExportOptions {
+                model_version,
+                max_correction_um,
+                max_rate_um_per_s,
+                choices: tcomp_model::export::parse_choices(&r#use)?,
+                ..Default::default()
+            };
+            let mut float = tcomp_model::export::float_model_from_fit(&file, &columns, &opts)?;
+            tcomp_model::export::name_sensors_by_rom(&mut float, &columns, &roms)?;
+            float
+        }
+        (false, None) => {
+            anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
+        }
+    };
+    let section = match geometry {
+        Some(path) => Some(geometry_section(
+            &path,
+            &float,
+            run_for_geometry.as_deref(),
+            tool_max_mm,
+            &geometry_origin_mm,
+            max_correction_um,
+        )?),
+        None => None,
+    };
+    let summary = tcomp_model::export::export_with(&float, section, &out)?;
+    tcomp_model::export::print_summary(&summary, &out, json);
+    Ok(())
+}
+
+/// `tcomp export --geometry`: read `geometry table --json`'s polynomial,
+/// find its sensors' board channels (the run's T_ columns, by name) and
+/// its X, Y, Z position slots (the model's axes of those names, else the
+/// first slots the model does not use), quantise it and report the cost.
+fn geometry_section(
+    path: &std::path::Path,
+    float: &thermocomp_core::float::FloatModel,
+    run: Option<&std::path::Path>,
+    tool_max_mm: f64,
+    origin: &str,
+    max_correction_um: f64,
+) -> anyhow::Result<tcomp_model::export::GeometrySection> {
+    use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    let poly: tcomp_geometry::volumetric::VolumetricPoly =
+        serde_json::from_str(&text).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: not a `tcomp geometry table --json` output: {e}",
+                path.display()
+            )
+        })?;
+    let mut channels = Vec::new();
+    if !poly.sensors.is_empty() {
+        let run = run.ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: the volumetric polynomial reads sensor(s) {}: --run <csv> gives their board channels",
+                path.display(),
+                poly.sensors.join(", ")
+            )
+        })?;
+        let columns: Vec<String> = tcomp_data::runcsv::Run::read_with_temperatures(run)?
+            .temperature_columns()
+            .iter()
+            .map(|c| c.to_string())
+            .collect();
+        for s in &poly.sensors {
+            let want = if s.starts_with("T_") {
+                s.clone()
+            } else {
+                format!("T_{s}")
+            };
+            let ch = columns
+                .iter()
+                .position(|c| *c == want || c == s)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "{}: sensor {s} of the volumetric polynomial is not among the T_ columns of {}",
+                        path.display(),
+                        run.display()
+                    )
+                })?;
+            let ch = u8::try_from(ch)
+                .ok()
+                .filter(|&c| usize::from(c) < thermocomp_core::limits::MAX_SENSORS)
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "sensor {s} is board channel {ch}; the board reads channels 0..=19"
+                    )
+                })?;
+            channels.push(ch);
+        }
+    }
+    let o: Vec<f64> = origin
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .ok_or_else(|| {
+            anyhow::anyhow!("--geometry-origin-mm {origin:?}: expected three numbers x,y,z (mm)")
+        })?;
+    let mut slots = [0u8; 3];
+    let mut used: Vec<usize> = Vec::new();
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if let Some(i) = float
+            .axes
+            .iter()
+            .position(|a| a.name.eq_ignore_ascii_case(name))
+        {
+            slots[k] = i as u8;
+            used.push(i);
+        }
+    }
+    for (k, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if !float.axes.iter().any(|a| a.name.eq_ignore_ascii_case(name)) {
+            let free = (0..thermocomp_core::limits::MAX_AXES)
+                .find(|i| *i >= float.axes.len() && !used.contains(i))
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "no free PLC position slot for axis {name} of the volumetric section"
+                    )
+                })?;
+            slots[k] = free as u8;
+            used.push(free);
+        }
+    }
+    let opts = BoardOptions {
+        channels,
+        slots,
+        origin_mm: [o[0], o[1], o[2]],
+        tool_max_mm,
+        max_correction_um,
+    };
+    let v = quantize(&poly, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let report = quantisation_report(&poly, &v, &opts);
+    Ok((v, report))
+}

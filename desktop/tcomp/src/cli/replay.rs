@@ -1,0 +1,131 @@
+//! `tcomp replay`: the board's output for a run, computed by the desktop
+//! core, and its error against the measured channels.
+
+use anyhow::Context;
+
+#[derive(clap::Args)]
+pub struct ReplayArgs {
+    pub run: std::path::PathBuf,
+    pub image: std::path::PathBuf,
+    /// Score rows from this fraction of the run (e.g. 0.6 for the FL_THERMAL test block).
+    #[arg(long, default_value_t = 0.0)]
+    pub from: f64,
+    #[arg(long, default_value_t = 1.0)]
+    pub to: f64,
+    /// Lose a sensor from a time on: `T_t4@1800` (seconds of the run) or
+    /// `T_t4@60%` (from that fraction of the rows); repeatable.
+    #[arg(long = "fail-sensor", value_name = "NAME@TIME")]
+    pub fail_sensor: Vec<String>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
+    let ReplayArgs {
+        run,
+        image,
+        from,
+        to,
+        fail_sensor,
+        json,
+    } = args;
+    // Run file first, then image: each refusal names its own file.
+    let mut table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
+    // Scored as rises from the run's start, as the board compensates.
+    let notes: Vec<String> = table
+        .errors_as_rises(&run.display().to_string())
+        .into_iter()
+        .collect();
+    let bytes =
+        std::fs::read(&image).map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
+    let model = thermocomp_core::Model::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", image.display()))?;
+    check_channels(&model, &table, &image, &run)?;
+    let failures = fail_sensor
+        .iter()
+        .map(|f| tcomp_model::replay::parse_failure(f, &table))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let rows = tcomp_model::replay::replay_files_failing(&run, &image, &failures)
+        .with_context(|| format!("in run file {}", run.display()))?;
+    let n = rows.len();
+    let (a, b) = (
+        (from.clamp(0.0, 1.0) * n as f64) as usize,
+        (to.clamp(0.0, 1.0) * n as f64) as usize,
+    );
+    let res = tcomp_model::replay::residuals(&table, &rows, &model, a, b);
+    let flags = tcomp_model::replay::flag_counts(&rows, a, b);
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags, "notes": notes})
+        );
+    } else {
+        println!("{} samples compensated; scored rows {a}..{b}", n);
+        for note in &notes {
+            println!("  note: {note}");
+        }
+        for r in &res {
+            println!(
+                "  {}: about the run's reference (what the board compensates): MAE {:.2} µm, RMS {:.2} µm (uncompensated {:.2}), peak {:.2} µm, RMS reduction {:.1} %",
+                r.column, r.mae_um, r.rms_um, r.uncompensated_rms_um, r.peak_um, r.reduction_pct
+            );
+            println!(
+                "  {}: about the block's own mean (an operator who re-zeroes): RMS {:.2} µm (uncompensated {:.2}), reduction {:.1} %",
+                r.column, r.rms_about_mean_um, r.uncompensated_rms_about_mean_um, r.reduction_about_mean_pct
+            );
+            println!(
+                "  {}: never worse than no compensation: {}",
+                r.column,
+                if r.never_worse {
+                    "yes"
+                } else {
+                    "NO — this block is worse with the board"
+                }
+            );
+        }
+        println!(
+            "  status rows: {} valid, {} out of envelope, {} clamped, {} rate limited, {} stale, {} sensor fault, {} degraded",
+            flags.valid, flags.out_of_envelope, flags.clamped, flags.rate_limited, flags.stale, flags.sensor_fault, flags.degraded
+        );
+    }
+    Ok(())
+}
+
+/// A model channel the run has no temperature column for would be a
+/// permanently failed sensor: the replay would show nothing of the model.
+/// A sensor named by ROM code that the run (recording ROM codes) does not
+/// hold is replayed as missing, as the board would, and said so.
+fn check_channels(
+    model: &thermocomp_core::Model,
+    run: &tcomp_data::runcsv::Run,
+    image: &std::path::Path,
+    run_path: &std::path::Path,
+) -> anyhow::Result<()> {
+    let names: Vec<String> = run
+        .temperature_columns()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    let roms = run
+        .sensor_roms()
+        .with_context(|| format!("in run file {}", run_path.display()))?;
+    let columns = names.len();
+    let resolved = tcomp_model::replay::sensor_columns(model, &names, &roms);
+    for (i, (s, c)) in model.sensors.iter().zip(&resolved).enumerate() {
+        match c {
+            Some(c) => anyhow::ensure!(
+                *c < columns,
+                "{} reads temperature channel {} (counted from 0) but {} has {columns} temperature columns",
+                image.display(),
+                c,
+                run_path.display()
+            ),
+            None => eprintln!(
+                "note: model sensor {i} (ROM {}) is not in {}: replayed as a missing sensor",
+                tcomp_data::runcsv::format_rom(&s.rom),
+                run_path.display()
+            ),
+        }
+    }
+    Ok(())
+}
