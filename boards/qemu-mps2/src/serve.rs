@@ -260,5 +260,12 @@ async fn watchdog(app: &'static Shared) {
         "watchdog started: {} ms, fed when both tasks progressed",
         safety::WATCHDOG_TIMEOUT_MS
     );
-    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay).await
+    runtime::watchdog_loop(
+        app,
+        &mut watchdog,
+        &Uptime,
+        &mut Delay,
+        runtime::BOOT_DEADLINE_MS,
+    )
+    .await
 }
