@@ -39,18 +39,30 @@ pub fn release_bus() {
         .modify(|w| w.set_moder(8, pac::gpio::vals::Moder::OUTPUT));
 }
 
-/// Start the IWDG at the application's timeout (prescaler 256 on the
-/// ~32 kHz LSI: 125 Hz). `safety::Iwdg::start` later writes the same
-/// values through embassy; a started IWDG cannot be stopped.
+/// Start the IWDG at the application's timeout, with the very prescaler and
+/// reload `IndependentWatchdog::new` computes for it later (÷128 on the
+/// nominal 32 kHz LSI; reload `timeout / 128 × 32 kHz − 1`, 2,499 for 10 s),
+/// so its rewrite changes nothing even if it lands while this update is
+/// still in progress (PVU/RVU, up to 5 LSI cycles; waited for here, bounded).
+/// A started IWDG cannot be stopped.
 pub fn start_watchdog(timeout_us: u32) {
-    let reload = (u64::from(timeout_us) * 125 / 1_000_000).clamp(1, 0xFFF);
+    let reload = (timeout_us / 128 * 32_000 / 1_000_000)
+        .saturating_sub(1)
+        .clamp(1, 0xFFF);
     let iwdg = pac::IWDG;
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::START));
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
     iwdg.pr()
-        .write(|w| w.set_pr(pac::iwdg::vals::Pr::DIVIDE_BY256));
+        .write(|w| w.set_pr(pac::iwdg::vals::Pr::DIVIDE_BY128));
     iwdg.rlr()
         .write(|w| w.set_rl(u16::try_from(reload).unwrap_or(0xFFF)));
+    for _ in 0..1_000 {
+        let sr = iwdg.sr().read();
+        if !sr.pvu() && !sr.rvu() {
+            break;
+        }
+        cortex_m::asm::delay(RESET_CLOCK_HZ / 100_000);
+    }
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 
