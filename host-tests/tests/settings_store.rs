@@ -425,7 +425,10 @@ fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
         assert!(app.poll_flash(), "look {look}: still in progress");
         assert_eq!(app.server.holding.result, result::COMMIT_IN_PROGRESS);
     }
-    assert!(!app.poll_flash(), "erased and written at the first quiet look");
+    assert!(
+        !app.poll_flash(),
+        "erased and written at the first quiet look"
+    );
     assert_eq!(app.server.holding.result, result::OK);
     assert_eq!(app.snapshot.model_version, 3);
 }
