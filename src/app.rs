@@ -338,6 +338,9 @@ impl<F: BackgroundErase> App<F> {
             FlashJob::Model { erasing, .. } | FlashJob::Settings { erasing } => erasing,
         };
         if !erasing {
+            if !self.store.ready_to_erase() {
+                return true;
+            }
             if self.store.begin().is_err() {
                 self.end_job(job, false);
                 return false;

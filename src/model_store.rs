@@ -363,6 +363,12 @@ impl<F: BackgroundErase> ModelStore<F> {
             .map_err(|_| StoreError::Flash)
     }
 
+    /// Whether [`ModelStore::begin`] may start the erase now
+    /// ([`BackgroundErase::ready_to_erase`]).
+    pub fn ready_to_erase(&mut self) -> bool {
+        self.flash.ready_to_erase()
+    }
+
     /// True once the erase [`ModelStore::begin`] started is done.
     pub fn erase_done(&mut self) -> bool {
         self.flash.erase_done()

@@ -5,11 +5,13 @@ The board's UART0 is a TCP socket carrying RTU frames (QEMU -serial tcp:...),
 so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
 
   read     --port P [--unit U]           snapshot: sequence, sample time, status, corrections
-  upload   --port P --image F [--corrupt] [--watch S]
+  upload   --port P --image F [--corrupt] [--length N] [--watch S]
                                          stage, commit; the reply time, the time until the
                                          background write is done, the outcome; with --watch
                                          the largest gap between snapshots before and during it
   badcrc   --port P                      a corrupted frame, then a good one
+  raw      --port P --hex H [--hex H ...] [--gap-ms G] [--wait-s S]
+                                         raw bytes, piece by piece G ms apart; the bytes back
   rate     --port P [--n N]              requests per second and latency
   command  --port P --code N             unlock, write command N; its exception (None: accepted)
   hold     --port P [--write A=V ...] [--unit U]
@@ -20,7 +22,7 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
                                          per point: write the positions (FC16 6-11) and the
                                          tool length (FC16 34-35), all µm, then read input
                                          registers 180-199 (the volumetric block)
-  flood    --pipe BASE [--bytes N] [--gap-ms G]
+  flood    --pipe BASE [--bytes N] [--gap-ms G] [--retry-ms R]
                                          N bytes of garbage into the board's UART (QEMU
                                          -serial pipe:BASE), then one good request; how
                                          long the flood took and the answer after it
@@ -174,7 +176,9 @@ def cmd_upload(a):
         r = m.call("write_registers", HR_STAGING + i, words[i:i + 100])
         if r is not None and r.isError():
             out["staging_error"] = str(r)
-    m.call("write_register", HR_STAGED_LEN, len(image))
+    length = len(image) if a.length is None else a.length
+    r = m.call("write_register", HR_STAGED_LEN, length)
+    out["length_exception"] = getattr(r, "exception_code", None) if r is not None and r.isError() else None
     t = time.perf_counter()
     r = m.call("write_register", HR_COMMAND, CMD_COMMIT)
     out["commit_reply_ms"] = round(1000 * (time.perf_counter() - t), 1)
@@ -195,6 +199,13 @@ def cmd_upload(a):
         while not done():
             time.sleep(0.02)
     out["result"] = state["result"]
+    # The lock after the commit: HR_UNLOCK reads 1 while unlocked, and a
+    # protected write (the staged length again, harmless) is refused with
+    # exception 01 while locked.
+    r = m.call("read_holding_registers", HR_UNLOCK, count=1)
+    out["unlocked_after"] = None if r is None or r.isError() else r.registers[0]
+    r = m.call("write_register", HR_STAGED_LEN, length & 0xFFFF)
+    out["protected_write_exception_after"] = getattr(r, "exception_code", None) if r is not None and r.isError() else None
     time.sleep(0.3)
     out["after"] = snapshot(m)
     out["link"] = m.close()
@@ -264,6 +275,32 @@ def cmd_rate(a):
     }))
 
 
+def cmd_raw(a):
+    # Raw bytes on the socket, in pieces with silences between them: what
+    # no master library sends (a frame split by a pause, a frame inside
+    # another). Prints every byte that came back within --wait-s.
+    s = socket.create_connection(("127.0.0.1", a.port), timeout=2)
+    s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    pieces = [bytes.fromhex(p) for p in a.hex]
+    for i, piece in enumerate(pieces):
+        if i:
+            time.sleep(a.gap_ms / 1000)
+        s.sendall(piece)
+    s.settimeout(0.05)
+    got = b""
+    t = time.perf_counter()
+    while time.perf_counter() - t < a.wait_s:
+        try:
+            chunk = s.recv(256)
+            if not chunk:
+                break
+            got += chunk
+        except socket.timeout:
+            pass
+    s.close()
+    print(json.dumps({"sent": [p.hex() for p in pieces], "reply": got.hex()}))
+
+
 def cmd_flood(a):
     # The pipe holds at most one page: the writes below block until the board
     # has taken all but the last 4 kB, as a real line (which holds a few bytes
@@ -309,16 +346,22 @@ def cmd_flood(a):
     want = bytes([UNIT, 4, 4, 0x12, 0x34, 0x56, 0x78])
     t1 = time.perf_counter()
     os.write(tx, req)
+    sent = 1
     answer_s = None
     while time.perf_counter() - t1 < a.wait_s:
         with lock:
             if want in replies:
                 answer_s = time.perf_counter() - t1
                 break
+        # A master's retry after its response timeout: the request that
+        # followed the garbage with no silence was part of the garbage's frame.
+        if a.retry_ms and time.perf_counter() - t1 >= sent * a.retry_ms / 1000:
+            os.write(tx, req)
+            sent += 1
         time.sleep(0.001)
     print(json.dumps({"flood_bytes": len(garbage), "flood_s": round(flood_s, 2),
                       "flood_bytes_per_s": round(len(garbage) / flood_s),
-                      "replies_to_garbage_bytes": replies_to_garbage,
+                      "replies_to_garbage_bytes": replies_to_garbage, "requests_sent": sent,
                       "answer_s": None if answer_s is None else round(answer_s, 3)}))
 
 
@@ -413,11 +456,16 @@ def main():
     r.add_argument("--unit", type=int, default=UNIT); r.add_argument("--timeout", type=float, default=3.0)
     r.add_argument("--degraded", action="store_true")
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
+    u.add_argument("--length", type=int, default=None, help="stage this length instead of the image's")
     u.add_argument("--watch", type=float, default=0.0, help="seconds of sequence polling before and after the commit")
     b = sub.add_parser("badcrc"); b.add_argument("--port", type=int, required=True)
     q = sub.add_parser("rate"); q.add_argument("--port", type=int, required=True); q.add_argument("--n", type=int, default=200)
+    w = sub.add_parser("raw"); w.add_argument("--port", type=int, required=True)
+    w.add_argument("--hex", action="append", required=True, help="one piece of bytes (hex); pieces are sent --gap-ms apart")
+    w.add_argument("--gap-ms", type=float, default=20.0); w.add_argument("--wait-s", type=float, default=0.5)
     f = sub.add_parser("flood"); f.add_argument("--pipe", required=True); f.add_argument("--bytes", type=int, default=300_000)
     f.add_argument("--gap-ms", type=float, default=0.0); f.add_argument("--wait-s", type=float, default=5.0)
+    f.add_argument("--retry-ms", type=float, default=0.0, help="send the request again every this many ms until answered")
     c = sub.add_parser("command"); c.add_argument("--port", type=int, required=True); c.add_argument("--code", type=int, required=True)
     c.add_argument("--unit", type=int, default=UNIT)
     h = sub.add_parser("hold"); h.add_argument("--port", type=int, required=True); h.add_argument("--write", action="append", default=[])
@@ -430,7 +478,7 @@ def main():
     a = p.parse_args()
     {"read": cmd_read, "upload": cmd_upload, "badcrc": cmd_badcrc, "rate": cmd_rate,
      "flood": cmd_flood, "command": cmd_command, "fault": cmd_fault, "hold": cmd_hold, "inputs": cmd_inputs,
-     "volumetric": cmd_volumetric}[a.cmd](a)
+     "volumetric": cmd_volumetric, "raw": cmd_raw}[a.cmd](a)
 
 
 if __name__ == "__main__":

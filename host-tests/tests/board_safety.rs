@@ -219,9 +219,10 @@ fn test_only_commands_are_refused_without_the_feature() {
     // board answers commands 8 and 9 with ILLEGAL DATA VALUE.
     let mut app = app();
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    app.request(&write1(HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
     // 12: the first number without a command (10 and 11 keep a reference).
     for cmd in [CMD_TEST_PANIC, CMD_TEST_STALL, 12] {
+        // Unlocked each time: a refused command locks the board again.
+        app.request(&write1(HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
         let change = app.request(&write1(HR_COMMAND, cmd), 0, &mut reply);
         assert_eq!((reply[1], reply[2]), (0x86, 3), "command {cmd}");
         assert_eq!(change, LinkChange::None);

@@ -263,6 +263,8 @@ fn unlock_then_configure_and_the_lock_expires() {
         0x03,
         "no such baud rate"
     );
+    assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a refusal locks");
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
     assert_eq!(b.ask(&write1(17, HR_BAUD, 96)).0, Action::LinkChanged);
     assert_eq!(b.server.holding.baud, 9600);
     b.now += UNLOCK_MS;
@@ -346,14 +348,124 @@ fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
         );
         assert!(!b.server.holding.unlocked(b.now));
     }
-    // The right key is echoed; a wrong one afterwards is refused and leaves
-    // the board as it was (unlocked: the lock command is CMD_LOCK).
+    // The right key is echoed; a wrong one afterwards is refused and locks
+    // the board (every refusal does: a guessing master gains nothing).
     assert_eq!(
         b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE)).1,
         write1(17, HR_UNLOCK, UNLOCK_CODE)
     );
     assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
+    assert!(!b.server.holding.unlocked(b.now));
+}
+
+/// Every refused write to this unit locks the board, whatever refused it
+/// and whichever master sent it (the lock is the board's: no sessions).
+#[test]
+fn every_refused_write_locks_the_board() {
+    let img = encoded(demo_model(3).quantize().unwrap().0);
+    let mut corrupt = img.clone();
+    corrupt[40] ^= 0xFF;
+    let mut bad_count = write_n(17, HR_CLAMP, &[1, 2]);
+    bad_count[6] = 3;
+    let n = bad_count.len();
+    let crc = crc16(&bad_count[..n - 2]).to_le_bytes();
+    bad_count[n - 2..].copy_from_slice(&crc);
+    // (what to send once unlocked, the exception it gets)
+    let refusals: Vec<(&str, Box<dyn Fn(&mut Bench) -> Vec<u8>>, u8)> = vec![
+        (
+            "bad CRC image",
+            Box::new(|b: &mut Bench| {
+                upload(b, &corrupt);
+                write1(17, HR_COMMAND, CMD_COMMIT_MODEL)
+            }),
+            0x04,
+        ),
+        (
+            "staged length 0",
+            Box::new(|b: &mut Bench| {
+                upload(b, &img);
+                b.ask(&write1(17, HR_STAGED_LEN, 0));
+                write1(17, HR_COMMAND, CMD_COMMIT_MODEL)
+            }),
+            0x04,
+        ),
+        (
+            "staged length too long for the image",
+            Box::new(|b: &mut Bench| {
+                upload(b, &img);
+                b.ask(&write1(17, HR_STAGED_LEN, (img.len() + 2) as u16));
+                write1(17, HR_COMMAND, CMD_COMMIT_MODEL)
+            }),
+            0x04,
+        ),
+        (
+            "staged length above the staging area",
+            Box::new(|_: &mut Bench| write1(17, HR_STAGED_LEN, 9000)),
+            0x03,
+        ),
+        (
+            "wrong key",
+            Box::new(|_: &mut Bench| write1(17, HR_UNLOCK, 0x1234)),
+            0x03,
+        ),
+        (
+            "unit out of range",
+            Box::new(|_: &mut Bench| write1(17, HR_UNIT, 300)),
+            0x03,
+        ),
+        (
+            "read-only register",
+            Box::new(|_: &mut Bench| write1(17, HR_RESULT, 0)),
+            0x02,
+        ),
+        (
+            "unknown command",
+            Box::new(|_: &mut Bench| write1(17, HR_COMMAND, 999)),
+            0x03,
+        ),
+        (
+            "byte count disagrees",
+            Box::new(move |_: &mut Bench| bad_count.clone()),
+            0x03,
+        ),
+        (
+            "coil write",
+            Box::new(|_: &mut Bench| frame(&[17, 5, 0, 0, 0xFF, 0])),
+            0x01,
+        ),
+    ];
+    for (what, request, code) in &refusals {
+        let mut b = Bench::new();
+        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+        let req = request(&mut b);
+        assert!(b.server.holding.unlocked(b.now), "{what}: unlocked before");
+        assert_eq!(b.exception_of(&req), *code, "{what}");
+        assert!(!b.server.holding.unlocked(b.now), "{what}: still unlocked");
+        assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "{what}");
+        assert_eq!(
+            b.exception_of(&write1(17, HR_CLAMP, 100)),
+            0x01,
+            "{what}: a protected write after it"
+        );
+    }
+    // A refused read does not lock; a broadcast refusal does not either (a
+    // broadcast never runs a command, the lock included).
+    let mut b = Bench::new();
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    assert_eq!(b.exception_of(&read(17, 3, 9000, 1)), 0x02);
+    assert!(b.ask(&write1(0, HR_UNIT, 5)).1.is_empty());
     assert!(b.server.holding.unlocked(b.now));
+    // Busy (06) asks the master to send the same request again later: it
+    // does not lock, so the retransmission goes through.
+    b.server.holding.busy = true;
+    assert_eq!(b.exception_of(&write1(17, HR_UNIT, 5)), 0x06);
+    assert!(b.server.holding.unlocked(b.now));
+    b.server.holding.busy = false;
+    assert_eq!(b.ask(&write1(17, HR_UNIT, 5)).0, Action::LinkChanged);
+    // A new board (a reset) starts locked; the unlock times out.
+    assert!(!Bench::new().server.holding.unlocked(0));
+    b.now += UNLOCK_MS;
+    assert!(!b.server.holding.unlocked(b.now));
 }
 
 fn upload(b: &mut Bench, image: &[u8]) {
@@ -387,6 +499,8 @@ fn model_upload_commits_only_a_valid_image() {
         0x04
     );
     assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_CRC]);
+    assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a refused commit locks");
+    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
     upload(&mut b, &img);
     assert_eq!(
         b.words(3, HR_STAGING, 2),

@@ -174,6 +174,39 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
     assert_eq!(bad["commit_exception"], 4, "{bad}");
     assert_eq!(bad["result"], 3, "{bad}");
     assert_eq!(bad["after"]["model_version"], 1, "{bad}");
+    // Every refusal locks the board (issue 30): read back and a protected write.
+    assert_eq!(bad["unlocked_after"], 0, "{bad}");
+    assert_eq!(bad["protected_write_exception_after"], 1, "{bad}");
+    // A bad staged length: 0 (the commit refused, result 2), and above the
+    // staging area (the length write refused with 03, the commit then 01).
+    let zero = python(&[
+        "upload",
+        "--port",
+        &p,
+        "--image",
+        m2.to_str().unwrap(),
+        "--length",
+        "0",
+    ]);
+    assert_eq!(zero["commit_exception"], 4, "{zero}");
+    assert_eq!(zero["result"], 2, "{zero}");
+    assert_eq!(zero["unlocked_after"], 0, "{zero}");
+    assert_eq!(zero["protected_write_exception_after"], 1, "{zero}");
+    assert_eq!(zero["after"]["model_version"], 1, "{zero}");
+    let long = python(&[
+        "upload",
+        "--port",
+        &p,
+        "--image",
+        m2.to_str().unwrap(),
+        "--length",
+        "9000",
+    ]);
+    assert_eq!(long["length_exception"], 3, "{long}");
+    assert_eq!(long["commit_exception"], 1, "{long}");
+    assert_eq!(long["unlocked_after"], 0, "{long}");
+    assert_eq!(long["protected_write_exception_after"], 1, "{long}");
+    assert_eq!(long["after"]["model_version"], 1, "{long}");
     // Good: committed, version and CRC of v2 served, corrections from v2.
     let good = python(&["upload", "--port", &p, "--image", m2.to_str().unwrap()]);
     assert_eq!(
@@ -188,6 +221,7 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
     assert!(good["link"]["requests"].as_u64().unwrap() >= 6, "{good}");
     let crc = u32::from_le_bytes(v2[v2.len() - 4..].try_into().unwrap());
     assert_eq!(good["after"]["model_version"], 2, "{good}");
+    assert_eq!(good["unlocked_after"], 0, "a commit locks: {good}");
     assert_eq!(good["after"]["model_crc"], crc, "{good}");
 }
 
@@ -289,7 +323,10 @@ fn after_a_300_kb_flood_of_garbage_the_next_request_is_answered_within_a_second(
     // fast as the board takes it, so when the write returns the flood has
     // stopped for the board too (a TCP socket would queue it instead). The
     // request follows at once: no silent gap after the garbage, whose last
-    // bytes open a 255-byte FC16 frame.
+    // bytes open a 255-byte FC16 frame. That first request is part of the
+    // garbage's frame (no silence between them: the spec's framing, issue
+    // 30); the master asks again every 100 ms, as after any response
+    // timeout, and the first request after a silence is answered.
     let _one = serial();
     let dir = scratch("flood");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
@@ -317,6 +354,8 @@ fn after_a_300_kb_flood_of_garbage_the_next_request_is_answered_within_a_second(
         base.to_str().unwrap(),
         "--bytes",
         "300000",
+        "--retry-ms",
+        "100",
     ]);
     println!("{r}");
     assert_eq!(r["flood_bytes"], 300_000, "{r}");

@@ -203,6 +203,13 @@ fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults
     let panic = python(&["command", "--port", &p, "--unit", "7", "--code", "8"]);
     assert_eq!(panic["exception"], Value::Null, "{panic}");
     wait_for_boots(&board, 2, BOOT);
+    // The boot log names the stored unit, not the default (issue 30).
+    let log = board.log();
+    let second = log.rsplit(SERVING).next().unwrap_or_default();
+    assert!(
+        second.starts_with(" on UART0: unit 7, 115200 baud"),
+        "{log}"
+    );
     let after = python(&["hold", "--port", &p, "--unit", "7"]);
     let r = &after["registers"];
     assert_eq!(
@@ -238,7 +245,7 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
     let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("commit");
     // One sample per second, as on the NUCLEO.
-    let (_board, port) = boot_paced(&dir, "1000");
+    let (board, port) = boot_paced(&dir, "1000");
     let v2 = dir.join("v2.img");
     let mut fm = thermocomp_core::float::demo_model(2);
     fm.model_version = 2;
@@ -271,6 +278,20 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
     assert!(
         during < base + 300.0,
         "the loop kept its period during the commit: {r}"
+    );
+    // A reset keeps the uploaded model: the command line's version 1 is
+    // programmed only into blank slots (issue 30).
+    let panic = python(&["command", "--port", &p, "--code", "8"]);
+    assert_eq!(panic["exception"], Value::Null, "{panic}");
+    wait_for_boots(&board, 2, BOOT);
+    let snap = &python(&["read", "--port", &p])[0];
+    assert_eq!(snap["model_version"], 2, "{snap}\n{}", board.log());
+    assert!(
+        board
+            .log()
+            .contains("not programmed: the flash slots hold version 2"),
+        "{}",
+        board.log()
     );
 }
 

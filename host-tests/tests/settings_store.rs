@@ -362,3 +362,73 @@ fn the_channel_map_persists_and_a_swapped_sensor_goes_to_a_free_channel() {
     assert_eq!(app.channel_map(), m2);
     assert_eq!(app.settings(), Settings::default(), "settings untouched");
 }
+
+/// A flash whose board says "not now" (its RS-485 port is transmitting or
+/// receiving) for the first `busy_looks` looks: the NUCLEO's erase stalls
+/// the CPU, so it must never start under a reply (issue 30).
+struct BusyLine {
+    inner: MockFlash,
+    busy_looks: u32,
+}
+
+impl embedded_storage::nor_flash::ErrorType for BusyLine {
+    type Error = host_tests::mock_flash::MockError;
+}
+impl embedded_storage::nor_flash::ReadNorFlash for BusyLine {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, o: u32, b: &mut [u8]) -> Result<(), Self::Error> {
+        self.inner.read(o, b)
+    }
+    fn capacity(&self) -> usize {
+        self.inner.capacity()
+    }
+}
+impl embedded_storage::nor_flash::NorFlash for BusyLine {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = ERASE_SIZE;
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        assert_eq!(self.busy_looks, 0, "erased while the line was busy");
+        self.inner.erase(from, to)
+    }
+    fn write(&mut self, o: u32, b: &[u8]) -> Result<(), Self::Error> {
+        self.inner.write(o, b)
+    }
+}
+impl thermocomp::hal::flash::BackgroundErase for BusyLine {
+    fn ready_to_erase(&mut self) -> bool {
+        if self.busy_looks == 0 {
+            return true;
+        }
+        self.busy_looks -= 1;
+        false
+    }
+}
+
+#[test]
+fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
+    let flash = BusyLine {
+        inner: MockFlash::new(2 * SLOT as usize),
+        busy_looks: 3,
+    };
+    let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let (_, img) = image(3);
+    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    for (i, pair) in img.chunks(2).enumerate() {
+        let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
+        app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);
+    }
+    app.request(&write1(1, HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
+    app.request(&write1(1, HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
+    assert_eq!(reply[1], 6, "answered first: {reply:02x?}");
+    for look in 0..3 {
+        assert!(app.poll_flash(), "look {look}: still in progress");
+        assert_eq!(app.server.holding.result, result::COMMIT_IN_PROGRESS);
+    }
+    assert!(
+        !app.poll_flash(),
+        "erased and written at the first quiet look"
+    );
+    assert_eq!(app.server.holding.result, result::OK);
+    assert_eq!(app.snapshot.model_version, 3);
+}

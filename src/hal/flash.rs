@@ -19,4 +19,12 @@ pub trait BackgroundErase: NorFlash {
     fn erase_done(&mut self) -> bool {
         true
     }
+
+    /// Whether an erase may start now. A board whose erase stalls the CPU
+    /// (the NUCLEO) says no while its RS-485 port transmits or receives, so
+    /// that the erase never holds the bus or delays a reply; the commit then
+    /// waits for the next look (the feeder's, every 100 ms).
+    fn ready_to_erase(&mut self) -> bool {
+        true
+    }
 }

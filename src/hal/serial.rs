@@ -1,6 +1,8 @@
 //! The RS-485 Modbus port as the application sees it: whole RTU frames.
-//! The board finds frame ends (3.5-character gap, or the USART's IDLE line)
-//! and drives the transceiver's driver-enable around each reply.
+//! The board times each received byte and finds frame ends with the
+//! application's one framer ([`crate::modbus::rtu_framer`]: 3.5-character
+//! end, 1.5-character break), and drives the transceiver's driver-enable
+//! around each reply.
 
 /// A received frame was longer than the buffer (it is discarded whole).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

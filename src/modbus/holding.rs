@@ -175,8 +175,36 @@ impl Holding {
         })
     }
 
+    /// Lock now (command 4, a commit, and every refused write to this unit).
+    pub fn lock(&mut self) {
+        self.unlocked_until_ms = None;
+    }
+
     /// Write `values` to consecutive registers from `addr`, all or nothing.
+    ///
+    /// A refused write addressed to this unit locks the board: whatever went
+    /// wrong (a wrong key, a value out of range, a refused model), the
+    /// master must unlock again before the next protected write. The lock is
+    /// the board's, not a master's: the spec has no sessions, so one refusal
+    /// from any master locks it for all. Two answers do not lock: busy (06,
+    /// "retransmit later", as the spec asks of the master; nothing was
+    /// refused for what it is) and a refused broadcast (a broadcast never
+    /// runs a command, the lock command included).
     pub fn write(
+        &mut self,
+        addr: u16,
+        values: &[u16],
+        now_ms: u64,
+        addressing: Addressing,
+    ) -> Result<Command, WriteError> {
+        let outcome = self.write_checked(addr, values, now_ms, addressing);
+        if outcome.is_err_and(|e| e != WriteError::Busy) && addressing == Addressing::Unit {
+            self.lock();
+        }
+        outcome
+    }
+
+    fn write_checked(
         &mut self,
         addr: u16,
         values: &[u16],

@@ -5,8 +5,10 @@
 
 pub mod holding;
 pub mod registers;
+pub mod rtu_framer;
 pub mod server;
 
 pub use holding::Holding;
 pub use registers::Snapshot;
+pub use rtu_framer::{Outcome as FrameOutcome, RtuFramer, Timing as FrameTiming};
 pub use server::{Action, Server};

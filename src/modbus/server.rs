@@ -51,7 +51,31 @@ impl Server {
 
     /// Handle one received frame. `reply` is cleared and, when the request
     /// deserves an answer, filled with the complete RTU reply (CRC included).
+    ///
+    /// A write request to this unit (FC05, 06, 15, 16) answered with an
+    /// exception locks the board, whichever check refused it (a malformed
+    /// count here, a refused value or model in [`Holding::write`]); busy
+    /// (06: "retransmit later") does not.
     pub fn handle(
+        &mut self,
+        frame: &[u8],
+        now_ms: u64,
+        snapshot: &Snapshot,
+        reply: &mut Vec<u8, MAX_FRAME>,
+    ) -> Action {
+        let action = self.dispatch(frame, now_ms, snapshot, reply);
+        let is_exception =
+            reply.get(1).is_some_and(|f| f & 0x80 != 0) && reply.get(2) != Some(&0x06);
+        let is_write = frame
+            .get(1)
+            .is_some_and(|f| matches!(f, 0x05 | 0x06 | 0x0F | 0x10));
+        if is_exception && is_write {
+            self.holding.lock();
+        }
+        action
+    }
+
+    fn dispatch(
         &mut self,
         frame: &[u8],
         now_ms: u64,

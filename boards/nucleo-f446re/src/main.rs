@@ -6,6 +6,7 @@
 #![no_std]
 #![no_main]
 
+mod early;
 mod model_flash;
 mod onewire;
 mod probe_adc;
@@ -52,21 +53,39 @@ static APP: StaticCell<Shared> = StaticCell::new();
 /// One acquisition cycle per second: 20 sensors take 0.96 s on the bus
 /// (BENCHMARKS.md, sensor acquisition).
 const CYCLE_PERIOD: Duration = Duration::from_secs(1);
+/// Uptime until which the feeder pets the IWDG while the board boots
+/// (1-Wire search and configuration of up to 20 sensors, the boot-time
+/// step count: about 1 s). After it, a boot that has not finished is left
+/// to the IWDG (10 s nominal, 6.8 s at the fastest LSI): no unconditional
+/// feeding beyond the boot's own need.
+const BOOT_WINDOW_MS: u64 = 3_000;
 /// The bus is searched again every this many cycles (one minute).
 const REDISCOVER_CYCLES: u32 = 60;
 
-/// 168 MHz from the ST-LINK's 8 MHz MCO (HSE bypass). 180 MHz would need the
-/// regulator's over-drive mode for no gain the compensator needs.
-fn clock_config() -> Config {
+/// 168 MHz from the ST-LINK's 8 MHz MCO (HSE bypass), or from the 16 MHz
+/// HSI when the HSE did not start ([`early::probe_hse`]). 180 MHz would need
+/// the regulator's over-drive mode for no gain the compensator needs.
+fn clock_config(source: early::ClockSource) -> Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(8_000_000),
-        mode: HseMode::Bypass,
-    });
-    config.rcc.pll_src = PllSource::HSE;
+    let prediv = match source {
+        early::ClockSource::Hse => {
+            config.rcc.hse = Some(Hse {
+                freq: Hertz(8_000_000),
+                mode: HseMode::Bypass,
+            });
+            config.rcc.pll_src = PllSource::HSE;
+            PllPreDiv::DIV4
+        }
+        early::ClockSource::HsiFallback => {
+            config.rcc.hse = None;
+            config.rcc.pll_src = PllSource::HSI;
+            PllPreDiv::DIV8
+        }
+    };
+    // 2 MHz into the PLL either way: × 168 = 336 MHz, / 2 = 168 MHz, / 7 = 48 MHz.
     config.rcc.pll = Some(Pll {
-        prediv: PllPreDiv::DIV4,
+        prediv,
         mul: PllMul::MUL168,
         divp: Some(PllPDiv::DIV2),
         divq: Some(PllQDiv::DIV7),
@@ -81,11 +100,24 @@ fn clock_config() -> Config {
 
 /// Sets everything up, then stays as the watchdog feeder: `main` never
 /// returns, and an initialisation that fails is a fault (record + reset),
-/// never a silent exit.
+/// never a silent exit. Boot order (issue 30): the bus released, the
+/// watchdog running, the HSE probed with a timeout ([`early`]), then the
+/// clock init.
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    let p = embassy_stm32::init(clock_config());
-    info!("thermocomp on NUCLEO-F446RE, 168 MHz");
+    early::release_bus();
+    early::start_watchdog(safety::WATCHDOG_TIMEOUT_US);
+    let source = early::probe_hse();
+    let p = embassy_stm32::init(clock_config(source));
+    // The same pin as an embassy output, still low.
+    let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
+    match source {
+        early::ClockSource::Hse => info!("thermocomp on NUCLEO-F446RE, 168 MHz from the HSE"),
+        early::ClockSource::HsiFallback => warn!(
+            "thermocomp on NUCLEO-F446RE, 168 MHz from the HSI: the HSE did not start within {} ms",
+            early::HSE_TIMEOUT_MS
+        ),
+    }
     safety::note_watchdog_reset();
     let mut watchdog = safety::Iwdg::start(p.IWDG);
     let led = Output::new(p.PA5, Level::Low, Speed::Low);
@@ -94,7 +126,7 @@ async fn main(spawner: Spawner) {
     let flash = model_flash::SlotFlash::new(Flash::new_blocking(p.FLASH));
     let mut uart_config = usart::Config::default();
     uart_config.baudrate = BAUD;
-    let uart = match Uart::new(
+    let (tx, rx) = match Uart::new(
         p.USART1,
         p.PA10,
         p.PA9,
@@ -103,14 +135,17 @@ async fn main(spawner: Spawner) {
         Irqs,
         uart_config,
     ) {
-        Ok(u) => u,
+        Ok(u) => u.split(),
         Err(e) => {
             defmt::error!("USART1 configuration refused: {}", e);
             fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::UART)
         }
     };
-    let driver_enable = Output::new(p.PA8, Level::Low, Speed::Medium);
-    let port = rtu_port::Rs485Port::new(uart, driver_enable);
+    static RX_RING: StaticCell<[u8; rtu_port::RX_RING]> = StaticCell::new();
+    let Some(ring) = RX_RING.try_init([0; rtu_port::RX_RING]) else {
+        fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::BUFFER)
+    };
+    let port = rtu_port::Rs485Port::new(tx, rx.into_ring_buffered(ring), driver_enable, BAUD);
     let app = build_app(flash);
     // Loaded in place: the model never sits on the stack inside an app.
     app.lock(|a| a.borrow_mut().load_stored());
@@ -129,7 +164,7 @@ async fn main(spawner: Spawner) {
             fault::fault::<safety::Nucleo>(fault::kind::INIT_FAILED, 0, fault::init_step::SPAWN)
         }
     }
-    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay).await
+    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay, BOOT_WINDOW_MS).await
 }
 
 /// The app state in its static: the model, settings and channel map

@@ -52,5 +52,13 @@ impl NorFlash for SlotFlash {
 /// Blocking erase (the default): the F446 has one flash bank, and every
 /// flash read — every instruction fetch — stalls while a sector erases, so
 /// a background erase would stall the CPU all the same. The application
-/// starts it after the commit's reply is out (HR_RESULT 23 until done).
-impl thermocomp::hal::flash::BackgroundErase for SlotFlash {}
+/// starts it after the commit's reply is out (HR_RESULT 23 until done), and
+/// only once the RS-485 line is quiet: not while the port transmits (the
+/// driver enable would stay high through the erase: the bus jammed for
+/// 1–4 s) nor while a request is coming in (its reply would wait out the
+/// erase).
+impl thermocomp::hal::flash::BackgroundErase for SlotFlash {
+    fn ready_to_erase(&mut self) -> bool {
+        crate::rtu_port::line_quiet()
+    }
+}

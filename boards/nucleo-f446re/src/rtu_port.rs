@@ -1,48 +1,165 @@
 //! The RS-485 Modbus port: USART1 (PA9 TX, PA10 RX) through a half-duplex
 //! transceiver whose driver enable is PA8 (a GPIO: the F4's USART has no
-//! hardware DE). Frame ends are found by the USART's IDLE-line detection
-//! (`read_until_idle`), which the Modbus serial-line spec allows in place of
-//! timing 3.5 characters; DMA receives, so a 1-Wire critical section cannot
-//! overrun the receiver.
+//! hardware DE). Frames are found by the application's one RTU framer
+//! ([`thermocomp::modbus::rtu_framer`]: 3.5-character end, 1.5-character
+//! break, 256-byte limit), as on the bench.
+//!
+//! Reception runs into a DMA ring without pause (a 1-Wire critical section
+//! cannot overrun it, and waiting for a frame's end can be cancelled without
+//! losing a byte). The ring hands over bytes at an idle line (one character
+//! of silence) or when the DMA passes the middle or the end of the ring;
+//! each batch's bytes are stamped back from the time it was handed over,
+//! one character apart, the last one a character before it (the idle
+//! detection). The stamps are accurate to the task's latency, plus one
+//! character for a batch cut at the ring's middle or end: at 115200 baud
+//! the break rule (750 µs) has eight characters of margin; at 9600 baud a
+//! silence just under 1.5 characters may be read as a break (the frame is
+//! discarded; the master asks again), never a break as none.
+
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
-use embassy_stm32::usart::Uart;
+use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use embassy_time::{with_deadline, Instant};
 use thermocomp::hal::serial::{Overrun, RtuPort};
+use thermocomp::modbus::rtu_framer::{Outcome, RtuFramer, Timing};
+
+/// One batch from the ring.
+const BATCH: usize = 64;
+/// The DMA ring: two frames.
+pub const RX_RING: usize = 512;
+
+/// The port drives the bus (driver enable high, until the last stop bit).
+static TRANSMITTING: AtomicBool = AtomicBool::new(false);
+/// A frame is being received (bytes since the last frame end).
+static RECEIVING: AtomicBool = AtomicBool::new(false);
+
+/// Neither sending nor receiving, and USART1's last stop bit is out (TC):
+/// a flash erase, which stalls the CPU for 1–4 s, may start now without
+/// holding the bus or delaying a reply. Called under the app lock (no task
+/// runs in between).
+pub fn line_quiet() -> bool {
+    !TRANSMITTING.load(Ordering::Acquire)
+        && !RECEIVING.load(Ordering::Acquire)
+        && embassy_stm32::pac::USART1.sr().read().tc()
+}
 
 pub struct Rs485Port {
-    uart: Uart<'static, Async>,
+    tx: UartTx<'static, Async>,
+    rx: RingBufferedUartRx<'static>,
     driver_enable: Output<'static>,
+    framer: RtuFramer,
+    /// Bytes handed over by the ring, not yet given to the framer.
+    batch: [u8; BATCH],
+    batch_len: usize,
+    batch_pos: usize,
+    /// Time stamp of the batch's last byte (µs).
+    batch_end_us: u64,
 }
 
 impl Rs485Port {
-    pub fn new(uart: Uart<'static, Async>, driver_enable: Output<'static>) -> Self {
+    pub fn new(
+        tx: UartTx<'static, Async>,
+        rx: RingBufferedUartRx<'static>,
+        driver_enable: Output<'static>,
+        baud: u32,
+    ) -> Self {
         Rs485Port {
-            uart,
+            tx,
+            rx,
             driver_enable,
+            framer: RtuFramer::new(Timing::for_baud(baud)),
+            batch: [0; BATCH],
+            batch_len: 0,
+            batch_pos: 0,
+            batch_end_us: 0,
         }
+    }
+
+    /// The next byte and its time stamp, or `None` once the frame in
+    /// progress has reached its deadline with no byte.
+    async fn next_byte(&mut self) -> Result<Option<(u8, u64)>, Overrun> {
+        if self.batch_pos >= self.batch_len {
+            let read = self.rx.read(&mut self.batch);
+            let got = match self.framer.deadline_us() {
+                None => Some(read.await),
+                Some(d) => with_deadline(Instant::from_micros(d), read).await.ok(),
+            };
+            match got {
+                None => return Ok(None),
+                Some(Ok(n)) => {
+                    let char_us = self.framer.timing().char_us;
+                    self.batch_len = n.min(BATCH);
+                    self.batch_pos = 0;
+                    self.batch_end_us = Instant::now().as_micros().saturating_sub(char_us);
+                }
+                Some(Err(_)) => {
+                    // Overrun, framing or noise error: the frame in progress
+                    // lost or garbled bytes; reception restarts at the next read.
+                    self.framer.reset();
+                    self.batch_len = 0;
+                    self.batch_pos = 0;
+                    return Err(Overrun);
+                }
+            }
+        }
+        let Some(&byte) = self.batch.get(self.batch_pos) else {
+            return Ok(None);
+        };
+        let behind = (self.batch_len - 1 - self.batch_pos) as u64;
+        let at = self
+            .batch_end_us
+            .saturating_sub(behind * self.framer.timing().char_us);
+        self.batch_pos += 1;
+        Ok(Some((byte, at)))
     }
 }
 
 impl RtuPort for Rs485Port {
     async fn read_frame(&mut self, buf: &mut [u8]) -> Result<usize, Overrun> {
-        // A frame that fills the buffer is longer than any valid RTU frame.
-        match self.uart.read_until_idle(buf).await {
-            Ok(n) if n < buf.len() => Ok(n),
-            _ => Err(Overrun),
+        loop {
+            let outcome = match self.next_byte().await {
+                Ok(Some((byte, at))) => self.framer.push(byte, at),
+                Ok(None) => self.framer.idle(Instant::now().as_micros()),
+                Err(e) => {
+                    RECEIVING.store(false, Ordering::Release);
+                    return Err(e);
+                }
+            };
+            RECEIVING.store(self.framer.deadline_us().is_some(), Ordering::Release);
+            match outcome {
+                Some(Outcome::Frame) => {
+                    let frame = self.framer.frame();
+                    let n = frame.len();
+                    return match buf.get_mut(..n) {
+                        Some(dst) => {
+                            dst.copy_from_slice(frame);
+                            Ok(n)
+                        }
+                        None => Err(Overrun),
+                    };
+                }
+                Some(Outcome::Oversize) => return Err(Overrun),
+                Some(Outcome::Broken) | None => {}
+            }
         }
     }
 
     async fn write_frame(&mut self, bytes: &[u8]) {
+        TRANSMITTING.store(true, Ordering::Release);
         self.driver_enable.set_high();
-        let _ = self.uart.write(bytes).await;
+        let _ = self.tx.write(bytes).await;
         // Wait for the last stop bit (TC), not just an empty data register,
         // before releasing the line.
-        let _ = self.uart.blocking_flush();
+        let _ = self.tx.blocking_flush();
         self.driver_enable.set_low();
+        TRANSMITTING.store(false, Ordering::Release);
     }
 
     fn set_baud(&mut self, baud: u32) {
-        let _ = self.uart.set_baudrate(baud);
+        let _ = self.tx.set_baudrate(baud);
+        let _ = self.rx.set_baudrate(baud);
+        self.framer.set_timing(Timing::for_baud(baud));
     }
 }

@@ -157,6 +157,9 @@ unsafe fn DefaultHandler(irqn: i16) {
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     // SAFETY: a read of the SCB's fault status register.
     let cfsr = unsafe { (*cortex_m::peripheral::SCB::PTR).cfsr.read() };
+    // The bus first (the UART off), then the log: a log over semihosting
+    // takes host time while the line would be held.
+    <safety::Bench as fault::FaultBoard>::safe_state();
     log!("hard fault at pc={:#010x} cfsr={:#010x}", frame.pc(), cfsr);
     if safety::FIELD_MODE.load(Ordering::Relaxed) {
         fault::fault::<safety::Bench>(fault::kind::HARD_FAULT, frame.pc(), cfsr)
@@ -166,6 +169,8 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
+    // The bus first (the UART off), then the log.
+    <safety::Bench as fault::FaultBoard>::safe_state();
     log!("panic: {}", info);
     if safety::FIELD_MODE.load(Ordering::Relaxed) {
         let line = info.location().map_or(0, |l| l.line());

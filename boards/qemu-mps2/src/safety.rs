@@ -163,6 +163,8 @@ core::arch::global_asm!(
 unsafe extern "C" fn watchdog_nmi(frame: *const u32) -> ! {
     // SAFETY: an exception frame is 8 words; the PC is word 6.
     let pc = unsafe { read_volatile(frame.add(6)) };
+    // The bus first (the UART off), then the log.
+    <Bench as FaultBoard>::safe_state();
     crate::log!(
         "watchdog expired at pc={:#010x} (stalled: {:#x}); fault recorded, resetting",
         pc,

@@ -98,7 +98,19 @@ async fn measure(
     sensors.start(map).await;
     let boot = runtime::boot_report::<safety::Bench, _, _>(app, *sensors.acquisition.map());
     if let Some(p) = args.model {
-        program(app, p);
+        // A factory programs a blank board once: a model already in the
+        // slots (an upload, or this one at an earlier boot) stays, so a
+        // reset never goes back to the command line's model.
+        let stored = app.lock(|a| a.borrow().snapshot.model_version);
+        if stored == 0 {
+            program(app, p);
+        } else {
+            log!(
+                "model {} not programmed: the flash slots hold version {}",
+                p,
+                stored
+            );
+        }
     }
     if let Some(r) = boot.fault {
         log!(
@@ -110,13 +122,20 @@ async fn measure(
             r.detail
         );
     }
-    let (version, crc) = app.lock(|a| {
-        let s = &a.borrow().snapshot;
-        (s.model_version, s.model_crc)
+    // The unit and baud rate in force: the stored settings, else the defaults.
+    let (version, crc, unit, baud) = app.lock(|a| {
+        let a = a.borrow();
+        let h = &a.server.holding;
+        (
+            a.snapshot.model_version,
+            a.snapshot.model_crc,
+            h.unit,
+            h.baud,
+        )
     });
     log!(
         "serving Modbus RTU on UART0: unit {}, {} baud, model version {} crc {:#010x}; replaying {} ({} channels), one sample per {} ms",
-        UNIT, BAUD, version, crc, args.trace, trace.header().channels(), args.pace_ms
+        unit, baud, version, crc, args.trace, trace.header().channels(), args.pace_ms
     );
     let mut source = TraceCycles {
         trace,
@@ -241,5 +260,12 @@ async fn watchdog(app: &'static Shared) {
         "watchdog started: {} ms, fed when both tasks progressed",
         safety::WATCHDOG_TIMEOUT_MS
     );
-    runtime::watchdog_loop(app, &mut watchdog, &Uptime, &mut Delay).await
+    runtime::watchdog_loop(
+        app,
+        &mut watchdog,
+        &Uptime,
+        &mut Delay,
+        runtime::BOOT_DEADLINE_MS,
+    )
+    .await
 }

@@ -79,6 +79,28 @@ fn SysTick() {
     DRIVER.on_tick();
 }
 
+/// Microseconds since boot, to the SysTick count (40 ns): the counted ms
+/// ticks plus the SysTick counts elapsed in the current one. The RTU
+/// framer times each received byte with it (the 1 kHz embassy tick is too
+/// coarse for the 750 µs break rule).
+pub fn now_us() -> u64 {
+    critical_section::with(|cs| {
+        let mut ms = DRIVER.ticks.borrow(cs).get();
+        let mut val = SYST::get_current();
+        // The counter wrapped, but its tick is not counted yet (the SysTick
+        // exception waits for this critical section): count it, and read
+        // the counter again after the wrap.
+        if cortex_m::peripheral::SCB::is_pendst_pending() {
+            ms = ms.wrapping_add(1);
+            val = SYST::get_current();
+        }
+        let reload = SYST::get_reload();
+        let counts = u64::from(reload.saturating_sub(val));
+        let per_ms = u64::from(reload) + 1;
+        ms.wrapping_mul(1000).wrapping_add(counts * 1000 / per_ms)
+    })
+}
+
 /// Milliseconds since boot, as the application reads them.
 pub struct Uptime;
 

@@ -1,6 +1,7 @@
 //! CMSDK APB UART0 of the MPS2 (0x4000_4000), the bench board's RS-485 port.
 //! QEMU connects it to a host TCP socket or pty. Receive is interrupt driven
-//! into a bounded ring so the executor never busy-waits on the line; transmit
+//! into a bounded ring of time-stamped bytes so the executor never
+//! busy-waits on the line and the RTU framer sees the gaps; transmit
 //! polls the TX-full flag (QEMU drains it at once). There is no driver-enable
 //! pin on this board: the RS-485 direction calls are no-ops here.
 //!
@@ -36,7 +37,10 @@ pub const UART0_RX_IRQ: u16 = 0;
 /// the next one.
 const RX_CAPACITY: usize = 512;
 
-static RX: Mutex<RefCell<Deque<u8, RX_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
+/// Received bytes with their arrival time (µs since boot, taken in the
+/// receive interrupt: [`crate::time_driver::now_us`]), so the RTU framer
+/// sees the line's gaps however late the Modbus task reads them.
+static RX: Mutex<RefCell<Deque<(u8, u64), RX_CAPACITY>>> = Mutex::new(RefCell::new(Deque::new()));
 static RX_OVERRUNS: Mutex<core::cell::Cell<u32>> = Mutex::new(core::cell::Cell::new(0));
 static RX_WAKER: AtomicWaker = AtomicWaker::new();
 
@@ -74,8 +78,14 @@ impl Uart0 {
         unsafe { write_volatile(BAUDDIV, div) };
     }
 
-    /// Next received byte, waiting without blocking the executor.
-    pub async fn read_byte(&mut self) -> u8 {
+    /// The oldest received byte and its arrival time (µs), if any.
+    pub fn try_read_byte(&mut self) -> Option<(u8, u64)> {
+        critical_section::with(|cs| RX.borrow(cs).borrow_mut().pop_front())
+    }
+
+    /// Next received byte and its arrival time (µs), waiting without
+    /// blocking the executor.
+    pub async fn read_byte(&mut self) -> (u8, u64) {
         poll_fn(|cx| {
             if let Some(b) = critical_section::with(|cs| RX.borrow(cs).borrow_mut().pop_front()) {
                 return Poll::Ready(b);
@@ -113,7 +123,7 @@ pub fn on_rx_interrupt() {
             write_volatile(INTSTATUS_CLEAR, INT_RX);
             while read_volatile(STATE) & STATE_RX_FULL != 0 {
                 let b = (read_volatile(DATA) & 0xFF) as u8;
-                if rx.push_back(b).is_err() {
+                if rx.push_back((b, crate::time_driver::now_us())).is_err() {
                     let n = RX_OVERRUNS.borrow(cs);
                     n.set(n.get().saturating_add(1));
                 }
