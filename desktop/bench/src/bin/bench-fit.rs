@@ -21,7 +21,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::ProgressBar;
 use tcomp_data::runcsv::Run;
 use tcomp_model::fit::net::NetOpts;
-use tcomp_model::fit::pipeline::{fit_plan, train_ensemble, FitConfig, Plan};
+use tcomp_model::fit::pipeline::{fit_plan, train_ensemble, FitConfig, NetInfo, Plan};
 use tcomp_model::fit::*;
 
 const PUBLISHED: [(&str, f64); 2] = [("dch3_um", 3.70), ("dch5_um", 4.28)];
@@ -113,6 +113,33 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
+/// The command line, read as each figure group needs it (a bad number is
+/// reported when its group comes).
+struct Args(Vec<String>);
+
+impl Args {
+    fn flag(&self, name: &str) -> bool {
+        self.0.iter().any(|a| a == name)
+    }
+
+    fn opt(&self, name: &str) -> Option<String> {
+        self.0
+            .iter()
+            .position(|a| a == name)
+            .and_then(|i| self.0.get(i + 1))
+            .cloned()
+    }
+
+    fn number(&self, name: &str, default: usize) -> Result<usize> {
+        Ok(self
+            .opt(name)
+            .map(|s| s.parse())
+            .transpose()
+            .context(name.to_string())?
+            .unwrap_or(default))
+    }
+}
+
 fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     tcomp_data::cli_error::check_args(
@@ -126,25 +153,54 @@ fn run() -> Result<()> {
             "--write-big",
         ],
     )?;
-    let json = args.iter().any(|a| a == "--json");
-    let no_sklearn = args.iter().any(|a| a == "--no-sklearn");
-    let opt = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let data = opt("--data")
+    let args = Args(args);
+    let json = args.flag("--json");
+    let no_sklearn = args.flag("--no-sklearn");
+    let data = args
+        .opt("--data")
         .map(PathBuf::from)
         .unwrap_or_else(default_data);
-    let ensemble: usize = opt("--ensemble")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--ensemble")?
-        .unwrap_or(NetOpts::default().ensemble);
+    let ensemble = args.number("--ensemble", NetOpts::default().ensemble)?;
     let run = Run::read(&data).with_context(|| "FL_THERMAL data (give --data <run.csv>)")?;
 
-    // (a) FL_THERMAL chronological 60/20.
+    let fl = fit_fl_thermal(&run, ensemble, json)?;
+    let n_seeds = args.number("--seeds", 5)?;
+    let seeds_out = seed_spread(&fl.plan, &fl.cfg, n_seeds, json)?;
+    let big_rows = args.number("--big-rows", 500_000)?;
+    let big = big_fit(&run, &fl.cfg, big_rows, args.opt("--write-big"), json)?;
+    let t4 = timing_4h(&run, no_sklearn)?;
+    let out = serde_json::json!({"fl_thermal": fl.table, "fl_thermal_fit_s": fl.secs, "fl_thermal_fit_cpu_s": fl.cpu,
+        "seed_spread": seeds_out, "big_fit": big, "timing_4h_1hz": t4.json()});
+    if json {
+        println!("{out}");
+        return Ok(());
+    }
+    print_fl_table(&fl.table);
+    for s in &seeds_out {
+        println!("seed spread {}: {}", s["channel"], s["test_mae"]);
+    }
+    if !big.is_null() {
+        println!("big fit: {big}");
+    }
+    println!(
+        "(published: seq2seq + attention, GPU; fit took {:.1} s for both channels)\n",
+        fl.secs
+    );
+    t4.print();
+    Ok(())
+}
+
+/// (a) FL_THERMAL chronological 60/20: the plan and configuration the
+/// other groups refit, the table of test MAE per model, the fit's time.
+struct FlThermal {
+    plan: Plan,
+    cfg: FitConfig,
+    table: Vec<serde_json::Value>,
+    secs: f64,
+    cpu: Option<f64>,
+}
+
+fn fit_fl_thermal(run: &Run, ensemble: usize, json: bool) -> Result<FlThermal> {
     let t_a = Instant::now();
     let ca = cpu_s();
     let plan = Plan::new(
@@ -164,8 +220,8 @@ fn run() -> Result<()> {
         ..FitConfig::default()
     };
     let rep = fit_plan(&plan, &cfg)?;
-    let fl_s = t_a.elapsed().as_secs_f64();
-    let fl_cpu = cpu_s().zip(ca).map(|(b, a)| b - a);
+    let secs = t_a.elapsed().as_secs_f64();
+    let cpu = cpu_s().zip(ca).map(|(b, a)| b - a);
     let mae = |model: &str, ch: &str| {
         rep.models
             .iter()
@@ -187,106 +243,134 @@ fn run() -> Result<()> {
             "inputs": info.map(|i| i.features.clone()).unwrap_or_default(),
         }));
     }
+    Ok(FlThermal {
+        plan,
+        cfg,
+        table,
+        secs,
+        cpu,
+    })
+}
 
-    // (a2) Seed spread: the default pipeline with ensemble base seeds
-    // 1, 5, 9, ... (members never shared between seeds); test MAE of the
-    // chosen model and of each network candidate.
-    let n_seeds: usize = opt("--seeds")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--seeds")?
-        .unwrap_or(5);
+/// (a2) Seed spread: the default pipeline with ensemble base seeds
+/// 1, 5, 9, ... (members never shared between seeds); test MAE of the
+/// chosen model and of each network candidate.
+fn seed_spread(
+    plan: &Plan,
+    cfg: &FitConfig,
+    n_seeds: usize,
+    json: bool,
+) -> Result<Vec<serde_json::Value>> {
     let mut seeds_out = Vec::new();
-    if n_seeds > 0 {
-        let mut per: Vec<BTreeMap<String, Vec<f64>>> = vec![BTreeMap::new(); PUBLISHED.len()];
-        let mut chosen_names: Vec<Vec<String>> = vec![vec![]; PUBLISHED.len()];
-        for k in 0..n_seeds {
-            let seed = 1 + 4 * k as u64;
-            let c = FitConfig {
-                net: NetOpts {
-                    seed,
-                    ..cfg.net.clone()
-                },
-                progress: false,
-                ..cfg.clone()
-            };
-            let r = fit_plan(&plan, &c)?;
-            for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
-                let chosen = r.chosen.get(*ch).cloned().unwrap_or_default();
-                for m in &r.models {
-                    if let Some(x) = m.channels.get(*ch) {
-                        per[i].entry(m.name.clone()).or_default().push(x.mae_um);
-                        if m.name == chosen {
-                            per[i].entry("chosen".into()).or_default().push(x.mae_um);
-                        }
-                    }
-                }
-                chosen_names[i].push(chosen);
-            }
-            if !json {
-                eprintln!("seed {seed}: chosen {:?}", r.chosen);
-            }
-        }
-        for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
-            let stats: BTreeMap<&String, serde_json::Value> = per[i]
-                .iter()
-                .map(|(name, v)| {
-                    let n = v.len() as f64;
-                    let mean = v.iter().sum::<f64>() / n;
-                    let sd = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>()
-                        / (n - 1.0).max(1.0))
-                    .sqrt();
-                    (
-                        name,
-                        serde_json::json!({"mae_um": v, "mean_um": mean, "sd_um": sd,
-                            "spread_pct": 100.0 * sd / mean}),
-                    )
-                })
-                .collect();
-            seeds_out.push(serde_json::json!({"channel": ch,
-                "base_seeds": (0..n_seeds).map(|k| 1 + 4 * k).collect::<Vec<_>>(),
-                "chosen": chosen_names[i], "test_mae": stats}));
-        }
+    if n_seeds == 0 {
+        return Ok(seeds_out);
     }
-
-    // (c) Fit time on 500,000 rows: FL_THERMAL's whole span interpolated
-    // (≈ 3 Hz), default pipeline, both published channels.
-    let big_rows: usize = opt("--big-rows")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--big-rows")?
-        .unwrap_or(500_000);
-    let mut big = serde_json::Value::Null;
-    if big_rows > 0 {
-        let rb = resample_rows(&run, big_rows)?;
-        if let Some(p) = opt("--write-big") {
-            rb.write(std::path::Path::new(&p))?;
-        }
-        let n = rb.rows();
-        let t_c = Instant::now();
-        let c0 = cpu_s();
-        let planb = Plan::new(vec![rb], vec!["fl-big".into()], 1, Some((0.6, 0.8)))?;
+    let mut per: Vec<BTreeMap<String, Vec<f64>>> = vec![BTreeMap::new(); PUBLISHED.len()];
+    let mut chosen_names: Vec<Vec<String>> = vec![vec![]; PUBLISHED.len()];
+    for k in 0..n_seeds {
+        let seed = 1 + 4 * k as u64;
         let c = FitConfig {
+            net: NetOpts {
+                seed,
+                ..cfg.net.clone()
+            },
             progress: false,
             ..cfg.clone()
         };
-        let r = fit_plan(&planb, &c)?;
-        let secs = t_c.elapsed().as_secs_f64();
-        let cpu = cpu_s().zip(c0).map(|(b, a)| b - a);
-        big = serde_json::json!({"rows": n, "fit_s": secs, "fit_cpu_s": cpu, "target_s": 30.0,
-            "chosen": r.chosen,
-            "cv": r.inputs.iter().map(|i| (i.channel.clone(), i.cv.clone())).collect::<BTreeMap<_, _>>()});
+        let r = fit_plan(plan, &c)?;
+        for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
+            let chosen = r.chosen.get(*ch).cloned().unwrap_or_default();
+            for m in &r.models {
+                if let Some(x) = m.channels.get(*ch) {
+                    per[i].entry(m.name.clone()).or_default().push(x.mae_um);
+                    if m.name == chosen {
+                        per[i].entry("chosen".into()).or_default().push(x.mae_um);
+                    }
+                }
+            }
+            chosen_names[i].push(chosen);
+        }
         if !json {
-            eprintln!(
-                "{n}-row fit: {secs:.1} s wall, {:.1} s CPU, chosen {:?}",
-                cpu.unwrap_or(f64::NAN),
-                r.chosen
-            );
+            eprintln!("seed {seed}: chosen {:?}", r.chosen);
         }
     }
+    for (i, (ch, _)) in PUBLISHED.iter().enumerate() {
+        let stats: BTreeMap<&String, serde_json::Value> = per[i]
+            .iter()
+            .map(|(name, v)| {
+                let n = v.len() as f64;
+                let mean = v.iter().sum::<f64>() / n;
+                let sd = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>()
+                    / (n - 1.0).max(1.0))
+                .sqrt();
+                (
+                    name,
+                    serde_json::json!({"mae_um": v, "mean_um": mean, "sd_um": sd,
+                        "spread_pct": 100.0 * sd / mean}),
+                )
+            })
+            .collect();
+        seeds_out.push(serde_json::json!({"channel": ch,
+            "base_seeds": (0..n_seeds).map(|k| 1 + 4 * k).collect::<Vec<_>>(),
+            "chosen": chosen_names[i], "test_mae": stats}));
+    }
+    Ok(seeds_out)
+}
 
-    // (b) 4 h at 1 Hz: GA + LM vs scikit-learn.
-    let r4 = resample_1hz(&run, 24.0 * 3600.0, 28.0 * 3600.0)?;
+/// (c) Fit time on 500,000 rows: FL_THERMAL's whole span interpolated
+/// (≈ 3 Hz), default pipeline, both published channels.
+fn big_fit(
+    run: &Run,
+    cfg: &FitConfig,
+    big_rows: usize,
+    write_big: Option<String>,
+    json: bool,
+) -> Result<serde_json::Value> {
+    if big_rows == 0 {
+        return Ok(serde_json::Value::Null);
+    }
+    let rb = resample_rows(run, big_rows)?;
+    if let Some(p) = write_big {
+        rb.write(std::path::Path::new(&p))?;
+    }
+    let n = rb.rows();
+    let t_c = Instant::now();
+    let c0 = cpu_s();
+    let planb = Plan::new(vec![rb], vec!["fl-big".into()], 1, Some((0.6, 0.8)))?;
+    let c = FitConfig {
+        progress: false,
+        ..cfg.clone()
+    };
+    let r = fit_plan(&planb, &c)?;
+    let secs = t_c.elapsed().as_secs_f64();
+    let cpu = cpu_s().zip(c0).map(|(b, a)| b - a);
+    let big = serde_json::json!({"rows": n, "fit_s": secs, "fit_cpu_s": cpu, "target_s": 30.0,
+        "chosen": r.chosen,
+        "cv": r.inputs.iter().map(|i| (i.channel.clone(), i.cv.clone())).collect::<BTreeMap<_, _>>()});
+    if !json {
+        eprintln!(
+            "{n}-row fit: {secs:.1} s wall, {:.1} s CPU, chosen {:?}",
+            cpu.unwrap_or(f64::NAN),
+            r.chosen
+        );
+    }
+    Ok(big)
+}
+
+/// (b) 4 h at 1 Hz: GA + LM against scikit-learn, what both reached.
+struct Timing4h {
+    specs: Vec<FeatureSpec>,
+    train_rows: usize,
+    test_rows: usize,
+    ours_s: f64,
+    info: NetInfo,
+    ours: Metrics,
+    sk: Option<serde_json::Value>,
+    sk_err: Option<String>,
+}
+
+fn timing_4h(run: &Run, no_sklearn: bool) -> Result<Timing4h> {
+    let r4 = resample_1hz(run, 24.0 * 3600.0, 28.0 * 3600.0)?;
     let kinds: Vec<(FeatureKind, Option<f64>)> =
         ["T_t4", "T_t5@1800", "T_t16@3600", "T_t9@7200", "rpm@1800"]
             .iter()
@@ -320,71 +404,121 @@ fn run() -> Result<()> {
     };
     let pred: Vec<f64> = test.x.iter().map(|r| np.predict_raw(r)).collect();
     let ours = metrics(&test.y, &pred);
+    let (sk, sk_err) = if no_sklearn {
+        (None, None)
+    } else {
+        sklearn(kinds.len(), &specs, &full, &test)?
+    };
+    Ok(Timing4h {
+        train_rows: full.y.len(),
+        test_rows: test.y.len(),
+        specs,
+        ours_s,
+        info,
+        ours,
+        sk,
+        sk_err,
+    })
+}
 
+/// scikit-learn's MLPRegressor on the same normalized inputs and rows
+/// (`scripts/bench-sklearn.py`): its JSON, or why there is none.
+fn sklearn(
+    n_inputs: usize,
+    specs: &[FeatureSpec],
+    full: &Samples,
+    test: &Samples,
+) -> Result<(Option<serde_json::Value>, Option<String>)> {
     let mut sk: Option<serde_json::Value> = None;
     let mut sk_err: Option<String> = None;
-    if !no_sklearn {
-        let dir = std::env::temp_dir().join(format!("bench-fit-{}", std::process::id()));
-        std::fs::create_dir_all(&dir)?;
-        let csv = dir.join("data.csv");
-        let mut s = String::new();
-        s.push_str(
-            &(1..=kinds.len())
-                .map(|i| format!("x{i}"))
-                .collect::<Vec<_>>()
-                .join(","),
+    let dir = std::env::temp_dir().join(format!("bench-fit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let csv = dir.join("data.csv");
+    let mut s = String::new();
+    s.push_str(
+        &(1..=n_inputs)
+            .map(|i| format!("x{i}"))
+            .collect::<Vec<_>>()
+            .join(","),
+    );
+    s.push_str(",y,split\n");
+    for (set, name) in [(full, "train"), (test, "test")] {
+        for (r, y) in set.x.iter().zip(&set.y) {
+            for (f, v) in specs.iter().zip(r) {
+                s.push_str(&format!("{},", f.normalize(*v)));
+            }
+            s.push_str(&format!("{y},{name}\n"));
+        }
+    }
+    std::fs::write(&csv, s)?;
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/bench-sklearn.py");
+    let out =
+        std::process::Command::new(std::env::var("PYTHON").unwrap_or_else(|_| "python3".into()))
+            .arg(&script)
+            .arg(&csv)
+            .output();
+    let _ = std::fs::remove_dir_all(&dir);
+    match out {
+        Ok(o) if o.status.success() => {
+            match serde_json::from_slice::<serde_json::Value>(&o.stdout) {
+                Ok(v) => sk = Some(v),
+                Err(e) => sk_err = Some(format!("bad JSON from bench-sklearn.py: {e}")),
+            }
+        }
+        Ok(o) => {
+            sk_err = Some(format!(
+                "bench-sklearn.py failed: {}",
+                String::from_utf8_lossy(&o.stderr)
+            ))
+        }
+        Err(e) => sk_err = Some(format!("cannot run python3: {e}")),
+    }
+    Ok((sk, sk_err))
+}
+
+impl Timing4h {
+    fn sk_s(&self) -> Option<f64> {
+        self.sk.as_ref().and_then(|v| v["train_s"].as_f64())
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let (info, ours, ours_s) = (&self.info, &self.ours, self.ours_s);
+        serde_json::json!({
+            "data": "FL_THERMAL 24-28 h interpolated to 1 Hz, chrono 60/20, channel dch5_um",
+            "inputs": self.specs.iter().map(FeatureSpec::name).collect::<Vec<_>>(),
+            "train_rows": self.train_rows, "test_rows": self.test_rows,
+            "ours": {"train_s": ours_s, "ga_s": info.ga_s, "lm_s": info.lm_s, "lm_iters": info.lm_iters, "mae_um": ours.mae_um, "rms_um": ours.rms_um},
+            "sklearn": self.sk, "sklearn_error": self.sk_err,
+            "ratio_sklearn_over_ours": self.sk_s().map(|s| s / ours_s),
+        })
+    }
+
+    fn print(&self) {
+        let (info, ours, ours_s) = (&self.info, &self.ours, self.ours_s);
+        println!(
+            "Training time, 4 h at 1 Hz ({} train rows, {} test rows, 5 inputs, 11 hidden):",
+            self.train_rows, self.test_rows
         );
-        s.push_str(",y,split\n");
-        for (set, name) in [(&full, "train"), (&test, "test")] {
-            for (r, y) in set.x.iter().zip(&set.y) {
-                for (f, v) in specs.iter().zip(r) {
-                    s.push_str(&format!("{},", f.normalize(*v)));
-                }
-                s.push_str(&format!("{y},{name}\n"));
+        println!(
+            "  ours GA + LM      {:>7.2} s (GA {:.2} s, LM {:.2} s, {} steps), test MAE {:.2} µm",
+            ours_s, info.ga_s, info.lm_s, info.lm_iters, ours.mae_um
+        );
+        let sk_mae = self.sk.as_ref().and_then(|v| v["mae_um"].as_f64());
+        match (self.sk_s(), sk_mae) {
+            (Some(s), Some(m)) => {
+                println!("  sklearn MLP (adam){:>7.2} s, test MAE {:.2} µm", s, m);
+                println!("  ratio sklearn / ours: {:.2}", s / ours_s);
             }
-        }
-        std::fs::write(&csv, s)?;
-        let script =
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/bench-sklearn.py");
-        let out = std::process::Command::new(
-            std::env::var("PYTHON").unwrap_or_else(|_| "python3".into()),
-        )
-        .arg(&script)
-        .arg(&csv)
-        .output();
-        let _ = std::fs::remove_dir_all(&dir);
-        match out {
-            Ok(o) if o.status.success() => {
-                match serde_json::from_slice::<serde_json::Value>(&o.stdout) {
-                    Ok(v) => sk = Some(v),
-                    Err(e) => sk_err = Some(format!("bad JSON from bench-sklearn.py: {e}")),
-                }
-            }
-            Ok(o) => {
-                sk_err = Some(format!(
-                    "bench-sklearn.py failed: {}",
-                    String::from_utf8_lossy(&o.stderr)
-                ))
-            }
-            Err(e) => sk_err = Some(format!("cannot run python3: {e}")),
+            _ => println!(
+                "  sklearn: {}",
+                self.sk_err.clone().unwrap_or_else(|| "skipped".into())
+            ),
         }
     }
-    let sk_s = sk.as_ref().and_then(|v| v["train_s"].as_f64());
-    let sk_mae = sk.as_ref().and_then(|v| v["mae_um"].as_f64());
-    let timing = serde_json::json!({
-        "data": "FL_THERMAL 24-28 h interpolated to 1 Hz, chrono 60/20, channel dch5_um",
-        "inputs": specs.iter().map(FeatureSpec::name).collect::<Vec<_>>(),
-        "train_rows": full.y.len(), "test_rows": test.y.len(),
-        "ours": {"train_s": ours_s, "ga_s": info.ga_s, "lm_s": info.lm_s, "lm_iters": info.lm_iters, "mae_um": ours.mae_um, "rms_um": ours.rms_um},
-        "sklearn": sk, "sklearn_error": sk_err,
-        "ratio_sklearn_over_ours": sk_s.map(|s| s / ours_s),
-    });
-    let out = serde_json::json!({"fl_thermal": table, "fl_thermal_fit_s": fl_s, "fl_thermal_fit_cpu_s": fl_cpu,
-        "seed_spread": seeds_out, "big_fit": big, "timing_4h_1hz": timing});
-    if json {
-        println!("{out}");
-        return Ok(());
-    }
+}
+
+/// The FL_THERMAL table as text.
+fn print_fl_table(table: &[serde_json::Value]) {
     println!(
         "FL_THERMAL, chronological split (train first 60 %, test next 20 %), test MAE µm (float)"
     );
@@ -392,7 +526,7 @@ fn run() -> Result<()> {
         "{:<9} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8}  {:<10} inputs (ours)",
         "channel", "published", "MLR static", "MLR", "blend", "hybrid", "GA-BPN", "chosen"
     );
-    for row in &table {
+    for row in table {
         let f = |k: &str| {
             row[k]
                 .as_f64()
@@ -418,28 +552,4 @@ fn run() -> Result<()> {
                 .unwrap_or_default()
         );
     }
-    for s in &seeds_out {
-        println!("seed spread {}: {}", s["channel"], s["test_mae"]);
-    }
-    if !big.is_null() {
-        println!("big fit: {big}");
-    }
-    println!("(published: seq2seq + attention, GPU; fit took {fl_s:.1} s for both channels)\n");
-    println!(
-        "Training time, 4 h at 1 Hz ({} train rows, {} test rows, 5 inputs, 11 hidden):",
-        full.y.len(),
-        test.y.len()
-    );
-    println!(
-        "  ours GA + LM      {:>7.2} s (GA {:.2} s, LM {:.2} s, {} steps), test MAE {:.2} µm",
-        ours_s, info.ga_s, info.lm_s, info.lm_iters, ours.mae_um
-    );
-    match (sk_s, sk_mae) {
-        (Some(s), Some(m)) => {
-            println!("  sklearn MLP (adam){:>7.2} s, test MAE {:.2} µm", s, m);
-            println!("  ratio sklearn / ours: {:.2}", s / ours_s);
-        }
-        _ => println!("  sklearn: {}", sk_err.unwrap_or_else(|| "skipped".into())),
-    }
-    Ok(())
 }
