@@ -43,6 +43,8 @@ pub enum GeometryCommand {
     /// The volumetric correction polynomial the board will evaluate
     /// (positions, tool length): its terms, size and fit to the kinematics.
     Table(TableArgs),
+    /// Score a model against a tabulated machine and held-out lines (issue 29).
+    Score(super::score::ScoreArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -50,6 +52,10 @@ pub struct TableArgs {
     /// Errors (errors.json or identify --json output).
     #[arg(long)]
     pub model: PathBuf,
+    /// Use a model whose identification marked errors unobservable (the
+    /// table then carries them and `export --geometry` takes it).
+    #[arg(long)]
+    pub allow_unobservable: bool,
     #[arg(long)]
     pub json: bool,
 }
@@ -106,11 +112,14 @@ pub struct TooltipArgs {
     #[arg(long, default_value = "XY/Z")]
     pub structure: String,
     /// Axis positions x,y,z [mm] or x,y,z,a,c [mm, deg].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub at: String,
     /// Tool offset from the spindle gauge point x,y,z [mm].
-    #[arg(long, default_value = "0,0,100")]
+    #[arg(long, default_value = "0,0,100", allow_hyphen_values = true)]
     pub tool: String,
+    /// Use a model whose identification marked errors unobservable.
+    #[arg(long)]
+    pub allow_unobservable: bool,
     #[arg(long)]
     pub json: bool,
 }
@@ -237,6 +246,14 @@ pub struct IdentifyArgs {
     /// Errors of the simulated machine: adds the recovery error per term.
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// When the lines do not determine every error: write the model anyway,
+    /// the undetermined errors listed under `unobservable_terms`.
+    #[arg(long)]
+    pub partial: bool,
+    /// `poly`: the polynomial model of the degree options; `smooth`: no
+    /// shape assumed (rich basis, prior chosen from the data; issue 29).
+    #[arg(long, default_value = "poly")]
+    pub method: String,
     #[arg(long)]
     pub json: bool,
 }
@@ -290,6 +307,9 @@ pub struct ErrorsJson {
     pub stroke_mm: [f64; 3],
     pub errors: BTreeMap<String, TermJson>,
     pub squareness_urad: Squareness,
+    /// Errors the lines did not determine (`identify --partial`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unobservable_terms: Vec<String>,
 }
 
 impl ErrorsJson {
@@ -323,6 +343,7 @@ impl ErrorsJson {
             stroke_mm: stroke,
             errors,
             squareness_urad: e.squareness,
+            unobservable_terms: Vec::new(),
         }
     }
 
@@ -355,6 +376,7 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::Check(c) => super::check::check_cmd(c),
         GeometryCommand::Tooltip(t) => tooltip_cmd(t),
         GeometryCommand::Table(t) => table_cmd(t),
+        GeometryCommand::Score(s) => super::score::score_cmd(s),
     }
 }
 
@@ -499,21 +521,18 @@ pub fn volumetric_residual(
 }
 
 fn identify_cmd(a: IdentifyArgs) -> Result<()> {
+    match a.method.as_str() {
+        "poly" => {}
+        "smooth" => return super::smooth_cli::identify_smooth_cmd(&a),
+        m => bail!("--method {m:?}: poly or smooth"),
+    }
     let degrees = a.degrees.degrees()?;
     let files: Vec<LineFile> = a
         .files
         .iter()
         .map(|p| LineFile::read(p))
         .collect::<Result<_>>()?;
-    let st = files[0].structure.clone();
-    if let Some(f) = files.iter().find(|f| f.structure != st) {
-        bail!(
-            "line {}: structure {} differs from {} in the other files",
-            f.spec.id,
-            f.structure,
-            st
-        );
-    }
+    let st = super::guard::common_structure(&files, &a.files)?;
     let avg = average_runs(&files)?;
     let states: std::collections::BTreeSet<_> =
         avg.iter().map(|a| a.temperature_state.clone()).collect();
@@ -539,7 +558,9 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         bail!("the lines do not move every axis; give --stroke X,Y,Z");
     }
     let id = identify(&st, &obs, degrees, stroke)?;
-    let ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
+    super::guard::refuse_unobservable(&id, obs.len(), a.partial)?;
+    let mut ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
+    ej.unobservable_terms = id.unobservable_terms.clone();
     let truth = match &a.truth {
         Some(p) => Some(ErrorsJson::read(p)?.to_errors()?),
         None => None,
@@ -605,6 +626,12 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         return Ok(());
     }
     print_identification(&id, &obs, stroke, &st, a.points);
+    if !id.unobservable_terms.is_empty() {
+        println!(
+            "unobservable (not determined by these lines, values meaningless): {}",
+            id.unobservable_terms.join(", ")
+        );
+    }
     for t in Term::all() {
         let tj = &ej.errors[&t.name()];
         let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
@@ -778,7 +805,7 @@ fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
         .iter()
         .map(|p| LineFile::read(p))
         .collect::<Result<_>>()?;
-    let st = files[0].structure.clone();
+    let st = super::guard::common_structure(&files, &a.files)?;
     let avg = average_runs(&files)?;
     let sensors: Vec<String> = match &a.sensors {
         Some(s) => s
@@ -893,6 +920,7 @@ fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
             let ej = ErrorsJson::read(p)?;
             let st = Structure::parse(&ej.structure)
                 .with_context(|| format!("{}: structure", p.display()))?;
+            super::guard::refuse_model(&ej.unobservable_terms, p, a.allow_unobservable)?;
             (st, ej.to_errors()?)
         }
         None => (
@@ -969,7 +997,10 @@ fn table_cmd(a: TableArgs) -> Result<()> {
     let ej = ErrorsJson::read(&a.model)?;
     let st = Structure::parse(&ej.structure)
         .with_context(|| format!("{}: structure", a.model.display()))?;
-    let p = super::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
+    super::guard::refuse_model(&ej.unobservable_terms, &a.model, a.allow_unobservable)?;
+    let mut p = super::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
+    p.unobservable_terms = ej.unobservable_terms.clone();
+    p.unobservable_accepted = a.allow_unobservable && !p.unobservable_terms.is_empty();
     let bytes = p.terms.len() * 16;
     if a.json {
         println!("{}", table_json(&p)?);

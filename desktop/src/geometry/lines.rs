@@ -419,6 +419,17 @@ pub fn average_runs(files: &[LineFile]) -> Result<Vec<Averaged>> {
                 bail!("line {id}: its runs differ in direction or tool offset");
             }
         }
+        if fs.len() > 1 && fs.iter().any(|f| f.run == Run::Single) {
+            bail!(
+                "line {id}{}: {} files for it, one of them without `run` metadata; a file without `run` is the whole line (both runs averaged), so give either that file alone or `run: forward` and `run: backward`",
+                if state.is_empty() {
+                    String::new()
+                } else {
+                    format!(" in state {state}")
+                },
+                fs.len()
+            );
+        }
         let mut runs: Vec<Run> = fs.iter().map(|f| f.run).collect();
         runs.sort();
         runs.dedup();
