@@ -69,7 +69,7 @@ pub fn shifted_legendre(n: usize) -> Vec<f64> {
     };
     (0..=n)
         .map(|k| {
-            let s = if (n + k) % 2 == 0 { 1.0 } else { -1.0 };
+            let s = if (n + k).is_multiple_of(2) { 1.0 } else { -1.0 };
             s * binom(n, k) * binom(n + k, k)
         })
         .collect()
