@@ -5,5 +5,8 @@ pub mod diagnose;
 pub mod fit;
 pub mod geometry;
 pub mod geometry_check;
+pub mod geometry_score;
+pub mod geometry_smooth;
+pub mod geometry_table;
 pub mod select;
 pub mod sim;
