@@ -32,40 +32,10 @@ impl Run {
             .with_context(|| format!("in run file {}", path.display()))
     }
 
-    pub fn from_reader<R: BufRead>(reader: R) -> Result<Run> {
+    pub fn from_reader<R: BufRead>(mut reader: R) -> Result<Run> {
         let mut run = Run::default();
-        let mut lines = reader.lines().enumerate();
-        // Metadata lines, then the header.
-        let header = loop {
-            let Some((n, line)) = lines.next() else {
-                bail!("no header row (file is empty or only metadata)");
-            };
-            let line = line.with_context(|| format!("line {}: not UTF-8 text", n + 1))?;
-            // a spreadsheet's UTF-8 export starts with a byte-order mark
-            let t = if n == 0 {
-                line.trim_start_matches('\u{feff}').trim()
-            } else {
-                line.trim()
-            };
-            if t.is_empty() {
-                continue;
-            }
-            if let Some(m) = t.strip_prefix('#') {
-                if let Some((k, v)) = m.split_once(':') {
-                    run.meta.push((k.trim().to_string(), v.trim().to_string()));
-                }
-                continue;
-            }
-            break t.to_string();
-        };
-        // names as written, spreadsheet quotes removed
-        let names: Vec<String> = header.split(',').map(|s| unquote(s).to_string()).collect();
-        let mut seen = std::collections::HashSet::new();
-        for c in &names {
-            if !seen.insert(c) {
-                bail!("header: column `{c}` appears twice");
-            }
-        }
+        let (header, header_line) = read_head(&mut reader, &mut run.meta)?;
+        let names = header_names(&header)?;
         // `time_s` may stand anywhere in the file; the run keeps it first
         // (the order every writer uses), the other columns in file order
         let Some(time_at) = names.iter().position(|c| c == "time_s") else {
@@ -80,30 +50,33 @@ impl Run {
         run.columns = order.iter().map(|&i| names[i].clone()).collect();
         run.data = vec![Vec::new(); run.columns.len()];
         let ranges: Vec<_> = run.columns.iter().map(|c| plausible_range(c)).collect();
-        for (n, line) in lines {
-            let line = line.with_context(|| format!("line {}: not UTF-8 text", n + 1))?;
-            let t = line.trim();
-            if t.is_empty() || t.starts_with('#') {
-                continue;
-            }
-            let in_file: Vec<&str> = t.split(',').collect();
+        // A newline appended to the input ends every row with one, so the
+        // reader's line count after a row is always one past the row's last line.
+        let mut rows = csv_rows(reader.chain(&b"\n"[..]));
+        let mut record = csv::ByteRecord::new();
+        while let Some(n) = next_row(&mut rows, &mut record, header_line, &names)? {
+            // UTF-8 checked by `next_row`
+            let in_file: Vec<&str> = record
+                .iter()
+                .map(|f| std::str::from_utf8(f).unwrap_or_default())
+                .collect();
             if in_file.len() != run.columns.len() {
                 bail!(
                     "line {}: {} fields, header has {} columns",
-                    n + 1,
+                    n,
                     in_file.len(),
                     run.columns.len()
                 );
             }
             for (c, &i) in order.iter().enumerate() {
-                let f = unquote(in_file[i]);
+                let f = field_value(in_file[i]);
                 let v = if f.is_empty() {
                     None
                 } else {
                     let v: f64 = f.parse().map_err(|_| {
                         anyhow::anyhow!(
                             "line {}, column `{}`: cannot parse `{}` as a number",
-                            n + 1,
+                            n,
                             run.columns[c],
                             f
                         )
@@ -111,7 +84,7 @@ impl Run {
                     if !v.is_finite() {
                         bail!(
                             "line {}, column `{}`: `{}` is not a finite number (a missing value is an empty field)",
-                            n + 1,
+                            n,
                             run.columns[c],
                             f
                         );
@@ -120,7 +93,7 @@ impl Run {
                         if !(lo..=hi).contains(&v) {
                             bail!(
                                 "line {}, column `{}`: {f} {unit} is outside the possible {lo}..={hi} {unit}",
-                                n + 1,
+                                n,
                                 run.columns[c],
                             );
                         }
@@ -131,13 +104,9 @@ impl Run {
             }
             let r = run.data[0].len() - 1;
             match run.data[0][r] {
-                None => bail!("line {}: `time_s` is empty", n + 1),
+                None => bail!("line {}: `time_s` is empty", n),
                 Some(t) if r > 0 && run.data[0][r - 1].is_some_and(|p| t <= p) => {
-                    bail!(
-                        "line {}: `time_s` {} is not after the previous row",
-                        n + 1,
-                        t
-                    )
+                    bail!("line {}: `time_s` {} is not after the previous row", n, t)
                 }
                 _ => {}
             }
@@ -430,6 +399,166 @@ pub fn is_temperature_column(name: &str) -> bool {
             && name[1..].bytes().all(|b| b.is_ascii_digit()))
 }
 
+/// The `# key: value` lines before the header into `meta`, then the header
+/// line (trimmed, without a byte-order mark) and its line number. Read line
+/// by line here: csv would skip the metadata as comments, and it is kept.
+fn read_head<R: BufRead>(
+    reader: &mut R,
+    meta: &mut Vec<(String, String)>,
+) -> Result<(String, usize)> {
+    let mut line = String::new();
+    let mut header_line = 0usize;
+    let header = loop {
+        line.clear();
+        header_line += 1;
+        let n = header_line;
+        let read = reader
+            .read_line(&mut line)
+            .with_context(|| format!("line {n}: not UTF-8 text"))?;
+        if read == 0 {
+            bail!("no header row (file is empty or only metadata)");
+        }
+        // a spreadsheet's UTF-8 export starts with a byte-order mark
+        let t = if n == 1 {
+            line.trim_start_matches('\u{feff}').trim()
+        } else {
+            line.trim()
+        };
+        if t.is_empty() {
+            continue;
+        }
+        if let Some(m) = t.strip_prefix('#') {
+            if let Some((k, v)) = m.split_once(':') {
+                meta.push((k.trim().to_string(), v.trim().to_string()));
+            }
+            continue;
+        }
+        break t.to_string();
+    };
+    Ok((header, header_line))
+}
+
+/// The header's column names, in file order, checked.
+fn header_names(header: &str) -> Result<Vec<String>> {
+    // names as written, spreadsheet quotes removed; the header is one
+    // line, so a quote left open cannot run into the rows
+    let mut header_fields = csv::StringRecord::new();
+    csv_rows(header.as_bytes()).read_record(&mut header_fields)?;
+    let names: Vec<String> = header_fields
+        .iter()
+        .map(|f| field_value(f).to_string())
+        .collect();
+    let mut seen = std::collections::HashSet::new();
+    for c in &names {
+        if !seen.insert(c) {
+            bail!("header: column `{c}` appears twice");
+        }
+        // written back unquoted, such a name would split into two
+        if c.contains(',') {
+            bail!(
+                "header: column `{c}` has a comma in its name (the format has none inside fields)"
+            );
+        }
+    }
+    Ok(names)
+}
+
+/// Read the next data row from `rows` (the input after the header, with a
+/// newline appended) into `record` (fields as written, UTF-8, not
+/// trimmed) and return its first line in the file; `None` at the end. Blank and comment lines are skipped,
+/// a row not valid UTF-8 or with a quote left open is an error.
+fn next_row<R: std::io::Read>(
+    rows: &mut csv::Reader<R>,
+    record: &mut csv::ByteRecord,
+    header_line: usize,
+    names: &[String],
+) -> Result<Option<usize>> {
+    loop {
+        let more = rows.read_byte_record(record).map_err(|e| {
+            let n = header_line as u64 + rows.position().line();
+            match e.into_kind() {
+                csv::ErrorKind::Io(io) => {
+                    anyhow::Error::new(io).context(format!("line {n}: not UTF-8 text"))
+                }
+                _ => anyhow::anyhow!("line {n}: not readable as CSV"),
+            }
+        })?;
+        if !more {
+            return Ok(None);
+        }
+        // Line breaks inside a row only come from a quoted field whose
+        // closing quote is missing or on a later line; the row is named
+        // by its first line.
+        let breaks = record.as_slice().iter().filter(|&&b| b == b'\n').count();
+        let mut n = header_line + rows.position().line() as usize - 1 - breaks;
+        if breaks > 0 {
+            // A quote left open to the end took the appended newline
+            // too: nothing is left to read and the count is one short.
+            let line_after = rows.position().line();
+            let mut rest = csv::ByteRecord::new();
+            let _ = rows.read_byte_record(&mut rest);
+            if rows.position().line() == line_after {
+                n += 1;
+            }
+        }
+        let mut in_file: Vec<&str> = Vec::with_capacity(record.len());
+        for f in record.iter() {
+            let Ok(f) = std::str::from_utf8(f) else {
+                // the same words as for the lines read before the header
+                return Err(anyhow::Error::new(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    "stream did not contain valid UTF-8",
+                ))
+                .context(format!("line {n}: not UTF-8 text")));
+            };
+            in_file.push(f);
+        }
+        if let Some(i) = in_file.iter().position(|f| f.contains('\n')) {
+            let at = match names.get(i) {
+                Some(c) => format!("line {n}, column `{c}`"),
+                None => format!("line {n}"),
+            };
+            bail!(
+                "{at}: a quoted field does not end on its line (a `\"` without its closing quote)"
+            );
+        }
+        // Blank lines and comments, also the ones csv keeps: blanks only
+        // (a CRLF's `\r` among them) or a `#` after blanks. An empty
+        // field alone is a quoted `""`, not a blank line.
+        let first = in_file.first().copied().unwrap_or_default();
+        let blank = in_file.len() == 1 && !first.is_empty() && first.trim().is_empty();
+        if !(blank || first.trim_start().starts_with('#')) {
+            break Ok(Some(n));
+        }
+    }
+}
+
+/// The csv reader for a run's header and rows: double quotes as spreadsheets
+/// write them, rows of any length (the run reader names the line of a
+/// short or long one), lines starting with `#` skipped. Rows end at `\n`
+/// only, as lines did before (a `\r` of CRLF is blank trimmed with the
+/// field); fields are trimmed by [`field_value`].
+fn csv_rows<R: std::io::Read>(input: R) -> csv::Reader<R> {
+    csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::None)
+        .comment(Some(b'#'))
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_reader(input)
+}
+
+/// A csv field as the run reader takes it: without surrounding blanks, and
+/// without the quotes csv leaves in place when blanks stand before them
+/// (`0, "20.5"`: csv takes a quote only at a field's very start).
+fn field_value(field: &str) -> &str {
+    if field.starts_with(char::is_whitespace) {
+        unquote(field)
+    } else {
+        field.trim()
+    }
+}
+
 /// A field without surrounding blanks and without the double quotes a
 /// spreadsheet may put around it (the format has no commas inside fields).
 pub fn unquote(field: &str) -> &str {
@@ -483,6 +612,40 @@ mod tests {
             Run::from_reader("time_s,T_01\n0,abc\n".as_bytes()).unwrap_err()
         );
         assert!(err.contains("cannot parse `abc`"), "{err}");
+    }
+
+    #[test]
+    fn csv_quoting_keeps_line_numbers_and_one_line_errors() {
+        let err = |text: &str| format!("{:#}", Run::from_reader(text.as_bytes()).unwrap_err());
+        // lines are counted over blank, comment and indented comment lines
+        let e = err("# a: b\ntime_s,T01\n\n0,20\n# c\n  # d, e\r\n\r\n1,abc\n");
+        assert!(
+            e.contains("line 8, column `T01`: cannot parse `abc`"),
+            "{e}"
+        );
+        // a quoted comma stays in its field
+        let e = err("time_s,T01\n0,\"20,5\"\n");
+        assert!(
+            e.contains("line 2, column `T01`: cannot parse `20,5`"),
+            "{e}"
+        );
+        // a quote left open is named by the line it opens on, in one line
+        for (text, line) in [
+            ("time_s,T01\n0,\"20\n1,21\n2,22\n", "line 2,"),
+            ("time_s,T01\n0,20\n1,\"21", "line 3,"),
+            ("time_s,T01\n0,20\n1,\"21\n", "line 3,"),
+        ] {
+            let e = err(text);
+            assert!(e.contains(line) && e.contains("closing quote"), "{e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+        // a quote after blanks, and blanks after a closing quote
+        let run = Run::from_reader("time_s, \"T01\"\n0, \"20\" \n".as_bytes()).unwrap();
+        assert_eq!(run.col("T01").unwrap(), &[Some(20.0)][..]);
+        // a name with a comma would not survive writing
+        assert!(err("\"a,b\",time_s\n1,0\n").contains("comma"));
+        // a lone CR does not end a line, as before
+        assert!(err("time_s,T01\n0,20\r1,21\n").contains("line 2: 3 fields"));
     }
 
     #[test]

@@ -55,6 +55,12 @@ pub struct QuantisationReport {
 /// The section for `poly` (refusing, with one line naming the limit, what
 /// the board cannot hold).
 pub fn quantize(poly: &VolumetricPoly, o: &BoardOptions) -> Result<Volumetric> {
+    if !poly.unobservable_terms.is_empty() && !poly.unobservable_accepted {
+        bail!(
+            "the volumetric table comes from a model whose lines did not determine {} (unobservable); make it with `geometry table --allow-unobservable` to serve it anyway",
+            poly.unobservable_terms.join(", ")
+        );
+    }
     if poly.sensors.len() != o.channels.len() {
         bail!(
             "the volumetric polynomial reads {} sensor(s) but {} board channel(s) were given",

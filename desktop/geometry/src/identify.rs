@@ -22,9 +22,17 @@ use serde::Serialize;
 use super::errors::{GeometricErrors, Poly, Squareness, Term, SQUARENESS_NAMES};
 use super::kinematics::{sensitivity, Structure};
 
-/// Relative singular-value threshold below which a direction counts as not
-/// observable.
-pub const RANK_TOL: f64 = 1e-7;
+/// Relative singular-value threshold (of the design matrix with unit-norm
+/// columns) below which a direction counts as not observable. The full
+/// 14-line plan's smallest is 2.6e-3 (condition number 381); dropping a
+/// line leaves directions at 1e-5 … 1e-4 whose solution is noise times
+/// 10⁴ (issue 29: EXX −184 µm, EAZ −1,946 µrad from 13 lines), so the
+/// threshold sits at 1e-3: a condition number above 1,000 is refused.
+pub const RANK_TOL: f64 = 1e-3;
+
+/// Weight (unit-norm null vector, unit-norm columns) from which a column
+/// counts as part of an unobservable combination.
+pub const NULL_WEIGHT: f64 = 0.05;
 
 /// One target of one line as the identification sees it.
 #[derive(Clone, Debug)]
@@ -103,6 +111,16 @@ pub struct Basis {
 pub enum Column {
     Term { term: Term, power: usize },
     Squareness(usize),
+}
+
+impl Column {
+    /// The error this column belongs to (`EXX`, …, `EC0Y`).
+    pub fn label(&self) -> String {
+        match self {
+            Column::Term { term, .. } => term.name(),
+            Column::Squareness(i) => SQUARENESS_NAMES[*i].to_string(),
+        }
+    }
 }
 
 impl Basis {
@@ -204,6 +222,10 @@ pub struct Identification {
     pub rank: usize,
     pub condition_number: f64,
     pub unobservable: Vec<Unobservable>,
+    /// The errors (`EXX`, …, `EC0Y`) that have a column in an unobservable
+    /// combination: their values are not determined by the lines (the
+    /// minimum-norm solution fills them with something), sorted.
+    pub unobservable_terms: Vec<String>,
     /// RMS of the readings minus the model [µm].
     pub residual_rms_um: f64,
     pub readings: usize,
@@ -291,7 +313,7 @@ pub fn identify(
             .iter()
             .zip(v.iter())
             .map(|(c, x)| (basis.column_name(c), *x))
-            .filter(|(_, x)| x.abs() > 0.05)
+            .filter(|(_, x)| x.abs() > NULL_WEIGHT)
             .collect();
         w.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
         w.truncate(8);
@@ -327,7 +349,13 @@ pub fn identify(
             }
         }
     }
+    let mut unobservable_terms = std::collections::BTreeSet::new();
     for (v, s) in null_vectors {
+        for (c, w) in basis.columns.iter().zip(v.iter()) {
+            if w.abs() > NULL_WEIGHT {
+                unobservable_terms.insert(c.label());
+            }
+        }
         unobservable.push(describe(v, s));
     }
     let condition_number = match sv.iter().rev().find(|s| **s > tol) {
@@ -342,6 +370,7 @@ pub fn identify(
         rank,
         condition_number,
         unobservable,
+        unobservable_terms: unobservable_terms.into_iter().collect(),
         residual_rms_um,
         readings: m,
     })

@@ -18,12 +18,16 @@ pub use errors::{Axis, Component, GeometricErrors, Poly, Squareness, Term};
 pub use kinematics::{
     sensitivity, tool_tip_error_exact, tool_tip_error_linear, Sensitivity, Structure,
 };
+pub mod bench_rich;
 pub mod board;
 pub mod check;
 pub mod five_axis;
+pub mod guard;
 pub mod identify;
 pub mod lines;
+pub mod score;
 pub mod sim;
+pub mod smooth;
 pub mod study;
 pub mod thermal;
 pub mod volumetric;

@@ -150,6 +150,50 @@ fn triple(path: &Path, lineno: usize, key: &str, v: &str) -> Result<[f64; 3]> {
     Ok(out)
 }
 
+/// A line file's metadata, column header and data lines, numbered.
+type Sections<'t> = (
+    BTreeMap<String, (usize, String)>,
+    Option<(usize, Vec<String>)>,
+    Vec<(usize, &'t str)>,
+);
+
+/// Metadata (`# key: value`, with line numbers), the column header and
+/// the data lines (with line numbers) of a line file's text.
+fn sections<'t>(text: &'t str, path: &Path) -> Result<Sections<'t>> {
+    let p = path.display();
+    let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
+    let mut header: Option<(usize, Vec<String>)> = None;
+    let mut data: Vec<(usize, &str)> = Vec::new();
+    // a spreadsheet's UTF-8 export starts with a byte-order mark
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    for (i, raw) in text.lines().enumerate() {
+        let lineno = i + 1;
+        let l = raw.trim();
+        if l.is_empty() {
+            continue;
+        }
+        if let Some(m) = l.strip_prefix('#') {
+            if header.is_some() {
+                continue; // comments after the header are allowed and ignored
+            }
+            let Some((k, v)) = m.split_once(':') else {
+                bail!("{p}:{lineno}: metadata line must be '# key: value', got `{l}`");
+            };
+            meta.insert(k.trim().to_string(), (lineno, v.trim().to_string()));
+        } else if header.is_none() {
+            header = Some((
+                lineno,
+                l.split(',')
+                    .map(|c| tcomp_data::runcsv::unquote(c).to_string())
+                    .collect(),
+            ));
+        } else {
+            data.push((lineno, l));
+        }
+    }
+    Ok((meta, header, data))
+}
+
 impl LineFile {
     pub fn read(path: &Path) -> Result<LineFile> {
         let text =
@@ -160,36 +204,7 @@ impl LineFile {
     /// Parse the text of a line file; `path` names it in errors.
     pub fn parse(text: &str, path: &Path) -> Result<LineFile> {
         let p = path.display();
-        let mut meta: BTreeMap<String, (usize, String)> = BTreeMap::new();
-        let mut header: Option<(usize, Vec<String>)> = None;
-        let mut data: Vec<(usize, &str)> = Vec::new();
-        // a spreadsheet's UTF-8 export starts with a byte-order mark
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        for (i, raw) in text.lines().enumerate() {
-            let lineno = i + 1;
-            let l = raw.trim();
-            if l.is_empty() {
-                continue;
-            }
-            if let Some(m) = l.strip_prefix('#') {
-                if header.is_some() {
-                    continue; // comments after the header are allowed and ignored
-                }
-                let Some((k, v)) = m.split_once(':') else {
-                    bail!("{p}:{lineno}: metadata line must be '# key: value', got `{l}`");
-                };
-                meta.insert(k.trim().to_string(), (lineno, v.trim().to_string()));
-            } else if header.is_none() {
-                header = Some((
-                    lineno,
-                    l.split(',')
-                        .map(|c| tcomp_data::runcsv::unquote(c).to_string())
-                        .collect(),
-                ));
-            } else {
-                data.push((lineno, l));
-            }
-        }
+        let (meta, header, data) = sections(text, path)?;
         let get = |k: &str| -> Result<(usize, &str)> {
             meta.get(k)
                 .map(|(n, v)| (*n, v.as_str()))
@@ -418,6 +433,17 @@ pub fn average_runs(files: &[LineFile]) -> Result<Vec<Averaged>> {
             {
                 bail!("line {id}: its runs differ in direction or tool offset");
             }
+        }
+        if fs.len() > 1 && fs.iter().any(|f| f.run == Run::Single) {
+            bail!(
+                "line {id}{}: {} files for it, one of them without `run` metadata; a file without `run` is the whole line (both runs averaged), so give either that file alone or `run: forward` and `run: backward`",
+                if state.is_empty() {
+                    String::new()
+                } else {
+                    format!(" in state {state}")
+                },
+                fs.len()
+            );
         }
         let mut runs: Vec<Run> = fs.iter().map(|f| f.run).collect();
         runs.sort();

@@ -27,6 +27,9 @@ pub struct ErrorsJson {
     pub stroke_mm: [f64; 3],
     pub errors: BTreeMap<String, TermJson>,
     pub squareness_urad: Squareness,
+    /// Errors the lines did not determine (`identify --partial`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unobservable_terms: Vec<String>,
 }
 
 impl ErrorsJson {
@@ -60,6 +63,7 @@ impl ErrorsJson {
             stroke_mm: stroke,
             errors,
             squareness_urad: e.squareness,
+            unobservable_terms: Vec::new(),
         }
     }
 

@@ -78,6 +78,13 @@ pub struct VolumetricPoly {
     /// Largest |first-order kinematics − polynomial| on the check points,
     /// after dropping small terms [µm].
     pub max_fit_error_um: f64,
+    /// Errors of the model the identification did not determine (identify
+    /// --partial): `export --geometry` refuses the table unless
+    /// `unobservable_accepted` (`geometry table --allow-unobservable`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unobservable_terms: Vec<String>,
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub unobservable_accepted: bool,
 }
 
 impl VolumetricPoly {
@@ -195,6 +202,8 @@ pub fn build(
         t_ref_c: t_ref.clone(),
         terms,
         max_fit_error_um: 0.0,
+        unobservable_terms: Vec::new(),
+        unobservable_accepted: false,
     };
     // Check on points off the fitting grid, at the reference and 5 K above it.
     let mut worst = 0.0f64;

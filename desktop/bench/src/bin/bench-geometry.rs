@@ -156,14 +156,65 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
+/// `--rich [--method poly|smooth] [--seeds N] [--first-seed S] [--no-wave]`:
+/// machines of `desktop/tcomp/tests/data/geometry_rich_gen.py` (issue 29), σ = 0 and 0.5 µm.
+fn rich(args: &[String], json: bool) -> anyhow::Result<()> {
+    use tcomp_geometry::bench_rich::{run, Method};
+    let val = |k: &str| {
+        args.iter()
+            .position(|a| a == k)
+            .and_then(|i| args.get(i + 1))
+    };
+    let method = Method::parse(val("--method").map_or("smooth", |s| s.as_str()))?;
+    let seeds: u64 = val("--seeds").map_or(Ok(10), |s| s.parse())?;
+    let first: u64 = val("--first-seed").map_or(Ok(1), |s| s.parse())?;
+    let wave = !args.iter().any(|a| a == "--no-wave");
+    let t0 = std::time::Instant::now();
+    let v = run(seeds, first, &[0.0, 0.5], wave, method)?;
+    if json {
+        println!("{v}");
+        return Ok(());
+    }
+    println!(
+        "rich machines (degree-5 polynomials{} , per-line scale 0.5 ppm), method {method:?}, seeds {first}..{}, {:.1} s",
+        if wave { " + waves of 0.5–1.5 strokes" } else { "" },
+        first + seeds - 1,
+        t0.elapsed().as_secs_f64()
+    );
+    println!("noise µm | worst-term RMS µm (min–max over machines) | µrad | held-out lines RMS reduction % (min–max)");
+    for r in v["rows"].as_array().into_iter().flatten() {
+        let f = |k: &str, m: &str| r[k][m].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "{:8.2} | {:.2}–{:.2} | {:.2}–{:.2} | {:.1}–{:.1}",
+            r["noise_um"].as_f64().unwrap_or(0.0),
+            f("worst_rms_translational_um", "min"),
+            f("worst_rms_translational_um", "max"),
+            f("worst_rms_angular_urad", "min"),
+            f("worst_rms_angular_urad", "max"),
+            f("heldout_reduction_pct", "min"),
+            f("heldout_reduction_pct", "max"),
+        );
+    }
+    Ok(())
+}
+
 fn run() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     tcomp_data::cli_error::check_args(
         &args,
-        &["--json", "--board-only"],
-        &["--firmware", "--seeds"],
+        &["--json", "--board-only", "--rich", "--no-wave"],
+        &["--firmware", "--seeds", "--method", "--first-seed"],
     )?;
     let json = args.iter().any(|a| a == "--json");
+    if args.iter().any(|a| a == "--rich") {
+        return rich(&args, json);
+    }
+    standard(&args, json)
+}
+
+/// The identification on simulated machines of the model's own class and
+/// the board's figures (the bench without `--rich`).
+fn standard(args: &[String], json: bool) -> anyhow::Result<()> {
     let board_only = args.iter().any(|a| a == "--board-only");
     let elf: std::path::PathBuf = args
         .iter()

@@ -5,8 +5,13 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
+use super::geometry_score::{score_cmd, ScoreArgs};
+use super::geometry_smooth::{identify_smooth_cmd, stroke_from, SmoothRequest};
+use super::geometry_table::{
+    parse_triple, table_cmd, table_json, tooltip_cmd, TableArgs, TooltipArgs,
+};
 use tcomp_data::rng::Rng;
-use tcomp_geometry::errors::{GeometricErrors, Term};
+use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, plan14, LineFile};
@@ -44,36 +49,8 @@ pub enum GeometryCommand {
     /// The volumetric correction polynomial the board will evaluate
     /// (positions, tool length): its terms, size and fit to the kinematics.
     Table(TableArgs),
-}
-
-#[derive(clap::Args, Debug)]
-pub struct TableArgs {
-    /// Errors (errors.json or identify --json output).
-    #[arg(long)]
-    pub model: PathBuf,
-    #[arg(long)]
-    pub json: bool,
-}
-
-#[derive(clap::Args, Debug)]
-pub struct TooltipArgs {
-    /// Linear-axis errors (errors.json or identify --json output); default none.
-    #[arg(long)]
-    pub errors: Option<PathBuf>,
-    /// Turntable file (five-axis): pivot, offsets and rotary errors.
-    #[arg(long)]
-    pub turntable: Option<PathBuf>,
-    /// Structure when --errors is not given.
-    #[arg(long, default_value = "XY/Z")]
-    pub structure: String,
-    /// Axis positions x,y,z [mm] or x,y,z,a,c [mm, deg].
-    #[arg(long)]
-    pub at: String,
-    /// Tool offset from the spindle gauge point x,y,z [mm].
-    #[arg(long, default_value = "0,0,100")]
-    pub tool: String,
-    #[arg(long)]
-    pub json: bool,
+    /// Score a model against a tabulated machine and held-out lines (issue 29).
+    Score(ScoreArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -198,6 +175,14 @@ pub struct IdentifyArgs {
     /// Errors of the simulated machine: adds the recovery error per term.
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// When the lines do not determine every error: write the model anyway,
+    /// the undetermined errors listed under `unobservable_terms`.
+    #[arg(long)]
+    pub partial: bool,
+    /// `poly`: the polynomial model of the degree options; `smooth`: no
+    /// shape assumed (rich basis, prior chosen from the data; issue 29).
+    #[arg(long, default_value = "poly")]
+    pub method: String,
     #[arg(long)]
     pub json: bool,
 }
@@ -212,20 +197,6 @@ pub struct PlanArgs {
     pub structure: String,
     #[arg(long)]
     pub json: bool,
-}
-
-pub fn parse_triple(s: &str, what: &str) -> Result<[f64; 3]> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| {
-            anyhow::anyhow!("{what}: expected three numbers like 800,500,400, got {s:?}")
-        })?;
-    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-        bail!("{what}: expected three numbers like 800,500,400, got {s:?}");
-    }
-    Ok([v[0], v[1], v[2]])
 }
 
 fn stroke_of(v: &VolumeArgs) -> Result<[f64; 3]> {
@@ -245,6 +216,7 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::Check(c) => check_cmd(c),
         GeometryCommand::Tooltip(t) => tooltip_cmd(t),
         GeometryCommand::Table(t) => table_cmd(t),
+        GeometryCommand::Score(s) => score_cmd(s),
     }
 }
 
@@ -339,21 +311,27 @@ fn simulate(a: SimulateArgs) -> Result<()> {
 }
 
 fn identify_cmd(a: IdentifyArgs) -> Result<()> {
+    match a.method.as_str() {
+        "poly" => {}
+        "smooth" => {
+            return identify_smooth_cmd(&SmoothRequest {
+                files: &a.files,
+                stroke: a.stroke.as_deref(),
+                points: a.points,
+                truth: a.truth.as_deref(),
+                partial: a.partial,
+                json: a.json,
+            })
+        }
+        m => bail!("--method {m:?}: poly or smooth"),
+    }
     let degrees = a.degrees.degrees()?;
     let files: Vec<LineFile> = a
         .files
         .iter()
         .map(|p| LineFile::read(p))
         .collect::<Result<_>>()?;
-    let st = files[0].structure.clone();
-    if let Some(f) = files.iter().find(|f| f.structure != st) {
-        bail!(
-            "line {}: structure {} differs from {} in the other files",
-            f.spec.id,
-            f.structure,
-            st
-        );
-    }
+    let st = tcomp_geometry::guard::common_structure(&files, &a.files)?;
     let avg = average_runs(&files)?;
     let states: std::collections::BTreeSet<_> =
         avg.iter().map(|a| a.temperature_state.clone()).collect();
@@ -361,25 +339,11 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         bail!("the files come from {} temperature states; identify one state at a time (or use fit-thermal)", states.len());
     }
     let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
-    let stroke = match &a.stroke {
-        Some(s) => parse_triple(s, "--stroke")?,
-        None => {
-            let mut m = [0.0f64; 3];
-            for l in &obs {
-                for p in &l.points {
-                    for k in 0..3 {
-                        m[k] = m[k].max(p.pos_mm[k].abs());
-                    }
-                }
-            }
-            m
-        }
-    };
-    if stroke.iter().any(|x| !(*x > 0.0)) {
-        bail!("the lines do not move every axis; give --stroke X,Y,Z");
-    }
+    let stroke = stroke_from(a.stroke.as_deref(), &obs)?;
     let id = identify(&st, &obs, degrees, stroke)?;
-    let ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
+    tcomp_geometry::guard::refuse_unobservable(&id, obs.len(), a.partial)?;
+    let mut ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
+    ej.unobservable_terms = id.unobservable_terms.clone();
     let truth = match &a.truth {
         Some(p) => Some(ErrorsJson::read(p)?.to_errors()?),
         None => None,
@@ -445,6 +409,12 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         return Ok(());
     }
     print_identification(&id, &obs, stroke, &st, a.points);
+    if !id.unobservable_terms.is_empty() {
+        println!(
+            "unobservable (not determined by these lines, values meaningless): {}",
+            id.unobservable_terms.join(", ")
+        );
+    }
     for t in Term::all() {
         let tj = &ej.errors[&t.name()];
         let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
@@ -618,7 +588,7 @@ fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
         .iter()
         .map(|p| LineFile::read(p))
         .collect::<Result<_>>()?;
-    let st = files[0].structure.clone();
+    let st = tcomp_geometry::guard::common_structure(&files, &a.files)?;
     let avg = average_runs(&files)?;
     let sensors: Vec<String> = match &a.sensors {
         Some(s) => s
@@ -723,111 +693,5 @@ fn fit_thermal_cmd(a: FitThermalArgs) -> Result<()> {
             h.state, h.static_rms_um, h.thermal_rms_um, h.own_fit_rms_um
         );
     }
-    Ok(())
-}
-
-fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
-    use tcomp_geometry::five_axis::{
-        tool_tip_error_exact5, tool_tip_error_linear5, RotaryPos, Turntable,
-    };
-    let (st, lin) = match &a.errors {
-        Some(p) => {
-            let ej = ErrorsJson::read(p)?;
-            let st = Structure::parse(&ej.structure)
-                .with_context(|| format!("{}: structure", p.display()))?;
-            (st, ej.to_errors()?)
-        }
-        None => (
-            Structure::parse(&a.structure).context("--structure")?,
-            GeometricErrors::zero(),
-        ),
-    };
-    let v: Vec<f64> = a
-        .at
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| anyhow::anyhow!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at))?;
-    if !(v.len() == 3 || v.len() == 5) || v.iter().any(|x| !x.is_finite()) {
-        bail!("--at {:?}: expected x,y,z or x,y,z,a,c (numbers)", a.at);
-    }
-    let tool = parse_triple(&a.tool, "--tool")?;
-    let turntable = match &a.turntable {
-        Some(p) => Turntable::read(p)?,
-        None if v.len() == 5 => bail!("--at gives rotary angles but no --turntable file"),
-        None => Turntable::default(),
-    };
-    let pos = [v[0], v[1], v[2]];
-    let r = RotaryPos {
-        a_deg: v.get(3).copied().unwrap_or(0.0),
-        c_deg: v.get(4).copied().unwrap_or(0.0),
-    };
-    let exact = tool_tip_error_exact5(&st, &lin, &turntable, pos, r, tool);
-    let linear = tool_tip_error_linear5(&st, &lin, &turntable, pos, r, tool);
-    if a.json {
-        println!(
-            "{}",
-            serde_json::json!({"frame": "workpiece", "unit": "um",
-                "exact_um": [exact.x, exact.y, exact.z],
-                "first_order_um": [linear.x, linear.y, linear.z],
-                "length_um": exact.norm()})
-        );
-        return Ok(());
-    }
-    println!(
-        "tool-tip error at x,y,z {:.3},{:.3},{:.3} mm, A {:.3}°, C {:.3}°, tool {:?} mm (workpiece frame):",
-        pos[0], pos[1], pos[2], r.a_deg, r.c_deg, tool
-    );
-    println!(
-        "  exact        {:+9.3} {:+9.3} {:+9.3} µm (length {:.3} µm)",
-        exact.x,
-        exact.y,
-        exact.z,
-        exact.norm()
-    );
-    println!(
-        "  first order  {:+9.3} {:+9.3} {:+9.3} µm",
-        linear.x, linear.y, linear.z
-    );
-    Ok(())
-}
-
-/// The volumetric polynomial as `geometry table --json` and
-/// `fit-thermal --table` write it.
-fn table_json(p: &tcomp_geometry::volumetric::VolumetricPoly) -> Result<serde_json::Value> {
-    let mut v = serde_json::to_value(p)?;
-    if let Some(o) = v.as_object_mut() {
-        // On the board a term is 4 exponent/sensor bytes + 3 × i32 coefficients.
-        o.insert(
-            "bytes_on_board".into(),
-            serde_json::json!(p.terms.len() * 16),
-        );
-        o.insert("unit".into(), serde_json::json!("um"));
-    }
-    Ok(v)
-}
-
-fn table_cmd(a: TableArgs) -> Result<()> {
-    let ej = ErrorsJson::read(&a.model)?;
-    let st = Structure::parse(&ej.structure)
-        .with_context(|| format!("{}: structure", a.model.display()))?;
-    let p = tcomp_geometry::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
-    let bytes = p.terms.len() * 16;
-    if a.json {
-        println!("{}", table_json(&p)?);
-        return Ok(());
-    }
-    println!(
-        "volumetric polynomial of {} ({}, strokes {:?} mm): {} terms (of 52 monomials × 3 directions), about {bytes} bytes on the board",
-        a.model.display(),
-        st,
-        ej.stroke_mm,
-        p.terms.len()
-    );
-    println!(
-        "largest difference to the first-order kinematics on check points: {:.4} µm (terms below {} µm dropped)",
-        p.max_fit_error_um,
-        tcomp_geometry::volumetric::DROP_BELOW_UM
-    );
     Ok(())
 }
