@@ -4,8 +4,18 @@
 
 use anyhow::{Context, Result};
 use std::path::Path;
-use thermocomp_core::float::{FloatModel, QuantReport};
+use thermocomp_core::float::{
+    FloatDirection, FloatFallback, FloatInput, FloatModel, FloatNet, FloatTable, FloatTerm,
+    QuantReport,
+};
+use thermocomp_core::image::{InputKind, SensorRef};
+use thermocomp_core::limits::{
+    MAX_DIRECTIONS, MAX_FALLBACKS, MAX_FALLBACK_TERMS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS,
+    MAX_SENSORS, MAX_TABLES, MAX_TERMS,
+};
 use thermocomp_core::Model;
+
+use crate::fit::{FallbackParams, FeatureKind, FeatureSpec, ModelFile, NetParams};
 
 /// What an export produced, for the report and `--json`.
 #[derive(Debug, serde::Serialize)]
@@ -264,7 +274,7 @@ impl Default for ExportOptions {
 
 /// The model a channel ships: the `--use` override, else the fit's
 /// cross-validated choice, else (an old fit file without one) the lagged MLR.
-pub fn choice_for(file: &crate::fit::ModelFile, opts: &ExportOptions, ch: &str) -> Result<Choice> {
+pub fn choice_for(file: &ModelFile, opts: &ExportOptions, ch: &str) -> Result<Choice> {
     if let Some((_, c)) = opts.choices.iter().find(|(c, _)| c == ch) {
         return Ok(*c);
     }
@@ -283,14 +293,36 @@ pub fn choice_for(file: &crate::fit::ModelFile, opts: &ExportOptions, ch: &str) 
 /// original envelope. `temperature_columns` is the board's channel order
 /// (the run's `T_…` columns, as the bench maps them).
 pub fn float_model_from_fit(
-    file: &crate::fit::ModelFile,
+    file: &ModelFile,
     temperature_columns: &[String],
     opts: &ExportOptions,
 ) -> Result<FloatModel> {
-    use crate::fit::{FeatureKind, FeatureSpec};
-    use thermocomp_core::float::{FloatDirection, FloatInput, FloatNet, FloatTable, FloatTerm};
-    use thermocomp_core::image::{InputKind, SensorRef};
+    let channels = fitted_channels(file);
+    if channels.len() > MAX_DIRECTIONS {
+        anyhow::bail!(
+            "the model has {} channels; the board serves at most {MAX_DIRECTIONS} directions (MAX_DIRECTIONS)",
+            channels.len()
+        );
+    }
+    let mut b = FloatModelBuilder {
+        model: empty_float_model(opts),
+        temperature_columns,
+    };
+    for ch in &channels {
+        b.add_direction(file, opts, ch)?;
+    }
+    if b.model.tables.is_empty() && b.model.nets.is_empty() {
+        anyhow::bail!(
+            "no channel has a model to ship: the fit chose `none` (no model beat no compensation in its cross-validation) for {}; `--use CHANNEL=mlr` ships one anyway",
+            channels.join(", ")
+        );
+    }
+    b.add_fallbacks(file, &channels);
+    Ok(b.model)
+}
 
+/// Every channel with a fitted model, sorted: the board's directions.
+fn fitted_channels(file: &ModelFile) -> Vec<String> {
     let mut channels: Vec<String> = file
         .nets
         .iter()
@@ -300,7 +332,11 @@ pub fn float_model_from_fit(
         .collect();
     channels.sort();
     channels.dedup();
-    let mut model = FloatModel {
+    channels
+}
+
+fn empty_float_model(opts: &ExportOptions) -> FloatModel {
+    FloatModel {
         model_version: opts.model_version,
         step_ms: crate::fit::features::STEP_MS,
         warmup_s: opts.warmup_s,
@@ -312,19 +348,49 @@ pub fn float_model_from_fit(
         nets: vec![],
         tables: vec![],
         fallbacks: vec![],
-    };
-    use thermocomp_core::limits::{
-        MAX_DIRECTIONS, MAX_FALLBACKS, MAX_FALLBACK_TERMS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS,
-        MAX_SENSORS, MAX_TABLES, MAX_TERMS,
-    };
-    if channels.len() > MAX_DIRECTIONS {
-        anyhow::bail!(
-            "the model has {} channels; the board serves at most {MAX_DIRECTIONS} directions (MAX_DIRECTIONS)",
-            channels.len()
-        );
     }
-    let sensor_of = |name: &str, model: &mut FloatModel| -> Result<u8> {
-        let ch = temperature_columns
+}
+
+/// The blend's shares of channel `ch`: the table's `w`, the networks' `1 − w`
+/// (both 1 for every other choice).
+fn blend_shares(file: &ModelFile, ch: &str, choice: Choice) -> Result<(f64, f64)> {
+    if choice != Choice::Blend {
+        return Ok((1.0, 1.0));
+    }
+    let w = *file.blend.get(ch).ok_or_else(|| {
+        anyhow::anyhow!("no blend weight for channel {ch} in the fit file (fit with --blend)")
+    })?;
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&w),
+        "channel {ch}: blend weight {w} is outside [0, 1]"
+    );
+    Ok((w, 1.0 - w))
+}
+
+/// Fallbacks in the board's priority order: per channel the lowest
+/// cross-validated RMS first (singles before pairs at equal CV; no CV
+/// figure: last).
+fn fallbacks_by_priority(file: &ModelFile) -> Vec<&FallbackParams> {
+    let mut ordered: Vec<&FallbackParams> = file.fallbacks.iter().collect();
+    ordered.sort_by(|a, b| {
+        let key = |f: &FallbackParams| (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len());
+        let (ka, kb) = (key(a), key(b));
+        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
+    });
+    ordered
+}
+
+/// The float model under construction, with the board's channel order.
+struct FloatModelBuilder<'a> {
+    model: FloatModel,
+    temperature_columns: &'a [String],
+}
+
+impl FloatModelBuilder<'_> {
+    /// The model's sensor index of temperature column `name` (added if new).
+    fn sensor_of(&mut self, name: &str) -> Result<u8> {
+        let ch = self
+            .temperature_columns
             .iter()
             .position(|c| c == name)
             .ok_or_else(|| {
@@ -336,6 +402,7 @@ pub fn float_model_from_fit(
                 MAX_SENSORS - 1
             );
         }
+        let model = &mut self.model;
         if let Some(i) = model
             .sensors
             .iter()
@@ -349,20 +416,22 @@ pub fn float_model_from_fit(
             ref_temp: 0,
         });
         Ok((model.sensors.len() - 1) as u8)
-    };
-    // One model input per distinct (kind, lag); returns its index and the fold (a, c).
-    let input_of = |f: &FeatureSpec, model: &mut FloatModel| -> Result<(u8, f64, f64)> {
+    }
+
+    /// One model input per distinct (kind, lag); returns its index and the
+    /// fold (a, c) of the normalisation change.
+    fn input_of(&mut self, f: &FeatureSpec) -> Result<(u8, f64, f64)> {
         let (kind, scale) = match &f.kind {
             FeatureKind::SensorRise(a) => (
                 InputKind::SensorRise {
-                    a: sensor_of(a, model)?,
+                    a: self.sensor_of(a)?,
                 },
                 16.0,
             ),
             FeatureKind::SensorDiff(a, b) => (
                 InputKind::SensorDiff {
-                    a: sensor_of(a, model)?,
-                    b: sensor_of(b, model)?,
+                    a: self.sensor_of(a)?,
+                    b: self.sensor_of(b)?,
                 },
                 16.0,
             ),
@@ -388,236 +457,43 @@ pub fn float_model_from_fit(
             min: lo2,
             max: hi2,
         };
-        let idx = match model.inputs.iter().position(|i| *i == spec) {
+        let inputs = &mut self.model.inputs;
+        let idx = match inputs.iter().position(|i| *i == spec) {
             Some(i) => i,
             None => {
-                if model.inputs.len() >= MAX_INPUTS {
+                if inputs.len() >= MAX_INPUTS {
                     anyhow::bail!(
                         "the model needs more than {MAX_INPUTS} distinct inputs, the most a board image holds (MAX_INPUTS)"
                     );
                 }
-                model.inputs.push(spec);
-                model.inputs.len() - 1
+                inputs.push(spec);
+                inputs.len() - 1
             }
         };
         Ok((idx as u8, a, c))
-    };
-    for ch in &channels {
-        let choice = choice_for(file, opts, ch)?;
-        let d = model.directions.len() as u8;
-        let name = ch.trim_start_matches('d').trim_end_matches("_um");
-        model.directions.push(FloatDirection {
-            name: name.to_string(),
-            max_correction_um: opts.max_correction_um,
-            max_rate_um_per_s: opts.max_rate_um_per_s,
-        });
-        // Blend: the table's share `w`, the networks' `1 − w`.
-        let (w_table, w_nets) = match choice {
-            Choice::Blend => {
-                let w = *file.blend.get(ch).ok_or_else(|| {
-                    anyhow::anyhow!(
-                        "no blend weight for channel {ch} in the fit file (fit with --blend)"
-                    )
-                })?;
-                anyhow::ensure!(
-                    (0.0..=1.0).contains(&w),
-                    "channel {ch}: blend weight {w} is outside [0, 1]"
-                );
-                (w, 1.0 - w)
-            }
-            _ => (1.0, 1.0),
-        };
-        let members: Vec<_> = match choice {
-            Choice::Net => file.nets.iter().filter(|n| &n.channel == ch).collect(),
-            Choice::Blend if w_nets > 0.0 => {
-                file.nets.iter().filter(|n| &n.channel == ch).collect()
-            }
-            Choice::Hybrid => file
-                .hybrid_nets
-                .iter()
-                .filter(|n| &n.channel == ch)
-                .collect(),
-            _ => vec![],
-        };
-        let mlr = match choice {
-            Choice::MlrStatic => file.mlr_static.iter().find(|m| &m.channel == ch),
-            Choice::Mlr | Choice::Hybrid | Choice::Blend => {
-                file.mlr.iter().find(|m| &m.channel == ch)
-            }
-            Choice::Net | Choice::None => None,
-        };
-        let blend_nets = choice == Choice::Blend && w_nets > 0.0;
-        if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
-            if members.is_empty() {
-                anyhow::bail!(
-                    "no fitted {} network for channel {ch} (fit without --mlr-only)",
-                    match choice {
-                        Choice::Hybrid => "hybrid",
-                        Choice::Blend => "blend",
-                        _ => "ga-bpn",
-                    }
-                );
-            }
-            if model.nets.len() + members.len() > MAX_NETS {
-                anyhow::bail!(
-                    "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
-                    members.len()
-                );
-            }
-            // The ensemble's mean: each member's output layer scaled by 1/k
-            // (and by the blend's 1 − w).
-            let k = members.len() as f64 / w_nets;
-            for n in members {
-                if n.features.len() > MAX_NET_INPUTS {
-                    anyhow::bail!(
-                        "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
-                        n.features.len()
-                    );
-                }
-                let mut inputs = vec![];
-                let mut folds = vec![];
-                for f in &n.features {
-                    let (i, a, c) = input_of(f, &mut model)?;
-                    inputs.push(i);
-                    folds.push((a, c));
-                }
-                let w1: Vec<Vec<f64>> =
-                    n.w1.iter()
-                        .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
-                        .collect();
-                let b1 =
-                    n.w1.iter()
-                        .zip(&n.b1)
-                        .map(|(row, b)| {
-                            b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>()
-                        })
-                        .collect();
-                model.nets.push(FloatNet {
-                    direction: d,
-                    inputs,
-                    w1,
-                    b1,
-                    w2: n.w2.iter().map(|w| w / k).collect(),
-                    b2: n.b2 / k,
-                });
-            }
-        }
-        let blend_table = choice == Choice::Blend && w_table > 0.0;
-        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
-            let Some(m) = mlr else {
-                anyhow::bail!("no fitted {choice:?} model for channel {ch}");
-            };
-            if model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
-                anyhow::bail!(
-                    "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
-                );
-            }
-            let mut terms = vec![];
-            let mut c0 = m.c0 * w_table;
-            for (f, coef) in m.features.iter().zip(&m.coef) {
-                let (i, a, c) = input_of(f, &mut model)?;
-                let coef = coef * w_table;
-                c0 += coef * c;
-                terms.push(FloatTerm {
-                    coef_um: coef * a,
-                    input: Some(i),
-                    input_power: 1,
-                    position_power: 0,
-                });
-            }
+    }
+
+    /// The terms of a linear model scaled by `w`, the normalisation change
+    /// folded in, constant last (`w = 1` leaves every figure as it is).
+    fn linear_terms(
+        &mut self,
+        features: &[FeatureSpec],
+        coefs: &[f64],
+        c0: f64,
+        w: f64,
+    ) -> Result<Vec<FloatTerm>> {
+        let mut terms = vec![];
+        let mut c0 = c0 * w;
+        for (f, coef) in features.iter().zip(coefs) {
+            let (i, a, c) = self.input_of(f)?;
+            let coef = coef * w;
+            c0 += coef * c;
             terms.push(FloatTerm {
-                coef_um: c0,
-                input: None,
-                input_power: 0,
+                coef_um: coef * a,
+                input: Some(i),
+                input_power: 1,
                 position_power: 0,
             });
-            model.tables.push(FloatTable {
-                direction: d,
-                axis: None,
-                terms,
-            });
-        }
-    }
-    if model.tables.is_empty() && model.nets.is_empty() {
-        anyhow::bail!(
-            "no channel has a model to ship: the fit chose `none` (no model beat no compensation in its cross-validation) for {}; `--use CHANNEL=mlr` ships one anyway",
-            channels.join(", ")
-        );
-    }
-    // Fallback models (image v2) in the board's priority order: the board
-    // serves a direction with the first fallback whose sensors are all
-    // valid, so per channel the lowest cross-validated RMS comes first
-    // (singles before pairs at equal CV; no CV figure: last). One that would
-    // need inputs beyond the board's is left out (said on stderr); `export`
-    // drops the last ones if the image would exceed MAX_IMAGE_BYTES.
-    let mut ordered: Vec<&crate::fit::FallbackParams> = file.fallbacks.iter().collect();
-    ordered.sort_by(|a, b| {
-        let key = |f: &crate::fit::FallbackParams| {
-            (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len())
-        };
-        let (ka, kb) = (key(a), key(b));
-        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
-    });
-    for fb in ordered {
-        let Some(d) = channels.iter().position(|c| *c == fb.channel) else {
-            continue;
-        };
-        // Only sensors the exported model reads: a fallback for any other is never used.
-        let excluded: Option<Vec<u8>> = fb
-            .excluded
-            .iter()
-            .map(|name| {
-                let ch = temperature_columns.iter().position(|c| c == name)?;
-                model
-                    .sensors
-                    .iter()
-                    .position(|s| usize::from(s.channel) == ch)
-                    .map(|i| i as u8)
-            })
-            .collect();
-        let Some(excluded) = excluded else { continue };
-        let held_terms: usize = model.fallbacks.iter().map(|f| f.terms.len()).sum();
-        if model.fallbacks.len() >= MAX_FALLBACKS
-            || held_terms + fb.params.features.len() + 1 > MAX_FALLBACK_TERMS
-        {
-            eprintln!(
-                "note: fallback of {} without {} left out: the image holds {MAX_FALLBACKS} fallbacks of {MAX_FALLBACK_TERMS} terms in all",
-                fb.channel,
-                fb.excluded.join("+")
-            );
-            continue;
-        }
-        let (n_sensors, n_inputs) = (model.sensors.len(), model.inputs.len());
-        let m = &fb.params;
-        let mut terms = vec![];
-        let mut c0 = m.c0;
-        let mut failed = None;
-        for (f, coef) in m.features.iter().zip(&m.coef) {
-            match input_of(f, &mut model) {
-                Ok((i, a, c)) => {
-                    c0 += coef * c;
-                    terms.push(FloatTerm {
-                        coef_um: coef * a,
-                        input: Some(i),
-                        input_power: 1,
-                        position_power: 0,
-                    });
-                }
-                Err(e) => {
-                    failed = Some(e);
-                    break;
-                }
-            }
-        }
-        if let Some(e) = failed {
-            model.sensors.truncate(n_sensors);
-            model.inputs.truncate(n_inputs);
-            eprintln!(
-                "note: fallback of {} without {} left out: {e}",
-                fb.channel,
-                fb.excluded.join("+")
-            );
-            continue;
         }
         terms.push(FloatTerm {
             coef_um: c0,
@@ -625,13 +501,183 @@ pub fn float_model_from_fit(
             input_power: 0,
             position_power: 0,
         });
-        model.fallbacks.push(thermocomp_core::float::FloatFallback {
-            direction: d as u8,
-            excluded,
-            terms,
-        });
+        Ok(terms)
     }
-    Ok(model)
+
+    /// Direction `ch` with the networks and table its choice ships.
+    fn add_direction(&mut self, file: &ModelFile, opts: &ExportOptions, ch: &str) -> Result<()> {
+        let choice = choice_for(file, opts, ch)?;
+        let d = self.model.directions.len() as u8;
+        let name = ch.trim_start_matches('d').trim_end_matches("_um");
+        self.model.directions.push(FloatDirection {
+            name: name.to_string(),
+            max_correction_um: opts.max_correction_um,
+            max_rate_um_per_s: opts.max_rate_um_per_s,
+        });
+        let (w_table, w_nets) = blend_shares(file, ch, choice)?;
+        let members: Vec<_> = match choice {
+            Choice::Net => file.nets.iter().filter(|n| n.channel == ch).collect(),
+            Choice::Blend if w_nets > 0.0 => file.nets.iter().filter(|n| n.channel == ch).collect(),
+            Choice::Hybrid => file
+                .hybrid_nets
+                .iter()
+                .filter(|n| n.channel == ch)
+                .collect(),
+            _ => vec![],
+        };
+        let mlr = match choice {
+            Choice::MlrStatic => file.mlr_static.iter().find(|m| m.channel == ch),
+            Choice::Mlr | Choice::Hybrid | Choice::Blend => {
+                file.mlr.iter().find(|m| m.channel == ch)
+            }
+            Choice::Net | Choice::None => None,
+        };
+        let blend_nets = choice == Choice::Blend && w_nets > 0.0;
+        if matches!(choice, Choice::Net | Choice::Hybrid) || blend_nets {
+            self.add_nets(ch, d, choice, &members, w_nets)?;
+        }
+        let blend_table = choice == Choice::Blend && w_table > 0.0;
+        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
+            let Some(m) = mlr else {
+                anyhow::bail!("no fitted {choice:?} model for channel {ch}");
+            };
+            if self.model.tables.len() >= MAX_TABLES || m.features.len() + 1 > MAX_TERMS {
+                anyhow::bail!(
+                    "channel {ch}: the board image holds at most {MAX_TABLES} tables of {MAX_TERMS} terms (MAX_TABLES, MAX_TERMS)"
+                );
+            }
+            let terms = self.linear_terms(&m.features, &m.coef, m.c0, w_table)?;
+            self.model.tables.push(FloatTable {
+                direction: d,
+                axis: None,
+                terms,
+            });
+        }
+        Ok(())
+    }
+
+    /// The networks of direction `d` (channel `ch`): the ensemble's mean,
+    /// each member's output layer scaled by 1/k (and by the blend's `w_nets`).
+    fn add_nets(
+        &mut self,
+        ch: &str,
+        d: u8,
+        choice: Choice,
+        members: &[&NetParams],
+        w_nets: f64,
+    ) -> Result<()> {
+        if members.is_empty() {
+            anyhow::bail!(
+                "no fitted {} network for channel {ch} (fit without --mlr-only)",
+                match choice {
+                    Choice::Hybrid => "hybrid",
+                    Choice::Blend => "blend",
+                    _ => "ga-bpn",
+                }
+            );
+        }
+        if self.model.nets.len() + members.len() > MAX_NETS {
+            anyhow::bail!(
+                "channel {ch} needs {} networks; the board image holds at most {MAX_NETS} in all (MAX_NETS)",
+                members.len()
+            );
+        }
+        let k = members.len() as f64 / w_nets;
+        for n in members {
+            if n.features.len() > MAX_NET_INPUTS {
+                anyhow::bail!(
+                    "channel {ch}: a network with {} inputs; the board takes at most {MAX_NET_INPUTS} (MAX_NET_INPUTS)",
+                    n.features.len()
+                );
+            }
+            let mut inputs = vec![];
+            let mut folds = vec![];
+            for f in &n.features {
+                let (i, a, c) = self.input_of(f)?;
+                inputs.push(i);
+                folds.push((a, c));
+            }
+            let w1: Vec<Vec<f64>> =
+                n.w1.iter()
+                    .map(|row| row.iter().zip(&folds).map(|(w, (a, _))| w * a).collect())
+                    .collect();
+            let b1 = n
+                .w1
+                .iter()
+                .zip(&n.b1)
+                .map(|(row, b)| b + row.iter().zip(&folds).map(|(w, (_, c))| w * c).sum::<f64>())
+                .collect();
+            self.model.nets.push(FloatNet {
+                direction: d,
+                inputs,
+                w1,
+                b1,
+                w2: n.w2.iter().map(|w| w / k).collect(),
+                b2: n.b2 / k,
+            });
+        }
+        Ok(())
+    }
+
+    /// Fallback models (image v2) in the board's priority order: the board
+    /// serves a direction with the first fallback whose sensors are all
+    /// valid. One that would need inputs beyond the board's is left out
+    /// (said on stderr); `export` drops the last ones if the image would
+    /// exceed MAX_IMAGE_BYTES.
+    fn add_fallbacks(&mut self, file: &ModelFile, channels: &[String]) {
+        for fb in fallbacks_by_priority(file) {
+            let Some(d) = channels.iter().position(|c| *c == fb.channel) else {
+                continue;
+            };
+            self.add_fallback(fb, d as u8);
+        }
+    }
+
+    fn add_fallback(&mut self, fb: &FallbackParams, d: u8) {
+        // Only sensors the exported model reads: a fallback for any other is never used.
+        let excluded: Option<Vec<u8>> = fb
+            .excluded
+            .iter()
+            .map(|name| {
+                let ch = self.temperature_columns.iter().position(|c| c == name)?;
+                self.model
+                    .sensors
+                    .iter()
+                    .position(|s| usize::from(s.channel) == ch)
+                    .map(|i| i as u8)
+            })
+            .collect();
+        let Some(excluded) = excluded else { return };
+        let held_terms: usize = self.model.fallbacks.iter().map(|f| f.terms.len()).sum();
+        if self.model.fallbacks.len() >= MAX_FALLBACKS
+            || held_terms + fb.params.features.len() + 1 > MAX_FALLBACK_TERMS
+        {
+            eprintln!(
+                "note: fallback of {} without {} left out: the image holds {MAX_FALLBACKS} fallbacks of {MAX_FALLBACK_TERMS} terms in all",
+                fb.channel,
+                fb.excluded.join("+")
+            );
+            return;
+        }
+        let (n_sensors, n_inputs) = (self.model.sensors.len(), self.model.inputs.len());
+        let m = &fb.params;
+        match self.linear_terms(&m.features, &m.coef, m.c0, 1.0) {
+            Ok(terms) => self.model.fallbacks.push(FloatFallback {
+                direction: d,
+                excluded,
+                terms,
+            }),
+            Err(e) => {
+                self.model.sensors.truncate(n_sensors);
+                self.model.inputs.truncate(n_inputs);
+                eprintln!(
+                    "note: fallback of {} without {} left out: {e}",
+                    fb.channel,
+                    fb.excluded.join("+")
+                );
+            }
+        }
+    }
 }
 
 /// Parse `dch5_um=mlr,dch3_um=ga-bpn` (`net` is an alias of `ga-bpn`).

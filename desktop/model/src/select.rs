@@ -134,6 +134,55 @@ pub struct Selection {
 /// Select sensors over one or more runs (series concatenated; temperatures as
 /// rises from each run's first row, so runs with different ambient combine).
 pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
+    let (sensors, directions) = checked_columns(runs, groups)?;
+    let left_out = unusable_sensors(runs, &sensors);
+    let sensors: Vec<String> = sensors
+        .into_iter()
+        .filter(|n| !left_out.contains_key(n))
+        .collect();
+    let mut notes = Vec::new();
+    if sensors.is_empty() {
+        bail!("select: no temperature sensor reads in at least half the rows of every run and changes");
+    }
+    let groups = if groups > sensors.len() {
+        notes.push(format!(
+            "{groups} groups asked, {} usable sensors: {} groups",
+            sensors.len(),
+            sensors.len()
+        ));
+        sensors.len()
+    } else {
+        groups
+    };
+    let (temp, err) = concatenated_series(runs, &sensors, &directions);
+    let (labels, inertia) = kmeans_pp(&cluster_points(&temp), groups, 10, seed);
+    let (scores, correlations) = correlate(&sensors, &directions, &temp, &err);
+    let clusters = clusters_of(&sensors, &labels);
+    let chosen = clusters
+        .iter()
+        .map(|g| {
+            g.iter()
+                .max_by(|a, b| scores[*a].total_cmp(&scores[*b]))
+                .cloned()
+                .unwrap_or_default()
+        })
+        .collect();
+    Ok(Selection {
+        sensors,
+        directions,
+        clusters,
+        scores,
+        correlations,
+        chosen,
+        inertia,
+        left_out,
+        notes,
+    })
+}
+
+/// The first run's temperature and error columns, checked against `groups`
+/// and against every run.
+fn checked_columns(runs: &[Run], groups: usize) -> Result<(Vec<String>, Vec<String>)> {
     let Some(first) = runs.first() else {
         bail!("select: no runs given")
     };
@@ -166,11 +215,15 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
             }
         }
     }
-    // A sensor must read in at least half the rows of every run and change
-    // at all: otherwise it is left out (its gap-filled series would be a
-    // constant that K-means puts in a group of its own and "chooses").
+    Ok((sensors, directions))
+}
+
+/// Sensors left out, with why. A sensor must read in at least half the rows
+/// of every run and change at all: otherwise its gap-filled series would be
+/// a constant that K-means puts in a group of its own and "chooses".
+fn unusable_sensors(runs: &[Run], sensors: &[String]) -> BTreeMap<String, String> {
     let mut left_out = BTreeMap::new();
-    for name in &sensors {
+    for name in sensors {
         let cols: Vec<&[Option<f64>]> = runs.iter().map(|r| r.col(name).unwrap_or(&[])).collect();
         let sparse = cols.iter().enumerate().find_map(|(i, col)| {
             let valid = col.iter().flatten().count();
@@ -188,27 +241,20 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
             left_out.insert(name.clone(), why);
         }
     }
-    let sensors: Vec<String> = sensors
-        .into_iter()
-        .filter(|n| !left_out.contains_key(n))
-        .collect();
-    let mut notes = Vec::new();
-    if sensors.is_empty() {
-        bail!("select: no temperature sensor reads in at least half the rows of every run and changes");
-    }
-    let groups = if groups > sensors.len() {
-        notes.push(format!(
-            "{groups} groups asked, {} usable sensors: {} groups",
-            sensors.len(),
-            sensors.len()
-        ));
-        sensors.len()
-    } else {
-        groups
-    };
-    // Concatenated rise series (None kept) and error series.
-    let mut temp: Vec<Vec<Option<f64>>> = vec![Vec::new(); sensors.len()];
-    let mut err: Vec<Vec<Option<f64>>> = vec![Vec::new(); directions.len()];
+    left_out
+}
+
+/// Series with gaps kept as `None`.
+type Series = Vec<Vec<Option<f64>>>;
+
+/// Concatenated rise series per sensor and error series per direction.
+fn concatenated_series(
+    runs: &[Run],
+    sensors: &[String],
+    directions: &[String],
+) -> (Series, Series) {
+    let mut temp: Series = vec![Vec::new(); sensors.len()];
+    let mut err: Series = vec![Vec::new(); directions.len()];
     for r in runs {
         for (s, name) in sensors.iter().enumerate() {
             let col = r.col(name).unwrap_or(&[]);
@@ -219,11 +265,14 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
             err[d].extend_from_slice(r.col(name).unwrap_or(&[]));
         }
     }
-    // Standardized, gap-filled, strided series for clustering.
+    (temp, err)
+}
+
+/// Standardized, gap-filled, strided series for clustering.
+fn cluster_points(temp: &Series) -> Vec<Vec<f64>> {
     let n = temp[0].len();
     let stride = n.div_ceil(4000).max(1);
-    let points: Vec<Vec<f64>> = temp
-        .iter()
+    temp.iter()
         .map(|col| {
             let vals: Vec<f64> = col.iter().flatten().copied().collect();
             let m = vals.iter().sum::<f64>() / vals.len().max(1) as f64;
@@ -242,8 +291,19 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
                 .step_by(stride)
                 .collect()
         })
-        .collect();
-    let (labels, inertia) = kmeans_pp(&points, groups, 10, seed);
+        .collect()
+}
+
+/// Correlations per sensor and direction.
+type Correlations = BTreeMap<String, BTreeMap<String, f64>>;
+
+/// Per sensor: the summed |r| over the directions, and r per direction.
+fn correlate(
+    sensors: &[String],
+    directions: &[String],
+    temp: &Series,
+    err: &Series,
+) -> (BTreeMap<String, f64>, Correlations) {
     let mut correlations = BTreeMap::new();
     let mut scores = BTreeMap::new();
     for (s, name) in sensors.iter().enumerate() {
@@ -255,37 +315,22 @@ pub fn select(runs: &[Run], groups: usize, seed: u64) -> Result<Selection> {
         scores.insert(name.clone(), rs.values().map(|r| r.abs()).sum::<f64>());
         correlations.insert(name.clone(), rs);
     }
+    (scores, correlations)
+}
+
+/// Sensor names per group label, in label order.
+fn clusters_of(sensors: &[String], labels: &[usize]) -> Vec<Vec<String>> {
     let k = labels.iter().max().map_or(0, |m| m + 1);
-    let clusters: Vec<Vec<String>> = (0..k)
+    (0..k)
         .map(|c| {
             sensors
                 .iter()
-                .zip(&labels)
+                .zip(labels)
                 .filter(|(_, &l)| l == c)
                 .map(|(s, _)| s.clone())
                 .collect()
         })
-        .collect();
-    let chosen = clusters
-        .iter()
-        .map(|g| {
-            g.iter()
-                .max_by(|a, b| scores[*a].total_cmp(&scores[*b]))
-                .cloned()
-                .unwrap_or_default()
-        })
-        .collect();
-    Ok(Selection {
-        sensors,
-        directions,
-        clusters,
-        scores,
-        correlations,
-        chosen,
-        inertia,
-        left_out,
-        notes,
-    })
+        .collect()
 }
 
 /// Human-readable report.

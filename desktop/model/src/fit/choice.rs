@@ -282,44 +282,15 @@ pub(crate) fn cross_validate(
     cfg: &FitConfig,
     with: NetCandidates,
 ) -> Result<BTreeMap<String, CvScore>> {
-    let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-    let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-    let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
-    // No compensation: the target is the error about the run's start, so 0.
-    let mut acc_none = CvAcc::default();
-    // Per usable fold: (fold index, specs, fitted MLR, fit rows, held-out rows).
-    let mut kept = Vec::new();
-    for (f, (fit, val)) in folds.iter().enumerate() {
-        let tr = cache.samples_capped(&plan.runs, fit, idx, ch, SELECT_ROWS)?;
-        let va = cache.samples_capped(&plan.runs, val, idx, ch, SELECT_ROWS)?;
-        if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
-            continue;
-        }
-        let specs = ranged_specs(&kinds, &tr);
-        let m = fit_mlr(specs.clone(), &tr, ch)?;
-        let p_mlr: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
-        acc_mlr.add_fold(&va.y, &p_mlr);
-        acc_none.add_fold(&va.y, &vec![0.0; va.y.len()]);
-        if !static_idx.is_empty() {
-            let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
-            let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
-            let ms = fit_mlr(ranged_specs(&skinds, &trs), &trs, ch)?;
-            let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
-            acc_static.add_fold(&vas.y, &p);
-        }
-        kept.push((f, specs, m, tr, va, p_mlr));
-    }
-    let mut out = BTreeMap::new();
-    for (name, acc) in [
-        ("none", &acc_none),
-        ("mlr-static", &acc_static),
-        ("mlr", &acc_mlr),
-    ] {
-        if let Some(sc) = acc.score() {
-            out.insert(name.to_string(), sc);
-        }
-    }
-    let n_total = acc_mlr.n;
+    let cv = CvChannel {
+        cache,
+        plan,
+        folds,
+        idx,
+        ch,
+        cfg,
+    };
+    let (kept, mut out, n_total) = cv.score_linear(static_idx)?;
     let linear_best = out.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
     // Out-of-fold network predictions per kept fold (for the blend).
     let mut net_preds: Vec<Option<Vec<f64>>> = vec![None; kept.len()];
@@ -329,99 +300,217 @@ pub(crate) fn cross_validate(
             continue;
         }
         let may_drop = cfg.cv_drop && !(with_blend && name == "ga-bpn");
-        let bar = linear_best / (1.0 + cfg.choice_margin);
-        let mut acc = CvAcc::default();
-        let mut dropped = false;
-        for (j, (f, specs, m, tr, va, p_mlr)) in kept.iter().enumerate().rev() {
-            let fit = &folds[*f].0;
-            let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
-            let inner_s = cache.samples_capped(&plan.runs, &inner, idx, ch, cfg.net.max_rows)?;
-            let block_s = cache.samples_capped(&plan.runs, &block, idx, ch, cfg.net.max_rows)?;
-            let full_s = tr.strided(cfg.net.max_rows);
-            let p: Vec<f64> = if name == "ga-bpn" {
-                let (members, _) = train_ensemble(
-                    specs,
-                    ch,
-                    &inner_s,
-                    &block_s,
-                    &full_s,
-                    &cfg.net,
-                    &ProgressBar::hidden(),
-                );
-                let ens = NetEnsemble {
-                    members: members.iter().collect(),
-                };
-                va.x.iter().map(|r| ens.predict_raw(r)).collect()
-            } else {
-                let members = train_hybrid(
-                    m,
-                    specs,
-                    &inner_s,
-                    &block_s,
-                    &full_s,
-                    &cfg.net,
-                    &ProgressBar::hidden(),
-                );
-                let ens = NetEnsemble {
-                    members: members.iter().collect(),
-                };
-                va.x.iter()
-                    .zip(p_mlr)
-                    .map(|(r, pm)| {
-                        if members.is_empty() {
-                            *pm
-                        } else {
-                            pm + ens.predict_raw(r)
-                        }
-                    })
-                    .collect()
-            };
-            acc.add_fold(&va.y, &p);
-            if name == "ga-bpn" {
-                net_preds[j] = Some(p);
-            }
-            if may_drop && n_total > 0 && (acc.sq / n_total as f64).sqrt() >= bar {
-                dropped = acc.n < n_total;
-                break;
-            }
-        }
-        // Fold figures in time order.
-        acc.folds.reverse();
-        if let Some(mut sc) = acc.score() {
-            sc.dropped = dropped;
+        let drop_at = may_drop.then_some((n_total, linear_best / (1.0 + cfg.choice_margin)));
+        let net_preds = (name == "ga-bpn").then_some(&mut net_preds);
+        if let Some(sc) = cv.score_net(name, &kept, drop_at, net_preds)? {
             out.insert(name.to_string(), sc);
         }
     }
     if with_blend && kept.len() >= 2 && net_preds.iter().all(Option::is_some) {
-        let rows = |skip: Option<usize>| {
-            kept.iter()
-                .zip(&net_preds)
-                .enumerate()
-                .filter(move |(j, _)| Some(*j) != skip)
-                .flat_map(|(_, (k, pn))| {
-                    let (va, pm) = (&k.4, &k.5);
-                    va.y.iter()
-                        .zip(pm.iter())
-                        .zip(pn.iter().flatten())
-                        .map(|((y, a), b)| (y, a, b))
-                })
-        };
-        let mut acc = CvAcc::default();
-        for (j, (k, pn)) in kept.iter().zip(&net_preds).enumerate() {
-            let w = blend_weight(rows(Some(j)));
-            let p: Vec<f64> =
-                k.5.iter()
-                    .zip(pn.iter().flatten())
-                    .map(|(a, b)| w * a + (1.0 - w) * b)
-                    .collect();
-            acc.add_fold(&k.4.y, &p);
-        }
-        if let Some(mut sc) = acc.score() {
-            sc.weight = Some(blend_weight(rows(None)));
+        if let Some(sc) = score_blend(&kept, &net_preds) {
             out.insert("blend".to_string(), sc);
         }
     }
     Ok(out)
+}
+
+/// What the cross-validation of one channel works on.
+struct CvChannel<'a> {
+    cache: &'a SeriesCache,
+    plan: &'a Plan,
+    folds: &'a [(Vec<Segment>, Vec<Segment>)],
+    /// The channel's (lagged) inputs, indices into `cache.kinds`.
+    idx: &'a [usize],
+    ch: &'a str,
+    cfg: &'a FitConfig,
+}
+
+/// One usable fold, as the linear scoring left it for the network candidates.
+struct KeptFold {
+    /// Index into the folds.
+    fold: usize,
+    specs: Vec<FeatureSpec>,
+    mlr: MlrParams,
+    /// Fit rows and held-out rows.
+    fit: Samples,
+    held_out: Samples,
+    /// The lagged MLR's predictions on the held-out rows.
+    mlr_pred: Vec<f64>,
+}
+
+impl CvChannel<'_> {
+    /// Scores `none`, `mlr-static` (on `static_idx`) and `mlr` on every
+    /// usable fold; returns those folds, the scores and the held-out rows.
+    fn score_linear(
+        &self,
+        static_idx: &[usize],
+    ) -> Result<(Vec<KeptFold>, BTreeMap<String, CvScore>, usize)> {
+        let (cache, plan, idx, ch) = (self.cache, self.plan, self.idx, self.ch);
+        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
+        // No compensation: the target is the error about the run's start, so 0.
+        let mut acc_none = CvAcc::default();
+        let mut kept = Vec::new();
+        for (f, (fit, val)) in self.folds.iter().enumerate() {
+            let tr = cache.samples_capped(&plan.runs, fit, idx, ch, SELECT_ROWS)?;
+            let va = cache.samples_capped(&plan.runs, val, idx, ch, SELECT_ROWS)?;
+            if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
+                continue;
+            }
+            let specs = ranged_specs(&kinds, &tr);
+            let m = fit_mlr(specs.clone(), &tr, ch)?;
+            let p_mlr: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
+            acc_mlr.add_fold(&va.y, &p_mlr);
+            acc_none.add_fold(&va.y, &vec![0.0; va.y.len()]);
+            if !static_idx.is_empty() {
+                let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
+                let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
+                let ms = fit_mlr(ranged_specs(&skinds, &trs), &trs, ch)?;
+                let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
+                acc_static.add_fold(&vas.y, &p);
+            }
+            kept.push(KeptFold {
+                fold: f,
+                specs,
+                mlr: m,
+                fit: tr,
+                held_out: va,
+                mlr_pred: p_mlr,
+            });
+        }
+        let mut out = BTreeMap::new();
+        for (name, acc) in [
+            ("none", &acc_none),
+            ("mlr-static", &acc_static),
+            ("mlr", &acc_mlr),
+        ] {
+            if let Some(sc) = acc.score() {
+                out.insert(name.to_string(), sc);
+            }
+        }
+        Ok((kept, out, acc_mlr.n))
+    }
+
+    /// Scores the network candidate `name` (`ga-bpn` or `hybrid`) fold by
+    /// fold, the latest first. With `drop_at = Some((all held-out rows,
+    /// bar))` it stops once its pooled error over all rows reaches `bar`.
+    /// `net_preds` collects the out-of-fold predictions per kept fold.
+    fn score_net(
+        &self,
+        name: &str,
+        kept: &[KeptFold],
+        drop_at: Option<(usize, f64)>,
+        mut net_preds: Option<&mut Vec<Option<Vec<f64>>>>,
+    ) -> Result<Option<CvScore>> {
+        let mut acc = CvAcc::default();
+        let mut dropped = false;
+        for (j, k) in kept.iter().enumerate().rev() {
+            let p = self.net_fold_predictions(name, k)?;
+            acc.add_fold(&k.held_out.y, &p);
+            if let Some(preds) = net_preds.as_deref_mut() {
+                preds[j] = Some(p);
+            }
+            if let Some((n_total, bar)) = drop_at {
+                if n_total > 0 && (acc.sq / n_total as f64).sqrt() >= bar {
+                    dropped = acc.n < n_total;
+                    break;
+                }
+            }
+        }
+        // Fold figures in time order.
+        acc.folds.reverse();
+        Ok(acc.score().map(|mut sc| {
+            sc.dropped = dropped;
+            sc
+        }))
+    }
+
+    /// Trains the network candidate `name` on a fold's fit rows and predicts
+    /// its held-out rows.
+    fn net_fold_predictions(&self, name: &str, k: &KeptFold) -> Result<Vec<f64>> {
+        let (cache, plan, cfg) = (self.cache, self.plan, self.cfg);
+        let fit = &self.folds[k.fold].0;
+        let (inner, block) = split_blocks(plan, fit, cfg.es_frac);
+        let inner_s =
+            cache.samples_capped(&plan.runs, &inner, self.idx, self.ch, cfg.net.max_rows)?;
+        let block_s =
+            cache.samples_capped(&plan.runs, &block, self.idx, self.ch, cfg.net.max_rows)?;
+        let full_s = k.fit.strided(cfg.net.max_rows);
+        let va = &k.held_out;
+        Ok(if name == "ga-bpn" {
+            let (members, _) = train_ensemble(
+                &k.specs,
+                self.ch,
+                &inner_s,
+                &block_s,
+                &full_s,
+                &cfg.net,
+                &ProgressBar::hidden(),
+            );
+            let ens = NetEnsemble {
+                members: members.iter().collect(),
+            };
+            va.x.iter().map(|r| ens.predict_raw(r)).collect()
+        } else {
+            let members = train_hybrid(
+                &k.mlr,
+                &k.specs,
+                &inner_s,
+                &block_s,
+                &full_s,
+                &cfg.net,
+                &ProgressBar::hidden(),
+            );
+            let ens = NetEnsemble {
+                members: members.iter().collect(),
+            };
+            va.x.iter()
+                .zip(&k.mlr_pred)
+                .map(|(r, pm)| {
+                    if members.is_empty() {
+                        *pm
+                    } else {
+                        pm + ens.predict_raw(r)
+                    }
+                })
+                .collect()
+        })
+    }
+}
+
+/// The blend `w·mlr + (1−w)·ga-bpn` from the out-of-fold predictions: each
+/// fold scored with the weight chosen on the other folds; `weight` is the
+/// one chosen on all folds.
+fn score_blend(kept: &[KeptFold], net_preds: &[Option<Vec<f64>>]) -> Option<CvScore> {
+    let rows = |skip: Option<usize>| {
+        kept.iter()
+            .zip(net_preds)
+            .enumerate()
+            .filter(move |(j, _)| Some(*j) != skip)
+            .flat_map(|(_, (k, pn))| {
+                let (va, pm) = (&k.held_out, &k.mlr_pred);
+                va.y.iter()
+                    .zip(pm.iter())
+                    .zip(pn.iter().flatten())
+                    .map(|((y, a), b)| (y, a, b))
+            })
+    };
+    let mut acc = CvAcc::default();
+    for (j, (k, pn)) in kept.iter().zip(net_preds).enumerate() {
+        let w = blend_weight(rows(Some(j)));
+        let p: Vec<f64> = k
+            .mlr_pred
+            .iter()
+            .zip(pn.iter().flatten())
+            .map(|(a, b)| w * a + (1.0 - w) * b)
+            .collect();
+        acc.add_fold(&k.held_out.y, &p);
+    }
+    acc.score().map(|mut sc| {
+        sc.weight = Some(blend_weight(rows(None)));
+        sc
+    })
 }
 
 /// The simplest model whose cross-validated RMS is within `margin` of the

@@ -17,6 +17,7 @@ pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
 use super::*;
 use crate::select::{self, Selection};
 use tcomp_data::runcsv::Run;
+use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS};
 
 /// Per-run figures.
 #[derive(Clone, Debug, Serialize)]
@@ -128,10 +129,68 @@ pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) ->
 
 /// Fit on a planned split.
 pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
-    use thermocomp_core::limits::{
-        MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS,
-    };
     let first = &plan.runs[plan.train[0].run];
+    let (channels, ens) = checked_request(first, cfg)?;
+    let folds = if cfg.select_folds <= 1 {
+        let (inner, block) = plan.inner_block(cfg.es_frac);
+        vec![(inner, block)]
+    } else {
+        blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
+    };
+    // The board reads temperature channels 0..MAX_SENSORS in the run's
+    // column order: sensors beyond are never candidates.
+    let board_sensors = features::board_channels(first);
+    let mut notes = Vec::new();
+    let lags = candidate_lags(plan, cfg, &mut notes)?;
+    let selection = select_sensors(plan, cfg, &board_sensors)?;
+    let has_spindle = first.col("spindle_rpm").is_some();
+    let (cache, static_idx) = candidate_cache(
+        plan,
+        cfg,
+        selection.as_ref(),
+        &lags,
+        has_spindle,
+        &board_sensors,
+    )?;
+    let fit = ChannelFit {
+        plan,
+        cfg,
+        cache: &cache,
+        folds: &folds,
+        static_idx: &static_idx,
+        ens,
+    };
+    let mut acc = Fitted::new(notes);
+    for ch in &channels {
+        fit.fit_channel(ch, &mut acc)?;
+    }
+    note_image_gaps(plan, &acc.file, &mut acc.notes)?;
+    let fallbacks = if cfg.fallbacks {
+        fit.fit_fallbacks(&channels, &mut acc)?
+    } else {
+        Vec::new()
+    };
+    let models = acc
+        .reports
+        .into_values()
+        .filter(|r| !r.channels.is_empty())
+        .collect();
+    Ok(FitReport {
+        fallbacks,
+        models,
+        inputs: acc.inputs,
+        chosen: acc.file.chosen.clone(),
+        notes: acc.notes,
+        selection,
+        train_segments: plan.train.clone(),
+        val_segments: plan.val.clone(),
+        model_file: acc.file,
+    })
+}
+
+/// The channels to fit, and the ensemble size, checked against the board's
+/// limits.
+fn checked_request(first: &Run, cfg: &FitConfig) -> Result<(Vec<String>, usize)> {
     let channels: Vec<String> = match &cfg.channels {
         Some(c) => c.clone(),
         None => first
@@ -162,20 +221,17 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     if ens > MAX_NETS {
         bail!("fit: --ensemble {ens} exceeds the board's {MAX_NETS} networks");
     }
-    let folds = if cfg.select_folds <= 1 {
-        let (inner, block) = plan.inner_block(cfg.es_frac);
-        vec![(inner, block)]
-    } else {
-        blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
-    };
-    // The board reads temperature channels 0..MAX_SENSORS in the run's
-    // column order: sensors beyond are never candidates.
-    let board_sensors = features::board_channels(first);
+    Ok((channels, ens))
+}
+
+/// The candidate lags no longer than the training span; notes what the
+/// board's channels and the span rule out.
+fn candidate_lags(plan: &Plan, cfg: &FitConfig, notes: &mut Vec<String>) -> Result<Vec<f64>> {
+    let first = &plan.runs[plan.train[0].run];
     let beyond = first
         .temperature_columns()
         .len()
         .saturating_sub(MAX_SENSORS);
-    let mut notes = Vec::new();
     if beyond > 0 {
         notes.push(format!(
             "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates"
@@ -192,47 +248,48 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     if lags.is_empty() {
         bail!("fit: every candidate lag is longer than the training span ({span:.0} s)");
     }
-    // Sensor selection on training rows only, among the board's channels.
-    let selection = if matches!(cfg.features, FeatureChoice::Auto) {
-        let slices: Vec<Run> = plan
-            .train
-            .iter()
-            .map(|s| {
-                plan.runs[s.run]
-                    .slice_rows(s.start, s.end)
-                    .keep_temperatures(&board_sensors)
-            })
-            .collect();
-        let groups = cfg.groups.min(board_sensors.len());
-        Some(select::select(&slices, groups, 0)?)
-    } else {
-        None
-    };
-    let has_spindle = first.col("spindle_rpm").is_some();
-    let mut reports: BTreeMap<&str, ModelReport> = MODEL_NAMES
+    Ok(lags)
+}
+
+/// Sensor selection for `auto`, on training rows only, among the board's channels.
+fn select_sensors(
+    plan: &Plan,
+    cfg: &FitConfig,
+    board_sensors: &[String],
+) -> Result<Option<Selection>> {
+    if !matches!(cfg.features, FeatureChoice::Auto) {
+        return Ok(None);
+    }
+    let slices: Vec<Run> = plan
+        .train
         .iter()
-        .map(|n| {
-            (
-                *n,
-                ModelReport {
-                    name: n.to_string(),
-                    channels: BTreeMap::new(),
-                    per_run: vec![],
-                },
-            )
+        .map(|s| {
+            plan.runs[s.run]
+                .slice_rows(s.start, s.end)
+                .keep_temperatures(board_sensors)
         })
         .collect();
-    let mut inputs = Vec::new();
-    let mut file = ModelFile::default();
+    let groups = cfg.groups.min(board_sensors.len());
+    Ok(Some(select::select(&slices, groups, 0)?))
+}
 
-    // Candidate cache shared by all channels.
-    let (cache, static_idx): (SeriesCache, Vec<usize>) = match (&cfg.features, &selection) {
+/// The candidate cache shared by all channels, and the candidates of the
+/// static MLR (unlagged rises of the selected sensors).
+fn candidate_cache(
+    plan: &Plan,
+    cfg: &FitConfig,
+    selection: Option<&Selection>,
+    lags: &[f64],
+    has_spindle: bool,
+    board_sensors: &[String],
+) -> Result<(SeriesCache, Vec<usize>)> {
+    match (&cfg.features, selection) {
         (FeatureChoice::Auto, Some(sel)) => {
             let sensors: Vec<String> = match cfg.candidates {
                 Candidates::Selected => sel.chosen.clone(),
                 Candidates::All => sel.sensors.clone(),
             };
-            let kinds = candidates(&sensors, &lags, has_spindle);
+            let kinds = candidates(&sensors, lags, has_spindle);
             let static_idx = sel
                 .chosen
                 .iter()
@@ -243,7 +300,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                 })
                 .take(MAX_NET_INPUTS)
                 .collect();
-            (SeriesCache::new(&plan.runs, kinds)?, static_idx)
+            Ok((SeriesCache::new(&plan.runs, kinds)?, static_idx))
         }
         (FeatureChoice::List(kinds), _) => {
             if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
@@ -259,231 +316,16 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
                     }
                 }
             }
-            (SeriesCache::new(&plan.runs, kinds.clone())?, vec![])
+            Ok((SeriesCache::new(&plan.runs, kinds.clone())?, vec![]))
         }
         (FeatureChoice::Auto, None) => bail!("internal: no selection"),
-    };
-
-    // Board resources shared by the channels: inputs and networks.
-    let mut in_use: Vec<usize> = Vec::new();
-    let mut nets_left = MAX_NETS;
-    for ch in &channels {
-        if first.col(ch).is_none() {
-            bail!("fit: training run has no column `{ch}`");
-        }
-        let budget = MAX_INPUTS.saturating_sub(in_use.len());
-        let (idx, cv_mse) = match cfg.features {
-            FeatureChoice::Auto => {
-                let (i, e) = greedy_select(
-                    &cache,
-                    &plan.runs,
-                    &folds,
-                    ch,
-                    cfg.max_inputs,
-                    &in_use,
-                    budget,
-                )?;
-                (i, Some(e))
-            }
-            FeatureChoice::List(_) => ((0..cache.kinds.len()).collect(), None),
-        };
-        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-        let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
-        let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
-        if full.y.is_empty() || val.y.is_empty() {
-            // name the cause: an input column that never reads there, else
-            // the channel itself
-            for (part, segs) in [("training", &plan.train), ("validation", &plan.val)] {
-                for c in kinds.iter().flat_map(|k| k.0.columns()) {
-                    let reads = segs.iter().any(|s| {
-                        plan.runs[s.run]
-                            .col(c)
-                            .is_some_and(|v| v[s.start..s.end].iter().any(Option::is_some))
-                    });
-                    if !reads {
-                        bail!("fit: input {c} has no values in the {part} rows");
-                    }
-                }
-            }
-            bail!("fit: channel {ch} has no values in the training or validation rows");
-        }
-        // Static inputs the board can still take.
-        let static_ok: Vec<usize> = static_idx
-            .iter()
-            .copied()
-            .filter(|i| in_use.contains(i) || idx.contains(i))
-            .chain(
-                static_idx
-                    .iter()
-                    .copied()
-                    .filter(|i| !in_use.contains(i) && !idx.contains(i))
-                    .take(
-                        budget.saturating_sub(idx.iter().filter(|i| !in_use.contains(i)).count()),
-                    ),
-            )
-            .collect();
-        let with = NetCandidates {
-            net: !cfg.skip_net,
-            hybrid: !cfg.skip_net && cfg.hybrid,
-            blend: !cfg.skip_net && cfg.blend,
-        };
-        let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
-        let cv = if folds.len() > 1 {
-            cross_validate(&cache, plan, &folds, &idx, &static_ok, ch, cfg, with)?
-        } else {
-            BTreeMap::new()
-        };
-        pb.finish_and_clear();
-
-        let specs = ranged_specs(&kinds, &full);
-        let mlr = fit_mlr(specs.clone(), &full, ch)?;
-        if let Some(r) = reports.get_mut("mlr") {
-            r.channels
-                .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
-        }
-        if !static_ok.is_empty() {
-            let fs = cache.samples(&plan.runs, &plan.train, &static_ok, ch)?;
-            let vs = cache.samples(&plan.runs, &plan.val, &static_ok, ch)?;
-            let sk: Vec<_> = static_ok.iter().map(|&i| cache.kinds[i].clone()).collect();
-            let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch)?;
-            if let Some(r) = reports.get_mut("mlr-static") {
-                r.channels
-                    .insert(ch.clone(), validate(&m, &vs, plan, &mut r.per_run));
-            }
-            file.mlr_static.push(m);
-        }
-
-        let mut info = ChannelInfo {
-            channel: ch.clone(),
-            features: specs.iter().map(FeatureSpec::name).collect(),
-            train_rows: full.y.len(),
-            val_rows: val.y.len(),
-            cv_rms_um: cv_mse.map(f64::sqrt),
-            cv: cv.clone(),
-            net: None,
-        };
-        let mut hybrid_empty = false;
-        if with.net || with.hybrid {
-            let (inner, block) = plan.inner_block(cfg.es_frac);
-            let inner_s = cache.samples_capped(&plan.runs, &inner, &idx, ch, cfg.net.max_rows)?;
-            let block_s = cache.samples_capped(&plan.runs, &block, &idx, ch, cfg.net.max_rows)?;
-            let full_s = full.strided(cfg.net.max_rows);
-            if with.net {
-                let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
-                let (members, infos) =
-                    train_ensemble(&specs, ch, &inner_s, &block_s, &full_s, &cfg.net, &pb);
-                pb.finish_and_clear();
-                let ens = NetEnsemble {
-                    members: members.iter().collect(),
-                };
-                if let Some(r) = reports.get_mut("ga-bpn") {
-                    r.channels
-                        .insert(ch.clone(), validate(&ens, &val, plan, &mut r.per_run));
-                }
-                info.net = infos.into_iter().next();
-                if let Some(w) = cv.get("blend").and_then(|s| s.weight) {
-                    let b = Blend {
-                        mlr: &mlr,
-                        nets: NetEnsemble {
-                            members: members.iter().collect(),
-                        },
-                        w,
-                    };
-                    if let Some(r) = reports.get_mut("blend") {
-                        r.channels
-                            .insert(ch.clone(), validate(&b, &val, plan, &mut r.per_run));
-                    }
-                    file.blend.insert(ch.clone(), w);
-                }
-                file.nets.extend(members);
-            }
-            if with.hybrid {
-                let pb = progress_bar(cfg.progress, 1, format!("hybrid {ch}"));
-                let members =
-                    train_hybrid(&mlr, &specs, &inner_s, &block_s, &full_s, &cfg.net, &pb);
-                pb.finish_and_clear();
-                if members.is_empty() {
-                    notes.push(format!(
-                        "{ch}: the hybrid's residual networks did not lower the residual on the early-stopping block: the hybrid is the MLR alone"
-                    ));
-                    if let Some(r) = reports.get_mut("hybrid") {
-                        r.channels
-                            .insert(ch.clone(), validate(&mlr, &val, plan, &mut r.per_run));
-                    }
-                } else {
-                    let hyb = Hybrid {
-                        mlr: &mlr,
-                        residual: NetEnsemble {
-                            members: members.iter().collect(),
-                        },
-                    };
-                    if let Some(r) = reports.get_mut("hybrid") {
-                        r.channels
-                            .insert(ch.clone(), validate(&hyb, &val, plan, &mut r.per_run));
-                    }
-                }
-                hybrid_empty = members.is_empty();
-                file.hybrid_nets.extend(members);
-            }
-        }
-        // The choice: cross-validated on training rows, within the board's networks.
-        let mut admissible = cv.clone();
-        admissible.retain(|_, s| !s.dropped);
-        for (name, r, bar) in latest_block_rule(&mut admissible, cfg.choice_margin) {
-            notes.push(format!(
-                "{ch}: {name} is not admissible: RMS {r:.2} µm on the latest training block (the one fold that forecasts forward) against the linear model's {bar:.2} µm"
-            ));
-        }
-        for name in NET_MODELS {
-            if admissible.contains_key(name) && nets_left < ens {
-                admissible.remove(name);
-                notes.push(format!(
-                    "{ch}: {name} is not admissible (the board holds {MAX_NETS} networks, {} in use)",
-                    MAX_NETS - nets_left
-                ));
-            }
-        }
-        let mut chosen =
-            choose_model(&admissible, cfg.choice_margin).unwrap_or_else(|| "mlr".into());
-        if chosen == "hybrid" && hybrid_empty {
-            // The final hybrid kept no networks: it is the lagged MLR.
-            chosen = "mlr".into();
-        }
-        if chosen == "blend" {
-            // All weight on one part: the blend is that part.
-            match file.blend.get(ch) {
-                Some(w) if *w >= 1.0 => chosen = "mlr".into(),
-                Some(w) if *w <= 0.0 => chosen = "ga-bpn".into(),
-                _ => {}
-            }
-        }
-        if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
-            nets_left -= ens;
-        }
-        if chosen == "none" {
-            notes.push(format!(
-                "{ch}: no model beats no compensation by more than {:.0} % in the training CV (RMS {:.2} µm without compensation): the board serves 0 for it (`export --use {ch}=mlr` ships the lagged MLR anyway)",
-                100.0 * cfg.choice_margin,
-                admissible.get("none").map_or(f64::NAN, |s| s.rms_um)
-            ));
-        }
-        let used_idx: &[usize] = match chosen.as_str() {
-            "mlr-static" => &static_ok,
-            "none" => &[],
-            _ => &idx,
-        };
-        for &i in used_idx {
-            if !in_use.contains(&i) {
-                in_use.push(i);
-            }
-        }
-        file.chosen.insert(ch.clone(), chosen);
-        inputs.push(info);
-        file.mlr.push(mlr);
     }
-    // Sensor gaps: the board skips a step when any of the image's sensors is
-    // empty; say where that differs from what each channel trained on.
-    let image_kinds = features::chosen_kinds(&file);
+}
+
+/// Sensor gaps: the board skips a step when any of the image's sensors is
+/// empty; say where that differs from what each channel trained on.
+fn note_image_gaps(plan: &Plan, file: &ModelFile, notes: &mut Vec<String>) -> Result<()> {
+    let image_kinds = features::chosen_kinds(file);
     if let Some(n) = features::image_gap_rows(&plan.runs, &plan.train, &image_kinds)? {
         if n > 0 {
             notes.push(format!(
@@ -491,37 +333,364 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
             ));
         }
     }
-    let mut fallbacks = Vec::new();
-    if cfg.fallbacks {
-        let ctx = fallback::Context {
-            cache: &cache,
-            plan,
-            folds: &folds,
-            static_idx: &static_idx,
-            cfg,
-        };
-        let pb = progress_bar(cfg.progress, 1, "fallback models".into());
-        let (params, reps) =
-            fallback::fit_fallbacks(&ctx, &file, &channels, &mut in_use, &mut notes)?;
-        pb.finish_and_clear();
-        file.fallbacks = params;
-        fallbacks = reps;
+    Ok(())
+}
+
+/// What the channels share while they are fitted one after another.
+struct ChannelFit<'a> {
+    plan: &'a Plan,
+    cfg: &'a FitConfig,
+    cache: &'a SeriesCache,
+    folds: &'a [(Vec<Segment>, Vec<Segment>)],
+    /// Candidates of the static MLR (unlagged rises of the selected sensors).
+    static_idx: &'a [usize],
+    /// Networks per ensemble.
+    ens: usize,
+}
+
+/// What the fit has gathered so far, and the board resources the fitted
+/// channels hold (inputs and networks).
+struct Fitted {
+    reports: BTreeMap<&'static str, ModelReport>,
+    inputs: Vec<ChannelInfo>,
+    file: ModelFile,
+    notes: Vec<String>,
+    /// Candidate indices the chosen models read.
+    in_use: Vec<usize>,
+    nets_left: usize,
+}
+
+impl Fitted {
+    fn new(notes: Vec<String>) -> Fitted {
+        let reports = MODEL_NAMES
+            .iter()
+            .map(|n| {
+                let report = ModelReport {
+                    name: n.to_string(),
+                    channels: BTreeMap::new(),
+                    per_run: vec![],
+                };
+                (*n, report)
+            })
+            .collect();
+        Fitted {
+            reports,
+            inputs: Vec::new(),
+            file: ModelFile::default(),
+            notes,
+            in_use: Vec::new(),
+            nets_left: MAX_NETS,
+        }
     }
-    let models = reports
-        .into_values()
-        .filter(|r| !r.channels.is_empty())
-        .collect();
-    Ok(FitReport {
-        fallbacks,
-        models,
-        inputs,
-        chosen: file.chosen.clone(),
-        notes,
-        selection,
-        train_segments: plan.train.clone(),
-        val_segments: plan.val.clone(),
-        model_file: file,
-    })
+
+    /// Validation figures of model `name` on channel `ch`.
+    fn record<M: Model>(&mut self, name: &str, ch: &str, m: &M, val: &Samples, plan: &Plan) {
+        if let Some(r) = self.reports.get_mut(name) {
+            r.channels
+                .insert(ch.to_string(), validate(m, val, plan, &mut r.per_run));
+        }
+    }
+}
+
+/// One channel's inputs, rows and lagged MLR: what its networks build on.
+struct ChannelRows<'c> {
+    ch: &'c str,
+    idx: &'c [usize],
+    specs: &'c [FeatureSpec],
+    full: &'c Samples,
+    val: &'c Samples,
+    mlr: &'c MlrParams,
+}
+
+impl ChannelFit<'_> {
+    /// Fits every candidate model of channel `ch`, validates them and
+    /// records the one cross-validation chose.
+    fn fit_channel(&self, ch: &str, acc: &mut Fitted) -> Result<()> {
+        let (plan, cfg, cache) = (self.plan, self.cfg, self.cache);
+        if plan.runs[plan.train[0].run].col(ch).is_none() {
+            bail!("fit: training run has no column `{ch}`");
+        }
+        let budget = MAX_INPUTS.saturating_sub(acc.in_use.len());
+        let (idx, cv_mse) = self.channel_inputs(ch, &acc.in_use, budget)?;
+        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
+        let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
+        if full.y.is_empty() || val.y.is_empty() {
+            return Err(self.no_rows_error(ch, &kinds));
+        }
+        let static_ok = static_inputs(self.static_idx, &acc.in_use, &idx, budget);
+        let with = NetCandidates {
+            net: !cfg.skip_net,
+            hybrid: !cfg.skip_net && cfg.hybrid,
+            blend: !cfg.skip_net && cfg.blend,
+        };
+        let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
+        let cv = if self.folds.len() > 1 {
+            cross_validate(cache, plan, self.folds, &idx, &static_ok, ch, cfg, with)?
+        } else {
+            BTreeMap::new()
+        };
+        pb.finish_and_clear();
+
+        let specs = ranged_specs(&kinds, &full);
+        let mlr = fit_mlr(specs.clone(), &full, ch)?;
+        acc.record("mlr", ch, &mlr, &val, plan);
+        if !static_ok.is_empty() {
+            self.fit_static(ch, &static_ok, acc)?;
+        }
+        let mut info = ChannelInfo {
+            channel: ch.to_string(),
+            features: specs.iter().map(FeatureSpec::name).collect(),
+            train_rows: full.y.len(),
+            val_rows: val.y.len(),
+            cv_rms_um: cv_mse.map(f64::sqrt),
+            cv: cv.clone(),
+            net: None,
+        };
+        let rows = ChannelRows {
+            ch,
+            idx: &idx,
+            specs: &specs,
+            full: &full,
+            val: &val,
+            mlr: &mlr,
+        };
+        let mut hybrid_empty = false;
+        if with.net || with.hybrid {
+            hybrid_empty = self.fit_networks(&rows, with, &cv, &mut info, acc)?;
+        }
+        let chosen = self.choose(ch, &cv, hybrid_empty, acc);
+        let used_idx: &[usize] = match chosen.as_str() {
+            "mlr-static" => &static_ok,
+            "none" => &[],
+            _ => &idx,
+        };
+        for &i in used_idx {
+            if !acc.in_use.contains(&i) {
+                acc.in_use.push(i);
+            }
+        }
+        acc.file.chosen.insert(ch.to_string(), chosen);
+        acc.inputs.push(info);
+        acc.file.mlr.push(mlr);
+        Ok(())
+    }
+
+    /// The channel's inputs (indices into the cache) and, for `auto`, the
+    /// cross-validated MSE that chose them.
+    fn channel_inputs(
+        &self,
+        ch: &str,
+        in_use: &[usize],
+        budget: usize,
+    ) -> Result<(Vec<usize>, Option<f64>)> {
+        let cfg = self.cfg;
+        Ok(match cfg.features {
+            FeatureChoice::Auto => {
+                let (i, e) = greedy_select(
+                    self.cache,
+                    &self.plan.runs,
+                    self.folds,
+                    ch,
+                    cfg.max_inputs,
+                    in_use,
+                    budget,
+                )?;
+                (i, Some(e))
+            }
+            FeatureChoice::List(_) => ((0..self.cache.kinds.len()).collect(), None),
+        })
+    }
+
+    /// Fallback models per channel and excluded sensor(s), into the model file.
+    fn fit_fallbacks(
+        &self,
+        channels: &[String],
+        acc: &mut Fitted,
+    ) -> Result<Vec<fallback::FallbackReport>> {
+        let ctx = fallback::Context {
+            cache: self.cache,
+            plan: self.plan,
+            folds: self.folds,
+            static_idx: self.static_idx,
+            cfg: self.cfg,
+        };
+        let pb = progress_bar(self.cfg.progress, 1, "fallback models".into());
+        let (params, reps) =
+            fallback::fit_fallbacks(&ctx, &acc.file, channels, &mut acc.in_use, &mut acc.notes)?;
+        pb.finish_and_clear();
+        acc.file.fallbacks = params;
+        Ok(reps)
+    }
+
+    /// Why channel `ch` has no rows: an input column that never reads
+    /// there, else the channel itself.
+    fn no_rows_error(&self, ch: &str, kinds: &[(FeatureKind, Option<f64>)]) -> anyhow::Error {
+        let plan = self.plan;
+        for (part, segs) in [("training", &plan.train), ("validation", &plan.val)] {
+            for c in kinds.iter().flat_map(|k| k.0.columns()) {
+                let reads = segs.iter().any(|s| {
+                    plan.runs[s.run]
+                        .col(c)
+                        .is_some_and(|v| v[s.start..s.end].iter().any(Option::is_some))
+                });
+                if !reads {
+                    return anyhow::anyhow!("fit: input {c} has no values in the {part} rows");
+                }
+            }
+        }
+        anyhow::anyhow!("fit: channel {ch} has no values in the training or validation rows")
+    }
+
+    /// The static MLR on the inputs `static_ok`.
+    fn fit_static(&self, ch: &str, static_ok: &[usize], acc: &mut Fitted) -> Result<()> {
+        let (plan, cache) = (self.plan, self.cache);
+        let fs = cache.samples(&plan.runs, &plan.train, static_ok, ch)?;
+        let vs = cache.samples(&plan.runs, &plan.val, static_ok, ch)?;
+        let sk: Vec<_> = static_ok.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let m = fit_mlr(ranged_specs(&sk, &fs), &fs, ch)?;
+        acc.record("mlr-static", ch, &m, &vs, plan);
+        acc.file.mlr_static.push(m);
+        Ok(())
+    }
+
+    /// The GA-BPN ensemble (and the blend) and the hybrid, as `with` asks;
+    /// returns whether the hybrid kept no networks.
+    fn fit_networks(
+        &self,
+        c: &ChannelRows,
+        with: NetCandidates,
+        cv: &BTreeMap<String, CvScore>,
+        info: &mut ChannelInfo,
+        acc: &mut Fitted,
+    ) -> Result<bool> {
+        let (plan, cfg, cache, ch) = (self.plan, self.cfg, self.cache, c.ch);
+        let (inner, block) = plan.inner_block(cfg.es_frac);
+        let inner_s = cache.samples_capped(&plan.runs, &inner, c.idx, ch, cfg.net.max_rows)?;
+        let block_s = cache.samples_capped(&plan.runs, &block, c.idx, ch, cfg.net.max_rows)?;
+        let full_s = c.full.strided(cfg.net.max_rows);
+        if with.net {
+            let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
+            let (members, infos) =
+                train_ensemble(c.specs, ch, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+            pb.finish_and_clear();
+            let ens = NetEnsemble {
+                members: members.iter().collect(),
+            };
+            acc.record("ga-bpn", ch, &ens, c.val, plan);
+            info.net = infos.into_iter().next();
+            if let Some(w) = cv.get("blend").and_then(|s| s.weight) {
+                let b = Blend {
+                    mlr: c.mlr,
+                    nets: NetEnsemble {
+                        members: members.iter().collect(),
+                    },
+                    w,
+                };
+                acc.record("blend", ch, &b, c.val, plan);
+                acc.file.blend.insert(ch.to_string(), w);
+            }
+            acc.file.nets.extend(members);
+        }
+        let mut hybrid_empty = false;
+        if with.hybrid {
+            let pb = progress_bar(cfg.progress, 1, format!("hybrid {ch}"));
+            let members = train_hybrid(c.mlr, c.specs, &inner_s, &block_s, &full_s, &cfg.net, &pb);
+            pb.finish_and_clear();
+            if members.is_empty() {
+                acc.notes.push(format!(
+                    "{ch}: the hybrid's residual networks did not lower the residual on the early-stopping block: the hybrid is the MLR alone"
+                ));
+                acc.record("hybrid", ch, c.mlr, c.val, plan);
+            } else {
+                let hyb = Hybrid {
+                    mlr: c.mlr,
+                    residual: NetEnsemble {
+                        members: members.iter().collect(),
+                    },
+                };
+                acc.record("hybrid", ch, &hyb, c.val, plan);
+            }
+            hybrid_empty = members.is_empty();
+            acc.file.hybrid_nets.extend(members);
+        }
+        Ok(hybrid_empty)
+    }
+
+    /// The choice: cross-validated on training rows, within the board's
+    /// networks; takes the chosen model's networks from what is left.
+    fn choose(
+        &self,
+        ch: &str,
+        cv: &BTreeMap<String, CvScore>,
+        hybrid_empty: bool,
+        acc: &mut Fitted,
+    ) -> String {
+        let (margin, ens) = (self.cfg.choice_margin, self.ens);
+        let mut admissible = cv.clone();
+        admissible.retain(|_, s| !s.dropped);
+        for (name, r, bar) in latest_block_rule(&mut admissible, margin) {
+            acc.notes.push(format!(
+                "{ch}: {name} is not admissible: RMS {r:.2} µm on the latest training block (the one fold that forecasts forward) against the linear model's {bar:.2} µm"
+            ));
+        }
+        for name in NET_MODELS {
+            if admissible.contains_key(name) && acc.nets_left < ens {
+                admissible.remove(name);
+                acc.notes.push(format!(
+                    "{ch}: {name} is not admissible (the board holds {MAX_NETS} networks, {} in use)",
+                    MAX_NETS - acc.nets_left
+                ));
+            }
+        }
+        let mut chosen = choose_model(&admissible, margin).unwrap_or_else(|| "mlr".into());
+        if chosen == "hybrid" && hybrid_empty {
+            // The final hybrid kept no networks: it is the lagged MLR.
+            chosen = "mlr".into();
+        }
+        if chosen == "blend" {
+            // All weight on one part: the blend is that part.
+            match acc.file.blend.get(ch) {
+                Some(w) if *w >= 1.0 => chosen = "mlr".into(),
+                Some(w) if *w <= 0.0 => chosen = "ga-bpn".into(),
+                _ => {}
+            }
+        }
+        if chosen == "ga-bpn" || chosen == "hybrid" || chosen == "blend" {
+            acc.nets_left -= ens;
+        }
+        if chosen == "none" {
+            acc.notes.push(format!(
+                "{ch}: no model beats no compensation by more than {:.0} % in the training CV (RMS {:.2} µm without compensation): the board serves 0 for it (`export --use {ch}=mlr` ships the lagged MLR anyway)",
+                100.0 * margin,
+                admissible.get("none").map_or(f64::NAN, |s| s.rms_um)
+            ));
+        }
+        chosen
+    }
+}
+
+/// Static inputs the board can still take: those already in use or among
+/// the channel's inputs `idx`, then new ones up to the input budget.
+fn static_inputs(
+    static_idx: &[usize],
+    in_use: &[usize],
+    idx: &[usize],
+    budget: usize,
+) -> Vec<usize> {
+    let new_inputs = idx.iter().filter(|i| !in_use.contains(i)).count();
+    static_idx
+        .iter()
+        .copied()
+        .filter(|i| in_use.contains(i) || idx.contains(i))
+        .chain(
+            static_idx
+                .iter()
+                .copied()
+                .filter(|i| !in_use.contains(i) && !idx.contains(i))
+                .take(budget.saturating_sub(new_inputs)),
+        )
+        .collect()
 }
 
 /// Plain-text report.
