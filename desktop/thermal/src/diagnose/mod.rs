@@ -4,14 +4,18 @@
 //! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
 
 pub mod calibrate;
+pub mod candidate;
 pub mod effect_fit;
 pub mod fitmode;
 pub mod ident;
+mod ident_fit;
 pub mod lag;
 pub mod open_effects;
 pub mod prep;
 pub mod render;
+pub mod sensor_step;
 pub mod series;
+pub mod speed_law;
 pub mod stats;
 
 use anyhow::{bail, Result};

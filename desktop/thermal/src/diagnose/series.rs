@@ -137,135 +137,206 @@ fn sensor_columns(run: &Run) -> Vec<String> {
         .collect()
 }
 
+/// Which inputs every run carries (a column only some runs have is left out).
+#[derive(Clone, Copy)]
+struct Present {
+    rpm: bool,
+    feed: bool,
+    coolant: bool,
+    ambient: bool,
+}
+
+/// Channel names pooled over the runs read so far, and the notes.
+#[derive(Default)]
+struct Pooled {
+    sensors: Vec<String>,
+    disps: Vec<String>,
+    notes: Vec<String>,
+}
+
 /// Read runs into a dataset. `max_rows`: block-average longer runs.
 pub fn load(runs: &[(String, Run)], max_rows: usize) -> Result<Dataset> {
     if runs.is_empty() {
         bail!("no runs given");
     }
-    let mut sensors: Vec<String> = Vec::new();
-    let mut disps: Vec<String> = Vec::new();
-    let mut notes = Vec::new();
-    let mut out = Vec::new();
     let all = |name: &str| runs.iter().all(|(_, r)| r.col(name).is_some());
-    let any = |name: &str| runs.iter().any(|(_, r)| r.col(name).is_some());
-    let has_rpm = all("spindle_rpm");
-    let has_feed = all("feed_activity");
-    let has_coolant = all("coolant_on");
-    let has_ambient = all(AMBIENT_COLUMN);
+    let present = Present {
+        rpm: all("spindle_rpm"),
+        feed: all("feed_activity"),
+        coolant: all("coolant_on"),
+        ambient: all(AMBIENT_COLUMN),
+    };
+    let mut pooled = Pooled::default();
+    let mut out = Vec::new();
     for (name, run) in runs {
-        let t = run.time_s();
-        if t.len() < 20 {
-            bail!("run {name}: needs at least 20 rows, has {}", t.len());
-        }
-        let mut diffs: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        diffs.sort_by(|a, b| a.total_cmp(b));
-        let dt = diffs[diffs.len() / 2];
-        let worst = diffs
-            .iter()
-            .map(|d| (d - dt).abs() / dt)
-            .fold(0.0, f64::max);
-        if worst > 0.1 {
-            notes.push(format!(
-                "{name}: sampling is not uniform (median {dt} s, worst deviation {:.0} %); rows treated as uniform",
-                worst * 100.0
-            ));
-        }
-        let n = t.len();
-        let f = n.div_ceil(max_rows.max(20)).max(1);
-        let starts: Vec<usize> = (0..n).step_by(f).collect();
-        // block mean over finite values (NaN when the block has none)
-        let avg = |v: &[f64]| block_means(v, f);
-        let raw = |c: &str| -> Vec<f64> {
-            run.col(c)
-                .map(|v| v.iter().map(|x| x.unwrap_or(f64::NAN)).collect())
-                .unwrap_or_default()
-        };
-        let input = |c: &str, present: bool| -> Option<Vec<f64>> {
-            if !present {
-                return None;
-            }
-            Some(avg(&held_column(run, c).unwrap_or_else(|| vec![0.0; n])))
-        };
-        let mut run_sensors = Vec::new();
-        for c in sensor_columns(run) {
-            if !sensors.contains(&c) {
-                sensors.push(c.clone());
-            }
-            run_sensors.push(Signal {
-                values: avg(&raw(&c)),
-                name: c,
-            });
-        }
-        let absolute = run.meta("error_reference") == Some("absolute");
-        let mut run_disps = Vec::new();
-        for c in run.error_columns() {
-            let c = c.to_string();
-            if !disps.contains(&c) {
-                disps.push(c.clone());
-            }
-            let v = raw(&c);
-            // rises against the run's start (the format's reference; an
-            // absolute column is re-zeroed the same way)
-            let first: Vec<f64> = v
-                .iter()
-                .copied()
-                .filter(|x| x.is_finite())
-                .take(3)
-                .collect();
-            let z = if first.is_empty() {
-                0.0
-            } else {
-                first.iter().sum::<f64>() / first.len() as f64
-            };
-            let v: Vec<f64> = v.iter().map(|x| x - z).collect();
-            run_disps.push(Signal {
-                values: avg(&v),
-                name: c,
-            });
-        }
-        if absolute && !run_disps.is_empty() {
-            notes.push(format!(
-                "{name}: error_reference is absolute; displacements taken as rises from their first valid samples"
-            ));
-        }
-        if run_sensors.is_empty() {
-            bail!(
-                "run {name}: no temperature sensor column (`T_<name>` other than `{AMBIENT_COLUMN}`)"
-            );
-        }
-        let rows = starts.len();
-        let held = (0..rows)
-            .map(|k| HELD_BLOCKS.contains(&(k * BLOCKS / rows)))
-            .collect();
-        out.push(RunData {
-            name: name.clone(),
-            dt: dt * f as f64,
-            decimation: f,
-            time: starts.iter().map(|&s| t[s]).collect(),
-            rpm: input("spindle_rpm", has_rpm),
-            feed: input("feed_activity", has_feed),
-            coolant: input("coolant_on", has_coolant).map(|v| {
-                v.into_iter()
-                    .map(|c| if c >= 0.5 { 1.0 } else { 0.0 })
-                    .collect()
-            }),
-            ambient: input(AMBIENT_COLUMN, has_ambient),
-            sensors: run_sensors,
-            disps: run_disps,
-            held,
-        });
+        out.push(load_run(name, run, max_rows, present, &mut pooled)?);
     }
+    let Pooled {
+        mut sensors,
+        mut disps,
+        mut notes,
+    } = pooled;
     if let Some(f) = out.iter().map(|r| r.decimation).max().filter(|f| *f > 1) {
         notes.push(format!(
             "runs block-averaged by up to {f} rows for identification"
         ));
     }
-    let mut missing = Vec::new();
-    // a channel that is dead or stuck in some run (`unusable_channel`)
-    // cannot be identified there: it is left out of the whole diagnosis and
-    // said so, rather than failing the fit or fitting a frozen value
+    let mut missing = leave_out_unusable(&mut out, &mut sensors, &mut disps);
+    if sensors.is_empty() {
+        bail!("no temperature sensor reads in at least half the rows of every run");
+    }
+    missing.extend(missing_inputs(runs, present));
+    if disps.is_empty() {
+        missing.push(
+            "no displacement column (d<name>_um): every figure is in °C; nothing can be said in µm"
+                .into(),
+        );
+    }
+    Ok(Dataset {
+        runs: out,
+        sensors,
+        disps,
+        has_rpm: present.rpm,
+        has_feed: present.feed,
+        has_coolant: present.coolant,
+        has_ambient: present.ambient,
+        missing,
+        notes,
+    })
+}
+
+/// The median sampling period of a run [s], with a note when the rows are
+/// not uniform.
+fn median_period(name: &str, t: &[f64], notes: &mut Vec<String>) -> f64 {
+    let mut diffs: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    diffs.sort_by(|a, b| a.total_cmp(b));
+    let dt = diffs[diffs.len() / 2];
+    let worst = diffs
+        .iter()
+        .map(|d| (d - dt).abs() / dt)
+        .fold(0.0, f64::max);
+    if worst > 0.1 {
+        notes.push(format!(
+            "{name}: sampling is not uniform (median {dt} s, worst deviation {:.0} %); rows treated as uniform",
+            worst * 100.0
+        ));
+    }
+    dt
+}
+
+/// A displacement as its rise against the run's start (the mean of its
+/// first three valid samples; the format's reference, and an absolute
+/// column is re-zeroed the same way).
+fn rise_from_start(v: &[f64]) -> Vec<f64> {
+    let first: Vec<f64> = v
+        .iter()
+        .copied()
+        .filter(|x| x.is_finite())
+        .take(3)
+        .collect();
+    let z = if first.is_empty() {
+        0.0
+    } else {
+        first.iter().sum::<f64>() / first.len() as f64
+    };
+    v.iter().map(|x| x - z).collect()
+}
+
+/// One run on its decimated grid; its channel names join `pooled`.
+fn load_run(
+    name: &str,
+    run: &Run,
+    max_rows: usize,
+    present: Present,
+    pooled: &mut Pooled,
+) -> Result<RunData> {
+    let t = run.time_s();
+    if t.len() < 20 {
+        bail!("run {name}: needs at least 20 rows, has {}", t.len());
+    }
+    let dt = median_period(name, &t, &mut pooled.notes);
+    let n = t.len();
+    let f = n.div_ceil(max_rows.max(20)).max(1);
+    let starts: Vec<usize> = (0..n).step_by(f).collect();
+    // block mean over finite values (NaN when the block has none)
+    let avg = |v: &[f64]| block_means(v, f);
+    let raw = |c: &str| -> Vec<f64> {
+        run.col(c)
+            .map(|v| v.iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+            .unwrap_or_default()
+    };
+    let input = |c: &str, present: bool| -> Option<Vec<f64>> {
+        if !present {
+            return None;
+        }
+        Some(avg(&held_column(run, c).unwrap_or_else(|| vec![0.0; n])))
+    };
+    let mut run_sensors = Vec::new();
+    for c in sensor_columns(run) {
+        if !pooled.sensors.contains(&c) {
+            pooled.sensors.push(c.clone());
+        }
+        run_sensors.push(Signal {
+            values: avg(&raw(&c)),
+            name: c,
+        });
+    }
+    let absolute = run.meta("error_reference") == Some("absolute");
+    let mut run_disps = Vec::new();
+    for c in run.error_columns() {
+        let c = c.to_string();
+        if !pooled.disps.contains(&c) {
+            pooled.disps.push(c.clone());
+        }
+        run_disps.push(Signal {
+            values: avg(&rise_from_start(&raw(&c))),
+            name: c,
+        });
+    }
+    if absolute && !run_disps.is_empty() {
+        pooled.notes.push(format!(
+            "{name}: error_reference is absolute; displacements taken as rises from their first valid samples"
+        ));
+    }
+    if run_sensors.is_empty() {
+        bail!(
+            "run {name}: no temperature sensor column (`T_<name>` other than `{AMBIENT_COLUMN}`)"
+        );
+    }
+    let rows = starts.len();
+    let held = (0..rows)
+        .map(|k| HELD_BLOCKS.contains(&(k * BLOCKS / rows)))
+        .collect();
+    Ok(RunData {
+        name: name.to_string(),
+        dt: dt * f as f64,
+        decimation: f,
+        time: starts.iter().map(|&s| t[s]).collect(),
+        rpm: input("spindle_rpm", present.rpm),
+        feed: input("feed_activity", present.feed),
+        coolant: input("coolant_on", present.coolant).map(|v| {
+            v.into_iter()
+                .map(|c| if c >= 0.5 { 1.0 } else { 0.0 })
+                .collect()
+        }),
+        ambient: input(AMBIENT_COLUMN, present.ambient),
+        sensors: run_sensors,
+        disps: run_disps,
+        held,
+    })
+}
+
+/// Leave out every channel that is dead or stuck in some run
+/// (`unusable_channel`): it cannot be identified there, so it is left out
+/// of the whole diagnosis and said so, rather than failing the fit or
+/// fitting a frozen value. Returns one line per channel left out.
+fn leave_out_unusable(
+    out: &mut [RunData],
+    sensors: &mut Vec<String>,
+    disps: &mut Vec<String>,
+) -> Vec<String> {
     let mut sparse: Vec<(String, String, String)> = Vec::new();
-    for r in &out {
+    for r in out.iter() {
         let moving = r
             .sensors
             .iter()
@@ -283,61 +354,49 @@ pub fn load(runs: &[(String, Run)], max_rows: usize) -> Result<Dataset> {
             }
         }
     }
-    for (c, run, why) in &sparse {
-        missing.push(format!(
-            "{c} {why} of run {run} (identification rows): left out (a channel must read, and change, in at least half the rows of every run)"
-        ));
-    }
     let kept = |n: &String| !sparse.iter().any(|x| &x.0 == n);
     sensors.retain(kept);
     disps.retain(kept);
-    for r in &mut out {
+    for r in out.iter_mut() {
         r.sensors.retain(|sig| kept(&sig.name));
         r.disps.retain(|sig| kept(&sig.name));
     }
-    if sensors.is_empty() {
-        bail!("no temperature sensor reads in at least half the rows of every run");
-    }
+    sparse
+        .iter()
+        .map(|(c, run, why)| format!(
+            "{c} {why} of run {run} (identification rows): left out (a channel must read, and change, in at least half the rows of every run)"
+        ))
+        .collect()
+}
+
+/// One line per input not in every run: what is missing and what that costs.
+fn missing_inputs(runs: &[(String, Run)], present: Present) -> Vec<String> {
+    let any = |name: &str| runs.iter().any(|(_, r)| r.col(name).is_some());
     let partly = |c: &str| if any(c) { " in every run" } else { "" };
-    if !has_rpm {
+    let mut missing = Vec::new();
+    if !present.rpm {
         missing.push(format!(
             "no spindle_rpm{}: the heat input is not observed, so each sensor is predicted from the other sensors and displacement from the sensors; speed nonlinearity and effects common to all sensors cannot be tested",
             partly("spindle_rpm")
         ));
     }
-    if !has_ambient {
+    if !present.ambient {
         missing.push(format!(
             "no {AMBIENT_COLUMN}{}: the room temperature is not an input, so its changes stay in the residual and ambient drift cannot be told from the room itself",
             partly(AMBIENT_COLUMN)
         ));
     }
-    if !has_feed {
+    if !present.feed {
         missing.push(format!(
             "no feed_activity{}: heat from the axes is not an input; it is absorbed where it follows the spindle, else left in the residual",
             partly("feed_activity")
         ));
     }
-    if !has_coolant {
+    if !present.coolant {
         missing.push(format!(
             "no coolant_on{}: coolant switching is not an input; a periodic coolant/chiller drive is searched in each sensor's own spectrum",
             partly("coolant_on")
         ));
     }
-    if disps.is_empty() {
-        missing.push(
-            "no displacement column (d<name>_um): every figure is in °C; nothing can be said in µm"
-                .into(),
-        );
-    }
-    Ok(Dataset {
-        runs: out,
-        sensors,
-        disps,
-        has_rpm,
-        has_feed,
-        has_coolant,
-        has_ambient,
-        missing,
-        notes,
-    })
+    missing
 }

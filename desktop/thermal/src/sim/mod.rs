@@ -229,147 +229,222 @@ pub fn steady_state(m: &Machine, q: &[f64], ta: f64, effects: &[Effect]) -> Resu
 pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) -> Result<SimOut> {
     let stride = stride.max(1);
     let act = activate(m, effects)?;
-    let n = m.n;
     let dt = inp.dt;
-    let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
-    // conductance to the coolant per node: the circuit's jackets while it
-    // flows, the `coolant` effect while it is on; Φ, Ψ per combination
-    let mut g_jacket = vec![0.0; n];
-    if let Some(c) = &m.coolant {
-        for &(i, g) in &c.jacket {
-            g_jacket[i] += g;
-        }
-    }
-    let mut g_cool = vec![0.0; n];
-    if let Some((g, ..)) = act.cool {
-        for &i in &m.coolant_nodes {
-            g_cool[i] += g / m.coolant_nodes.len() as f64;
-        }
-    }
-    let mut mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4] = Default::default();
-    for (key, slot) in mats.iter_mut().enumerate() {
-        let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
-        if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
-            continue;
-        }
-        let g: Vec<f64> = (0..n)
-            .map(|i| (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 })
-            .collect();
-        *slot = Some(discretize_cached(&state_matrix(m, &g_amb, &g), dt)?);
-    }
-    let circuit = m.coolant.as_ref();
-    let supply = circuit.map_or(0.0, |c| c.supply_c);
-    // coolant temperature (the set point unless the chiller cycles)
-    let mut t_cool = supply;
-    let mut chiller_on = false;
-    // initial equilibrium at rest
-    // (a circuit that flows `always` holds its jackets towards the supply)
+    let net = Network::new(m, &act, dt)?;
     let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
-    let at_rest = circuit.is_some_and(|c| c.flows == machine::Flow::Always);
-    let g_rest: Vec<f64> = (0..n)
-        .map(|i| g_amb[i] + if at_rest { g_jacket[i] } else { 0.0 })
-        .collect();
-    let rhs: Vec<f64> = (0..n)
-        .map(|i| {
-            g_amb[i] * (ta0 + m.amb_offset[i]) + if at_rest { g_jacket[i] * supply } else { 0.0 }
-        })
-        .collect();
-    let mut x = DVector::from_vec(
-        solve(conductance(m, &g_rest), &rhs)
-            .map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
-    );
-    let x0 = x.clone();
+    let mut state = State::new(net.rest_state(ta0)?, net.supply);
     let k_total = inp.len();
-    let n_out = k_total.div_ceil(stride);
-    let ns = m.sensor_cols.len();
-    let nd = m.dir_cols.len();
-    let mut temps = vec![Vec::with_capacity(n_out); ns];
-    let mut disp = vec![Vec::with_capacity(n_out); nd];
-    let mut ts = Vec::with_capacity(n_out);
-    let mut q = vec![0.0; n];
-    let mut b = DVector::<f64>::zeros(n);
-    let mut next = DVector::<f64>::zeros(n);
-    let n_max = m.spec.n_max_rpm;
-    let n_screw = m.ballscrew_nodes.len().max(1) as f64;
-    let mut last_rpm = f64::NAN;
-    let base = mats[0]
-        .take()
-        .ok_or_else(|| anyhow::anyhow!("thermal network: no base discretisation"))?;
-    let feed_sources = m
-        .spec
-        .sources
-        .iter()
-        .any(|s| s.driver == machine::Driver::Feed);
-    let mut qf = vec![0.0; n];
+    let mut rec = Recorder::new(m, act.bend, state.x.clone(), k_total.div_ceil(stride));
     for k in 0..k_total {
         let t = inp.time(k);
         if k % stride == 0 {
             let amb_now = inp.ambient[k] + drift_at(&act.drift, t);
-            ts.push(t);
-            for (s, probe) in m.sensor_probe.iter().enumerate() {
-                temps[s].push(match probe {
-                    Probe::Node(i) => x[*i],
-                    Probe::Ambient => amb_now,
-                    Probe::Coolant => t_cool,
-                });
-            }
-            for (d, terms) in m.dir_terms.iter().enumerate() {
-                let mut v = 0.0;
-                for &(i, al) in terms {
-                    v += al * (x[i] - x0[i]);
-                }
-                if let Some((a, bn, di)) = m.bending {
-                    if di == d {
-                        v += act.bend * ((x[a] - x0[a]) - (x[bn] - x0[bn]));
-                    }
-                }
-                disp[d].push(v);
-            }
+            rec.record(t, amb_now, &state.x, state.t_cool);
         }
         if k + 1 == k_total {
             break;
         }
+        net.step(inp, k, t, &mut state);
+    }
+    let mut out = rec.out;
+    sensor_post(&act, &mut out, dt * stride as f64);
+    Ok(out)
+}
+
+/// The network under the active effects: its conductances to ambient and
+/// to the coolant, and its step matrices `(Φ, Ψ)` for every combination of
+/// coolant flows.
+struct Network<'a> {
+    m: &'a Machine,
+    act: &'a Active,
+    g_amb: Vec<f64>,
+    /// Conductance to the coolant per node while the circuit flows (its jackets).
+    g_jacket: Vec<f64>,
+    /// Conductance to the coolant per node while the `coolant` effect is on.
+    g_cool: Vec<f64>,
+    /// `(Φ, Ψ)` indexed by `flowing | cool_on << 1`, the base (neither) taken out.
+    mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4],
+    base: (DMatrix<f64>, DMatrix<f64>),
+    /// Coolant set point (0 without a circuit).
+    supply: f64,
+    n_screw: f64,
+    feed_sources: bool,
+}
+
+/// What changes from step to step: the node temperatures, the coolant tank
+/// and the scratch vectors of the stepping loop.
+struct State {
+    x: DVector<f64>,
+    next: DVector<f64>,
+    /// Forcing `Ψ` multiplies, per node [K/s].
+    b: DVector<f64>,
+    /// Spindle heat per node [W] at `last_rpm`.
+    q: Vec<f64>,
+    /// Feed heat per node [W] (scratch).
+    qf: Vec<f64>,
+    last_rpm: f64,
+    /// Coolant temperature (the set point unless the chiller cycles).
+    t_cool: f64,
+    chiller_on: bool,
+}
+
+impl State {
+    fn new(x: DVector<f64>, supply: f64) -> State {
+        let n = x.len();
+        State {
+            next: DVector::zeros(n),
+            b: DVector::zeros(n),
+            q: vec![0.0; n],
+            qf: vec![0.0; n],
+            x,
+            last_rpm: f64::NAN,
+            t_cool: supply,
+            chiller_on: false,
+        }
+    }
+}
+
+impl<'a> Network<'a> {
+    fn new(m: &'a Machine, act: &'a Active, dt: f64) -> Result<Network<'a>> {
+        let n = m.n;
+        let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
+        // conductance to the coolant per node: the circuit's jackets while it
+        // flows, the `coolant` effect while it is on; Φ, Ψ per combination
+        let mut g_jacket = vec![0.0; n];
+        if let Some(c) = &m.coolant {
+            for &(i, g) in &c.jacket {
+                g_jacket[i] += g;
+            }
+        }
+        let mut g_cool = vec![0.0; n];
+        if let Some((g, ..)) = act.cool {
+            for &i in &m.coolant_nodes {
+                g_cool[i] += g / m.coolant_nodes.len() as f64;
+            }
+        }
+        let mut mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4] = Default::default();
+        for (key, slot) in mats.iter_mut().enumerate() {
+            let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
+            if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
+                continue;
+            }
+            let g: Vec<f64> = (0..n)
+                .map(|i| {
+                    (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 }
+                })
+                .collect();
+            *slot = Some(discretize_cached(&state_matrix(m, &g_amb, &g), dt)?);
+        }
+        let base = mats[0]
+            .take()
+            .ok_or_else(|| anyhow::anyhow!("thermal network: no base discretisation"))?;
+        Ok(Network {
+            m,
+            act,
+            g_amb,
+            g_jacket,
+            g_cool,
+            mats,
+            base,
+            supply: m.coolant.as_ref().map_or(0.0, |c| c.supply_c),
+            n_screw: m.ballscrew_nodes.len().max(1) as f64,
+            feed_sources: m
+                .spec
+                .sources
+                .iter()
+                .any(|s| s.driver == machine::Driver::Feed),
+        })
+    }
+
+    /// Equilibrium at rest with ambient `ta0` (a circuit that flows
+    /// `always` holds its jackets towards the supply).
+    fn rest_state(&self, ta0: f64) -> Result<DVector<f64>> {
+        let m = self.m;
+        let (g_amb, g_jacket, supply) = (&self.g_amb, &self.g_jacket, self.supply);
+        let at_rest = m
+            .coolant
+            .as_ref()
+            .is_some_and(|c| c.flows == machine::Flow::Always);
+        let g_rest: Vec<f64> = (0..m.n)
+            .map(|i| g_amb[i] + if at_rest { g_jacket[i] } else { 0.0 })
+            .collect();
+        let rhs: Vec<f64> = (0..m.n)
+            .map(|i| {
+                g_amb[i] * (ta0 + m.amb_offset[i])
+                    + if at_rest { g_jacket[i] * supply } else { 0.0 }
+            })
+            .collect();
+        Ok(DVector::from_vec(
+            solve(conductance(m, &g_rest), &rhs)
+                .map_err(|e| anyhow::anyhow!("thermal network: {e}"))?,
+        ))
+    }
+
+    /// Spindle heat per node [W] at speed `rpm`: the nominal sources and
+    /// the `bearing_nonlinear` extra.
+    fn spindle_heat(&self, rpm: f64, q: &mut [f64]) {
+        self.m.heat_nominal(rpm, q);
+        if rpm > 0.0 {
+            let n_max = self.m.spec.n_max_rpm;
+            for (kw, p, at) in &self.act.bnl {
+                let extra = kw * (rpm / n_max).powf(*p);
+                for &bn in at {
+                    q[bn] += extra;
+                }
+            }
+        }
+    }
+
+    /// One step from row `k` (time `t`) to the next.
+    fn step(&self, inp: &Inputs, k: usize, t: f64, s: &mut State) {
+        let dt = inp.dt;
         let tm = t + 0.5 * dt;
         let rpm = inp.rpm[k];
-        if rpm != last_rpm {
-            m.heat_nominal(rpm, &mut q);
-            if rpm > 0.0 {
-                for (kw, p, at) in &act.bnl {
-                    let extra = kw * (rpm / n_max).powf(*p);
-                    for &bn in at {
-                        q[bn] += extra;
-                    }
-                }
+        if rpm != s.last_rpm {
+            self.spindle_heat(rpm, &mut s.q);
+            s.last_rpm = rpm;
+        }
+        let ta = inp.ambient[k] + drift_at(&self.act.drift, tm);
+        let (flowing, cool_on) = self.forcing(inp, k, tm, ta, s);
+        let key = usize::from(flowing) | (usize::from(cool_on) << 1);
+        let (phi, psi) = self.mats[key].as_ref().unwrap_or(&self.base);
+        self.chiller_step(s, ta, flowing, dt);
+        s.next.gemv(1.0, phi, &s.x, 0.0);
+        s.next.gemv(1.0, psi, &s.b, 1.0);
+        std::mem::swap(&mut s.x, &mut s.next);
+    }
+
+    /// The forcing `b` of row `k` (mid-step time `tm`, ambient `ta`): heat,
+    /// ambient, and the coolant where it flows. Returns whether the circuit
+    /// flows and whether the `coolant` effect is on.
+    fn forcing(&self, inp: &Inputs, k: usize, tm: f64, ta: f64, s: &mut State) -> (bool, bool) {
+        let m = self.m;
+        for i in 0..m.n {
+            s.b[i] = (s.q[i] + self.g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
+        }
+        if self.feed_sources && inp.feed[k] > 0.0 {
+            s.qf.iter_mut().for_each(|v| *v = 0.0);
+            m.heat_feed(inp.feed[k], &mut s.qf);
+            for i in 0..m.n {
+                s.b[i] += s.qf[i] / m.c[i];
             }
-            last_rpm = rpm;
         }
-        let ta = inp.ambient[k] + drift_at(&act.drift, tm);
-        for i in 0..n {
-            b[i] = (q[i] + g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
-        }
-        if feed_sources && inp.feed[k] > 0.0 {
-            qf.iter_mut().for_each(|v| *v = 0.0);
-            m.heat_feed(inp.feed[k], &mut qf);
-            for i in 0..n {
-                b[i] += qf[i] / m.c[i];
-            }
-        }
-        if act.screw != 0.0 && inp.feed[k] != 0.0 {
+        if self.act.screw != 0.0 && inp.feed[k] != 0.0 {
             for &i in &m.ballscrew_nodes {
-                b[i] += act.screw * inp.feed[k] / n_screw / m.c[i];
+                s.b[i] += self.act.screw * inp.feed[k] / self.n_screw / m.c[i];
             }
         }
-        let flowing = m.coolant_flows(rpm, inp.coolant[k]);
+        let flowing = m.coolant_flows(inp.rpm[k], inp.coolant[k]);
         if flowing {
-            for (i, g) in g_jacket.iter().enumerate() {
+            for (i, g) in self.g_jacket.iter().enumerate() {
                 if *g > 0.0 {
-                    b[i] += g * t_cool / m.c[i];
+                    s.b[i] += g * s.t_cool / m.c[i];
                 }
             }
         }
-        let cool_on = match act.cool {
+        let cool_on = match self.act.cool {
             Some((_, off, amp, per)) => {
-                let on = if circuit.is_some() {
+                let on = if m.coolant.is_some() {
                     flowing
                 } else {
                     inp.coolant[k] > 0.5
@@ -377,55 +452,104 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
                 if on {
                     let tc = ta + off + saw(tm, amp, per);
                     for &i in &m.coolant_nodes {
-                        b[i] += g_cool[i] * tc / m.c[i];
+                        s.b[i] += self.g_cool[i] * tc / m.c[i];
                     }
                 }
                 on
             }
             None => false,
         };
-        let key = usize::from(flowing) | (usize::from(cool_on) << 1);
-        let (phi, psi) = mats[key].as_ref().unwrap_or(&base);
-        // the tank under a cycling chiller (its time constant is hours:
-        // the jackets' heat is taken at the step's start; the thermostat
-        // switches at the exact crossing of its band within the step)
-        if let (Some((band, power, load)), Some(c)) = (act.chiller, circuit) {
-            let mut g_in = 0.0;
-            let mut q_in = c.tank_g_amb * ta + load * power;
-            if flowing {
-                for &(i, g) in &c.jacket {
-                    g_in += g;
-                    q_in += g * x[i];
-                }
-            }
-            let g_tot = c.tank_g_amb + g_in;
-            let (lo, hi) = (supply - band / 2.0, supply + band / 2.0);
-            let mut rem = dt;
-            for _ in 0..3 {
-                let slope =
-                    (q_in - g_tot * t_cool - if chiller_on { power } else { 0.0 }) / c.tank_c;
-                let end = t_cool + slope * rem;
-                if chiller_on && slope < 0.0 && end < lo {
-                    rem -= (lo - t_cool) / slope;
-                    t_cool = lo;
-                    chiller_on = false;
-                } else if !chiller_on && slope > 0.0 && end > hi {
-                    rem -= (hi - t_cool) / slope;
-                    t_cool = hi;
-                    chiller_on = true;
-                } else {
-                    t_cool = end;
-                    break;
-                }
+        (flowing, cool_on)
+    }
+
+    /// The tank under a cycling chiller over one step of `dt` (its time
+    /// constant is hours: the jackets' heat is taken at the step's start;
+    /// the thermostat switches at the exact crossing of its band within
+    /// the step). Nothing without a chiller.
+    fn chiller_step(&self, s: &mut State, ta: f64, flowing: bool, dt: f64) {
+        let (Some((band, power, load)), Some(c)) = (self.act.chiller, self.m.coolant.as_ref())
+        else {
+            return;
+        };
+        let mut g_in = 0.0;
+        let mut q_in = c.tank_g_amb * ta + load * power;
+        if flowing {
+            for &(i, g) in &c.jacket {
+                g_in += g;
+                q_in += g * s.x[i];
             }
         }
-        next.gemv(1.0, phi, &x, 0.0);
-        next.gemv(1.0, psi, &b, 1.0);
-        std::mem::swap(&mut x, &mut next);
+        let g_tot = c.tank_g_amb + g_in;
+        let (lo, hi) = (self.supply - band / 2.0, self.supply + band / 2.0);
+        let mut rem = dt;
+        for _ in 0..3 {
+            let slope =
+                (q_in - g_tot * s.t_cool - if s.chiller_on { power } else { 0.0 }) / c.tank_c;
+            let end = s.t_cool + slope * rem;
+            if s.chiller_on && slope < 0.0 && end < lo {
+                rem -= (lo - s.t_cool) / slope;
+                s.t_cool = lo;
+                s.chiller_on = false;
+            } else if !s.chiller_on && slope > 0.0 && end > hi {
+                rem -= (hi - s.t_cool) / slope;
+                s.t_cool = hi;
+                s.chiller_on = true;
+            } else {
+                s.t_cool = end;
+                break;
+            }
+        }
     }
-    let mut out = SimOut { temps, disp, t: ts };
-    sensor_post(&act, &mut out, dt * stride as f64);
-    Ok(out)
+}
+
+/// The output samples of a simulation as they are taken.
+struct Recorder<'a> {
+    m: &'a Machine,
+    /// Gain of the `bending` effect.
+    bend: f64,
+    /// Node temperatures at the start: displacements are rises from them.
+    x0: DVector<f64>,
+    out: SimOut,
+}
+
+impl<'a> Recorder<'a> {
+    fn new(m: &'a Machine, bend: f64, x0: DVector<f64>, n_out: usize) -> Recorder<'a> {
+        Recorder {
+            m,
+            bend,
+            x0,
+            out: SimOut {
+                temps: vec![Vec::with_capacity(n_out); m.sensor_cols.len()],
+                disp: vec![Vec::with_capacity(n_out); m.dir_cols.len()],
+                t: Vec::with_capacity(n_out),
+            },
+        }
+    }
+
+    /// Sensor readings and displacements at time `t` for node temperatures `x`.
+    fn record(&mut self, t: f64, amb_now: f64, x: &DVector<f64>, t_cool: f64) {
+        let (m, x0) = (self.m, &self.x0);
+        self.out.t.push(t);
+        for (s, probe) in m.sensor_probe.iter().enumerate() {
+            self.out.temps[s].push(match probe {
+                Probe::Node(i) => x[*i],
+                Probe::Ambient => amb_now,
+                Probe::Coolant => t_cool,
+            });
+        }
+        for (d, terms) in m.dir_terms.iter().enumerate() {
+            let mut v = 0.0;
+            for &(i, al) in terms {
+                v += al * (x[i] - x0[i]);
+            }
+            if let Some((a, bn, di)) = m.bending {
+                if di == d {
+                    v += self.bend * ((x[a] - x0[a]) - (x[bn] - x0[bn]));
+                }
+            }
+            self.out.disp[d].push(v);
+        }
+    }
 }
 
 /// Sensor lag (first-order, exact for a signal linear between samples)
