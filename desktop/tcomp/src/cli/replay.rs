@@ -16,6 +16,9 @@ pub struct ReplayArgs {
     /// `T_t4@60%` (from that fraction of the rows); repeatable.
     #[arg(long = "fail-sensor", value_name = "NAME@TIME")]
     pub fail_sensor: Vec<String>,
+    /// Probe references at a gauge and operator re-zeros (issue 28).
+    #[command(flatten)]
+    pub reference: tcomp_model::reference_replay::ReferenceArgs,
     #[arg(long)]
     pub json: bool,
 }
@@ -27,6 +30,7 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
         from,
         to,
         fail_sensor,
+        reference,
         json,
     } = args;
     // Run file first, then image: each refusal names its own file.
@@ -54,11 +58,16 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
     );
     let res = tcomp_model::replay::residuals(&table, &rows, &model, a, b);
     let flags = tcomp_model::replay::flag_counts(&rows, a, b);
+    let refs = reference
+        .is_active()
+        .then(|| tcomp_model::reference_replay::score(&table, &rows, &model, &reference, a, b))
+        .transpose()?;
     if json {
-        println!(
-            "{}",
-            serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags, "notes": notes})
-        );
+        let mut v = serde_json::json!({"rows": n, "scored_rows": [a, b], "failed_sensors": fail_sensor, "channels": res, "status_rows": flags, "notes": notes});
+        if let Some(r) = &refs {
+            v["references"] = serde_json::to_value(r)?;
+        }
+        println!("{v}");
     } else {
         println!("{} samples compensated; scored rows {a}..{b}", n);
         for note in &notes {
@@ -87,6 +96,9 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
             "  status rows: {} valid, {} out of envelope, {} clamped, {} rate limited, {} stale, {} sensor fault, {} degraded",
             flags.valid, flags.out_of_envelope, flags.clamped, flags.rate_limited, flags.stale, flags.sensor_fault, flags.degraded
         );
+        if let Some(r) = &refs {
+            r.print();
+        }
     }
     Ok(())
 }
