@@ -50,49 +50,82 @@ struct Knob {
     target: Target,
 }
 
-fn knobs(m: &Machine) -> Vec<Knob> {
+/// Knobs by how fine they are: `common` always apply; `element` (one per
+/// element) when they fit under `MAX_KNOBS` together with `common`,
+/// otherwise `grouped` (one per kind of element).
+#[derive(Default)]
+struct KnobSets {
+    common: Vec<Knob>,
+    element: Vec<Knob>,
+    grouped: Vec<Knob>,
+}
+
+impl KnobSets {
+    fn chosen(self) -> Vec<Knob> {
+        let mut out = self.common;
+        if self.element.len() + out.len() <= MAX_KNOBS {
+            out.extend(self.element);
+        } else {
+            out.extend(self.grouped.into_iter().filter(|k| match &k.target {
+                Target::Capacity(v) | Target::Loss(v) | Target::Link(v) | Target::Jacket(v) => {
+                    !v.is_empty()
+                }
+                Target::Term(_, v) => !v.is_empty(),
+                _ => true,
+            }));
+        }
+        out
+    }
+}
+
+fn node_name(m: &Machine, i: usize) -> String {
+    m.names.get(i).cloned().unwrap_or_else(|| format!("#{i}"))
+}
+
+/// Capacities and losses: per lumped node; rod slices share one each.
+fn add_node_knobs(m: &Machine, sets: &mut KnobSets) {
     let n_lumped = m.spec.nodes.len();
-    let node = |i: usize| m.names.get(i).cloned().unwrap_or_else(|| format!("#{i}"));
-    let mut element = Vec::new();
-    let mut grouped = Vec::new();
-    // capacities and losses: per lumped node; rod slices share one each
     let rod: Vec<usize> = (n_lumped..m.n).collect();
     let lumped_c: Vec<usize> = (0..n_lumped).filter(|&i| m.c[i] > 0.0).collect();
     let lumped_g: Vec<usize> = (0..n_lumped).filter(|&i| m.g_amb[i] > 0.0).collect();
     for &i in &lumped_c {
-        element.push(Knob {
-            name: format!("c_j_per_k {}", node(i)),
+        sets.element.push(Knob {
+            name: format!("c_j_per_k {}", node_name(m, i)),
             target: Target::Capacity(vec![i]),
         });
     }
-    grouped.push(Knob {
+    sets.grouped.push(Knob {
         name: "c_j_per_k (all nodes)".into(),
         target: Target::Capacity(lumped_c.clone()),
     });
     for &i in &lumped_g {
-        element.push(Knob {
-            name: format!("g_amb_w_per_k {}", node(i)),
+        sets.element.push(Knob {
+            name: format!("g_amb_w_per_k {}", node_name(m, i)),
             target: Target::Loss(vec![i]),
         });
     }
-    grouped.push(Knob {
+    sets.grouped.push(Knob {
         name: "g_amb_w_per_k (all nodes)".into(),
         target: Target::Loss(lumped_g.clone()),
     });
-    let mut common = Vec::new();
     if !rod.is_empty() {
-        common.push(Knob {
+        sets.common.push(Knob {
             name: "rod capacity".into(),
             target: Target::Capacity(rod.clone()),
         });
         let rg: Vec<usize> = rod.iter().copied().filter(|&i| m.g_amb[i] > 0.0).collect();
         if !rg.is_empty() {
-            common.push(Knob {
+            sets.common.push(Knob {
                 name: "rod g_amb".into(),
                 target: Target::Loss(rg),
             });
         }
     }
+}
+
+/// Conductances: per link between lumped nodes; the rod's links share one.
+fn add_link_knobs(m: &Machine, sets: &mut KnobSets) {
+    let n_lumped = m.spec.nodes.len();
     let (mut rod_links, mut lumped_links) = (Vec::new(), Vec::new());
     for (k, &(a, b, g)) in m.links.iter().enumerate() {
         if g <= 0.0 {
@@ -102,59 +135,62 @@ fn knobs(m: &Machine) -> Vec<Knob> {
             rod_links.push(k);
         } else {
             lumped_links.push(k);
-            element.push(Knob {
-                name: format!("link {}–{}", node(a), node(b)),
+            sets.element.push(Knob {
+                name: format!("link {}–{}", node_name(m, a), node_name(m, b)),
                 target: Target::Link(vec![k]),
             });
         }
     }
-    grouped.push(Knob {
+    sets.grouped.push(Knob {
         name: "g_w_per_k (all links)".into(),
         target: Target::Link(lumped_links),
     });
     if !rod_links.is_empty() {
-        common.push(Knob {
+        sets.common.push(Knob {
             name: "rod conduction".into(),
             target: Target::Link(rod_links),
         });
     }
-    if let Some(c) = &m.coolant {
-        let js: Vec<usize> = (0..c.jacket.len())
-            .filter(|&j| c.jacket[j].1 > 0.0)
-            .collect();
-        for &j in &js {
-            element.push(Knob {
-                name: format!("jacket {}", node(c.jacket[j].0)),
-                target: Target::Jacket(vec![j]),
-            });
-        }
-        if !js.is_empty() {
-            grouped.push(Knob {
-                name: "jacket (all)".into(),
-                target: Target::Jacket(js),
-            });
-        }
+}
+
+/// The coolant jacket's conductances, per jacketed node.
+fn add_jacket_knobs(m: &Machine, sets: &mut KnobSets) {
+    let Some(c) = &m.coolant else {
+        return;
+    };
+    let js: Vec<usize> = (0..c.jacket.len())
+        .filter(|&j| c.jacket[j].1 > 0.0)
+        .collect();
+    for &j in &js {
+        sets.element.push(Knob {
+            name: format!("jacket {}", node_name(m, c.jacket[j].0)),
+            target: Target::Jacket(vec![j]),
+        });
     }
-    // heat gains: one scale per driver (the spindle-driven sources, bearings
-    // and motor loss; the feed-driven sources). The split of the heat
-    // budget between sources stays the design's: that split is where the
-    // heat effects (bearing heat, ball-screw heat) act, and a gain per
-    // source would absorb them.
-    let spindle: Vec<usize> = (0..m.spec.sources.len())
-        .filter(|&s| {
-            m.spec.sources[s].driver == crate::sim::machine::Driver::Spindle
-                && m.spec.sources[s].w_at_nmax > 0.0
-        })
-        .collect();
-    let feed: Vec<usize> = (0..m.spec.sources.len())
-        .filter(|&s| {
-            m.spec.sources[s].driver == crate::sim::machine::Driver::Feed
-                && m.spec.sources[s].w_at_nmax > 0.0
-        })
-        .collect();
+    if !js.is_empty() {
+        sets.grouped.push(Knob {
+            name: "jacket (all)".into(),
+            target: Target::Jacket(js),
+        });
+    }
+}
+
+/// Heat gains: one scale per driver (the spindle-driven sources, bearings
+/// and motor loss; the feed-driven sources). The split of the heat budget
+/// between sources stays the design's: that split is where the heat
+/// effects (bearing heat, ball-screw heat) act, and a gain per source
+/// would absorb them.
+fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
+    let driven_by = |driver: crate::sim::machine::Driver| -> Vec<usize> {
+        (0..m.spec.sources.len())
+            .filter(|&s| m.spec.sources[s].driver == driver && m.spec.sources[s].w_at_nmax > 0.0)
+            .collect()
+    };
+    let spindle = driven_by(crate::sim::machine::Driver::Spindle);
+    let feed = driven_by(crate::sim::machine::Driver::Feed);
     let motor = m.motor_node.is_some() && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
     if !spindle.is_empty() || !m.spec.bearings.is_empty() || motor {
-        common.push(Knob {
+        sets.common.push(Knob {
             name: "spindle heat (all spindle-driven sources, bearings, motor)".into(),
             target: Target::Heat {
                 sources: spindle,
@@ -164,7 +200,7 @@ fn knobs(m: &Machine) -> Vec<Knob> {
         });
     }
     if !feed.is_empty() {
-        common.push(Knob {
+        sets.common.push(Knob {
             name: "feed heat (all feed-driven sources)".into(),
             target: Target::Heat {
                 sources: feed,
@@ -173,34 +209,34 @@ fn knobs(m: &Machine) -> Vec<Knob> {
             },
         });
     }
-    // displacement: per term, or one lever per direction
+}
+
+/// Displacement: per term, or one lever per direction.
+fn add_term_knobs(m: &Machine, sets: &mut KnobSets) {
     for (d, terms) in m.dir_terms.iter().enumerate() {
         let dir = m.dir_cols.get(d).cloned().unwrap_or_default();
         let live: Vec<usize> = (0..terms.len()).filter(|&t| terms[t].1 != 0.0).collect();
         for &t in &live {
-            element.push(Knob {
-                name: format!("{dir} term {}", node(terms[t].0)),
+            sets.element.push(Knob {
+                name: format!("{dir} term {}", node_name(m, terms[t].0)),
                 target: Target::Term(d, vec![t]),
             });
         }
-        grouped.push(Knob {
+        sets.grouped.push(Knob {
             name: format!("{dir} (all terms)"),
             target: Target::Term(d, live),
         });
     }
-    let mut out = common;
-    if element.len() + out.len() <= MAX_KNOBS {
-        out.extend(element);
-    } else {
-        out.extend(grouped.into_iter().filter(|k| match &k.target {
-            Target::Capacity(v) | Target::Loss(v) | Target::Link(v) | Target::Jacket(v) => {
-                !v.is_empty()
-            }
-            Target::Term(_, v) => !v.is_empty(),
-            _ => true,
-        }));
-    }
-    out
+}
+
+fn knobs(m: &Machine) -> Vec<Knob> {
+    let mut sets = KnobSets::default();
+    add_node_knobs(m, &mut sets);
+    add_link_knobs(m, &mut sets);
+    add_jacket_knobs(m, &mut sets);
+    add_heat_knobs(m, &mut sets);
+    add_term_knobs(m, &mut sets);
+    sets.chosen()
 }
 
 fn apply(m: &Machine, ks: &[Knob], theta: &[f64]) -> Machine {

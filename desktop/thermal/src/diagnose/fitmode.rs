@@ -228,23 +228,34 @@ struct Scored {
     before: Option<ModelFit>,
 }
 
-fn score(
-    p: &Problem,
-    c: Candidate,
-    reference: Option<ModelFit>,
-    nominal: &ModelFit,
-    min: &Options,
-) -> Scored {
-    let before = reference.as_ref().unwrap_or(nominal);
+/// A candidate's fit against its reference (the nominal or its own).
+struct Measures {
+    /// Held-out gap (noise units, affected outputs) before and after.
+    m_b: f64,
+    m_a: f64,
+    dbic: f64,
+    /// Held-out µm and °C gaps (RMS, peak) before and after.
+    gum: Option<((f64, f64), (f64, f64))>,
+    gc: Option<((f64, f64), (f64, f64))>,
+}
+
+fn measure(p: &Problem, c: &Candidate, before: &ModelFit) -> Measures {
     let outs = &p.outputs;
-    let m_b = before.m_held_of(outs, &c.affected);
-    let m_a = c.fit.m_held_of(outs, &c.affected);
     let n = before.n_fit().max(2) as f64;
-    let dbic = c.fit.j_fit(outs) - before.j_fit(outs) + c.k_extra as f64 * n.ln();
-    let gum = before.gap_held(outs, true).zip(c.fit.gap_held(outs, true));
-    let gc = before
-        .gap_held(outs, false)
-        .zip(c.fit.gap_held(outs, false));
+    Measures {
+        m_b: before.m_held_of(outs, &c.affected),
+        m_a: c.fit.m_held_of(outs, &c.affected),
+        dbic: c.fit.j_fit(outs) - before.j_fit(outs) + c.k_extra as f64 * n.ln(),
+        gum: before.gap_held(outs, true).zip(c.fit.gap_held(outs, true)),
+        gc: before
+            .gap_held(outs, false)
+            .zip(c.fit.gap_held(outs, false)),
+    }
+}
+
+/// Held-out reduction in noise units summed over the affected outputs.
+fn held_out_gain(p: &Problem, c: &Candidate, before: &ModelFit, nominal: &ModelFit) -> f64 {
+    let outs = &p.outputs;
     let gain_over = |b: &ModelFit| -> f64 {
         c.affected
             .iter()
@@ -258,11 +269,25 @@ fn score(
     };
     // the speed law ranks by the smaller shrink (over its reference, over
     // the nominal): the other candidates are ranked against the nominal
-    let gain = if c.name == "bearing_nonlinear" {
+    if c.name == "bearing_nonlinear" {
         gain_over(before).min(gain_over(nominal))
     } else {
         gain_over(before)
-    };
+    }
+}
+
+/// Whether the candidate is claimed, and (for the speed law against its
+/// own reference) whether it also beats the nominal.
+fn claim(
+    p: &Problem,
+    c: &Candidate,
+    has_reference: bool,
+    nominal: &ModelFit,
+    ms: &Measures,
+    min: &Options,
+) -> (bool, bool) {
+    let outs = &p.outputs;
+    let (m_b, m_a) = (ms.m_b, ms.m_a);
     let no_worse =
         |g: Option<((f64, f64), (f64, f64))>| g.is_none_or(|g| g.1 .0 <= g.0 .0 * (1.0 + 1e-9));
     // sensor lag is judged against the lagged body map, which is itself
@@ -290,7 +315,7 @@ fn score(
     // inputs and the fixed textbook law): on the outputs it changes it must
     // also beat the nominal by the same margins, so a reference that fits
     // them worse than the nominal never lends it a shrink
-    let beats_nominal = reference.is_none() || c.name != "bearing_nonlinear" || {
+    let beats_nominal = !has_reference || c.name != "bearing_nonlinear" || {
         let m_n = nominal.m_held_of(outs, &c.affected);
         m_a <= m_n * (1.0 - FIT_MIN_REL) && m_n - m_a >= FIT_MIN_ABS
     };
@@ -316,10 +341,10 @@ fn score(
     // It may be claimed by them if they halve the nominal's gap (besides the
     // general 30 % over its own reference, below)
     let nominal_halved = c.name == "bearing_nonlinear"
-        && reference.is_some()
+        && has_reference
         && m_a.is_finite()
         && m_a <= SPEED_HELD_REL * nominal.m_held_of(outs, &c.affected);
-    let bic_ok = dbic <= -min.min_dbic
+    let bic_ok = ms.dbic <= -min.min_dbic
         || nominal_halved
         || (c.name == "sensor_offset"
             && c.evidence["few_fit_rows_after"].as_bool() == Some(true)
@@ -341,13 +366,26 @@ fn score(
         && periodic_ok
         && m_a <= m_b * (1.0 - min_rel)
         && margin_ok
-        && no_worse(gum)
-        && no_worse(gc);
+        && no_worse(ms.gum)
+        && no_worse(ms.gc);
+    (claimed, beats_nominal)
+}
+
+/// The candidate's own evidence with its scores added.
+fn scored_evidence(
+    p: &Problem,
+    c: &Candidate,
+    has_reference: bool,
+    nominal: &ModelFit,
+    ms: &Measures,
+    beats_nominal: bool,
+) -> Value {
+    let outs = &p.outputs;
     let mut ev = c.evidence.clone();
     if let Some(o) = ev.as_object_mut() {
-        o.insert("delta_bic".into(), r4(dbic));
-        o.insert("held_out_norm_gap_before".into(), r4(m_b.sqrt()));
-        o.insert("held_out_norm_gap_after".into(), r4(m_a.sqrt()));
+        o.insert("delta_bic".into(), r4(ms.dbic));
+        o.insert("held_out_norm_gap_before".into(), r4(ms.m_b.sqrt()));
+        o.insert("held_out_norm_gap_after".into(), r4(ms.m_a.sqrt()));
         o.insert(
             "affected".into(),
             json!(c
@@ -357,26 +395,42 @@ fn score(
                 .collect::<Vec<_>>()),
         );
         o.insert("at_bound".into(), json!(c.at_bound));
-        if reference.is_some() && c.name == "bearing_nonlinear" {
+        if has_reference && c.name == "bearing_nonlinear" {
             o.insert(
                 "held_out_norm_gap_nominal".into(),
                 r4(nominal.m_held_of(outs, &c.affected).sqrt()),
             );
             o.insert("beats_nominal".into(), json!(beats_nominal));
         }
-        o.insert("peak_before_um".into(), json!(gum.map(|g| r4(g.0 .1))));
-        o.insert("peak_after_um".into(), json!(gum.map(|g| r4(g.1 .1))));
+        o.insert("peak_before_um".into(), json!(ms.gum.map(|g| r4(g.0 .1))));
+        o.insert("peak_after_um".into(), json!(ms.gum.map(|g| r4(g.1 .1))));
     }
+    ev
+}
+
+fn score(
+    p: &Problem,
+    c: Candidate,
+    reference: Option<ModelFit>,
+    nominal: &ModelFit,
+    min: &Options,
+) -> Scored {
+    let before = reference.as_ref().unwrap_or(nominal);
+    let ms = measure(p, &c, before);
+    let gain = held_out_gain(p, &c, before, nominal);
+    let has_reference = reference.is_some();
+    let (claimed, beats_nominal) = claim(p, &c, has_reference, nominal, &ms, min);
+    let evidence = scored_evidence(p, &c, has_reference, nominal, &ms, beats_nominal);
     Scored {
         finding: Finding {
             name: c.name.to_string(),
             effects: Vec::new(),
-            dbic,
-            m_before: m_b,
-            m_after: m_a,
-            gap_um: gum,
-            gap_c: gc,
-            evidence: ev,
+            dbic: ms.dbic,
+            m_before: ms.m_b,
+            m_after: ms.m_a,
+            gap_um: ms.gum,
+            gap_c: ms.gc,
+            evidence,
             params: Some(c.params),
         },
         claimed,
@@ -462,53 +516,56 @@ pub const FIT_MIN_REL: f64 = 0.3;
 pub const SENSOR_MIN_REL: f64 = 0.4;
 /// Absolute held-out shrink (noise-variance units) to claim an effect.
 pub const FIT_MIN_ABS: f64 = 1.0;
-/// Diagnose runs without a machine file.
-pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
-    let t0 = std::time::Instant::now();
-    let ds = series::load(runs, opt.max_rows.min(1500))?;
-    let p = Problem::new(&ds);
-    let (st, fit) = p.identify();
-    if let Some(o) = fit.outs.iter().position(|f| f.failed) {
-        anyhow::bail!(
-            "diagnose fit: the least-squares fit of the identified model failed for output {} (singular design or too few rows)",
-            p.outputs.get(o).map_or("?", |x| x.name.as_str())
-        );
-    }
-    let where_ = where_of(&p, &fit);
-    // candidates (each against the nominal; the lag against the body map)
-    let only = |n: &str| opt.only.is_empty() || opt.only.iter().any(|o| o == n);
+
+/// Candidates, each with the reference it is scored against (`None`: the
+/// nominal; the lag against the body map).
+fn fit_candidates(
+    p: &Problem,
+    st: &Structure,
+    fit: &ModelFit,
+    only: &dyn Fn(&str) -> bool,
+) -> Vec<(Candidate, Option<ModelFit>)> {
     let mut cands: Vec<(Candidate, Option<ModelFit>)> = Vec::new();
     if only("sensor_offset") {
         cands.extend(
-            open_effects::sensor_steps(&p, &st, &fit)
+            open_effects::sensor_steps(p, st, fit)
                 .into_iter()
                 .map(|c| (c, None)),
         );
     }
     if only("sensor_lag") {
         cands.extend(
-            open_effects::sensor_lags(&p)
+            open_effects::sensor_lags(p)
                 .into_iter()
                 .map(|(c, b)| (c, Some(b))),
         );
     }
     if only("coolant") {
-        cands.extend(open_effects::periodic(&p, &st, &fit).map(|c| (c, None)));
+        cands.extend(open_effects::periodic(p, st, fit).map(|c| (c, None)));
     }
     if only("bearing_nonlinear") {
-        cands.extend(open_effects::speed_nonlinearity(&p).map(|(c, b)| (c, Some(b))));
+        cands.extend(open_effects::speed_nonlinearity(p).map(|(c, b)| (c, Some(b))));
         cands.extend(
-            open_effects::speed_nonlinearity_against_nominal(&p, &st, &fit).map(|c| (c, None)),
+            open_effects::speed_nonlinearity_against_nominal(p, st, fit).map(|c| (c, None)),
         );
     }
     if only("ambient_drift") {
-        cands.extend(open_effects::ambient_drift(&p, &st, &fit).map(|c| (c, None)));
+        cands.extend(open_effects::ambient_drift(p, st, fit).map(|c| (c, None)));
     }
-    // where the test itself saw a lag at a tau, that sensor is testable
-    // there (the injected-lag probe of `lag_reach` under-rates a sensor that
-    // already lags: its own lag stays in the probe's data)
-    let mut lag_reach = if only("sensor_lag") {
-        open_effects::lag_reach(&p)
+    cands
+}
+
+/// Per sensor, the shortest lag the test can see. Where the test itself
+/// saw a lag at a tau, that sensor is testable there (the injected-lag
+/// probe of `lag_reach` under-rates a sensor that already lags: its own
+/// lag stays in the probe's data).
+fn sensor_lag_reach(
+    p: &Problem,
+    cands: &[(Candidate, Option<ModelFit>)],
+    lag_tested: bool,
+) -> Vec<Option<f64>> {
+    let mut lag_reach = if lag_tested {
+        open_effects::lag_reach(p)
     } else {
         Vec::new()
     };
@@ -523,17 +580,17 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             }
         }
     }
-    let n_cands = cands.len();
-    let mut scored: Vec<Scored> = cands
-        .into_iter()
-        .map(|(c, b)| score(&p, c, b, &fit, opt))
-        .collect();
-    // each lag candidate is scored against its own reference (the body map
-    // lagged by its tau), so their absolute shrinks do not compare: the lag
-    // family is ranked by its best absolute shrink, and within it by the
-    // relative fit-row shrink of the body map (the detector's own
-    // statistic, on the most rows; the unsensed neighbour of a lagged
-    // sensor shows a smaller share of the same gain)
+    lag_reach
+}
+
+/// Rank by the held-out shrink, largest first. Each lag candidate is
+/// scored against its own reference (the body map lagged by its tau), so
+/// their absolute shrinks do not compare: the lag family is ranked by its
+/// best absolute shrink, and within it by the relative fit-row shrink of
+/// the body map (the detector's own statistic, on the most rows; the
+/// unsensed neighbour of a lagged sensor shows a smaller share of the
+/// same gain).
+fn rank(scored: &mut [Scored]) {
     let lag_gain = scored
         .iter()
         .filter(|s| s.finding.name == "sensor_lag")
@@ -555,8 +612,12 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         let (ka, kb) = (key(a), key(b));
         kb.0.total_cmp(&ka.0).then(kb.1.total_cmp(&ka.1))
     });
-    // the speed law is tried against two references: reported once, in its
-    // best-ranked claimed form
+}
+
+/// The claimed findings in rank order, the first selected. The speed law
+/// is tried against two references: reported once, in its best-ranked
+/// claimed form.
+fn claimed_findings(scored: &[Scored]) -> Vec<Finding> {
     let mut findings: Vec<Finding> = Vec::new();
     for s in scored.iter().filter(|s| s.claimed) {
         if s.finding.name == "bearing_nonlinear"
@@ -577,6 +638,42 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         }
         findings.push(f);
     }
+    findings
+}
+
+fn fit_ranking_rule(opt: &Options) -> String {
+    format!(
+        "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {} (a sensor step with at most one block of fit rows after it, where slow modes absorb a constant: or its held-out gap halves), the held-out gap of the outputs it changes shrinks by ≥ {:.0} % (a sensor step or lag: ≥ {:.0} %) and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 25 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
+        opt.min_dbic,
+        FIT_MIN_REL * 100.0,
+        SENSOR_MIN_REL * 100.0,
+        FIT_MIN_ABS
+    ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes), claimed there only when it halves the held-out gap, and reported once, in the better-ranked form"
+}
+
+/// Diagnose runs without a machine file.
+pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
+    let t0 = std::time::Instant::now();
+    let ds = series::load(runs, opt.max_rows.min(1500))?;
+    let p = Problem::new(&ds);
+    let (st, fit) = p.identify();
+    if let Some(o) = fit.outs.iter().position(|f| f.failed) {
+        anyhow::bail!(
+            "diagnose fit: the least-squares fit of the identified model failed for output {} (singular design or too few rows)",
+            p.outputs.get(o).map_or("?", |x| x.name.as_str())
+        );
+    }
+    let where_ = where_of(&p, &fit);
+    let only = |n: &str| opt.only.is_empty() || opt.only.iter().any(|o| o == n);
+    let cands = fit_candidates(&p, &st, &fit, &only);
+    let lag_reach = sensor_lag_reach(&p, &cands, only("sensor_lag"));
+    let n_cands = cands.len();
+    let mut scored: Vec<Scored> = cands
+        .into_iter()
+        .map(|(c, b)| score(&p, c, b, &fit, opt))
+        .collect();
+    rank(&mut scored);
+    let findings = claimed_findings(&scored);
     let selected = scored.iter().find(|s| s.claimed).map(|s| {
         selected_gaps(
             &p,
@@ -615,12 +712,6 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         nominal: nominal_json(&p, &st, &fit),
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
-        ranking_rule: format!(
-            "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {} (a sensor step with at most one block of fit rows after it, where slow modes absorb a constant: or its held-out gap halves), the held-out gap of the outputs it changes shrinks by ≥ {:.0} % (a sensor step or lag: ≥ {:.0} %) and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 25 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
-            opt.min_dbic,
-            FIT_MIN_REL * 100.0,
-            SENSOR_MIN_REL * 100.0,
-            FIT_MIN_ABS
-        ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes), claimed there only when it halves the held-out gap, and reported once, in the better-ranked form",
+        ranking_rule: fit_ranking_rule(opt),
     })
 }

@@ -11,6 +11,7 @@ pub mod ident;
 mod ident_fit;
 pub mod lag;
 pub mod open_effects;
+mod placement;
 pub mod prep;
 pub mod render;
 pub mod sensor_step;
@@ -21,8 +22,8 @@ pub mod stats;
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
 
-use crate::sim::{Effect, Machine, ALL_EFFECT_NAMES};
-use effect_fit::{fit_cands, par_map, Cand, Evaluator, FitResult, Stats};
+use crate::sim::{Effect, Machine};
+use effect_fit::{fit_cands, par_map, Evaluator, FitResult, Stats};
 use prep::{prepare, Kind, Prepared};
 pub use render::report_md;
 pub use stats::phases;
@@ -373,338 +374,29 @@ fn evidence(
     })
 }
 
-/// Candidates applicable to this machine and these runs; the sensor
-/// effects are placed where the nominal residual is (fit rows only).
-fn candidates(ev: &Evaluator, res0: &[Vec<Vec<f64>>], opt: &Options) -> Vec<Cand> {
-    let (m, ps) = (ev.m, ev.runs);
-    let has_disp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
-    let has_temp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
-    let flows = ps
-        .iter()
-        .any(|p| (0..p.rows()).any(|k| m.coolant_flows(p.inputs.rpm[k], p.inputs.coolant[k])));
-    let mut out = Vec::new();
-    for &k in ALL_EFFECT_NAMES.iter() {
-        if !opt.only.is_empty() && !opt.only.iter().any(|o| o == k) {
-            continue;
-        }
-        let ok = match k {
-            "coolant" => {
-                !m.coolant_nodes.is_empty()
-                    && (ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5))
-                        || (m.coolant.is_some() && flows))
-            }
-            "chiller" => m.coolant.as_ref().is_some_and(|c| c.tank_c > 0.0),
-            "ballscrew" => {
-                !m.ballscrew_nodes.is_empty()
-                    && ps.iter().any(|p| p.inputs.feed.iter().any(|f| *f > 0.0))
-            }
-            "bending" => m.bending.is_some() && has_disp,
-            "sensor_lag" | "sensor_offset" => has_temp,
-            "bearing_nonlinear" => !m.bnl_nodes.is_empty(),
-            "convection" => m.area.iter().any(|a| *a > 0.0),
-            _ => true,
-        };
-        if !ok {
-            continue;
-        }
-        match k {
-            "sensor_offset" => out.extend(locate_offset(ps, res0)),
-            "sensor_lag" => {
-                // every sensor lagging (one thermometer model), and the one
-                // sensor whose residual looks most like −τ·d(prediction)/dt
-                out.push(Cand::new(k));
-                if let Some(sensor) = locate_lag(ev, res0) {
-                    out.push(Cand {
-                        sensor,
-                        ..Cand::new(k)
-                    });
-                }
-            }
-            "bearing_nonlinear" => out.push(Cand {
-                node: locate_heat(ev, res0),
-                ..Cand::new(k)
-            }),
-            "chiller" => out.push(Cand {
-                init: chiller_refine(ev, chiller_init(ev)),
-                ..Cand::new(k)
-            }),
-            _ => out.push(Cand::new(k)),
-        }
-    }
-    out
+/// The nominal's fit and the margins every candidate is judged by.
+struct Judge<'a> {
+    ev: &'a Evaluator<'a>,
+    res0: &'a [Vec<Vec<f64>>],
+    st0: Stats,
+    /// The nominal's fit criterion on the fit rows.
+    j0: f64,
+    /// The nominal's held-out gap (noise units).
+    m0: f64,
+    /// BIC's penalty per parameter: ln of the fit rows.
+    lnn: f64,
+    opt: &'a Options,
 }
 
-/// Least-squares gain (noise units, fit rows) of the nominal residual on
-/// the change `with` − nominal of every channel.
-fn gain_on(ev: &Evaluator, res0: &[Vec<Vec<f64>>], with: &[Effect]) -> f64 {
-    let (mut rd, mut dd) = (0.0, 0.0);
-    for ((p, rr), nom) in ev.runs.iter().zip(res0).zip(&ev.nominal) {
-        let Ok(out) = crate::sim::simulate(ev.m, &p.inputs, with, 1) else {
-            return 0.0;
-        };
-        for (c, r) in p.channels.iter().zip(rr) {
-            let (a, b) = match c.kind {
-                Kind::Temp(i) => (&out.temps[i], &nom.temps[i]),
-                Kind::Disp(i) => (&out.disp[i], &nom.disp[i]),
-            };
-            for k in 0..r.len() {
-                if p.is_fit(k) && r[k].is_finite() {
-                    let d = (a[k] - b[k]) / c.s;
-                    rd += r[k] / c.s * d;
-                    dd += d * d;
-                }
-            }
-        }
+impl Judge<'_> {
+    fn dbic(&self, fr: &FitResult) -> f64 {
+        fr.j - self.j0 + fr.k as f64 * self.lnn
     }
-    if dd > 0.0 && rd > 0.0 {
-        rd * rd / dd
-    } else {
-        0.0
-    }
-}
 
-/// Where extra speed-dependent bearing heat fits the residual best: one
-/// bearing node (returned) or all of them (empty).
-fn locate_heat(ev: &Evaluator, res0: &[Vec<Vec<f64>>]) -> String {
-    let nodes = &ev.m.bnl_nodes;
-    if nodes.len() < 2 {
-        return String::new();
-    }
-    let probe = |node: Option<String>| Effect::BearingNonlinear {
-        k_w: 10.0,
-        p: 2.5,
-        node,
-    };
-    let mut best = (String::new(), gain_on(ev, res0, &[probe(None)]));
-    for &i in nodes {
-        let name = ev.m.names[i].clone();
-        let g = gain_on(ev, res0, &[probe(Some(name.clone()))]);
-        if g > best.1 {
-            best = (name, g);
-        }
-    }
-    best.0
-}
-
-/// Refine the chiller's start: a thermostat's phase runs away over many
-/// cycles, so the cycle time (the power at a fixed load share) is scanned
-/// finely, then the load share, on the fit rows' criterion.
-fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
-    if init.len() != 3 {
-        return init;
-    }
-    let j = |v: &[f64]| -> f64 {
-        let e = Effect::Chiller {
-            band_c: v[0],
-            power_w: v[1],
-            load_frac: v[2],
-        };
-        ev.stats(&[e]).map_or(f64::INFINITY, |s| s.j_fit())
-    };
-    let mut best = (init.clone(), j(&init));
-    for i in 0..=40 {
-        // power × 0.8 … 1.25, log-spaced (≈ 1.1 % apart)
-        let scale = (0.8f64.ln() + (1.25f64 / 0.8).ln() * i as f64 / 40.0).exp();
-        let v = [init[0], init[1] * scale, init[2]];
-        let f = j(&v);
-        if f < best.1 {
-            best = (v.to_vec(), f);
-        }
-    }
-    let base = best.0.clone();
-    for i in 0..=10 {
-        let lf = (base[2] - 0.1 + 0.02 * i as f64).clamp(0.05, 0.95);
-        let v = [base[0], base[1], lf];
-        let f = j(&v);
-        if f < best.1 {
-            best = (v.to_vec(), f);
-        }
-    }
-    best.0
-}
-
-/// Start values of a cycling chiller from the coolant sensor (a sensor on
-/// `coolant`): its swing is the band; the mean rise and fall rates give
-/// the chiller's power and the tank's load. Empty without such a sensor.
-fn chiller_init(ev: &Evaluator) -> Vec<f64> {
-    use crate::sim::Probe;
-    let Some(circ) = ev.m.coolant.as_ref() else {
-        return vec![];
-    };
-    let (mut vals, mut up, mut down, mut n_up, mut n_down, mut air) =
-        (Vec::new(), 0.0, 0.0, 0usize, 0usize, Vec::new());
-    for p in ev.runs {
-        for c in &p.channels {
-            let Kind::Temp(i) = c.kind else { continue };
-            if ev.m.sensor_probe[i] != Probe::Coolant {
-                continue;
-            }
-            // slopes over 2 min (the 1/16 °C steps hide single differences)
-            let w = ((120.0 / p.inputs.dt).round() as usize).max(1);
-            for k in 0..c.meas.len() {
-                if !p.is_fit(k) || !c.meas[k].is_finite() {
-                    continue;
-                }
-                vals.push(c.meas[k]);
-                air.push(p.inputs.ambient[k]);
-                if k >= w && c.meas[k - w].is_finite() && p.is_fit(k - w) {
-                    let sl = (c.meas[k] - c.meas[k - w]) / (w as f64 * p.inputs.dt);
-                    if sl > 0.0 {
-                        up += sl;
-                        n_up += 1;
-                    } else if sl < 0.0 {
-                        down -= sl;
-                        n_down += 1;
-                    }
-                }
-            }
-        }
-    }
-    if vals.len() < 20 || n_up == 0 || n_down == 0 || circ.tank_c <= 0.0 {
-        return vec![];
-    }
-    vals.sort_by(|a, b| a.total_cmp(b));
-    let q = |f: f64| vals[((vals.len() - 1) as f64 * f).round() as usize];
-    let band = (q(0.98) - q(0.02)).max(0.1);
-    let (s_r, s_f) = (up / n_up as f64, down / n_down as f64);
-    let mean_air = air.iter().sum::<f64>() / air.len() as f64;
-    let power = circ.tank_c * (s_r + s_f);
-    let load = circ.tank_c * s_r - circ.tank_g_amb * (mean_air - circ.supply_c);
-    vec![band, power, (load / power).clamp(0.05, 0.95)]
-}
-
-/// Where a sensor bias is: per sensor, a constant offset over all runs,
-/// and per run the onset (any fit row) after which the fit-row residual
-/// shifts most, scored in noise units less ln n per located choice.
-fn locate_offset(ps: &[Prepared], res0: &[Vec<Vec<f64>>]) -> Option<Cand> {
-    let mut best: Option<(Cand, f64)> = None;
-    let mut consider = |c: Cand, score: f64| {
-        if best.as_ref().is_none_or(|b| score > b.1) {
-            best = Some((c, score));
-        }
-    };
-    let n_all: usize = ps.iter().map(|p| p.rows()).sum();
-    let pen = (n_all.max(2) as f64).ln();
-    // constant over all runs
-    let mut acc: std::collections::BTreeMap<String, (f64, usize, f64)> = Default::default();
-    for (p, rr) in ps.iter().zip(res0) {
-        for (c, r) in p.channels.iter().zip(rr) {
-            if let Kind::Temp(_) = c.kind {
-                let e = acc.entry(c.name.clone()).or_insert((0.0, 0, c.s));
-                for (k, v) in r.iter().enumerate() {
-                    if p.is_fit(k) && v.is_finite() {
-                        e.0 += v;
-                        e.1 += 1;
-                    }
-                }
-            }
-        }
-    }
-    for (name, (sum, n, s)) in acc {
-        if n > 0 {
-            consider(
-                Cand {
-                    sensor: name,
-                    ..Cand::new("sensor_offset")
-                },
-                sum * sum / n as f64 / (s * s),
-            );
-        }
-    }
-    // a step in one run
-    if ps.len() > 1 || ps.iter().any(|p| p.rows() > 20) {
-        for (p, rr) in ps.iter().zip(res0) {
-            for (c, r) in p.channels.iter().zip(rr) {
-                if !matches!(c.kind, Kind::Temp(_)) {
-                    continue;
-                }
-                // suffix sums over fit rows
-                let nr = r.len();
-                let (mut sum, mut n) = (0.0, 0usize);
-                let mut best_k = (0usize, 0.0f64);
-                for k in (0..nr).rev() {
-                    if p.is_fit(k) && r[k].is_finite() {
-                        sum += r[k];
-                        n += 1;
-                    }
-                    if n >= 3 {
-                        let sc = sum * sum / n as f64 / (c.s * c.s);
-                        if sc > best_k.1 {
-                            best_k = (k, sc);
-                        }
-                    }
-                }
-                let (k0, sc) = best_k;
-                let at_s = if k0 == 0 {
-                    0.0
-                } else {
-                    k0 as f64 * p.inputs.dt
-                };
-                let run = (ps.len() > 1).then(|| p.name.clone());
-                let cand = Cand {
-                    sensor: c.name.clone(),
-                    at_s,
-                    run,
-                    ..Cand::new("sensor_offset")
-                };
-                let extra = cand.located() as f64 - 1.0;
-                consider(cand, sc - extra * pen);
-            }
-        }
-    }
-    best.map(|b| b.0)
-}
-
-/// The sensor whose fit-row residual is best explained by a lag: the
-/// least-squares τ of r ≈ −τ·dŷ/dt, its gain in noise units.
-fn locate_lag(ev: &Evaluator, res0: &[Vec<Vec<f64>>]) -> Option<String> {
-    let mut acc: std::collections::BTreeMap<String, (f64, f64, f64)> = Default::default();
-    for ((p, rr), out) in ev.runs.iter().zip(res0).zip(&ev.nominal) {
-        let dt = p.inputs.dt;
-        for (c, r) in p.channels.iter().zip(rr) {
-            let Kind::Temp(i) = c.kind else { continue };
-            let y = &out.temps[i];
-            let e = acc.entry(c.name.clone()).or_insert((0.0, 0.0, c.s));
-            for k in 1..r.len().min(y.len()) {
-                if p.is_fit(k) && r[k].is_finite() {
-                    let d = -(y[k] - y[k - 1]) / dt;
-                    e.0 += r[k] * d;
-                    e.1 += d * d;
-                }
-            }
-        }
-    }
-    acc.into_iter()
-        .filter(|(_, (rd, dd, _))| *dd > 0.0 && *rd > 0.0)
-        .map(|(n, (rd, dd, s))| (n, rd * rd / dd / (s * s)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|b| b.0)
-}
-
-/// Diagnose prepared runs against the nominal machine.
-pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
-    let t0 = std::time::Instant::now();
-    let ev = Evaluator::new(m, ps)?;
-    let res0 = ev.residuals(&[])?;
-    let st0 = ev.stats_of(&res0);
-    let j0 = st0.j_fit();
-    let m0 = st0.m_held();
-    let lnn = (st0.n_fit().max(2) as f64).ln();
-    let where_ = where_analysis(ps, &res0);
-    let cands = candidates(&ev, &res0, opt);
-    let mut sims = 1usize;
-    let singles: Vec<FitResult> = par_map(&cands, opt.threads, |c| {
-        let d = effect_fit::params_of(c.kind).len();
-        fit_cands(&ev, std::slice::from_ref(c), None, opt.budget + 15 * d)
-    });
-    sims += singles.iter().map(|f| f.evals).sum::<usize>();
-    let mk = |fr: &FitResult, dbic: f64| -> Result<(Finding, Stats)> {
-        let st = ev.stats(&fr.effects)?;
-        let ev_json = evidence(&ev, &res0, fr, &st0, &st, dbic);
+    fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
+        let st = self.ev.stats(&fr.effects)?;
+        let st0 = &self.st0;
+        let ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
         Ok((
             Finding {
                 name: fr
@@ -715,7 +407,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
                     .join("+"),
                 effects: fr.effects.clone(),
                 dbic,
-                m_before: m0,
+                m_before: self.m0,
                 m_after: st.m_held(),
                 gap_um: st0.gap_held(true).zip(st.gap_held(true)),
                 gap_c: st0.gap_held(false).zip(st.gap_held(false)),
@@ -724,31 +416,66 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
             },
             st,
         ))
-    };
+    }
+
     // never an effect that widens the held-out displacement gap (beyond
     // 2 %, below what an RMS over the held-out rows can resolve)
-    let supported = |f: &Finding, m_ref: f64| -> bool {
+    fn supported(&self, f: &Finding, m_ref: f64) -> bool {
+        let opt = self.opt;
         f.dbic <= -opt.min_dbic
             && f.gap_um.is_none_or(|((b, _), (a, _))| a <= b * 1.02 + 1e-9)
             && f.m_after.is_finite()
             && f.m_after <= m_ref * (1.0 - opt.min_rel)
             && m_ref - f.m_after >= opt.min_abs
-    };
+    }
+
+    // the added effect must itself earn the margins: the pair's own fit
+    // without it (its base effect at the pair's parameters) is the
+    // reference, so a joint polish of the base alone never names a pair
+    fn partner_earns_its_place(&self, fr: &FitResult, f: &Finding) -> Result<bool> {
+        let Some(last) = fr.cands.last() else {
+            return Ok(true);
+        };
+        let opt = self.opt;
+        let k_partner = effect_fit::params_of(last.kind).len() + last.located();
+        let n_base = fr.effects.len() - 1;
+        let st = self.ev.stats(&fr.effects[..n_base])?;
+        let dbic_base = st.j_fit() - self.j0 + (fr.k - k_partner) as f64 * self.lnn;
+        let m_base = st.m_held();
+        Ok(f.dbic <= dbic_base - opt.min_dbic
+            && f.m_after <= m_base * (1.0 - opt.min_rel)
+            && m_base - f.m_after >= opt.min_abs)
+    }
+}
+
+/// A candidate as tried: its finding and its fit.
+type Tried = (Finding, FitResult);
+
+/// Single effects judged: every one tried (finding and fit), and the
+/// indexes of the supported ones, smallest held-out gap first.
+fn judge_singles(judge: &Judge, singles: &[FitResult]) -> Result<(Vec<Tried>, Vec<usize>)> {
     let mut tried = Vec::new();
-    for fr in &singles {
-        let dbic = fr.j - j0 + fr.k as f64 * lnn;
-        tried.push((mk(fr, dbic)?.0, fr.clone()));
+    for fr in singles {
+        tried.push((judge.finding(fr, judge.dbic(fr))?.0, fr.clone()));
     }
     let mut ok_idx: Vec<usize> = (0..tried.len())
-        .filter(|&i| supported(&tried[i].0, m0))
+        .filter(|&i| judge.supported(&tried[i].0, judge.m0))
         .collect();
     ok_idx.sort_by(|&a, &b| tried[a].0.m_after.total_cmp(&tried[b].0.m_after));
-    let singles_ok: Vec<Finding> = ok_idx.iter().map(|&i| tried[i].0.clone()).collect();
-    let best_single = singles_ok.first().cloned();
-    // pairs: the best single plus each other candidate (forward step),
-    // skipped when the best single already leaves only noise
+    Ok((tried, ok_idx))
+}
+
+/// Pairs to fit: the best single plus each other candidate (forward step),
+/// skipped when the best single already leaves only noise.
+fn pairs_to_try(
+    tried: &[Tried],
+    ok_idx: &[usize],
+    best_single: Option<&Finding>,
+    m0: f64,
+    opt: &Options,
+) -> Vec<(usize, usize)> {
     let floor = opt.min_abs / opt.min_rel.max(1e-6);
-    let base_idx = match &best_single {
+    let base_idx = match best_single {
         Some(_) => ok_idx.first().copied(),
         None => (0..tried.len())
             .filter(|&i| tried[i].0.dbic <= -opt.min_dbic)
@@ -758,7 +485,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     // own held-out gap is above that floor: below it the runs are at noise
     // level for every single and a pair is a fit of noise)
     let floor = floor.max(opt.min_abs + 1.0);
-    let need_pairs = match &best_single {
+    let need_pairs = match best_single {
         Some(b) => b.m_after > floor,
         None => m0 > floor,
     };
@@ -771,6 +498,123 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         }
         pairs.truncate(opt.pair_top.max(1) * 2);
     }
+    pairs
+}
+
+/// The pair that beats every single (the best one by held-out gap and both
+/// of its members by BIC) by the same margins, smallest held-out gap first,
+/// with the indexes of its members.
+fn best_pair(
+    judge: &Judge,
+    tried: &[Tried],
+    pairs: &[(usize, usize)],
+    pair_fits: &[FitResult],
+    best_single: Option<&Finding>,
+) -> Result<Option<(Finding, usize, usize)>> {
+    let opt = judge.opt;
+    let mut best: Option<(Finding, usize, usize)> = None;
+    for (fr, &(a, b)) in pair_fits.iter().zip(pairs) {
+        let (f, _) = judge.finding(fr, judge.dbic(fr))?;
+        let ref_m = best_single.map_or(judge.m0, |b| b.m_after);
+        let ref_bic = tried[a]
+            .0
+            .dbic
+            .min(tried[b].0.dbic)
+            .min(best_single.map_or(0.0, |b| b.dbic));
+        if f.dbic <= ref_bic - opt.min_dbic
+            && judge.supported(&f, judge.m0)
+            && f.m_after <= ref_m * (1.0 - opt.min_rel)
+            && ref_m - f.m_after >= opt.min_abs
+            && best.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
+            && judge.partner_earns_its_place(fr, &f)?
+        {
+            best = Some((f, a, b));
+        }
+    }
+    Ok(best)
+}
+
+fn with_role(f: &Finding, role: &str) -> Finding {
+    let mut g = f.clone();
+    if let Some(o) = g.evidence.as_object_mut() {
+        o.insert("role".into(), json!(role));
+    }
+    g
+}
+
+/// The selected explanation first (a pair, then its members), then the
+/// single effects that are supported on their own as alternatives.
+fn ranked_findings(
+    best_pair: Option<(Finding, usize, usize)>,
+    tried: &[Tried],
+    best_single: Option<&Finding>,
+    singles_ok: &[Finding],
+) -> Vec<Finding> {
+    let mut findings: Vec<Finding> = Vec::new();
+    if let Some((f, a, b)) = best_pair {
+        findings.push(f);
+        for i in [a, b] {
+            findings.push(with_role(
+                &tried[i].0,
+                "member of the selected combination, fitted alone",
+            ));
+        }
+    } else if let Some(b) = best_single {
+        findings.push(with_role(b, "selected"));
+    }
+    for f in singles_ok.iter() {
+        if findings.iter().any(|g| g.name == f.name) {
+            continue;
+        }
+        findings.push(with_role(
+            f,
+            "alternative: supported alone but explains less than the selected effect",
+        ));
+    }
+    findings
+}
+
+/// The runs' own notes, and the decimation when any.
+fn run_notes(ps: &[Prepared]) -> Vec<String> {
+    let mut notes: Vec<String> = ps.iter().flat_map(|p| p.notes.clone()).collect();
+    if ps.iter().any(|p| p.decimation > 1) {
+        notes.push(format!(
+            "runs decimated by {} for fitting (inputs block-averaged)",
+            ps.iter().map(|p| p.decimation).max().unwrap_or(1)
+        ));
+    }
+    notes
+}
+
+const RANKING_RULE: &str = "single effects and pairs fitted on the fit part; an effect is claimed when its BIC improves by at least min_dbic and the held-out gap (noise units) shrinks by min_rel and min_abs; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect";
+
+/// Diagnose prepared runs against the nominal machine.
+pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
+    let t0 = std::time::Instant::now();
+    let ev = Evaluator::new(m, ps)?;
+    let res0 = ev.residuals(&[])?;
+    let st0 = ev.stats_of(&res0);
+    let judge = Judge {
+        ev: &ev,
+        res0: &res0,
+        j0: st0.j_fit(),
+        m0: st0.m_held(),
+        lnn: (st0.n_fit().max(2) as f64).ln(),
+        st0,
+        opt,
+    };
+    let where_ = where_analysis(ps, &res0);
+    let cands = placement::candidates(&ev, &res0, &opt.only);
+    let mut sims = 1usize;
+    let singles: Vec<FitResult> = par_map(&cands, opt.threads, |c| {
+        let d = effect_fit::params_of(c.kind).len();
+        fit_cands(&ev, std::slice::from_ref(c), None, opt.budget + 15 * d)
+    });
+    sims += singles.iter().map(|f| f.evals).sum::<usize>();
+    let (tried, ok_idx) = judge_singles(&judge, &singles)?;
+    let singles_ok: Vec<Finding> = ok_idx.iter().map(|&i| tried[i].0.clone()).collect();
+    let best_single = singles_ok.first();
+    let pairs = pairs_to_try(&tried, &ok_idx, best_single, judge.m0, opt);
     let pair_fits: Vec<FitResult> = par_map(&pairs, opt.threads, |&(a, b)| {
         let fa = &tried[a].1;
         let fb = &tried[b].1;
@@ -782,95 +626,17 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         )
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
-    // the added effect must itself earn the margins: the pair's own fit
-    // without it (its base effect at the pair's parameters) is the
-    // reference, so a joint polish of the base alone never names a pair
-    let partner_earns_its_place = |fr: &FitResult, f: &Finding| -> Result<bool> {
-        let Some(last) = fr.cands.last() else {
-            return Ok(true);
-        };
-        let k_partner = effect_fit::params_of(last.kind).len() + last.located();
-        let n_base = fr.effects.len() - 1;
-        let st = ev.stats(&fr.effects[..n_base])?;
-        let dbic_base = st.j_fit() - j0 + (fr.k - k_partner) as f64 * lnn;
-        let m_base = st.m_held();
-        Ok(f.dbic <= dbic_base - opt.min_dbic
-            && f.m_after <= m_base * (1.0 - opt.min_rel)
-            && m_base - f.m_after >= opt.min_abs)
-    };
-    let mut best_pair: Option<(Finding, usize, usize)> = None;
-    for (fr, &(a, b)) in pair_fits.iter().zip(&pairs) {
-        let dbic = fr.j - j0 + fr.k as f64 * lnn;
-        let (f, _) = mk(fr, dbic)?;
-        // a pair must beat every single (the best one by held-out gap and
-        // both of its members by BIC) by the same margins
-        let ref_m = best_single.as_ref().map_or(m0, |b| b.m_after);
-        let ref_bic = tried[a]
-            .0
-            .dbic
-            .min(tried[b].0.dbic)
-            .min(best_single.as_ref().map_or(0.0, |b| b.dbic));
-        if f.dbic <= ref_bic - opt.min_dbic
-            && supported(&f, m0)
-            && f.m_after <= ref_m * (1.0 - opt.min_rel)
-            && ref_m - f.m_after >= opt.min_abs
-            && best_pair.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
-            && partner_earns_its_place(fr, &f)?
-        {
-            best_pair = Some((f, a, b));
-        }
-    }
-    // the selected explanation first (a pair, then its members), then the
-    // single effects that are supported on their own as alternatives
-    let mut findings: Vec<Finding> = Vec::new();
-    if let Some((f, a, b)) = best_pair {
-        findings.push(f);
-        for i in [a, b] {
-            let mut g = tried[i].0.clone();
-            if let Some(o) = g.evidence.as_object_mut() {
-                o.insert(
-                    "role".into(),
-                    json!("member of the selected combination, fitted alone"),
-                );
-            }
-            findings.push(g);
-        }
-    } else if let Some(b) = &best_single {
-        let mut g = b.clone();
-        if let Some(o) = g.evidence.as_object_mut() {
-            o.insert("role".into(), json!("selected"));
-        }
-        findings.push(g);
-    }
-    for f in singles_ok.iter() {
-        if findings.iter().any(|g| g.name == f.name) {
-            continue;
-        }
-        let mut g = f.clone();
-        if let Some(o) = g.evidence.as_object_mut() {
-            o.insert(
-                "role".into(),
-                json!("alternative: supported alone but explains less than the selected effect"),
-            );
-        }
-        findings.push(g);
-    }
-    let mut notes: Vec<String> = ps.iter().flat_map(|p| p.notes.clone()).collect();
-    if ps.iter().any(|p| p.decimation > 1) {
-        notes.push(format!(
-            "runs decimated by {} for fitting (inputs block-averaged)",
-            ps.iter().map(|p| p.decimation).max().unwrap_or(1)
-        ));
-    }
+    let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
+    let findings = ranked_findings(pair, &tried, best_single, &singles_ok);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
         tried: tried.into_iter().map(|t| t.0).collect(),
         where_,
-        nominal_m_held: m0,
-        nominal_gap_um: st0.gap_held(true),
-        nominal_gap_c: st0.gap_held(false),
-        notes,
+        nominal_m_held: judge.m0,
+        nominal_gap_um: judge.st0.gap_held(true),
+        nominal_gap_c: judge.st0.gap_held(false),
+        notes: run_notes(ps),
         seconds: t0.elapsed().as_secs_f64(),
         sims,
         untestable: Vec::new(),
@@ -879,7 +645,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,
-        ranking_rule: "single effects and pairs fitted on the fit part; an effect is claimed when its BIC improves by at least min_dbic and the held-out gap (noise units) shrinks by min_rel and min_abs; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect".into(),
+        ranking_rule: RANKING_RULE.into(),
     })
 }
 
