@@ -104,32 +104,9 @@ fn run() -> Result<()> {
     let open = run_open_bench(&open_cfg)?;
     let cross = run_cross_bench(&machines, &open_cfg)?;
     let mut v = run_bench(&machines, &closed_cfg)?;
-    // full diagnosis of one 8 h run sampled at 1 s, all candidates
-    let m = &machines[1];
-    let duty = Duty::load(&desktop_dir().join("duty/production-mixed.toml"))?;
-    let run = sim_run(
-        m,
-        &duty,
-        &SimOptions {
-            effects: vec![Effect::Ballscrew { k_w: 80.0 }],
-            seed: 5,
-            hours: Some(8.0),
-            sample_period_s: Some(1.0),
-            noise: true,
-        },
-    )?;
-    let t = std::time::Instant::now();
-    let d = diagnose(
-        m,
-        &[("8h-1s".into(), run)],
-        &Options {
-            threads,
-            ..Options::default()
-        },
-    )?;
-    let secs = t.elapsed().as_secs_f64();
+    let (secs, top) = full_diagnosis_8h_1s(&machines[1], threads)?;
     v["full_diagnosis_8h_1s_seconds"] = serde_json::json!(secs);
-    v["full_diagnosis_8h_1s_top"] = serde_json::json!(d.findings.first().map(|f| f.name.clone()));
+    v["full_diagnosis_8h_1s_top"] = serde_json::json!(top);
     v["threads"] = serde_json::json!(threads);
     // closed world (machine file, the simulator the diagnoser searches) and
     // open world (no machine file, the separate truth model) side by side
@@ -167,42 +144,81 @@ fn run() -> Result<()> {
     if json {
         println!("{v}");
     } else {
-        println!(
-            "bench-diagnose: {} cases ({} single, {} pair, {} clean): top-1 {:.1} % (single {:.1} %, pair {:.1} %), held-out gap shrink {:.1} % (µm channels {:.1} %), false alarms {}/{}; 8 h @ 1 s full diagnosis {:.2} s ({} threads)",
-            v["cases"], v["single_cases"], v["pair_cases"], v["clean_cases"],
-            v["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            v["top1_single_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            v["top1_pair_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            v["mean_heldout_gap_shrink"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            v["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            v["false_alarms"], v["clean_cases"], secs, threads
-        );
-        println!(
-            "open world (diagnose fit, no machine file, truth model diagnose/truth.rs): {} cases: top-1 {:.1} % (step/lag/chiller/speed kinds {:.1} %), held-out shrink {:.1} % °C / {:.1} % µm, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
-            open["cases"],
-            open["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            open["top1_rate_fit_testable"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            open["mean_heldout_gap_shrink_c"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            open["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            open["false_alarms"], open["clean_cases"],
-            open["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
-            open["per_effect"]
-        );
-        println!(
-            "cross model (diagnose fit on the first simulator's machines): {} cases: top-1 {:.1} %, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
-            cross["cases"],
-            cross["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
-            cross["false_alarms"], cross["clean_cases"],
-            cross["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
-            cross["per_effect"]
-        );
-        if let Some(ms) = v["misses"].as_array() {
-            for m in ms {
-                println!("  miss: {m}");
-            }
-        }
+        print_text(&v, &open, &cross, secs, threads);
     }
     Ok(())
+}
+
+/// Time of a full diagnosis (all candidates) of one 8 h run sampled at 1 s,
+/// and the effect it names first.
+fn full_diagnosis_8h_1s(m: &Machine, threads: usize) -> Result<(f64, Option<String>)> {
+    let duty = Duty::load(&desktop_dir().join("duty/production-mixed.toml"))?;
+    let run = sim_run(
+        m,
+        &duty,
+        &SimOptions {
+            effects: vec![Effect::Ballscrew { k_w: 80.0 }],
+            seed: 5,
+            hours: Some(8.0),
+            sample_period_s: Some(1.0),
+            noise: true,
+        },
+    )?;
+    let t = std::time::Instant::now();
+    let d = diagnose(
+        m,
+        &[("8h-1s".into(), run)],
+        &Options {
+            threads,
+            ..Options::default()
+        },
+    )?;
+    let secs = t.elapsed().as_secs_f64();
+    Ok((secs, d.findings.first().map(|f| f.name.clone())))
+}
+
+/// The text summary (without --json).
+fn print_text(
+    v: &serde_json::Value,
+    open: &serde_json::Value,
+    cross: &serde_json::Value,
+    secs: f64,
+    threads: usize,
+) {
+    println!(
+        "bench-diagnose: {} cases ({} single, {} pair, {} clean): top-1 {:.1} % (single {:.1} %, pair {:.1} %), held-out gap shrink {:.1} % (µm channels {:.1} %), false alarms {}/{}; 8 h @ 1 s full diagnosis {:.2} s ({} threads)",
+        v["cases"], v["single_cases"], v["pair_cases"], v["clean_cases"],
+        v["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        v["top1_single_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        v["top1_pair_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        v["mean_heldout_gap_shrink"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        v["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        v["false_alarms"], v["clean_cases"], secs, threads
+    );
+    println!(
+        "open world (diagnose fit, no machine file, truth model diagnose/truth.rs): {} cases: top-1 {:.1} % (step/lag/chiller/speed kinds {:.1} %), held-out shrink {:.1} % °C / {:.1} % µm, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+        open["cases"],
+        open["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        open["top1_rate_fit_testable"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        open["mean_heldout_gap_shrink_c"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        open["mean_heldout_gap_shrink_um"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        open["false_alarms"], open["clean_cases"],
+        open["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+        open["per_effect"]
+    );
+    println!(
+        "cross model (diagnose fit on the first simulator's machines): {} cases: top-1 {:.1} %, false alarms {}/{}, {:.2} s per 8 h case; per effect {}",
+        cross["cases"],
+        cross["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
+        cross["false_alarms"], cross["clean_cases"],
+        cross["mean_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN),
+        cross["per_effect"]
+    );
+    if let Some(ms) = v["misses"].as_array() {
+        for m in ms {
+            println!("  miss: {m}");
+        }
+    }
 }
 
 /// `desktop/`, where the machine and duty files are (beside the crates).
