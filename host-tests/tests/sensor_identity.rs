@@ -336,9 +336,10 @@ fn export_refuses_a_run_with_rom_codes_for_only_some_sensors() {
         .map(|c| c.to_string())
         .collect();
     let mut fm = thermocomp_core::float::demo_model(7);
-    let e = tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &run.sensor_roms().unwrap())
-        .unwrap_err()
-        .to_string();
+    let e =
+        tcomp_model::export::name_sensors_by_rom(&mut fm, &columns, &run.sensor_roms().unwrap())
+            .unwrap_err()
+            .to_string();
     assert!(e.contains("not for T04") && !e.contains('\n'), "{e}");
     // None at all: by channel, as before.
     let none = BTreeMap::new();
@@ -425,8 +426,12 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     model.sensors[4].rom = Ds18b20::rom_for(0xABC_0004).0;
     let mut image = vec![0u8; model.encoded_len()];
     model.encode(&mut image).unwrap();
-    let s =
-        tcomp_link::board_link::upload(&mut link, &image, tcomp_link::board_link::Commit::NewerOnly).unwrap();
+    let s = tcomp_link::board_link::upload(
+        &mut link,
+        &image,
+        tcomp_link::board_link::Commit::NewerOnly,
+    )
+    .unwrap();
     assert_eq!(s.sensors_not_on_board, vec![4]);
     // A sensor swapped on channel 0 before an append: refused, one line.
     let mut swapped = map;
@@ -473,7 +478,8 @@ fn replay_reads_sensors_named_by_rom_from_the_column_the_run_records_them_on() {
     let (c1, c2) = (run.col_index("T01").unwrap(), run.col_index("T02").unwrap());
     swapped.data[c1] = t2;
     swapped.data[c2] = t1;
-    let by_rom_swapped = outs(tcomp_model::replay::replay(&text(&swapped), by_rom.clone()).unwrap());
+    let by_rom_swapped =
+        outs(tcomp_model::replay::replay(&text(&swapped), by_rom.clone()).unwrap());
     assert!(
         by_rom_swapped == same,
         "by ROM the replay follows the sensors"
