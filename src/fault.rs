@@ -33,7 +33,7 @@ pub mod kind {
     /// Initialisation failed (detail: [`super::init_step`] code).
     pub const INIT_FAILED: u16 = 4;
 
-    /// Name as in the README's register map.
+    /// Name as in the register map (docs/register-map.md).
     pub fn name(k: u16) -> &'static str {
         match k {
             NONE => "none",

@@ -1,4 +1,4 @@
-//! Replay of a recorded run (run CSV, `shared/formats/run-csv.md`) as sensor
+//! Replay of a recorded run (run CSV, `docs/formats/run-csv.md`) as sensor
 //! input: the bench board's emulated sensors read a trace line by line and hand
 //! out what the DS18B20s and the PLC would. Integer-only so the board and the
 //! desktop quantise identically (bit-exact comparisons downstream).

@@ -1,5 +1,5 @@
 //! Run files: the CSV exchanged between the board, the desktop tools and users
-//! (`../shared/formats/run-csv.md`). Readers keep unknown columns; missing
+//! (`docs/formats/run-csv.md`). Readers keep unknown columns; missing
 //! values are empty fields; anything unparsable is reported by row and column.
 //!
 //! Values of the format's columns must be physically possible, so that a

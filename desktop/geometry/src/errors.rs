@@ -120,7 +120,7 @@ impl Term {
 }
 
 /// The three squareness errors [µrad], signs as in
-/// shared/formats/displacement-lines.md: X is the reference; Y is the nominal
+/// docs/formats/displacement-lines.md: X is the reference; Y is the nominal
 /// Y rotated about +z by `EC0Y`; Z is rotated about +x by `EA0Z` and about +y
 /// by `EB0Z`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]

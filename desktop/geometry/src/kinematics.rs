@@ -4,7 +4,7 @@
 //!
 //! Convention (docs/geometry.md): each axis's errors are the error motion of
 //! the tool relative to the workpiece that the axis commands (as in
-//! shared/formats/displacement-lines.md). Then the tool point relative to the
+//! docs/formats/displacement-lines.md). Then the tool point relative to the
 //! workpiece is one chain of joint transforms, workpiece-side axes first
 //! (from the workpiece outwards), then the tool-side axes (from the base
 //! outwards):

@@ -1,4 +1,4 @@
-//! Displacement-line files (shared/formats/displacement-lines.md): reading,
+//! Displacement-line files (docs/formats/displacement-lines.md): reading,
 //! writing, and the measurement plan of 14 lines (docs/geometry.md).
 
 use anyhow::{bail, Context, Result};

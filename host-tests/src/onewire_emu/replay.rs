@@ -1,4 +1,4 @@
-//! Replays run CSVs (`shared/formats/run-csv.md`) into the emulated sensors:
+//! Replays run CSVs (`docs/formats/run-csv.md`) into the emulated sensors:
 //! temperature column k (in file order) drives device k. Parsing and the
 //! rounding to 1/16 °C are the board's own (`thermocomp_protocol::trace`), so the
 //! emulator and the bench board quantise identically.

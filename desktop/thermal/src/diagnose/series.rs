@@ -1,6 +1,6 @@
 //! Run files → the signals `diagnose fit` identifies its nominal model on,
 //! read exactly as the run-CSV format defines them
-//! (`../shared/formats/run-csv.md`): `T_ambient` is the ambient input, every
+//! (`docs/formats/run-csv.md`): `T_ambient` is the ambient input, every
 //! other `T_<name>` column is a sensor, `d<name>_um` columns are measured
 //! displacements, `spindle_rpm`, `feed_activity` and `coolant_on` are inputs
 //! when present. Runs are block-averaged to at most `max_rows` rows and split
