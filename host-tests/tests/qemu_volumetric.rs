@@ -69,6 +69,8 @@ fn poly() -> VolumetricPoly {
             term([0, 0, 0, 0], Some(1), [0.5, 0.5, -0.25]),
         ],
         max_fit_error_um: 0.0,
+        unobservable_terms: Vec::new(),
+        unobservable_accepted: false,
     }
 }
 
