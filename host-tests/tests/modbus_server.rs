@@ -371,7 +371,7 @@ fn every_refused_write_locks_the_board() {
     let crc = crc16(&bad_count[..n - 2]).to_le_bytes();
     bad_count[n - 2..].copy_from_slice(&crc);
     // (what to send once unlocked, the exception it gets)
-    let refusals: Vec<(&str, Box<dyn Fn(&mut Bench) -> Vec<u8>>, u8)> = vec![
+    let refusals: Vec<(&str, Refusal<'_>, u8)> = vec![
         (
             "bad CRC image",
             Box::new(|b: &mut Bench| {
@@ -657,3 +657,6 @@ proptest! {
         }
     }
 }
+
+/// A request that a locked-after board must refuse: builds and sends it, returns the reply.
+type Refusal<'a> = Box<dyn Fn(&mut Bench) -> Vec<u8> + 'a>;
