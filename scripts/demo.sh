@@ -81,4 +81,4 @@ done
 
 say "the board's error over the whole held-out part ($(awk -v t="$split_t" 'BEGIN{printf "%.1f h", t/3600}') to the end; tcomp replay runs the same fixed-point core, bit for bit):"
 "$tcomp" replay "$trace" "$model" --from "$heldout" --to 1.0
-say "done: the corrections above are what a PLC reads; the register map is in README.md"
+say "done: the corrections above are what a PLC reads; the register map is in docs/register-map.md"
