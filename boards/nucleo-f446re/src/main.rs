@@ -12,7 +12,7 @@ mod onewire;
 mod probe_adc;
 mod rtu_port;
 mod safety;
-mod stack;
+use board_support::stack;
 
 use core::cell::RefCell;
 use defmt::{info, warn};

@@ -40,7 +40,7 @@ mod selftest;
 mod semihost;
 mod sensors;
 mod serve;
-mod stack;
+use board_support::stack;
 mod time_driver;
 mod uart;
 
