@@ -20,6 +20,9 @@ use crate::modbus::holding::Command;
 use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot};
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
+use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
+
+mod probe;
 use crate::model_store::MAX_SETTINGS_BYTES;
 use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
@@ -31,9 +34,11 @@ use thermocomp_protocol::rtu::MAX_FRAME;
 use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
 
-// The slots' settings block holds the settings, the channel map and a kept reference.
+// The slots' settings block holds the settings, the channel map, a kept
+// reference and the probe references.
 const _: () = assert!(
-    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN <= MAX_SETTINGS_BYTES
+    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN + REFERENCES_LEN
+        <= MAX_SETTINGS_BYTES
 );
 
 /// PLC registers older than this make the inputs "stale".
@@ -70,6 +75,11 @@ pub struct App<F: NorFlash> {
     vol_held: bool,
     /// Uptime of the last cycle or request (ms), for the PLC-timeout rule.
     vol_uptime_ms: u64,
+    /// Probe references and re-zero ([`crate::probe_reference`]).
+    pub references: References,
+    /// HR_RESULT once the settings job in progress is stored (a refused
+    /// probe reference says so after its count is stored).
+    stored_result: Option<u16>,
 }
 
 /// A flash write accepted over Modbus and done in the background: the
@@ -134,6 +144,8 @@ impl<F: BackgroundErase> App<F> {
             vol_temps: [None; MAX_VOL_SENSORS],
             vol_held: false,
             vol_uptime_ms: 0,
+            references: References::new(),
+            stored_result: None,
         }
     }
 
@@ -152,10 +164,22 @@ impl<F: BackgroundErase> App<F> {
         {
             self.map = map;
         }
-        self.kept = blob
+        // After the map: the kept reference (tag 'R'), then the probe
+        // references (tag 'Q'), each optional.
+        let mut tail = blob
             .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
+            .unwrap_or(&[]);
+        self.kept = tail
+            .get(..crate::settings::REFERENCE_LEN)
             .and_then(KeptReference::decode);
+        if self.kept.is_some() {
+            tail = tail.get(crate::settings::REFERENCE_LEN..).unwrap_or(&[]);
+        }
         apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
+        if let Some(setup) = self.references.decode(tail) {
+            self.server.holding.probe = setup;
+        }
+        self.publish_references();
         self.snapshot.reference_state = u16::from(self.kept.is_some());
         self.publish_map();
         self.install(model);
@@ -188,12 +212,24 @@ impl<F: BackgroundErase> App<F> {
     /// What the slots keep besides the model: the settings, then the
     /// channel map (ROM code per channel), then the kept reference if any.
     fn persisted(&self) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
+        self.persisted_with(false)
+    }
+
+    /// As [`App::persisted`]; `fresh_terms`: with the probe references
+    /// reset (what a new model stores).
+    fn persisted_with(&self, fresh_terms: bool) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
         let mut v = heapless::Vec::new();
         let _ = v.extend_from_slice(&self.settings().encode());
         let _ = v.extend_from_slice(&self.map.to_bytes());
         if let Some(k) = &self.kept {
             let _ = v.extend_from_slice(&k.encode());
         }
+        let setup = &self.server.holding.probe;
+        let _ = v.extend_from_slice(&if fresh_terms {
+            References::new().encode(setup)
+        } else {
+            self.references.encode(setup)
+        });
         v
     }
 
@@ -353,7 +389,8 @@ impl<F: BackgroundErase> App<F> {
         if !self.store.erase_done() {
             return true;
         }
-        let settings = self.persisted();
+        // A new model's terms restart: stored so with it.
+        let settings = self.persisted_with(matches!(job, FlashJob::Model { .. }));
         let ok = match job {
             FlashJob::Model { len, .. } => {
                 let staged = self.server.holding.staged();
@@ -361,6 +398,7 @@ impl<F: BackgroundErase> App<F> {
                 match Model::parse(staged) {
                     Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
                         self.install(Some(m));
+                        self.references.reset();
                         true
                     }
                     _ => false,
@@ -377,11 +415,12 @@ impl<F: BackgroundErase> App<F> {
     fn end_job(&mut self, job: FlashJob, ok: bool) {
         self.job = None;
         self.server.holding.busy = false;
+        let after = self.stored_result.take().unwrap_or(result::OK);
         let h = &mut self.server.holding;
         match (job, ok) {
             (FlashJob::Model { .. }, true) => h.result = result::OK,
             (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
-            (FlashJob::Settings { .. }, true) => h.result = result::OK,
+            (FlashJob::Settings { .. }, true) => h.result = after,
             (FlashJob::Settings { .. }, false) => h.result = result::SETTINGS_NOT_STORED,
         }
     }
@@ -399,7 +438,8 @@ impl<F: BackgroundErase> App<F> {
             return Err(result::COMMIT_IN_PROGRESS);
         }
         // With the settings and map in force (a pending settings write is
-        // done by this one).
+        // done by this one); a new model's terms restart.
+        self.references.reset();
         let persisted = self.persisted();
         self.store
             .commit_with(image, &persisted)
@@ -569,7 +609,14 @@ impl<F: BackgroundErase> App<F> {
         s.uptime_s = ((uptime_ms / 1000) & 0xFFFF_FFFF) as u32;
         s.sample_time_s = ((now_ms / 1000) & 0xFFFF_FFFF) as u32;
         s.status = out.status;
-        s.corrections = out.corrections;
+        // The model's served correction plus each direction's probe terms.
+        let (limits, n_dir) = self.served_limits();
+        let s = &mut self.snapshot;
+        s.corrections = self
+            .references
+            .serve(&out.corrections, limits, n_dir, now_ms);
+        self.publish_references();
+        let s = &mut self.snapshot;
         s.predictions = out.predicted;
         s.axes = out.axes;
         s.map_missing = 0;
@@ -608,12 +655,6 @@ impl<F: BackgroundErase> App<F> {
         self.progress.cycles = self.progress.cycles.wrapping_add(1);
     }
 
-    /// Publish the eddy-current probe's latest reading (0.1 µm and state code).
-    pub fn set_probe(&mut self, reading: &crate::acquisition::probe::ProbeReading) {
-        self.snapshot.probe = reading.tenth_um.unwrap_or(0);
-        self.snapshot.probe_state = reading.state.code();
-    }
-
     /// Handle one request frame; `reply` gets the answer (empty: stay silent).
     pub fn request(
         &mut self,
@@ -643,6 +684,10 @@ impl<F: BackgroundErase> App<F> {
                 self.server.holding.result = result::COMMIT_IN_PROGRESS;
                 LinkChange::None
             }
+            Command::Rereference if self.server.holding.probe.direction.is_some() => {
+                self.probe_command(command);
+                LinkChange::None
+            }
             Command::Rereference
                 if self.kept.is_some()
                     || self.compensation.model().is_some_and(|m| {
@@ -669,6 +714,12 @@ impl<F: BackgroundErase> App<F> {
                 self.compensation.compensator().rereference();
                 LinkChange::None
             }
+            Command::TakeProbeReference
+            | Command::ResetReferenceTerms
+            | Command::ProbeSetupChanged => {
+                self.probe_command(command);
+                LinkChange::None
+            }
             Command::LimitsChanged => {
                 self.apply_limits();
                 self.store_settings();
@@ -691,6 +742,7 @@ impl<F: BackgroundErase> App<F> {
                 self.reference_pending = false;
                 self.snapshot.reference_state = 0;
                 apply_settings(&mut self.server.holding, &self.defaults);
+                self.server.holding.probe = Default::default();
                 self.apply_limits();
                 self.store_settings();
                 LinkChange::Reconfigure {

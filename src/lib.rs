@@ -12,6 +12,7 @@ pub mod fault;
 pub mod hal;
 pub mod modbus;
 pub mod model_store;
+pub mod probe_reference;
 pub mod runtime;
 pub mod settings;
 pub mod watchdog;

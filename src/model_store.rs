@@ -25,7 +25,7 @@ const MAGIC: [u8; 4] = *b"TCSL";
 const HEADER: u32 = 16;
 const SETTINGS_MAGIC: [u8; 4] = *b"TCSE";
 /// Largest settings payload a slot carries.
-pub const MAX_SETTINGS_BYTES: usize = 256;
+pub const MAX_SETTINGS_BYTES: usize = 640;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

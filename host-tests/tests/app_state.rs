@@ -171,7 +171,7 @@ fn probe_reading_reaches_its_registers() {
         min_code: 0,
         max_code: 0,
     };
-    app.set_probe(&r);
+    app.set_probe(&r, None);
     let hi = app.snapshot.input_register(IR_PROBE).unwrap();
     let lo = app.snapshot.input_register(IR_PROBE + 1).unwrap();
     assert_eq!(((u32::from(hi) << 16) | u32::from(lo)) as i32, -12_345);

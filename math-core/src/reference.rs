@@ -294,6 +294,21 @@ fn to_01um(nm: i64) -> i32 {
     div_round(i128::from(nm), 100).clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32
 }
 
+/// The probe's reference temperature for its own drift: 20 °C (ISO 1), in 1/16 °C.
+pub const PROBE_DRIFT_REF_16: i32 = 20 * 16;
+
+/// A probe reading (0.1 µm) with the probe's own temperature drift removed:
+/// `reading − k·(T − 20 °C)`, `T` in 1/16 °C (the DS18B20's unit) and `k`
+/// in nm/K, rounded to 0.1 µm (ties away from zero); saturating. The board
+/// and `tcomp record` both use it.
+#[allow(clippy::cast_possible_truncation, reason = "clamped to the i32 range")]
+pub fn remove_probe_drift(reading: i32, temp_16: i32, drift_nm_per_k: i32) -> i32 {
+    // k·ΔT16/16 nm = k·ΔT16/1600 tenths of a µm.
+    let d = i128::from(drift_nm_per_k) * (i128::from(temp_16) - i128::from(PROBE_DRIFT_REF_16));
+    let v = i128::from(reading) - div_round(d, 1600);
+    v.clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32
+}
+
 impl ReferenceState {
     /// A fresh state: no terms, the prior covariance of `params`.
     pub fn new(params: &ReferenceParams) -> Self {
@@ -303,6 +318,13 @@ impl ReferenceState {
             p: [v(p.sigma_bias_nm), 0, v(p.sigma_rate_nm_h)],
             ..Default::default()
         }
+    }
+
+    /// The predicted terms at `now_ms`: bias b(t) (nm) and drift rate s(t) (nm/h).
+    pub fn terms_at(&self, params: &ReferenceParams, now_ms: u64) -> (i64, i64) {
+        let p = params.sanitised();
+        let (b, s, _) = predict(self, &p, now_ms);
+        (b, s)
     }
 
     /// The estimated model error c(t) − z at `now_ms`, nm.
@@ -620,6 +642,18 @@ mod tests {
         let with_rate = st.term_nm(&p, 8 * H + H / 2);
         // Truth half an hour later: 8.5 µm.
         assert!((8_500 - with_rate).abs() < (8_500 - bias_only).abs());
+    }
+
+    #[test]
+    fn probe_drift_is_removed_about_20_degrees() {
+        // 0.5 µm/K, 30 °C: 5 µm too much.
+        assert_eq!(remove_probe_drift(120, 30 * 16, 500), 70);
+        assert_eq!(remove_probe_drift(120, 20 * 16, 500), 120);
+        // 10 °C: 5 µm too little; 1/16 K steps round to 0.1 µm.
+        assert_eq!(remove_probe_drift(0, 10 * 16, 500), 50);
+        assert_eq!(remove_probe_drift(0, 20 * 16 + 1, 500), 0);
+        assert_eq!(remove_probe_drift(0, 20 * 16 + 2, 500), -1);
+        assert_eq!(remove_probe_drift(i32::MIN, 125 * 16, 32_767), i32::MIN);
     }
 
     #[test]

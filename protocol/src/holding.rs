@@ -27,8 +27,26 @@ pub const HR_STAGED_LEN: u16 = 32;
 /// Tool length for the volumetric correction, int32 µm, high word first
 /// (written by the PLC like the positions; 36–39 reserved).
 pub const HR_TOOL_LENGTH: u16 = 34;
-/// Last register of the plain block (33 and 36–39 reserved, read 0).
-pub const HR_LAST_PLAIN: u16 = 39;
+/// Probe references (issue 28; unlock; stored with the settings): the
+/// model direction the probe measures at the gauge (0–5; 0xFFFF: none).
+pub const HR_PROBE_DIRECTION: u16 = 40;
+/// Probe ADC samples averaged for one reference (1–1024).
+pub const HR_REFERENCE_SAMPLES: u16 = 41;
+/// Bus channel of the DS18B20 beside the probe (0–19; 0xFFFF: none).
+pub const HR_PROBE_TEMP_CHANNEL: u16 = 42;
+/// The probe's own temperature drift, int16 nm/K (0.001 µm/K), removed
+/// from a reading before it is used: reading − k·(T − 20 °C).
+pub const HR_PROBE_DRIFT: u16 = 43;
+/// Probe reading at the gauge with the machine at its reference state,
+/// int32 0.1 µm, high word first (44–45): a reference uses reading − this.
+pub const HR_GAUGE_ZERO: u16 = 44;
+/// Defaults of the probe-reference registers.
+pub const DEFAULT_PROBE_DIRECTION: u16 = REGISTER_NONE;
+pub const DEFAULT_REFERENCE_SAMPLES: u16 = 256;
+/// "None" for holding registers 40 and 42.
+pub const REGISTER_NONE: u16 = 0xFFFF;
+/// Last register of the plain block (33, 36–39 and 46–49 reserved, read 0).
+pub const HR_LAST_PLAIN: u16 = 49;
 /// Model staging area: 2 bytes per register (first byte in the high half).
 pub const HR_STAGING: u16 = 1000;
 // The staging area must fit the address space above HR_STAGING.
@@ -118,6 +136,16 @@ wire_codes! {
         /// Forget the kept reference (stored); the reference in use stays until
         /// the next boot or command 2.
         ForgetReference = 11 => CMD_FORGET_REFERENCE,
+        /// Take a probe reference now (the spindle sits at the gauge): after
+        /// the next cycle the probe is averaged over holding register 41's
+        /// samples and compared with the model for the direction of register
+        /// 40 (`thermocomp_core::reference`); HR_RESULT 60 until taken, then
+        /// 23 (stored) and 0 (accepted) or 61 (refused: counted, nothing else
+        /// changed), or 62–64 (not taken).
+        TakeProbeReference = 12 => CMD_TAKE_PROBE_REFERENCE,
+        /// Reset the learned reference terms and re-zero offsets of every
+        /// direction (stored; a new model does the same).
+        ResetReferenceTerms = 13 => CMD_RESET_REFERENCE_TERMS,
     }
 }
 
@@ -206,6 +234,21 @@ pub mod result {
             SensorRom = 51 => SENSOR_ROM,
             /// The image names two sensors by the same ROM code.
             DuplicateSensorRom = 52 => DUPLICATE_SENSOR_ROM,
+            /// Command 12 accepted: the probe reference is taken after the next cycle.
+            ProbeReferencePending = 60 => PROBE_REFERENCE_PENDING,
+            /// The probe reference disagreed with the model beyond the gate
+            /// (a chip on the gauge, the probe out of place): refused and
+            /// counted (input register 305), nothing else changed.
+            ReferenceRefused = 61 => REFERENCE_REFUSED,
+            /// No probe reference taken: the probe's reading is not OK (none,
+            /// out of range, saturated, ADC error).
+            ProbeNotReady = 62 => PROBE_NOT_READY,
+            /// No probe reference taken: no model, or holding register 40
+            /// names no direction of it.
+            NoProbeDirection = 63 => NO_PROBE_DIRECTION,
+            /// No probe reference taken: holding register 42 names a channel
+            /// without a fresh reading.
+            ProbeTemperatureMissing = 64 => PROBE_TEMPERATURE_MISSING,
         }
     }
 
@@ -273,7 +316,9 @@ mod tests {
             }
         }
         assert_eq!(Command::from_u16(0), None);
-        assert_eq!(Command::from_u16(12), None);
+        assert_eq!(Command::from_u16(12), Some(Command::TakeProbeReference));
+        assert_eq!(Command::from_u16(14), None);
+        assert_eq!(ResultCode::ReferenceRefused.code(), 61);
         assert_eq!(Command::KeepReference.code(), CMD_KEEP_REFERENCE);
         assert_eq!(ResultCode::CommitInProgress.code(), 23);
         assert_eq!(

@@ -6,8 +6,10 @@
 
 /// Version of this register map (input register 2), so a PLC can tell which
 /// blocks the board serves. 2 added input registers 150–299, status bits 8–9,
-/// holding registers 34–35 and commands 6–11 to version 1 (docs/register-map.md).
-pub const MAP_VERSION: u16 = 2;
+/// holding registers 34–35 and commands 6–11 to version 1; 3 added input
+/// registers 300–329, holding registers 40–45 and commands 12–13 (probe
+/// references, issue 28; docs/register-map.md).
+pub const MAP_VERSION: u16 = 3;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;
@@ -44,9 +46,9 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register: the end of the sensor-identity block (158–159,
+/// Last input register: the end of the probe-reference block (158–159,
 /// 169, 174–179, 196–199 and 293–299 reserved, read 0).
-pub const IR_LAST: u16 = IR_IDENTITY_LAST;
+pub const IR_LAST: u16 = IR_REF_LAST;
 
 /// "Not available" for 32-bit measurements: reads 0x8000, 0x0000 (i32::MIN).
 pub const NOT_AVAILABLE_32: i32 = i32::MIN;
@@ -105,3 +107,23 @@ pub const IR_SENSORS_MISSING: u16 = 290;
 pub const IR_REFERENCE_STATE: u16 = 292;
 /// Last register of the identity block (293–299 reserved, read 0).
 pub const IR_IDENTITY_LAST: u16 = 299;
+
+/// Probe references (issue 28, commands 12–13, holding registers 40–45):
+/// the state of the direction the probe measures (holding register 40).
+/// Time of its last accepted reference, u32 s of the board's sample time
+/// (0xFFFF_FFFF: none since the terms were reset), 300–301.
+pub const IR_REF_TIME: u16 = 300;
+/// Innovation of its last reference (accepted or refused), int32 0.1 µm:
+/// probe reading − model − bias at that moment, 302–303.
+pub const IR_REF_INNOVATION: u16 = 302;
+/// References accepted (304) and refused (305) since the terms were reset, u16.
+pub const IR_REF_ACCEPTED: u16 = 304;
+pub const IR_REF_REFUSED: u16 = 305;
+/// Current bias term b(t) per direction, int16 0.1 µm (saturating), 306–311.
+pub const IR_REF_BIAS: u16 = 306;
+/// Current drift-rate term s(t) per direction, int16 0.1 µm/h (saturating), 312–317.
+pub const IR_REF_RATE: u16 = 312;
+/// Re-zero offset z per direction (command 2), int32 0.1 µm, 318–329.
+pub const IR_REF_ZERO: u16 = 318;
+/// Last register of the probe-reference block.
+pub const IR_REF_LAST: u16 = 329;

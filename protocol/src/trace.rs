@@ -59,6 +59,9 @@ pub struct TraceHeader {
     /// Column index of each temperature channel, in file order (`T_*`, `T01`).
     temperature_columns: heapless::Vec<u8, MAX_CHANNELS>,
     spindle_column: Option<u8>,
+    /// Column of `dprobe_um`: the eddy-current probe's reading (µm), which
+    /// the bench board's emulated probe gives (issue 28).
+    probe_column: Option<u8>,
 }
 
 impl TraceHeader {
@@ -68,6 +71,7 @@ impl TraceHeader {
             time_column: 0,
             temperature_columns: heapless::Vec::new(),
             spindle_column: None,
+            probe_column: None,
         };
         let mut time_seen = false;
         for (i, name) in line.trim_start_matches(BOM).trim().split(',').enumerate() {
@@ -85,6 +89,8 @@ impl TraceHeader {
                 let _ = header.temperature_columns.push(idx);
             } else if name == "spindle_rpm" {
                 header.spindle_column = Some(idx);
+            } else if name == "dprobe_um" {
+                header.probe_column = Some(idx);
             }
             header.columns = i + 1;
         }
@@ -96,6 +102,11 @@ impl TraceHeader {
 
     pub fn channels(&self) -> usize {
         self.temperature_columns.len()
+    }
+
+    /// The trace has a probe column (`dprobe_um`).
+    pub fn has_probe(&self) -> bool {
+        self.probe_column.is_some()
     }
 }
 
@@ -127,6 +138,8 @@ pub struct TraceSample {
     pub temperatures: [Option<i32>; MAX_CHANNELS],
     /// Spindle speed in rpm, rounded; None where empty or absent.
     pub spindle_rpm: Option<i32>,
+    /// Probe reading in 0.1 µm, rounded; None where empty or absent.
+    pub probe_tenth_um: Option<i32>,
 }
 
 impl TraceSample {
@@ -135,6 +148,7 @@ impl TraceSample {
             time_ms: 0,
             temperatures: [None; MAX_CHANNELS],
             spindle_rpm: None,
+            probe_tenth_um: None,
         };
         let mut fields = 0usize;
         let mut time_seen = false;
@@ -162,6 +176,11 @@ impl TraceSample {
                 };
             } else if header.spindle_column == Some(col) {
                 sample.spindle_rpm = match decimal_scaled(field, 1, col)? {
+                    Some(v) => Some(i32::try_from(v).map_err(|_| TraceError::OutOfRange(col))?),
+                    None => None,
+                };
+            } else if header.probe_column == Some(col) {
+                sample.probe_tenth_um = match decimal_scaled(field, 10, col)? {
                     Some(v) => Some(i32::try_from(v).map_err(|_| TraceError::OutOfRange(col))?),
                     None => None,
                 };
@@ -246,6 +265,14 @@ mod tests {
     fn rows_map_temperature_columns_to_channels() {
         let h = TraceHeader::parse("time_s,spindle_rpm,T_t1,dch1_um,T02").unwrap();
         assert_eq!(h.channels(), 2);
+        assert!(!h.has_probe());
+        let p = TraceHeader::parse("time_s,T01,dprobe_um").unwrap();
+        assert!(p.has_probe());
+        assert_eq!(
+            TraceSample::parse(&p, "1,20,-3.25").unwrap().probe_tenth_um,
+            Some(-33)
+        );
+        assert_eq!(TraceSample::parse(&p, "1,20,").unwrap().probe_tenth_um, None);
         let s = TraceSample::parse(&h, "15,1250,-0.5,3.2,").unwrap();
         assert_eq!(s.time_ms, 15_000);
         assert_eq!(s.spindle_rpm, Some(1250));

@@ -72,6 +72,45 @@ pub enum Command {
     KeepReference,
     /// Command 11: forget the kept reference.
     ForgetReference,
+    /// Command 12: take a probe reference after the next cycle.
+    TakeProbeReference,
+    /// Command 13: reset the learned reference terms.
+    ResetReferenceTerms,
+    /// Holding registers 40–45 changed: store them.
+    ProbeSetupChanged,
+}
+
+/// The probe-reference registers (40–45): which direction the probe
+/// measures, how it is averaged, its temperature and drift, its gauge zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeSetup {
+    /// Model direction the probe measures (`None`: references refused).
+    pub direction: Option<u8>,
+    /// ADC samples averaged per reference, 1..=1024.
+    pub samples: u16,
+    /// Bus channel of the probe's DS18B20 (`None`: no drift removed).
+    pub temp_channel: Option<u8>,
+    /// The probe's drift, nm/K.
+    pub drift_nm_per_k: i16,
+    /// Probe reading at the gauge at the machine's reference state, 0.1 µm.
+    pub gauge_zero: i32,
+}
+
+impl Default for ProbeSetup {
+    fn default() -> Self {
+        ProbeSetup {
+            direction: u8::try_from(DEFAULT_PROBE_DIRECTION).ok(),
+            samples: DEFAULT_REFERENCE_SAMPLES,
+            temp_channel: None,
+            drift_nm_per_k: 0,
+            gauge_zero: 0,
+        }
+    }
+}
+
+/// Registers 40 and 42: a small index or 0xFFFF ("none").
+fn index_register(v: Option<u8>) -> u16 {
+    v.map_or(REGISTER_NONE, u16::from)
 }
 
 pub struct Holding {
@@ -88,6 +127,8 @@ pub struct Holding {
     pub clamp: [u16; MAX_DIRECTIONS],
     pub rate: [u16; MAX_DIRECTIONS],
     pub result: u16,
+    /// Holding registers 40–45.
+    pub probe: ProbeSetup,
     /// Version of the model serving now (0: none); a commit must be newer.
     pub running_version: u32,
     /// A commit is being written ([`WriteError::Busy`] for what it stores).
@@ -110,6 +151,7 @@ impl Holding {
             clamp: [u16::MAX; MAX_DIRECTIONS],
             rate: [u16::MAX; MAX_DIRECTIONS],
             result: result::NONE,
+            probe: ProbeSetup::default(),
             running_version: 0,
             busy: false,
             unlocked_until_ms: None,
@@ -163,6 +205,12 @@ impl Holding {
                 *self.rate.get(usize::from(a - HR_RATE))?
             }
             HR_STAGED_LEN => self.staged_len,
+            HR_PROBE_DIRECTION => index_register(self.probe.direction),
+            HR_REFERENCE_SAMPLES => self.probe.samples,
+            HR_PROBE_TEMP_CHANNEL => index_register(self.probe.temp_channel),
+            HR_PROBE_DRIFT => self.probe.drift_nm_per_k as u16,
+            HR_GAUGE_ZERO => (self.probe.gauge_zero as u32 >> 16) as u16,
+            a if a == HR_GAUGE_ZERO + 1 => (self.probe.gauge_zero as u32 & 0xFFFF) as u16,
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
                 match self.staging.get(i..i + 2)? {
@@ -268,10 +316,12 @@ impl Holding {
                             | WireCommand::RestoreDefaults
                             | WireCommand::KeepReference
                             | WireCommand::ForgetReference
+                            | WireCommand::ResetReferenceTerms
                     )
                 ))
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
+            || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
     }
 
@@ -286,6 +336,7 @@ impl Holding {
         ) || Self::plc_register(a)
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
+            || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
         if !writable {
             return Err(WriteError::Address);
@@ -305,6 +356,13 @@ impl Holding {
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
+            HR_PROBE_DIRECTION => v == REGISTER_NONE || usize::from(v) < MAX_DIRECTIONS,
+            HR_REFERENCE_SAMPLES => {
+                (1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&v)
+            }
+            HR_PROBE_TEMP_CHANNEL => {
+                v == REGISTER_NONE || usize::from(v) < thermocomp_protocol::MAX_CHANNELS
+            }
             _ => true,
         };
         if ok {
@@ -359,6 +417,26 @@ impl Holding {
                 let r = self.rate.get_mut(usize::from(a - HR_RATE));
                 *r.ok_or(WriteError::Address)? = v;
                 return Ok(Command::LimitsChanged);
+            }
+            HR_PROBE_DIRECTION..=HR_PROBE_DRIFT => {
+                let p = &mut self.probe;
+                // check() bounded 40 and 42 to a small index or 0xFFFF.
+                match a {
+                    HR_PROBE_DIRECTION => p.direction = u8::try_from(v).ok(),
+                    HR_REFERENCE_SAMPLES => p.samples = v,
+                    HR_PROBE_TEMP_CHANNEL => p.temp_channel = u8::try_from(v).ok(),
+                    _ => p.drift_nm_per_k = v as i16,
+                }
+                return Ok(Command::ProbeSetupChanged);
+            }
+            a if (HR_GAUGE_ZERO..HR_GAUGE_ZERO + 2).contains(&a) => {
+                let u = self.probe.gauge_zero as u32;
+                self.probe.gauge_zero = if a == HR_GAUGE_ZERO {
+                    ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
+                } else {
+                    ((u & 0xFFFF_0000) | u32::from(v)) as i32
+                };
+                return Ok(Command::ProbeSetupChanged);
             }
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
@@ -416,6 +494,8 @@ impl Holding {
             WireCommand::TestStall => Ok(Command::TestStall),
             WireCommand::KeepReference => Ok(Command::KeepReference),
             WireCommand::ForgetReference => Ok(Command::ForgetReference),
+            WireCommand::TakeProbeReference => Ok(Command::TakeProbeReference),
+            WireCommand::ResetReferenceTerms => Ok(Command::ResetReferenceTerms),
         }
     }
 }

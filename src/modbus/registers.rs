@@ -54,7 +54,12 @@ pub struct Snapshot {
     pub reference_state: u16,
     /// The volumetric correction (input registers 180–199).
     pub vol: VolSnapshot,
+    /// Probe references (input registers 300–329), as the app published them.
+    pub references: [u16; REFERENCE_REGS],
 }
+
+/// Registers of the probe-reference block (300–329).
+pub const REFERENCE_REGS: usize = (IR_REF_LAST - IR_REF_TIME + 1) as usize;
 
 /// The volumetric block of the snapshot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -112,6 +117,7 @@ impl Default for Snapshot {
             sensors_missing: 0,
             reference_state: 0,
             vol: VolSnapshot::default(),
+            references: [0; REFERENCE_REGS],
         }
     }
 }
@@ -168,6 +174,10 @@ impl Snapshot {
         }
         if (IR_VOL_CORRECTION..=IR_VOL_LAST).contains(&addr) {
             return Some(self.vol_register(addr));
+        }
+        if (IR_REF_TIME..=IR_REF_LAST).contains(&addr) {
+            let k = usize::from(addr - IR_REF_TIME);
+            return Some(self.references.get(k).copied().unwrap_or(0));
         }
         if addr > IR_LAST {
             return None;

@@ -50,8 +50,10 @@ pub trait CycleSource<B: OneWireBus> {
     fn uptime_ms(&mut self, input: &CycleInput) -> u64;
     /// Called under the app lock once the cycle is published: log it.
     fn cycle_done(&mut self, done: &CycleDone<'_>);
-    /// Read the eddy-current probe, if the board has one (after the cycle).
-    async fn probe(&mut self) -> Option<ProbeReading> {
+    /// Read the eddy-current probe, if the board has one (after the cycle);
+    /// `reference_samples`: a probe reference is pending, average this many
+    /// ADC samples instead of the board's usual count.
+    async fn probe(&mut self, _reference_samples: Option<u16>) -> Option<ProbeReading> {
         None
     }
     /// The loop stopped on request (test command 9).
@@ -116,9 +118,22 @@ where
                 model: app.compensation.model(),
             });
         });
-        if let Some(reading) = source.probe().await {
-            shared.lock(|a| a.borrow_mut().set_probe(&reading));
-        }
+        // A pending probe reference (command 12) takes this cycle's reading
+        // against this cycle's model output; a board without a probe
+        // answers it "probe not ready".
+        let reference = shared.lock(|a| a.borrow().probe_reference_samples());
+        let reading = source.probe(reference).await;
+        shared.lock(|a| {
+            let mut app = a.borrow_mut();
+            let at = reference.map(|_| (&*acq, input.now_ms));
+            match &reading {
+                Some(r) => app.set_probe(r, at),
+                None if reference.is_some() => {
+                    app.take_probe_reference(None, acq, input.now_ms);
+                }
+                None => {}
+            }
+        });
     }
     source.ended(cycle);
     loop {

@@ -314,9 +314,11 @@ impl CycleSource<Bus> for FieldCycles {
         }
     }
 
-    async fn probe(&mut self) -> Option<ProbeReading> {
-        let cfg = self.probe_config.as_ref()?;
-        let reading = probe::measure(&mut self.probe_input, cfg).await;
+    async fn probe(&mut self, reference_samples: Option<u16>) -> Option<ProbeReading> {
+        let mut cfg = *self.probe_config.as_ref()?;
+        // A probe reference (command 12) averages holding register 41's samples.
+        cfg.oversample = reference_samples.unwrap_or(cfg.oversample);
+        let reading = probe::measure(&mut self.probe_input, &cfg).await;
         info!("probe: {} {}", reading.state, reading.tenth_um);
         Some(reading)
     }

@@ -33,6 +33,7 @@ mod executor;
 mod flash;
 mod host_files;
 mod host_trace;
+mod probe;
 mod replay;
 mod rtu_port;
 mod safety;

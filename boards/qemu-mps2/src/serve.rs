@@ -17,6 +17,8 @@ use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_protocol::trace::TraceSample;
 
 use crate::emulated_bus::EmulatedBus;
+use crate::probe::EmulatedProbe;
+use thermocomp::acquisition::probe::ProbeReading;
 use crate::host_files::{next_sample_or_exit, open_trace, read_host_file};
 use crate::host_trace::HostTrace;
 use crate::replay::log_correction;
@@ -243,6 +245,15 @@ impl CycleSource<EmulatedBus> for TraceCycles {
 
     async fn idle(&mut self) {
         Timer::after(Duration::from_millis(self.pace_ms)).await;
+    }
+
+    /// The emulated probe at the row's `dprobe_um` (none without that column).
+    async fn probe(&mut self, reference_samples: Option<u16>) -> Option<ProbeReading> {
+        if !self.trace.header().has_probe() {
+            return None;
+        }
+        let value = self.sample.as_ref().and_then(|s| s.probe_tenth_um);
+        EmulatedProbe::read(value, reference_samples).await
     }
 }
 
