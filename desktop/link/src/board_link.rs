@@ -19,8 +19,9 @@ use rmodbus::{ErrorKind, ModbusProto};
 // (docs/register-map.md), so master and server cannot disagree on an address.
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_protocol::holding::{
-    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_RESULT, HR_SPINDLE,
-    HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, STAGING_REGS, UNLOCK_CODE,
+    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_PROBE_TEMP_CHANNEL,
+    HR_RESULT, HR_SPINDLE, HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, REGISTER_NONE, STAGING_REGS,
+    UNLOCK_CODE,
 };
 use thermocomp_protocol::registers::{
     IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
@@ -429,14 +430,15 @@ pub fn channel_roms(link: &mut BoardLink) -> Result<[[u8; 8]; MAX_CHANNELS]> {
     Ok(roms)
 }
 
-/// Poll the board and append rows to a run CSV. Columns: `time_s` (host
-/// time since the recording started, continued on --append), `board_time_s`
-/// (the board's sample time), `spindle_rpm` (the PLC's register), `T01…`
-/// (°C, empty when the channel has no valid value), `comp_d<k>_um` (the
-/// served correction per direction, µm), `dprobe_um` (probe, when valid),
-/// `state_T01…` (channel state codes). Each row is flushed at once. The
-/// metadata names each column's sensor by ROM code (`# rom.T01: 28…`) when
-/// the board serves them; appending to a file whose sensors changed is refused.
+/// The probe's own temperature drift for `record`: the bus channel of the
+/// DS18B20 beside it and k (nm/K), as the board's holding registers 42–43.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeDriftSetup {
+    pub channel: usize,
+    pub nm_per_k: i16,
+}
+
+/// [`record`] with the board's probe-drift setup (holding registers 42–43).
 pub fn record(
     link: &mut BoardLink,
     out: &Path,
@@ -444,8 +446,58 @@ pub fn record(
     samples: usize,
     append: bool,
 ) -> Result<usize> {
+    record_with(link, out, interval, samples, append, None)
+}
+
+/// The probe's reading in µm with its drift removed, as the board removes it
+/// (`thermocomp_core::reference::remove_probe_drift`): `raw` 0.1 µm, the
+/// channel's temperature register (0.01 °C) back to the board's 1/16 °C.
+pub fn probe_without_drift(raw: i32, temp_centi: i16, nm_per_k: i16) -> f64 {
+    let t16 = (f64::from(temp_centi) * 16.0 / 100.0).round() as i32;
+    f64::from(thermocomp_core::reference::remove_probe_drift(
+        raw,
+        t16,
+        i32::from(nm_per_k),
+    )) / 10.0
+}
+
+/// Poll the board and append rows to a run CSV. Columns: `time_s` (host
+/// time since the recording started, continued on --append), `board_time_s`
+/// (the board's sample time), `spindle_rpm` (the PLC's register), `T01…`
+/// (°C, empty when the channel has no valid value), `comp_d<k>_um` (the
+/// served correction per direction, µm), `dprobe_um` (probe when valid,
+/// its own drift removed: `drift`, else the board's registers 42–43; empty
+/// when the probe's temperature is not available), `probe_raw_um` (the
+/// probe as read), `state_T01…` (channel state codes). Each row is flushed
+/// at once. The metadata names each column's sensor by ROM code (`# rom.T01:
+/// 28…`) when the board serves them, and the drift removed
+/// (`# probe_channel`, `# probe_drift_um_per_k`); appending to a file whose
+/// sensors changed is refused.
+pub fn record_with(
+    link: &mut BoardLink,
+    out: &Path,
+    interval: Duration,
+    samples: usize,
+    append: bool,
+    drift: Option<ProbeDriftSetup>,
+) -> Result<usize> {
     let snap = link.read_inputs(0, SNAPSHOT_LEN)?;
     check_register_map(&snap)?;
+    let drift = match drift {
+        Some(d) => Some(d),
+        None => {
+            let w = link.read_holdings(HR_PROBE_TEMP_CHANNEL, 2)?;
+            (w[0] != REGISTER_NONE).then(|| ProbeDriftSetup {
+                channel: usize::from(w[0]),
+                nm_per_k: w[1] as i16,
+            })
+        }
+    };
+    if let Some(d) = drift {
+        if d.channel >= MAX_CHANNELS {
+            bail!("probe temperature channel {}: the board has channels 1-{MAX_CHANNELS}", d.channel + 1);
+        }
+    }
     let block = link.read_inputs(IR_TEMPERATURES, CHANNEL_BLOCK)?;
     let state_of = |block: &[u16], c: usize| block[usize::from(IR_STATES - IR_TEMPERATURES) + c];
     let n_dir = usize::from(snap[usize::from(IR_N_DIRECTIONS)]).min(MAX_DIRECTIONS);
@@ -461,6 +513,7 @@ pub fn record(
     header.extend(channels.iter().map(|c| format!("T{:02}", c + 1)));
     header.extend((0..n_dir).map(|d| format!("comp_d{d}_um")));
     header.push("dprobe_um".into());
+    header.push("probe_raw_um".into());
     header.extend(channels.iter().map(|c| format!("state_T{:02}", c + 1)));
     let header_line = header.join(",");
     // The sensor on each channel, by ROM code (input registers 200–279).
@@ -536,6 +589,14 @@ pub fn record(
         for (k, v) in &rom_lines {
             writeln!(f, "# {k}: {v}")?;
         }
+        if let Some(d) = drift {
+            writeln!(f, "# probe_channel: T{:02}", d.channel + 1)?;
+            writeln!(
+                f,
+                "# probe_drift_um_per_k: {}",
+                f64::from(d.nm_per_k) / 1000.0
+            )?;
+        }
         writeln!(f, "{header_line}")?;
         f
     };
@@ -568,13 +629,17 @@ pub fn record(
                 f64::from(u32_of(&snap, IR_CORRECTIONS + 2 * d as u16) as i32) / 10.0
             ));
         }
-        row.push(
-            if snap[usize::from(IR_PROBE_STATE)] == ProbeState::Ok.code() {
-                format!("{:.1}", f64::from(u32_of(&snap, IR_PROBE) as i32) / 10.0)
-            } else {
-                String::new()
-            },
-        );
+        let raw = (snap[usize::from(IR_PROBE_STATE)] == ProbeState::Ok.code())
+            .then(|| u32_of(&snap, IR_PROBE) as i32);
+        let without = match (raw, drift) {
+            (Some(r), None) => Some(f64::from(r) / 10.0),
+            (Some(r), Some(d)) => Some(block[d.channel])
+                .filter(|&t| t != NOT_AVAILABLE)
+                .map(|t| probe_without_drift(r, t as i16, d.nm_per_k)),
+            (None, _) => None,
+        };
+        row.push(without.map_or(String::new(), |v| format!("{v:.1}")));
+        row.push(raw.map_or(String::new(), |r| format!("{:.1}", f64::from(r) / 10.0)));
         row.extend(channels.iter().map(|&c| state_of(&block, c).to_string()));
         writeln!(file, "{}", row.join(","))?;
         file.flush()?;

@@ -55,6 +55,18 @@ enum Command {
         /// Continue an existing file (same board, same columns).
         #[arg(long)]
         append: bool,
+        /// The DS18B20 beside the probe (T01…T20) whose drift `dprobe_um`
+        /// has removed (default: the board's holding registers 42–43).
+        #[arg(long, value_name = "COLUMN", requires = "probe_drift_um_per_k")]
+        probe_channel: Option<String>,
+        /// The probe's drift, µm/K (`tcomp fit --probe-drift` estimates it).
+        #[arg(
+            long,
+            value_name = "UM_PER_K",
+            requires = "probe_channel",
+            allow_hyphen_values = true
+        )]
+        probe_drift_um_per_k: Option<f64>,
     },
     /// SVG plots: temperatures, measured error vs the board's correction,
     /// residual before/after, and the sensor clusters.
@@ -214,17 +226,34 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             interval_s,
             samples,
             append,
+            probe_channel,
+            probe_drift_um_per_k,
         } => {
             anyhow::ensure!(
                 interval_s > 0.0 && interval_s.is_finite(),
                 "--interval-s must be positive"
             );
-            let n = tcomp_link::board_link::record(
+            let drift = match (probe_channel, probe_drift_um_per_k) {
+                (Some(c), Some(k)) => {
+                    let channel = c
+                        .strip_prefix('T')
+                        .and_then(|n| n.parse::<usize>().ok())
+                        .filter(|n| (1..=20).contains(n))
+                        .ok_or_else(|| anyhow::anyhow!("--probe-channel {c}: expected T01 … T20"))?;
+                    Some(tcomp_link::board_link::ProbeDriftSetup {
+                        channel: channel - 1,
+                        nm_per_k: tcomp_model::probe_drift::register_value(k)?,
+                    })
+                }
+                _ => None,
+            };
+            let n = tcomp_link::board_link::record_with(
                 &mut link.open()?,
                 &out,
                 std::time::Duration::from_secs_f64(interval_s),
                 samples,
                 append,
+                drift,
             )?;
             println!("recorded {n} samples to {}", out.display());
         }

@@ -6,13 +6,30 @@ use anyhow::{bail, Context, Result};
 
 use tcomp_model::fit::net::NetOpts;
 use tcomp_model::fit::parse_feature;
+use tcomp_model::probe_drift;
 use tcomp_model::fit::pipeline::{self as run, Candidates, FeatureChoice, FitConfig};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct FitArgs {
-    /// Training runs (run CSVs).
-    #[arg(required = true)]
+    /// Training runs (run CSVs); none with `--probe-drift` alone.
+    #[arg(required_unless_present_any = ["probe_drift", "probe_drift_um_per_k"])]
     pub train: Vec<PathBuf>,
+    /// Estimate the probe's own temperature drift (µm/K, the board's holding
+    /// register 43) from this run, recorded with the target not moving
+    /// (`probe_raw_um` or `dprobe_um` against `--probe-channel`).
+    #[arg(long, value_name = "RUN", requires = "probe_channel")]
+    pub probe_drift: Option<PathBuf>,
+    /// The probe's drift given (µm/K) instead of estimated.
+    #[arg(
+        long,
+        value_name = "UM_PER_K",
+        conflicts_with = "probe_drift",
+        allow_hyphen_values = true
+    )]
+    pub probe_drift_um_per_k: Option<f64>,
+    /// The temperature column of the DS18B20 beside the probe (e.g. T05).
+    #[arg(long, value_name = "COLUMN")]
+    pub probe_channel: Option<String>,
     /// Held-out runs to validate on (never trained on).
     #[arg(long, num_args = 1..)]
     pub validate: Vec<PathBuf>,
@@ -175,6 +192,19 @@ impl FitArgs {
 
 /// `tcomp fit`.
 pub fn main(args: FitArgs) -> Result<()> {
+    let drift = probe_drift(&args)?;
+    if args.train.is_empty() {
+        // The probe's drift alone.
+        let Some(d) = drift else {
+            bail!("no training runs");
+        };
+        if args.json {
+            println!("{}", serde_json::json!({ "probe_drift": d }));
+        } else {
+            d.print();
+        }
+        return Ok(());
+    }
     let cfg = args.config()?;
     if args.split_chrono.is_some() && args.train.len() != 1 && args.validate.is_empty() {
         // Allowed, but say what happens.
@@ -186,12 +216,33 @@ pub fn main(args: FitArgs) -> Result<()> {
         std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
     }
     if args.json {
-        println!("{}", run::report_json(&report));
+        let mut v = run::report_json(&report);
+        if let (Some(d), Some(o)) = (&drift, v.as_object_mut()) {
+            o.insert("probe_drift".into(), serde_json::to_value(d)?);
+        }
+        println!("{v}");
     } else {
         run::print_report(&report);
+        if let Some(d) = &drift {
+            d.print();
+        }
         if let Some(out) = &args.out {
             println!("\nwrote {}", out.display());
         }
     }
     Ok(())
+}
+
+/// `--probe-drift RUN` / `--probe-drift-um-per-k K` with `--probe-channel`.
+fn probe_drift(args: &FitArgs) -> Result<Option<probe_drift::ProbeDrift>> {
+    let channel = args.probe_channel.as_deref().unwrap_or("T?");
+    match (&args.probe_drift, args.probe_drift_um_per_k) {
+        (Some(path), _) => {
+            let run = tcomp_data::runcsv::Run::read(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(Some(probe_drift::estimate(&run, channel)?))
+        }
+        (None, Some(k)) => Ok(Some(probe_drift::given(channel, k)?)),
+        (None, None) => Ok(None),
+    }
 }
