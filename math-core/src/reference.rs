@@ -178,11 +178,17 @@ pub struct ReferenceState {
     clippy::cast_possible_truncation,
     reason = "clamped to ±bound, which is an i64"
 )]
+// Not inlined: i128 arithmetic expands to long sequences on a Cortex-M4
+// (flash size; the result is the same).
+#[inline(never)]
 fn clamp_i128(v: i128, bound: i64) -> i64 {
     v.clamp(-i128::from(bound), i128::from(bound)) as i64
 }
 
 /// Division rounding to nearest (ties away from zero); `d > 0`.
+// Not inlined: i128 arithmetic expands to long sequences on a Cortex-M4
+// (flash size; the result is the same).
+#[inline(never)]
 fn div_round(n: i128, d: i128) -> i128 {
     if d <= 0 {
         return 0;
@@ -221,6 +227,9 @@ pub fn exp_neg_q30(num: u64, den: u64) -> u32 {
     ((ek * t.clamp(0, Q30) as u64 + (1 << 29)) >> 30) as u32
 }
 
+// Not inlined: i128 arithmetic expands to long sequences on a Cortex-M4
+// (flash size; the result is the same).
+#[inline(never)]
 fn mul_q30(v: i128, q: u32) -> i128 {
     (v * i128::from(q) + (1 << 29)) >> 30
 }

@@ -162,7 +162,7 @@ mod tests {
             .collect();
         let d = estimate(&run(&rows), "T05").unwrap();
         assert!((d.um_per_k - 0.5).abs() < 0.01, "{d:?}");
-        assert_eq!(d.register_nm_per_k, 500);
+        assert!((d.register_nm_per_k - 500).abs() <= 10, "{d:?}");
         assert_eq!(d.rows, 50);
     }
 
