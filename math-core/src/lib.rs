@@ -31,6 +31,7 @@ pub mod golden;
 pub mod image;
 pub mod limits;
 pub mod reference;
+pub mod trig;
 pub mod volumetric;
 
 pub use compensator::{Compensator, StepInput, StepOutput};
