@@ -47,7 +47,10 @@ fn every_input_of_a_turn_is_within_the_stated_bound() {
     let mean = sum / f64::from(MDEG_PER_TURN);
     // The larger of two roundings (sin, cos) alone averages ⅓ LSB.
     assert!(mean < 0.45, "mean error {mean} LSB");
-    println!("worst {:.4} LSB at {} mdeg, mean {mean:.4}", worst.0, worst.1);
+    println!(
+        "worst {:.4} LSB at {} mdeg, mean {mean:.4}",
+        worst.0, worst.1
+    );
 }
 
 #[test]

@@ -199,6 +199,21 @@ pub mod result {
             VolumetricTemperature = 41 => VOLUMETRIC_TEMPERATURE,
             /// Volumetric section: a max correction outside 1..=MAX_CORRECTION.
             VolumetricMaxCorrection = 42 => VOLUMETRIC_MAX_CORRECTION,
+            /// Five-axis section (kind 4) without a volumetric section (kind 3).
+            FiveAxisNoVolumetric = 80 => FIVE_AXIS_NO_VOLUMETRIC,
+            /// Five-axis section: more temperature columns than the volumetric section has sensors.
+            FiveAxisSensors = 81 => FIVE_AXIS_SENSORS,
+            /// Five-axis section: a Fourier order above 4.
+            FiveAxisOrder = 82 => FIVE_AXIS_ORDER,
+            /// Five-axis section: pivot or offset beyond ±2^27 µm, or the
+            /// volumetric section's positions beyond ±2^28 µm.
+            FiveAxisGeometry = 83 => FIVE_AXIS_GEOMETRY,
+            /// Five-axis section: an A or C range not increasing or beyond ±720°.
+            FiveAxisAngleRange = 84 => FIVE_AXIS_ANGLE_RANGE,
+            /// Five-axis section: a max correction outside 1..=MAX_CORRECTION.
+            FiveAxisMaxCorrection = 85 => FIVE_AXIS_MAX_CORRECTION,
+            /// Five-axis section: an error that can exceed 1 mm / 1 mrad.
+            FiveAxisErrorTooLarge = 86 => FIVE_AXIS_ERROR_TOO_LARGE,
             /// Command 10 (or 2 with a kept reference) accepted: the reference is
             /// taken at the next cycle with every model sensor fresh, then stored.
             ReferencePending = 50 => REFERENCE_PENDING,
@@ -241,6 +256,13 @@ pub mod result {
                 | ImageError::VolumetricTool { .. } => ResultCode::VolumetricRange,
                 ImageError::VolumetricTemperature { .. } => ResultCode::VolumetricTemperature,
                 ImageError::VolumetricMaxCorrection { .. } => ResultCode::VolumetricMaxCorrection,
+                ImageError::FiveAxisWithoutVolumetric => ResultCode::FiveAxisNoVolumetric,
+                ImageError::FiveAxisSensors { .. } => ResultCode::FiveAxisSensors,
+                ImageError::FiveAxisOrder { .. } => ResultCode::FiveAxisOrder,
+                ImageError::FiveAxisGeometry => ResultCode::FiveAxisGeometry,
+                ImageError::FiveAxisAngleRange { .. } => ResultCode::FiveAxisAngleRange,
+                ImageError::FiveAxisMaxCorrection { .. } => ResultCode::FiveAxisMaxCorrection,
+                ImageError::FiveAxisErrorTooLarge { .. } => ResultCode::FiveAxisErrorTooLarge,
             }
         }
     }

@@ -12,6 +12,9 @@ pub const FORMAT_VERSION: u16 = 2;
 pub const SECTION_FALLBACKS: u8 = 1;
 /// Section kind: volumetric correction (issue 14, [`crate::volumetric`]).
 pub const SECTION_VOLUMETRIC: u8 = 3;
+/// Section kind: the five-axis part of the volumetric correction (issue 31,
+/// [`crate::five_axis`]); needs a kind-3 section.
+pub const SECTION_FIVE_AXIS: u8 = 4;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.
