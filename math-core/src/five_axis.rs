@@ -96,8 +96,8 @@ use crate::limits::MAX_CORRECTION;
 use crate::trig::{sin_cos_mdeg, MDEG_PER_TURN, ONE_Q30};
 use crate::volumetric::{vstatus, Volumetric, MAX_VOL_SENSORS, MAX_VOL_TOOL_UM};
 
-/// Highest Fourier order of a component error.
-pub const MAX_FOURIER_ORDER: usize = 4;
+/// Kept here for its old path; defined with the other limits.
+pub use crate::limits::MAX_FOURIER_ORDER;
 /// Largest location or component error anywhere: 10⁹ pm (1 mm) or 10⁹ prad
 /// (1 mrad). An error beyond that is a wrong nominal, not a compensation.
 pub const MAX_ERROR: u64 = 1_000_000_000;
@@ -110,14 +110,11 @@ pub const MAX_ANGLE_MDEG: i32 = 720_000;
 /// Largest temperature rise the kind-3 envelope allows, K (2880/16).
 const MAX_RISE_K: u64 = 180;
 
-/// The eight location errors, in the section's order (rtest.md names).
-pub const LOCATION_NAMES: [&str; 8] = ["XOC", "YOC", "AOC", "BOC", "YOA", "ZOA", "BOA", "COA"];
+/// The eight location errors and the component-error letters, in the
+/// section's order (defined with the image format's constants).
+pub use crate::image::format::{LOCATION_NAMES, MOTION_LETTERS};
 /// Which of [`LOCATION_NAMES`] are angles (prad), the others translations (pm).
 const LOCATION_IS_ANGLE: [bool; 8] = [false, false, true, true, false, false, true, true];
-/// Component errors of each axis, in the section's order: E{X,Y,Z,A,B,C}{axis}
-/// (the first three translations in pm, the last three angles in prad).
-pub const MOTION_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
-
 /// Bits of input register 334 (what the five-axis evaluation did).
 pub mod fstatus {
     /// Registers 180–185 include the five-axis part (and are valid).

@@ -24,3 +24,9 @@ pub const HEADER_LEN: usize = 32;
 pub const NONE: u8 = 0xFF;
 /// Bytes of the CRC-32 that ends an image.
 pub(crate) const CRC_LEN: usize = 4;
+/// Five-axis section (kind 4): the eight location errors in the section's
+/// order (`shared/formats/rtest.md` names; translations in pm, angles in prad).
+pub const LOCATION_NAMES: [&str; 8] = ["XOC", "YOC", "AOC", "BOC", "YOA", "ZOA", "BOA", "COA"];
+/// Five-axis section: the component errors of each axis in the section's
+/// order, E{X,Y,Z,A,B,C}{axis} (the first three translations, pm; the last three angles, prad).
+pub const MOTION_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
