@@ -14,4 +14,5 @@ pub mod modbus;
 pub mod model_store;
 pub mod runtime;
 pub mod settings;
+pub mod volumetric;
 pub mod watchdog;

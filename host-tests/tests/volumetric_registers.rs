@@ -178,7 +178,7 @@ fn served_correction_equals_the_core_at_the_plcs_positions() {
     assert_eq!(
         app.server.holding.read(HR_TOOL_LENGTH + 2, 0),
         Some(0),
-        "reserved"
+        "A (holding 36), never written"
     );
 }
 

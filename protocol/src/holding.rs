@@ -25,9 +25,15 @@ pub const HR_RATE: u16 = 26;
 /// Length in bytes of the staged model image.
 pub const HR_STAGED_LEN: u16 = 32;
 /// Tool length for the volumetric correction, int32 µm, high word first
-/// (written by the PLC like the positions; 36–39 reserved).
+/// (written by the PLC like the positions).
 pub const HR_TOOL_LENGTH: u16 = 34;
-/// Last register of the plain block (33 and 36–39 reserved, read 0).
+/// Rotary axes A (36–37) and C (38–39) for the five-axis part of the
+/// volumetric correction (image section kind 4), int32 0.001°, high word
+/// first, written by the PLC like the positions (no unlock; broadcast allowed).
+pub const HR_ROTARY: u16 = 36;
+/// Registers of the rotary block (A and C, two each).
+pub const ROTARY_REGS: u16 = 4;
+/// Last register of the plain block (33 reserved, read 0).
 pub const HR_LAST_PLAIN: u16 = 39;
 /// Model staging area: 2 bytes per register (first byte in the high half).
 pub const HR_STAGING: u16 = 1000;
