@@ -17,7 +17,7 @@ use crate::compensation::{Compensation, PlcInputs};
 use crate::fault::FaultRecord;
 use crate::hal::flash::BackgroundErase;
 use crate::modbus::holding::Command;
-use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot};
+use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
@@ -25,11 +25,11 @@ use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
 mod probe;
 use crate::model_store::MAX_SETTINGS_BYTES;
 use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::volumetric::VolContext;
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
-use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
+use thermocomp_core::volumetric::MAX_VOL_SENSORS;
 use thermocomp_protocol::holding::result;
-use thermocomp_protocol::registers::NOT_AVAILABLE_32;
 use thermocomp_protocol::rtu::MAX_FRAME;
 use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
@@ -497,63 +497,26 @@ impl<F: BackgroundErase> App<F> {
         self.update_volumetric(self.vol_uptime_ms);
     }
 
-    /// Evaluate the volumetric correction (image section kind 3) at the
-    /// PLC's positions and tool length with the last cycle's temperatures,
-    /// into input registers 180–199. Without a section, without positions
-    /// from the PLC or with a sensor fault the correction registers read
-    /// "not available" (0x8000 0000) and the status says why.
+    /// Evaluate the volumetric correction (image section kind 3, and the
+    /// five-axis part of kind 4 at the PLC's A and C) at the PLC's
+    /// positions and tool length with the last cycle's temperatures, into
+    /// input registers 180–199 and 330–359 ([`crate::volumetric`]).
+    /// Without a section, without positions (or, with kind 4, angles) from
+    /// the PLC or with a sensor fault the correction registers read "not
+    /// available" (0x8000 0000) and the status says why.
     pub fn update_volumetric(&mut self, uptime_ms: u64) {
         self.vol_uptime_ms = uptime_ms;
         let h = &self.server.holding;
-        let vol = &mut self.snapshot.vol;
-        let sequence = vol.sequence.wrapping_add(1);
-        let Some(v) = self
-            .compensation
-            .model()
-            .and_then(|m| m.volumetric.as_ref())
-        else {
-            *vol = VolSnapshot {
-                sequence,
-                ..VolSnapshot::default()
-            };
-            return;
-        };
-        let n = v.sensors.len().min(MAX_VOL_SENSORS);
-        let out = v.evaluate(
-            &h.positions,
-            h.tool_length_um,
-            self.vol_temps.get(..n).unwrap_or(&self.vol_temps),
-        );
-        let mut status = out.status;
-        if !h.positions_written {
-            status = (status & !vstatus::VALID) | vstatus::NO_POSITIONS;
-        }
         let plc_stale = h
             .plc_written_ms
             .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
-        if plc_stale || self.vol_held {
-            status |= vstatus::STALE;
-        }
-        let valid = status & vstatus::VALID != 0;
-        *vol = VolSnapshot {
-            corrections: if valid {
-                out.corrections
-            } else {
-                [NOT_AVAILABLE_32; 3]
-            },
-            status,
-            terms: register_count(v.terms.len()),
-            tool_um: if valid { out.tool_um } else { NOT_AVAILABLE_32 },
-            temps: core::array::from_fn(|i| {
-                self.vol_temps
-                    .get(i)
-                    .copied()
-                    .flatten()
-                    .filter(|_| i < n)
-                    .and_then(|t| i16::try_from(t).ok())
-            }),
-            sequence,
+        let cx = VolContext {
+            temps: &self.vol_temps,
+            held: self.vol_held,
+            plc_stale,
+            sequence: self.snapshot.vol.sequence.wrapping_add(1),
         };
+        self.snapshot.vol = crate::volumetric::snapshot(self.compensation.model(), h, &cx);
     }
 
     fn apply_limits(&mut self) {
@@ -663,11 +626,19 @@ impl<F: BackgroundErase> App<F> {
         reply: &mut heapless::Vec<u8, MAX_FRAME>,
     ) -> LinkChange {
         let h = &self.server.holding;
-        let geometry_before = (h.positions, h.tool_length_um, h.positions_written);
+        let geometry = |h: &crate::modbus::holding::Holding| {
+            (
+                h.positions,
+                h.tool_length_um,
+                h.positions_written,
+                h.rotary_mdeg,
+                h.rotary_written,
+            )
+        };
+        let geometry_before = geometry(h);
         let command = self.server.handle(frame, uptime_ms, &self.snapshot, reply);
-        let h = &self.server.holding;
-        if (h.positions, h.tool_length_um, h.positions_written) != geometry_before {
-            // New positions or tool length: the volumetric correction follows
+        if geometry(&self.server.holding) != geometry_before {
+            // New positions, tool length or angles: the volumetric correction follows
             // at once (not at the next cycle), so the PLC's next read has it.
             self.update_volumetric(uptime_ms);
         }

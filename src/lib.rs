@@ -15,4 +15,5 @@ pub mod model_store;
 pub mod probe_reference;
 pub mod runtime;
 pub mod settings;
+pub mod volumetric;
 pub mod watchdog;

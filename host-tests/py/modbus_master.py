@@ -18,10 +18,12 @@ so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
                                          unlock, write holding registers (one FC06 each), read 0-31
   inputs   --port P --addr A [--count N] input registers as a list
   fault    --port P                      status and the fault record (input registers 160-168)
-  volumetric --port P --at X,Y,Z,L [--at ...]
+  volumetric --port P --at X,Y,Z,L[,A,C] [--at ...]
                                          per point: write the positions (FC16 6-11) and the
-                                         tool length (FC16 34-35), all µm, then read input
-                                         registers 180-199 (the volumetric block)
+                                         tool length (FC16 34-35), all µm, (with A,C in
+                                         0.001°: FC16 36-39), then read input registers
+                                         180-199 (the volumetric block) and, with A,C,
+                                         330-343 (the five-axis block)
   flood    --pipe BASE [--bytes N] [--gap-ms G] [--retry-ms R]
                                          N bytes of garbage into the board's UART (QEMU
                                          -serial pipe:BASE), then one good request; how
@@ -429,18 +431,37 @@ def cmd_volumetric(a):
     m = Master(a.port)
     out = []
     for at in a.at:
-        x, y, z, tool = (int(v) for v in at.split(","))
+        vals = [int(v) for v in at.split(",")]
+        x, y, z, tool = vals[:4]
+        angles = vals[4:6]
         regs = []
         for v in (x, y, z):
             regs += list(struct.unpack(">HH", struct.pack(">i", v)))
         w1 = m.call("write_registers", 6, regs)
         w2 = m.call("write_registers", 34, list(struct.unpack(">HH", struct.pack(">i", tool))))
+        calls = [w1, w2]
+        if angles:
+            ang = []
+            for v in angles:
+                ang += list(struct.unpack(">HH", struct.pack(">i", v)))
+            calls.append(m.call("write_registers", 36, ang))
         r = m.call("read_input_registers", 180, count=20)
-        if None in (w1, w2, r) or w1.isError() or w2.isError() or r.isError():
-            out.append({"error": str((w1, w2, r))})
+        calls.append(r)
+        f = None
+        if angles:
+            f = m.call("read_input_registers", 330, count=14)
+            calls.append(f)
+        if None in calls or any(c.isError() for c in calls):
+            out.append({"error": str(calls)})
             continue
         w = r.registers
-        out.append({"at": [x, y, z, tool],
+        five = {}
+        if f is not None:
+            g = f.registers
+            five = {"angles": [s32(g[0], g[1]), s32(g[2], g[3])], "five_status": g[4],
+                    "order": g[5], "rotary": [s32(g[6 + 2 * d], g[7 + 2 * d]) for d in range(3)],
+                    "five_sequence": u32(g[12], g[13])}
+        out.append({**five, "at": vals,
                     "correction": [s32(w[2 * d], w[2 * d + 1]) for d in range(3)],
                     "status": w[6], "terms": w[7], "tool_um": s32(w[8], w[9]),
                     "temps_16": [struct.unpack(">h", struct.pack(">H", t))[0] for t in w[10:14]],

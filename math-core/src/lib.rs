@@ -16,6 +16,9 @@
 //!   (Kalman bias + drift, gate, re-zero), issue 28.
 //! - [`volumetric`]: the geometric-thermal tool-tip correction (image
 //!   section kind 3), integers only.
+//! - [`five_axis`]: the rotary axes' errors of a table-tilting five-axis
+//!   machine added to the volumetric correction at the PLC's A and C
+//!   (image section kind 4), with [`trig`]'s fixed-point sine and cosine.
 //! - [`golden`]: golden vectors checked on the board (generated on the host).
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
@@ -24,6 +27,7 @@ pub mod compensator;
 pub mod crc;
 pub mod eval;
 pub mod features;
+pub mod five_axis;
 pub mod fixed;
 #[cfg(feature = "std")]
 pub mod float;
@@ -31,6 +35,7 @@ pub mod golden;
 pub mod image;
 pub mod limits;
 pub mod reference;
+pub mod trig;
 pub mod volumetric;
 
 pub use compensator::{Compensator, StepInput, StepOutput};

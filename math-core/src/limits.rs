@@ -52,3 +52,5 @@ pub const MAX_VOL_POWER: u8 = 3;
 pub const MAX_VOL_STROKE_UM: i32 = 100_000_000;
 /// Longest volumetric tool-length scale, µm (10 m).
 pub const MAX_VOL_TOOL_UM: i32 = 10_000_000;
+/// Highest Fourier order of a five-axis component error (image section kind 4).
+pub const MAX_FOURIER_ORDER: usize = 4;

@@ -96,6 +96,9 @@ pub mod vstatus {
     pub const CLAMPED: u16 = 1 << 7;
     /// The PLC's registers are older than the timeout, or a sensor value is held.
     pub const STALE: u16 = 1 << 8;
+    /// Five-axis section (kind 4): A or C was outside the section's range
+    /// and held at its edge.
+    pub const ANGLE_CLAMPED: u16 = 1 << 9;
 }
 
 /// A sensor the section reads: identity as the image's sensors (ROM code,
@@ -269,19 +272,11 @@ impl Volumetric {
     /// the firmware serves exactly this, the desktop predicts with it.
     pub fn evaluate(&self, positions: &[i32], tool_um: i32, temps: &[Option<i32>]) -> VolOutput {
         let mut out = VolOutput::default();
-        // Temperature rises (1/16 °C), clamped into the envelope.
-        let mut rise = [0i64; MAX_VOL_SENSORS];
-        for (i, (s, r)) in self.sensors.iter().zip(rise.iter_mut()).enumerate() {
-            let Some(t) = temps.get(i).copied().flatten() else {
-                out.status |= vstatus::SENSOR_FAULT;
-                return out;
-            };
-            let c = t.clamp(i32::from(s.min), i32::from(s.max));
-            if c != t {
-                out.status |= vstatus::TEMPERATURE_CLAMPED;
-            }
-            *r = i64::from(c - s.sensor.ref_temp);
-        }
+        let (rise, status) = self.rises(temps);
+        out.status |= status;
+        let Some(rise) = rise else {
+            return out;
+        };
         // Powers 0..=3 of u, v, w, l in Q24.
         let mut pow = [[ONE_Q24; 4]; 4];
         #[allow(
@@ -374,6 +369,37 @@ impl Volumetric {
         }
         out.status |= vstatus::VALID;
         out
+    }
+
+    /// Temperature rises (1/16 °C) against each sensor's reference, the
+    /// temperature clamped into its envelope first (|rise| ≤ 2880); `None`
+    /// with [`vstatus::SENSOR_FAULT`] when a sensor has no value. The
+    /// five-axis section ([`crate::five_axis`]) scales by these same rises.
+    pub(crate) fn rises(&self, temps: &[Option<i32>]) -> (Option<[i64; MAX_VOL_SENSORS]>, u16) {
+        let mut status = 0;
+        let mut rise = [0i64; MAX_VOL_SENSORS];
+        for (i, (s, r)) in self.sensors.iter().zip(rise.iter_mut()).enumerate() {
+            let Some(t) = temps.get(i).copied().flatten() else {
+                return (None, status | vstatus::SENSOR_FAULT);
+            };
+            let c = t.clamp(i32::from(s.min), i32::from(s.max));
+            if c != t {
+                status |= vstatus::TEMPERATURE_CLAMPED;
+            }
+            *r = i64::from(c - s.sensor.ref_temp);
+        }
+        (Some(rise), status)
+    }
+
+    /// The position of direction `k` (0 x, 1 y, 2 z) the evaluation uses:
+    /// the PLC's slot (a missing slot reads as the origin), held inside
+    /// origin … origin + stroke. `None` for k > 2.
+    pub fn position_used(&self, k: usize, positions: &[i32]) -> Option<i32> {
+        let slot = usize::from(*self.slots.get(k)?);
+        let origin = *self.origin_um.get(k)?;
+        let span = self.spans.get(k)?;
+        let raw = positions.get(slot).copied().unwrap_or(origin);
+        Some(raw.clamp(span.lo, span.hi))
     }
 
     /// Bound on |served − exact polynomial of the same integer coefficients|

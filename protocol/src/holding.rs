@@ -25,8 +25,14 @@ pub const HR_RATE: u16 = 26;
 /// Length in bytes of the staged model image.
 pub const HR_STAGED_LEN: u16 = 32;
 /// Tool length for the volumetric correction, int32 µm, high word first
-/// (written by the PLC like the positions; 36–39 reserved).
+/// (written by the PLC like the positions).
 pub const HR_TOOL_LENGTH: u16 = 34;
+/// Rotary axes A (36–37) and C (38–39) for the five-axis part of the
+/// volumetric correction (image section kind 4), int32 0.001°, high word
+/// first, written by the PLC like the positions (no unlock; broadcast allowed).
+pub const HR_ROTARY: u16 = 36;
+/// Registers of the rotary block (A and C, two each).
+pub const ROTARY_REGS: u16 = 4;
 /// Probe references (issue 28; unlock; stored with the settings): the
 /// model direction the probe measures at the gauge (0–5; 0xFFFF: none).
 pub const HR_PROBE_DIRECTION: u16 = 40;
@@ -45,7 +51,7 @@ pub const DEFAULT_PROBE_DIRECTION: u16 = REGISTER_NONE;
 pub const DEFAULT_REFERENCE_SAMPLES: u16 = 256;
 /// "None" for holding registers 40 and 42.
 pub const REGISTER_NONE: u16 = 0xFFFF;
-/// Last register of the plain block (33, 36–39 and 46–49 reserved, read 0).
+/// Last register of the plain block (33 and 46–49 reserved, read 0).
 pub const HR_LAST_PLAIN: u16 = 49;
 /// Model staging area: 2 bytes per register (first byte in the high half).
 pub const HR_STAGING: u16 = 1000;
@@ -227,6 +233,21 @@ pub mod result {
             VolumetricTemperature = 41 => VOLUMETRIC_TEMPERATURE,
             /// Volumetric section: a max correction outside 1..=MAX_CORRECTION.
             VolumetricMaxCorrection = 42 => VOLUMETRIC_MAX_CORRECTION,
+            /// Five-axis section (kind 4) without a volumetric section (kind 3).
+            FiveAxisNoVolumetric = 80 => FIVE_AXIS_NO_VOLUMETRIC,
+            /// Five-axis section: more temperature columns than the volumetric section has sensors.
+            FiveAxisSensors = 81 => FIVE_AXIS_SENSORS,
+            /// Five-axis section: a Fourier order above 4.
+            FiveAxisOrder = 82 => FIVE_AXIS_ORDER,
+            /// Five-axis section: pivot or offset beyond ±2^27 µm, or the
+            /// volumetric section's positions beyond ±2^28 µm.
+            FiveAxisGeometry = 83 => FIVE_AXIS_GEOMETRY,
+            /// Five-axis section: an A or C range not increasing or beyond ±720°.
+            FiveAxisAngleRange = 84 => FIVE_AXIS_ANGLE_RANGE,
+            /// Five-axis section: a max correction outside 1..=MAX_CORRECTION.
+            FiveAxisMaxCorrection = 85 => FIVE_AXIS_MAX_CORRECTION,
+            /// Five-axis section: an error that can exceed 1 mm / 1 mrad.
+            FiveAxisErrorTooLarge = 86 => FIVE_AXIS_ERROR_TOO_LARGE,
             /// Command 10 (or 2 with a kept reference) accepted: the reference is
             /// taken at the next cycle with every model sensor fresh, then stored.
             ReferencePending = 50 => REFERENCE_PENDING,
@@ -284,6 +305,13 @@ pub mod result {
                 | ImageError::VolumetricTool { .. } => ResultCode::VolumetricRange,
                 ImageError::VolumetricTemperature { .. } => ResultCode::VolumetricTemperature,
                 ImageError::VolumetricMaxCorrection { .. } => ResultCode::VolumetricMaxCorrection,
+                ImageError::FiveAxisWithoutVolumetric => ResultCode::FiveAxisNoVolumetric,
+                ImageError::FiveAxisSensors { .. } => ResultCode::FiveAxisSensors,
+                ImageError::FiveAxisOrder { .. } => ResultCode::FiveAxisOrder,
+                ImageError::FiveAxisGeometry => ResultCode::FiveAxisGeometry,
+                ImageError::FiveAxisAngleRange { .. } => ResultCode::FiveAxisAngleRange,
+                ImageError::FiveAxisMaxCorrection { .. } => ResultCode::FiveAxisMaxCorrection,
+                ImageError::FiveAxisErrorTooLarge { .. } => ResultCode::FiveAxisErrorTooLarge,
             }
         }
     }

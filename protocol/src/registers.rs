@@ -46,9 +46,9 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register: the end of the probe-reference block (158–159,
-/// 169, 174–179, 196–199 and 293–299 reserved, read 0).
-pub const IR_LAST: u16 = IR_REF_LAST;
+/// Last input register: the end of the five-axis block (158–159, 169,
+/// 174–179, 196–199, 293–299 and 344–359 reserved, read 0).
+pub const IR_LAST: u16 = IR_FIVE_LAST;
 
 /// "Not available" for 32-bit measurements: reads 0x8000, 0x0000 (i32::MIN).
 pub const NOT_AVAILABLE_32: i32 = i32::MIN;
@@ -68,6 +68,25 @@ pub const IR_VOL_TEMPS: u16 = 190;
 pub const IR_VOL_SEQUENCE: u16 = 194;
 /// Last register of the volumetric block (180–199).
 pub const IR_VOL_LAST: u16 = 199;
+
+/// The five-axis part of the volumetric correction (image section kind 4,
+/// issue 31), input registers 330–359: what the evaluation used. A and C
+/// after clamping, int32 0.001° each (330–333; [`NOT_AVAILABLE_32`] unless
+/// status bit 0).
+pub const IR_FIVE_ANGLES: u16 = 330;
+/// Five-axis status bits ([`thermocomp_core::five_axis::fstatus`]).
+pub const IR_FIVE_STATUS: u16 = 334;
+/// Fourier order of the section's component errors (0: none or no section).
+pub const IR_FIVE_ORDER: u16 = 335;
+/// The rotary part alone of registers 180–185, x, y, z, int32 0.1 µm,
+/// machine frame (336–341; [`NOT_AVAILABLE_32`] unless status bit 0).
+pub const IR_FIVE_ROTARY: u16 = 336;
+/// The volumetric evaluation these registers belong to (= 194–195 of the
+/// same snapshot), u32.
+pub const IR_FIVE_SEQUENCE: u16 = 342;
+/// Last register of the five-axis block (344–359 reserved, read 0).
+pub const IR_FIVE_FIRST: u16 = 330;
+pub const IR_FIVE_LAST: u16 = 359;
 
 /// Status bit 9: a fault record from before the last reset is held (input
 /// registers 160–168) until command 6 clears it.

@@ -19,6 +19,16 @@ fn in_block(a: u16, base: u16, n: usize) -> Option<usize> {
     a.checked_sub(base).map(usize::from).filter(|&k| k < n)
 }
 
+/// Register `k` of a block of 32-bit values (even: the high word) sets that half of `p`.
+fn set_half(p: &mut i32, k: usize, v: u16) {
+    let u = *p as u32;
+    *p = if k % 2 == 0 {
+        ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
+    } else {
+        ((u & 0xFFFF_0000) | u32::from(v)) as i32
+    };
+}
+
 /// Why a write was refused (mapped to a Modbus exception by the server).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WriteError {
@@ -122,6 +132,10 @@ pub struct Holding {
     pub tool_length_um: i32,
     /// The PLC has written positions (or the tool length) since boot.
     pub positions_written: bool,
+    /// Rotary axes A and C, 0.001° (HR_ROTARY), for the five-axis section.
+    pub rotary_mdeg: [i32; 2],
+    /// The PLC has written A or C since boot.
+    pub rotary_written: bool,
     /// ms time of the PLC's last write of speed or positions.
     pub plc_written_ms: Option<u64>,
     pub clamp: [u16; MAX_DIRECTIONS],
@@ -147,6 +161,8 @@ impl Holding {
             positions: [0; MAX_AXES],
             tool_length_um: 0,
             positions_written: false,
+            rotary_mdeg: [0; 2],
+            rotary_written: false,
             plc_written_ms: None,
             clamp: [u16::MAX; MAX_DIRECTIONS],
             rate: [u16::MAX; MAX_DIRECTIONS],
@@ -178,9 +194,9 @@ impl Holding {
     }
 
     pub fn read(&self, addr: u16, now_ms: u64) -> Option<u16> {
-        let pos = |a: u16| -> Option<u16> {
-            let k = a.checked_sub(HR_POSITIONS)?;
-            let v = *self.positions.get(usize::from(k / 2))? as u32;
+        let word = |values: &[i32], base: u16, a: u16| -> Option<u16> {
+            let k = a.checked_sub(base)?;
+            let v = *values.get(usize::from(k / 2))? as u32;
             Some(if k % 2 == 0 {
                 (v >> 16) as u16
             } else {
@@ -195,7 +211,12 @@ impl Holding {
             // The baud rates the board accepts are below 6,553,600.
             HR_BAUD => u16::try_from(self.baud / 100).unwrap_or(u16::MAX),
             HR_SPINDLE => self.spindle_rpm,
-            a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => pos(a)?,
+            a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => {
+                word(&self.positions, HR_POSITIONS, a)?
+            }
+            a if in_block(a, HR_ROTARY, usize::from(ROTARY_REGS)).is_some() => {
+                word(&self.rotary_mdeg, HR_ROTARY, a)?
+            }
             HR_TOOL_LENGTH => (self.tool_length_um as u32 >> 16) as u16,
             a if a == HR_TOOL_LENGTH + 1 => (self.tool_length_um as u32 & 0xFFFF) as u16,
             a if in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some() => {
@@ -287,20 +308,26 @@ impl Holding {
         let touches =
             |first: u16, n: usize| usize::from(addr) < usize::from(first) + n && end > first;
         let geometry = touches(HR_POSITIONS, POSITION_REGS) || touches(HR_TOOL_LENGTH, 2);
-        if geometry || touches(HR_SPINDLE, 1) {
+        let rotary = touches(HR_ROTARY, usize::from(ROTARY_REGS));
+        if geometry || rotary || touches(HR_SPINDLE, 1) {
             self.plc_written_ms = Some(now_ms);
         }
         if geometry {
             self.positions_written = true;
         }
+        if rotary {
+            self.rotary_written = true;
+        }
         Ok(command)
     }
 
-    /// Registers the PLC writes in normal operation (spindle speed, positions, tool length).
+    /// Registers the PLC writes in normal operation (spindle speed,
+    /// positions, tool length, rotary axes).
     fn plc_register(a: u16) -> bool {
         a == HR_SPINDLE
             || in_block(a, HR_POSITIONS, POSITION_REGS).is_some()
             || (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a)
+            || in_block(a, HR_ROTARY, usize::from(ROTARY_REGS)).is_some()
     }
 
     /// Writes that change what a commit in progress stores.
@@ -393,12 +420,12 @@ impl Holding {
             a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => {
                 let k = usize::from(a - HR_POSITIONS);
                 let p = self.positions.get_mut(k / 2).ok_or(WriteError::Address)?;
-                let u = *p as u32;
-                *p = if k % 2 == 0 {
-                    ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
-                } else {
-                    ((u & 0xFFFF_0000) | u32::from(v)) as i32
-                };
+                set_half(p, k, v);
+            }
+            a if in_block(a, HR_ROTARY, usize::from(ROTARY_REGS)).is_some() => {
+                let k = usize::from(a - HR_ROTARY);
+                let p = self.rotary_mdeg.get_mut(k / 2).ok_or(WriteError::Address)?;
+                set_half(p, k, v);
             }
             a if (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a) => {
                 let u = self.tool_length_um as u32;

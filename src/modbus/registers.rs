@@ -73,6 +73,32 @@ pub struct VolSnapshot {
     /// 1/16 °C per section sensor; `None`: no value (or no such sensor).
     pub temps: [Option<i16>; MAX_VOL_SENSORS],
     pub sequence: u32,
+    /// The five-axis part (input registers 330–359).
+    pub five: FiveSnapshot,
+}
+
+/// The five-axis block of the snapshot (input registers 330–359).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FiveSnapshot {
+    /// A and C used, 0.001°; [`NOT_AVAILABLE_32`] unless `status` has INCLUDED.
+    pub angles: [i32; 2],
+    /// [`thermocomp_core::five_axis::fstatus`] bits.
+    pub status: u16,
+    /// Fourier order of the section (0: none).
+    pub order: u16,
+    /// The rotary part alone, 0.1 µm; [`NOT_AVAILABLE_32`] unless INCLUDED.
+    pub rotary: [i32; 3],
+}
+
+impl Default for FiveSnapshot {
+    fn default() -> Self {
+        FiveSnapshot {
+            angles: [NOT_AVAILABLE_32; 2],
+            status: thermocomp_core::five_axis::fstatus::NO_SECTION,
+            order: 0,
+            rotary: [NOT_AVAILABLE_32; 3],
+        }
+    }
 }
 
 impl Default for VolSnapshot {
@@ -84,6 +110,7 @@ impl Default for VolSnapshot {
             tool_um: NOT_AVAILABLE_32,
             temps: [None; MAX_VOL_SENSORS],
             sequence: 0,
+            five: FiveSnapshot::default(),
         }
     }
 }
@@ -178,6 +205,9 @@ impl Snapshot {
         if (IR_REF_TIME..=IR_REF_LAST).contains(&addr) {
             let k = usize::from(addr - IR_REF_TIME);
             return Some(self.references.get(k).copied().unwrap_or(0));
+        }
+        if (IR_FIVE_FIRST..=IR_FIVE_LAST).contains(&addr) {
+            return Some(self.five_register(addr));
         }
         if addr > IR_LAST {
             return None;
@@ -313,6 +343,26 @@ impl Snapshot {
         } else {
             word32(addr, IR_VOL_SEQUENCE, v.sequence).unwrap_or_default()
         }
+    }
+
+    /// Input registers 330–359: the five-axis part of the volumetric correction.
+    fn five_register(&self, addr: u16) -> u16 {
+        let f = &self.vol.five;
+        let k = usize::from(addr.wrapping_sub(IR_FIVE_ANGLES));
+        if let Some(w) = block_word(&f.angles, k) {
+            return w;
+        }
+        if addr == IR_FIVE_STATUS {
+            return f.status;
+        }
+        if addr == IR_FIVE_ORDER {
+            return f.order;
+        }
+        let k = usize::from(addr.wrapping_sub(IR_FIVE_ROTARY));
+        if let Some(w) = block_word(&f.rotary, k) {
+            return w;
+        }
+        word32(addr, IR_FIVE_SEQUENCE, self.vol.sequence).unwrap_or_default()
     }
 
     /// Input registers 160–179: the fault record (0 without one).

@@ -47,6 +47,12 @@ pub async fn bench(golden_path: Option<&'static str>, model_path: Option<&'stati
             .volumetric
             .as_ref()
             .map(|v| (bench_volumetric(v), v.terms.len(), v.sensors.len()));
+        // And its five-axis section (issue 31): the whole evaluation, kind 3 + kind 4.
+        let five = model
+            .volumetric
+            .as_ref()
+            .zip(model.five_axis.as_ref())
+            .map(|(v, f)| (bench_five_axis(v, f), f.order));
         let (eval, step, _, _) = bench_model(model);
         let _ = write!(
             line,
@@ -58,6 +64,13 @@ pub async fn bench(golden_path: Option<&'static str>, model_path: Option<&'stati
                 line,
                 ",\"volumetric_evaluate_insn_x100\":{},\"volumetric_terms\":{},\"volumetric_sensors\":{}",
                 insn, terms, sensors
+            );
+        }
+        if let Some((insn, order)) = five {
+            let _ = write!(
+                line,
+                ",\"five_axis_evaluate_insn_x100\":{},\"five_axis_order\":{}",
+                insn, order
             );
         }
     }
@@ -85,6 +98,37 @@ fn bench_volumetric(v: &thermocomp_core::volumetric::Volumetric) -> u64 {
         core::hint::black_box(v.evaluate(
             core::hint::black_box(&positions),
             core::hint::black_box(200_000),
+            core::hint::black_box(&temps),
+        ));
+    })
+}
+
+/// Instructions of one evaluation of the volumetric correction with its
+/// five-axis part (kind 3 at the pose of [`bench_volumetric`], plus the
+/// rotary chain at A = 30°, C = 45°).
+fn bench_five_axis(
+    v: &thermocomp_core::volumetric::Volumetric,
+    f: &thermocomp_core::five_axis::FiveAxis,
+) -> u64 {
+    const RUNS: u32 = 500;
+    let mut positions = [0i32; MAX_AXES];
+    for k in 0..3 {
+        if let Some(p) = positions.get_mut(usize::from(v.slots[k])) {
+            *p = v.origin_um[k] + v.stroke_um[k] / 3;
+        }
+    }
+    let temps: heapless::Vec<Option<i32>, { thermocomp_core::volumetric::MAX_VOL_SENSORS }> = v
+        .sensors
+        .iter()
+        .map(|s| Some(s.sensor.ref_temp + 80))
+        .collect();
+    cycles::instructions_x100(RUNS, || {
+        core::hint::black_box(thermocomp_core::five_axis::evaluate(
+            v,
+            f,
+            core::hint::black_box(&positions),
+            core::hint::black_box(200_000),
+            core::hint::black_box([30_000, 45_000]),
             core::hint::black_box(&temps),
         ));
     })

@@ -20,6 +20,7 @@ pub use kinematics::{
 };
 pub mod bench_rich;
 pub mod board;
+pub mod board5;
 pub mod check;
 pub mod five_axis;
 pub mod guard;

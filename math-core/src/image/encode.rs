@@ -3,11 +3,12 @@
 
 use super::error::EncodeError;
 use super::format::{
-    crc32, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, SECTION_FALLBACKS, SECTION_VOLUMETRIC,
-    UNITS_V1,
+    crc32, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
+    SECTION_VOLUMETRIC, UNITS_V1,
 };
 use super::model::Model;
 use super::types::{InputKind, Term};
+use crate::five_axis::FiveAxis;
 use crate::volumetric::Volumetric;
 use heapless::Vec;
 
@@ -16,10 +17,11 @@ impl Model {
     fn sections_len(&self) -> usize {
         let fallbacks = self.fallbacks_payload_len().map_or(0, |n| 4 + n);
         let volumetric = self.volumetric.as_ref().map_or(0, |v| 4 + v.encoded_len());
-        if fallbacks + volumetric == 0 {
+        let five_axis = self.five_axis.as_ref().map_or(0, |f| 4 + f.encoded_len());
+        if fallbacks + volumetric + five_axis == 0 {
             return 0;
         }
-        4 + fallbacks + volumetric
+        4 + fallbacks + volumetric + five_axis
     }
 
     fn fallbacks_payload_len(&self) -> Option<usize> {
@@ -165,7 +167,9 @@ impl Model {
     /// The section list (v2 only) and the sections.
     fn write_sections(&self, w: &mut Writer<'_>) {
         if self.sections_len() > 0 {
-            let n = u8::from(!self.fallbacks.is_empty()) + u8::from(self.volumetric.is_some());
+            let n = u8::from(!self.fallbacks.is_empty())
+                + u8::from(self.volumetric.is_some())
+                + u8::from(self.five_axis.is_some());
             w.put(&[n, 0, 0, 0]);
         }
         if let Some(payload) = self.fallbacks_payload_len() {
@@ -181,6 +185,9 @@ impl Model {
         }
         if let Some(v) = &self.volumetric {
             write_volumetric(w, v);
+        }
+        if let Some(f) = &self.five_axis {
+            write_five_axis(w, f);
         }
     }
 }
@@ -225,6 +232,30 @@ fn write_volumetric(w: &mut Writer<'_>, v: &Volumetric) {
         ]);
         for c in t.coef {
             w.put(&c.to_le_bytes());
+        }
+    }
+}
+
+/// Section kind 4 (layout in the module docs).
+fn write_five_axis(w: &mut Writer<'_>, f: &FiveAxis) {
+    w.put(&[SECTION_FIVE_AXIS, 0]);
+    w.put(&len_u16(f.encoded_len()).to_le_bytes());
+    w.put(&[f.n_sensors, f.order, 0, 0]);
+    let head = f.pivot_a_um.iter().chain(&f.offset_c_um);
+    let head = head.chain(&f.a_range_mdeg).chain(&f.c_range_mdeg);
+    for v in head.chain(&f.max_correction) {
+        w.put(&v.to_le_bytes());
+    }
+    for row in &f.location {
+        for v in row.iter().take(1 + usize::from(f.n_sensors)) {
+            w.put(&v.to_le_bytes());
+        }
+    }
+    for axis in &f.motion {
+        for error in axis {
+            for v in error.iter().take(usize::from(f.order)).flatten() {
+                w.put(&v.to_le_bytes());
+            }
         }
     }
 }

@@ -1,10 +1,13 @@
 //! Why an image is refused ([`ImageError`], one line each for users) or
 //! cannot be written ([`EncodeError`]).
 
-use super::format::{FORMAT_VERSION, SECTION_FALLBACKS, SECTION_VOLUMETRIC, UNITS_V1};
+use super::format::{
+    FORMAT_VERSION, LOCATION_NAMES, MOTION_LETTERS, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
+    SECTION_VOLUMETRIC, UNITS_V1,
+};
 use crate::limits::{
-    MAX_AXES, MAX_CORRECTION, MAX_IMAGE_BYTES, MAX_RATE, MAX_SENSORS, MAX_VOL_STROKE_UM,
-    MAX_VOL_TOOL_UM,
+    MAX_AXES, MAX_CORRECTION, MAX_FOURIER_ORDER, MAX_IMAGE_BYTES, MAX_RATE, MAX_SENSORS,
+    MAX_VOL_SENSORS, MAX_VOL_STROKE_UM, MAX_VOL_TOOL_UM,
 };
 use heapless::Vec;
 
@@ -132,6 +135,51 @@ pub enum ImageError {
         direction: u8,
         value: i32,
     },
+    /// Five-axis section (kind 4) in an image without a volumetric section
+    /// (kind 3): the chain needs the linear axes' errors.
+    FiveAxisWithoutVolumetric,
+    /// Five-axis section: more temperature columns than the volumetric
+    /// section has sensors (or than [`MAX_VOL_SENSORS`]).
+    FiveAxisSensors {
+        count: u8,
+        available: u8,
+    },
+    /// Five-axis section: a Fourier order above [`MAX_FOURIER_ORDER`].
+    FiveAxisOrder {
+        order: u8,
+    },
+    /// Five-axis section: pivot or offset beyond ±2^27 µm, or the volumetric
+    /// section's positions beyond ±2^28 µm.
+    FiveAxisGeometry,
+    /// Five-axis section: an A (axis 0) or C (1) range whose minimum is not
+    /// below its maximum, or beyond ±720°.
+    FiveAxisAngleRange {
+        axis: u8,
+    },
+    /// Five-axis section: a max correction outside 1..=[`MAX_CORRECTION`].
+    FiveAxisMaxCorrection {
+        direction: u8,
+        value: i32,
+    },
+    /// Five-axis section: an error that can exceed 1 mm / 1 mrad (0–7 the
+    /// location errors XOC … COA, 8 + 6·axis + k the component errors
+    /// E{X,Y,Z,A,B,C}{A,C}), or a non-zero unused coefficient.
+    FiveAxisErrorTooLarge {
+        error: u8,
+    },
+}
+
+/// The name of five-axis error `error` (see [`ImageError::FiveAxisErrorTooLarge`]).
+fn five_axis_error_name(f: &mut core::fmt::Formatter<'_>, error: u8) -> core::fmt::Result {
+    match LOCATION_NAMES.get(usize::from(error)) {
+        Some(name) => write!(f, "{name}"),
+        None => {
+            let k = usize::from(error.saturating_sub(8));
+            let letter = MOTION_LETTERS.get(k % 6).copied().unwrap_or('?');
+            let axis = if k / 6 == 0 { 'A' } else { 'C' };
+            write!(f, "E{letter}{axis}")
+        }
+    }
 }
 
 impl core::fmt::Display for ImageError {
@@ -200,7 +248,7 @@ impl core::fmt::Display for ImageError {
             ),
             ImageError::UnknownSection { kind } => write!(
                 f,
-                "image section kind {kind} not known to this build (it reads kinds {SECTION_FALLBACKS} and {SECTION_VOLUMETRIC})"
+                "image section kind {kind} not known to this build (it reads kinds {SECTION_FALLBACKS}, {SECTION_VOLUMETRIC} and {SECTION_FIVE_AXIS})"
             ),
             ImageError::SectionLength { kind } => write!(
                 f,
@@ -244,6 +292,39 @@ impl core::fmt::Display for ImageError {
                 f,
                 "volumetric direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
             ),
+            ImageError::FiveAxisWithoutVolumetric => write!(
+                f,
+                "five-axis section (kind {SECTION_FIVE_AXIS}) without a volumetric section (kind {SECTION_VOLUMETRIC}): the chain needs the linear axes' errors"
+            ),
+            ImageError::FiveAxisSensors { count, available } => write!(
+                f,
+                "five-axis section reads {count} sensors; the volumetric section has {available} (at most {MAX_VOL_SENSORS})"
+            ),
+            ImageError::FiveAxisOrder { order } => write!(
+                f,
+                "five-axis section: Fourier order {order} above {MAX_FOURIER_ORDER}"
+            ),
+            ImageError::FiveAxisGeometry => write!(
+                f,
+                "five-axis section: pivot or offset beyond +-2^27 um, or volumetric positions beyond +-2^28 um"
+            ),
+            ImageError::FiveAxisAngleRange { axis } => write!(
+                f,
+                "five-axis section: range of {} not increasing or beyond +-720 deg",
+                if axis == 0 { 'A' } else { 'C' }
+            ),
+            ImageError::FiveAxisMaxCorrection { direction, value } => write!(
+                f,
+                "five-axis direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
+            ),
+            ImageError::FiveAxisErrorTooLarge { error } => {
+                write!(f, "five-axis error ")?;
+                five_axis_error_name(f, error)?;
+                write!(
+                    f,
+                    " can exceed 1 mm / 1 mrad in the temperature envelope, or has a non-zero unused coefficient"
+                )
+            }
         }
     }
 }

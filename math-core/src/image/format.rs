@@ -12,6 +12,9 @@ pub const FORMAT_VERSION: u16 = 2;
 pub const SECTION_FALLBACKS: u8 = 1;
 /// Section kind: volumetric correction (issue 14, [`crate::volumetric`]).
 pub const SECTION_VOLUMETRIC: u8 = 3;
+/// Section kind: the five-axis part of the volumetric correction (issue 31,
+/// [`crate::five_axis`]); needs a kind-3 section.
+pub const SECTION_FIVE_AXIS: u8 = 4;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.
@@ -21,3 +24,9 @@ pub const HEADER_LEN: usize = 32;
 pub const NONE: u8 = 0xFF;
 /// Bytes of the CRC-32 that ends an image.
 pub(crate) const CRC_LEN: usize = 4;
+/// Five-axis section (kind 4): the eight location errors in the section's
+/// order (`shared/formats/rtest.md` names; translations in pm, angles in prad).
+pub const LOCATION_NAMES: [&str; 8] = ["XOC", "YOC", "AOC", "BOC", "YOA", "ZOA", "BOA", "COA"];
+/// Five-axis section: the component errors of each axis in the section's
+/// order, E{X,Y,Z,A,B,C}{axis} (the first three translations, pm; the last three angles, prad).
+pub const MOTION_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];

@@ -3,6 +3,7 @@
 
 use super::error::{push, ImageError};
 use super::types::{name_str, Axis, Direction, Fallback, InputSpec, Net, SensorRef, Table, Term};
+use crate::five_axis::FiveAxis;
 use crate::fixed::Span;
 use crate::limits::*;
 use crate::volumetric::Volumetric;
@@ -29,6 +30,8 @@ pub struct Model {
     pub fallback_terms: Vec<Term, MAX_FALLBACK_TERMS>,
     /// The volumetric correction (format v2, section kind 3), if any.
     pub volumetric: Option<Volumetric>,
+    /// The five-axis part of the volumetric correction (section kind 4), if any.
+    pub five_axis: Option<FiveAxis>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
     pub(crate) input_span: [Span; MAX_INPUTS],
@@ -56,6 +59,7 @@ impl Model {
             fallbacks: Vec::new(),
             fallback_terms: Vec::new(),
             volumetric: None,
+            five_axis: None,
             input_span: [Span::default(); MAX_INPUTS],
             axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],

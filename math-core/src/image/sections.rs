@@ -2,11 +2,12 @@
 //! one reader per kind (1: fallback models, 3: volumetric correction).
 
 use super::error::{push, ImageError};
-use super::format::{NONE, SECTION_FALLBACKS, SECTION_VOLUMETRIC};
+use super::format::{NONE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC};
 use super::model::Model;
 use super::reader::Reader;
 use super::terms::{read_terms, TermRule};
 use super::types::{InputKind, SensorRef};
+use crate::five_axis::{FiveAxis, FiveAxisSpec, MAX_FOURIER_ORDER};
 use crate::limits::{MAX_FALLBACKS, MAX_SECTIONS, MAX_TERMS, MAX_VOL_SENSORS, MAX_VOL_TERMS};
 use crate::volumetric::{VolSensor, VolTerm, Volumetric, VolumetricSpec};
 use heapless::Vec;
@@ -22,7 +23,7 @@ pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), Im
         let len = usize::from(r.u16()?);
         let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
-        if kind != SECTION_FALLBACKS && kind != SECTION_VOLUMETRIC {
+        if ![SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind) {
             return Err(ImageError::UnknownSection { kind });
         }
         if seen & bit != 0 {
@@ -31,6 +32,7 @@ pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), Im
         seen |= bit;
         let parsed = match kind {
             SECTION_VOLUMETRIC => parse_volumetric(&mut payload, m),
+            SECTION_FIVE_AXIS => parse_five_axis(&mut payload, m),
             _ => parse_fallbacks(&mut payload, m),
         };
         parsed.map_err(|e| match e {
@@ -40,6 +42,10 @@ pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), Im
         if !payload.is_at_end() {
             return Err(ImageError::SectionLength { kind });
         }
+    }
+    // Kind 4 leans on kind 3 (its sensors and position ranges), whichever came first.
+    if let Some(f) = &m.five_axis {
+        f.check_with(m.volumetric.as_ref())?;
     }
     Ok(())
 }
@@ -136,6 +142,44 @@ fn read_vol_terms(r: &mut Reader<'_>, n: usize) -> Result<Vec<VolTerm, MAX_VOL_T
         push(&mut terms, VolTerm { exps, sensor, coef })?;
     }
     Ok(terms)
+}
+
+/// Section kind 4: the five-axis part (validated by [`FiveAxis::new`];
+/// against kind 3 after every section is read).
+fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let [n_sensors, order, p1, p2] = r.array()?;
+    if p1 != 0 || p2 != 0 {
+        return Err(ImageError::BadValue {
+            what: "five-axis section padding",
+        });
+    }
+    if usize::from(n_sensors) > MAX_VOL_SENSORS {
+        return Err(ImageError::FiveAxisSensors {
+            count: n_sensors,
+            available: 0,
+        });
+    }
+    if usize::from(order) > MAX_FOURIER_ORDER {
+        return Err(ImageError::FiveAxisOrder { order });
+    }
+    let mut s = FiveAxisSpec {
+        n_sensors,
+        order,
+        ..FiveAxisSpec::default()
+    };
+    r.i32s(s.pivot_a_um.iter_mut().chain(s.offset_c_um.iter_mut()))?;
+    r.i32s(s.a_range_mdeg.iter_mut().chain(s.c_range_mdeg.iter_mut()))?;
+    r.i32s(s.max_correction.iter_mut())?;
+    for row in &mut s.location {
+        r.i32s(row.iter_mut().take(1 + usize::from(n_sensors)))?;
+    }
+    for axis in &mut s.motion {
+        for error in axis.iter_mut() {
+            r.i32s(error.iter_mut().take(usize::from(order)).flatten())?;
+        }
+    }
+    m.five_axis = Some(FiveAxis::new(&s)?);
+    Ok(())
 }
 
 /// Section kind 1: fallback models, in priority order.

@@ -27,7 +27,11 @@ use tcomp_geometry::{Structure, Term};
 
 /// Instructions (×100) of one volumetric evaluation of `image` on the
 /// bench firmware, or why it could not be measured.
-fn count_on_board(elf: &std::path::Path, image: &std::path::Path) -> Result<f64, String> {
+fn count_on_board(
+    elf: &std::path::Path,
+    image: &std::path::Path,
+    key: &str,
+) -> Result<f64, String> {
     if !elf.exists() {
         return Err(format!(
             "no QEMU firmware at {} (cargo build -p board-qemu-mps2 --release --target thumbv7em-none-eabihf)",
@@ -54,10 +58,10 @@ fn count_on_board(elf: &std::path::Path, image: &std::path::Path) -> Result<f64,
         .rfind(|l| l.starts_with('{'))
         .ok_or_else(|| format!("the bench firmware printed no figures: {text}"))?;
     let v: serde_json::Value = serde_json::from_str(line).map_err(|e| format!("{e}: {line}"))?;
-    v["volumetric_evaluate_insn_x100"]
+    v[key]
         .as_f64()
         .map(|x| x / 100.0)
-        .ok_or_else(|| format!("no volumetric figure in {line}"))
+        .ok_or_else(|| format!("no {key} in {line}"))
 }
 
 /// Quantisation and instruction count of the static and a dense thermal section.
@@ -134,7 +138,7 @@ fn board_figures(
             Some((v, report.clone())),
             &img,
         )?;
-        let insn = count_on_board(elf, &img);
+        let insn = count_on_board(elf, &img, "volumetric_evaluate_insn_x100");
         out.insert(
             name.into(),
             serde_json::json!({
@@ -149,7 +153,92 @@ fn board_figures(
             }),
         );
     }
+    out.insert(
+        "thermal_dense_five_axis".into(),
+        five_axis_figures(&dense, elf, dir)?,
+    );
     Ok(serde_json::Value::Object(out))
+}
+
+/// Issue 31: the dense thermal section with a five-axis section (kind 4)
+/// as dense as the board takes: the eight location errors with slopes on
+/// all three sensors, all twelve component errors to order 4; the whole
+/// evaluation (kind 3 + the rotary chain) counted on the bench firmware.
+fn five_axis_figures(
+    dense: &tcomp_geometry::volumetric::VolumetricPoly,
+    elf: &std::path::Path,
+    dir: &std::path::Path,
+) -> anyhow::Result<serde_json::Value> {
+    use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
+    use tcomp_geometry::board5::{
+        quantize_five_axis, FiveAxisOptions, Location, LocationValue, RotaryModel,
+    };
+    use tcomp_geometry::five_axis::Fourier;
+    let opts = BoardOptions {
+        channels: vec![0, 1, 2],
+        slots: [0, 1, 2],
+        origin_mm: [0.0; 3],
+        tool_max_mm: 500.0,
+        max_correction_um: 500.0,
+    };
+    let v = quantize(dense, &opts)?;
+    let report = quantisation_report(dense, &v, &opts);
+    let mut r = RotaryModel {
+        pivot_a_mm: [400.0, 250.0, -150.0],
+        offset_c_mm: [0.0, 0.0, 120.0],
+        sensors: dense.sensors.clone(),
+        t_ref_c: dense.t_ref_c.clone(),
+        ..Default::default()
+    };
+    for (k, name) in thermocomp_core::five_axis::LOCATION_NAMES
+        .iter()
+        .enumerate()
+    {
+        let s = 0.1 * (k as f64 + 1.0);
+        r.location.insert(
+            name.to_string(),
+            LocationValue::Thermal(Location {
+                value: 10.0 - 2.5 * k as f64,
+                per_k: vec![s, -s, s / 2.0],
+            }),
+        );
+    }
+    for axis in ['A', 'C'] {
+        for m in thermocomp_core::five_axis::MOTION_LETTERS {
+            r.motion.insert(
+                format!("E{m}{axis}"),
+                Fourier {
+                    cos: vec![2.0, -1.0, 0.5, 0.25],
+                    sin: vec![-1.5, 0.75, -0.4, 0.2],
+                },
+            );
+        }
+    }
+    let f = quantize_five_axis(&r, &v, &dense.sensors, &FiveAxisOptions::default())?;
+    let five_bytes = 4 + f.encoded_len();
+    let order = f.order;
+    let (mut model, _) = thermocomp_core::float::demo_model(1)
+        .quantize()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    model.volumetric = Some(v);
+    model.five_axis = Some(f);
+    let mut buf = vec![0u8; model.encoded_len()];
+    model.encode(&mut buf).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let img = dir.join("thermal_dense_five_axis.img");
+    std::fs::write(&img, &buf)?;
+    let insn = count_on_board(elf, &img, "five_axis_evaluate_insn_x100");
+    Ok(serde_json::json!({
+        "terms": report.terms,
+        "sensors": report.sensors,
+        "section_bytes": report.section_bytes + five_bytes,
+        "five_axis_section_bytes": five_bytes,
+        "fourier_order": order,
+        "image_bytes": buf.len(),
+        "quantisation": report,
+        "evaluate_instructions": insn.as_ref().ok(),
+        "evaluate_instructions_error": insn.as_ref().err(),
+        "target_instructions": 30_000,
+    }))
 }
 
 fn main() -> std::process::ExitCode {
