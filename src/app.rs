@@ -21,7 +21,7 @@ use crate::modbus::registers::{centidegrees, Snapshot, VolSnapshot};
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::model_store::MAX_SETTINGS_BYTES;
-use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::settings::{KeptReference, Settings, StoredKeys, ENCODED_LEN as SETTINGS_LEN};
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
 use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
@@ -31,9 +31,14 @@ use thermocomp_protocol::rtu::MAX_FRAME;
 use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
 
-// The slots' settings block holds the settings, the channel map and a kept reference.
+// The slots' settings block holds the settings, the channel map, a kept
+// reference and the keys.
 const _: () = assert!(
-    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN <= MAX_SETTINGS_BYTES
+    SETTINGS_LEN
+        + CHANNEL_MAP_BYTES
+        + crate::settings::REFERENCE_LEN
+        + crate::settings::KEYS_LEN
+        <= MAX_SETTINGS_BYTES
 );
 
 /// PLC registers older than this make the inputs "stale".
@@ -152,9 +157,12 @@ impl<F: BackgroundErase> App<F> {
         {
             self.map = map;
         }
-        self.kept = blob
+        let (kept, keys) = blob
             .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
-            .and_then(KeptReference::decode);
+            .map_or((None, None), crate::settings::tail_records);
+        self.kept = kept;
+        let keys = keys.unwrap_or_default();
+        self.server.holding.keys = crate::modbus::keys::Keys::stored(keys.unlock, keys.signing);
         apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
         self.snapshot.reference_state = u16::from(self.kept.is_some());
         self.publish_map();
@@ -193,6 +201,13 @@ impl<F: BackgroundErase> App<F> {
         let _ = v.extend_from_slice(&self.map.to_bytes());
         if let Some(k) = &self.kept {
             let _ = v.extend_from_slice(&k.encode());
+        }
+        let keys = StoredKeys {
+            unlock: self.server.holding.keys.unlock,
+            signing: self.server.holding.keys.signing,
+        };
+        if !keys.is_empty() {
+            let _ = v.extend_from_slice(&keys.encode());
         }
         v
     }
@@ -696,6 +711,11 @@ impl<F: BackgroundErase> App<F> {
                 LinkChange::Reconfigure {
                     baud: self.defaults.baud,
                 }
+            }
+            Command::KeysChanged => {
+                // In force at once; stored like the settings (23, then 0 or 22).
+                self.store_settings();
+                LinkChange::None
             }
             Command::TestPanic => LinkChange::TestPanic,
             Command::TestStall => {

@@ -19,8 +19,8 @@ use rmodbus::{ErrorKind, ModbusProto};
 // (docs/register-map.md), so master and server cannot disagree on an address.
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_protocol::holding::{
-    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_RESULT, HR_SPINDLE,
-    HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, STAGING_REGS, UNLOCK_CODE,
+    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_KEY_STATE, HR_RESULT,
+    HR_SPINDLE, HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, KEY_STATE_SIGNING_KEY, STAGING_REGS,
 };
 use thermocomp_protocol::registers::{
     IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
@@ -254,6 +254,8 @@ pub struct UploadSummary {
     pub model_version: u32,
     pub model_crc: String,
     pub result: u16,
+    /// The file carried a signature trailer (`tcomp export --sign`).
+    pub signed: bool,
     /// Model sensors the image names by a ROM code that is on none of the
     /// board's channels (input registers 200–279): the board serves without
     /// them (fallback or held) until that sensor is on the bus. Empty when
@@ -296,21 +298,42 @@ pub fn check_register_map(first: &[u16]) -> Result<()> {
 }
 
 /// Validate locally, check the size, stage, commit, and check that the board
-/// now serves it. Any failure after the unlock relocks the board, so a
-/// failed upload never leaves it open to configuration writes.
-pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<UploadSummary> {
+/// now serves it. `file` is an image, or an image and its signature trailer
+/// (`tcomp export --sign`); `unlock_key` is the board's own key (the factory
+/// code only opens commissioning). Any failure after the unlock relocks the
+/// board, so a failed upload never leaves it open to configuration writes.
+pub fn upload(
+    link: &mut BoardLink,
+    file: &[u8],
+    commit: Commit,
+    unlock_key: u16,
+) -> Result<UploadSummary> {
     let staging_bytes = usize::from(STAGING_REGS) * 2;
-    if image.len() > staging_bytes {
+    if file.len() > staging_bytes {
         bail!(
             "the image is {} bytes; the board's staging area holds {staging_bytes}: not sent",
-            image.len()
+            file.len()
         );
     }
-    let model = thermocomp_core::Model::parse(image)
+    let signed = thermocomp_core::image::split_signed(file)
+        .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
+    let model = thermocomp_core::Model::parse(signed.image)
         .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
     check_register_map(&link.read_inputs(0, 3)?).context("not sent")?;
-    match stage_and_commit(link, image, commit) {
-        Ok(result) => verify(link, image, &model, result),
+    // A board with a signing key takes signed models only (a board
+    // without the key registers answers an exception: it has no key).
+    let key_state = link.read_holdings(HR_KEY_STATE, 1).ok();
+    let board_wants_signature = key_state
+        .and_then(|k| k.first().copied())
+        .is_some_and(|k| k & KEY_STATE_SIGNING_KEY != 0);
+    if board_wants_signature && signed.signature.is_none() {
+        bail!(
+            "the board stores a signing key and commits signed models only: export with --sign <private key file>; not sent"
+        );
+    }
+    let is_signed = signed.signature.is_some();
+    match stage_and_commit(link, file, commit, unlock_key) {
+        Ok(result) => verify(link, file, &model, result, is_signed),
         Err(e) => {
             // A commit locks the board itself; everything else needs a lock.
             // (A board already locked answers exception 01: nothing to do.)
@@ -328,9 +351,13 @@ pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<Uplo
 }
 
 /// Unlock, stage, commit; the result register's value on success.
-fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<u16> {
-    link.write_one(HR_UNLOCK, UNLOCK_CODE)
-        .context("unlocking")?;
+fn stage_and_commit(
+    link: &mut BoardLink,
+    image: &[u8],
+    commit: Commit,
+    unlock_key: u16,
+) -> Result<u16> {
+    unlock(link, unlock_key)?;
     let mut padded = image.to_vec();
     padded.resize(image.len().div_ceil(2) * 2, 0);
     let words: Vec<u16> = padded
@@ -350,20 +377,7 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
         Commit::Rollback => CMD_ROLLBACK_MODEL,
     };
     let committed = link.write_one(HR_COMMAND, command);
-    let mut code = link
-        .read_holdings(HR_RESULT, 1)
-        .ok()
-        .and_then(|r| r.first().copied());
-    // The board answers the commit at once and writes the flash in the
-    // background (result 23 until done: ~1-2 s for a sector erase).
-    let start = std::time::Instant::now();
-    while code == Some(result::COMMIT_IN_PROGRESS) && start.elapsed() < Duration::from_secs(15) {
-        std::thread::sleep(Duration::from_millis(50));
-        code = link
-            .read_holdings(HR_RESULT, 1)
-            .ok()
-            .and_then(|r| r.first().copied());
-    }
+    let code = await_result(link);
     match (committed, code) {
         (Ok(()), Some(result::OK)) => Ok(result::OK),
         (Ok(()), Some(code)) => bail!("commit accepted, but storing it failed: result {code} {}", result::name(code)),
@@ -371,6 +385,10 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
         (Err(e), Some(result::NOT_NEWER)) => Err(e.context(format!(
             "commit refused: result {} NOT_NEWER, the board runs this or a newer model version; pass --rollback to go back on purpose",
             result::NOT_NEWER
+        ))),
+        (Err(e), Some(code @ (result::UNSIGNED | result::BAD_SIGNATURE))) => Err(e.context(format!(
+            "commit refused: result {code} {}: the board commits only models signed with the private key of the public key it stores (registers 50-65)",
+            result::name(code)
         ))),
         (Err(e), Some(code)) => Err(e.context(format!(
             "commit refused: result {code} {}",
@@ -380,12 +398,42 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
     }
 }
 
+/// Unlock with `key`; a refusal says what the key is.
+pub fn unlock(link: &mut BoardLink, key: u16) -> Result<()> {
+    link.write_one(HR_UNLOCK, key).map_err(|e| {
+        if e.to_string().contains("exception 03") {
+            e.context("unlocking: the board refused the key (give the board's own unlock key: --unlock-key or TCOMP_UNLOCK_KEY; the factory code opens only commissioning)")
+        } else {
+            e.context("unlocking")
+        }
+    })
+}
+
+/// HR_RESULT once the board has finished a commit: it answers a commit
+/// (model, settings, keys) at once and writes the flash in the background
+/// (result 23 until done: ~1-2 s for a sector erase). `None`: unreadable.
+pub fn await_result(link: &mut BoardLink) -> Option<u16> {
+    let read = |link: &mut BoardLink| {
+        link.read_holdings(HR_RESULT, 1)
+            .ok()
+            .and_then(|r| r.first().copied())
+    };
+    let mut code = read(link);
+    let start = std::time::Instant::now();
+    while code == Some(result::COMMIT_IN_PROGRESS) && start.elapsed() < Duration::from_secs(15) {
+        std::thread::sleep(Duration::from_millis(50));
+        code = read(link);
+    }
+    code
+}
+
 /// The board must now serve the uploaded model.
 fn verify(
     link: &mut BoardLink,
     image: &[u8],
     model: &thermocomp_core::Model,
     result: u16,
+    signed: bool,
 ) -> Result<UploadSummary> {
     let snap = link.read_inputs(0, IR_MODEL_CRC + 2)?;
     let (version, crc) = (u32_of(&snap, IR_MODEL_VERSION), u32_of(&snap, IR_MODEL_CRC));
@@ -412,6 +460,7 @@ fn verify(
         model_version: version,
         model_crc: format!("{crc:#010x}"),
         result,
+        signed,
         sensors_not_on_board,
     })
 }

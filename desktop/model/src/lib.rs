@@ -14,3 +14,4 @@ pub mod plots;
 pub mod reference_replay;
 pub mod replay;
 pub mod select;
+pub mod signing;

@@ -94,6 +94,8 @@ mod model;
 mod parse;
 mod reader;
 mod sections;
+mod semantic;
+pub mod signed;
 mod terms;
 pub(crate) mod types;
 
@@ -103,6 +105,7 @@ pub use format::{
     SECTION_FALLBACKS, SECTION_VOLUMETRIC, UNITS_V1,
 };
 pub use model::Model;
+pub use signed::{split_signed, SignedImage, MAX_SIGNED_BYTES};
 pub use types::{
     name8, Axis, Direction, Fallback, InputKind, InputSpec, Lag, Net, SensorRef, Table, Term,
 };
