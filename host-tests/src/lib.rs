@@ -35,3 +35,31 @@ pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermoco
     while app.poll_flash() {}
     assert_eq!(app.server.holding.keys.unlock, Some(TEST_UNLOCK_KEY));
 }
+
+/// Upload options of a test: [`TEST_UNLOCK_KEY`]; `allow_missing_sensors`
+/// for boards that have no sensors (the mocks).
+pub fn upload_opts(
+    commit: tcomp_link::board_link::Commit,
+    allow_missing_sensors: bool,
+) -> tcomp_link::board_link::UploadOptions {
+    tcomp_link::board_link::UploadOptions {
+        commit,
+        unlock_key: TEST_UNLOCK_KEY,
+        allow_missing_sensors,
+    }
+}
+
+/// Give a board behind `link` its unlock key [`TEST_UNLOCK_KEY`] if it has
+/// none yet (a fresh QEMU bench board), as `tcomp commission` does.
+pub fn commission_link(link: &mut tcomp_link::board_link::BoardLink) {
+    use tcomp_link::commission::{commission, key_state, Commission};
+    if key_state(link).unwrap().unlock_key_set {
+        return;
+    }
+    let c = Commission {
+        unlock_key: None,
+        new_unlock_key: Some(TEST_UNLOCK_KEY),
+        signing_key: None,
+    };
+    assert!(commission(link, &c).unwrap().unlock_key_set);
+}

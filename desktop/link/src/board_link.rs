@@ -263,6 +263,56 @@ pub struct UploadSummary {
     pub sensors_not_on_board: Vec<usize>,
 }
 
+/// How `upload` commits.
+#[derive(Debug, Clone, Copy)]
+pub struct UploadOptions {
+    pub commit: Commit,
+    /// The board's own unlock key (set at commissioning).
+    pub unlock_key: u16,
+    /// Send a model whose sensors the board does not have now (it then
+    /// serves without them: fallback or held); refused otherwise.
+    pub allow_missing_sensors: bool,
+}
+
+/// The model sensors the board has no sensor for now, one line each naming
+/// the sensor and its channel: by ROM code, a code on none of its channels
+/// (input registers 200–279); by channel, a channel with no sensor on it
+/// (state unused or no presence, 130–149). Read from the board's identity
+/// registers before anything is sent.
+pub fn missing_sensors(link: &mut BoardLink, model: &thermocomp_core::Model) -> Result<Vec<String>> {
+    let by_rom = model.sensors.iter().any(|s| s.rom != [0; 8]);
+    let by_channel = model.sensors.iter().any(|s| s.rom == [0; 8]);
+    let roms = if by_rom { Some(channel_roms(link)?) } else { None };
+    let states = if by_channel {
+        Some(link.read_inputs(IR_STATES, MAX_CHANNELS as u16)?)
+    } else {
+        None
+    };
+    let absent = [ChannelState::Unused.code(), ChannelState::NoPresence.code()];
+    let mut out = vec![];
+    for (i, s) in model.sensors.iter().enumerate() {
+        let line = if s.rom != [0; 8] {
+            let on_board = roms.as_ref().is_some_and(|r| r.contains(&s.rom));
+            (!on_board).then(|| {
+                format!(
+                    "model sensor {i} (ROM {}, trained on channel {}) is on none of the board's channels",
+                    tcomp_data::runcsv::format_rom(&s.rom),
+                    s.channel
+                )
+            })
+        } else {
+            let state = states
+                .as_ref()
+                .and_then(|st| st.get(usize::from(s.channel)).copied());
+            state
+                .is_none_or(|st| absent.contains(&st))
+                .then(|| format!("model sensor {i} reads channel {} (T{:02})", s.channel, s.channel + 1))
+        };
+        out.extend(line);
+    }
+    Ok(out)
+}
+
 /// Which commit command an upload ends with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Commit {
@@ -302,12 +352,12 @@ pub fn check_register_map(first: &[u16]) -> Result<()> {
 /// (`tcomp export --sign`); `unlock_key` is the board's own key (the factory
 /// code only opens commissioning). Any failure after the unlock relocks the
 /// board, so a failed upload never leaves it open to configuration writes.
-pub fn upload(
-    link: &mut BoardLink,
-    file: &[u8],
-    commit: Commit,
-    unlock_key: u16,
-) -> Result<UploadSummary> {
+pub fn upload(link: &mut BoardLink, file: &[u8], opts: &UploadOptions) -> Result<UploadSummary> {
+    let UploadOptions {
+        commit,
+        unlock_key,
+        allow_missing_sensors,
+    } = *opts;
     let staging_bytes = usize::from(STAGING_REGS) * 2;
     if file.len() > staging_bytes {
         bail!(
@@ -329,6 +379,17 @@ pub fn upload(
     if board_wants_signature && signed.signature.is_none() {
         bail!(
             "the board stores a signing key and commits signed models only: export with --sign <private key file>; not sent"
+        );
+    }
+    let missing = missing_sensors(link, &model)?;
+    if let (false, Some(first)) = (allow_missing_sensors, missing.first()) {
+        bail!(
+            "{first}{}: the board has no sensor there now; not sent (--allow-missing-sensors sends it anyway: the board then serves without them, fallback or held)",
+            if missing.len() > 1 {
+                format!(" (and {} more: {})", missing.len() - 1, missing[1..].join("; "))
+            } else {
+                String::new()
+            }
         );
     }
     let is_signed = signed.signature.is_some();

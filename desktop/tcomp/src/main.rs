@@ -41,6 +41,10 @@ enum Command {
         rollback: bool,
         #[command(flatten)]
         unlock: cli::keys::UnlockArgs,
+        /// Send it even if the board has no sensor for some model sensor
+        /// now (it serves without them: fallback or held).
+        #[arg(long)]
+        allow_missing_sensors: bool,
         #[arg(long)]
         json: bool,
     },
@@ -196,6 +200,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             link,
             rollback,
             unlock,
+            allow_missing_sensors,
             json,
         } => {
             let key = unlock.key()?.ok_or_else(|| {
@@ -210,7 +215,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 tcomp_link::board_link::Commit::NewerOnly
             };
-            let s = tcomp_link::board_link::upload(&mut link.open()?, &bytes, commit, key)?;
+            let opts = tcomp_link::board_link::UploadOptions {
+                commit,
+                unlock_key: key,
+                allow_missing_sensors,
+            };
+            let s = tcomp_link::board_link::upload(&mut link.open()?, &bytes, &opts)?;
             if json {
                 println!("{}", serde_json::to_string(&s)?);
             } else {
