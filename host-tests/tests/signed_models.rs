@@ -20,7 +20,7 @@ use thermocomp_protocol::rtu::{expected_request_len, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 /// The unlock key these tests give their boards.
-const KEY: u16 = 0x7E57;
+const KEY: u16 = host_tests::TEST_UNLOCK_KEY;
 
 /// The board's application behind a socket (one client at a time), its
 /// state shared with the test.
@@ -131,7 +131,7 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     // tcomp refuses to send an unsigned image to a board with a key.
     let e = format!(
         "{:#}",
-        upload(&mut link, &image(3), Commit::NewerOnly, KEY).unwrap_err()
+        upload(&mut link, &image(3), &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
     );
     assert!(e.contains("--sign"), "{e}");
     // A master that sends it anyway: exception 04, result 70, locked.
@@ -145,7 +145,7 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     let wrong = signing::sign_image(&image(3), &other.private).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &wrong, Commit::NewerOnly, KEY).unwrap_err()
+        upload(&mut link, &wrong, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
     );
     assert!(e.contains("BAD_SIGNATURE"), "{e}");
     assert_eq!(raw_commit(&mut link, &wrong).1, result::BAD_SIGNATURE);
@@ -171,7 +171,7 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
     let keys = new_keys();
     let (mut link, board) = commissioned(&keys);
     let signed = signing::sign_image(&image(3), &keys.private).unwrap();
-    let s = upload(&mut link, &signed, Commit::NewerOnly, KEY).unwrap();
+    let s = upload(&mut link, &signed, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
     assert!(s.signed);
     assert_eq!((s.model_version, s.result), (3, result::OK));
     assert_eq!(serving(&board), 3);
@@ -192,7 +192,7 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
         KEY_STATE_UNLOCK_KEY | KEY_STATE_SIGNING_KEY
     );
     let signed4 = signing::sign_image(&image(4), &keys.private).unwrap();
-    upload(&mut link, &signed4, Commit::NewerOnly, KEY).unwrap();
+    upload(&mut link, &signed4, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
     assert_eq!(serving(&board), 4);
     // A board without a signing key takes unsigned and signed images alike.
     let mut app = fresh_app(MockFlash::new(2 * SLOT as usize));
@@ -205,8 +205,8 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
         signing_key: None,
     };
     commission(&mut link, &c).unwrap();
-    assert!(!upload(&mut link, &image(3), Commit::NewerOnly, KEY).unwrap().signed);
-    upload(&mut link, &signed4, Commit::NewerOnly, KEY).unwrap();
+    assert!(!upload(&mut link, &image(3), &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap().signed);
+    upload(&mut link, &signed4, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
     assert_eq!(serving(&board), 4);
 }
 
@@ -257,7 +257,7 @@ fn a_stored_signing_key_is_replaced_only_with_the_old_keys_signature() {
     let by_old = signing::sign_image(&image(3), &old.private).unwrap();
     assert_eq!(raw_commit(&mut link, &by_old).1, result::BAD_SIGNATURE);
     let by_new = signing::sign_image(&image(3), &new.private).unwrap();
-    upload(&mut link, &by_new, Commit::NewerOnly, KEY).unwrap();
+    upload(&mut link, &by_new, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
     assert_eq!(serving(&board), 3);
     // Not a curve point: BAD_KEY.
     let fresh = fresh_app(MockFlash::new(2 * SLOT as usize));

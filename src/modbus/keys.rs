@@ -116,3 +116,35 @@ pub fn verify(key: &[u8; PUBLIC_KEY_LEN], message: &[u8], signature: &[u8; SIGNA
         .verify(message, &Signature::new(*signature))
         .is_ok()
 }
+
+#[cfg(test)]
+#[allow(
+    clippy::unwrap_used,
+    clippy::indexing_slicing,
+    clippy::cast_possible_truncation
+)]
+mod tests {
+    use super::*;
+
+    /// A signature made by another implementation (Python `cryptography`,
+    /// seed 00 01 … 1f, message byte i = (7i + 3) mod 256, 2,048 bytes);
+    /// the QEMU bench times the same verification.
+    #[test]
+    fn verifies_another_implementations_signature_and_nothing_else() {
+        let hex = |s: &str| -> Vec<u8> {
+            (0..s.len() / 2)
+                .map(|i| u8::from_str_radix(&s[2 * i..2 * i + 2], 16).unwrap())
+                .collect()
+        };
+        let key: [u8; 32] = hex("03a107bff3ce10be1d70dd18e74bc09967e4d6309ba50d5f1ddc8664125531b8")
+            .try_into()
+            .unwrap();
+        let sig: [u8; 64] = hex("5bd00ad8e1273e224b4f2dd08bb72f89bb14a30c83f5476224cb321f4d350c8ba568aab5b6e5e4f9c416ac58f6f8add6691b04b3e565c2c1ed46d525dcba1101")
+            .try_into()
+            .unwrap();
+        let mut message: Vec<u8> = (0..2048).map(|i| ((7 * i + 3) % 256) as u8).collect();
+        assert!(verify(&key, &message, &sig));
+        message[1000] ^= 1;
+        assert!(!verify(&key, &message, &sig));
+    }
+}
