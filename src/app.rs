@@ -24,7 +24,7 @@ use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
 
 mod probe;
 use crate::model_store::MAX_SETTINGS_BYTES;
-use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::settings::{KeptReference, Settings, StoredKeys, ENCODED_LEN as SETTINGS_LEN};
 use crate::volumetric::VolContext;
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
@@ -35,9 +35,13 @@ use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
 
 // The slots' settings block holds the settings, the channel map, a kept
-// reference and the probe references.
+// reference, the probe references and the keys.
 const _: () = assert!(
-    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN + REFERENCES_LEN
+    SETTINGS_LEN
+        + CHANNEL_MAP_BYTES
+        + crate::settings::REFERENCE_LEN
+        + REFERENCES_LEN
+        + crate::settings::KEYS_LEN
         <= MAX_SETTINGS_BYTES
 );
 
@@ -164,19 +168,17 @@ impl<F: BackgroundErase> App<F> {
         {
             self.map = map;
         }
-        // After the map: the kept reference (tag 'R'), then the probe
-        // references (tag 'Q'), each optional.
-        let mut tail = blob
+        // After the map: the kept reference (tag 'R'), the probe references
+        // (tag 'Q') and the keys (tag 'K'), each optional, read by their tag.
+        let tail = blob
             .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
-            .unwrap_or(&[]);
-        self.kept = tail
-            .get(..crate::settings::REFERENCE_LEN)
-            .and_then(KeptReference::decode);
-        if self.kept.is_some() {
-            tail = tail.get(crate::settings::REFERENCE_LEN..).unwrap_or(&[]);
-        }
+            .map(crate::settings::tail_records)
+            .unwrap_or_default();
+        self.kept = tail.kept;
+        let keys = tail.keys.unwrap_or_default();
+        self.server.holding.keys = crate::modbus::keys::Keys::stored(keys.unlock, keys.signing);
         apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
-        if let Some(setup) = self.references.decode(tail) {
+        if let Some(setup) = tail.references.and_then(|r| self.references.decode(r)) {
             self.server.holding.probe = setup;
         }
         self.publish_references();
@@ -230,6 +232,13 @@ impl<F: BackgroundErase> App<F> {
         } else {
             self.references.encode(setup)
         });
+        let keys = StoredKeys {
+            unlock: self.server.holding.keys.unlock,
+            signing: self.server.holding.keys.signing,
+        };
+        if !keys.is_empty() {
+            let _ = v.extend_from_slice(&keys.encode());
+        }
         v
     }
 
@@ -719,6 +728,11 @@ impl<F: BackgroundErase> App<F> {
                 LinkChange::Reconfigure {
                     baud: self.defaults.baud,
                 }
+            }
+            Command::KeysChanged => {
+                // In force at once; stored like the settings (23, then 0 or 22).
+                self.store_settings();
+                LinkChange::None
             }
             Command::TestPanic => LinkChange::TestPanic,
             Command::TestStall => {

@@ -77,8 +77,9 @@ impl<F: NorFlash> ModelStore<F> {
         &mut self.flash
     }
 
-    /// Find the newest valid slot and parse its model; `buf` is scratch.
-    pub fn load(&mut self, buf: &mut [u8; MAX_IMAGE_BYTES]) -> Option<Model> {
+    /// Find the newest valid slot and parse its model; `buf` is scratch
+    /// (at least `MAX_IMAGE_BYTES`: a longer image is no valid slot).
+    pub fn load(&mut self, buf: &mut [u8]) -> Option<Model> {
         self.active = None;
         let mut best: Option<(usize, u32)> = None;
         for s in 0..2 {
@@ -153,7 +154,7 @@ impl<F: NorFlash> ModelStore<F> {
 
     /// Reads slot `s`'s image into `buf` and returns its header when the slot
     /// holds a complete, CRC-correct image that parses.
-    fn valid_header(&mut self, s: usize, buf: &mut [u8; MAX_IMAGE_BYTES]) -> Option<Header> {
+    fn valid_header(&mut self, s: usize, buf: &mut [u8]) -> Option<Header> {
         let base = self.slot_base(s);
         let mut h = [0u8; HEADER as usize];
         self.flash.read(base, &mut h).ok()?;

@@ -36,7 +36,8 @@ use crate::modbus::holding::ProbeSetup;
 /// channel, drift, gauge zero: 10 bytes), one state per direction.
 pub const BLOCK_LEN: usize = 2 + SETUP_LEN + MAX_DIRECTIONS * STATE_BYTES;
 const SETUP_LEN: usize = 10;
-const TAG: u8 = b'Q';
+/// Tag of the block in the settings slot (`settings::tail_records`).
+pub const TAG: u8 = b'Q';
 const VERSION: u8 = 1;
 /// "None" for a stored index (direction, channel).
 const NONE_U8: u8 = 0xFF;

@@ -148,3 +148,108 @@ impl KeptReference {
         Some(KeptReference { temps })
     }
 }
+
+// ---------------------------------------------------------------------------
+// Issue 30 (signed models, per-board unlock key): the board's keys, one
+// tagged record after the channel map, beside the kept reference ('R').
+// Records after the channel map are read by their tag ([`tail_records`]),
+// so a slot written before a record existed still reads, and a record
+// added later goes after these without moving them.
+// ---------------------------------------------------------------------------
+
+/// Encoded size of the keys record: tag, version, flags, unlock key u16,
+/// signing public key (32 bytes).
+pub const KEYS_LEN: usize = 3 + 2 + 32;
+const KEYS_TAG: u8 = b'K';
+const KEYS_VERSION: u8 = 1;
+const KEYS_HAS_UNLOCK: u8 = 1 << 0;
+const KEYS_HAS_SIGNING: u8 = 1 << 1;
+
+/// The keys set at commissioning (holding registers 50–67, commands
+/// 14–16). The unlock key is kept only here and in RAM: no register and
+/// no log shows it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StoredKeys {
+    /// The board's own unlock key (`None`: not commissioned).
+    pub unlock: Option<u16>,
+    /// The Ed25519 public key models must be signed with.
+    pub signing: Option<[u8; 32]>,
+}
+
+impl StoredKeys {
+    /// Nothing to store: no record is written.
+    pub fn is_empty(&self) -> bool {
+        self.unlock.is_none() && self.signing.is_none()
+    }
+
+    pub fn encode(&self) -> [u8; KEYS_LEN] {
+        let mut b = [0u8; KEYS_LEN];
+        let flags = if self.unlock.is_some() { KEYS_HAS_UNLOCK } else { 0 }
+            | if self.signing.is_some() { KEYS_HAS_SIGNING } else { 0 };
+        let content = [KEYS_TAG, KEYS_VERSION, flags]
+            .into_iter()
+            .chain(self.unlock.unwrap_or(0).to_le_bytes())
+            .chain(self.signing.unwrap_or([0; 32]));
+        for (byte, v) in b.iter_mut().zip(content) {
+            *byte = v;
+        }
+        b
+    }
+
+    /// Keys from a stored record; `None` for another length, tag, version
+    /// or unknown flag bits, or an unlock key of 0.
+    pub fn decode(b: &[u8]) -> Option<StoredKeys> {
+        let (&[tag, version, flags, k0, k1], signing) = b.split_first_chunk::<5>()?;
+        if b.len() != KEYS_LEN || tag != KEYS_TAG || version != KEYS_VERSION {
+            return None;
+        }
+        if flags & !(KEYS_HAS_UNLOCK | KEYS_HAS_SIGNING) != 0 {
+            return None;
+        }
+        let unlock = u16::from_le_bytes([k0, k1]);
+        let signing = <[u8; 32]>::try_from(signing).ok()?;
+        Some(StoredKeys {
+            unlock: if flags & KEYS_HAS_UNLOCK != 0 {
+                Some(unlock).filter(|&k| k != 0)
+            } else {
+                None
+            },
+            signing: (flags & KEYS_HAS_SIGNING != 0).then_some(signing),
+        })
+    }
+}
+
+/// The tagged records after the channel map.
+#[derive(Default)]
+pub struct TailRecords<'a> {
+    pub kept: Option<KeptReference>,
+    pub keys: Option<StoredKeys>,
+    /// The probe references' block (tag 'Q', decoded by
+    /// `probe_reference::References::decode`).
+    pub references: Option<&'a [u8]>,
+}
+
+/// The tagged records after the channel map: the kept reference, the probe
+/// references and the keys, each at most once, in any order; reading stops
+/// at an unknown tag.
+pub fn tail_records(mut b: &[u8]) -> TailRecords<'_> {
+    let mut out = TailRecords::default();
+    while let Some(&tag) = b.first() {
+        let len = match tag {
+            REFERENCE_TAG => REFERENCE_LEN,
+            KEYS_TAG => KEYS_LEN,
+            crate::probe_reference::TAG => crate::probe_reference::BLOCK_LEN,
+            _ => break,
+        };
+        let Some((record, rest)) = b.split_at_checked(len) else {
+            break;
+        };
+        match tag {
+            REFERENCE_TAG => out.kept = KeptReference::decode(record),
+            KEYS_TAG => out.keys = StoredKeys::decode(record),
+            _ => out.references = Some(record),
+        }
+        b = rest;
+    }
+    out
+}

@@ -3,15 +3,18 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use thermocomp::modbus::{Server, Snapshot};
-use thermocomp_protocol::holding::{HR_UNLOCK, UNLOCK_CODE};
+use thermocomp_protocol::holding::HR_UNLOCK;
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 fuzz_target!(|data: &[u8]| {
     let mut server = Server::new(1, 115_200);
+    // A commissioned board with its own key.
+    const KEY: u16 = 0x7E57;
+    server.holding.keys.unlock = Some(KEY);
     let snap = Snapshot::default();
     let mut reply: heapless::Vec<u8, MAX_FRAME> = heapless::Vec::new();
     // Unlocked, so protected writes and commits are reached too.
-    let mut unlock = vec![1, 6, 0, HR_UNLOCK as u8, (UNLOCK_CODE >> 8) as u8, UNLOCK_CODE as u8];
+    let mut unlock = vec![1, 6, 0, HR_UNLOCK as u8, (KEY >> 8) as u8, KEY as u8];
     unlock.extend_from_slice(&crc16(&unlock).to_le_bytes());
     server.handle(&unlock, 0, &snap, &mut reply);
     for (i, chunk) in data.split(|&b| b == 0xFE).enumerate() {

@@ -51,8 +51,29 @@ UNIT = 1
 IR_SEQUENCE, IR_SAMPLE_TIME, IR_MODEL_VERSION = 4, 10, 12
 IR_CORRECTIONS = 30
 HR_UNLOCK, HR_COMMAND, HR_RESULT, HR_STAGED_LEN, HR_STAGING = 0, 1, 2, 32, 1000
-UNLOCK_CODE, CMD_COMMIT = 0xA5C3, 1
+CMD_COMMIT = 1
 COMMIT_IN_PROGRESS = 23
+# Keys (issue 30): a fresh board takes the factory code for commissioning
+# only; this test master gives it TEST_UNLOCK_KEY (host_tests::TEST_UNLOCK_KEY)
+# first and unlocks with that.
+FACTORY_UNLOCK_CODE, TEST_UNLOCK_KEY = 0xA5C3, 0x7E57
+HR_KEY_STATE, HR_NEW_UNLOCK_KEY, CMD_SET_UNLOCK_KEY = 66, 67, 15
+
+
+def unlock(m):
+    """Unlock with the test key, commissioning a fresh board with it first."""
+    r = m.call("read_holding_registers", HR_KEY_STATE, count=1)
+    if r is not None and not r.isError() and not r.registers[0] & 1:
+        m.call("write_register", HR_UNLOCK, FACTORY_UNLOCK_CODE)
+        m.call("write_register", HR_NEW_UNLOCK_KEY, TEST_UNLOCK_KEY)
+        m.call("write_register", HR_COMMAND, CMD_SET_UNLOCK_KEY)
+        t = time.perf_counter()
+        while time.perf_counter() - t < 10:
+            res = m.call("read_holding_registers", HR_RESULT, count=1)
+            if res is not None and not res.isError() and res.registers[0] != COMMIT_IN_PROGRESS:
+                break
+            time.sleep(0.05)
+    return m.call("write_register", HR_UNLOCK, TEST_UNLOCK_KEY)
 
 
 def s32(hi, lo):
@@ -171,7 +192,7 @@ def cmd_upload(a):
     out = {"bytes": len(image)}
     if a.watch:
         out["baseline_max_sample_gap_ms"] = watch_sequence(m, a.watch)
-    m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    unlock(m)
     padded = image + b"\0" * (len(image) % 2)
     words = [int.from_bytes(padded[i:i + 2], "big") for i in range(0, len(padded), 2)]
     for i in range(0, len(words), 100):
@@ -369,7 +390,7 @@ def cmd_flood(a):
 
 def cmd_command(a):
     m = Master(a.port, unit=a.unit)
-    m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+    unlock(m)
     t = time.perf_counter()
     r = m.call("write_register", HR_COMMAND, a.code)
     out = {"exception": getattr(r, "exception_code", None) if r is not None and r.isError() else None,
@@ -382,7 +403,7 @@ def cmd_hold(a):
     m = Master(a.port, unit=a.unit)
     out = {"exceptions": {}}
     if a.write:
-        m.call("write_register", HR_UNLOCK, UNLOCK_CODE)
+        unlock(m)
     for w in a.write:
         addr, val = (int(x, 0) for x in w.split("="))
         t = time.perf_counter()

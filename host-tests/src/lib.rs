@@ -4,3 +4,62 @@
 pub mod mock_flash;
 pub mod onewire_emu;
 pub mod qemu;
+
+/// The unlock key the tests give their boards at commissioning (a fresh
+/// board takes the factory code for commissioning only).
+pub const TEST_UNLOCK_KEY: u16 = 0x7E57;
+
+/// Give a fresh board its own unlock key [`TEST_UNLOCK_KEY`] as `tcomp
+/// commission` does (factory code, register 67, command 15), and drive the
+/// flash write to its end; the board ends locked. A board that has its
+/// key already is left as it is.
+pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermocomp::app::App<F>) {
+    use thermocomp_protocol::holding::*;
+    if app.server.holding.keys.unlock.is_some() {
+        return; // commissioned already (a reboot of a commissioned board)
+    }
+    let unit = app.server.holding.unit;
+    let mut reply = heapless::Vec::<u8, { thermocomp_protocol::rtu::MAX_FRAME }>::new();
+    for (addr, v) in [
+        (HR_UNLOCK, FACTORY_UNLOCK_CODE),
+        (HR_NEW_UNLOCK_KEY, TEST_UNLOCK_KEY),
+        (HR_COMMAND, CMD_SET_UNLOCK_KEY),
+    ] {
+        let [a, b] = addr.to_be_bytes();
+        let [c, d] = v.to_be_bytes();
+        let mut f = vec![unit, 6, a, b, c, d];
+        f.extend_from_slice(&thermocomp_protocol::rtu::crc16(&f).to_le_bytes());
+        app.request(&f, 0, &mut reply);
+        assert_eq!(reply.get(1), Some(&6), "commissioning write {addr}={v:#x}: {reply:02x?}");
+    }
+    while app.poll_flash() {}
+    assert_eq!(app.server.holding.keys.unlock, Some(TEST_UNLOCK_KEY));
+}
+
+/// Upload options of a test: [`TEST_UNLOCK_KEY`]; `allow_missing_sensors`
+/// for boards that have no sensors (the mocks).
+pub fn upload_opts(
+    commit: tcomp_link::board_link::Commit,
+    allow_missing_sensors: bool,
+) -> tcomp_link::board_link::UploadOptions {
+    tcomp_link::board_link::UploadOptions {
+        commit,
+        unlock_key: TEST_UNLOCK_KEY,
+        allow_missing_sensors,
+    }
+}
+
+/// Give a board behind `link` its unlock key [`TEST_UNLOCK_KEY`] if it has
+/// none yet (a fresh QEMU bench board), as `tcomp commission` does.
+pub fn commission_link(link: &mut tcomp_link::board_link::BoardLink) {
+    use tcomp_link::commission::{commission, key_state, Commission};
+    if key_state(link).unwrap().unlock_key_set {
+        return;
+    }
+    let c = Commission {
+        unlock_key: None,
+        new_unlock_key: Some(TEST_UNLOCK_KEY),
+        signing_key: None,
+    };
+    assert!(commission(link, &c).unwrap().unlock_key_set);
+}

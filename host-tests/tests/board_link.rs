@@ -53,7 +53,7 @@ fn reads_writes_and_exceptions_round_trip_through_the_real_server() {
     assert!(e.contains("exception 01"), "{e}");
     let e = link.read_inputs(400, 1).unwrap_err().to_string();
     assert!(e.contains("exception 02"), "{e}");
-    let e = upload(&mut link, b"not an image", Commit::NewerOnly)
+    let e = upload(&mut link, b"not an image", &host_tests::upload_opts(Commit::NewerOnly, true))
         .unwrap_err()
         .to_string();
     assert!(e.contains("not valid, not sent"), "{e}");
@@ -83,6 +83,7 @@ fn inspectable_board(
         115_200,
         ChannelMap::new(),
     );
+    host_tests::commission(&mut app);
     if let Some(image) = running {
         app.program(image).unwrap();
     }
@@ -140,7 +141,7 @@ fn an_image_larger_than_the_staging_area_is_refused_before_anything_is_sent() {
     // A valid image followed by padding up to beyond the staging area.
     let mut big = demo_image_bytes(2);
     big.resize(STAGING_REGS as usize * 2 + 2, 0);
-    let e = upload(&mut link, &big, Commit::NewerOnly)
+    let e = upload(&mut link, &big, &host_tests::upload_opts(Commit::NewerOnly, true))
         .unwrap_err()
         .to_string();
     assert!(e.contains("staging area"), "{e}");
@@ -150,16 +151,17 @@ fn an_image_larger_than_the_staging_area_is_refused_before_anything_is_sent() {
 #[test]
 fn a_failed_upload_relocks_the_board() {
     let image = demo_image_bytes(2);
-    // The map check is request 0, unlock 1, staging 2.., then the length and
-    // the commit: fail each write after the unlock in turn; the board must
-    // end locked and keep its staging from being committed by anyone else.
+    // The map check is request 0, the key state 1, the channel states 2
+    // (the sensor check), unlock 3, staging 4.., then the length and the
+    // commit: fail each write after the unlock in turn; the board must end
+    // locked and keep its staging from being committed by anyone else.
     let n_staging = (image.len().div_ceil(2)).div_ceil(100);
-    for fault_at in 2..=n_staging + 3 {
+    for fault_at in 4..=n_staging + 5 {
         let (addr, board) = inspectable_board(None, Some(fault_at));
         let mut link = BoardLink::tcp(&addr, 1).unwrap();
         let e = format!(
             "{:#}",
-            upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+            upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
         );
         assert!(e.contains("exception 04"), "{e}");
         assert!(
@@ -185,13 +187,13 @@ fn a_refused_commit_names_the_reason_and_relocks_and_rollback_commits() {
     let image = demo_image_bytes(2);
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
     );
     assert!(e.contains("NOT_NEWER") && e.contains("--rollback"), "{e}");
     assert!(!unlocked(&board));
     assert_eq!(board.lock().unwrap().app.snapshot.model_version, 5);
     // The rollback commits it on purpose.
-    let s = upload(&mut link, &image, Commit::Rollback).unwrap();
+    let s = upload(&mut link, &image, &host_tests::upload_opts(Commit::Rollback, true)).unwrap();
     assert_eq!(s.model_version, 2);
     assert_eq!(s.result, result::OK);
     assert!(!unlocked(&board));
@@ -251,7 +253,9 @@ fn upload_and_record_against_the_bench_board() {
         board.log()
     );
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
-    let s = upload(&mut link, &std::fs::read(&v2).unwrap(), Commit::NewerOnly).unwrap();
+    host_tests::commission_link(&mut link);
+    let opts = host_tests::upload_opts(Commit::NewerOnly, false);
+    let s = upload(&mut link, &std::fs::read(&v2).unwrap(), &opts).unwrap();
     assert_eq!(s.model_version, 2);
     // Record five samples, then two more appended to the same file.
     let out = dir.join("recorded.csv");
@@ -312,7 +316,7 @@ fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
     );
     assert!(
         e.contains(&format!("register map version {}", MAP_VERSION - 1)) && e.contains("not sent"),
@@ -323,12 +327,12 @@ fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, Commit::NewerOnly).unwrap_err()
+        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
     );
     assert!(e.contains("0x56781234") && e.contains("word order"), "{e}");
     // the board's own server serves the current version: accepted
     let (addr, board) = inspectable_board(None, None);
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
-    upload(&mut link, &image, Commit::NewerOnly).unwrap();
+    upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
     assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
 }

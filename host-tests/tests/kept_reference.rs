@@ -24,7 +24,7 @@ fn frame(body: &[u8]) -> Vec<u8> {
 
 fn command(app: &mut App<MockFlash>, cmd: u16) -> Vec<u8> {
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    for (a, v) in [(HR_UNLOCK, UNLOCK_CODE), (HR_COMMAND, cmd)] {
+    for (a, v) in [(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), (HR_COMMAND, cmd)] {
         let [a0, a1] = a.to_be_bytes();
         let [v0, v1] = v.to_be_bytes();
         app.request(&frame(&[1, 6, a0, a1, v0, v1]), 0, &mut reply);
@@ -92,7 +92,9 @@ impl Rig {
 }
 
 fn boot(rig: &Rig, flash: MockFlash) -> App<MockFlash> {
-    App::new(flash, SLOT, 1, 115_200, *rig.acq.map())
+    let mut app = App::new(flash, SLOT, 1, 115_200, *rig.acq.map());
+    host_tests::commission(&mut app);
+    app
 }
 
 fn power_cycle(rig: &Rig, app: &mut App<MockFlash>) -> App<MockFlash> {

@@ -6,6 +6,7 @@ use proptest::prelude::*;
 use thermocomp::modbus::registers::*;
 use thermocomp::modbus::{Action, Server, Snapshot};
 use thermocomp_core::float::demo_model;
+use host_tests::TEST_UNLOCK_KEY;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
@@ -55,8 +56,11 @@ impl Bench {
         snap.axes[0].offset = 42;
         snap.axes[0].slope = -7;
         snap.temperatures[0] = Some(centidegrees(20 * 16 + 1));
+        // A commissioned board: it has its own unlock key.
+        let mut server = Server::new(17, 115_200);
+        server.holding.keys.unlock = Some(TEST_UNLOCK_KEY);
         Bench {
-            server: Server::new(17, 115_200),
+            server,
             snap,
             reply: HVec::new(),
             now: 1000,
@@ -255,7 +259,8 @@ fn unlock_then_configure_and_the_lock_expires() {
         0x01,
         "wrong code keeps it locked"
     );
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.now += UNLOCK_HOLDOFF_MS;
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![1]);
     assert_eq!(b.ask(&write1(17, HR_CLAMP, 100)).0, Action::LimitsChanged);
     assert_eq!(
@@ -264,7 +269,7 @@ fn unlock_then_configure_and_the_lock_expires() {
         "no such baud rate"
     );
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a refusal locks");
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert_eq!(b.ask(&write1(17, HR_BAUD, 96)).0, Action::LinkChanged);
     assert_eq!(b.server.holding.baud, 9600);
     b.now += UNLOCK_MS;
@@ -276,13 +281,13 @@ fn unlock_then_configure_and_the_lock_expires() {
 fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
     let mut b = Bench::new();
     // Unlock by broadcast: refused (every board on the bus would open at once).
-    assert!(b.ask(&write1(0, HR_UNLOCK, UNLOCK_CODE)).1.is_empty());
+    assert!(b.ask(&write1(0, HR_UNLOCK, TEST_UNLOCK_KEY)).1.is_empty());
     assert!(!b.server.holding.unlocked(b.now), "broadcast unlocked");
-    assert!(b.ask(&write_n(0, HR_UNLOCK, &[UNLOCK_CODE])).1.is_empty());
+    assert!(b.ask(&write_n(0, HR_UNLOCK, &[TEST_UNLOCK_KEY])).1.is_empty());
     assert!(!b.server.holding.unlocked(b.now), "FC16 broadcast unlocked");
     // Even while this board is unlocked by its own address, a broadcast does
     // not change its unit, baud, limits or staging area, nor run a command.
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert!(b.server.holding.unlocked(b.now));
     for (addr, value) in [
         (HR_UNIT, 5),
@@ -321,7 +326,7 @@ fn a_broadcast_commit_does_not_commit_a_valid_staged_model() {
     let mut img = vec![0u8; m.encoded_len()];
     m.encode(&mut img).unwrap();
     let mut b = Bench::new();
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     upload(&mut b, &img);
     let (action, reply) = b.ask(&write1(0, HR_COMMAND, CMD_COMMIT_MODEL));
     assert!(reply.is_empty());
@@ -335,7 +340,7 @@ fn a_broadcast_commit_does_not_commit_a_valid_staged_model() {
 #[test]
 fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
     let mut b = Bench::new();
-    for key in [0x0000, 0x1111, UNLOCK_CODE ^ 1, 0xFFFF] {
+    for key in [0x0000, 0x1111, TEST_UNLOCK_KEY ^ 1, 0xFFFF] {
         assert_eq!(
             b.exception_of(&write1(17, HR_UNLOCK, key)),
             0x03,
@@ -348,11 +353,18 @@ fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
         );
         assert!(!b.server.holding.unlocked(b.now));
     }
+    // Even the right key waits out the hold-off after a wrong one.
+    assert_eq!(
+        b.exception_of(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY)),
+        0x03,
+        "hold-off"
+    );
+    b.now += UNLOCK_HOLDOFF_MS;
     // The right key is echoed; a wrong one afterwards is refused and locks
     // the board (every refusal does: a guessing master gains nothing).
     assert_eq!(
-        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE)).1,
-        write1(17, HR_UNLOCK, UNLOCK_CODE)
+        b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY)).1,
+        write1(17, HR_UNLOCK, TEST_UNLOCK_KEY)
     );
     assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
     assert!(!b.server.holding.unlocked(b.now));
@@ -436,7 +448,7 @@ fn every_refused_write_locks_the_board() {
     ];
     for (what, request, code) in &refusals {
         let mut b = Bench::new();
-        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+        b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
         let req = request(&mut b);
         assert!(b.server.holding.unlocked(b.now), "{what}: unlocked before");
         assert_eq!(b.exception_of(&req), *code, "{what}");
@@ -451,7 +463,7 @@ fn every_refused_write_locks_the_board() {
     // A refused read does not lock; a broadcast refusal does not either (a
     // broadcast never runs a command, the lock included).
     let mut b = Bench::new();
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert_eq!(b.exception_of(&read(17, 3, 9000, 1)), 0x02);
     assert!(b.ask(&write1(0, HR_UNIT, 5)).1.is_empty());
     assert!(b.server.holding.unlocked(b.now));
@@ -490,7 +502,7 @@ fn model_upload_commits_only_a_valid_image() {
     let mut b = Bench::new();
     // Locked: staging writes refused.
     assert_eq!(b.exception_of(&write_n(17, HR_STAGING, &[1, 2])), 0x01);
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     let mut corrupt = img.clone();
     corrupt[40] ^= 0xFF;
     upload(&mut b, &corrupt);
@@ -500,7 +512,7 @@ fn model_upload_commits_only_a_valid_image() {
     );
     assert_eq!(b.words(3, HR_RESULT, 1), vec![result::BAD_CRC]);
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a refused commit locks");
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     upload(&mut b, &img);
     assert_eq!(
         b.words(3, HR_STAGING, 2),
@@ -518,7 +530,7 @@ fn model_upload_commits_only_a_valid_image() {
 
 /// Stage `image` (padded to whole registers) with `staged_len`, then send `command`.
 fn stage_and_send(b: &mut Bench, image: &[u8], staged_len: usize, command: u16) -> Vec<u8> {
-    b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+    b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     b.ask(&write1(17, HR_COMMAND, CMD_CLEAR_STAGING));
     upload(b, image);
     b.ask(&write1(17, HR_STAGED_LEN, staged_len as u16));
@@ -634,7 +646,7 @@ proptest! {
     #[test]
     fn random_frames_never_panic(body in proptest::collection::vec(any::<u8>(), 0..260), fix_crc in any::<bool>(), unit in prop_oneof![Just(17u8), Just(0u8), any::<u8>()]) {
         let mut b = Bench::new();
-        b.ask(&write1(17, HR_UNLOCK, UNLOCK_CODE));
+        b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
         let mut f = body.clone();
         if !f.is_empty() { f[0] = unit; }
         if fix_crc && f.len() >= 2 { f = frame(&f[..f.len() - 2]); }

@@ -83,7 +83,9 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     );
     let summary = tcomp_model::export::export(&fm, &v2).unwrap();
     assert_eq!(summary.sensors_by_rom, 6);
-    let s = upload(&mut link, &std::fs::read(&v2).unwrap(), Commit::NewerOnly).unwrap();
+    host_tests::commission_link(&mut link);
+    let opts = host_tests::upload_opts(Commit::NewerOnly, false);
+    let s = upload(&mut link, &std::fs::read(&v2).unwrap(), &opts).unwrap();
     assert_eq!(s.model_version, 2);
     // Model sensor i reads channel i (the channels its ROM codes are on).
     assert_eq!(
@@ -146,8 +148,9 @@ fn wait_for_boots(board: &BenchBoard, n: usize) {
 }
 
 fn command(link: &mut BoardLink, code: u16) {
-    use thermocomp_protocol::holding::{HR_COMMAND, HR_UNLOCK, UNLOCK_CODE};
-    link.write_one(HR_UNLOCK, UNLOCK_CODE).unwrap();
+    use thermocomp_protocol::holding::{HR_COMMAND, HR_UNLOCK};
+    host_tests::commission_link(link);
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
     link.write_one(HR_COMMAND, code).unwrap();
 }
 

@@ -197,7 +197,7 @@ fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults
     assert_eq!(w["exceptions"], serde_json::json!({}), "{w}");
     // Wait until they are in flash (HR_RESULT 23 → 0), then reboot (the
     // panic command, at the new unit address).
-    let cmd = python(&["hold", "--port", &p, "--unit", "7", "--write", "0=0xA5C3"]);
+    let cmd = python(&["hold", "--port", &p, "--unit", "7", "--write", "0=0x7E57"]);
     assert_eq!(cmd["registers"][3], 7, "{cmd}");
     assert_eq!(cmd["registers"][2], 0, "stored: {cmd}");
     let panic = python(&["command", "--port", &p, "--unit", "7", "--code", "8"]);

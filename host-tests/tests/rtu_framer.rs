@@ -172,11 +172,12 @@ fn a_request_inside_another_units_frame_is_not_a_frame() {
     assert!(!line.got.contains(&Got::Frame(bc)));
     // Through the server: unit 2's frame is ignored, nothing changes.
     let mut server = Server::new(1, 115_200);
+    server.holding.keys.unlock = Some(host_tests::TEST_UNLOCK_KEY);
     server
         .holding
         .write(
             HR_UNLOCK,
-            &[UNLOCK_CODE],
+            &[host_tests::TEST_UNLOCK_KEY],
             0,
             thermocomp::modbus::holding::Addressing::Unit,
         )

@@ -367,6 +367,7 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
         115_200,
         ChannelMap::new(),
     );
+    host_tests::commission(&mut app);
     app.update_channel_map(*acq.map());
     app.poll_flash();
     for _ in 0..2 {
@@ -426,10 +427,24 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     model.sensors[4].rom = Ds18b20::rom_for(0xABC_0004).0;
     let mut image = vec![0u8; model.encoded_len()];
     model.encode(&mut image).unwrap();
+    // The upload names the missing sensor and sends nothing ...
+    let commit = tcomp_link::board_link::Commit::NewerOnly;
+    let e = tcomp_link::board_link::upload(
+        &mut link,
+        &image,
+        &host_tests::upload_opts(commit, false),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("model sensor 4 (ROM") && e.contains("not sent"),
+        "{e}"
+    );
+    // ... unless told to: the board then serves without it.
     let s = tcomp_link::board_link::upload(
         &mut link,
         &image,
-        tcomp_link::board_link::Commit::NewerOnly,
+        &host_tests::upload_opts(commit, true),
     )
     .unwrap();
     assert_eq!(s.sensors_not_on_board, vec![4]);

@@ -170,7 +170,9 @@ fn write1(unit: u8, addr: u16, v: u16) -> Vec<u8> {
 }
 
 fn app_on(flash: MockFlash) -> App<MockFlash> {
-    App::new(flash, SLOT, 1, 115_200, ChannelMap::new())
+    let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    host_tests::commission(&mut app);
+    app
 }
 
 fn power_cycle(app: &mut App<MockFlash>) -> App<MockFlash> {
@@ -184,7 +186,7 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     let mut app = app_on(MockFlash::new(2 * SLOT as usize));
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     assert_eq!(app.settings(), Settings::default());
-    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     app.request(&write1(1, HR_CLAMP + 2, 150), 0, &mut reply);
     assert_eq!(reply[1], 6, "{reply:02x?}");
     app.poll_flash();
@@ -211,7 +213,7 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     assert_eq!(&reply[..3], &[9, 3, 12], "unit 9 answers: {reply:02x?}");
     assert_eq!(u16::from_be_bytes([reply[7], reply[8]]), 150);
     // Command 7: defaults, applied and stored.
-    app.request(&write1(9, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(9, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     let change = app.request(&write1(9, HR_COMMAND, CMD_RESTORE_DEFAULTS), 0, &mut reply);
     assert_eq!(reply[0], 9, "answered at the old address");
     app.poll_flash();
@@ -225,7 +227,7 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     assert_eq!(app.snapshot.model_version, 1, "the model stays");
     // A flash that fails: the change is in force, HR_RESULT says it is not stored.
     app.store.flash().budget = Some(0);
-    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     app.request(&write1(1, HR_CLAMP, 10), 0, &mut reply);
     assert_eq!(app.settings().clamp[0], 10);
     assert!(!app.poll_flash(), "the failed write ends the job");
@@ -286,9 +288,10 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
         steps: 5,
     };
     let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    host_tests::commission(&mut app);
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     let (_, img) = image(3);
-    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     for (i, pair) in img.chunks(2).enumerate() {
         let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
         app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);
@@ -300,7 +303,7 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     assert_eq!(app.snapshot.model_version, 0, "not swapped in yet");
     // While it is written: reads answer, staging and settings are busy (06),
     // the PLC's registers are written as usual. (The commit locked the board.)
-    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     app.request(&write1(1, HR_STAGING, 0), 0, &mut reply);
     assert_eq!((reply[1], reply[2]), (0x86, 6));
     app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
@@ -408,12 +411,15 @@ impl thermocomp::hal::flash::BackgroundErase for BusyLine {
 fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
     let flash = BusyLine {
         inner: MockFlash::new(2 * SLOT as usize),
-        busy_looks: 3,
+        busy_looks: 0,
     };
     let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
+    host_tests::commission(&mut app);
+    // The line is busy for the model's commit (commissioning stored the key).
+    app.store.flash().busy_looks = 3;
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     let (_, img) = image(3);
-    app.request(&write1(1, HR_UNLOCK, UNLOCK_CODE), 0, &mut reply);
+    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
     for (i, pair) in img.chunks(2).enumerate() {
         let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
         app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);

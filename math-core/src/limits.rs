@@ -54,3 +54,20 @@ pub const MAX_VOL_STROKE_UM: i32 = 100_000_000;
 pub const MAX_VOL_TOOL_UM: i32 = 10_000_000;
 /// Highest Fourier order of a five-axis component error (image section kind 4).
 pub const MAX_FOURIER_ORDER: usize = 4;
+
+// Semantic limits (issue 30, `image::semantic`): numbers `tcomp export`
+// can produce and predictions within a stated bound.
+
+/// Largest prediction an image may be able to make per direction over its
+/// own input envelope, 0.1 µm (10 mm, as [`MAX_CORRECTION`]: no thermal
+/// drift of a machine tool comes near it), bounded analytically.
+pub const MAX_PREDICTION: i32 = 100_000;
+/// Largest hidden-layer weight or bias of a network, Q16 (256.0: inputs
+/// are normalised to [−1, 1], so a larger weight only turns a neuron into
+/// a step within 1/256 of the envelope; the quantizer refuses beyond it).
+pub const MAX_NET_WEIGHT_Q16: u32 = 1 << 24;
+/// Longest warm-up, s (24 h).
+pub const MAX_WARMUP_S: u32 = 86_400;
+/// Longest lag time constant, s (7 days: the slowest machine-hall
+/// temperature cycles are hours).
+pub const MAX_TAU_S: u32 = 604_800;

@@ -7,7 +7,7 @@
 //! same numbers as plain register words, for code that writes or matches
 //! raw words (a master's requests, tests).
 
-use thermocomp_core::limits::MAX_IMAGE_BYTES;
+use thermocomp_core::image::MAX_SIGNED_BYTES;
 use thermocomp_core::ImageError;
 
 pub const HR_UNLOCK: u16 = 0;
@@ -54,15 +54,48 @@ pub const REGISTER_NONE: u16 = 0xFFFF;
 /// Last register of the plain block (33 and 46–49 reserved, read 0).
 pub const HR_LAST_PLAIN: u16 = 49;
 /// Model staging area: 2 bytes per register (first byte in the high half).
+/// It holds the largest image and its signature trailer
+/// (`thermocomp_core::image::signed`).
 pub const HR_STAGING: u16 = 1000;
 // The staging area must fit the address space above HR_STAGING.
-const _: () = assert!(MAX_IMAGE_BYTES / 2 <= (u16::MAX - HR_STAGING) as usize);
+const _: () = assert!(MAX_SIGNED_BYTES / 2 <= (u16::MAX - HR_STAGING) as usize);
+const _: () = assert!(MAX_SIGNED_BYTES % 2 == 0);
 #[allow(clippy::cast_possible_truncation)] // checked by the assertion above
-pub const STAGING_REGS: u16 = (MAX_IMAGE_BYTES / 2) as u16;
+pub const STAGING_REGS: u16 = (MAX_SIGNED_BYTES / 2) as u16;
 
-/// Write this to HR_UNLOCK to allow configuration and model writes for 60 s.
-pub const UNLOCK_CODE: u16 = 0xA5C3;
+// --- Keys (issue 30: signed models, per-board unlock key), registers 50–89.
+/// The model-signing public key (Ed25519, 32 bytes, 16 registers, first
+/// byte in the high half): written before [`CMD_STORE_SIGNING_KEY`] or
+/// [`CMD_REPLACE_SIGNING_KEY`] (unlock); reads back what was written, or
+/// the stored key after a boot (all zero: none). A public key is no secret.
+pub const HR_SIGNING_KEY: u16 = 50;
+/// Registers of the signing key.
+pub const SIGNING_KEY_REGS: u16 = 16;
+/// Key state (read only): see the `KEY_STATE_*` bits.
+pub const HR_KEY_STATE: u16 = 66;
+/// Bit of HR_KEY_STATE: the board has its own unlock key (commissioned).
+pub const KEY_STATE_UNLOCK_KEY: u16 = 1 << 0;
+/// Bit of HR_KEY_STATE: a signing key is stored: only signed models commit.
+pub const KEY_STATE_SIGNING_KEY: u16 = 1 << 1;
+/// Bit of HR_KEY_STATE: unlocked with the factory code (commissioning
+/// only: HR_NEW_UNLOCK_KEY, commands 15 and 4).
+pub const KEY_STATE_COMMISSIONING: u16 = 1 << 2;
+/// The board's new unlock key, written before [`CMD_SET_UNLOCK_KEY`]
+/// (unlock); always reads 0: the board never shows a key.
+pub const HR_NEW_UNLOCK_KEY: u16 = 67;
+/// Last register of the key block (68–89 reserved, read 0).
+pub const HR_LAST_KEYS: u16 = 89;
+
+/// The factory unlock code: on a board without its own unlock key it opens
+/// commissioning (setting that key) and nothing else; once the board has
+/// its key it opens nothing (docs/register-map.md, "Keys and commissioning").
+pub const FACTORY_UNLOCK_CODE: u16 = 0xA5C3;
+/// An unlock (the board's own key in HR_UNLOCK) allows configuration and
+/// model writes for this long.
 pub const UNLOCK_MS: u64 = 60_000;
+/// After a refused unlock, every unlock is refused for this long (a 16-bit
+/// key then takes 9 h on average to guess over the bus, 18 h at most).
+pub const UNLOCK_HOLDOFF_MS: u64 = 1_000;
 
 /// Baud rates the board accepts (HR_BAUD holds baud / 100).
 pub const BAUD_RATES: [u32; 6] = [9_600, 19_200, 38_400, 57_600, 115_200, 230_400];
@@ -152,6 +185,19 @@ wire_codes! {
         /// Reset the learned reference terms and re-zero offsets of every
         /// direction (stored; a new model does the same).
         ResetReferenceTerms = 13 => CMD_RESET_REFERENCE_TERMS,
+        /// Store the signing public key written to HR_SIGNING_KEY; from then
+        /// on only models signed with its private key commit. Refused (result
+        /// 72) when a key is stored: a stored key is replaced only by
+        /// [`CMD_REPLACE_SIGNING_KEY`].
+        StoreSigningKey = 14 => CMD_STORE_SIGNING_KEY,
+        /// Set the board's own unlock key from HR_NEW_UNLOCK_KEY (stored; the
+        /// board locks: unlock again with the new key). The only command a
+        /// board unlocked with the factory code takes.
+        SetUnlockKey = 15 => CMD_SET_UNLOCK_KEY,
+        /// Replace the stored signing key by the one in HR_SIGNING_KEY: the
+        /// staging area holds (staged length 64) a signature by the stored
+        /// key over "thermocomp signing key v1" followed by the new key.
+        ReplaceSigningKey = 16 => CMD_REPLACE_SIGNING_KEY,
     }
 }
 
@@ -270,6 +316,25 @@ pub mod result {
             /// No probe reference taken: holding register 42 names a channel
             /// without a fresh reading.
             ProbeTemperatureMissing = 64 => PROBE_TEMPERATURE_MISSING,
+            /// A signing key is stored and the staged image carries no signature.
+            Unsigned = 70 => UNSIGNED,
+            /// The staged image's signature is not one by the stored signing key
+            /// (or its trailer is malformed); for command 16, the replacement's.
+            BadSignature = 71 => BAD_SIGNATURE,
+            /// Command 14 while a signing key is stored (command 16 replaces it).
+            SigningKeySet = 72 => SIGNING_KEY_SET,
+            /// Command 14 or 16: HR_SIGNING_KEY is not an Ed25519 public key;
+            /// command 15: the new unlock key is 0 or the factory code.
+            BadKey = 73 => BAD_KEY,
+            /// A direction (or fallback) can predict beyond ±10 mm over the
+            /// image's own input envelope (bounded analytically).
+            PredictionBound = 74 => PREDICTION_BOUND,
+            /// A network weight or bias beyond what the quantizer produces (±256.0).
+            CoefficientRange = 75 => COEFFICIENT_RANGE,
+            /// A warm-up longer than 24 h.
+            WarmupTooLong = 76 => WARMUP_TOO_LONG,
+            /// A lag time constant of 0 or longer than 7 days.
+            LagTooLong = 77 => LAG_TOO_LONG,
         }
     }
 
@@ -312,6 +377,11 @@ pub mod result {
                 ImageError::FiveAxisAngleRange { .. } => ResultCode::FiveAxisAngleRange,
                 ImageError::FiveAxisMaxCorrection { .. } => ResultCode::FiveAxisMaxCorrection,
                 ImageError::FiveAxisErrorTooLarge { .. } => ResultCode::FiveAxisErrorTooLarge,
+                ImageError::BadSignatureTrailer => ResultCode::BadSignature,
+                ImageError::PredictionBound { .. } => ResultCode::PredictionBound,
+                ImageError::CoefficientRange { .. } => ResultCode::CoefficientRange,
+                ImageError::WarmupTooLong { .. } => ResultCode::WarmupTooLong,
+                ImageError::LagTooLong { .. } => ResultCode::LagTooLong,
             }
         }
     }
@@ -345,8 +415,9 @@ mod tests {
         }
         assert_eq!(Command::from_u16(0), None);
         assert_eq!(Command::from_u16(12), Some(Command::TakeProbeReference));
-        assert_eq!(Command::from_u16(14), None);
+        assert_eq!(Command::from_u16(17), None);
         assert_eq!(ResultCode::ReferenceRefused.code(), 61);
+        assert_eq!(Command::ReplaceSigningKey.code(), 16);
         assert_eq!(Command::KeepReference.code(), CMD_KEEP_REFERENCE);
         assert_eq!(ResultCode::CommitInProgress.code(), 23);
         assert_eq!(

@@ -6,8 +6,11 @@
 //! a refused request leaves everything as it was. The addresses, codes and
 //! numbers are the wire contract's (`thermocomp_protocol::holding`).
 
-use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS, MAX_IMAGE_BYTES};
+use thermocomp_core::image::{split_signed, MAX_SIGNED_BYTES};
+use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 use thermocomp_core::Model;
+
+use super::keys::{Keys, PUBLIC_KEY_LEN};
 use thermocomp_protocol::holding::Command as WireCommand;
 use thermocomp_protocol::holding::*;
 
@@ -88,6 +91,8 @@ pub enum Command {
     ResetReferenceTerms,
     /// Holding registers 40–45 changed: store them.
     ProbeSetupChanged,
+    /// Commands 14–16: a key changed (in force at once): store it.
+    KeysChanged,
 }
 
 /// The probe-reference registers (40–45): which direction the probe
@@ -147,9 +152,16 @@ pub struct Holding {
     pub running_version: u32,
     /// A commit is being written ([`WriteError::Busy`] for what it stores).
     pub busy: bool,
+    /// The unlock key and the signing key ([`Keys`]).
+    pub keys: Keys,
     unlocked_until_ms: Option<u64>,
+    /// The unlock in force came from the factory code: commissioning only.
+    commissioning: bool,
+    /// A wrong key was written: no unlock before this time.
+    unlock_refused_until_ms: u64,
     staged_len: u16,
-    staging: [u8; MAX_IMAGE_BYTES],
+    /// The image and its signature trailer, if any.
+    staging: [u8; MAX_SIGNED_BYTES],
 }
 
 impl Holding {
@@ -170,9 +182,12 @@ impl Holding {
             probe: ProbeSetup::default(),
             running_version: 0,
             busy: false,
+            keys: Keys::default(),
             unlocked_until_ms: None,
+            commissioning: false,
+            unlock_refused_until_ms: 0,
             staged_len: 0,
-            staging: [0; MAX_IMAGE_BYTES],
+            staging: [0; MAX_SIGNED_BYTES],
         }
     }
 
@@ -189,7 +204,7 @@ impl Holding {
     }
 
     /// Scratch buffer (the staging area) for reading a stored image at boot.
-    pub fn scratch(&mut self) -> &mut [u8; MAX_IMAGE_BYTES] {
+    pub fn scratch(&mut self) -> &mut [u8] {
         &mut self.staging
     }
 
@@ -232,6 +247,16 @@ impl Holding {
             HR_PROBE_DRIFT => self.probe.drift_nm_per_k as u16,
             HR_GAUGE_ZERO => (self.probe.gauge_zero as u32 >> 16) as u16,
             a if a == HR_GAUGE_ZERO + 1 => (self.probe.gauge_zero as u32 & 0xFFFF) as u16,
+            a if in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() => {
+                let i = usize::from(a - HR_SIGNING_KEY) * 2;
+                match self.keys.staged_signing.get(i..i + 2)? {
+                    &[high, low] => u16::from_be_bytes([high, low]),
+                    _ => return None,
+                }
+            }
+            HR_KEY_STATE => self.key_state(now_ms),
+            // The board never shows an unlock key (HR_NEW_UNLOCK_KEY included).
+            a if (HR_KEY_STATE..=HR_LAST_KEYS).contains(&a) => 0,
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
                 match self.staging.get(i..i + 2)? {
@@ -242,6 +267,21 @@ impl Holding {
             a if a <= HR_LAST_PLAIN => 0, // reserved
             _ => return None,
         })
+    }
+
+    /// HR_KEY_STATE: which keys are set (never the keys themselves).
+    fn key_state(&self, now_ms: u64) -> u16 {
+        let mut bits = 0;
+        if self.keys.unlock.is_some() {
+            bits |= KEY_STATE_UNLOCK_KEY;
+        }
+        if self.keys.signing.is_some() {
+            bits |= KEY_STATE_SIGNING_KEY;
+        }
+        if self.commissioning && self.unlocked(now_ms) {
+            bits |= KEY_STATE_COMMISSIONING;
+        }
+        bits
     }
 
     /// Lock now (command 4, a commit, and every refused write to this unit).
@@ -269,6 +309,11 @@ impl Holding {
         let outcome = self.write_checked(addr, values, now_ms, addressing);
         if outcome.is_err_and(|e| e != WriteError::Busy) && addressing == Addressing::Unit {
             self.lock();
+            if addr == HR_UNLOCK {
+                // A wrong key (or one during the hold-off): the next try
+                // waits, so guessing the 16-bit key takes hours, not minutes.
+                self.unlock_refused_until_ms = now_ms + UNLOCK_HOLDOFF_MS;
+            }
         }
         outcome
     }
@@ -344,12 +389,21 @@ impl Holding {
                             | WireCommand::KeepReference
                             | WireCommand::ForgetReference
                             | WireCommand::ResetReferenceTerms
+                            | WireCommand::StoreSigningKey
+                            | WireCommand::SetUnlockKey
+                            | WireCommand::ReplaceSigningKey
                     )
                 ))
+            || Self::key_register(a)
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
+    }
+
+    /// The registers the key commands read (HR_SIGNING_KEY, HR_NEW_UNLOCK_KEY).
+    fn key_register(a: u16) -> bool {
+        in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() || a == HR_NEW_UNLOCK_KEY
     }
 
     fn protected(a: u16) -> bool {
@@ -364,12 +418,22 @@ impl Holding {
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
-            || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a);
+            || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
+            || Self::key_register(a);
         if !writable {
             return Err(WriteError::Address);
         }
         if Self::protected(a) && !self.unlocked(now_ms) {
             return Err(WriteError::Locked);
+        }
+        // The factory code opens commissioning only: the board's own key
+        // (and locking again), nothing else.
+        if Self::protected(a) && self.commissioning {
+            let allowed = a == HR_NEW_UNLOCK_KEY
+                || (a == HR_COMMAND && matches!(v, CMD_SET_UNLOCK_KEY | CMD_LOCK));
+            if !allowed {
+                return Err(WriteError::Locked);
+            }
         }
         if self.busy && Self::stored(a, v) {
             return Err(WriteError::Busy);
@@ -377,12 +441,15 @@ impl Holding {
         let ok = match a {
             // A wrong key is refused, not echoed: the master must see that the
             // board stayed locked.
-            HR_UNLOCK => v == UNLOCK_CODE,
+            HR_UNLOCK => {
+                now_ms >= self.unlock_refused_until_ms
+                    && v == self.keys.unlock.unwrap_or(FACTORY_UNLOCK_CODE)
+            }
             HR_COMMAND => WireCommand::from_u16(v)
                 .is_some_and(|c| !c.test_only() || cfg!(feature = "test-faults")),
             HR_UNIT => (1..=247).contains(&v),
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
-            HR_STAGED_LEN => usize::from(v) <= MAX_IMAGE_BYTES,
+            HR_STAGED_LEN => usize::from(v) <= MAX_SIGNED_BYTES,
             HR_PROBE_DIRECTION => v == REGISTER_NONE || usize::from(v) < MAX_DIRECTIONS,
             HR_REFERENCE_SAMPLES => {
                 (1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&v)
@@ -402,8 +469,10 @@ impl Holding {
     fn apply(&mut self, a: u16, v: u16, now_ms: u64) -> Result<Command, WriteError> {
         match a {
             HR_UNLOCK => {
-                // check() let only the unlock code through.
+                // check() let only the board's key (or, on a board without
+                // one, the factory code) through.
                 self.unlocked_until_ms = Some(now_ms + UNLOCK_MS);
+                self.commissioning = self.keys.unlock.is_none();
             }
             HR_COMMAND => return self.command(v),
             HR_UNIT => {
@@ -470,9 +539,34 @@ impl Holding {
                 let bytes = self.staging.get_mut(i..i + 2).ok_or(WriteError::Address)?;
                 bytes.copy_from_slice(&v.to_be_bytes());
             }
+            a if in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() => {
+                let i = usize::from(a - HR_SIGNING_KEY) * 2;
+                let key = &mut self.keys.staged_signing;
+                let bytes = key.get_mut(i..i + 2).ok_or(WriteError::Address)?;
+                bytes.copy_from_slice(&v.to_be_bytes());
+            }
+            HR_NEW_UNLOCK_KEY => self.keys.new_unlock = v,
             _ => return Err(WriteError::Address),
         }
         Ok(Command::None)
+    }
+
+    /// A key command: on success the key is in force and must be stored
+    /// (result 23, then 0 or 22); on refusal HR_RESULT says why.
+    fn key_command(
+        &mut self,
+        run: impl FnOnce(&mut Self) -> Result<(), u16>,
+    ) -> Result<Command, WriteError> {
+        match run(self) {
+            Ok(()) => {
+                self.result = result::OK;
+                Ok(Command::KeysChanged)
+            }
+            Err(code) => {
+                self.result = code;
+                Err(WriteError::ModelRefused)
+            }
+        }
     }
 
     fn command(&mut self, v: u16) -> Result<Command, WriteError> {
@@ -488,13 +582,22 @@ impl Holding {
                     self.result = result::BAD_LENGTH;
                     return Err(WriteError::ModelRefused);
                 };
-                let model = match Model::parse(staged) {
-                    Ok(m) => m,
+                // The image, then its signature trailer if it carries one.
+                let parsed = split_signed(staged)
+                    .and_then(|signed| Model::parse(signed.image).map(|m| (signed, m)));
+                let (signed, model) = match parsed {
+                    Ok(ok) => ok,
                     Err(e) => {
                         self.result = result::of_image_error(&e);
                         return Err(WriteError::ModelRefused);
                     }
                 };
+                // With a signing key stored, only a model it signed commits.
+                if let Err(code) = self.keys.check_model(&signed) {
+                    self.result = code;
+                    return Err(WriteError::ModelRefused);
+                }
+                let len = signed.image.len();
                 // An older or the same version only on purpose: a stale
                 // upload must not replace a newer model by accident.
                 if wire == WireCommand::CommitModel && model.model_version <= self.running_version {
@@ -523,6 +626,22 @@ impl Holding {
             WireCommand::ForgetReference => Ok(Command::ForgetReference),
             WireCommand::TakeProbeReference => Ok(Command::TakeProbeReference),
             WireCommand::ResetReferenceTerms => Ok(Command::ResetReferenceTerms),
+            WireCommand::StoreSigningKey => self.key_command(|h| h.keys.store_signing()),
+            WireCommand::ReplaceSigningKey => self.key_command(|h| {
+                let proof = h.staging.get(..usize::from(h.staged_len)).unwrap_or(&[]);
+                h.keys.replace_signing(proof)
+            }),
+            WireCommand::SetUnlockKey => self.key_command(|h| {
+                let k = h.keys.new_unlock;
+                if k == 0 || k == FACTORY_UNLOCK_CODE {
+                    return Err(result::BAD_KEY);
+                }
+                h.keys.unlock = Some(k);
+                h.keys.new_unlock = 0;
+                // Open only with the new key from now on.
+                h.unlocked_until_ms = None;
+                Ok(())
+            }),
         }
     }
 }

@@ -4,6 +4,7 @@
 //! module decides what each register means.
 
 pub mod holding;
+pub mod keys;
 pub mod registers;
 pub mod rtu_framer;
 pub mod server;

@@ -19,9 +19,9 @@ use rmodbus::{ErrorKind, ModbusProto};
 // (docs/register-map.md), so master and server cannot disagree on an address.
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_protocol::holding::{
-    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_PROBE_TEMP_CHANNEL,
-    HR_RESULT, HR_SPINDLE, HR_STAGED_LEN, HR_STAGING, HR_UNLOCK, REGISTER_NONE, STAGING_REGS,
-    UNLOCK_CODE,
+    result, CMD_COMMIT_MODEL, CMD_LOCK, CMD_ROLLBACK_MODEL, HR_COMMAND, HR_KEY_STATE,
+    HR_PROBE_TEMP_CHANNEL, HR_RESULT, HR_SPINDLE, HR_STAGED_LEN, HR_STAGING, HR_UNLOCK,
+    KEY_STATE_SIGNING_KEY, REGISTER_NONE, STAGING_REGS,
 };
 use thermocomp_protocol::registers::{
     IR_CHANNEL_ROMS, IR_CORRECTIONS, IR_MODEL_CRC, IR_MODEL_VERSION, IR_N_DIRECTIONS,
@@ -255,11 +255,63 @@ pub struct UploadSummary {
     pub model_version: u32,
     pub model_crc: String,
     pub result: u16,
+    /// The file carried a signature trailer (`tcomp export --sign`).
+    pub signed: bool,
     /// Model sensors the image names by a ROM code that is on none of the
     /// board's channels (input registers 200–279): the board serves without
     /// them (fallback or held) until that sensor is on the bus. Empty when
     /// the board does not serve ROM codes.
     pub sensors_not_on_board: Vec<usize>,
+}
+
+/// How `upload` commits.
+#[derive(Debug, Clone, Copy)]
+pub struct UploadOptions {
+    pub commit: Commit,
+    /// The board's own unlock key (set at commissioning).
+    pub unlock_key: u16,
+    /// Send a model whose sensors the board does not have now (it then
+    /// serves without them: fallback or held); refused otherwise.
+    pub allow_missing_sensors: bool,
+}
+
+/// The model sensors the board has no sensor for now, one line each naming
+/// the sensor and its channel: by ROM code, a code on none of its channels
+/// (input registers 200–279); by channel, a channel with no sensor on it
+/// (state unused or no presence, 130–149). Read from the board's identity
+/// registers before anything is sent.
+pub fn missing_sensors(link: &mut BoardLink, model: &thermocomp_core::Model) -> Result<Vec<String>> {
+    let by_rom = model.sensors.iter().any(|s| s.rom != [0; 8]);
+    let by_channel = model.sensors.iter().any(|s| s.rom == [0; 8]);
+    let roms = if by_rom { Some(channel_roms(link)?) } else { None };
+    let states = if by_channel {
+        Some(link.read_inputs(IR_STATES, MAX_CHANNELS as u16)?)
+    } else {
+        None
+    };
+    let absent = [ChannelState::Unused.code(), ChannelState::NoPresence.code()];
+    let mut out = vec![];
+    for (i, s) in model.sensors.iter().enumerate() {
+        let line = if s.rom != [0; 8] {
+            let on_board = roms.as_ref().is_some_and(|r| r.contains(&s.rom));
+            (!on_board).then(|| {
+                format!(
+                    "model sensor {i} (ROM {}, trained on channel {}) is on none of the board's channels",
+                    tcomp_data::runcsv::format_rom(&s.rom),
+                    s.channel
+                )
+            })
+        } else {
+            let state = states
+                .as_ref()
+                .and_then(|st| st.get(usize::from(s.channel)).copied());
+            state
+                .is_none_or(|st| absent.contains(&st))
+                .then(|| format!("model sensor {i} reads channel {} (T{:02})", s.channel, s.channel + 1))
+        };
+        out.extend(line);
+    }
+    Ok(out)
 }
 
 /// Which commit command an upload ends with.
@@ -297,21 +349,53 @@ pub fn check_register_map(first: &[u16]) -> Result<()> {
 }
 
 /// Validate locally, check the size, stage, commit, and check that the board
-/// now serves it. Any failure after the unlock relocks the board, so a
-/// failed upload never leaves it open to configuration writes.
-pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<UploadSummary> {
+/// now serves it. `file` is an image, or an image and its signature trailer
+/// (`tcomp export --sign`); `unlock_key` is the board's own key (the factory
+/// code only opens commissioning). Any failure after the unlock relocks the
+/// board, so a failed upload never leaves it open to configuration writes.
+pub fn upload(link: &mut BoardLink, file: &[u8], opts: &UploadOptions) -> Result<UploadSummary> {
+    let UploadOptions {
+        commit,
+        unlock_key,
+        allow_missing_sensors,
+    } = *opts;
     let staging_bytes = usize::from(STAGING_REGS) * 2;
-    if image.len() > staging_bytes {
+    if file.len() > staging_bytes {
         bail!(
             "the image is {} bytes; the board's staging area holds {staging_bytes}: not sent",
-            image.len()
+            file.len()
         );
     }
-    let model = thermocomp_core::Model::parse(image)
+    let signed = thermocomp_core::image::split_signed(file)
+        .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
+    let model = thermocomp_core::Model::parse(signed.image)
         .map_err(|e| anyhow!("the image is not valid, not sent: {e}"))?;
     check_register_map(&link.read_inputs(0, 3)?).context("not sent")?;
-    match stage_and_commit(link, image, commit) {
-        Ok(result) => verify(link, image, &model, result),
+    // A board with a signing key takes signed models only (a board
+    // without the key registers answers an exception: it has no key).
+    let key_state = link.read_holdings(HR_KEY_STATE, 1).ok();
+    let board_wants_signature = key_state
+        .and_then(|k| k.first().copied())
+        .is_some_and(|k| k & KEY_STATE_SIGNING_KEY != 0);
+    if board_wants_signature && signed.signature.is_none() {
+        bail!(
+            "the board stores a signing key and commits signed models only: export with --sign <private key file>; not sent"
+        );
+    }
+    let missing = missing_sensors(link, &model)?;
+    if let (false, Some(first)) = (allow_missing_sensors, missing.first()) {
+        bail!(
+            "{first}{}: the board has no sensor there now; not sent (--allow-missing-sensors sends it anyway: the board then serves without them, fallback or held)",
+            if missing.len() > 1 {
+                format!(" (and {} more: {})", missing.len() - 1, missing[1..].join("; "))
+            } else {
+                String::new()
+            }
+        );
+    }
+    let is_signed = signed.signature.is_some();
+    match stage_and_commit(link, file, commit, unlock_key) {
+        Ok(result) => verify(link, file, &model, result, is_signed),
         Err(e) => {
             // A commit locks the board itself; everything else needs a lock.
             // (A board already locked answers exception 01: nothing to do.)
@@ -329,9 +413,13 @@ pub fn upload(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<Uplo
 }
 
 /// Unlock, stage, commit; the result register's value on success.
-fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Result<u16> {
-    link.write_one(HR_UNLOCK, UNLOCK_CODE)
-        .context("unlocking")?;
+fn stage_and_commit(
+    link: &mut BoardLink,
+    image: &[u8],
+    commit: Commit,
+    unlock_key: u16,
+) -> Result<u16> {
+    unlock(link, unlock_key)?;
     let mut padded = image.to_vec();
     padded.resize(image.len().div_ceil(2) * 2, 0);
     let words: Vec<u16> = padded
@@ -351,20 +439,7 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
         Commit::Rollback => CMD_ROLLBACK_MODEL,
     };
     let committed = link.write_one(HR_COMMAND, command);
-    let mut code = link
-        .read_holdings(HR_RESULT, 1)
-        .ok()
-        .and_then(|r| r.first().copied());
-    // The board answers the commit at once and writes the flash in the
-    // background (result 23 until done: ~1-2 s for a sector erase).
-    let start = std::time::Instant::now();
-    while code == Some(result::COMMIT_IN_PROGRESS) && start.elapsed() < Duration::from_secs(15) {
-        std::thread::sleep(Duration::from_millis(50));
-        code = link
-            .read_holdings(HR_RESULT, 1)
-            .ok()
-            .and_then(|r| r.first().copied());
-    }
+    let code = await_result(link);
     match (committed, code) {
         (Ok(()), Some(result::OK)) => Ok(result::OK),
         (Ok(()), Some(code)) => bail!("commit accepted, but storing it failed: result {code} {}", result::name(code)),
@@ -372,6 +447,10 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
         (Err(e), Some(result::NOT_NEWER)) => Err(e.context(format!(
             "commit refused: result {} NOT_NEWER, the board runs this or a newer model version; pass --rollback to go back on purpose",
             result::NOT_NEWER
+        ))),
+        (Err(e), Some(code @ (result::UNSIGNED | result::BAD_SIGNATURE))) => Err(e.context(format!(
+            "commit refused: result {code} {}: the board commits only models signed with the private key of the public key it stores (registers 50-65)",
+            result::name(code)
         ))),
         (Err(e), Some(code)) => Err(e.context(format!(
             "commit refused: result {code} {}",
@@ -381,12 +460,42 @@ fn stage_and_commit(link: &mut BoardLink, image: &[u8], commit: Commit) -> Resul
     }
 }
 
+/// Unlock with `key`; a refusal says what the key is.
+pub fn unlock(link: &mut BoardLink, key: u16) -> Result<()> {
+    link.write_one(HR_UNLOCK, key).map_err(|e| {
+        if e.to_string().contains("exception 03") {
+            e.context("unlocking: the board refused the key (give the board's own unlock key: --unlock-key or TCOMP_UNLOCK_KEY; the factory code opens only commissioning)")
+        } else {
+            e.context("unlocking")
+        }
+    })
+}
+
+/// HR_RESULT once the board has finished a commit: it answers a commit
+/// (model, settings, keys) at once and writes the flash in the background
+/// (result 23 until done: ~1-2 s for a sector erase). `None`: unreadable.
+pub fn await_result(link: &mut BoardLink) -> Option<u16> {
+    let read = |link: &mut BoardLink| {
+        link.read_holdings(HR_RESULT, 1)
+            .ok()
+            .and_then(|r| r.first().copied())
+    };
+    let mut code = read(link);
+    let start = std::time::Instant::now();
+    while code == Some(result::COMMIT_IN_PROGRESS) && start.elapsed() < Duration::from_secs(15) {
+        std::thread::sleep(Duration::from_millis(50));
+        code = read(link);
+    }
+    code
+}
+
 /// The board must now serve the uploaded model.
 fn verify(
     link: &mut BoardLink,
     image: &[u8],
     model: &thermocomp_core::Model,
     result: u16,
+    signed: bool,
 ) -> Result<UploadSummary> {
     let snap = link.read_inputs(0, IR_MODEL_CRC + 2)?;
     let (version, crc) = (u32_of(&snap, IR_MODEL_VERSION), u32_of(&snap, IR_MODEL_CRC));
@@ -413,6 +522,7 @@ fn verify(
         model_version: version,
         model_crc: format!("{crc:#010x}"),
         result,
+        signed,
         sensors_not_on_board,
     })
 }

@@ -1,4 +1,5 @@
 //! tcomp-link: the desktop's Modbus RTU master for the board (`board_link`:
-//! `tcomp record` and `tcomp upload`).
+//! `tcomp record` and `tcomp upload`; `commission`: `tcomp commission`).
 
 pub mod board_link;
+pub mod commission;

@@ -34,6 +34,10 @@ pub struct ExportSummary {
     /// The volumetric section (`--geometry`) and what its quantisation costs.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub volumetric: Option<tcomp_geometry::board::QuantisationReport>,
+    /// `--sign`: the public key (hex) whose private key signed the image;
+    /// the file then carries the 72-byte signature trailer after `bytes`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signed_by: Option<String>,
 }
 
 /// A volumetric section to add to the image, with its quantisation report.
@@ -55,6 +59,17 @@ pub fn export_with(
     model: &FloatModel,
     geometry: Option<GeometrySection>,
     out: &Path,
+) -> Result<ExportSummary> {
+    export_signed(model, geometry, out, None)
+}
+
+/// [`export_with`], signed with `sign` when given (`tcomp export --sign`):
+/// the file is the image followed by its signature trailer.
+pub fn export_signed(
+    model: &FloatModel,
+    geometry: Option<GeometrySection>,
+    out: &Path,
+    sign: Option<&ed25519_compact::SecretKey>,
 ) -> Result<ExportSummary> {
     let quantize = |m: &FloatModel| -> Result<(Model, QuantReport)> {
         let (mut fixed, report) = m.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -93,9 +108,19 @@ pub fn export_with(
     }
     let bytes = encode(&mut fixed)?;
     Model::parse(&bytes).map_err(|e| anyhow::anyhow!("encoded image does not parse: {e}"))?;
-    std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    let file = match sign {
+        Some(sk) => crate::signing::sign_image(&bytes, sk)?,
+        None => bytes.clone(),
+    };
+    std::fs::write(out, &file).with_context(|| format!("writing {}", out.display()))?;
     let mut s = summary(&fixed, &bytes, &report);
     s.volumetric = geometry.map(|(_, r)| r);
+    s.signed_by = sign.map(|sk| {
+        crate::signing::public_of(sk)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    });
     Ok(s)
 }
 
@@ -121,6 +146,7 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
         fallbacks: m.fallbacks.len(),
         sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
         volumetric: None,
+        signed_by: None,
     }
 }
 
@@ -174,6 +200,11 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
         s.crc32,
         s.model_version
     );
+    if let Some(k) = &s.signed_by {
+        println!(
+            "  signed (Ed25519, 72-byte trailer after the image) by public key {k}"
+        );
+    }
     if s.fallbacks > 0 {
         println!("  {} fallback model(s) for degraded mode", s.fallbacks);
     }

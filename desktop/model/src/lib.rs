@@ -15,3 +15,4 @@ pub mod probe_drift;
 pub mod reference_replay;
 pub mod replay;
 pub mod select;
+pub mod signing;

@@ -39,8 +39,24 @@ enum Command {
         /// Commit even if the board runs this or a newer model version (going back on purpose).
         #[arg(long)]
         rollback: bool,
+        #[command(flatten)]
+        unlock: cli::keys::UnlockArgs,
+        /// Send it even if the board has no sensor for some model sensor
+        /// now (it serves without them: fallback or held).
+        #[arg(long)]
+        allow_missing_sensors: bool,
         #[arg(long)]
         json: bool,
+    },
+    /// Write a new model-signing key pair (Ed25519) for `export --sign`.
+    Keygen(cli::keys::KeygenArgs),
+    /// Give a board its own unlock key and the public key its models must be
+    /// signed with; without --new-unlock-key or --signing-key, show its key state.
+    Commission {
+        #[command(flatten)]
+        link: LinkArgs,
+        #[command(flatten)]
+        args: cli::keys::CommissionArgs,
     },
     /// Poll a board over Modbus RTU and write (or extend) a run CSV.
     Record {
@@ -195,8 +211,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             image,
             link,
             rollback,
+            unlock,
+            allow_missing_sensors,
             json,
         } => {
+            let key = unlock.key()?.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "give the board's unlock key: --unlock-key or TCOMP_UNLOCK_KEY (set at commissioning: tcomp commission --new-unlock-key)"
+                )
+            })?;
             let bytes = std::fs::read(&image)
                 .map_err(|e| anyhow::anyhow!("reading {}: {e}", image.display()))?;
             let commit = if rollback {
@@ -204,7 +227,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 tcomp_link::board_link::Commit::NewerOnly
             };
-            let s = tcomp_link::board_link::upload(&mut link.open()?, &bytes, commit)?;
+            let opts = tcomp_link::board_link::UploadOptions {
+                commit,
+                unlock_key: key,
+                allow_missing_sensors,
+            };
+            let s = tcomp_link::board_link::upload(&mut link.open()?, &bytes, &opts)?;
             if json {
                 println!("{}", serde_json::to_string(&s)?);
             } else {
@@ -277,6 +305,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let n = tcomp_model::export::golden(&out, steps, seed)?;
             println!("wrote {} ({n} bytes, {steps} steps)", out.display());
         }
+        Command::Keygen(args) => cli::keys::keygen(args)?,
+        Command::Commission { link, args } => cli::keys::commission_board(link.open()?, args)?,
         Command::Select(args) => cli::select::main(args)?,
         Command::Fit(args) => cli::fit::main(args)?,
         Command::Sim(args) => cli::sim::main(args)?,

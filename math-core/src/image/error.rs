@@ -6,8 +6,9 @@ use super::format::{
     SECTION_VOLUMETRIC, UNITS_V1,
 };
 use crate::limits::{
-    MAX_AXES, MAX_CORRECTION, MAX_FOURIER_ORDER, MAX_IMAGE_BYTES, MAX_RATE, MAX_SENSORS,
-    MAX_VOL_SENSORS, MAX_VOL_STROKE_UM, MAX_VOL_TOOL_UM,
+    MAX_AXES, MAX_CORRECTION, MAX_FOURIER_ORDER, MAX_IMAGE_BYTES, MAX_NET_WEIGHT_Q16,
+    MAX_PREDICTION, MAX_RATE, MAX_SENSORS, MAX_TAU_S, MAX_VOL_SENSORS, MAX_VOL_STROKE_UM,
+    MAX_VOL_TOOL_UM, MAX_WARMUP_S,
 };
 use heapless::Vec;
 
@@ -167,6 +168,29 @@ pub enum ImageError {
     FiveAxisErrorTooLarge {
         error: u8,
     },
+    /// A signature trailer ([`super::signed`]) of another algorithm, with
+    /// non-zero padding, or cut short.
+    BadSignatureTrailer,
+    /// The networks and tables of a direction (or a fallback) can predict
+    /// beyond ±[`MAX_PREDICTION`] over the image's own input envelope
+    /// (bounded analytically: `image::semantic`).
+    PredictionBound {
+        direction: u8,
+    },
+    /// A network's hidden weight or bias beyond ±[`MAX_NET_WEIGHT_Q16`]
+    /// (what the quantizer produces at most).
+    CoefficientRange {
+        net: u8,
+    },
+    /// A warm-up longer than [`MAX_WARMUP_S`].
+    WarmupTooLong {
+        value: u32,
+    },
+    /// A lag time constant of 0 or longer than [`MAX_TAU_S`].
+    LagTooLong {
+        input: u8,
+        value: u32,
+    },
 }
 
 /// The name of five-axis error `error` (see [`ImageError::FiveAxisErrorTooLarge`]).
@@ -325,6 +349,27 @@ impl core::fmt::Display for ImageError {
                     " can exceed 1 mm / 1 mrad in the temperature envelope, or has a non-zero unused coefficient"
                 )
             }
+            ImageError::PredictionBound { direction } => write!(
+                f,
+                "direction {direction}: the model can predict beyond +-{} mm over its own input envelope (networks and tables bounded analytically)",
+                MAX_PREDICTION / 10_000
+            ),
+            ImageError::CoefficientRange { net } => write!(
+                f,
+                "net {net}: a hidden weight or bias beyond +-{} (Q16), more than the quantizer produces",
+                MAX_NET_WEIGHT_Q16 >> 16
+            ),
+            ImageError::WarmupTooLong { value } => {
+                write!(f, "warm-up {value} s longer than {MAX_WARMUP_S} s")
+            }
+            ImageError::LagTooLong { input, value } => write!(
+                f,
+                "input {input}: lag time constant {value} s outside 1..={MAX_TAU_S} s"
+            ),
+            ImageError::BadSignatureTrailer => write!(
+                f,
+                "signature trailer malformed (not one Ed25519 signature after the image)"
+            ),
         }
     }
 }

@@ -114,6 +114,8 @@ mod model;
 mod parse;
 mod reader;
 mod sections;
+mod semantic;
+pub mod signed;
 mod terms;
 pub(crate) mod types;
 
@@ -123,6 +125,7 @@ pub use format::{
     SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
 };
 pub use model::Model;
+pub use signed::{split_signed, SignedImage, MAX_SIGNED_BYTES};
 pub use types::{
     name8, Axis, Direction, Fallback, InputKind, InputSpec, Lag, Net, SensorRef, Table, Term,
 };

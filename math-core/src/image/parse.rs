@@ -61,6 +61,7 @@ impl Model {
             return Err(ImageError::LengthMismatch);
         }
         check_table_weight(&m)?;
+        super::semantic::check(&m)?;
         m.crc = env.crc;
         Ok(m)
     }

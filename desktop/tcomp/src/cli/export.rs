@@ -40,6 +40,10 @@ pub struct ExportArgs {
     pub geometry_origin_mm: String,
     #[arg(short, long)]
     pub out: std::path::PathBuf,
+    /// Sign the image with this private key file (`tcomp keygen`): a board
+    /// that stores the public key commits only images it signed.
+    #[arg(long)]
+    pub sign: Option<std::path::PathBuf>,
     #[arg(long)]
     pub json: bool,
 }
@@ -58,8 +62,13 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         tool_max_mm,
         geometry_origin_mm,
         out,
+        sign,
         json,
     } = args;
+    // Read the key first: a bad key file costs no fit.
+    let sign = sign
+        .map(|p| tcomp_model::signing::read_private(&p))
+        .transpose()?;
     let run_for_geometry = run.clone();
     let float = match (demo, model) {
         (true, _) => thermocomp_core::float::demo_model(seed),
@@ -105,7 +114,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         )?),
         None => None,
     };
-    let summary = tcomp_model::export::export_with(&float, section, &out)?;
+    let summary = tcomp_model::export::export_signed(&float, section, &out, sign.as_ref())?;
     tcomp_model::export::print_summary(&summary, &out, json);
     Ok(())
 }

@@ -9,6 +9,7 @@ pub mod geometry_check;
 pub mod geometry_score;
 pub mod geometry_smooth;
 pub mod geometry_table;
+pub mod keys;
 pub mod replay;
 pub mod select;
 pub mod sim;
