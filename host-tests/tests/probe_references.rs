@@ -32,7 +32,7 @@ fn frame(body: &[u8]) -> Vec<u8> {
 /// Unlock, then write `v` to holding register `addr`.
 fn write(app: &mut App<MockFlash>, addr: u16, v: u16) -> Vec<u8> {
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    for (a, v) in [(HR_UNLOCK, UNLOCK_CODE), (addr, v)] {
+    for (a, v) in [(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), (addr, v)] {
         let [a0, a1] = a.to_be_bytes();
         let [v0, v1] = v.to_be_bytes();
         app.request(&frame(&[1, 6, a0, a1, v0, v1]), 0, &mut reply);
@@ -121,7 +121,9 @@ fn ok_reading(tenth_um: i32) -> ProbeReading {
 }
 
 fn boot(rig: &Rig, flash: MockFlash) -> App<MockFlash> {
-    App::new(flash, SLOT, 1, 115_200, *rig.acq.map())
+    let mut app = App::new(flash, SLOT, 1, 115_200, *rig.acq.map());
+    host_tests::commission(&mut app);
+    app
 }
 
 fn power_cycle(rig: &Rig, app: &mut App<MockFlash>) -> App<MockFlash> {

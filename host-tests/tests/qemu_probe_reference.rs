@@ -13,7 +13,6 @@ use tcomp_model::replay::ReplayRow;
 use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceState};
 use thermocomp_protocol::holding::{
     result, CMD_TAKE_PROBE_REFERENCE, HR_COMMAND, HR_PROBE_DIRECTION, HR_RESULT, HR_UNLOCK,
-    UNLOCK_CODE,
 };
 use thermocomp_protocol::registers::*;
 
@@ -46,7 +45,8 @@ fn snapshot(link: &mut BoardLink) -> (u64, [i32; 6]) {
 }
 
 fn command(link: &mut BoardLink, code: u16) {
-    link.write_one(HR_UNLOCK, UNLOCK_CODE).unwrap();
+    host_tests::commission_link(link);
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
     link.write_one(HR_COMMAND, code).unwrap();
 }
 
@@ -226,7 +226,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     command(&mut link, CMD_TAKE_PROBE_REFERENCE);
     assert_eq!(final_result(&mut link, &board), result::NO_PROBE_DIRECTION);
     // The probe measures direction 0 (stored with the settings).
-    link.write_one(HR_UNLOCK, UNLOCK_CODE).unwrap();
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
     link.write_one(HR_PROBE_DIRECTION, 0).unwrap();
     assert_eq!(final_result(&mut link, &board), result::OK);
 
