@@ -34,10 +34,7 @@ use thermocomp_protocol::MAX_CHANNELS;
 // The slots' settings block holds the settings, the channel map, a kept
 // reference and the keys.
 const _: () = assert!(
-    SETTINGS_LEN
-        + CHANNEL_MAP_BYTES
-        + crate::settings::REFERENCE_LEN
-        + crate::settings::KEYS_LEN
+    SETTINGS_LEN + CHANNEL_MAP_BYTES + crate::settings::REFERENCE_LEN + crate::settings::KEYS_LEN
         <= MAX_SETTINGS_BYTES
 );
 
