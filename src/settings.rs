@@ -184,8 +184,15 @@ impl StoredKeys {
 
     pub fn encode(&self) -> [u8; KEYS_LEN] {
         let mut b = [0u8; KEYS_LEN];
-        let flags = if self.unlock.is_some() { KEYS_HAS_UNLOCK } else { 0 }
-            | if self.signing.is_some() { KEYS_HAS_SIGNING } else { 0 };
+        let flags = if self.unlock.is_some() {
+            KEYS_HAS_UNLOCK
+        } else {
+            0
+        } | if self.signing.is_some() {
+            KEYS_HAS_SIGNING
+        } else {
+            0
+        };
         let content = [KEYS_TAG, KEYS_VERSION, flags]
             .into_iter()
             .chain(self.unlock.unwrap_or(0).to_le_bytes())

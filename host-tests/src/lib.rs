@@ -30,7 +30,11 @@ pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermoco
         let mut f = vec![unit, 6, a, b, c, d];
         f.extend_from_slice(&thermocomp_protocol::rtu::crc16(&f).to_le_bytes());
         app.request(&f, 0, &mut reply);
-        assert_eq!(reply.get(1), Some(&6), "commissioning write {addr}={v:#x}: {reply:02x?}");
+        assert_eq!(
+            reply.get(1),
+            Some(&6),
+            "commissioning write {addr}={v:#x}: {reply:02x?}"
+        );
     }
     while app.poll_flash() {}
     assert_eq!(app.server.holding.keys.unlock, Some(TEST_UNLOCK_KEY));

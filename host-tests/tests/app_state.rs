@@ -49,7 +49,11 @@ fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
 fn upload_with(app: &mut App<MockFlash>, img: &[u8], command: u16) -> Vec<u8> {
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     host_tests::commission(app);
-    app.request(&write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     let mut padded = img.to_vec();
     padded.resize(img.len().div_ceil(2) * 2, 0);
     let words: Vec<u16> = padded

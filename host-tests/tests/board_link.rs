@@ -53,9 +53,13 @@ fn reads_writes_and_exceptions_round_trip_through_the_real_server() {
     assert!(e.contains("exception 01"), "{e}");
     let e = link.read_inputs(400, 1).unwrap_err().to_string();
     assert!(e.contains("exception 02"), "{e}");
-    let e = upload(&mut link, b"not an image", &host_tests::upload_opts(Commit::NewerOnly, true))
-        .unwrap_err()
-        .to_string();
+    let e = upload(
+        &mut link,
+        b"not an image",
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("not valid, not sent"), "{e}");
 }
 
@@ -141,9 +145,13 @@ fn an_image_larger_than_the_staging_area_is_refused_before_anything_is_sent() {
     // A valid image followed by padding up to beyond the staging area.
     let mut big = demo_image_bytes(2);
     big.resize(STAGING_REGS as usize * 2 + 2, 0);
-    let e = upload(&mut link, &big, &host_tests::upload_opts(Commit::NewerOnly, true))
-        .unwrap_err()
-        .to_string();
+    let e = upload(
+        &mut link,
+        &big,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("staging area"), "{e}");
     assert!(board.lock().unwrap().requests.is_empty(), "nothing sent");
 }
@@ -161,7 +169,12 @@ fn a_failed_upload_relocks_the_board() {
         let mut link = BoardLink::tcp(&addr, 1).unwrap();
         let e = format!(
             "{:#}",
-            upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+            upload(
+                &mut link,
+                &image,
+                &host_tests::upload_opts(Commit::NewerOnly, true)
+            )
+            .unwrap_err()
         );
         assert!(e.contains("exception 04"), "{e}");
         assert!(
@@ -187,13 +200,23 @@ fn a_refused_commit_names_the_reason_and_relocks_and_rollback_commits() {
     let image = demo_image_bytes(2);
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+        upload(
+            &mut link,
+            &image,
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap_err()
     );
     assert!(e.contains("NOT_NEWER") && e.contains("--rollback"), "{e}");
     assert!(!unlocked(&board));
     assert_eq!(board.lock().unwrap().app.snapshot.model_version, 5);
     // The rollback commits it on purpose.
-    let s = upload(&mut link, &image, &host_tests::upload_opts(Commit::Rollback, true)).unwrap();
+    let s = upload(
+        &mut link,
+        &image,
+        &host_tests::upload_opts(Commit::Rollback, true),
+    )
+    .unwrap();
     assert_eq!(s.model_version, 2);
     assert_eq!(s.result, result::OK);
     assert!(!unlocked(&board));
@@ -316,7 +339,12 @@ fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+        upload(
+            &mut link,
+            &image,
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap_err()
     );
     assert!(
         e.contains(&format!("register map version {}", MAP_VERSION - 1)) && e.contains("not sent"),
@@ -327,12 +355,22 @@ fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+        upload(
+            &mut link,
+            &image,
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap_err()
     );
     assert!(e.contains("0x56781234") && e.contains("word order"), "{e}");
     // the board's own server serves the current version: accepted
     let (addr, board) = inspectable_board(None, None);
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
-    upload(&mut link, &image, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
+    upload(
+        &mut link,
+        &image,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap();
     assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
 }

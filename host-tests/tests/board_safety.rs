@@ -201,7 +201,11 @@ fn the_record_is_served_with_status_bit_9_until_command_6() {
     // Command 6 needs the unlock, like every command.
     app.request(&write1(HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
     assert_eq!(reply[1], 0x86);
-    app.request(&write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     let change = app.request(&write1(HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
     assert_eq!(
         change,
@@ -225,7 +229,11 @@ fn test_only_commands_are_refused_without_the_feature() {
     // 14–16 are allocated to another branch).
     for cmd in [CMD_TEST_PANIC, CMD_TEST_STALL, 99] {
         // Unlocked each time: a refused command locks the board again.
-        app.request(&write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+        app.request(
+            &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+            0,
+            &mut reply,
+        );
         let change = app.request(&write1(HR_COMMAND, cmd), 0, &mut reply);
         assert_eq!((reply[1], reply[2]), (0x86, 3), "command {cmd}");
         assert_eq!(change, LinkChange::None);

@@ -49,7 +49,11 @@ fn seal(m: &mut Model) -> Vec<u8> {
 /// Unlock (the board's own key), stage and commit `img`; the reply frame.
 fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    app.request(&write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     let mut padded = img.to_vec();
     padded.resize(img.len().div_ceil(2) * 2, 0);
     let words: Vec<u16> = padded

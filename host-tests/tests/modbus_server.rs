@@ -2,11 +2,11 @@
 //! model upload and commit, exceptions and silent discards per the spec,
 //! and random frames never panic it.
 use heapless::Vec as HVec;
+use host_tests::TEST_UNLOCK_KEY;
 use proptest::prelude::*;
 use thermocomp::modbus::registers::*;
 use thermocomp::modbus::{Action, Server, Snapshot};
 use thermocomp_core::float::demo_model;
-use host_tests::TEST_UNLOCK_KEY;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
@@ -283,7 +283,10 @@ fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
     // Unlock by broadcast: refused (every board on the bus would open at once).
     assert!(b.ask(&write1(0, HR_UNLOCK, TEST_UNLOCK_KEY)).1.is_empty());
     assert!(!b.server.holding.unlocked(b.now), "broadcast unlocked");
-    assert!(b.ask(&write_n(0, HR_UNLOCK, &[TEST_UNLOCK_KEY])).1.is_empty());
+    assert!(b
+        .ask(&write_n(0, HR_UNLOCK, &[TEST_UNLOCK_KEY]))
+        .1
+        .is_empty());
     assert!(!b.server.holding.unlocked(b.now), "FC16 broadcast unlocked");
     // Even while this board is unlocked by its own address, a broadcast does
     // not change its unit, baud, limits or staging area, nor run a command.

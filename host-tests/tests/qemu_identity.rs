@@ -150,7 +150,8 @@ fn wait_for_boots(board: &BenchBoard, n: usize) {
 fn command(link: &mut BoardLink, code: u16) {
     use thermocomp_protocol::holding::{HR_COMMAND, HR_UNLOCK};
     host_tests::commission_link(link);
-    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY)
+        .unwrap();
     link.write_one(HR_COMMAND, code).unwrap();
 }
 

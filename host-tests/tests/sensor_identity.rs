@@ -429,24 +429,18 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     model.encode(&mut image).unwrap();
     // The upload names the missing sensor and sends nothing ...
     let commit = tcomp_link::board_link::Commit::NewerOnly;
-    let e = tcomp_link::board_link::upload(
-        &mut link,
-        &image,
-        &host_tests::upload_opts(commit, false),
-    )
-    .unwrap_err()
-    .to_string();
+    let e =
+        tcomp_link::board_link::upload(&mut link, &image, &host_tests::upload_opts(commit, false))
+            .unwrap_err()
+            .to_string();
     assert!(
         e.contains("model sensor 4 (ROM") && e.contains("not sent"),
         "{e}"
     );
     // ... unless told to: the board then serves without it.
-    let s = tcomp_link::board_link::upload(
-        &mut link,
-        &image,
-        &host_tests::upload_opts(commit, true),
-    )
-    .unwrap();
+    let s =
+        tcomp_link::board_link::upload(&mut link, &image, &host_tests::upload_opts(commit, true))
+            .unwrap();
     assert_eq!(s.sensors_not_on_board, vec![4]);
     // A sensor swapped on channel 0 before an append: refused, one line.
     let mut swapped = map;

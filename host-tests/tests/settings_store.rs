@@ -186,7 +186,11 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     let mut app = app_on(MockFlash::new(2 * SLOT as usize));
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     assert_eq!(app.settings(), Settings::default());
-    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     app.request(&write1(1, HR_CLAMP + 2, 150), 0, &mut reply);
     assert_eq!(reply[1], 6, "{reply:02x?}");
     app.poll_flash();
@@ -213,7 +217,11 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     assert_eq!(&reply[..3], &[9, 3, 12], "unit 9 answers: {reply:02x?}");
     assert_eq!(u16::from_be_bytes([reply[7], reply[8]]), 150);
     // Command 7: defaults, applied and stored.
-    app.request(&write1(9, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(9, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     let change = app.request(&write1(9, HR_COMMAND, CMD_RESTORE_DEFAULTS), 0, &mut reply);
     assert_eq!(reply[0], 9, "answered at the old address");
     app.poll_flash();
@@ -227,7 +235,11 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     assert_eq!(app.snapshot.model_version, 1, "the model stays");
     // A flash that fails: the change is in force, HR_RESULT says it is not stored.
     app.store.flash().budget = Some(0);
-    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     app.request(&write1(1, HR_CLAMP, 10), 0, &mut reply);
     assert_eq!(app.settings().clamp[0], 10);
     assert!(!app.poll_flash(), "the failed write ends the job");
@@ -291,7 +303,11 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     host_tests::commission(&mut app);
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     let (_, img) = image(3);
-    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     for (i, pair) in img.chunks(2).enumerate() {
         let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
         app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);
@@ -303,7 +319,11 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     assert_eq!(app.snapshot.model_version, 0, "not swapped in yet");
     // While it is written: reads answer, staging and settings are busy (06),
     // the PLC's registers are written as usual. (The commit locked the board.)
-    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     app.request(&write1(1, HR_STAGING, 0), 0, &mut reply);
     assert_eq!((reply[1], reply[2]), (0x86, 6));
     app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
@@ -419,7 +439,11 @@ fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
     app.store.flash().busy_looks = 3;
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     let (_, img) = image(3);
-    app.request(&write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     for (i, pair) in img.chunks(2).enumerate() {
         let v = u16::from_be_bytes([pair[0], *pair.get(1).unwrap_or(&0)]);
         app.request(&write1(1, HR_STAGING + i as u16, v), 0, &mut reply);

@@ -131,7 +131,12 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     // tcomp refuses to send an unsigned image to a board with a key.
     let e = format!(
         "{:#}",
-        upload(&mut link, &image(3), &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+        upload(
+            &mut link,
+            &image(3),
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap_err()
     );
     assert!(e.contains("--sign"), "{e}");
     // A master that sends it anyway: exception 04, result 70, locked.
@@ -145,7 +150,12 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     let wrong = signing::sign_image(&image(3), &other.private).unwrap();
     let e = format!(
         "{:#}",
-        upload(&mut link, &wrong, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap_err()
+        upload(
+            &mut link,
+            &wrong,
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap_err()
     );
     assert!(e.contains("BAD_SIGNATURE"), "{e}");
     assert_eq!(raw_commit(&mut link, &wrong).1, result::BAD_SIGNATURE);
@@ -171,16 +181,18 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
     let keys = new_keys();
     let (mut link, board) = commissioned(&keys);
     let signed = signing::sign_image(&image(3), &keys.private).unwrap();
-    let s = upload(&mut link, &signed, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
+    let s = upload(
+        &mut link,
+        &signed,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap();
     assert!(s.signed);
     assert_eq!((s.model_version, s.result), (3, result::OK));
     assert_eq!(serving(&board), 3);
     // The slot holds the image, not the trailer: a reboot serves it and
     // still holds both keys.
-    let flash = std::mem::replace(
-        board.lock().unwrap().store.flash(),
-        MockFlash::new(0),
-    );
+    let flash = std::mem::replace(board.lock().unwrap().store.flash(), MockFlash::new(0));
     let rebooted = fresh_app(flash);
     assert_eq!(rebooted.snapshot.model_version, 3);
     assert_eq!(rebooted.server.holding.keys.signing, Some(keys.public));
@@ -192,7 +204,12 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
         KEY_STATE_UNLOCK_KEY | KEY_STATE_SIGNING_KEY
     );
     let signed4 = signing::sign_image(&image(4), &keys.private).unwrap();
-    upload(&mut link, &signed4, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
+    upload(
+        &mut link,
+        &signed4,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap();
     assert_eq!(serving(&board), 4);
     // A board without a signing key takes unsigned and signed images alike.
     let mut app = fresh_app(MockFlash::new(2 * SLOT as usize));
@@ -205,8 +222,21 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
         signing_key: None,
     };
     commission(&mut link, &c).unwrap();
-    assert!(!upload(&mut link, &image(3), &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap().signed);
-    upload(&mut link, &signed4, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
+    assert!(
+        !upload(
+            &mut link,
+            &image(3),
+            &host_tests::upload_opts(Commit::NewerOnly, true)
+        )
+        .unwrap()
+        .signed
+    );
+    upload(
+        &mut link,
+        &signed4,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap();
     assert_eq!(serving(&board), 4);
 }
 
@@ -257,7 +287,12 @@ fn a_stored_signing_key_is_replaced_only_with_the_old_keys_signature() {
     let by_old = signing::sign_image(&image(3), &old.private).unwrap();
     assert_eq!(raw_commit(&mut link, &by_old).1, result::BAD_SIGNATURE);
     let by_new = signing::sign_image(&image(3), &new.private).unwrap();
-    upload(&mut link, &by_new, &host_tests::upload_opts(Commit::NewerOnly, true)).unwrap();
+    upload(
+        &mut link,
+        &by_new,
+        &host_tests::upload_opts(Commit::NewerOnly, true),
+    )
+    .unwrap();
     assert_eq!(serving(&board), 3);
     // Not a curve point: BAD_KEY.
     let fresh = fresh_app(MockFlash::new(2 * SLOT as usize));

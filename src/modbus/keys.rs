@@ -131,18 +131,12 @@ mod tests {
     /// the QEMU bench times the same verification.
     #[test]
     fn verifies_another_implementations_signature_and_nothing_else() {
-        let hex = |s: &str| -> Vec<u8> {
-            (0..s.len() / 2)
-                .map(|i| u8::from_str_radix(&s[2 * i..2 * i + 2], 16).unwrap())
-                .collect()
-        };
-        let key: [u8; 32] = hex("03a107bff3ce10be1d70dd18e74bc09967e4d6309ba50d5f1ddc8664125531b8")
-            .try_into()
-            .unwrap();
-        let sig: [u8; 64] = hex("5bd00ad8e1273e224b4f2dd08bb72f89bb14a30c83f5476224cb321f4d350c8ba568aab5b6e5e4f9c416ac58f6f8add6691b04b3e565c2c1ed46d525dcba1101")
-            .try_into()
-            .unwrap();
-        let mut message: Vec<u8> = (0..2048).map(|i| ((7 * i + 3) % 256) as u8).collect();
+        fn hex<const N: usize>(s: &str) -> [u8; N] {
+            core::array::from_fn(|i| u8::from_str_radix(&s[2 * i..2 * i + 2], 16).unwrap())
+        }
+        let key: [u8; 32] = hex("03a107bff3ce10be1d70dd18e74bc09967e4d6309ba50d5f1ddc8664125531b8");
+        let sig: [u8; 64] = hex("5bd00ad8e1273e224b4f2dd08bb72f89bb14a30c83f5476224cb321f4d350c8ba568aab5b6e5e4f9c416ac58f6f8add6691b04b3e565c2c1ed46d525dcba1101");
+        let mut message: [u8; 2048] = core::array::from_fn(|i| ((7 * i + 3) % 256) as u8);
         assert!(verify(&key, &message, &sig));
         message[1000] ^= 1;
         assert!(!verify(&key, &message, &sig));

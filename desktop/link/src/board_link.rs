@@ -280,10 +280,17 @@ pub struct UploadOptions {
 /// (input registers 200–279); by channel, a channel with no sensor on it
 /// (state unused or no presence, 130–149). Read from the board's identity
 /// registers before anything is sent.
-pub fn missing_sensors(link: &mut BoardLink, model: &thermocomp_core::Model) -> Result<Vec<String>> {
+pub fn missing_sensors(
+    link: &mut BoardLink,
+    model: &thermocomp_core::Model,
+) -> Result<Vec<String>> {
     let by_rom = model.sensors.iter().any(|s| s.rom != [0; 8]);
     let by_channel = model.sensors.iter().any(|s| s.rom == [0; 8]);
-    let roms = if by_rom { Some(channel_roms(link)?) } else { None };
+    let roms = if by_rom {
+        Some(channel_roms(link)?)
+    } else {
+        None
+    };
     let states = if by_channel {
         Some(link.read_inputs(IR_STATES, MAX_CHANNELS as u16)?)
     } else {
@@ -305,9 +312,13 @@ pub fn missing_sensors(link: &mut BoardLink, model: &thermocomp_core::Model) -> 
             let state = states
                 .as_ref()
                 .and_then(|st| st.get(usize::from(s.channel)).copied());
-            state
-                .is_none_or(|st| absent.contains(&st))
-                .then(|| format!("model sensor {i} reads channel {} (T{:02})", s.channel, s.channel + 1))
+            state.is_none_or(|st| absent.contains(&st)).then(|| {
+                format!(
+                    "model sensor {i} reads channel {} (T{:02})",
+                    s.channel,
+                    s.channel + 1
+                )
+            })
         };
         out.extend(line);
     }

@@ -201,9 +201,7 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
         s.model_version
     );
     if let Some(k) = &s.signed_by {
-        println!(
-            "  signed (Ed25519, 72-byte trailer after the image) by public key {k}"
-        );
+        println!("  signed (Ed25519, 72-byte trailer after the image) by public key {k}");
     }
     if s.fallbacks > 0 {
         println!("  {} fallback model(s) for degraded mode", s.fallbacks);

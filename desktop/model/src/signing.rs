@@ -17,9 +17,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use ed25519_compact::{KeyPair, PublicKey, Seed};
 /// A private signing key (the type `read_private` returns).
 pub use ed25519_compact::SecretKey;
+use ed25519_compact::{KeyPair, PublicKey, Seed};
 use thermocomp_core::image::signed::{trailer, SIGNATURE_LEN};
 use thermocomp_core::image::split_signed;
 
@@ -59,7 +59,10 @@ pub fn keygen(target: &Path) -> Result<KeyFiles> {
     let (private_key, public_key) = key_paths(target);
     for p in [&private_key, &public_key] {
         if p.exists() {
-            bail!("{} exists: not overwritten (a signing key is not replaceable by accident)", p.display());
+            bail!(
+                "{} exists: not overwritten (a signing key is not replaceable by accident)",
+                p.display()
+            );
         }
     }
     let pair = KeyPair::from_seed(Seed::generate());
@@ -120,8 +123,8 @@ fn unhex<const N: usize>(s: &str) -> Option<[u8; N]> {
 
 /// The value after `tag` in a key file.
 fn tagged<const N: usize>(path: &Path, tag: &str, what: &str) -> Result<[u8; N]> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| anyhow!("reading {}: {e}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| anyhow!("reading {}: {e}", path.display()))?;
     let value = text
         .lines()
         .find_map(|l| l.trim().strip_prefix(tag))

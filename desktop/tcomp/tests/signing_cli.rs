@@ -25,7 +25,10 @@ fn keygen_then_export_sign_writes_a_verifiable_signed_image() {
     let again = tcomp(&["keygen", d]);
     assert!(!again.status.success());
     let e = stderr(&again);
-    assert!(e.contains("not overwritten") && e.lines().count() == 1, "{e}");
+    assert!(
+        e.contains("not overwritten") && e.lines().count() == 1,
+        "{e}"
+    );
     let key = dir.path().join("tcomp-signing.key");
     let (plain, signed) = (dir.path().join("p.img"), dir.path().join("s.img"));
     let p = plain.to_str().unwrap();
@@ -41,14 +44,20 @@ fn keygen_then_export_sign_writes_a_verifiable_signed_image() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let public =
-        tcomp_model::signing::read_public(&dir.path().join("tcomp-signing.pub")).unwrap();
+    let public = tcomp_model::signing::read_public(&dir.path().join("tcomp-signing.pub")).unwrap();
     let hex: String = public.iter().map(|b| format!("{b:02x}")).collect();
     assert_eq!(summary["signed_by"], hex.as_str());
-    let (plain, signed) = (std::fs::read(&plain).unwrap(), std::fs::read(&signed).unwrap());
+    let (plain, signed) = (
+        std::fs::read(&plain).unwrap(),
+        std::fs::read(&signed).unwrap(),
+    );
     assert_eq!(signed.len(), plain.len() + 72);
     let split = thermocomp_core::image::split_signed(&signed).unwrap();
-    assert_eq!(split.image, &plain[..], "the image is the same signed or not");
+    assert_eq!(
+        split.image,
+        &plain[..],
+        "the image is the same signed or not"
+    );
     assert!(tcomp_model::signing::verify(
         &public,
         split.image,
@@ -64,7 +73,10 @@ fn keygen_then_export_sign_writes_a_verifiable_signed_image() {
         dir.path().join("x.img").to_str().unwrap(),
     ]);
     let e = stderr(&o);
-    assert!(!o.status.success() && e.contains("not a tcomp private key file"), "{e}");
+    assert!(
+        !o.status.success() && e.contains("not a tcomp private key file"),
+        "{e}"
+    );
     // upload names the missing unlock key before touching any board.
     let o = tcomp(&["upload", p, "--tcp", "127.0.0.1:1"]);
     let e = stderr(&o);

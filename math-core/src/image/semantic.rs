@@ -17,9 +17,7 @@
 
 use super::error::ImageError;
 use super::model::Model;
-use crate::limits::{
-    MAX_DIRECTIONS, MAX_NET_WEIGHT_Q16, MAX_PREDICTION, MAX_TAU_S, MAX_WARMUP_S,
-};
+use crate::limits::{MAX_DIRECTIONS, MAX_NET_WEIGHT_Q16, MAX_PREDICTION, MAX_TAU_S, MAX_WARMUP_S};
 
 /// Every semantic limit, in the order the module docs give them.
 pub(crate) fn check(m: &Model) -> Result<(), ImageError> {
@@ -41,7 +39,10 @@ pub(crate) fn check(m: &Model) -> Result<(), ImageError> {
         let n_in = n.inputs.len();
         let weights = n.w1.iter().take(h).flat_map(|row| row.iter().take(n_in));
         let hidden = weights.chain(n.b1.iter().take(h));
-        if hidden.into_iter().any(|w| w.unsigned_abs() > MAX_NET_WEIGHT_Q16) {
+        if hidden
+            .into_iter()
+            .any(|w| w.unsigned_abs() > MAX_NET_WEIGHT_Q16)
+        {
             return Err(ImageError::CoefficientRange { net });
         }
     }
@@ -56,7 +57,10 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
     let mut hi = [0i64; MAX_DIRECTIONS];
     for n in &m.nets {
         let d = usize::from(n.direction);
-        let w2 = n.w2.iter().take(usize::from(n.n_hidden)).map(|&w| i64::from(w));
+        let w2 =
+            n.w2.iter()
+                .take(usize::from(n.n_hidden))
+                .map(|&w| i64::from(w));
         let (neg, pos) = w2.fold((0, 0), |(neg, pos), w| (neg + w.min(0), pos + w.max(0)));
         if let (Some(l), Some(h)) = (lo.get_mut(d), hi.get_mut(d)) {
             *l += i64::from(n.b2) + neg;
@@ -65,7 +69,11 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
     }
     for t in &m.tables {
         let d = usize::from(t.direction);
-        let sum: i64 = t.terms.iter().map(|x| i64::from(x.coef.unsigned_abs())).sum();
+        let sum: i64 = t
+            .terms
+            .iter()
+            .map(|x| i64::from(x.coef.unsigned_abs()))
+            .sum();
         if let (Some(l), Some(h)) = (lo.get_mut(d), hi.get_mut(d)) {
             *l -= sum;
             *h += sum;
