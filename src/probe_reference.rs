@@ -26,8 +26,7 @@ use thermocomp_core::reference::{
 };
 use thermocomp_protocol::holding::result;
 use thermocomp_protocol::registers::{
-    IR_REF_ACCEPTED, IR_REF_BIAS, IR_REF_INNOVATION, IR_REF_REFUSED, IR_REF_TIME,
-    IR_REF_ZERO,
+    IR_REF_ACCEPTED, IR_REF_BIAS, IR_REF_INNOVATION, IR_REF_REFUSED, IR_REF_TIME, IR_REF_ZERO,
 };
 
 use crate::modbus::holding::ProbeSetup;
@@ -201,9 +200,9 @@ impl References {
             1 => Some(lo(v)),
             _ => None,
         };
-        let time = probe
-            .and_then(|s| s.last_ms)
-            .map_or(u32::MAX, |t| u32::try_from(t / 1000).unwrap_or(u32::MAX - 1));
+        let time = probe.and_then(|s| s.last_ms).map_or(u32::MAX, |t| {
+            u32::try_from(t / 1000).unwrap_or(u32::MAX - 1)
+        });
         let innovation = probe.map_or(0, |s| div_round(i64::from(s.last_innovation_nm), 100));
         if let Some(w) = word(IR_REF_TIME, time) {
             return w;

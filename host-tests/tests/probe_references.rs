@@ -204,8 +204,15 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
             ReferenceOutcome::Refused { .. } => {
                 assert_eq!(code, result::REFERENCE_REFUSED);
                 assert_eq!(
-                    ReferenceState { refused: 0, last_innovation_nm: 0, ..st },
-                    ReferenceState { last_innovation_nm: 0, ..before },
+                    ReferenceState {
+                        refused: 0,
+                        last_innovation_nm: 0,
+                        ..st
+                    },
+                    ReferenceState {
+                        last_innovation_nm: 0,
+                        ..before
+                    },
                     "a refused reference changes nothing but its count"
                 );
             }
@@ -255,8 +262,14 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
         app.compensation.compensator().reference().unwrap(),
         &reference_before[..]
     );
-    assert_eq!(app.snapshot.corrections[0], predicted(&out, now, &zeroed, &max)[0]);
-    assert_ne!(app.snapshot.corrections[1], out.corrections[1], "all directions re-zeroed");
+    assert_eq!(
+        app.snapshot.corrections[0],
+        predicted(&out, now, &zeroed, &max)[0]
+    );
+    assert_ne!(
+        app.snapshot.corrections[1], out.corrections[1],
+        "all directions re-zeroed"
+    );
     assert_eq!(settled_result(&mut app), result::OK);
 
     // Command 13: the model alone again (stored).
@@ -373,10 +386,14 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
     let mut raw_pts = vec![];
     let dev = rig.device_on(5);
     for (i, &t) in temps.iter().enumerate() {
-        rig.bus.with_device(dev, |d| d.temperature = (t * 16.0) as i16);
+        rig.bus
+            .with_device(dev, |d| d.temperature = (t * 16.0) as i16);
         rig.bus.advance_ns(1_000 * MS);
         let now = rig.bus.now_ms();
-        block_on(rig.acq.cycle(&mut master(&rig.bus), &mut rig.bus.delay(), now));
+        block_on(
+            rig.acq
+                .cycle(&mut master(&rig.bus), &mut rig.bus.delay(), now),
+        );
         let t16 = rig.acq.value(5, now).usable().unwrap();
         adc.temp_c = f64::from(t16) / 16.0;
         let r = block_on(measure(&mut adc, &probe_config()));
@@ -385,7 +402,11 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
         raw_pts.push((adc.temp_c, um));
         csv += &format!("{i},{},{um:.1}\n", f64::from(t16) / 16.0);
     }
-    assert!((slope(&raw_pts) - DRIFT_UM_PER_K).abs() < 0.02, "{}", slope(&raw_pts));
+    assert!(
+        (slope(&raw_pts) - DRIFT_UM_PER_K).abs() < 0.02,
+        "{}",
+        slope(&raw_pts)
+    );
     let run = tcomp_data::runcsv::Run::from_reader(csv.as_bytes()).unwrap();
     let est = tcomp_model::probe_drift::estimate(&run, "T06").unwrap();
     assert!((est.um_per_k - DRIFT_UM_PER_K).abs() < 0.03, "{est:?}");
@@ -405,14 +426,18 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
     }
     let mut used = vec![];
     for &t in temps.iter().rev() {
-        rig.bus.with_device(dev, |d| d.temperature = (t * 16.0) as i16);
+        rig.bus
+            .with_device(dev, |d| d.temperature = (t * 16.0) as i16);
         // Fresh terms for each: the innovation is then reading − model.
         write(&mut app, HR_COMMAND, CMD_RESET_REFERENCE_TERMS);
         settled_result(&mut app);
         write(&mut app, HR_COMMAND, CMD_TAKE_PROBE_REFERENCE);
         rig.bus.advance_ns(1_000 * MS);
         let now = rig.bus.now_ms();
-        block_on(rig.acq.cycle(&mut master(&rig.bus), &mut rig.bus.delay(), now));
+        block_on(
+            rig.acq
+                .cycle(&mut master(&rig.bus), &mut rig.bus.delay(), now),
+        );
         let out = app.cycle(&rig.acq, now, now, Some(0));
         adc.temp_c = f64::from(rig.acq.value(5, now).usable().unwrap()) / 16.0;
         let mut cfg = probe_config();

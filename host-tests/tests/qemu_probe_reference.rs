@@ -154,11 +154,7 @@ fn reference(
         ReferenceOutcome::Refused { innovation } => (result::REFERENCE_REFUSED, innovation),
     };
     assert_eq!((code, innovation), want, "row {i}: {outcome:?}");
-    assert_eq!(
-        (w[4], w[5]),
-        (st.accepted, st.refused),
-        "accepted, refused"
-    );
+    assert_eq!((w[4], w[5]), (st.accepted, st.refused), "accepted, refused");
     (code, row_t)
 }
 
@@ -213,7 +209,12 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
     let board = BenchBoard::start(
         &serial,
-        &["serve", trace.to_str().unwrap(), img.to_str().unwrap(), "50"],
+        &[
+            "serve",
+            trace.to_str().unwrap(),
+            img.to_str().unwrap(),
+            "50",
+        ],
     );
     assert!(
         board.wait_for("serving Modbus RTU", BOOT),
@@ -247,7 +248,11 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     e.check(&mut link, &st, t2, 10);
     // A chip on the gauge: refused, counted, the served values unchanged.
     let before = st;
-    wait_sample(&mut link, &board, (CHIP_FROM_ROW as u64 + 5) * u64::from(ROW_S));
+    wait_sample(
+        &mut link,
+        &board,
+        (CHIP_FROM_ROW as u64 + 5) * u64::from(ROW_S),
+    );
     let (code, _) = reference(&mut link, &board, &e, &probe, &mut st);
     assert_eq!(code, result::REFERENCE_REFUSED);
     assert_eq!(

@@ -272,7 +272,10 @@ mod tests {
             TraceSample::parse(&p, "1,20,-3.25").unwrap().probe_tenth_um,
             Some(-33)
         );
-        assert_eq!(TraceSample::parse(&p, "1,20,").unwrap().probe_tenth_um, None);
+        assert_eq!(
+            TraceSample::parse(&p, "1,20,").unwrap().probe_tenth_um,
+            None
+        );
         let s = TraceSample::parse(&h, "15,1250,-0.5,3.2,").unwrap();
         assert_eq!(s.time_ms, 15_000);
         assert_eq!(s.spindle_rpm, Some(1250));

@@ -50,8 +50,7 @@ impl<F: BackgroundErase> App<F> {
     /// ADC samples the next probe reading averages: `Some` while a probe
     /// reference (command 12) is pending, then that reading is the reference.
     pub fn probe_reference_samples(&self) -> Option<u16> {
-        self.references
-            .pending_samples(&self.server.holding.probe)
+        self.references.pending_samples(&self.server.holding.probe)
     }
 
     /// The pending probe reference with this reading (0.1 µm; `None`: the

@@ -451,9 +451,7 @@ impl Holding {
             HR_BAUD => BAUD_RATES.contains(&(u32::from(v) * 100)),
             HR_STAGED_LEN => usize::from(v) <= MAX_SIGNED_BYTES,
             HR_PROBE_DIRECTION => v == REGISTER_NONE || usize::from(v) < MAX_DIRECTIONS,
-            HR_REFERENCE_SAMPLES => {
-                (1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&v)
-            }
+            HR_REFERENCE_SAMPLES => (1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&v),
             HR_PROBE_TEMP_CHANNEL => {
                 v == REGISTER_NONE || usize::from(v) < thermocomp_protocol::MAX_CHANNELS
             }

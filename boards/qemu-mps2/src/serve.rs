@@ -17,14 +17,14 @@ use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_protocol::trace::TraceSample;
 
 use crate::emulated_bus::EmulatedBus;
-use crate::probe::EmulatedProbe;
-use thermocomp::acquisition::probe::ProbeReading;
 use crate::host_files::{next_sample_or_exit, open_trace, read_host_file};
 use crate::host_trace::HostTrace;
+use crate::probe::EmulatedProbe;
 use crate::replay::log_correction;
 use crate::sensors::{put_sample, Sensors};
 use crate::time_driver::Uptime;
 use crate::{flash, log, rtu_port, safety, stack};
+use thermocomp::acquisition::probe::ProbeReading;
 
 /// The application state the serve tasks share: built in place once,
 /// before they start (never locked across an await).

@@ -604,21 +604,7 @@ pub fn record_with(
 ) -> Result<usize> {
     let snap = link.read_inputs(0, SNAPSHOT_LEN)?;
     check_register_map(&snap)?;
-    let drift = match drift {
-        Some(d) => Some(d),
-        None => {
-            let w = link.read_holdings(HR_PROBE_TEMP_CHANNEL, 2)?;
-            (w[0] != REGISTER_NONE).then(|| ProbeDriftSetup {
-                channel: usize::from(w[0]),
-                nm_per_k: w[1] as i16,
-            })
-        }
-    };
-    if let Some(d) = drift {
-        if d.channel >= MAX_CHANNELS {
-            bail!("probe temperature channel {}: the board has channels 1-{MAX_CHANNELS}", d.channel + 1);
-        }
-    }
+    let drift = drift_setup(link, drift)?;
     let block = link.read_inputs(IR_TEMPERATURES, CHANNEL_BLOCK)?;
     let state_of = |block: &[u16], c: usize| block[usize::from(IR_STATES - IR_TEMPERATURES) + c];
     let n_dir = usize::from(snap[usize::from(IR_N_DIRECTIONS)]).min(MAX_DIRECTIONS);
@@ -750,20 +736,54 @@ pub fn record_with(
                 f64::from(u32_of(&snap, IR_CORRECTIONS + 2 * d as u16) as i32) / 10.0
             ));
         }
-        let raw = (snap[usize::from(IR_PROBE_STATE)] == ProbeState::Ok.code())
-            .then(|| u32_of(&snap, IR_PROBE) as i32);
-        let without = match (raw, drift) {
-            (Some(r), None) => Some(f64::from(r) / 10.0),
-            (Some(r), Some(d)) => Some(block[d.channel])
-                .filter(|&t| t != NOT_AVAILABLE)
-                .map(|t| probe_without_drift(r, t as i16, d.nm_per_k)),
-            (None, _) => None,
-        };
-        row.push(without.map_or(String::new(), |v| format!("{v:.1}")));
-        row.push(raw.map_or(String::new(), |r| format!("{:.1}", f64::from(r) / 10.0)));
+        row.extend(probe_cells(&snap, &block, drift));
         row.extend(channels.iter().map(|&c| state_of(&block, c).to_string()));
         writeln!(file, "{}", row.join(","))?;
         file.flush()?;
     }
     Ok(samples)
+}
+
+/// The drift `record` removes: given, else the board's holding registers 42–43.
+fn drift_setup(
+    link: &mut BoardLink,
+    given: Option<ProbeDriftSetup>,
+) -> Result<Option<ProbeDriftSetup>> {
+    let drift = match given {
+        Some(d) => Some(d),
+        None => {
+            let w = link.read_holdings(HR_PROBE_TEMP_CHANNEL, 2)?;
+            (w[0] != REGISTER_NONE).then(|| ProbeDriftSetup {
+                channel: usize::from(w[0]),
+                nm_per_k: w[1] as i16,
+            })
+        }
+    };
+    if let Some(d) = drift {
+        if d.channel >= MAX_CHANNELS {
+            bail!(
+                "probe temperature channel {}: the board has channels 1-{MAX_CHANNELS}",
+                d.channel + 1
+            );
+        }
+    }
+    Ok(drift)
+}
+
+/// `dprobe_um` (drift removed; empty without the probe's temperature) and
+/// `probe_raw_um` of one row, both empty when the probe is not OK.
+fn probe_cells(snap: &[u16], block: &[u16], drift: Option<ProbeDriftSetup>) -> [String; 2] {
+    let raw = (snap[usize::from(IR_PROBE_STATE)] == ProbeState::Ok.code())
+        .then(|| u32_of(snap, IR_PROBE) as i32);
+    let without = match (raw, drift) {
+        (Some(r), None) => Some(f64::from(r) / 10.0),
+        (Some(r), Some(d)) => Some(block[d.channel])
+            .filter(|&t| t != NOT_AVAILABLE)
+            .map(|t| probe_without_drift(r, t as i16, d.nm_per_k)),
+        (None, _) => None,
+    };
+    [
+        without.map_or(String::new(), |v| format!("{v:.1}")),
+        raw.map_or(String::new(), |r| format!("{:.1}", f64::from(r) / 10.0)),
+    ]
 }

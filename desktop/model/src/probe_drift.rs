@@ -157,7 +157,10 @@ mod tests {
         let rows: Vec<(f64, f64)> = (0..50)
             .map(|i| {
                 let t = 18.0 + 0.3 * f64::from(i);
-                (t, 100.0 + 0.5 * (t - 20.0) + if i % 2 == 0 { 0.1 } else { -0.1 })
+                (
+                    t,
+                    100.0 + 0.5 * (t - 20.0) + if i % 2 == 0 { 0.1 } else { -0.1 },
+                )
             })
             .collect();
         let d = estimate(&run(&rows), "T05").unwrap();

@@ -267,7 +267,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         .strip_prefix('T')
                         .and_then(|n| n.parse::<usize>().ok())
                         .filter(|n| (1..=20).contains(n))
-                        .ok_or_else(|| anyhow::anyhow!("--probe-channel {c}: expected T01 … T20"))?;
+                        .ok_or_else(|| {
+                            anyhow::anyhow!("--probe-channel {c}: expected T01 … T20")
+                        })?;
                     Some(tcomp_link::board_link::ProbeDriftSetup {
                         channel: channel - 1,
                         nm_per_k: tcomp_model::probe_drift::register_value(k)?,

@@ -6,8 +6,8 @@ use anyhow::{bail, Context, Result};
 
 use tcomp_model::fit::net::NetOpts;
 use tcomp_model::fit::parse_feature;
-use tcomp_model::probe_drift;
 use tcomp_model::fit::pipeline::{self as run, Candidates, FeatureChoice, FitConfig};
+use tcomp_model::probe_drift;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct FitArgs {
