@@ -227,28 +227,16 @@ impl FiveAxis {
         }
         let n = usize::from(s.n_sensors);
         for (row, error) in s.location.iter().zip(0u8..) {
-            let (constant, per_k) = row.split_first().unwrap_or((&0, &[]));
-            let used = per_k.get(..n).unwrap_or(per_k);
-            let unused = per_k.get(n..).unwrap_or(&[]);
-            let weight = u64::from(constant.unsigned_abs())
-                + MAX_RISE_K
-                    * used
-                        .iter()
-                        .map(|c| u64::from(c.unsigned_abs()))
-                        .sum::<u64>();
-            if weight > MAX_ERROR || unused.iter().any(|&c| c != 0) {
+            // |c₀| + 180 · Σ|cᵢ| over the used columns.
+            if !within_bound(row, 1 + n, location_weight) {
                 return Err(ImageError::FiveAxisErrorTooLarge { error });
             }
         }
+        let order = usize::from(s.order);
         for (axis_terms, axis) in s.motion.iter().zip(0u8..) {
             for (terms, e) in axis_terms.iter().zip(0u8..) {
-                let used = terms.get(..usize::from(s.order)).unwrap_or(terms);
-                let unused = terms.get(usize::from(s.order)..).unwrap_or(&[]);
-                let weight: u64 = used
-                    .iter()
-                    .map(|[a, b]| 2 * u64::from(a.unsigned_abs()) + u64::from(b.unsigned_abs()))
-                    .sum();
-                if weight > MAX_ERROR || unused.iter().any(|t| *t != [0, 0]) {
+                // Σ 2|a_k| + |b_k| over the orders used.
+                if !within_bound(terms.as_flattened(), 2 * order, fourier_weight) {
                     return Err(ImageError::FiveAxisErrorTooLarge {
                         error: 8 + 6 * axis + e,
                     });
@@ -295,6 +283,7 @@ impl FiveAxis {
         4 + 24 + 16 + 12 + 32 * (1 + usize::from(self.n_sensors)) + 96 * usize::from(self.order)
     }
 
+    #[inline(never)]
     /// Location error values at temperature rises `rise` (1/16 °C): each
     /// translation in pm, each angle in nrad.
     fn location_values(&self, rise: &[i64; MAX_VOL_SENSORS]) -> [i64; 8] {
@@ -344,6 +333,41 @@ impl FiveAxis {
     }
 }
 
+/// Σ weight(k)·|cₖ| over the first `used` coefficients ≤ [`MAX_ERROR`],
+/// and every later one zero. Out of line (and the weight a function
+/// pointer): called for 32 rows, it would otherwise be unrolled.
+#[inline(never)]
+fn within_bound(c: &[i32], used: usize, weight: fn(usize) -> u64) -> bool {
+    let mut sum = 0u64;
+    for (k, v) in c.iter().enumerate() {
+        let a = u64::from(v.unsigned_abs());
+        if k < used {
+            sum += weight(k) * a;
+        } else if a != 0 {
+            return false;
+        }
+    }
+    sum <= MAX_ERROR
+}
+
+/// A location row: the constant, then slopes per kelvin (|ΔT| ≤ 180 K).
+fn location_weight(k: usize) -> u64 {
+    if k == 0 {
+        1
+    } else {
+        MAX_RISE_K
+    }
+}
+
+/// A Fourier row: cos, sin, cos, … (|cos kθ − 1| ≤ 2, |sin kθ| ≤ 1).
+fn fourier_weight(k: usize) -> u64 {
+    if k.is_multiple_of(2) {
+        2
+    } else {
+        1
+    }
+}
+
 /// A 3 × 3 rotation in Q30.
 type Rot = [[i64; 3]; 3];
 
@@ -371,6 +395,7 @@ fn cross(a: &[i64; 3], b: &[i64; 3]) -> [i64; 3] {
     ]
 }
 
+#[inline(never)]
 /// The rotary part Σ_k [R_k·δ_k·1000 + (R_k·ε_k) × (p − o_k)] in fm, at
 /// the tool point `p` (µm) and the angles used.
 fn rotary_sum_fm(
@@ -423,6 +448,7 @@ fn rotary_sum_fm(
 /// predicts with it. `f` must have passed [`FiveAxis::check_with`] `vol`
 /// (the parser does this); otherwise the result is still total, without
 /// the overflow guarantee.
+#[inline(never)]
 pub fn evaluate(
     vol: &Volumetric,
     f: &FiveAxis,
