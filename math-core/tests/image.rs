@@ -339,12 +339,17 @@ fn tables_whose_sums_could_overflow_the_accumulator_are_refused() {
         encoded(heavy_tables(MAX_TABLES, MAX_TERMS, i32::MIN)),
         Err(ImageError::TableSumTooLarge { axis: 0 })
     );
-    // At the bound the image is accepted and evaluates without overflow
-    // (this test runs with overflow checks on).
+    // At the bound the sums pass (what is refused now is the prediction
+    // such tables can make over the envelope, issue 30's semantic limit),
+    // and the evaluation cannot overflow (this test runs with overflow
+    // checks on).
     let per_term = MAX_AXIS_TABLE_WEIGHT / (3 * (MAX_TABLES * MAX_TERMS) as u64);
     let at_bound = heavy_tables(MAX_TABLES, MAX_TERMS, -(per_term as i32));
-    let parsed = encoded(at_bound).expect("an image at the bound parses");
-    evaluate_at_extremes(&parsed);
+    assert!(
+        matches!(encoded(at_bound.clone()), Err(ImageError::PredictionBound { .. })),
+        "at the sum bound only the prediction bound refuses"
+    );
+    evaluate_at_extremes(&at_bound);
     let over = heavy_tables(MAX_TABLES, MAX_TERMS, -(per_term as i32) - 1);
     assert_eq!(encoded(over), Err(ImageError::TableSumTooLarge { axis: 0 }));
 }
