@@ -59,7 +59,7 @@ pub const HR_LAST_PLAIN: u16 = 49;
 pub const HR_STAGING: u16 = 1000;
 // The staging area must fit the address space above HR_STAGING.
 const _: () = assert!(MAX_SIGNED_BYTES / 2 <= (u16::MAX - HR_STAGING) as usize);
-const _: () = assert!(MAX_SIGNED_BYTES % 2 == 0);
+const _: () = assert!(MAX_SIGNED_BYTES.is_multiple_of(2));
 #[allow(clippy::cast_possible_truncation)] // checked by the assertion above
 pub const STAGING_REGS: u16 = (MAX_SIGNED_BYTES / 2) as u16;
 
