@@ -25,7 +25,7 @@ fn in_block(a: u16, base: u16, n: usize) -> Option<usize> {
 /// Register `k` of a block of 32-bit values (even: the high word) sets that half of `p`.
 fn set_half(p: &mut i32, k: usize, v: u16) {
     let u = *p as u32;
-    *p = if k % 2 == 0 {
+    *p = if k.is_multiple_of(2) {
         ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
     } else {
         ((u & 0xFFFF_0000) | u32::from(v)) as i32
