@@ -25,6 +25,8 @@ pub mod five_axis;
 pub mod guard;
 pub mod identify;
 pub mod lines;
+pub mod rotary;
+pub mod rtest;
 pub mod score;
 pub mod sim;
 pub mod smooth;
