@@ -125,6 +125,10 @@ pub struct RotaryModel {
     /// `Σ a_k(cos kθ − 1) + b_k sin kθ` in µm or µrad; missing names are zero.
     #[serde(default)]
     pub components: BTreeMap<String, Fourier>,
+    /// Terms the measurements did not determine (`identify-rotary
+    /// --partial`): their values here are placeholders (zero), not errors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unobservable: Vec<String>,
 }
 
 /// A rotary axis.
@@ -439,6 +443,7 @@ mod tests {
             .into_iter()
             .map(|(n, c, s)| (n.to_string(), Fourier { cos: c, sin: s }))
             .collect(),
+            unobservable: vec![],
         }
     }
 
