@@ -26,6 +26,7 @@ pub mod guard;
 pub mod identify;
 pub mod lines;
 pub mod rotary;
+pub mod rotary_check;
 pub mod rotary_identify;
 pub mod rotary_sim;
 pub mod rtest;

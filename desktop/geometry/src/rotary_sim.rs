@@ -49,7 +49,7 @@ impl RPlan {
         poses.extend((0..8).map(|k| (60.0, 45.0 * k as f64)));
         poses.push((0.0, 0.0));
         RPlan {
-            pivot_a_mm: [400.0, 250.0, -150.0],
+            pivot_a_mm: [400.0, 350.0, 400.0],
             offset_c_mm: [0.0, 0.0, 120.0],
             nests: vec![
                 ([200.0, 0.0, 60.0], [0.0, 0.0, 100.0]),
