@@ -5,6 +5,10 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
+use super::geometry_rotary::{
+    check_rotary_cmd, identify_rotary_cmd, plan_rotary_cmd, sim_rotary_cmd, CheckRotaryArgs,
+    IdentifyRotaryArgs, PlanRotaryArgs, SimRotaryArgs,
+};
 use super::geometry_score::{score_cmd, ScoreArgs};
 use super::geometry_smooth::{identify_smooth_cmd, stroke_from, SmoothRequest};
 use super::geometry_table::{
@@ -51,6 +55,17 @@ pub enum GeometryCommand {
     Table(TableArgs),
     /// Score a model against a tabulated machine and held-out lines (issue 29).
     Score(ScoreArgs),
+    /// Write R-test files (docs/formats/rtest.md) of a five-axis machine
+    /// with random location and component errors (and their drift).
+    SimRotary(SimRotaryArgs),
+    /// The R-test poses (nests, tools, A and C sweeps) and their conditioning.
+    PlanRotary(PlanRotaryArgs),
+    /// Identify the eight location errors together with the component
+    /// errors from R-test files; prints uncertainties and what is unobservable.
+    IdentifyRotary(IdentifyRotaryArgs),
+    /// Five-axis check: tool-tip error over positions × A × C before and
+    /// after compensation with a rotary model.
+    CheckRotary(CheckRotaryArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -217,6 +232,10 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::Tooltip(t) => tooltip_cmd(t),
         GeometryCommand::Table(t) => table_cmd(t),
         GeometryCommand::Score(s) => score_cmd(s),
+        GeometryCommand::SimRotary(s) => sim_rotary_cmd(s),
+        GeometryCommand::PlanRotary(p) => plan_rotary_cmd(p),
+        GeometryCommand::IdentifyRotary(i) => identify_rotary_cmd(i),
+        GeometryCommand::CheckRotary(c) => check_rotary_cmd(c),
     }
 }
 

@@ -6,6 +6,7 @@ pub mod export;
 pub mod fit;
 pub mod geometry;
 pub mod geometry_check;
+pub mod geometry_rotary;
 pub mod geometry_score;
 pub mod geometry_smooth;
 pub mod geometry_table;
