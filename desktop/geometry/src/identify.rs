@@ -439,3 +439,56 @@ pub fn residual_rms(st: &Structure, basis: &Basis, lines: &[LineObs], params: &[
     }
     (ss / n.max(1) as f64).sqrt()
 }
+
+/// Adequacy that can fail (issue 29): each line predicted by the model
+/// identified from the other lines, beside the fit residual.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeaveOneLineOut {
+    /// RMS over every reading of each line predicted from the others [µm].
+    pub rms_um: f64,
+    /// Per line [µm].
+    pub per_line_um: Vec<(String, f64)>,
+    /// The noise the fit implies: residual with its degrees of freedom
+    /// (readings − one zero per line − rank) [µm].
+    pub noise_um: f64,
+    /// One line when the prediction error is far above the noise.
+    pub warning: Option<String>,
+}
+
+/// Leave one line out with the polynomial model: refit from the other
+/// lines (same degrees, same rank threshold) and predict the line, its
+/// zero removed. A line whose removal leaves a direction undetermined is
+/// predicted with that direction at zero, which is what the model without
+/// it knows.
+pub fn leave_one_line_out(
+    st: &Structure,
+    lines: &[LineObs],
+    id: &Identification,
+) -> anyhow::Result<LeaveOneLineOut> {
+    let (mut ss, mut n, mut per_line) = (0.0, 0usize, Vec::new());
+    for (k, l) in lines.iter().enumerate() {
+        if l.points.len() < 2 {
+            continue;
+        }
+        let rest: Vec<LineObs> = lines
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != k)
+            .map(|(_, l)| l.clone())
+            .collect();
+        let sub = identify(st, &rest, id.basis.degrees, id.basis.stroke_mm)?;
+        let r = residual_rms(st, &sub.basis, std::slice::from_ref(l), &sub.params);
+        ss += r * r * l.points.len() as f64;
+        n += l.points.len();
+        per_line.push((l.id.clone(), r));
+    }
+    let rms_um = (ss / n.max(1) as f64).sqrt();
+    let dof = id.readings.saturating_sub(lines.len() + id.rank).max(1);
+    let noise_um = id.residual_rms_um * (id.readings as f64 / dof as f64).sqrt();
+    Ok(LeaveOneLineOut {
+        rms_um,
+        per_line_um: per_line,
+        noise_um,
+        warning: super::smooth::loo_warning(rms_um, noise_um),
+    })
+}

@@ -21,6 +21,7 @@ pub use kinematics::{
 pub mod bench_rich;
 pub mod board;
 pub mod check;
+pub mod dense;
 pub mod five_axis;
 pub mod guard;
 pub mod identify;

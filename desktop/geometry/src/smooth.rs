@@ -39,6 +39,12 @@ pub const DETERMINED_UM: f64 = 1.0;
 /// … and this [µrad] for angular errors and squareness.
 pub const DETERMINED_URAD: f64 = 4.0;
 
+/// The leave-one-line-out warning fires above this multiple of the noise …
+pub const LOO_WARN_RATIO: f64 = 3.0;
+/// … with the noise taken as at least this [µm] (readings are written to
+/// 0.001 µm; a noise-free fit must not warn on rounding).
+pub const LOO_NOISE_FLOOR_UM: f64 = 0.05;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SCol {
     Term {
@@ -98,13 +104,20 @@ pub struct Hyper {
     pub positioning_um: f64,
     pub straightness_um: f64,
     pub angular_urad: f64,
-    pub decay: f64,
+    /// Legendre basis: how fast the prior size falls with the order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decay: Option<f64>,
+    /// Node values: the prior's length scale [strokes].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub length_scale_strokes: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct SmoothFit {
     #[serde(skip)]
     pub errors: GeometricErrors,
+    /// What each error function is made of, in words.
+    pub basis: String,
     pub degree: usize,
     pub unknowns: usize,
     pub readings: usize,
@@ -327,14 +340,10 @@ pub fn identify_smooth(
         })
         .collect();
     let noise_um = v[0].exp();
-    let warning = (loo_rms_um > 3.0 * noise_um.max(0.05)).then(|| {
-        format!(
-            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
-            loo_rms_um / noise_um.max(0.05)
-        )
-    });
+    let warning = loo_warning(loo_rms_um, noise_um);
     Ok(SmoothFit {
         errors,
+        basis: format!("Legendre degree {degree}"),
         degree,
         unknowns: n,
         readings: d.m,
@@ -345,7 +354,8 @@ pub fn identify_smooth(
             positioning_um: v[1].exp(),
             straightness_um: v[2].exp(),
             angular_urad: v[3].exp(),
-            decay: v[4],
+            decay: Some(v[4]),
+            length_scale_strokes: None,
         },
         residual_rms_um,
         loo_rms_um,
@@ -354,6 +364,17 @@ pub fn identify_smooth(
         posterior_sd,
         unobservable_terms,
         warning,
+    })
+}
+
+/// Leave-one-line-out error well above the noise: the model does not hold
+/// the machine, or the lines do not pin it down (one line).
+pub fn loo_warning(loo_rms_um: f64, noise_um: f64) -> Option<String> {
+    (loo_rms_um > LOO_WARN_RATIO * noise_um.max(LOO_NOISE_FLOOR_UM)).then(|| {
+        format!(
+            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
+            loo_rms_um / noise_um.max(LOO_NOISE_FLOOR_UM)
+        )
     })
 }
 
