@@ -75,11 +75,7 @@ pub fn identify_with(
             Ok((f.errors.clone(), Some(f)))
         }
         Method::Dense => {
-            let n = std::env::var("TCOMP_DENSE_NODES")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(super::dense::DEFAULT_NODES);
-            let f = super::dense::identify_dense(st, obs, n, stroke)?;
+            let f = super::dense::identify_dense(st, obs, super::dense::DEFAULT_NODES, stroke)?;
             Ok((f.errors.clone(), Some(f)))
         }
     }

@@ -184,6 +184,9 @@ pub struct IdentifyArgs {
     /// `dense`: values per node with a roughness prior chosen from the data.
     #[arg(long, default_value = "poly")]
     pub method: String,
+    /// `--method dense`: values per error function (both ends included).
+    #[arg(long, default_value_t = tcomp_geometry::dense::DEFAULT_NODES)]
+    pub nodes: usize,
     #[arg(long)]
     pub json: bool,
 }
@@ -316,7 +319,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         "poly" => {}
         "smooth" | "dense" => {
             return identify_smooth_cmd(&SmoothRequest {
-                dense: a.method == "dense",
+                dense: (a.method == "dense").then_some(a.nodes),
                 files: &a.files,
                 stroke: a.stroke.as_deref(),
                 points: a.points,
@@ -417,8 +420,8 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
     }
     print_identification(&id, &obs, stroke, &st, a.points);
     println!(
-        "leave-one-line-out prediction RMS {:.3} µm (noise implied by the residual {:.3} µm)",
-        loo.rms_um, loo.noise_um
+        "leave-one-line-out prediction RMS {:.3} µm beside reading noise {:.3} µm (from the readings' 4th differences; the residual implies {:.3} µm); {} direction(s) only the left-out line sees taken from it",
+        loo.rms_um, loo.noise_um, loo.residual_noise_um, loo.null_directions
     );
     if let Some(w) = &loo.warning {
         println!("WARNING: {w}");

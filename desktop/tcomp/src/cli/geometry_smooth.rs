@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::geometry_table::parse_triple;
-use tcomp_geometry::dense::{identify_dense, DEFAULT_NODES};
+use tcomp_geometry::dense::identify_dense;
 use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::LineObs;
 use tcomp_geometry::lines::{average_runs, LineFile};
@@ -21,8 +21,9 @@ use tcomp_geometry::study::{recovery, ErrorsJson};
 
 /// What `identify --method smooth` reads of the `identify` flags.
 pub struct SmoothRequest<'a> {
-    /// `--method dense` (values per node) rather than `smooth` (Legendre).
-    pub dense: bool,
+    /// `--method dense` with its nodes per error (values per node) rather
+    /// than `smooth` (Legendre).
+    pub dense: Option<usize>,
     pub files: &'a [PathBuf],
     /// `--stroke X,Y,Z` as given.
     pub stroke: Option<&'a str>,
@@ -70,10 +71,9 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
     }
     let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
     let stroke = stroke_from(a.stroke, &obs)?;
-    let fit = if a.dense {
-        identify_dense(&st, &obs, DEFAULT_NODES, stroke)?
-    } else {
-        identify_smooth(&st, &obs, DEFAULT_DEGREE, stroke)?
+    let fit = match a.dense {
+        Some(nodes) => identify_dense(&st, &obs, nodes, stroke)?,
+        None => identify_smooth(&st, &obs, DEFAULT_DEGREE, stroke)?,
     };
     if !fit.unobservable_terms.is_empty() && !a.partial {
         bail!(
@@ -96,7 +96,7 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
             .ok_or_else(|| anyhow::anyhow!("internal: errors JSON is not an object"))?;
         o.insert(
             "method".into(),
-            serde_json::json!(if a.dense { "dense" } else { "smooth" }),
+            serde_json::json!(if a.dense.is_some() { "dense" } else { "smooth" }),
         );
         o.insert("lines".into(), serde_json::json!(obs.len()));
         o.insert("identification".into(), serde_json::to_value(&fit)?);
