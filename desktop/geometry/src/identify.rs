@@ -448,6 +448,23 @@ pub fn residual_rms(st: &Structure, basis: &Basis, lines: &[LineObs], params: &[
     (ss / n.max(1) as f64).sqrt()
 }
 
+/// The leave-one-line-out warning fires above this multiple of the noise …
+pub const LOO_WARN_RATIO: f64 = 3.0;
+/// … with the noise taken as at least this [µm] (readings are written to
+/// 0.001 µm; a noise-free fit must not warn on rounding).
+pub const LOO_NOISE_FLOOR_UM: f64 = 0.05;
+
+/// Leave-one-line-out error well above the noise: the model does not hold
+/// the machine, or the lines do not pin it down (one line).
+pub fn loo_warning(loo_rms_um: f64, noise_um: f64) -> Option<String> {
+    (loo_rms_um > LOO_WARN_RATIO * noise_um.max(LOO_NOISE_FLOOR_UM)).then(|| {
+        format!(
+            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
+            loo_rms_um / noise_um.max(LOO_NOISE_FLOOR_UM)
+        )
+    })
+}
+
 /// The adequacy warning also fires when the residual implies this multiple
 /// of the readings' own noise (a model that holds the machine leaves the
 /// noise: ratio 1.0 ± 0.05 at 560 readings).
@@ -553,8 +570,8 @@ pub fn leave_one_line_out(
         noise_um,
         residual_noise_um,
         null_directions: fitted,
-        warning: super::smooth::loo_warning(rms_um, noise_um).or_else(|| {
-            let floor = noise_um.max(super::smooth::LOO_NOISE_FLOOR_UM);
+        warning: loo_warning(rms_um, noise_um).or_else(|| {
+            let floor = noise_um.max(LOO_NOISE_FLOOR_UM);
             (residual_noise_um > RESIDUAL_WARN_RATIO * floor).then(|| {
                 format!(
                     "the fit residual implies {residual_noise_um:.2} µm of noise, the readings' own is {noise_um:.3} µm: the model does not hold the machine"

@@ -23,6 +23,7 @@ use serde::Serialize;
 
 use super::errors::{GeometricErrors, Poly, Term, SQUARENESS_NAMES};
 use super::identify::LineObs;
+pub use super::identify::{loo_warning, LOO_NOISE_FLOOR_UM, LOO_WARN_RATIO};
 use super::kinematics::{sensitivity, Structure};
 
 /// Degree of the Legendre basis per error function.
@@ -38,12 +39,6 @@ pub const SQUARENESS_PRIOR_URAD: f64 = 200.0;
 pub const DETERMINED_UM: f64 = 1.0;
 /// … and this [µrad] for angular errors and squareness.
 pub const DETERMINED_URAD: f64 = 4.0;
-
-/// The leave-one-line-out warning fires above this multiple of the noise …
-pub const LOO_WARN_RATIO: f64 = 3.0;
-/// … with the noise taken as at least this [µm] (readings are written to
-/// 0.001 µm; a noise-free fit must not warn on rounding).
-pub const LOO_NOISE_FLOOR_UM: f64 = 0.05;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SCol {
@@ -340,7 +335,7 @@ pub fn identify_smooth(
         })
         .collect();
     let noise_um = v[0].exp();
-    let warning = loo_warning(loo_rms_um, noise_um);
+    let warning = super::identify::loo_warning(loo_rms_um, noise_um);
     Ok(SmoothFit {
         errors,
         basis: format!("Legendre degree {degree}"),
@@ -364,17 +359,6 @@ pub fn identify_smooth(
         posterior_sd,
         unobservable_terms,
         warning,
-    })
-}
-
-/// Leave-one-line-out error well above the noise: the model does not hold
-/// the machine, or the lines do not pin it down (one line).
-pub fn loo_warning(loo_rms_um: f64, noise_um: f64) -> Option<String> {
-    (loo_rms_um > LOO_WARN_RATIO * noise_um.max(LOO_NOISE_FLOOR_UM)).then(|| {
-        format!(
-            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
-            loo_rms_um / noise_um.max(LOO_NOISE_FLOOR_UM)
-        )
     })
 }
 

@@ -419,13 +419,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         return Ok(());
     }
     print_identification(&id, &obs, stroke, &st, a.points);
-    println!(
-        "leave-one-line-out prediction RMS {:.3} µm beside reading noise {:.3} µm (from the readings' 4th differences; the residual implies {:.3} µm); {} direction(s) only the left-out line sees taken from it",
-        loo.rms_um, loo.noise_um, loo.residual_noise_um, loo.null_directions
-    );
-    if let Some(w) = &loo.warning {
-        println!("WARNING: {w}");
-    }
+    print_loo(&loo);
     if !id.unobservable_terms.is_empty() {
         println!(
             "unobservable (not determined by these lines, values meaningless): {}",
@@ -466,6 +460,16 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+fn print_loo(loo: &tcomp_geometry::identify::LeaveOneLineOut) {
+    println!(
+        "leave-one-line-out prediction RMS {:.3} µm beside reading noise {:.3} µm (from the readings' 4th differences; the residual implies {:.3} µm); {} direction(s) only the left-out line sees taken from it",
+        loo.rms_um, loo.noise_um, loo.residual_noise_um, loo.null_directions
+    );
+    if let Some(w) = &loo.warning {
+        println!("WARNING: {w}");
+    }
 }
 
 fn print_identification(
