@@ -20,6 +20,8 @@ pub enum Method {
     Poly,
     /// `smooth::identify_smooth` (rich basis, evidence-chosen prior).
     Smooth,
+    /// `dense::identify_dense` (values per node, evidence-chosen roughness).
+    Dense,
 }
 
 impl Method {
@@ -27,7 +29,8 @@ impl Method {
         match s {
             "poly" => Ok(Method::Poly),
             "smooth" => Ok(Method::Smooth),
-            _ => bail!("--method {s:?}: poly or smooth"),
+            "dense" => Ok(Method::Dense),
+            _ => bail!("--method {s:?}: poly, smooth or dense"),
         }
     }
 }
@@ -69,6 +72,10 @@ pub fn identify_with(
         Method::Poly => Ok((identify(st, obs, Degrees::default(), stroke)?.errors, None)),
         Method::Smooth => {
             let f = super::smooth::identify_smooth(st, obs, super::smooth::DEFAULT_DEGREE, stroke)?;
+            Ok((f.errors.clone(), Some(f)))
+        }
+        Method::Dense => {
+            let f = super::dense::identify_dense(st, obs, super::dense::DEFAULT_NODES, stroke)?;
             Ok((f.errors.clone(), Some(f)))
         }
     }

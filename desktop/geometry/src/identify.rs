@@ -229,6 +229,9 @@ pub struct Identification {
     /// RMS of the readings minus the model [µm].
     pub residual_rms_um: f64,
     pub readings: usize,
+    /// The unobservable directions in parameter space (basis order), one
+    /// vector per combination of `unobservable`.
+    pub null_space: Vec<Vec<f64>>,
 }
 
 /// Solve for the errors from the lines.
@@ -350,6 +353,10 @@ pub fn identify(
         }
     }
     let mut unobservable_terms = std::collections::BTreeSet::new();
+    let null_space: Vec<Vec<f64>> = null_vectors
+        .iter()
+        .map(|(v, _)| (0..n).map(|j| v[j] / norms[j]).collect())
+        .collect();
     for (v, s) in null_vectors {
         for (c, w) in basis.columns.iter().zip(v.iter()) {
             if w.abs() > NULL_WEIGHT {
@@ -373,6 +380,7 @@ pub fn identify(
         unobservable_terms: unobservable_terms.into_iter().collect(),
         residual_rms_um,
         readings: m,
+        null_space,
     })
 }
 
@@ -438,4 +446,154 @@ pub fn residual_rms(st: &Structure, basis: &Basis, lines: &[LineObs], params: &[
         n += r.len();
     }
     (ss / n.max(1) as f64).sqrt()
+}
+
+/// The leave-one-line-out warning fires above this multiple of the noise …
+pub const LOO_WARN_RATIO: f64 = 3.0;
+/// … with the noise taken as at least this [µm] (readings are written to
+/// 0.001 µm; a noise-free fit must not warn on rounding).
+pub const LOO_NOISE_FLOOR_UM: f64 = 0.05;
+
+/// Leave-one-line-out error well above the noise: the model does not hold
+/// the machine, or the lines do not pin it down (one line).
+pub fn loo_warning(loo_rms_um: f64, noise_um: f64) -> Option<String> {
+    (loo_rms_um > LOO_WARN_RATIO * noise_um.max(LOO_NOISE_FLOOR_UM)).then(|| {
+        format!(
+            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
+            loo_rms_um / noise_um.max(LOO_NOISE_FLOOR_UM)
+        )
+    })
+}
+
+/// The adequacy warning also fires when the residual implies this multiple
+/// of the readings' own noise (a model that holds the machine leaves the
+/// noise: ratio 1.0 ± 0.05 at 560 readings).
+pub const RESIDUAL_WARN_RATIO: f64 = 1.5;
+
+/// Adequacy that can fail (issue 29): each line predicted by the model
+/// identified from the other lines, beside the fit residual.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeaveOneLineOut {
+    /// RMS over every reading of each line predicted from the others [µm].
+    pub rms_um: f64,
+    /// Per line [µm].
+    pub per_line_um: Vec<(String, f64)>,
+    /// Directions only the left-out line saw, summed over the lines, fitted
+    /// to that line rather than predicted.
+    pub null_directions: usize,
+    /// The noise of the readings themselves, from their fourth differences
+    /// along each line (`noise_from_readings`; no model involved) [µm].
+    pub noise_um: f64,
+    /// The noise the fit implies: residual with its degrees of freedom
+    /// (readings − one zero per line − rank) [µm]. Above `noise_um` when the
+    /// model does not hold the machine.
+    pub residual_noise_um: f64,
+    /// One line when the prediction error is far above the noise.
+    pub warning: Option<String>,
+}
+
+/// Leave one line out with the polynomial model: refit from the other
+/// lines (same degrees, same rank threshold) and predict the line, its
+/// zero removed. The plan has no line to spare: without any one line the
+/// model leaves a direction undetermined (the 13-line refusal), which only
+/// that line sees. Those directions (`null_directions` per line) are taken
+/// from the left-out line itself; everything else is predicted. A model
+/// that holds the machine then predicts each line to the noise; one that
+/// does not has pushed what it cannot hold into terms the other lines
+/// contradict.
+pub fn leave_one_line_out(
+    st: &Structure,
+    lines: &[LineObs],
+    id: &Identification,
+) -> anyhow::Result<LeaveOneLineOut> {
+    let (mut ss, mut n, mut per_line, mut fitted) = (0.0, 0usize, Vec::new(), 0usize);
+    for (k, l) in lines.iter().enumerate() {
+        if l.points.len() < 2 {
+            continue;
+        }
+        let rest: Vec<LineObs> = lines
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != k)
+            .map(|(_, l)| l.clone())
+            .collect();
+        let sub = identify(st, &rest, id.basis.degrees, id.basis.stroke_mm)?;
+        let rows: Vec<Vec<f64>> = l
+            .points
+            .iter()
+            .map(|p| sub.basis.row(st, l.direction, p.pos_mm, l.tool_offset_mm))
+            .collect();
+        let dot = |r: &[f64], x: &[f64]| r.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+        let centre = |v: Vec<f64>| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.into_iter().map(|x| x - m).collect::<Vec<f64>>()
+        };
+        let r = centre(
+            l.points
+                .iter()
+                .zip(&rows)
+                .map(|(p, row)| p.disp_um - dot(row, &sub.params))
+                .collect(),
+        );
+        // The line's readings of the directions the others leave open.
+        let cols: Vec<Vec<f64>> = sub
+            .null_space
+            .iter()
+            .map(|v| centre(rows.iter().map(|row| dot(row, v)).collect()))
+            .filter(|c| c.iter().any(|x| x.abs() > 1e-9))
+            .collect();
+        fitted += cols.len();
+        let r = if cols.is_empty() {
+            r
+        } else {
+            let a = DMatrix::from_fn(r.len(), cols.len(), |i, j| cols[j][i]);
+            let b = DVector::from_vec(r.clone());
+            let c = a
+                .clone()
+                .svd(true, true)
+                .solve(&b, 1e-12)
+                .map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+            (b - a * c).iter().copied().collect()
+        };
+        let s: f64 = r.iter().map(|x| x * x).sum();
+        ss += s;
+        n += r.len();
+        per_line.push((l.id.clone(), (s / r.len() as f64).sqrt()));
+    }
+    let rms_um = (ss / n.max(1) as f64).sqrt();
+    let dof = id.readings.saturating_sub(lines.len() + id.rank).max(1);
+    let residual_noise_um = id.residual_rms_um * (id.readings as f64 / dof as f64).sqrt();
+    let noise_um = noise_from_readings(lines);
+    Ok(LeaveOneLineOut {
+        rms_um,
+        per_line_um: per_line,
+        noise_um,
+        residual_noise_um,
+        null_directions: fitted,
+        warning: loo_warning(rms_um, noise_um).or_else(|| {
+            let floor = noise_um.max(LOO_NOISE_FLOOR_UM);
+            (residual_noise_um > RESIDUAL_WARN_RATIO * floor).then(|| {
+                format!(
+                    "the fit residual implies {residual_noise_um:.2} µm of noise, the readings' own is {noise_um:.3} µm: the model does not hold the machine"
+                )
+            })
+        }),
+    })
+}
+
+/// The reading noise without a model: the fourth difference of successive
+/// readings along a line takes out any shape up to a cubic (a wave of half
+/// a stroke over 40 target steps keeps 1 % of itself) and leaves white
+/// noise with variance 70 σ². Lines with fewer than 5 targets add nothing.
+pub fn noise_from_readings(lines: &[LineObs]) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for l in lines {
+        for w in l.points.windows(5) {
+            let d = w[0].disp_um - 4.0 * w[1].disp_um + 6.0 * w[2].disp_um - 4.0 * w[3].disp_um
+                + w[4].disp_um;
+            ss += d * d;
+            n += 1;
+        }
+    }
+    (ss / (70.0 * n.max(1) as f64)).sqrt()
 }

@@ -22,6 +22,7 @@ pub mod bench_rich;
 pub mod board;
 pub mod board5;
 pub mod check;
+pub mod dense;
 pub mod five_axis;
 pub mod guard;
 pub mod identify;

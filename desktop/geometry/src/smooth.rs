@@ -23,6 +23,7 @@ use serde::Serialize;
 
 use super::errors::{GeometricErrors, Poly, Term, SQUARENESS_NAMES};
 use super::identify::LineObs;
+pub use super::identify::{loo_warning, LOO_NOISE_FLOOR_UM, LOO_WARN_RATIO};
 use super::kinematics::{sensitivity, Structure};
 
 /// Degree of the Legendre basis per error function.
@@ -98,13 +99,20 @@ pub struct Hyper {
     pub positioning_um: f64,
     pub straightness_um: f64,
     pub angular_urad: f64,
-    pub decay: f64,
+    /// Legendre basis: how fast the prior size falls with the order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decay: Option<f64>,
+    /// Node values: the prior's length scale [strokes].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub length_scale_strokes: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct SmoothFit {
     #[serde(skip)]
     pub errors: GeometricErrors,
+    /// What each error function is made of, in words.
+    pub basis: String,
     pub degree: usize,
     pub unknowns: usize,
     pub readings: usize,
@@ -327,14 +335,10 @@ pub fn identify_smooth(
         })
         .collect();
     let noise_um = v[0].exp();
-    let warning = (loo_rms_um > 3.0 * noise_um.max(0.05)).then(|| {
-        format!(
-            "leave-one-line-out prediction error {loo_rms_um:.2} µm is {:.0}× the noise ({noise_um:.3} µm): the lines do not pin the machine down; the model may not hold it",
-            loo_rms_um / noise_um.max(0.05)
-        )
-    });
+    let warning = super::identify::loo_warning(loo_rms_um, noise_um);
     Ok(SmoothFit {
         errors,
+        basis: format!("Legendre degree {degree}"),
         degree,
         unknowns: n,
         readings: d.m,
@@ -345,7 +349,8 @@ pub fn identify_smooth(
             positioning_um: v[1].exp(),
             straightness_um: v[2].exp(),
             angular_urad: v[3].exp(),
-            decay: v[4],
+            decay: Some(v[4]),
+            length_scale_strokes: None,
         },
         residual_rms_um,
         loo_rms_um,

@@ -195,9 +195,13 @@ pub struct IdentifyArgs {
     #[arg(long)]
     pub partial: bool,
     /// `poly`: the polynomial model of the degree options; `smooth`: no
-    /// shape assumed (rich basis, prior chosen from the data; issue 29).
+    /// shape assumed (rich basis, prior chosen from the data; issue 29);
+    /// `dense`: values per node with a roughness prior chosen from the data.
     #[arg(long, default_value = "poly")]
     pub method: String,
+    /// `--method dense`: values per error function (both ends included).
+    #[arg(long, default_value_t = tcomp_geometry::dense::DEFAULT_NODES)]
+    pub nodes: usize,
     #[arg(long)]
     pub json: bool,
 }
@@ -332,8 +336,9 @@ fn simulate(a: SimulateArgs) -> Result<()> {
 fn identify_cmd(a: IdentifyArgs) -> Result<()> {
     match a.method.as_str() {
         "poly" => {}
-        "smooth" => {
+        "smooth" | "dense" => {
             return identify_smooth_cmd(&SmoothRequest {
+                dense: (a.method == "dense").then_some(a.nodes),
                 files: &a.files,
                 stroke: a.stroke.as_deref(),
                 points: a.points,
@@ -342,7 +347,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
                 json: a.json,
             })
         }
-        m => bail!("--method {m:?}: poly or smooth"),
+        m => bail!("--method {m:?}: poly, smooth or dense"),
     }
     let degrees = a.degrees.degrees()?;
     let files: Vec<LineFile> = a
@@ -361,6 +366,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
     let stroke = stroke_from(a.stroke.as_deref(), &obs)?;
     let id = identify(&st, &obs, degrees, stroke)?;
     tcomp_geometry::guard::refuse_unobservable(&id, obs.len(), a.partial)?;
+    let loo = tcomp_geometry::identify::leave_one_line_out(&st, &obs, &id)?;
     let mut ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
     ej.unobservable_terms = id.unobservable_terms.clone();
     let truth = match &a.truth {
@@ -406,6 +412,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
             serde_json::json!(id.residual_rms_um),
         );
         o.insert("reversal_um".into(), serde_json::json!(reversal));
+        o.insert("leave_one_line_out".into(), serde_json::to_value(&loo)?);
         if let Some(r) = &rec {
             let m: BTreeMap<_, _> = r
                 .iter()
@@ -425,9 +432,13 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
             );
         }
         println!("{v}");
+        if let Some(w) = &loo.warning {
+            eprintln!("warning: {w}");
+        }
         return Ok(());
     }
     print_identification(&id, &obs, stroke, &st, a.points);
+    print_loo(&loo);
     if !id.unobservable_terms.is_empty() {
         println!(
             "unobservable (not determined by these lines, values meaningless): {}",
@@ -468,6 +479,16 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+fn print_loo(loo: &tcomp_geometry::identify::LeaveOneLineOut) {
+    println!(
+        "leave-one-line-out prediction RMS {:.3} µm beside reading noise {:.3} µm (from the readings' 4th differences; the residual implies {:.3} µm); {} direction(s) only the left-out line sees taken from it",
+        loo.rms_um, loo.noise_um, loo.residual_noise_um, loo.null_directions
+    );
+    if let Some(w) = &loo.warning {
+        println!("WARNING: {w}");
+    }
 }
 
 fn print_identification(

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::geometry_table::parse_triple;
+use tcomp_geometry::dense::identify_dense;
 use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::LineObs;
 use tcomp_geometry::lines::{average_runs, LineFile};
@@ -20,6 +21,9 @@ use tcomp_geometry::study::{recovery, ErrorsJson};
 
 /// What `identify --method smooth` reads of the `identify` flags.
 pub struct SmoothRequest<'a> {
+    /// `--method dense` with its nodes per error (values per node) rather
+    /// than `smooth` (Legendre).
+    pub dense: Option<usize>,
     pub files: &'a [PathBuf],
     /// `--stroke X,Y,Z` as given.
     pub stroke: Option<&'a str>,
@@ -67,7 +71,10 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
     }
     let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
     let stroke = stroke_from(a.stroke, &obs)?;
-    let fit = identify_smooth(&st, &obs, DEFAULT_DEGREE, stroke)?;
+    let fit = match a.dense {
+        Some(nodes) => identify_dense(&st, &obs, nodes, stroke)?,
+        None => identify_smooth(&st, &obs, DEFAULT_DEGREE, stroke)?,
+    };
     if !fit.unobservable_terms.is_empty() && !a.partial {
         bail!(
             "{} lines do not determine {} (posterior standard deviation above {DETERMINED_UM} µm / {DETERMINED_URAD} µrad); measure more lines, or give --partial to write the model with these marked unobservable",
@@ -87,7 +94,10 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
         let o = v
             .as_object_mut()
             .ok_or_else(|| anyhow::anyhow!("internal: errors JSON is not an object"))?;
-        o.insert("method".into(), serde_json::json!("smooth"));
+        o.insert(
+            "method".into(),
+            serde_json::json!(if a.dense.is_some() { "dense" } else { "smooth" }),
+        );
         o.insert("lines".into(), serde_json::json!(obs.len()));
         o.insert("identification".into(), serde_json::to_value(&fit)?);
         if let Some(r) = &rec {
@@ -131,13 +141,21 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
 
 fn print_fit(f: &SmoothFit, stroke: [f64; 3]) {
     println!(
-        "{} lines ({} readings), strokes {:.0}×{:.0}×{:.0} mm; no shape assumed: Legendre degree {} per error, {} unknowns, {:.1} effective parameters",
-        f.lines, f.readings, stroke[0], stroke[1], stroke[2], f.degree, f.unknowns, f.effective_parameters
+        "{} lines ({} readings), strokes {:.0}×{:.0}×{:.0} mm; no shape assumed: {} per error, {} unknowns, {:.1} effective parameters",
+        f.lines, f.readings, stroke[0], stroke[1], stroke[2], f.basis, f.unknowns, f.effective_parameters
     );
     let h = &f.hyper;
     println!(
-        "prior chosen by the evidence: noise {:.3} µm, size {:.2} µm positioning, {:.2} µm straightness, {:.2} µrad angles, order decay {:.2}",
-        h.noise_um, h.positioning_um, h.straightness_um, h.angular_urad, h.decay
+        "prior chosen by the evidence: noise {:.3} µm, size {:.2} µm positioning, {:.2} µm straightness, {:.2} µrad angles{}",
+        h.noise_um,
+        h.positioning_um,
+        h.straightness_um,
+        h.angular_urad,
+        match (h.decay, h.length_scale_strokes) {
+            (Some(p), _) => format!(", order decay {p:.2}"),
+            (None, Some(l)) => format!(", length scale {l:.3} strokes"),
+            (None, None) => String::new(),
+        }
     );
     println!(
         "residual RMS {:.3} µm; leave-one-line-out prediction RMS {:.3} µm",
