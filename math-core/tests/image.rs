@@ -346,7 +346,10 @@ fn tables_whose_sums_could_overflow_the_accumulator_are_refused() {
     let per_term = MAX_AXIS_TABLE_WEIGHT / (3 * (MAX_TABLES * MAX_TERMS) as u64);
     let at_bound = heavy_tables(MAX_TABLES, MAX_TERMS, -(per_term as i32));
     assert!(
-        matches!(encoded(at_bound.clone()), Err(ImageError::PredictionBound { .. })),
+        matches!(
+            encoded(at_bound.clone()),
+            Err(ImageError::PredictionBound { .. })
+        ),
         "at the sum bound only the prediction bound refuses"
     );
     evaluate_at_extremes(&at_bound);

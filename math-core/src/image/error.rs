@@ -316,39 +316,13 @@ impl core::fmt::Display for ImageError {
                 f,
                 "volumetric direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
             ),
-            ImageError::FiveAxisWithoutVolumetric => write!(
-                f,
-                "five-axis section (kind {SECTION_FIVE_AXIS}) without a volumetric section (kind {SECTION_VOLUMETRIC}): the chain needs the linear axes' errors"
-            ),
-            ImageError::FiveAxisSensors { count, available } => write!(
-                f,
-                "five-axis section reads {count} sensors; the volumetric section has {available} (at most {MAX_VOL_SENSORS})"
-            ),
-            ImageError::FiveAxisOrder { order } => write!(
-                f,
-                "five-axis section: Fourier order {order} above {MAX_FOURIER_ORDER}"
-            ),
-            ImageError::FiveAxisGeometry => write!(
-                f,
-                "five-axis section: pivot or offset beyond +-2^27 um, or volumetric positions beyond +-2^28 um"
-            ),
-            ImageError::FiveAxisAngleRange { axis } => write!(
-                f,
-                "five-axis section: range of {} not increasing or beyond +-720 deg",
-                if axis == 0 { 'A' } else { 'C' }
-            ),
-            ImageError::FiveAxisMaxCorrection { direction, value } => write!(
-                f,
-                "five-axis direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
-            ),
-            ImageError::FiveAxisErrorTooLarge { error } => {
-                write!(f, "five-axis error ")?;
-                five_axis_error_name(f, error)?;
-                write!(
-                    f,
-                    " can exceed 1 mm / 1 mrad in the temperature envelope, or has a non-zero unused coefficient"
-                )
-            }
+            ImageError::FiveAxisWithoutVolumetric
+            | ImageError::FiveAxisSensors { .. }
+            | ImageError::FiveAxisOrder { .. }
+            | ImageError::FiveAxisGeometry
+            | ImageError::FiveAxisAngleRange { .. }
+            | ImageError::FiveAxisMaxCorrection { .. }
+            | ImageError::FiveAxisErrorTooLarge { .. } => five_axis_message(self, f),
             ImageError::PredictionBound { direction } => write!(
                 f,
                 "direction {direction}: the model can predict beyond +-{} mm over its own input envelope (networks and tables bounded analytically)",
@@ -396,4 +370,44 @@ pub(crate) fn push<T, const N: usize>(v: &mut Vec<T, N>, x: T) -> Result<(), Ima
         count: N + 1,
         max: N,
     })
+}
+
+/// The message of a five-axis section refusal (kept apart so `fmt` stays short).
+fn five_axis_message(e: &ImageError, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+    match *e {
+            ImageError::FiveAxisWithoutVolumetric => write!(
+                f,
+                "five-axis section (kind {SECTION_FIVE_AXIS}) without a volumetric section (kind {SECTION_VOLUMETRIC}): the chain needs the linear axes' errors"
+            ),
+            ImageError::FiveAxisSensors { count, available } => write!(
+                f,
+                "five-axis section reads {count} sensors; the volumetric section has {available} (at most {MAX_VOL_SENSORS})"
+            ),
+            ImageError::FiveAxisOrder { order } => write!(
+                f,
+                "five-axis section: Fourier order {order} above {MAX_FOURIER_ORDER}"
+            ),
+            ImageError::FiveAxisGeometry => write!(
+                f,
+                "five-axis section: pivot or offset beyond +-2^27 um, or volumetric positions beyond +-2^28 um"
+            ),
+            ImageError::FiveAxisAngleRange { axis } => write!(
+                f,
+                "five-axis section: range of {} not increasing or beyond +-720 deg",
+                if axis == 0 { 'A' } else { 'C' }
+            ),
+            ImageError::FiveAxisMaxCorrection { direction, value } => write!(
+                f,
+                "five-axis direction {direction}: max correction {value} (0.1 um) outside 1..={MAX_CORRECTION}"
+            ),
+            ImageError::FiveAxisErrorTooLarge { error } => {
+                write!(f, "five-axis error ")?;
+                five_axis_error_name(f, error)?;
+                write!(
+                    f,
+                    " can exceed 1 mm / 1 mrad in the temperature envelope, or has a non-zero unused coefficient"
+                )
+            }
+            _ => Ok(()),
+    }
 }
