@@ -311,7 +311,11 @@ fn five_axis_refusals_have_their_own_result_codes() {
     let mut app = app();
     let img = image(None, Some(five()));
     let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    app.request(&write_n(1, HR_UNLOCK, &[host_tests::TEST_UNLOCK_KEY]), 0, &mut reply);
+    app.request(
+        &write_n(1, HR_UNLOCK, &[host_tests::TEST_UNLOCK_KEY]),
+        0,
+        &mut reply,
+    );
     let regs: Vec<u16> = img
         .chunks(2)
         .map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)]))

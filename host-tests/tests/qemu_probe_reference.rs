@@ -46,7 +46,8 @@ fn snapshot(link: &mut BoardLink) -> (u64, [i32; 6]) {
 
 fn command(link: &mut BoardLink, code: u16) {
     host_tests::commission_link(link);
-    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY)
+        .unwrap();
     link.write_one(HR_COMMAND, code).unwrap();
 }
 
@@ -227,7 +228,8 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     command(&mut link, CMD_TAKE_PROBE_REFERENCE);
     assert_eq!(final_result(&mut link, &board), result::NO_PROBE_DIRECTION);
     // The probe measures direction 0 (stored with the settings).
-    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY).unwrap();
+    link.write_one(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY)
+        .unwrap();
     link.write_one(HR_PROBE_DIRECTION, 0).unwrap();
     assert_eq!(final_result(&mut link, &board), result::OK);
 
