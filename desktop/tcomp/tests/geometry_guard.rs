@@ -2,42 +2,9 @@
 //! ends in a refusal naming it, or in a partial model whose determined
 //! errors are right and whose others are marked; the commands that use a
 //! model refuse a partial one unless told; bad file sets name the file.
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-const EXE: &str = env!("CARGO_BIN_EXE_tcomp");
-
-fn generate(dir: &Path, seed: u32, noise_um: f64) -> Vec<PathBuf> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/geometry_lines_gen.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .args(["--seed", &seed.to_string()])
-        .args(["--noise-um", &noise_um.to_string()])
-        .arg("--out")
-        .arg(dir)
-        .output()
-        .expect("python3 runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
-        .collect();
-    files.sort();
-    files
-}
-
-fn run(args: &[&str], files: &[PathBuf]) -> Output {
-    Command::new(EXE).args(args).args(files).output().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
+mod common;
+use common::*;
+use std::path::PathBuf;
 
 /// Every 13-line subset: a refusal naming the undetermined errors, or a
 /// model whose every error is right; with --partial, every error not
@@ -45,7 +12,7 @@ fn stderr(o: &Output) -> String {
 #[test]
 fn every_thirteen_line_subset_is_refused_or_honest() {
     let dir = tempfile::tempdir().unwrap();
-    let files = generate(dir.path(), 1, 0.5);
+    let files = generate("geometry_lines_gen.py", dir.path(), 1, 0.5);
     let truth = dir.path().join("truth.json");
     for k in 1..=14 {
         let id = format!("L{k:02}_");
@@ -96,7 +63,7 @@ fn every_thirteen_line_subset_is_refused_or_honest() {
 #[test]
 fn table_and_tooltip_refuse_a_partial_model_unless_told() {
     let dir = tempfile::tempdir().unwrap();
-    let files = generate(dir.path(), 2, 0.5);
+    let files = generate("geometry_lines_gen.py", dir.path(), 2, 0.5);
     let subset: Vec<PathBuf> = files
         .iter()
         .filter(|p| !p.file_name().unwrap().to_string_lossy().starts_with("L01_"))
@@ -166,7 +133,7 @@ fn tool_takes_negative_numbers() {
 #[test]
 fn the_same_line_with_and_without_run_is_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let mut files = generate(dir.path(), 3, 0.5);
+    let mut files = generate("geometry_lines_gen.py", dir.path(), 3, 0.5);
     let fwd = dir.path().join("L03_forward.csv");
     let text = std::fs::read_to_string(&fwd).unwrap();
     let single = dir.path().join("L03_single.txt");
@@ -183,7 +150,7 @@ fn the_same_line_with_and_without_run_is_refused() {
 fn a_structure_mismatch_names_the_odd_file() {
     let dir = tempfile::tempdir().unwrap();
     for first in [true, false] {
-        let files = generate(dir.path(), 3, 0.5);
+        let files = generate("geometry_lines_gen.py", dir.path(), 3, 0.5);
         // The odd one is the first file, then one in the middle.
         let odd = if first { &files[0] } else { &files[9] };
         let text = std::fs::read_to_string(odd).unwrap();

@@ -10,33 +10,9 @@
 //! (0.35 µm, 1.5 µrad, ≥ 97 %). Squareness is compared directly: the writer
 //! draws straightness as bows zero at both ends, so its squareness already
 //! is the ISO end-point reference the identifier reports.
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
 use std::process::Command;
-
-fn generate(dir: &Path, seed: u32, noise_um: f64) -> Vec<PathBuf> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/geometry_lines_gen.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .args(["--seed", &seed.to_string()])
-        .args(["--noise-um", &noise_um.to_string()])
-        .arg("--out")
-        .arg(dir)
-        .output()
-        .expect("python3 runs (scripts/test.sh installs it)");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 28);
-    files
-}
 
 struct Worst {
     translational_um: f64,
@@ -48,7 +24,7 @@ struct Worst {
 
 fn identify(seed: u32, noise_um: f64) -> Worst {
     let dir = tempfile::tempdir().unwrap();
-    let files = generate(dir.path(), seed, noise_um);
+    let files = generate("geometry_lines_gen.py", dir.path(), seed, noise_um);
     let out = Command::new(env!("CARGO_BIN_EXE_tcomp"))
         .args(["geometry", "identify", "--json", "--truth"])
         .arg(dir.path().join("truth.json"))

@@ -6,41 +6,8 @@
 //! or marks what it cannot determine, every error it does not mark is
 //! within the tolerance (1 µm, 4 µrad RMS), and it says when the lines are
 //! predicted much worse than the noise.
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-const EXE: &str = env!("CARGO_BIN_EXE_tcomp");
-
-fn generate(script: &str, dir: &Path, seed: u32, noise_um: f64) -> Vec<PathBuf> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(script);
-    let out = Command::new("python3")
-        .arg(&script)
-        .args(["--seed", &seed.to_string()])
-        .args(["--noise-um", &noise_um.to_string()])
-        .arg("--out")
-        .arg(dir)
-        .output()
-        .expect("python3 runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "csv"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 28);
-    files
-}
-
-fn run(args: &[&str], files: &[PathBuf]) -> Output {
-    Command::new(EXE).args(args).args(files).output().unwrap()
-}
+mod common;
+use common::*;
 
 #[test]
 fn smooth_identification_of_a_rich_machine_is_refused_or_honest() {
