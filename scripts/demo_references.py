@@ -20,6 +20,7 @@ as the compensator neither clamped nor rate-limited it nor lost a sensor
 of both figures (and counted).
 
   demo_references.py trace demo/trace.csv probe.csv --column dch3_um [--noise-um 0.3] [--seed 28]
+      [--chip FROM_H:HOURS:UM]
   demo_references.py run --pty /dev/pts/N --trace probe.csv --column dch3_um
       [--direction 0] [--every-s 3600] [--split-s T] [--json OUT]
 """
@@ -191,10 +192,11 @@ def figures(samples, measured, split_s):
     return out
 
 
-def probe_trace(src, dst, column, noise_um, seed):
+def probe_trace(src, dst, column, noise_um, seed, chip=None):
     """Copy the trace with a `dprobe_um` column: what the probe reads at the
     gauge at that row, the measured `column` plus seeded Gaussian noise
-    (rounded to 0.1 µm); comment lines kept."""
+    (rounded to 0.1 µm); comment lines kept. `chip` = (from_s, to_s, um):
+    a chip on the gauge adds um to the readings of those rows."""
     rng = random.Random(seed)
     with open(src) as f, open(dst, "w") as out:
         lines = f.read().splitlines()
@@ -203,11 +205,13 @@ def probe_trace(src, dst, column, noise_um, seed):
         cols = body[0].split(",")
         if column not in cols:
             sys.exit(f"error: {src} has no column {column}")
-        c = cols.index(column)
+        c, t_col = cols.index(column), cols.index("time_s")
         out.write("\n".join(head + [body[0] + ",dprobe_um"]) + "\n")
         for row in body[1:]:
-            v = row.split(",")[c]
-            probe = f"{float(v) + rng.gauss(0.0, noise_um):.1f}" if v else ""
+            cells = row.split(",")
+            v, t = cells[c], float(cells[t_col])
+            extra = chip[2] if chip and chip[0] <= t < chip[1] else 0.0
+            probe = f"{float(v) + rng.gauss(0.0, noise_um) + extra:.1f}" if v else ""
             out.write(f"{row},{probe}\n")
 
 
@@ -239,10 +243,16 @@ def run(master, args):
     if not write_unlocked(master, key, HR_PROBE_DIRECTION, d) or wait_result(master) != OK:
         sys.exit("error: the board refused holding register 40 (probe direction)")
     poller, refs = Poller(master, d, args.quiet_s), []
-    next_ref = args.every_s
+    next_ref, end_s = args.every_s, max(measured)
+    print("each reference as the board reports it: when the PLC asked (trace time), when the board"
+          " took it (IR 300-301), the innovation (IR 302-303: probe reading - model - bias, um),"
+          " the outcome (HR 2), the bias term b after it (IR 306 + direction, um), accepted/refused"
+          " so far (IR 304/305)")
     print(f"{'asked at':>10} {'taken at':>10} {'innovation':>10} {'outcome':>9} {'bias b':>7} {'acc/ref':>7}")
     while not poller.quiet():
         s = poller.poll()
+        if s is not None and s[1] >= end_s:
+            break  # the trace's last row: the board keeps serving it
         if s is None or s[1] < next_ref:
             continue
         t = s[1]
@@ -250,7 +260,7 @@ def run(master, args):
         ref["asked_at_s"] = t
         refs.append(ref)
         if "time_s" in ref:
-            taken = "-" if ref["time_s"] == 0xFFFFFFFF else f"{ref['time_s'] / 3600:8.2f} h"
+            taken = "-" if ref["result"] != OK else f"{ref['time_s'] / 3600:8.2f} h"
             print(f"{t / 3600:8.2f} h {taken:>10} {ref['innovation_um']:10.1f} {ref['outcome']:>9}"
                   f" {ref['bias_um']:7.1f} {ref['accepted']:>3}/{ref['refused']:<3}")
         else:
@@ -262,8 +272,10 @@ def run(master, args):
 
 
 def print_figures(report):
-    print(f"error of the served correction against the measured {report['column']} "
-          f"(trace column), from the snapshots mbpoll read; MAE / RMS um:")
+    print(f"error of what the board served against the displacement the trace measured"
+          f" ({report['column']}: the error the compensation should cancel), measured - served,"
+          f" over the snapshots mbpoll read; no references = the model's own prediction in the same"
+          f" snapshot (IR 42+), references = the served correction (IR 30+); MAE / RMS um:")
     print(f"{'part':>12} {'snapshots':>9} {'no references':>16} {'references':>16}")
     for name, f in report["figures"].items():
         print(f"{name:>12} {f['snapshots']:>9} {f['mae_without_um']:7.2f} / {f['rms_without_um']:<6.2f}"
@@ -280,6 +292,8 @@ def main():
     tr.add_argument("--column", required=True)
     tr.add_argument("--noise-um", type=float, default=0.3)
     tr.add_argument("--seed", type=int, default=28)
+    tr.add_argument("--chip", metavar="FROM_H:HOURS:UM",
+                    help="a chip on the gauge: readings + UM for HOURS from FROM_H")
     ap = sub.add_parser("run", help="the PLC's side over Modbus (mbpoll)")
     ap.add_argument("--pty", required=True)
     ap.add_argument("--trace", required=True)
@@ -291,7 +305,11 @@ def main():
     ap.add_argument("--json", help="write the report here")
     args = root.parse_args()
     if args.cmd == "trace":
-        probe_trace(args.src, args.dst, args.column, args.noise_um, args.seed)
+        chip = None
+        if args.chip:
+            f, h, um = (float(x) for x in args.chip.split(":"))
+            chip = (f * 3600, (f + h) * 3600, um)
+        probe_trace(args.src, args.dst, args.column, args.noise_um, args.seed, chip)
         return
     report = run(MbpollMaster(args.pty), args)
     print_figures(report)
