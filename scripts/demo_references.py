@@ -72,8 +72,6 @@ class MbpollMaster:
 
     def _read(self, kind, addr, count):
         rc, out = self._run(["-t", f"{kind}:hex", "-r", str(addr), "-c", str(count)])
-        if os.environ.get("DEMO_DEBUG"):
-            print(f"read {kind} {addr} {count}: rc {rc} {out[:80]!r}", file=sys.stderr)
         words = [int(line.split(":", 1)[1].strip(), 16)
                  for line in out.splitlines() if line.startswith("[")]
         return words if rc == 0 and len(words) == count else None
