@@ -459,3 +459,33 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
     // Without the removal the board would have used the full drift.
     assert!(slope(&raw_pts).abs() > 0.4);
 }
+
+/// Hostile run of issue 30: a PLC that sets the probe direction and gives
+/// command 12 straight after (the settings are still being stored) reads
+/// 62 (not taken) in holding register 2, then 0 once the settings store
+/// ends — and 0 is "accepted" for command 12 (docs/register-map.md). The
+/// reference was not taken; the register must not say it was.
+#[test]
+fn a_settings_store_ending_after_a_refused_probe_reference_does_not_report_ok() {
+    let mut rig = Rig::new();
+    let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
+    app.program(&image(1, 1)).unwrap();
+    // Register 40 changes: a settings store starts (result 23); not settled.
+    write(&mut app, HR_PROBE_DIRECTION, 0);
+    assert!(app.flash_busy());
+    write(&mut app, HR_COMMAND, CMD_TAKE_PROBE_REFERENCE);
+    let (now, _) = rig.cycle(&mut app, 1);
+    let mut bad = ok_reading(10);
+    bad.state = ProbeState::OutOfRange;
+    app.set_probe(&bad, Some((&rig.acq, now)));
+    assert_eq!(app.server.holding.result, result::PROBE_NOT_READY);
+    assert_eq!(app.references.state(0).unwrap().accepted, 0);
+    // The settings store ends: what the PLC reads now.
+    let settled = settled_result(&mut app);
+    assert_eq!(app.references.state(0).unwrap().accepted, 0);
+    assert_ne!(
+        settled,
+        result::OK,
+        "holding register 2 says 0 (accepted) for a probe reference that was not taken"
+    );
+}
