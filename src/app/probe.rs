@@ -69,7 +69,14 @@ impl<F: BackgroundErase> App<F> {
             (v.validity == Validity::Fresh).then_some(i32::from(v.raw))
         });
         match self.references.take(reading, temp, &setup) {
-            Taken::NotTaken(code) => self.server.holding.result = code,
+            Taken::NotTaken(code) => {
+                self.server.holding.result = code;
+                // A settings store still running ends by writing its result:
+                // it must end on this refusal, not on 0 ("accepted").
+                if self.job.is_some() {
+                    self.stored_result = Some(code);
+                }
+            }
             Taken::Done(outcome) => {
                 self.snapshot.corrections = self.references.served();
                 let code = match outcome {
