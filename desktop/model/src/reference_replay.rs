@@ -38,6 +38,14 @@ pub struct ReferenceArgs {
         arg(long = "reference-every", value_name = "DURATION")
     )]
     pub every: Option<String>,
+    /// Also simulate a reference this long after every change of the run's
+    /// `spindle_rpm` (a probing cycle triggered by the operating state
+    /// rather than the clock), e.g. `10min`.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-after-change", value_name = "DURATION")
+    )]
+    pub after_change: Option<String>,
     /// σ of the simulated probe noise, µm (also the rule's σ_r unless
     /// `--reference-param sigma_ref_um=` says otherwise).
     #[cfg_attr(
@@ -82,7 +90,7 @@ pub struct ReferenceArgs {
 impl ReferenceArgs {
     /// Any reference or re-zero asked for.
     pub fn is_active(&self) -> bool {
-        self.every.is_some() || !self.rezero_at.is_empty()
+        self.every.is_some() || self.after_change.is_some() || !self.rezero_at.is_empty()
     }
 }
 
@@ -247,6 +255,7 @@ pub struct ChannelReference {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ReferenceReport {
     pub every_s: Option<f64>,
+    pub after_change_s: Option<f64>,
     pub noise_um: f64,
     pub outliers: Option<(f64, f64)>,
     pub seed: u64,
@@ -295,12 +304,42 @@ pub struct SimReference {
     pub corrupted: bool,
 }
 
-/// The simulated references per direction: at k·every (k ≥ 1) from the
-/// run's first time, on the first row at or after it that has a measured value.
+/// Times (s) at which a reference is due: k·every (k ≥ 1) from the run's
+/// first time and, with `after_change`, that long after every change of
+/// `spindle_rpm`; sorted, duplicates once.
+pub fn due_times(run: &Run, every_s: Option<f64>, after_change_s: Option<f64>) -> Vec<f64> {
+    let time = run.time_s();
+    let (Some(&t0), Some(&t_end)) = (time.first(), time.last()) else {
+        return vec![];
+    };
+    let mut due = vec![];
+    if let Some(e) = every_s {
+        let mut k = 1u64;
+        while t0 + e * k as f64 <= t_end {
+            due.push(t0 + e * k as f64);
+            k += 1;
+        }
+    }
+    if let (Some(d), Some(rpm)) = (after_change_s, run.col("spindle_rpm")) {
+        for (i, w) in rpm.windows(2).enumerate() {
+            if let [Some(a), Some(b)] = w {
+                if a != b && time[i + 1] + d <= t_end {
+                    due.push(time[i + 1] + d);
+                }
+            }
+        }
+    }
+    due.sort_by(f64::total_cmp);
+    due.dedup();
+    due
+}
+
+/// The simulated references per direction at the `due` times (s), on the
+/// first row at or after each that has a measured value.
 pub fn simulate_references(
     run: &Run,
     model: &Model,
-    every_s: f64,
+    due: &[f64],
     noise_um: f64,
     outliers: Option<(f64, f64)>,
     seed: u64,
@@ -308,12 +347,9 @@ pub fn simulate_references(
     let time = run.time_s();
     let mut noise = Rng::new(seed);
     let mut corrupt = Rng::new(seed ^ 0x9E37_79B9_7F4A_7C15);
-    let t0 = time.first().copied().unwrap_or(0.0);
     let mut out = vec![vec![]; model.directions.len()];
-    let mut k = 1u64;
     let mut row = 0usize;
-    loop {
-        let due = t0 + every_s * k as f64;
+    for &due in due {
         while row < time.len() && time[row] < due {
             row += 1;
         }
@@ -330,6 +366,10 @@ pub fn simulate_references(
             let Some(Some(m)) = run.col(&column).and_then(|c| c.get(row)) else {
                 continue;
             };
+            // Two due times on one row: one reference.
+            if refs.last().is_some_and(|r: &SimReference| r.row == row) {
+                continue;
+            }
             let v = m + n + if bad { off } else { 0.0 };
             refs.push(SimReference {
                 row,
@@ -340,7 +380,6 @@ pub fn simulate_references(
                 corrupted: bad,
             });
         }
-        k += 1;
     }
     out
 }
@@ -419,10 +458,16 @@ pub fn score(
         .iter()
         .filter_map(|&t| rows.iter().position(|r| r.time_ms >= t))
         .collect();
-    let refs = match every_s {
-        Some(e) => simulate_references(run, model, e, args.noise_um, outliers, args.seed),
-        None => vec![vec![]; model.directions.len()],
-    };
+    let after_s = args
+        .after_change
+        .as_deref()
+        .map(parse_duration_s)
+        .transpose()?;
+    if after_s.is_some() && run.col("spindle_rpm").is_none() {
+        bail!("--reference-after-change: the run has no spindle_rpm column");
+    }
+    let due = due_times(run, every_s, after_s);
+    let refs = simulate_references(run, model, &due, args.noise_um, outliers, args.seed);
     let mut channels = vec![];
     let mut dump: Vec<(String, Vec<i32>)> = vec![];
     for (d, dir) in model.directions.iter().enumerate() {
@@ -505,6 +550,7 @@ pub fn score(
     }
     Ok(ReferenceReport {
         every_s,
+        after_change_s: after_s,
         noise_um: args.noise_um,
         outliers,
         seed: args.seed,
@@ -570,6 +616,9 @@ impl ReferenceReport {
                 self.rezero_ms
             ),
             None => println!("  no references; re-zeros at {:?} ms", self.rezero_ms),
+        }
+        if let Some(a) = self.after_change_s {
+            println!("  and a reference {a:.0} s after every change of spindle speed");
         }
         for c in &self.channels {
             println!(

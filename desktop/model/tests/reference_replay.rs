@@ -50,6 +50,7 @@ fn setup() -> Setup {
 fn args(every: Option<&str>, outliers: Option<&str>, seed: u64) -> ReferenceArgs {
     ReferenceArgs {
         every: every.map(str::to_string),
+        after_change: None,
         noise_um: 0.3,
         outliers: outliers.map(str::to_string),
         seed,
@@ -142,4 +143,35 @@ fn rezero_serves_zero_at_that_moment() {
         assert_eq!(served[at - 1], s.rows[at - 1].out.corrections[d]);
     }
     assert_eq!(rep.rezero_ms, vec![s.rows[at].time_ms]);
+}
+
+#[test]
+fn references_after_speed_changes_follow_the_spindle() {
+    let s = setup();
+    let base = run(&s, &args(Some("4h"), None, 3));
+    let mut a = args(Some("4h"), None, 3);
+    a.after_change = Some("10min".into());
+    let rep = run(&s, &a);
+    let rpm = s.run.col("spindle_rpm").unwrap();
+    let time = s.run.time_s();
+    // One more reference 10 min (40 rows of 15 s) after each speed change
+    // that has 10 min of run left.
+    let changes = (1..rpm.len())
+        .filter(|&i| rpm[i] != rpm[i - 1] && time[i] + 600.0 <= *time.last().unwrap())
+        .count();
+    assert!(changes >= 8, "{changes}");
+    assert_eq!(rep.after_change_s, Some(600.0));
+    for (b, c) in base.channels.iter().zip(&rep.channels) {
+        assert_eq!(c.references, b.references + changes, "{}", c.column);
+    }
+    let due = tcomp_model::reference_replay::due_times(&s.run, None, Some(600.0));
+    assert_eq!(due.len(), changes);
+    for t in due {
+        let i = time.iter().position(|&x| x >= t).unwrap();
+        assert_ne!(
+            rpm[i - 40],
+            rpm[i - 41],
+            "no speed change 10 min before {t} s"
+        );
+    }
 }
