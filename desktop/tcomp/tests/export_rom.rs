@@ -142,3 +142,23 @@ fn export_names_sensors_by_the_rom_codes_the_run_records() {
     assert!(!out.status.success() && err.contains("rom.T_a"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
 }
+
+/// `export --demo --model-version N` writes version N into the image (the
+/// board's command 1 refuses an image not newer than the one it serves).
+#[test]
+fn the_demo_export_takes_the_model_version_it_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.bin");
+    let o = tcomp(&[
+        "export",
+        "--demo",
+        "--model-version",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&out).unwrap();
+    let model = thermocomp_core::image::Model::parse(&bytes).unwrap();
+    assert_eq!(model.model_version, 7);
+}

@@ -71,7 +71,11 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         .transpose()?;
     let run_for_geometry = run.clone();
     let float = match (demo, model) {
-        (true, _) => thermocomp_core::float::demo_model(seed),
+        (true, _) => {
+            let mut demo = thermocomp_core::float::demo_model(seed);
+            demo.model_version = model_version;
+            demo
+        }
         (false, Some(path)) => {
             let text = std::fs::read_to_string(&path)
                 .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
