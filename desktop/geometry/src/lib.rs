@@ -29,6 +29,7 @@ pub mod identify;
 pub mod lines;
 pub mod rotary;
 pub mod rotary_check;
+pub mod rotary_frames;
 pub mod rotary_identify;
 pub mod rotary_sim;
 pub mod rtest;
