@@ -28,6 +28,7 @@ pub mod guard;
 pub mod identify;
 pub mod lines;
 pub mod rotary;
+pub mod rotary_board;
 pub mod rotary_check;
 pub mod rotary_frames;
 pub mod rotary_identify;
