@@ -154,7 +154,9 @@ fn score(d: &Path, img: &Model, seed: u64) -> Figures {
 
 #[test]
 fn the_image_serves_the_identified_rotary_model_and_corrects_the_machine() {
-    for seed in ["11", "12"] {
+    let (mut least, mut worst_served) = (100.0f64, 0.0f64);
+    for seed in 1..=10u64 {
+        let seed = &seed.to_string();
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         identified_machine(d, seed);
@@ -197,7 +199,12 @@ fn the_image_serves_the_identified_rotary_model_and_corrects_the_machine() {
             fig.before_rms_um
         );
         assert!(reduction >= 85.0, "reduction {reduction:.1} %");
+        least = least.min(reduction);
+        worst_served = worst_served.max(fig.served_vs_model_um);
     }
+    println!(
+        "10 machines: least reduction {least:.1} %, worst served − model {worst_served:.4} µm"
+    );
 }
 
 #[test]

@@ -41,7 +41,7 @@ pub struct ExportArgs {
     /// Add the five-axis section (image section kind 4): the rotary model
     /// of `tcomp geometry identify-rotary --model-out` (R-test convention,
     /// converted to the board's rotating frame); needs --geometry.
-    #[arg(long, requires = "geometry")]
+    #[arg(long)]
     pub rotary: Option<std::path::PathBuf>,
     /// Serve a rotary model whose identification marked terms unobservable.
     #[arg(long, requires = "rotary")]
@@ -93,6 +93,11 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         sign,
         json,
     } = args;
+    if rotary.is_some() && geometry.is_none() {
+        anyhow::bail!(
+            "--rotary needs --geometry <vol.json>: the five-axis section adds to the volumetric section"
+        );
+    }
     // Read the key first: a bad key file costs no fit.
     let sign = sign
         .map(|p| tcomp_model::signing::read_private(&p))
