@@ -74,7 +74,7 @@ pub fn rotary_section(
 /// (points, worst µm, bound µm).
 pub fn served_vs_model(m: &RotaryModel, vol: &Volumetric, f: &FiveAxis) -> (usize, f64, f64) {
     let temps: Vec<Option<i32>> = (vol.sensors.iter())
-        .map(|s| Some(i32::from(s.sensor.ref_temp)))
+        .map(|s| Some(s.sensor.ref_temp))
         .collect();
     let levels = [0.05, 0.35, 0.65, 0.95];
     let (mut points, mut worst, mut arm) = (0usize, 0.0f64, 0.0f64);
