@@ -34,6 +34,10 @@ pub struct ExportSummary {
     /// The volumetric section (`--geometry`) and what its quantisation costs.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub volumetric: Option<tcomp_geometry::board::QuantisationReport>,
+    /// The five-axis section (`--rotary`) and what its conversion and
+    /// quantisation cost.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub five_axis: Option<tcomp_geometry::rotary_board::FiveAxisReport>,
     /// `--sign`: the public key (hex) whose private key signed the image;
     /// the file then carries the 72-byte signature trailer after `bytes`.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -44,6 +48,12 @@ pub struct ExportSummary {
 pub type GeometrySection = (
     thermocomp_core::volumetric::Volumetric,
     tcomp_geometry::board::QuantisationReport,
+);
+
+/// A five-axis section (image section kind 4) with its report.
+pub type FiveAxisSection = (
+    thermocomp_core::five_axis::FiveAxis,
+    tcomp_geometry::rotary_board::FiveAxisReport,
 );
 
 /// Quantize, encode and write an image; the image is parsed back before it
@@ -71,9 +81,25 @@ pub fn export_signed(
     out: &Path,
     sign: Option<&ed25519_compact::SecretKey>,
 ) -> Result<ExportSummary> {
+    export_five(model, geometry, None, out, sign)
+}
+
+/// [`export_signed`] with a five-axis section beside the volumetric one
+/// (`tcomp export --geometry … --rotary …`).
+pub fn export_five(
+    model: &FloatModel,
+    geometry: Option<GeometrySection>,
+    five: Option<FiveAxisSection>,
+    out: &Path,
+    sign: Option<&ed25519_compact::SecretKey>,
+) -> Result<ExportSummary> {
+    if five.is_some() && geometry.is_none() {
+        anyhow::bail!("a five-axis section needs the volumetric section (--geometry)");
+    }
     let quantize = |m: &FloatModel| -> Result<(Model, QuantReport)> {
         let (mut fixed, report) = m.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
         fixed.volumetric = geometry.as_ref().map(|(v, _)| v.clone());
+        fixed.five_axis = five.as_ref().map(|(f, _)| f.clone());
         Ok((fixed, report))
     };
     let (mut fixed, mut report) = quantize(model)?;
@@ -115,6 +141,7 @@ pub fn export_signed(
     std::fs::write(out, &file).with_context(|| format!("writing {}", out.display()))?;
     let mut s = summary(&fixed, &bytes, &report);
     s.volumetric = geometry.map(|(_, r)| r);
+    s.five_axis = five.map(|(_, r)| r);
     s.signed_by = sign.map(|sk| {
         crate::signing::public_of(sk)
             .iter()
@@ -146,6 +173,7 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
         fallbacks: m.fallbacks.len(),
         sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
         volumetric: None,
+        five_axis: None,
         signed_by: None,
     }
 }
@@ -228,6 +256,19 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
             v.max_error_um,
             v.max_error_before_rounding_um,
             v.bound_um
+        );
+    }
+    if let Some(f) = &s.five_axis {
+        println!(
+            "  five-axis section: Fourier order {} (the exact rotating-frame series needs {}; dropped RMS {:.4} µm, {:.4} µrad), {} bytes; served rotary part vs the model's f64 first-order prediction over {} poses: worst {:.4} µm (stated bound {:.4} µm)",
+            f.order,
+            f.order_needed,
+            f.truncated_rms_um,
+            f.truncated_rms_urad,
+            f.section_bytes,
+            f.grid_points,
+            f.max_error_um,
+            f.bound_um
         );
     }
 }

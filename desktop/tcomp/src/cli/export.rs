@@ -38,6 +38,30 @@ pub struct ExportArgs {
     /// Machine position (mm) of the volumetric polynomial's zero, per axis: x,y,z.
     #[arg(long, default_value = "0,0,0", requires = "geometry")]
     pub geometry_origin_mm: String,
+    /// Add the five-axis section (image section kind 4): the rotary model
+    /// of `tcomp geometry identify-rotary --model-out` (R-test convention,
+    /// converted to the board's rotating frame); needs --geometry.
+    #[arg(long)]
+    pub rotary: Option<std::path::PathBuf>,
+    /// Serve a rotary model whose identification marked terms unobservable.
+    #[arg(long, requires = "rotary")]
+    pub allow_unobservable: bool,
+    /// A range and C range of the five-axis section (degrees, min,max);
+    /// outside, the angle is held at the edge and flagged.
+    #[arg(
+        long,
+        default_value = "-120,120",
+        requires = "rotary",
+        allow_hyphen_values = true
+    )]
+    pub a_range_deg: String,
+    #[arg(
+        long,
+        default_value = "-720,720",
+        requires = "rotary",
+        allow_hyphen_values = true
+    )]
+    pub c_range_deg: String,
     #[arg(short, long)]
     pub out: std::path::PathBuf,
     /// Sign the image with this private key file (`tcomp keygen`): a board
@@ -61,10 +85,19 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         geometry,
         tool_max_mm,
         geometry_origin_mm,
+        rotary,
+        allow_unobservable,
+        a_range_deg,
+        c_range_deg,
         out,
         sign,
         json,
     } = args;
+    if rotary.is_some() && geometry.is_none() {
+        anyhow::bail!(
+            "--rotary needs --geometry <vol.json>: the five-axis section adds to the volumetric section"
+        );
+    }
     // Read the key first: a bad key file costs no fit.
     let sign = sign
         .map(|p| tcomp_model::signing::read_private(&p))
@@ -107,9 +140,9 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
         }
     };
-    let section = match geometry {
+    let section = match &geometry {
         Some(path) => Some(geometry_section(
-            &path,
+            path,
             &float,
             run_for_geometry.as_deref(),
             tool_max_mm,
@@ -118,7 +151,18 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         )?),
         None => None,
     };
-    let summary = tcomp_model::export::export_signed(&float, section, &out, sign.as_ref())?;
+    let five = match (&rotary, &section) {
+        (Some(path), Some((vol, _))) => Some(rotary_section(
+            path,
+            vol,
+            geometry.as_deref(),
+            [&a_range_deg, &c_range_deg],
+            max_correction_um,
+            allow_unobservable,
+        )?),
+        _ => None,
+    };
+    let summary = tcomp_model::export::export_five(&float, section, five, &out, sign.as_ref())?;
     tcomp_model::export::print_summary(&summary, &out, json);
     Ok(())
 }
@@ -230,4 +274,53 @@ fn geometry_section(
     let v = quantize(&poly, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let report = quantisation_report(&poly, &v, &opts);
     Ok((v, report))
+}
+
+/// `tcomp export --rotary`: the identified rotary model, converted to the
+/// board's convention and quantised beside the volumetric section `vol`
+/// (whose polynomial, at `geometry`, names the sensors).
+fn rotary_section(
+    path: &std::path::Path,
+    vol: &thermocomp_core::volumetric::Volumetric,
+    geometry: Option<&std::path::Path>,
+    ranges: [&str; 2],
+    max_correction_um: f64,
+    allow_unobservable: bool,
+) -> anyhow::Result<tcomp_model::export::FiveAxisSection> {
+    let m = tcomp_geometry::rotary::RotaryModel::read(path)?;
+    let sensors = match geometry {
+        Some(g) => {
+            let text = std::fs::read_to_string(g)
+                .map_err(|e| anyhow::anyhow!("reading {}: {e}", g.display()))?;
+            serde_json::from_str::<tcomp_geometry::volumetric::VolumetricPoly>(&text)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", g.display()))?
+                .sensors
+        }
+        None => Vec::new(),
+    };
+    let range = |s: &str, flag: &str| -> anyhow::Result<[f64; 2]> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .ok()
+            .filter(|v: &Vec<f64>| v.len() == 2 && v.iter().all(|x| x.is_finite()) && v[0] < v[1])
+            .ok_or_else(|| {
+                anyhow::anyhow!("{flag} {s:?}: expected min,max in degrees (min < max)")
+            })?;
+        Ok([v[0], v[1]])
+    };
+    let opts = tcomp_geometry::board5::FiveAxisOptions {
+        a_range_deg: range(ranges[0], "--a-range-deg")?,
+        c_range_deg: range(ranges[1], "--c-range-deg")?,
+        max_correction_um,
+    };
+    tcomp_geometry::rotary_board::rotary_section(&m, vol, &sensors, &opts, allow_unobservable)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "{}: {}",
+                path.display(),
+                tcomp_data::cli_error::one_line(&e)
+            )
+        })
 }
