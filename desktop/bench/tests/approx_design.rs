@@ -40,7 +40,10 @@ fn the_top_effect_names_the_truth_only_with_its_sensor() {
         score_effect(&effect("bearing_nonlinear+bending", json!({})), &b),
         Outcome::Wrong
     );
-    assert_eq!(score_effect(&effect("bearing_nonlinear", json!({})), &b), Outcome::Named);
+    assert_eq!(
+        score_effect(&effect("bearing_nonlinear", json!({})), &b),
+        Outcome::Named
+    );
     // the second effect does not count
     let two = json!({"effects": [{"name": "ballscrew"}, {"name": "bearing_nonlinear"}]});
     assert_eq!(score_effect(&two, &b), Outcome::Wrong);
@@ -48,9 +51,7 @@ fn the_top_effect_names_the_truth_only_with_its_sensor() {
 
 #[test]
 fn nothing_named_is_honest_only_when_untestable_covers_the_case() {
-    let d = |names: &[&str]| {
-        json!({"effects": [], "untestable": names.iter().map(|n| json!({"name": n, "reason": "r"})).collect::<Vec<_>>()})
-    };
+    let d = |names: &[&str]| json!({"effects": [], "untestable": names.iter().map(|n| json!({"name": n, "reason": "r"})).collect::<Vec<_>>()});
     let lag5 = truth("sensor_lag", Some("T_T5"), Some(300.0));
     let lag1 = truth("sensor_lag", Some("T_T1"), Some(300.0));
     let listed = d(&["convection", "sensor_lag on T_T2, T_T5"]);
@@ -67,14 +68,20 @@ fn nothing_named_is_honest_only_when_untestable_covers_the_case() {
         score_effect(&d(&["sensor_offset (constant over a run)"]), &step),
         Outcome::Silent
     );
-    assert!(!untestable_covers("coolant (on/off level)", &truth("coolant", None, None)));
+    assert!(!untestable_covers(
+        "coolant (on/off level)",
+        &truth("coolant", None, None)
+    ));
     let speed = truth("bearing_nonlinear", None, None);
     assert_eq!(
         score_effect(&d(&["bearing_nonlinear / speed nonlinearity"]), &speed),
         Outcome::Honest
     );
     assert_eq!(
-        score_effect(&d(&["ambient_drift (beyond T_ambient)"]), &truth("ambient_drift", None, None)),
+        score_effect(
+            &d(&["ambient_drift (beyond T_ambient)"]),
+            &truth("ambient_drift", None, None)
+        ),
         Outcome::Honest
     );
     // listed but something else named: wrong, not honest
@@ -90,22 +97,46 @@ fn a_parameter_finding_names_the_effect_by_its_physics() {
     let film = json!({"effects": [], "findings": [
         {"parameter": "node g_amb_w_per_k (all 20)", "meaning": "film coefficients ×1.9: convection", "design": 1.6, "fitted": 3.0}
     ]});
-    assert_eq!(finding_physics(&film["findings"][0]), Some(Physics::Convection));
-    assert_eq!(score_effect(&film, &truth("ambient_drift", None, None)), Outcome::Named);
-    assert_eq!(score_effect(&film, &truth("convection", None, None)), Outcome::Named);
+    assert_eq!(
+        finding_physics(&film["findings"][0]),
+        Some(Physics::Convection)
+    );
+    assert_eq!(
+        score_effect(&film, &truth("ambient_drift", None, None)),
+        Outcome::Named
+    );
+    assert_eq!(
+        score_effect(&film, &truth("convection", None, None)),
+        Outcome::Named
+    );
     assert_eq!(
         score_effect(&film, &truth("sensor_lag", Some("T_T1"), Some(300.0))),
         Outcome::Wrong
     );
     let source = json!({"effects": [], "findings": [{"parameter": "source 1 h1 w_at_nmax", "design": 75.0, "fitted": 150.0}]});
-    assert_eq!(finding_physics(&source["findings"][0]), Some(Physics::HeatSource));
-    assert_eq!(score_effect(&source, &truth("bearing_nonlinear", None, None)), Outcome::Named);
+    assert_eq!(
+        finding_physics(&source["findings"][0]),
+        Some(Physics::HeatSource)
+    );
+    assert_eq!(
+        score_effect(&source, &truth("bearing_nonlinear", None, None)),
+        Outcome::Named
+    );
     let jacket = json!({"findings": [{"group": "coolant jacket conductances", "factor": 0.4}]});
-    assert_eq!(score_effect(&jacket, &truth("coolant", None, None)), Outcome::Named);
-    assert_eq!(finding_physics(&json!({"parameter": "link h5-c7 g_w_per_k"})), Some(Physics::Joint));
+    assert_eq!(
+        score_effect(&jacket, &truth("coolant", None, None)),
+        Outcome::Named
+    );
+    assert_eq!(
+        finding_physics(&json!({"parameter": "link h5-c7 g_w_per_k"})),
+        Some(Physics::Joint)
+    );
     // with an effect named, the effect decides
     let both = json!({"effects": [{"name": "ballscrew"}], "findings": film["findings"]});
-    assert_eq!(score_effect(&both, &truth("ambient_drift", None, None)), Outcome::Wrong);
+    assert_eq!(
+        score_effect(&both, &truth("ambient_drift", None, None)),
+        Outcome::Wrong
+    );
 }
 
 #[test]
@@ -114,7 +145,8 @@ fn a_clean_case_alarms_on_an_effect_and_counts_findings_apart() {
     assert!(!none.false_alarm && !none.finding);
     let eff = score_clean(&json!({"effects": [{"name": "ballscrew"}]}));
     assert!(eff.false_alarm && !eff.finding);
-    let fnd = score_clean(&json!({"effects": [], "findings": [{"parameter": "node c0 c_j_per_k"}]}));
+    let fnd =
+        score_clean(&json!({"effects": [], "findings": [{"parameter": "node c0 c_j_per_k"}]}));
     assert!(!fnd.false_alarm && fnd.finding);
 }
 
@@ -128,8 +160,9 @@ fn truth_machine() -> Machine {
 fn the_design_perturbation_changes_every_number_by_a_seeded_lognormal_factor() {
     let m = truth_machine();
     let before = design_numbers(&m.spec);
-    // 20 nodes × 3, 21 links, 4 sources, 2 tank, 3 jackets, 31 lengths
-    assert_eq!(before.len(), 60 + 21 + 4 + 2 + 3 + 31);
+    // 20 nodes × 3 (capacity, loss, area), 19 links, 4 sources, 2 tank,
+    // 3 jackets, 31 lengths
+    assert_eq!(before.len(), 60 + 19 + 4 + 2 + 3 + 31);
     let mut logs = Vec::new();
     for s in 0..20u64 {
         let seed = design_seed(7, 0, s as usize);
@@ -160,7 +193,7 @@ fn the_design_perturbation_changes_every_number_by_a_seeded_lognormal_factor() {
         // the perturbed file passes the machine file's checks
         perturb_machine(&m, DESIGN_SIGMA, seed).unwrap();
     }
-    // ln factor ~ N(0, σ²): mean and spread over 20 × 120 draws
+    // ln factor ~ N(0, σ²): mean and spread over 20 × 119 draws
     let n = logs.len() as f64;
     let mu = logs.iter().sum::<f64>() / n;
     let sd = (logs.iter().map(|x| (x - mu).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();

@@ -115,7 +115,11 @@ fn run() -> Result<()> {
             columns,
             worlds,
             sigma,
-            seeds: if heldout { HELDOUT_SEEDS.to_vec() } else { vec![seed] },
+            seeds: if heldout {
+                HELDOUT_SEEDS.to_vec()
+            } else {
+                vec![seed]
+            },
         };
         let mut v = run_approx_bench(&Machine::load(&path)?, &machines, &open_cfg, &acfg)?;
         v["open_world_machine_file"] = serde_json::json!(path.display().to_string());

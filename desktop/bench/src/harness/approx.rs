@@ -178,7 +178,10 @@ fn world_cases<'a>(
             .map(|c| Case {
                 kind: c.kind,
                 truth: c.effects.first().map(truth_of_sim),
-                describe: c.effects.first().map_or("clean".into(), |e| format!("{e:?}")),
+                describe: c
+                    .effects
+                    .first()
+                    .map_or("clean".into(), |e| format!("{e:?}")),
                 runs: c.runs,
                 exact: &machines[c.machine],
             })

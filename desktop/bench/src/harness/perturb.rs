@@ -30,7 +30,10 @@ pub fn visit_design_numbers(spec: &mut MachineSpec, f: &mut dyn FnMut(&str, &mut
     v("motor_loss_frac".into(), &mut spec.motor_loss_frac);
     for n in &mut spec.nodes {
         v(format!("node {} c_j_per_k", n.name), &mut n.c_j_per_k);
-        v(format!("node {} g_amb_w_per_k", n.name), &mut n.g_amb_w_per_k);
+        v(
+            format!("node {} g_amb_w_per_k", n.name),
+            &mut n.g_amb_w_per_k,
+        );
         v(format!("node {} area_m2", n.name), &mut n.area_m2);
     }
     for l in &mut spec.links {
@@ -56,9 +59,15 @@ pub fn visit_design_numbers(spec: &mut MachineSpec, f: &mut dyn FnMut(&str, &mut
     }
     if let Some(c) = &mut spec.coolant {
         v("coolant tank_c_j_per_k".into(), &mut c.tank_c_j_per_k);
-        v("coolant tank_g_amb_w_per_k".into(), &mut c.tank_g_amb_w_per_k);
+        v(
+            "coolant tank_g_amb_w_per_k".into(),
+            &mut c.tank_g_amb_w_per_k,
+        );
         for j in &mut c.jacket {
-            v(format!("coolant jacket {} g_w_per_k", j.node), &mut j.g_w_per_k);
+            v(
+                format!("coolant jacket {} g_w_per_k", j.node),
+                &mut j.g_w_per_k,
+            );
         }
     }
     for d in &mut spec.directions {
@@ -82,7 +91,11 @@ pub fn design_numbers(spec: &MachineSpec) -> Vec<(String, f64)> {
 /// `spec` with every design number multiplied by exp(σ·z), z standard
 /// normal from `Rng::new(seed)` in visiting order; with the factors drawn
 /// (key, factor). The motor loss fraction stays ≤ 1.
-pub fn perturb_spec(spec: &MachineSpec, sigma: f64, seed: u64) -> (MachineSpec, Vec<(String, f64)>) {
+pub fn perturb_spec(
+    spec: &MachineSpec,
+    sigma: f64,
+    seed: u64,
+) -> (MachineSpec, Vec<(String, f64)>) {
     let mut g = Rng::new(seed);
     let mut s = spec.clone();
     let mut factors = Vec::new();

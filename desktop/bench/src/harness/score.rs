@@ -49,7 +49,10 @@ pub const PHYSICS_WORDS: &[(Physics, &[&str])] = &[
     ),
     (Physics::Joint, &["link", "joint"]),
     (Physics::Geometry, &["length_mm", "lever", "direction"]),
-    (Physics::Capacity, &["c_j_per_k", "capacity", "cp_j_per_kgk"]),
+    (
+        Physics::Capacity,
+        &["c_j_per_k", "capacity", "cp_j_per_kgk"],
+    ),
 ];
 
 /// Per truth kind (the diagnosis name it should be found as): the effect
