@@ -64,22 +64,14 @@ fn run() -> Result<()> {
                 open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
             }
             "--columns" => {
-                let l = args.next().context("--columns exact,design,fit")?;
-                columns = Some(if l == "all" {
-                    vec![Column::Exact, Column::Design, Column::Fit]
-                } else {
-                    l.split(',').map(Column::parse).collect::<Result<_>>()?
-                })
+                columns = Some(parse_columns(&args.next().context("--columns exact,design,fit")?)?)
             }
             "--worlds" => {
                 let l = args.next().context("--worlds open,cross")?;
                 worlds = l.split(',').map(World::parse).collect::<Result<_>>()?
             }
             "--heldout" => heldout = true,
-            "--sigma" => {
-                sigma = args.next().context("--sigma X")?.parse().context("--sigma X")?;
-                anyhow::ensure!(sigma >= 0.0 && sigma < 2.0, "--sigma X: 0 ≤ X < 2 (σ of the log factor)");
-            }
+            "--sigma" => sigma = args.next().context("--sigma X")?.parse().context("--sigma X")?,
             "--json" => json = true,
             "--calibrate" => calibrate = true,
             "--verbose" => verbose = true,
@@ -111,25 +103,18 @@ fn run() -> Result<()> {
     };
     if let Some(columns) = columns {
         let path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
+        let seeds = if heldout {
+            HELDOUT_SEEDS.to_vec()
+        } else {
+            vec![seed]
+        };
         let acfg = ApproxConfig {
             columns,
             worlds,
             sigma,
-            seeds: if heldout {
-                HELDOUT_SEEDS.to_vec()
-            } else {
-                vec![seed]
-            },
+            seeds,
         };
-        let mut v = run_approx_bench(&Machine::load(&path)?, &machines, &open_cfg, &acfg)?;
-        v["open_world_machine_file"] = serde_json::json!(path.display().to_string());
-        v["heldout"] = serde_json::json!(heldout);
-        if json {
-            println!("{v}");
-        } else {
-            print!("{}", approx_text(&v));
-        }
-        return Ok(());
+        return run_columns(&path, &machines, &open_cfg, &acfg, json);
     }
     if closed_only {
         let v = run_bench(&machines, &closed_cfg)?;
@@ -198,6 +183,32 @@ fn run() -> Result<()> {
         println!("{v}");
     } else {
         print_text(&v, &open, &cross, secs, threads);
+    }
+    Ok(())
+}
+
+/// `--columns LIST`: `all` or a comma list of exact, design, fit.
+fn parse_columns(l: &str) -> Result<Vec<Column>> {
+    if l == "all" {
+        return Ok(vec![Column::Exact, Column::Design, Column::Fit]);
+    }
+    l.split(',').map(Column::parse).collect()
+}
+
+/// Issue 27's columns (`--columns`), printed as text or JSON.
+fn run_columns(
+    path: &std::path::Path,
+    machines: &[Machine],
+    cfg: &BenchConfig,
+    acfg: &ApproxConfig,
+    json: bool,
+) -> Result<()> {
+    let mut v = run_approx_bench(&Machine::load(path)?, machines, cfg, acfg)?;
+    v["open_world_machine_file"] = serde_json::json!(path.display().to_string());
+    if json {
+        println!("{v}");
+    } else {
+        print!("{}", approx_text(&v));
     }
     Ok(())
 }

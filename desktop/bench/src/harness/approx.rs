@@ -281,6 +281,9 @@ pub fn run_approx_bench(
     cfg: &BenchConfig,
     acfg: &ApproxConfig,
 ) -> Result<Value> {
+    if !(0.0..2.0).contains(&acfg.sigma) {
+        bail!("--sigma {}: 0 ≤ σ < 2 (σ of the log factor)", acfg.sigma);
+    }
     let mut pooled: BTreeMap<(&'static str, &'static str), Tally> = BTreeMap::new();
     let mut per_seed = serde_json::Map::new();
     for &seed in &acfg.seeds {
@@ -308,6 +311,7 @@ pub fn run_approx_bench(
         "sigma_log": acfg.sigma,
         "seeds": acfg.seeds,
         "heldout_seeds": HELDOUT_SEEDS,
+        "heldout": acfg.seeds == HELDOUT_SEEDS,
         "cases_per_seed": cfg.cases,
         "scoring": "named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable; wrong: something else named; silent: nothing named or listed. Clean: false alarm = an effect named; parameter findings counted apart",
         "columns": table_json(&pooled),

@@ -219,7 +219,7 @@ pub fn untestable_covers(entry: &str, truth: &Truth) -> bool {
         return false;
     };
     let head = entry
-        .split(|c: char| c == ' ' || c == '(')
+        .split([' ', '('])
         .next()
         .unwrap_or("");
     if !r.effect_names.contains(&head) {
