@@ -218,10 +218,7 @@ pub fn untestable_covers(entry: &str, truth: &Truth) -> bool {
     let Some(r) = rule(&truth.kind) else {
         return false;
     };
-    let head = entry
-        .split([' ', '('])
-        .next()
-        .unwrap_or("");
+    let head = entry.split([' ', '(']).next().unwrap_or("");
     if !r.effect_names.contains(&head) {
         return false;
     }
