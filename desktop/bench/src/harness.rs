@@ -1,14 +1,20 @@
 //! Blind check of the diagnoser: generated "measured" runs with withheld
 //! effects (singles, pairs, none) at random strengths and duty cycles.
 //! `draw` draws the closed-world cases, `closed`, `open` and `cross` run
-//! the three worlds, `tally` scores them.
+//! the three worlds, `tally` scores them; `approx` runs issue 27's columns
+//! (exact file, design file off by σ = 15 % via `perturb`, no file) scored
+//! by `score`.
 
+mod approx;
 mod closed;
 mod cross;
 mod draw;
 mod open;
+pub mod perturb;
+pub mod score;
 mod tally;
 
+pub use approx::{approx_text, run_approx_bench, ApproxConfig, Column, World, HELDOUT_SEEDS};
 pub use closed::run_bench;
 pub use cross::{cross_cases, run_cross_bench, CrossCase, CROSS_KINDS};
 pub use draw::{random_duty, random_effect, BenchConfig};

@@ -42,3 +42,29 @@ fn benchmarks_refuse_bad_arguments_with_one_line_too() {
         );
     }
 }
+
+#[test]
+fn the_issue_27_columns_refuse_bad_choices_with_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_bench-diagnose");
+    for (args, says) in [
+        (&["--columns", "exact,bogus"][..], "unknown column `bogus`"),
+        (
+            &["--columns", "all", "--worlds", "moon"][..],
+            "unknown world `moon`",
+        ),
+        (
+            &["--columns", "fit", "--sigma", "5", "--cases", "1"][..],
+            "--sigma 5",
+        ),
+    ] {
+        let out = program(exe, dir.path(), args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let line = stderr.trim_end();
+        assert!(!out.status.success(), "{args:?} exited 0: {line}");
+        assert!(
+            line.starts_with("error: ") && !line.contains('\n') && line.contains(says),
+            "{args:?}: not the one error line about {says}:\n{stderr}"
+        );
+    }
+}

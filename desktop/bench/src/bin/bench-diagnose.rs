@@ -16,10 +16,20 @@
 //! ±10–20 %). The column takes the file as exact (as `tcomp diagnose`
 //! does by default); `--calibrate` calibrates its design values on each
 //! case's fit rows first (`tcomp diagnose --calibrate`).
+//!
+//! Issue 27's columns: `--columns exact,design,fit` (or `all`) diagnoses the
+//! same cases with the exact design file, with a design file whose every
+//! design number is off by a lognormal factor (σ of its log `--sigma`,
+//! default 0.15, drawn per case), both with default flags, and with no file
+//! (`diagnose fit`), on `--worlds open,cross` (default both), scored named /
+//! honest / wrong / silent with false alarms on clean cases. `--heldout`
+//! runs the held-out seeds (`HELDOUT_SEEDS`: 101, 103, 107) instead of
+//! `--seed`; never tune on them. One line per case and column on stderr.
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp_bench::harness::{
-    run_bench, run_cross_bench, run_open_bench, run_open_machine_bench, BenchConfig,
+    approx_text, run_approx_bench, run_bench, run_cross_bench, run_open_bench,
+    run_open_machine_bench, ApproxConfig, BenchConfig, Column, World, HELDOUT_SEEDS,
 };
 use tcomp_thermal::diagnose::{diagnose, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
@@ -40,6 +50,10 @@ fn run() -> Result<()> {
     let mut dir = desktop_dir().join("machines");
     let mut open_machine_file: Option<PathBuf> = None;
     let mut calibrate = false;
+    let mut columns: Option<Vec<Column>> = None;
+    let mut worlds = vec![World::Open, World::Cross];
+    let mut heldout = false;
+    let mut sigma = tcomp_bench::harness::perturb::DESIGN_SIGMA;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -49,6 +63,15 @@ fn run() -> Result<()> {
             "--machine" => {
                 open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
             }
+            "--columns" => {
+                columns = Some(parse_columns(&args.next().context("--columns exact,design,fit")?)?)
+            }
+            "--worlds" => {
+                let l = args.next().context("--worlds open,cross")?;
+                worlds = l.split(',').map(World::parse).collect::<Result<_>>()?
+            }
+            "--heldout" => heldout = true,
+            "--sigma" => sigma = args.next().context("--sigma X")?.parse().context("--sigma X")?,
             "--json" => json = true,
             "--calibrate" => calibrate = true,
             "--verbose" => verbose = true,
@@ -56,7 +79,7 @@ fn run() -> Result<()> {
             "--open-machine-only" => machine_only = true,
             "--closed-only" => closed_only = true,
             "--cross-only" => cross_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --machines DIR, --machine FILE, --calibrate)"),
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X)"),
         }
     }
     let machines = vec![
@@ -78,6 +101,21 @@ fn run() -> Result<()> {
         calibrate: false,
         ..open_cfg
     };
+    if let Some(columns) = columns {
+        let path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
+        let seeds = if heldout {
+            HELDOUT_SEEDS.to_vec()
+        } else {
+            vec![seed]
+        };
+        let acfg = ApproxConfig {
+            columns,
+            worlds,
+            sigma,
+            seeds,
+        };
+        return run_columns(&path, &machines, &open_cfg, &acfg, json);
+    }
     if closed_only {
         let v = run_bench(&machines, &closed_cfg)?;
         println!("{v}");
@@ -145,6 +183,32 @@ fn run() -> Result<()> {
         println!("{v}");
     } else {
         print_text(&v, &open, &cross, secs, threads);
+    }
+    Ok(())
+}
+
+/// `--columns LIST`: `all` or a comma list of exact, design, fit.
+fn parse_columns(l: &str) -> Result<Vec<Column>> {
+    if l == "all" {
+        return Ok(vec![Column::Exact, Column::Design, Column::Fit]);
+    }
+    l.split(',').map(Column::parse).collect()
+}
+
+/// Issue 27's columns (`--columns`), printed as text or JSON.
+fn run_columns(
+    path: &std::path::Path,
+    machines: &[Machine],
+    cfg: &BenchConfig,
+    acfg: &ApproxConfig,
+    json: bool,
+) -> Result<()> {
+    let mut v = run_approx_bench(&Machine::load(path)?, machines, cfg, acfg)?;
+    v["open_world_machine_file"] = serde_json::json!(path.display().to_string());
+    if json {
+        println!("{v}");
+    } else {
+        print!("{}", approx_text(&v));
     }
     Ok(())
 }

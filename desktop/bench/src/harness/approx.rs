@@ -1,0 +1,358 @@
+//! Issue 27's side-by-side columns: the same cases diagnosed with the exact
+//! design file, with a design file drawn off by σ = 15 % per case (default
+//! flags), and without a file (`diagnose fit`), on the open-world truth
+//! model and on the cross model (the first simulator's machines), scored
+//! named / honest / wrong / silent (`score.rs`), on a development seed or
+//! on the held-out seeds.
+
+use anyhow::{bail, Result};
+use serde_json::{json, Value};
+use std::collections::BTreeMap;
+
+use tcomp_thermal::diagnose::{diagnose, fitmode::diagnose_fit, Diagnosis, Options};
+use tcomp_thermal::sim::Machine;
+
+use super::cross::cross_cases;
+use super::draw::BenchConfig;
+use super::open::open_cases;
+use super::perturb::{design_seed, perturb_machine};
+use super::score::{score_clean, score_effect, truth_of_open, truth_of_sim, Outcome, Truth};
+use super::tally::mean;
+
+/// Seeds never tuned on: report them apart (`bench-diagnose --columns …
+/// --heldout`) and never use them while changing the diagnosis.
+pub const HELDOUT_SEEDS: [u64; 3] = [101, 103, 107];
+
+/// One column: which machine file the diagnosis is given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Column {
+    /// The design file with its exact numbers.
+    Exact,
+    /// The design file with every number off by a lognormal factor.
+    Design,
+    /// No file: `diagnose fit`.
+    Fit,
+}
+
+impl Column {
+    pub fn key(self) -> &'static str {
+        match self {
+            Column::Exact => "exact_file",
+            Column::Design => "design_error_file",
+            Column::Fit => "fit",
+        }
+    }
+
+    /// `exact`, `design` or `fit`.
+    pub fn parse(s: &str) -> Result<Column> {
+        Ok(match s {
+            "exact" => Column::Exact,
+            "design" => Column::Design,
+            "fit" => Column::Fit,
+            o => bail!("unknown column `{o}` (exact, design, fit)"),
+        })
+    }
+}
+
+/// Which cases: the truth model's (open) or the first simulator's (cross).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum World {
+    Open,
+    Cross,
+}
+
+impl World {
+    pub fn key(self) -> &'static str {
+        match self {
+            World::Open => "open_world",
+            World::Cross => "cross_model",
+        }
+    }
+
+    /// `open` or `cross`.
+    pub fn parse(s: &str) -> Result<World> {
+        Ok(match s {
+            "open" => World::Open,
+            "cross" => World::Cross,
+            o => bail!("unknown world `{o}` (open, cross)"),
+        })
+    }
+
+    fn tag(self) -> u64 {
+        match self {
+            World::Open => 0,
+            World::Cross => 1,
+        }
+    }
+}
+
+/// What to run besides the `BenchConfig`.
+pub struct ApproxConfig {
+    pub columns: Vec<Column>,
+    pub worlds: Vec<World>,
+    /// σ of the log design factor.
+    pub sigma: f64,
+    pub seeds: Vec<u64>,
+}
+
+/// One world × column: outcome counts, clean cases, times.
+#[derive(Default)]
+struct Tally {
+    /// kind → [named, honest, wrong, silent]
+    per: BTreeMap<String, [usize; 4]>,
+    clean: usize,
+    false_alarms: usize,
+    clean_findings: usize,
+    times: Vec<f64>,
+    misses: Vec<Value>,
+}
+
+impl Tally {
+    fn add_effect(&mut self, kind: &str, o: Outcome) {
+        let i = match o {
+            Outcome::Named => 0,
+            Outcome::Honest => 1,
+            Outcome::Wrong => 2,
+            Outcome::Silent => 3,
+        };
+        self.per.entry(kind.to_string()).or_default()[i] += 1;
+    }
+
+    fn json(&self) -> Value {
+        let mut tot = [0usize; 4];
+        for v in self.per.values() {
+            for i in 0..4 {
+                tot[i] += v[i];
+            }
+        }
+        let n: usize = tot.iter().sum();
+        let rate = |k: usize| k as f64 / n.max(1) as f64;
+        json!({
+            "effect_cases": n,
+            "named": tot[0],
+            "honest": tot[1],
+            "wrong": tot[2],
+            "silent": tot[3],
+            "named_rate": rate(tot[0]),
+            "named_or_honest_rate": rate(tot[0] + tot[1]),
+            "wrong_rate": rate(tot[2]),
+            "clean_cases": self.clean,
+            "false_alarms": self.false_alarms,
+            "clean_with_parameter_findings": self.clean_findings,
+            "mean_seconds_per_case": mean(&self.times),
+            "max_seconds_per_case": self.times.iter().copied().fold(0.0, f64::max),
+            "per_effect": self.per.iter().map(|(k, v)| (k.clone(), json!({"cases": v.iter().sum::<usize>(), "named": v[0], "honest": v[1], "wrong": v[2], "silent": v[3]}))).collect::<serde_json::Map<_, _>>(),
+            "misses": self.misses,
+        })
+    }
+}
+
+/// A case of either world, as the columns need it.
+struct Case<'a> {
+    kind: Option<&'static str>,
+    truth: Option<Truth>,
+    describe: String,
+    runs: Vec<(String, tcomp_data::runcsv::Run)>,
+    exact: &'a Machine,
+}
+
+fn world_cases<'a>(
+    w: World,
+    truth_machine: &'a Machine,
+    machines: &'a [Machine],
+    cfg: &BenchConfig,
+) -> Result<Vec<Case<'a>>> {
+    Ok(match w {
+        World::Open => open_cases(cfg)
+            .into_iter()
+            .map(|c| Case {
+                kind: c.kind,
+                truth: c.effects.first().map(truth_of_open),
+                describe: c.effects.first().map_or("clean".into(), |e| e.describe()),
+                runs: c.runs,
+                exact: truth_machine,
+            })
+            .collect(),
+        World::Cross => cross_cases(machines, cfg)?
+            .into_iter()
+            .map(|c| Case {
+                kind: c.kind,
+                truth: c.effects.first().map(truth_of_sim),
+                describe: c
+                    .effects
+                    .first()
+                    .map_or("clean".into(), |e| format!("{e:?}")),
+                runs: c.runs,
+                exact: &machines[c.machine],
+            })
+            .collect(),
+    })
+}
+
+/// The diagnosis of one case in one column (default flags), timed.
+fn diagnose_column(
+    col: Column,
+    case: &Case,
+    opt: &Options,
+    sigma: f64,
+    dseed: u64,
+) -> Result<(Diagnosis, f64)> {
+    let t = std::time::Instant::now();
+    let d = match col {
+        Column::Exact => diagnose(case.exact, &case.runs, opt)?,
+        Column::Design => diagnose(&perturb_machine(case.exact, sigma, dseed)?, &case.runs, opt)?,
+        Column::Fit => diagnose_fit(&case.runs, opt)?,
+    };
+    Ok((d, t.elapsed().as_secs_f64()))
+}
+
+/// Run every selected world and column on one seed's cases, into `tallies`
+/// (keyed world, column); one line per case and column on stderr.
+fn run_seed(
+    truth_machine: &Machine,
+    machines: &[Machine],
+    cfg: &BenchConfig,
+    acfg: &ApproxConfig,
+    tallies: &mut BTreeMap<(&'static str, &'static str), Tally>,
+) -> Result<()> {
+    let opt = Options {
+        threads: cfg.threads,
+        ..Options::default()
+    };
+    for &w in &acfg.worlds {
+        let cases = world_cases(w, truth_machine, machines, cfg)?;
+        for (ci, case) in cases.iter().enumerate() {
+            let dseed = design_seed(cfg.seed, w.tag(), ci);
+            for &col in &acfg.columns {
+                let (d, secs) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
+                let dj = d.to_json();
+                let t = tallies.entry((w.key(), col.key())).or_default();
+                t.times.push(secs);
+                let verdict = match (&case.truth, case.kind) {
+                    (Some(truth), Some(kind)) => {
+                        let o = score_effect(&dj, truth);
+                        t.add_effect(kind, o);
+                        o.label()
+                    }
+                    _ => {
+                        let c = score_clean(&dj);
+                        t.clean += 1;
+                        t.false_alarms += c.false_alarm as usize;
+                        t.clean_findings += c.finding as usize;
+                        if c.false_alarm {
+                            "FALSE ALARM"
+                        } else {
+                            "clean ok"
+                        }
+                    }
+                };
+                let got: Vec<Value> = ["effects", "findings"]
+                    .iter()
+                    .flat_map(|k| dj[*k].as_array().cloned().unwrap_or_default())
+                    .map(|e| json!({"name": e["name"], "params": e["params"]}))
+                    .collect();
+                if verdict != "named" && verdict != "clean ok" {
+                    t.misses.push(json!({
+                        "seed": cfg.seed, "case": ci, "verdict": verdict,
+                        "truth": case.describe, "got": got,
+                    }));
+                }
+                eprintln!(
+                    "{} seed {} case {ci:3} {:17} {:10} {:.2} s  truth {}  got {}",
+                    w.key(),
+                    cfg.seed,
+                    col.key(),
+                    verdict,
+                    secs,
+                    case.describe,
+                    Value::from(got)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Issue 27's bench: every selected world and column over `acfg.seeds`
+/// (pooled; per seed too when there are several).
+pub fn run_approx_bench(
+    truth_machine: &Machine,
+    machines: &[Machine],
+    cfg: &BenchConfig,
+    acfg: &ApproxConfig,
+) -> Result<Value> {
+    if !(0.0..2.0).contains(&acfg.sigma) {
+        bail!("--sigma {}: 0 ≤ σ < 2 (σ of the log factor)", acfg.sigma);
+    }
+    let mut pooled: BTreeMap<(&'static str, &'static str), Tally> = BTreeMap::new();
+    let mut per_seed = serde_json::Map::new();
+    for &seed in &acfg.seeds {
+        let c = BenchConfig { seed, ..*cfg };
+        let mut tallies = BTreeMap::new();
+        run_seed(truth_machine, machines, &c, acfg, &mut tallies)?;
+        per_seed.insert(seed.to_string(), table_json(&tallies));
+        for (k, t) in tallies {
+            let p = pooled.entry(k).or_default();
+            for (kind, v) in t.per {
+                let e = p.per.entry(kind).or_default();
+                for i in 0..4 {
+                    e[i] += v[i];
+                }
+            }
+            p.clean += t.clean;
+            p.false_alarms += t.false_alarms;
+            p.clean_findings += t.clean_findings;
+            p.times.extend(t.times);
+            p.misses.extend(t.misses);
+        }
+    }
+    Ok(json!({
+        "mode": "issue 27 columns: the same cases diagnosed with the exact design file, with a design file whose every design number is multiplied by exp(σ·z) (z standard normal, seeded per case), both with default flags, and by diagnose fit (no file)",
+        "sigma_log": acfg.sigma,
+        "seeds": acfg.seeds,
+        "heldout_seeds": HELDOUT_SEEDS,
+        "heldout": acfg.seeds == HELDOUT_SEEDS,
+        "cases_per_seed": cfg.cases,
+        "scoring": "named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable; wrong: something else named; silent: nothing named or listed. Clean: false alarm = an effect named; parameter findings counted apart",
+        "columns": table_json(&pooled),
+        "per_seed": per_seed,
+    }))
+}
+
+fn table_json(t: &BTreeMap<(&'static str, &'static str), Tally>) -> Value {
+    let mut out = serde_json::Map::new();
+    for ((w, c), tally) in t {
+        if let Some(o) = out
+            .entry(w.to_string())
+            .or_insert_with(|| json!({}))
+            .as_object_mut()
+        {
+            o.insert(c.to_string(), tally.json());
+        }
+    }
+    Value::Object(out)
+}
+
+/// The text table of `run_approx_bench`'s result.
+pub fn approx_text(v: &Value) -> String {
+    let mut s = format!(
+        "issue 27 columns, seeds {}, σ(log) {}: effect cases named / honest / wrong / silent; clean false alarms; s per case\n",
+        v["seeds"], v["sigma_log"]
+    );
+    s += "world        column             effect  named  honest  wrong  silent  named%  n+h%  wrong%  clean  false-alarms  clean-findings  s/case(mean/max)\n";
+    if let Some(ws) = v["columns"].as_object() {
+        for (w, cols) in ws {
+            for (c, t) in cols.as_object().into_iter().flatten() {
+                let f = |k: &str| t[k].as_f64().unwrap_or(f64::NAN);
+                s += &format!(
+                    "{w:12} {c:18} {:6} {:6} {:7} {:6} {:7} {:6.1} {:5.1} {:7.1} {:6} {:13} {:15} {:.2}/{:.2}\n",
+                    t["effect_cases"], t["named"], t["honest"], t["wrong"], t["silent"],
+                    100.0 * f("named_rate"), 100.0 * f("named_or_honest_rate"), 100.0 * f("wrong_rate"),
+                    t["clean_cases"], t["false_alarms"], t["clean_with_parameter_findings"],
+                    f("mean_seconds_per_case"), f("max_seconds_per_case"),
+                );
+            }
+        }
+    }
+    s
+}
