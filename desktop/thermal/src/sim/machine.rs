@@ -7,6 +7,7 @@ use std::path::Path;
 use super::limits;
 
 pub mod spec;
+pub mod tolerance;
 
 pub use spec::{
     BearingSpec, BendingSite, CoolantSpec, DirectionSpec, Driver, EffectSites, Flow, JacketSpec,

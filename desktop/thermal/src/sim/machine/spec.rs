@@ -311,6 +311,9 @@ pub struct MachineSpec {
     pub coolant: Option<CoolantSpec>,
     #[serde(default)]
     pub effects: EffectSites,
+    /// How far each design value may be off (`tolerance.rs`).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub tolerance: std::collections::BTreeMap<String, f64>,
 }
 
 impl MachineSpec {
@@ -447,6 +450,6 @@ impl MachineSpec {
                 within(key, t.length_mm, -1e5, 1e5, "mm")?;
             }
         }
-        Ok(())
+        super::tolerance::check(self)
     }
 }

@@ -1,0 +1,212 @@
+//! The calibration's freedom, left to every candidate: the nominal is the
+//! machine file calibrated within its tolerances (`calibrate.rs`), and an
+//! effect is judged against it with the SAME freedom — each design value may
+//! still move, but only inside its tolerance. Re-calibrating the ≈100
+//! design values for every trial of every candidate would cost ≈100
+//! simulations each, so the freedom is linearised at the calibrated values
+//! (the sensitivity of every channel to every design value, one simulation
+//! per value, computed once) and, for every trial, the design values'
+//! correction is a box-constrained least-squares fit on the fit rows
+//! (projected Gauss–Seidel) whose box is the tolerance: a candidate can
+//! absorb no more of a wrong design than the null hypothesis could.
+
+use anyhow::Result;
+use nalgebra::DMatrix;
+
+use super::calibrate::{apply, Knob};
+use super::effect_fit::{par_map, Evaluator};
+use super::prep::Prepared;
+use crate::sim::Machine;
+
+/// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi (A symmetric positive
+/// definite), by projected Gauss–Seidel from 0 (clamped).
+pub fn box_qp(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
+    let n = b.len();
+    let mut x: Vec<f64> = (0..n).map(|i| 0.0f64.clamp(lo[i], hi[i])).collect();
+    for _ in 0..200 {
+        let mut moved = 0.0f64;
+        for i in 0..n {
+            let aii = a[(i, i)];
+            if aii <= 0.0 {
+                continue;
+            }
+            let mut s = b[i];
+            for j in 0..n {
+                if j != i {
+                    s -= a[(i, j)] * x[j];
+                }
+            }
+            let xi = (s / aii).clamp(lo[i], hi[i]);
+            moved = moved.max((xi - x[i]).abs());
+            x[i] = xi;
+        }
+        if moved < 1e-7 {
+            break;
+        }
+    }
+    x
+}
+
+/// The linearised, bounded calibration freedom on the full grid.
+pub struct Freedom {
+    /// ∂(simulated channel)/∂θ per knob: knob → run → channel → row.
+    sens: Vec<Vec<Vec<Vec<f64>>>>,
+    /// Weight per (run, channel), flattened in run order.
+    w: Vec<f64>,
+    /// Calibrated θ, its bounds and prior precision per knob.
+    theta: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    prec: Vec<f64>,
+    /// SᵀWS over the fit rows plus the prior precision.
+    a: DMatrix<f64>,
+}
+
+impl Freedom {
+    /// Sensitivities at the calibrated θ (one simulation per knob).
+    pub(crate) fn new(
+        m: &Machine,
+        ks: &[Knob],
+        theta: &[f64],
+        ps: &[Prepared],
+        threads: usize,
+    ) -> Result<Freedom> {
+        let cal = apply(m, ks, theta);
+        let ev = Evaluator::new(&cal, ps)?;
+        let r0 = ev.residuals(&[])?;
+        let st = ev.stats_of(&r0);
+        let w: Vec<f64> = st
+            .ch
+            .iter()
+            .map(|c| 1.0 / (c.sse_fit / c.n_fit.max(1) as f64 + (0.1 * c.s).powi(2)))
+            .collect();
+        let h = 0.02;
+        let idx: Vec<usize> = (0..ks.len()).collect();
+        let sens = par_map(&idx, threads, |&i| -> Result<Vec<Vec<Vec<f64>>>> {
+            let mut t = theta.to_vec();
+            t[i] += h;
+            let mi = apply(m, ks, &t);
+            let ri = Evaluator::new(&mi, ps)?.residuals(&[])?;
+            // residual = measured − simulated: ∂sim = −∂residual
+            Ok(r0
+                .iter()
+                .zip(&ri)
+                .map(|(a, b)| {
+                    a.iter()
+                        .zip(b)
+                        .map(|(x, y)| {
+                            x.iter()
+                                .zip(y)
+                                .map(|(p, q)| {
+                                    let d = (p - q) / h;
+                                    if d.is_finite() {
+                                        d
+                                    } else {
+                                        0.0
+                                    }
+                                })
+                                .collect()
+                        })
+                        .collect()
+                })
+                .collect())
+        })
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
+        let nk = ks.len();
+        let prec: Vec<f64> = ks.iter().map(|k| 1.0 / k.sigma().powi(2)).collect();
+        let mut a = DMatrix::<f64>::zeros(nk, nk);
+        for i in 0..nk {
+            for j in i..nk {
+                let v = dot_fit(ps, &w, &sens[i], &sens[j]);
+                a[(i, j)] = v;
+                a[(j, i)] = v;
+            }
+            a[(i, i)] += prec[i];
+        }
+        let (lo, hi): (Vec<f64>, Vec<f64>) = ks.iter().map(Knob::bounds).unzip();
+        Ok(Freedom {
+            sens,
+            w,
+            theta: theta.to_vec(),
+            lo,
+            hi,
+            prec,
+            a,
+        })
+    }
+
+    /// Number of design values that may move.
+    pub fn len(&self) -> usize {
+        self.theta.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.theta.is_empty()
+    }
+
+    /// The bounded correction δ of the design values that best explains
+    /// `res` on the fit rows (with the prior), and `res` with it removed
+    /// (every row).
+    pub fn project(&self, ps: &[Prepared], res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
+        let nk = self.len();
+        if nk == 0 {
+            return Vec::new();
+        }
+        let b: Vec<f64> = (0..nk)
+            .map(|i| dot_fit(ps, &self.w, &self.sens[i], res) - self.prec[i] * self.theta[i])
+            .collect();
+        let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
+        let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
+        let d = box_qp(&self.a, &b, &lo, &hi);
+        for (i, di) in d.iter().enumerate() {
+            if *di == 0.0 {
+                continue;
+            }
+            for (rr, sr) in res.iter_mut().zip(&self.sens[i]) {
+                for (r, s) in rr.iter_mut().zip(sr) {
+                    for (v, sv) in r.iter_mut().zip(s) {
+                        *v -= di * sv;
+                    }
+                }
+            }
+        }
+        d
+    }
+
+    /// Where each knob would go with its bound released: the data's pull
+    /// at the calibrated θ (positive: wants a larger value).
+    pub fn pull(&self, ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Vec<f64> {
+        (0..self.len())
+            .map(|i| dot_fit(ps, &self.w, &self.sens[i], res) - self.prec[i] * self.theta[i])
+            .collect()
+    }
+
+    pub fn theta(&self) -> &[f64] {
+        &self.theta
+    }
+
+    pub fn bounds(&self, i: usize) -> (f64, f64) {
+        (self.lo[i], self.hi[i])
+    }
+}
+
+/// Σ over fit rows of w·x·y (non-finite rows skipped).
+fn dot_fit(ps: &[Prepared], w: &[f64], x: &[Vec<Vec<f64>>], y: &[Vec<Vec<f64>>]) -> f64 {
+    let mut s = 0.0;
+    let mut ci = 0;
+    for ((p, xr), yr) in ps.iter().zip(x).zip(y) {
+        for (xc, yc) in xr.iter().zip(yr) {
+            let wc = w.get(ci).copied().unwrap_or(0.0);
+            let mut acc = 0.0;
+            for (k, (a, b)) in xc.iter().zip(yc).enumerate() {
+                if p.is_fit(k) && b.is_finite() && a.is_finite() {
+                    acc += a * b;
+                }
+            }
+            s += wc * acc;
+            ci += 1;
+        }
+    }
+    s
+}
