@@ -11,7 +11,7 @@
 //! absorb no more of a wrong design than the null hypothesis could.
 
 use anyhow::Result;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator};
@@ -49,10 +49,11 @@ pub fn box_qp(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
-    /// ∂(simulated channel)/∂θ per knob: knob → run → channel → row.
-    sens: Vec<Vec<Vec<Vec<f64>>>>,
-    /// Weight per (run, channel), flattened in run order.
-    w: Vec<f64>,
+    /// ∂(simulated channel)/∂θ: one row per (run, channel, row) in order,
+    /// one column per knob.
+    sens: DMatrix<f64>,
+    /// Weight per flattened row: the channel's on fit rows, 0 on held-out.
+    wf: Vec<f64>,
     /// Calibrated θ, its bounds and prior precision per knob.
     theta: Vec<f64>,
     lo: Vec<f64>,
@@ -82,7 +83,7 @@ impl Freedom {
             .collect();
         let h = 0.02;
         let idx: Vec<usize> = (0..ks.len()).collect();
-        let sens = par_map(&idx, threads, |&i| -> Result<Vec<Vec<Vec<f64>>>> {
+        let cols = par_map(&idx, threads, |&i| -> Result<Vec<Vec<Vec<f64>>>> {
             let mut t = theta.to_vec();
             t[i] += h;
             let mi = apply(m, ks, &t);
@@ -115,19 +116,30 @@ impl Freedom {
         .collect::<Result<Vec<_>>>()?;
         let nk = ks.len();
         let prec: Vec<f64> = ks.iter().map(|k| 1.0 / k.sigma().powi(2)).collect();
-        let mut a = DMatrix::<f64>::zeros(nk, nk);
-        for i in 0..nk {
-            for j in i..nk {
-                let v = dot_fit(ps, &w, &sens[i], &sens[j]);
-                a[(i, j)] = v;
-                a[(j, i)] = v;
+        let mut wf = Vec::new();
+        let mut ci = 0;
+        for (p, rr) in ps.iter().zip(&r0) {
+            for ch in rr {
+                wf.extend((0..ch.len()).map(|k| if p.is_fit(k) { w[ci] } else { 0.0 }));
+                ci += 1;
             }
+        }
+        let n_all = wf.len();
+        let sens = DMatrix::from_fn(n_all, nk, |_, _| 0.0);
+        let mut sens = sens;
+        for (i, col) in cols.iter().enumerate() {
+            let flat: Vec<f64> = col.iter().flatten().flatten().copied().collect();
+            sens.column_mut(i).copy_from_slice(&flat);
+        }
+        let ws = DMatrix::from_fn(n_all, nk, |r, c| sens[(r, c)] * wf[r]);
+        let mut a = sens.transpose() * ws;
+        for i in 0..nk {
             a[(i, i)] += prec[i];
         }
         let (lo, hi): (Vec<f64>, Vec<f64>) = ks.iter().map(Knob::bounds).unzip();
         Ok(Freedom {
             sens,
-            w,
+            wf,
             theta: theta.to_vec(),
             lo,
             hi,
@@ -148,38 +160,47 @@ impl Freedom {
     /// The bounded correction δ of the design values that best explains
     /// `res` on the fit rows (with the prior), and `res` with it removed
     /// (every row).
-    pub fn project(&self, ps: &[Prepared], res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
+    pub fn project(&self, _ps: &[Prepared], res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
         let nk = self.len();
         if nk == 0 {
             return Vec::new();
         }
-        let b: Vec<f64> = (0..nk)
-            .map(|i| dot_fit(ps, &self.w, &self.sens[i], res) - self.prec[i] * self.theta[i])
-            .collect();
+        let b = self.pull_of(res);
         let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
         let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
         let d = box_qp(&self.a, &b, &lo, &hi);
-        for (i, di) in d.iter().enumerate() {
-            if *di == 0.0 {
-                continue;
-            }
-            for (rr, sr) in res.iter_mut().zip(&self.sens[i]) {
-                for (r, s) in rr.iter_mut().zip(sr) {
-                    for (v, sv) in r.iter_mut().zip(s) {
-                        *v -= di * sv;
-                    }
+        let corr = &self.sens * DVector::from_column_slice(&d);
+        let mut k = 0;
+        for rr in res.iter_mut() {
+            for r in rr.iter_mut() {
+                for v in r.iter_mut() {
+                    *v -= corr[k];
+                    k += 1;
                 }
             }
         }
         d
     }
 
+    /// Sᵀ W r − prior: the data's pull on every knob at the calibrated θ.
+    fn pull_of(&self, res: &[Vec<Vec<f64>>]) -> Vec<f64> {
+        let wr: Vec<f64> = res
+            .iter()
+            .flatten()
+            .flatten()
+            .zip(&self.wf)
+            .map(|(r, w)| if r.is_finite() { r * w } else { 0.0 })
+            .collect();
+        let g = self.sens.tr_mul(&DVector::from_vec(wr));
+        (0..self.len())
+            .map(|i| g[i] - self.prec[i] * self.theta[i])
+            .collect()
+    }
+
     /// Where each knob would go with its bound released: the data's pull
     /// at the calibrated θ (positive: wants a larger value).
-    pub fn pull(&self, ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Vec<f64> {
-        (0..self.len())
-            .map(|i| dot_fit(ps, &self.w, &self.sens[i], res) - self.prec[i] * self.theta[i])
-            .collect()
+    pub fn pull(&self, _ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Vec<f64> {
+        self.pull_of(res)
     }
 
     pub fn theta(&self) -> &[f64] {
@@ -191,22 +212,3 @@ impl Freedom {
     }
 }
 
-/// Σ over fit rows of w·x·y (non-finite rows skipped).
-fn dot_fit(ps: &[Prepared], w: &[f64], x: &[Vec<Vec<f64>>], y: &[Vec<Vec<f64>>]) -> f64 {
-    let mut s = 0.0;
-    let mut ci = 0;
-    for ((p, xr), yr) in ps.iter().zip(x).zip(y) {
-        for (xc, yc) in xr.iter().zip(yr) {
-            let wc = w.get(ci).copied().unwrap_or(0.0);
-            let mut acc = 0.0;
-            for (k, (a, b)) in xc.iter().zip(yc).enumerate() {
-                if p.is_fit(k) && b.is_finite() && a.is_finite() {
-                    acc += a * b;
-                }
-            }
-            s += wc * acc;
-            ci += 1;
-        }
-    }
-    s
-}

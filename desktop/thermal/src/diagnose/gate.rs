@@ -49,10 +49,12 @@ fn blocks(
     out
 }
 
-/// z of the held-out reduction of the mean squared gap (noise units):
-/// per held-out block the effect acts on (a sensor step acts after its
-/// onset only), the mean of (r₀² − r₁²)/s² over channels and rows, then
-/// mean / (sd / √blocks). NaN with fewer than two blocks.
+/// z of the held-out reduction of the gap against the noise: per held-out
+/// block the effect acts on (a sensor step acts after its onset only),
+/// d = ln((M₀ + 1)/(M₁ + 1)) with M the block's mean squared gap in noise
+/// units (the + 1 is the measured noise: a reduction inside it counts
+/// for little), then mean(d) / (sd(d) / √blocks). NaN with fewer than two
+/// blocks.
 pub fn held_out_z(ps: &[Prepared], r0: &[Vec<Vec<f64>>], r1: &[Vec<Vec<f64>>]) -> f64 {
     let touched = |pi: usize, a: usize, b: usize| {
         let p = &ps[pi];
@@ -67,17 +69,18 @@ pub fn held_out_z(ps: &[Prepared], r0: &[Vec<Vec<f64>>], r1: &[Vec<Vec<f64>>]) -
         .into_iter()
         .filter_map(|(pi, a, b)| {
             let p = &ps[pi];
-            let (mut s, mut n) = (0.0, 0usize);
+            let (mut s0, mut s1, mut n) = (0.0, 0.0, 0usize);
             for (ci, c) in p.channels.iter().enumerate() {
                 for k in a..b {
                     let (x, y) = (r0[pi][ci][k], r1[pi][ci][k]);
                     if x.is_finite() && y.is_finite() && c.s > 0.0 {
-                        s += (x * x - y * y) / (c.s * c.s);
+                        s0 += x * x / (c.s * c.s);
+                        s1 += y * y / (c.s * c.s);
                         n += 1;
                     }
                 }
             }
-            (n > 0).then(|| s / n as f64)
+            (n > 0).then(|| ((s0 / n as f64 + 1.0) / (s1 / n as f64 + 1.0)).ln())
         })
         .collect();
     if d.len() < 2 {
