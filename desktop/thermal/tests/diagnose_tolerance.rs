@@ -48,8 +48,10 @@ fn one_line_error(t: &str, needle: &str) {
 
 #[test]
 fn tolerance_table_parses() {
-    let m = with_tolerance("default = 0.1\nfilm = 0.3\n\"link:bed-head\" = 0.05\n\"length:z:head\" = 0.0")
-        .unwrap();
+    let m = with_tolerance(
+        "default = 0.1\nfilm = 0.3\n\"link:bed-head\" = 0.05\n\"length:z:head\" = 0.0",
+    )
+    .unwrap();
     let tol = &m.spec.tolerance;
     use tcomp_thermal::sim::machine::tolerance::of;
     assert_eq!(of(tol, "film", Some("head")), 0.3);
@@ -78,7 +80,10 @@ fn tolerance_of_100_percent_is_refused() {
 
 #[test]
 fn unknown_tolerance_key_is_refused() {
-    one_line_error("\"film:spindle\" = 0.2", "`film:spindle`: unknown parameter");
+    one_line_error(
+        "\"film:spindle\" = 0.2",
+        "`film:spindle`: unknown parameter",
+    );
     one_line_error("conductance = 0.2", "`conductance`: unknown parameter");
 }
 

@@ -488,7 +488,7 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         }
         let dlo: Vec<f64> = (0..nk).map(|i| lo[i] - theta[i]).collect();
         let dhi: Vec<f64> = (0..nk).map(|i| hi[i] - theta[i]).collect();
-        let delta = super::freedom::box_qp(&a, &g, &dlo, &dhi);
+        let delta = super::boxqp::box_qp(&a, &g, &dlo, &dhi);
         // step halving on the criterion (data + prior)
         let mut step = 1.0;
         let mut moved = false;

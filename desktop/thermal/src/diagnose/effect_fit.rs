@@ -75,6 +75,12 @@ impl Stats {
     }
 }
 
+/// A correction every evaluation's residuals get: the calibration's
+/// bounded freedom (`freedom.rs`), left to the null and every candidate.
+pub trait Projection: Sync {
+    fn project(&self, res: &mut [Vec<Vec<f64>>]);
+}
+
 /// Simulates the prepared runs with a set of effects.
 pub struct Evaluator<'a> {
     pub m: &'a Machine,
@@ -84,7 +90,7 @@ pub struct Evaluator<'a> {
     pub nominal: Vec<SimOut>,
     /// The calibration's bounded freedom, left to every evaluation (None:
     /// the machine file taken as exact).
-    pub freedom: Option<&'a super::freedom::Freedom>,
+    pub freedom: Option<&'a dyn Projection>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -102,7 +108,7 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The same evaluator with the calibration's freedom left to every fit.
-    pub fn with_freedom(mut self, f: Option<&'a super::freedom::Freedom>) -> Evaluator<'a> {
+    pub fn with_freedom(mut self, f: Option<&'a dyn Projection>) -> Evaluator<'a> {
         self.freedom = f;
         self
     }
@@ -138,7 +144,7 @@ impl<'a> Evaluator<'a> {
             all.push(rr);
         }
         if let Some(f) = self.freedom {
-            f.project(self.runs, &mut all);
+            f.project(&mut all);
         }
         Ok(all)
     }

@@ -13,39 +13,11 @@
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
+use super::boxqp::box_qp;
 use super::calibrate::{apply, Knob};
-use super::effect_fit::{par_map, Evaluator};
+use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
-
-/// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi (A symmetric positive
-/// definite), by projected Gauss–Seidel from 0 (clamped).
-pub fn box_qp(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
-    let n = b.len();
-    let mut x: Vec<f64> = (0..n).map(|i| 0.0f64.clamp(lo[i], hi[i])).collect();
-    for _ in 0..200 {
-        let mut moved = 0.0f64;
-        for i in 0..n {
-            let aii = a[(i, i)];
-            if aii <= 0.0 {
-                continue;
-            }
-            let mut s = b[i];
-            for j in 0..n {
-                if j != i {
-                    s -= a[(i, j)] * x[j];
-                }
-            }
-            let xi = (s / aii).clamp(lo[i], hi[i]);
-            moved = moved.max((xi - x[i]).abs());
-            x[i] = xi;
-        }
-        if moved < 1e-7 {
-            break;
-        }
-    }
-    x
-}
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
@@ -160,7 +132,7 @@ impl Freedom {
     /// The bounded correction δ of the design values that best explains
     /// `res` on the fit rows (with the prior), and `res` with it removed
     /// (every row).
-    pub fn project(&self, _ps: &[Prepared], res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
+    pub fn correct(&self, res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
         let nk = self.len();
         if nk == 0 {
             return Vec::new();
@@ -212,3 +184,8 @@ impl Freedom {
     }
 }
 
+impl Projection for Freedom {
+    fn project(&self, res: &mut [Vec<Vec<f64>>]) {
+        self.correct(res);
+    }
+}

@@ -5,13 +5,13 @@ use super::prep::Prepared;
 
 /// One-sided z at 1 %: a claimed reduction must reach it.
 pub const Z_MIN: f64 = 2.33;
-/// Fewest held-out blocks the test is run on (segments are cut when there
-/// are fewer).
-const MIN_BLOCKS: usize = 4;
+/// Longest held-out block [s]: a held-out stretch is cut into blocks of at
+/// most this length (the slow thermal misfit changes little within one).
+const BLOCK_S: f64 = 600.0;
 
 /// Held-out blocks: each contiguous stretch of held-out rows of a run
 /// where `touched` (the effect changes the prediction there), cut into
-/// equal pieces when there are fewer than `MIN_BLOCKS` in all.
+/// equal pieces of at most `BLOCK_S`.
 fn blocks(
     ps: &[Prepared],
     touched: impl Fn(usize, usize, usize) -> bool,
@@ -33,12 +33,10 @@ fn blocks(
             }
         }
     }
-    if segs.is_empty() || segs.len() >= MIN_BLOCKS {
-        return segs;
-    }
-    let cut = MIN_BLOCKS.div_ceil(segs.len());
     let mut out = Vec::new();
     for (pi, a, b) in segs {
+        let max = ((BLOCK_S / ps[pi].inputs.dt).floor() as usize).max(1);
+        let cut = (b - a).div_ceil(max).max(1);
         let len = (b - a).div_ceil(cut).max(1);
         let mut s = a;
         while s < b {

@@ -3,6 +3,7 @@
 //! phase, frequency band), fit each candidate effect on the fit part and
 //! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
 
+pub mod boxqp;
 pub mod calibrate;
 pub mod candidate;
 pub mod effect_fit;
@@ -663,7 +664,10 @@ fn diagnose_core(
     cal: Option<CalNull>,
 ) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
-    let ev = Evaluator::new(m, ps)?.with_freedom(cal.as_ref().map(|c| c.freedom));
+    let ev = Evaluator::new(m, ps)?.with_freedom(
+        cal.as_ref()
+            .map(|c| c.freedom as &dyn effect_fit::Projection),
+    );
     let res0 = ev.residuals(&[])?;
     let st0 = ev.stats_of(&res0);
     let judge = Judge {
@@ -754,20 +758,6 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
         }
     };
     d.untestable = placement::untestable(m, &ps, &opt.only);
-    if std::env::var_os("TCOMP_DIAG_DEBUG").is_some() {
-        eprintln!("DEBUG notes {:?}", d.notes);
-        for f in &d.tried {
-            eprintln!("DEBUG {} z {}", f.name, f.evidence["held_out_z"]);
-        }
-        for f in &d.findings {
-            eprintln!(
-                "DEBUG finding {} {} {}",
-                f.name,
-                f.params_json(),
-                f.evidence
-            );
-        }
-    }
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
 }

@@ -106,7 +106,7 @@ fn eval(
     ps: &[Prepared],
     fr: &Freedom,
 ) -> Result<(f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>)> {
-    let ev = Evaluator::new(m, ps)?.with_freedom(Some(fr));
+    let ev = Evaluator::new(m, ps)?.with_freedom(Some(fr as &dyn super::effect_fit::Projection));
     let r = ev.residuals(&[])?;
     let st = ev.stats_of(&r);
     Ok((st.j_fit(), st, r))

@@ -276,6 +276,7 @@ impl Machine {
     pub fn from_toml(text: &str) -> Result<Machine> {
         let spec: MachineSpec = toml::from_str(text).map_err(|e| limits::toml_error(text, &e))?;
         spec.validate()?;
+        tolerance::check(&spec)?;
         Machine::compile(spec)
     }
 
