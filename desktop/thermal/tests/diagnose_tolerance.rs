@@ -40,7 +40,9 @@ fn with_tolerance(t: &str) -> anyhow::Result<Machine> {
 }
 
 fn one_line_error(t: &str, needle: &str) {
-    let e = with_tolerance(t).err().expect("must be refused");
+    let Err(e) = with_tolerance(t) else {
+        panic!("`{t}` must be refused");
+    };
     let msg = format!("{e:#}");
     assert!(!msg.contains('\n'), "one line: {msg}");
     assert!(msg.contains(needle), "`{needle}` in: {msg}");
@@ -116,7 +118,7 @@ fn runs(m: &Machine, seed: u64) -> Vec<(String, tcomp_data::runcsv::Run)> {
 /// The design file: every capacity, loss and link of the truth off by a
 /// deterministic ±10–15 %.
 fn design_off(truth: &Machine) -> Machine {
-    let f = |k: usize| if k % 2 == 0 { 1.15 } else { 0.88 };
+    let f = |k: usize| if k.is_multiple_of(2) { 1.15 } else { 0.88 };
     let mut m = truth.clone();
     for (k, c) in m.c.iter_mut().enumerate() {
         *c *= f(k);
@@ -147,7 +149,14 @@ fn film_coefficients_far_off_are_a_convection_finding() {
     let rs = runs(&truth, 41);
     let d = diagnose(&design, &rs, &Options::default()).unwrap();
     let top = d.findings.first().expect("a finding");
-    assert_eq!(top.name, "convection", "{:?}", top.params_json());
+    // convection named: the film group released, or the convection effect
+    // (alone or as the base of the selected pair)
+    assert!(
+        top.name.split('+').any(|n| n == "convection"),
+        "{} {:?}",
+        top.name,
+        top.params_json()
+    );
     let p = top.params_json();
     if let Some(f) = p.get("factor").and_then(|f| f.as_f64()) {
         assert_eq!(p["parameter"], "film");

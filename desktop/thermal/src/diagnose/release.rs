@@ -99,13 +99,12 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
     }
 }
 
+/// Fit criterion, stats and residuals of one released machine.
+type Judged = (f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>);
+
 /// The judged quantities of a machine (with the freedom): fit criterion,
 /// stats and residuals.
-fn eval(
-    m: &Machine,
-    ps: &[Prepared],
-    fr: &Freedom,
-) -> Result<(f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>)> {
+fn eval(m: &Machine, ps: &[Prepared], fr: &Freedom) -> Result<Judged> {
     let ev = Evaluator::new(m, ps)?.with_freedom(Some(fr as &dyn super::effect_fit::Projection));
     let r = ev.residuals(&[])?;
     let st = ev.stats_of(&r);
