@@ -33,7 +33,12 @@ fn run_with(m: &Machine, effects: Vec<Effect>, seed: u64) -> Run {
 fn finds_a_strong_ballscrew_effect_and_shrinks_the_gap() {
     let m = turning();
     let run = run_with(&m, vec![Effect::Ballscrew { k_w: 120.0 }], 11);
-    let d = diagnose(&m, &[("r".into(), run)], &Options::default()).unwrap();
+    // closed world: the file is the simulator's own, exact by construction
+    let exact = Options {
+        exact: true,
+        ..Options::default()
+    };
+    let d = diagnose(&m, &[("r".into(), run)], &exact).unwrap();
     let top = d.findings.first().expect("an effect");
     assert_eq!(top.name, "ballscrew");
     let ((before, _), (after, _)) = top.gap_um.unwrap();
@@ -110,6 +115,8 @@ fn two_runs_hold_out_the_end_of_every_hour_of_each() {
         &[("a".into(), a), ("b".into(), b)],
         &Options {
             only: vec!["convection".into(), "coolant".into()],
+            // the file is the simulator's own (exact): the convection effect
+            exact: true,
             ..Options::default()
         },
     )

@@ -31,13 +31,14 @@ pub struct DiagnoseArgs {
     /// Threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Calibrate the machine file's design values (capacities, conductances,
-    /// losses, heat gains, displacement lengths) on the fit rows before the
-    /// effect search: for a design known to be off by 10-20 % (without it,
-    /// such a file names effects on clean runs; with it, an exact file loses
-    /// effects to the calibration: BENCHMARKS.md, issue 16). Off by default:
-    /// the file is taken as the design says.
+    /// Take the machine file as exact: no calibration within its
+    /// tolerances (by default every design value may move within its
+    /// tolerance, `[tolerance]` in the file or ±25 %, on the fit rows, and
+    /// every candidate effect is judged with the same freedom).
     #[arg(long)]
+    pub exact: bool,
+    /// Accepted for compatibility; no effect (the default calibrates).
+    #[arg(long, hide = true)]
     pub calibrate: bool,
 }
 
@@ -58,6 +59,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     let mut opt = Options {
         fit_fraction: a.fit_fraction,
         only: a.only.clone(),
+        exact: a.exact,
         calibrate: a.calibrate,
         ..Options::default()
     };
@@ -93,22 +95,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         {
             println!("{n}");
         }
-        if d.findings.is_empty() {
-            println!("no candidate effect is supported by the data");
-        }
-        for (i, f) in d.findings.iter().enumerate() {
-            println!(
-                "{}. {} {} — held-out gap {} µm → {} µm, {} °C → {} °C, ΔBIC {:.1}",
-                i + 1,
-                f.name,
-                f.params_json(),
-                f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
-                f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
-                f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
-                f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
-                f.dbic
-            );
-        }
+        print_findings(&d);
         if !d.untestable.is_empty() {
             let names: Vec<&str> = d.untestable.iter().map(|(n, _)| n.as_str()).collect();
             println!(
@@ -126,4 +113,35 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The ranked findings, effects and design values alike, one line each.
+fn print_findings(d: &tcomp_thermal::diagnose::Diagnosis) {
+    if d.findings.is_empty() {
+        println!("no candidate effect is supported by the data");
+    }
+    for (i, f) in d.findings.iter().enumerate() {
+        let p = f.params_json();
+        let what = match p.get("meaning").and_then(|m| m.as_str()) {
+            Some(m) => format!(
+                "{}: design {} → fitted {} (×{}): {m}",
+                p["parameter"].as_str().unwrap_or(""),
+                p["design"],
+                p["fitted"],
+                p["factor"]
+            ),
+            None => p.to_string(),
+        };
+        println!(
+            "{}. {} {} — held-out gap {} µm → {} µm, {} °C → {} °C, ΔBIC {:.1}",
+            i + 1,
+            f.name,
+            what,
+            f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
+            f.gap_um.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
+            f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.0 .0)),
+            f.gap_c.map_or("–".into(), |g| format!("{:.3}", g.1 .0)),
+            f.dbic
+        );
+    }
 }

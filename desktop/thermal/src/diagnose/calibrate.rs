@@ -4,8 +4,9 @@
 //! leaves a residual that any candidate effect with a free level (ball-screw
 //! heat, a sensor offset, convection) will happily absorb. So the nominal's
 //! uncertain parameters are first fitted on the fit rows, each as a log
-//! scale factor θ on its design value with a Gaussian prior (the design is
-//! good to about `PRIOR_SIGMA`, one σ) inside hard bounds (`BOUND`), by
+//! scale factor θ on its design value inside its tolerance (the machine
+//! file's `[tolerance]`, ±25 % by default: θ ∈ [ln(1 − tol), ln(1 + tol)])
+//! with a Gaussian prior (one σ = half the tolerance), by
 //! Gauss–Newton on the diagnosis' own criterion (per-channel unknown
 //! variance, iteratively reweighted) plus the prior. The effect search then
 //! works against the calibrated nominal. Whatever the calibration absorbs
@@ -20,10 +21,6 @@ use super::prep::Prepared;
 use crate::sim::Machine;
 use tcomp_data::stats::block_means;
 
-/// Prior spread of a design value (one σ of ln factor: ≈ 20 %).
-pub const PRIOR_SIGMA: f64 = 0.2;
-/// Hard bounds of a factor: design value × 1/2 … × 2.
-pub const BOUND: f64 = std::f64::consts::LN_2;
 /// Above this many element parameters, elements of a kind share one factor.
 const MAX_KNOBS: usize = 160;
 /// Gauss–Newton iterations.
@@ -31,7 +28,7 @@ const ITERS: usize = 3;
 
 /// What a knob scales.
 #[derive(Clone, Debug)]
-enum Target {
+pub(crate) enum Target {
     Capacity(Vec<usize>),
     Loss(Vec<usize>),
     Link(Vec<usize>),
@@ -45,9 +42,35 @@ enum Target {
 }
 
 #[derive(Clone, Debug)]
-struct Knob {
-    name: String,
+pub(crate) struct Knob {
+    pub name: String,
     target: Target,
+    /// Its tolerance group (`sim::machine::tolerance::GROUPS`).
+    pub group: &'static str,
+    /// Its element key within the group (None: the whole group).
+    pub element: Option<String>,
+    /// Its tolerance (fraction): θ ∈ [ln(1 − tol), ln(1 + tol)].
+    pub tol: f64,
+}
+
+impl Knob {
+    fn new(name: String, target: Target, group: &'static str, element: Option<String>) -> Knob {
+        Knob {
+            name,
+            target,
+            group,
+            element,
+            tol: 0.0,
+        }
+    }
+    /// Bounds of θ (ln factor) inside the tolerance.
+    pub fn bounds(&self) -> (f64, f64) {
+        ((1.0 - self.tol).ln(), (1.0 + self.tol).ln())
+    }
+    /// Prior spread of θ: half the tolerance (the bound is 2 σ).
+    pub fn sigma(&self) -> f64 {
+        (0.5 * (1.0 + self.tol).ln()).max(1e-6)
+    }
 }
 
 /// Knobs by how fine they are: `common` always apply; `element` (one per
@@ -89,36 +112,48 @@ fn add_node_knobs(m: &Machine, sets: &mut KnobSets) {
     let lumped_c: Vec<usize> = (0..n_lumped).filter(|&i| m.c[i] > 0.0).collect();
     let lumped_g: Vec<usize> = (0..n_lumped).filter(|&i| m.g_amb[i] > 0.0).collect();
     for &i in &lumped_c {
-        sets.element.push(Knob {
-            name: format!("c_j_per_k {}", node_name(m, i)),
-            target: Target::Capacity(vec![i]),
-        });
+        let n = node_name(m, i);
+        let t = Target::Capacity(vec![i]);
+        sets.element
+            .push(Knob::new(format!("c_j_per_k {n}"), t, "capacity", Some(n)));
     }
-    sets.grouped.push(Knob {
-        name: "c_j_per_k (all nodes)".into(),
-        target: Target::Capacity(lumped_c.clone()),
-    });
+    let t = Target::Capacity(lumped_c);
+    sets.grouped.push(Knob::new(
+        "c_j_per_k (all nodes)".into(),
+        t,
+        "capacity",
+        None,
+    ));
     for &i in &lumped_g {
-        sets.element.push(Knob {
-            name: format!("g_amb_w_per_k {}", node_name(m, i)),
-            target: Target::Loss(vec![i]),
-        });
+        let n = node_name(m, i);
+        let t = Target::Loss(vec![i]);
+        sets.element
+            .push(Knob::new(format!("g_amb_w_per_k {n}"), t, "film", Some(n)));
     }
-    sets.grouped.push(Knob {
-        name: "g_amb_w_per_k (all nodes)".into(),
-        target: Target::Loss(lumped_g.clone()),
-    });
+    let t = Target::Loss(lumped_g);
+    sets.grouped.push(Knob::new(
+        "g_amb_w_per_k (all nodes)".into(),
+        t,
+        "film",
+        None,
+    ));
     if !rod.is_empty() {
-        sets.common.push(Knob {
-            name: "rod capacity".into(),
-            target: Target::Capacity(rod.clone()),
-        });
+        let t = Target::Capacity(rod.clone());
+        let rod_name = Some("rod".to_string());
+        sets.common.push(Knob::new(
+            "rod capacity".into(),
+            t,
+            "capacity",
+            rod_name.clone(),
+        ));
         let rg: Vec<usize> = rod.iter().copied().filter(|&i| m.g_amb[i] > 0.0).collect();
         if !rg.is_empty() {
-            sets.common.push(Knob {
-                name: "rod g_amb".into(),
-                target: Target::Loss(rg),
-            });
+            sets.common.push(Knob::new(
+                "rod g_amb".into(),
+                Target::Loss(rg),
+                "film",
+                rod_name,
+            ));
         }
     }
 }
@@ -135,21 +170,26 @@ fn add_link_knobs(m: &Machine, sets: &mut KnobSets) {
             rod_links.push(k);
         } else {
             lumped_links.push(k);
-            sets.element.push(Knob {
-                name: format!("link {}–{}", node_name(m, a), node_name(m, b)),
-                target: Target::Link(vec![k]),
-            });
+            let (na, nb) = (node_name(m, a), node_name(m, b));
+            sets.element.push(Knob::new(
+                format!("link {na}–{nb}"),
+                Target::Link(vec![k]),
+                "link",
+                Some(format!("{na}-{nb}")),
+            ));
         }
     }
-    sets.grouped.push(Knob {
-        name: "g_w_per_k (all links)".into(),
-        target: Target::Link(lumped_links),
-    });
+    let t = Target::Link(lumped_links);
+    sets.grouped
+        .push(Knob::new("g_w_per_k (all links)".into(), t, "link", None));
     if !rod_links.is_empty() {
-        sets.common.push(Knob {
-            name: "rod conduction".into(),
-            target: Target::Link(rod_links),
-        });
+        let t = Target::Link(rod_links);
+        sets.common.push(Knob::new(
+            "rod conduction".into(),
+            t,
+            "link",
+            Some("rod".into()),
+        ));
     }
 }
 
@@ -162,16 +202,15 @@ fn add_jacket_knobs(m: &Machine, sets: &mut KnobSets) {
         .filter(|&j| c.jacket[j].1 > 0.0)
         .collect();
     for &j in &js {
-        sets.element.push(Knob {
-            name: format!("jacket {}", node_name(m, c.jacket[j].0)),
-            target: Target::Jacket(vec![j]),
-        });
+        let n = node_name(m, c.jacket[j].0);
+        let t = Target::Jacket(vec![j]);
+        sets.element
+            .push(Knob::new(format!("jacket {n}"), t, "jacket", Some(n)));
     }
     if !js.is_empty() {
-        sets.grouped.push(Knob {
-            name: "jacket (all)".into(),
-            target: Target::Jacket(js),
-        });
+        let t = Target::Jacket(js);
+        sets.grouped
+            .push(Knob::new("jacket (all)".into(), t, "jacket", None));
     }
 }
 
@@ -190,24 +229,30 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
     let feed = driven_by(crate::sim::machine::Driver::Feed);
     let motor = m.motor_node.is_some() && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
     if !spindle.is_empty() || !m.spec.bearings.is_empty() || motor {
-        sets.common.push(Knob {
-            name: "spindle heat (all spindle-driven sources, bearings, motor)".into(),
-            target: Target::Heat {
-                sources: spindle,
-                bearings: (0..m.spec.bearings.len()).collect(),
-                motor,
-            },
-        });
+        let t = Target::Heat {
+            sources: spindle,
+            bearings: (0..m.spec.bearings.len()).collect(),
+            motor,
+        };
+        sets.common.push(Knob::new(
+            "spindle heat (all spindle-driven sources, bearings, motor)".into(),
+            t,
+            "heat",
+            Some("spindle".into()),
+        ));
     }
     if !feed.is_empty() {
-        sets.common.push(Knob {
-            name: "feed heat (all feed-driven sources)".into(),
-            target: Target::Heat {
-                sources: feed,
-                bearings: vec![],
-                motor: false,
-            },
-        });
+        let t = Target::Heat {
+            sources: feed,
+            bearings: vec![],
+            motor: false,
+        };
+        sets.common.push(Knob::new(
+            "feed heat (all feed-driven sources)".into(),
+            t,
+            "heat",
+            Some("feed".into()),
+        ));
     }
 }
 
@@ -215,31 +260,62 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
 fn add_term_knobs(m: &Machine, sets: &mut KnobSets) {
     for (d, terms) in m.dir_terms.iter().enumerate() {
         let dir = m.dir_cols.get(d).cloned().unwrap_or_default();
+        let dir_name = m
+            .spec
+            .directions
+            .get(d)
+            .map_or(dir.clone(), |x| x.name.clone());
         let live: Vec<usize> = (0..terms.len()).filter(|&t| terms[t].1 != 0.0).collect();
         for &t in &live {
-            sets.element.push(Knob {
-                name: format!("{dir} term {}", node_name(m, terms[t].0)),
-                target: Target::Term(d, vec![t]),
-            });
+            let n = node_name(m, terms[t].0);
+            sets.element.push(Knob::new(
+                format!("{dir} term {n}"),
+                Target::Term(d, vec![t]),
+                "length",
+                Some(format!("{dir_name}:{n}")),
+            ));
         }
-        sets.grouped.push(Knob {
-            name: format!("{dir} (all terms)"),
-            target: Target::Term(d, live),
-        });
+        let t = Target::Term(d, live);
+        sets.grouped
+            .push(Knob::new(format!("{dir} (all terms)"), t, "length", None));
     }
 }
 
-fn knobs(m: &Machine) -> Vec<Knob> {
+/// The calibration's knobs, each with its tolerance from the file (a knob
+/// whose tolerance is 0 is exact: no knob).
+pub(crate) fn knobs(m: &Machine) -> Vec<Knob> {
     let mut sets = KnobSets::default();
     add_node_knobs(m, &mut sets);
     add_link_knobs(m, &mut sets);
     add_jacket_knobs(m, &mut sets);
     add_heat_knobs(m, &mut sets);
     add_term_knobs(m, &mut sets);
-    sets.chosen()
+    let tol = &m.spec.tolerance;
+    let mut ks = sets.chosen();
+    for k in ks.iter_mut() {
+        k.tol = crate::sim::machine::tolerance::of(tol, k.group, k.element.as_deref());
+    }
+    ks.retain(|k| k.tol > 0.0);
+    ks
 }
 
-fn apply(m: &Machine, ks: &[Knob], theta: &[f64]) -> Machine {
+/// The design value a knob scales (summed over its elements; heat: the
+/// sources' W at full drive; length: |mm|).
+pub(crate) fn design_value(m: &Machine, k: &Knob) -> f64 {
+    match &k.target {
+        Target::Capacity(v) => v.iter().map(|&i| m.c[i]).sum(),
+        Target::Loss(v) => v.iter().map(|&i| m.g_amb[i]).sum(),
+        Target::Link(v) => v.iter().map(|&i| m.links[i].2).sum(),
+        Target::Jacket(v) => m
+            .coolant
+            .as_ref()
+            .map_or(0.0, |c| v.iter().map(|&j| c.jacket[j].1).sum()),
+        Target::Heat { sources, .. } => sources.iter().map(|&s| m.spec.sources[s].w_at_nmax).sum(),
+        Target::Term(d, v) => v.iter().map(|&t| m.dir_terms[*d][t].1.abs()).sum(),
+    }
+}
+
+pub(crate) fn apply(m: &Machine, ks: &[Knob], theta: &[f64]) -> Machine {
     let mut c = m.clone();
     for (k, &t) in ks.iter().zip(theta) {
         if t == 0.0 {
@@ -283,6 +359,9 @@ pub struct Calibration {
     pub json: Value,
     pub note: String,
     pub sims: usize,
+    /// The design values it moved and their ln factors.
+    pub(crate) knobs: Vec<Knob>,
+    pub theta: Vec<f64>,
 }
 
 /// Per channel fit-row SSE and count, and the weighted residual vector
@@ -370,7 +449,9 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         .map(|p| (0..p.rows()).filter(|&k| p.is_fit(k)).count())
         .sum();
     let stride = rows.div_ceil(1500).max(1);
-    let prior = |th: &[f64]| th.iter().map(|t| t * t).sum::<f64>() / (PRIOR_SIGMA * PRIOR_SIGMA);
+    let prec: Vec<f64> = ks.iter().map(|k| 1.0 / k.sigma().powi(2)).collect();
+    let (lo, hi): (Vec<f64>, Vec<f64>) = ks.iter().map(Knob::bounds).unzip();
+    let prior = |th: &[f64]| th.iter().zip(&prec).map(|(t, p)| t * t * p).sum::<f64>();
     let mut theta = vec![0.0; nk];
     let (e0, _) = eval(m, ps, stride, None)?;
     let j_design = e0.j;
@@ -390,31 +471,30 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
             });
         sims += nk + 1;
         let cols = cols.into_iter().collect::<Result<Vec<_>>>()?;
-        // normal equations of  |r − J δ|² + |θ + δ|²/σ²
+        // normal equations of  |r − J δ|² + Σ (θ + δ)²/σ², θ + δ inside
+        // the tolerance: a box-constrained step
         let mut a = nalgebra::DMatrix::<f64>::zeros(nk, nk);
-        let mut g = nalgebra::DVector::<f64>::zeros(nk);
-        let sp = 1.0 / (PRIOR_SIGMA * PRIOR_SIGMA);
+        let mut g = vec![0.0; nk];
         for i in 0..nk {
             for j in i..nk {
                 let v: f64 = cols[i].iter().zip(&cols[j]).map(|(x, y)| x * y).sum();
                 a[(i, j)] = v;
                 a[(j, i)] = v;
             }
-            a[(i, i)] += sp;
+            a[(i, i)] += prec[i];
             // r(θ + δ) ≈ r + J δ (J = ∂r/∂θ of the weighted residual)
-            g[i] = -cols[i].iter().zip(&base.r).map(|(x, y)| x * y).sum::<f64>() - sp * theta[i];
+            g[i] =
+                -cols[i].iter().zip(&base.r).map(|(x, y)| x * y).sum::<f64>() - prec[i] * theta[i];
         }
-        let Some(delta) = a.clone().cholesky().map(|c| c.solve(&g)) else {
-            break;
-        };
+        let dlo: Vec<f64> = (0..nk).map(|i| lo[i] - theta[i]).collect();
+        let dhi: Vec<f64> = (0..nk).map(|i| hi[i] - theta[i]).collect();
+        let delta = super::boxqp::box_qp(&a, &g, &dlo, &dhi);
         // step halving on the criterion (data + prior)
         let mut step = 1.0;
         let mut moved = false;
         for _ in 0..4 {
-            let t: Vec<f64> = theta
-                .iter()
-                .zip(delta.iter())
-                .map(|(t, d)| (t + step * d).clamp(-BOUND, BOUND))
+            let t: Vec<f64> = (0..nk)
+                .map(|i| (theta[i] + step * delta[i]).clamp(lo[i], hi[i]))
                 .collect();
             let (e, _) = eval(&apply(m, &ks, &t), ps, stride, None)?;
             sims += 1;
@@ -441,14 +521,17 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
     let on_bound: Vec<String> = theta
         .iter()
         .enumerate()
-        .filter(|(_, t)| t.abs() >= BOUND - 1e-6)
+        .filter(|(i, t)| {
+            let (l, h) = ks[*i].bounds();
+            **t <= l + 1e-6 || **t >= h - 1e-6
+        })
         .map(|(i, t)| format!("{} ×{:.2}", ks[i].name, t.exp()))
         .collect();
     let r4 = super::stats::r4;
     let json = json!({
         "method": "each uncertain design value (capacity, loss to ambient, link and jacket conductance per element; heat gain per driver (spindle, feed); displacement length per term) scaled by exp(θ), θ fitted on the fit rows by Gauss–Newton on the diagnosis criterion plus a Gaussian prior",
-        "prior_sigma_ln": PRIOR_SIGMA,
-        "bounds_factor": [r4((-BOUND).exp()), r4(BOUND.exp())],
+        "bounds": "each design value within its tolerance (machine file [tolerance], default ±25 %): factor 1 − tol … 1 + tol; prior one σ = half the tolerance (ln)",
+        "tolerances": tol_summary(&ks),
         "parameters": nk,
         "criterion_design": r4(j_design),
         "criterion_calibrated": r4(j_cur - prior(&theta)),
@@ -463,10 +546,8 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         "absorbed": "an effect that acts like a change of these parameters (a different convection level or loss, the heat budget's overall level per driver, a displacement lever) is absorbed by the calibration: it is no gap and is not named",
     });
     let note = format!(
-        "machine file calibrated on the fit rows ({nk} design values, prior ±{:.0} %, bounds ×{:.1}…×{:.1}): held-out gap {:.2} → {:.2} (noise units){}",
-        PRIOR_SIGMA * 100.0,
-        (-BOUND).exp(),
-        BOUND.exp(),
+        "machine file calibrated on the fit rows within its tolerances ({nk} design values, {}): held-out gap {:.2} → {:.2} (noise units){}",
+        tol_summary(&ks),
         st_d.m_held().sqrt(),
         st_c.m_held().sqrt(),
         if on_bound.is_empty() {
@@ -480,5 +561,25 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         json,
         note,
         sims,
+        knobs: ks,
+        theta,
     })
+}
+
+/// The tolerances in use, by group (distinct values).
+fn tol_summary(ks: &[Knob]) -> String {
+    let mut by: std::collections::BTreeMap<&str, Vec<f64>> = Default::default();
+    for k in ks {
+        let v = by.entry(k.group).or_default();
+        if !v.iter().any(|x| (x - k.tol).abs() < 1e-9) {
+            v.push(k.tol);
+        }
+    }
+    by.iter()
+        .map(|(g, v)| {
+            let t: Vec<String> = v.iter().map(|x| format!("±{:.0} %", x * 100.0)).collect();
+            format!("{g} {}", t.join("/"))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -75,6 +75,12 @@ impl Stats {
     }
 }
 
+/// A correction every evaluation's residuals get: the calibration's
+/// bounded freedom (`freedom.rs`), left to the null and every candidate.
+pub trait Projection: Sync {
+    fn project(&self, res: &mut [Vec<Vec<f64>>]);
+}
+
 /// Simulates the prepared runs with a set of effects.
 pub struct Evaluator<'a> {
     pub m: &'a Machine,
@@ -82,6 +88,9 @@ pub struct Evaluator<'a> {
     /// The nominal output per run (sensor effects are applied to it
     /// without re-simulating the network).
     pub nominal: Vec<SimOut>,
+    /// The calibration's bounded freedom, left to every evaluation (None:
+    /// the machine file taken as exact).
+    pub freedom: Option<&'a dyn Projection>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -90,7 +99,18 @@ impl<'a> Evaluator<'a> {
             .iter()
             .map(|p| simulate(m, &p.inputs, &[], 1))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Evaluator { m, runs, nominal })
+        Ok(Evaluator {
+            m,
+            runs,
+            nominal,
+            freedom: None,
+        })
+    }
+
+    /// The same evaluator with the calibration's freedom left to every fit.
+    pub fn with_freedom(mut self, f: Option<&'a dyn Projection>) -> Evaluator<'a> {
+        self.freedom = f;
+        self
     }
 
     /// Residuals measured − simulated: run → channel → row (NaN where missing).
@@ -122,6 +142,9 @@ impl<'a> Evaluator<'a> {
                 rr.push(c.meas.iter().zip(sim).map(|(a, b)| a - b).collect());
             }
             all.push(rr);
+        }
+        if let Some(f) = self.freedom {
+            f.project(&mut all);
         }
         Ok(all)
     }

@@ -3,16 +3,20 @@
 //! phase, frequency band), fit each candidate effect on the fit part and
 //! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
 
+pub mod boxqp;
 pub mod calibrate;
 pub mod candidate;
 pub mod effect_fit;
 pub mod fitmode;
+pub mod freedom;
+pub mod gate;
 pub mod ident;
 mod ident_fit;
 pub mod lag;
 pub mod open_effects;
 mod placement;
 pub mod prep;
+mod release;
 pub mod render;
 pub mod sensor_step;
 pub mod series;
@@ -76,8 +80,11 @@ pub struct Options {
     pub threads: usize,
     /// Restrict the candidates (empty = all applicable).
     pub only: Vec<String>,
-    /// Calibrate the machine file's design values on the fit rows before
-    /// the effect search (`calibrate.rs`); off: the file is taken as exact.
+    /// Take the machine file as exact (no calibration within its
+    /// tolerances): the behaviour before issue 27.
+    pub exact: bool,
+    /// Accepted for compatibility, no effect: the default calibrates the
+    /// file within its tolerances (`calibrate.rs`); `exact` turns that off.
     pub calibrate: bool,
 }
 
@@ -96,6 +103,7 @@ impl Default for Options {
                 .map_or(1, |n| n.get())
                 .min(8),
             only: Vec::new(),
+            exact: false,
             calibrate: false,
         }
     }
@@ -394,9 +402,14 @@ impl Judge<'_> {
     }
 
     fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
-        let st = self.ev.stats(&fr.effects)?;
+        let res1 = self.ev.residuals(&fr.effects)?;
+        let st = self.ev.stats_of(&res1);
         let st0 = &self.st0;
-        let ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
+        let mut ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
+        let z = gate::held_out_z(self.ev.runs, self.res0, &res1);
+        if let Some(o) = ev_json.as_object_mut() {
+            o.insert("held_out_z".into(), json!(r4(z.min(1e6))));
+        }
         Ok((
             Finding {
                 name: fr
@@ -427,6 +440,10 @@ impl Judge<'_> {
             && f.m_after.is_finite()
             && f.m_after <= m_ref * (1.0 - opt.min_rel)
             && m_ref - f.m_after >= opt.min_abs
+            && gate::passes(
+                self.m0,
+                f.evidence["held_out_z"].as_f64().unwrap_or(f64::NAN),
+            )
     }
 
     // the added effect must itself earn the margins: the pair's own fit
@@ -586,12 +603,71 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "single effects and pairs fitted on the fit part; an effect is claimed when its BIC improves by at least min_dbic and the held-out gap (noise units) shrinks by min_rel and min_abs; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect";
 
-/// Diagnose prepared runs against the nominal machine.
+/// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
+    diagnose_core(m, ps, opt, None)
+}
+
+/// The calibrated null: the design file, its knobs and the freedom.
+struct CalNull<'a> {
+    design: &'a Machine,
+    knobs: &'a [calibrate::Knob],
+    freedom: &'a freedom::Freedom,
+}
+
+/// Parameter findings that earn the margins, merged into the ranking: one
+/// that leaves less held-out gap than the selected effect goes first.
+fn merge_releases(
+    judge: &Judge,
+    cal: &CalNull,
+    m: &Machine,
+    ps: &[Prepared],
+    findings: &mut Vec<Finding>,
+) -> Result<usize> {
+    let null = release::Null {
+        design: cal.design,
+        calibrated: m,
+        knobs: cal.knobs,
+        freedom: cal.freedom,
+        res0: judge.res0,
+        st0: &judge.st0,
+        j0: judge.j0,
+        m0: judge.m0,
+        lnn: judge.lnn,
+    };
+    let (rel, sims) = release::release_findings(&null, ps)?;
+    let mut ok: Vec<Finding> = rel
+        .into_iter()
+        .filter(|f| judge.supported(f, judge.m0))
+        .collect();
+    ok.sort_by(|a, b| a.m_after.total_cmp(&b.m_after));
+    for (i, f) in ok.into_iter().enumerate() {
+        let first = i == 0 && findings.first().is_none_or(|t| f.m_after < t.m_after);
+        if first {
+            findings.insert(0, with_role(&f, "selected"));
+        } else {
+            findings.push(with_role(
+                &f,
+                "alternative: supported alone but explains less than the selected finding",
+            ));
+        }
+    }
+    Ok(sims)
+}
+
+fn diagnose_core(
+    m: &Machine,
+    ps: &[Prepared],
+    opt: &Options,
+    cal: Option<CalNull>,
+) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
-    let ev = Evaluator::new(m, ps)?;
+    let ev = Evaluator::new(m, ps)?.with_freedom(
+        cal.as_ref()
+            .map(|c| c.freedom as &dyn effect_fit::Projection),
+    );
     let res0 = ev.residuals(&[])?;
     let st0 = ev.stats_of(&res0);
     let judge = Judge {
@@ -627,7 +703,10 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
-    let findings = ranked_findings(pair, &tried, best_single, &singles_ok);
+    let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
+    if let Some(c) = &cal {
+        sims += merge_releases(&judge, c, m, ps, &mut findings)?;
+    }
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
@@ -649,20 +728,36 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     })
 }
 
-/// Diagnose runs (name, run) against the nominal machine.
+/// Diagnose runs (name, run) against the nominal machine: by default the
+/// file calibrated within its tolerances, with the same bounded freedom
+/// left to every candidate; `opt.exact` takes it as written.
 pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
     let ps = prepare_all(m, runs, opt)?;
-    let mut d = if opt.calibrate {
-        let cal = calibrate::calibrate(m, &ps, opt.threads)?;
-        let mut d = diagnose_prepared(&cal.machine, &ps, opt)?;
-        d.sims += cal.sims;
-        d.notes.push(cal.note);
-        d.nominal = json!({"kind": "machine description, calibrated", "name": m.spec.name, "calibration": cal.json});
-        d
-    } else {
-        diagnose_prepared(m, &ps, opt)?
+    let cal = (!opt.exact)
+        .then(|| calibrate::calibrate(m, &ps, opt.threads))
+        .transpose()?;
+    let mut d = match &cal {
+        Some(c) if !c.knobs.is_empty() => {
+            let fr = freedom::Freedom::new(m, &c.knobs, &c.theta, &ps, opt.threads)?;
+            let null = CalNull {
+                design: m,
+                knobs: &c.knobs,
+                freedom: &fr,
+            };
+            let mut d = diagnose_core(&c.machine, &ps, opt, Some(null))?;
+            d.sims += c.sims + c.knobs.len();
+            d.notes.push(c.note.clone());
+            d.nominal = json!({"kind": "machine description, calibrated within its tolerances", "name": m.spec.name, "calibration": c.json});
+            d
+        }
+        _ => {
+            let mut d = diagnose_core(m, &ps, opt, None)?;
+            d.nominal = json!({"kind": "machine description, taken as exact", "name": m.spec.name});
+            d
+        }
     };
+    d.untestable = placement::untestable(m, &ps, &opt.only);
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
 }

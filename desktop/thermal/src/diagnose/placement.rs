@@ -318,3 +318,62 @@ fn locate_lag(ev: &Evaluator, res0: &[Vec<Vec<f64>>]) -> Option<String> {
         .max_by(|a, b| a.1.total_cmp(&b.1))
         .map(|b| b.0)
 }
+
+/// The effects these runs and this machine file cannot decide, with why
+/// (the machine-file mode's `untestable`; `diagnose fit` has its own).
+pub fn untestable(
+    m: &crate::sim::Machine,
+    ps: &[Prepared],
+    only: &[String],
+) -> Vec<(String, String)> {
+    let has_disp = ps
+        .iter()
+        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
+    let has_temp = ps
+        .iter()
+        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
+    let coolant_on = ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5));
+    let flows = ps
+        .iter()
+        .any(|p| (0..p.rows()).any(|k| m.coolant_flows(p.inputs.rpm[k], p.inputs.coolant[k])));
+    let feed = ps.iter().any(|p| p.inputs.feed.iter().any(|f| *f > 0.0));
+    let mut out = Vec::new();
+    for &k in ALL_EFFECT_NAMES.iter() {
+        if !only.is_empty() && !only.iter().any(|o| o == k) {
+            continue;
+        }
+        let why = match k {
+            "coolant" if m.coolant_nodes.is_empty() => {
+                Some("the machine file names no coolant site ([effects] coolant_nodes)")
+            }
+            "coolant" if !(coolant_on || (m.coolant.is_some() && flows)) => Some(
+                "the coolant never flows in these runs (no coolant_on, no flow by the file's rule)",
+            ),
+            "chiller" if !m.coolant.as_ref().is_some_and(|c| c.tank_c > 0.0) => {
+                Some("the machine file has no coolant tank (coolant.tank_c_j_per_k)")
+            }
+            "ballscrew" if m.ballscrew_nodes.is_empty() => {
+                Some("the machine file names no ball-screw site ([effects] ballscrew_nodes)")
+            }
+            "ballscrew" if !feed => Some("no feed activity in these runs"),
+            "bending" if m.bending.is_none() => {
+                Some("the machine file names no bending pair ([effects] bending)")
+            }
+            "bending" if !has_disp => Some("no displacement column in these runs"),
+            "sensor_lag" | "sensor_offset" if !has_temp => {
+                Some("no temperature sensor column in these runs")
+            }
+            "bearing_nonlinear" if m.bnl_nodes.is_empty() => {
+                Some("the machine file names no bearing site ([effects] bearing_nodes)")
+            }
+            "convection" if !m.area.iter().any(|a| *a > 0.0) => {
+                Some("no node has an area_m2 (convection acts through it)")
+            }
+            _ => None,
+        };
+        if let Some(w) = why {
+            out.push((k.to_string(), w.to_string()));
+        }
+    }
+    out
+}

@@ -7,6 +7,7 @@ use std::path::Path;
 use super::limits;
 
 pub mod spec;
+pub mod tolerance;
 
 pub use spec::{
     BearingSpec, BendingSite, CoolantSpec, DirectionSpec, Driver, EffectSites, Flow, JacketSpec,
@@ -275,6 +276,7 @@ impl Machine {
     pub fn from_toml(text: &str) -> Result<Machine> {
         let spec: MachineSpec = toml::from_str(text).map_err(|e| limits::toml_error(text, &e))?;
         spec.validate()?;
+        tolerance::check(&spec)?;
         Machine::compile(spec)
     }
 

@@ -311,6 +311,9 @@ pub struct MachineSpec {
     pub coolant: Option<CoolantSpec>,
     #[serde(default)]
     pub effects: EffectSites,
+    /// How far each design value may be off (`tolerance.rs`).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub tolerance: std::collections::BTreeMap<String, f64>,
 }
 
 impl MachineSpec {
