@@ -11,6 +11,8 @@ pub mod ident;
 mod ident_fit;
 pub mod lag;
 pub mod open_effects;
+pub mod periodic;
+pub mod periodic_claim;
 mod placement;
 pub mod prep;
 pub mod render;
@@ -627,11 +629,14 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
-    let findings = ranked_findings(pair, &tried, best_single, &singles_ok);
+    let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
+    let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
+    // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
+    periodic_claim::machine(&ev, &res0, &mut findings, &mut tried);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
-        tried: tried.into_iter().map(|t| t.0).collect(),
+        tried,
         where_,
         nominal_m_held: judge.m0,
         nominal_gap_um: judge.st0.gap_held(true),
@@ -645,7 +650,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,
-        ranking_rule: RANKING_RULE.into(),
+        ranking_rule: RANKING_RULE.to_string() + &periodic_claim::rule(),
     })
 }
 
