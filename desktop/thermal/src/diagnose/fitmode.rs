@@ -685,7 +685,14 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     let sel_fit = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
     let mut tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    super::periodic_claim::fit(&p, &fit, sel_fit.as_ref(), &mut findings, &mut tried);
+    super::periodic_claim::fit(
+        &p,
+        &fit,
+        sel_fit.as_ref(),
+        &mut findings,
+        &mut tried,
+        &opt.only,
+    );
     let mut notes = ds.notes.clone();
     notes.push(format!(
         "nominal identified on {} run(s), {} rows, fit and held-out blocks in every run",

@@ -632,7 +632,7 @@ pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<
     let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
     let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    periodic_claim::machine(&ev, &res0, &mut findings, &mut tried);
+    periodic_claim::machine(&ev, &res0, &mut findings, &mut tried, &opt.only);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,

@@ -312,7 +312,11 @@ pub fn machine(
     res0: &[Vec<Vec<f64>>],
     findings: &mut Vec<Finding>,
     tried: &mut Vec<Finding>,
+    only: &[String],
 ) {
+    if !wanted(only) {
+        return;
+    }
     let cand = candidate(&scan_machine(ev, res0));
     let sel = findings.first().map(|f| f.effects.clone());
     merge(findings, tried, cand, |line| match sel {
@@ -331,10 +335,19 @@ pub fn fit(
     selected: Option<&ModelFit>,
     findings: &mut Vec<Finding>,
     tried: &mut Vec<Finding>,
+    only: &[String],
 ) {
+    if !wanted(only) {
+        return;
+    }
     let cand = candidate(&scan_fit(p, nominal, nominal));
     merge(findings, tried, cand, |line| match selected {
         Some(s) => line_survives(&scan_fit(p, s, nominal), line),
         None => true,
     });
+}
+
+/// Whether `--only` leaves the periodic scan in.
+fn wanted(only: &[String]) -> bool {
+    only.is_empty() || only.iter().any(|o| o == "periodic")
 }
