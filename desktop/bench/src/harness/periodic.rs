@@ -206,9 +206,21 @@ pub fn run_periodic_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
         mach.add(ci, case, &e, t.elapsed().as_secs_f64());
         if cfg.verbose {
             let names = |d: &Diagnosis| {
+                let scan = d.tried.iter().find(|f| f.name == "periodic").map(|f| {
+                    format!(
+                        "[scan: {} s on {}, p×tests {:.1e}, amp/noise {}, m {:.2}→{:.2}]",
+                        f.evidence["period_s"],
+                        f.evidence["channel"],
+                        f.evidence["p_value_corrected"].as_f64().unwrap_or(f64::NAN),
+                        f.evidence["amplitude_over_noise"],
+                        f.m_before,
+                        f.m_after
+                    )
+                });
                 d.findings
                     .iter()
-                    .map(|f| format!("{} {}", f.name, f.params_json()))
+                    .map(|f| format!("{} {}", f.name, f.params_json()["period_s"]))
+                    .chain(scan)
                     .collect::<Vec<_>>()
                     .join(" | ")
             };

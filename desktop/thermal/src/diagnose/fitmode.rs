@@ -687,6 +687,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
     super::periodic_claim::fit(
         &p,
+        &st,
         &fit,
         sel_fit.as_ref(),
         &mut findings,

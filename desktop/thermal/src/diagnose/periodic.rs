@@ -36,8 +36,11 @@ pub const HARMONICS: usize = 3;
 pub const ALPHA: f64 = 1e-3;
 /// Trial frequencies per independent frequency (1 / longest run).
 const OVERSAMPLE: f64 = 5.0;
-/// Background ordinates needed for the local median.
-const MIN_BACKGROUND: usize = 8;
+/// Background ordinates needed for the local median: four independent
+/// frequencies (a median of fewer is too loose a yardstick).
+const MIN_BACKGROUND: usize = 4 * OVERSAMPLE as usize;
+/// Cycles the shortest run must hold of the longest period searched.
+pub const MIN_CYCLES: f64 = 3.0;
 
 /// One channel's residual, per run.
 #[derive(Clone, Debug)]
@@ -79,31 +82,40 @@ impl Line {
     }
 }
 
-/// Differenced rows of one run: mid times and the orthonormal nuisance
-/// basis (level and slope).
+/// Rows of one run (mid times when differenced) and the orthonormal
+/// nuisance basis (Legendre polynomials up to `deg`).
 struct RunBasis {
     tm: Vec<f64>,
-    nuis: [Vec<f64>; 2],
+    nuis: Vec<Vec<f64>>,
     dt: f64,
 }
 
-fn run_basis(t: &[f64]) -> RunBasis {
-    let n = t.len().saturating_sub(1);
+fn run_basis(t: &[f64], diff: bool, deg: usize) -> RunBasis {
     let t0 = t.first().copied().unwrap_or(0.0);
-    let tm: Vec<f64> = (0..n).map(|k| 0.5 * (t[k] + t[k + 1]) - t0).collect();
+    let tm: Vec<f64> = if diff {
+        (0..t.len().saturating_sub(1))
+            .map(|k| 0.5 * (t[k] + t[k + 1]) - t0)
+            .collect()
+    } else {
+        t.iter().map(|x| x - t0).collect()
+    };
+    let n = t.len().saturating_sub(1);
     let dt = if n > 0 { (t[n] - t[0]) / n as f64 } else { 1.0 };
     let span = tm.last().copied().unwrap_or(1.0).max(1e-9);
-    let mut a: Vec<f64> = vec![1.0; n];
-    let mut b: Vec<f64> = tm.iter().map(|x| 2.0 * x / span - 1.0).collect();
-    normalise(&mut a);
-    let ab: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
-    b.iter_mut().zip(&a).for_each(|(y, x)| *y -= ab * x);
-    normalise(&mut b);
-    RunBasis {
-        tm,
-        nuis: [a, b],
-        dt,
+    let mut nuis: Vec<Vec<f64>> = Vec::new();
+    for d in 0..=deg {
+        let mut v: Vec<f64> = tm
+            .iter()
+            .map(|x| (2.0 * x / span - 1.0).powi(d as i32))
+            .collect();
+        for u in &nuis {
+            let c: f64 = v.iter().zip(u).map(|(x, y)| x * y).sum();
+            v.iter_mut().zip(u).for_each(|(x, y)| *x -= c * y);
+        }
+        normalise(&mut v);
+        nuis.push(v);
     }
+    RunBasis { tm, nuis, dt }
 }
 
 fn normalise(v: &mut [f64]) {
@@ -120,11 +132,13 @@ fn project_out(v: &mut [f64], b: &RunBasis) {
     }
 }
 
-/// The differenced residual, missing differences as 0, nuisance removed.
-fn differenced(e: &[f64], b: &RunBasis) -> Vec<f64> {
+/// The residual (differenced when the basis is), missing values as 0,
+/// nuisance removed.
+fn prepared_resid(e: &[f64], b: &RunBasis) -> Vec<f64> {
+    let diff = b.tm.len() < e.len();
     let mut d: Vec<f64> = (0..b.tm.len())
         .map(|k| {
-            let v = e[k + 1] - e[k];
+            let v = if diff { e[k + 1] - e[k] } else { e[k] };
             if v.is_finite() {
                 v
             } else {
@@ -132,6 +146,18 @@ fn differenced(e: &[f64], b: &RunBasis) -> Vec<f64> {
             }
         })
         .collect();
+    if !diff {
+        // the mean of the finite rows stands in for the missing ones
+        let (s, n) = e
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((0.0, 0usize), |a, v| (a.0 + v, a.1 + 1));
+        let m = if n > 0 { s / n as f64 } else { 0.0 };
+        d.iter_mut()
+            .zip(e)
+            .filter(|(_, v)| !v.is_finite())
+            .for_each(|(x, _)| *x = m);
+    }
     project_out(&mut d, b);
     d
 }
@@ -212,7 +238,7 @@ fn chi2_median_per_dof(q: usize) -> f64 {
     (1.0 - 2.0 / (9.0 * q)).powi(3)
 }
 
-/// The residuals differenced, per channel and run, and the run bases.
+/// The residuals prepared per channel and run, and the run bases.
 struct Prepared {
     bases: Vec<RunBasis>,
     diffs: Vec<Vec<Vec<f64>>>,
@@ -221,8 +247,11 @@ struct Prepared {
     t_min: f64,
 }
 
-fn prepare(scan: &Scan) -> Prepared {
-    let bases: Vec<RunBasis> = scan.times.iter().map(|t| run_basis(t)).collect();
+/// Differenced with a level and slope per run (the test), or as read with
+/// a cubic per run (which of a line's relatives is its fundamental).
+fn prepare(scan: &Scan, diff: bool) -> Prepared {
+    let deg = if diff { 1 } else { 3 };
+    let bases: Vec<RunBasis> = scan.times.iter().map(|t| run_basis(t, diff, deg)).collect();
     let diffs = scan
         .chans
         .iter()
@@ -230,7 +259,7 @@ fn prepare(scan: &Scan) -> Prepared {
             c.resid
                 .iter()
                 .zip(&bases)
-                .map(|(e, b)| differenced(e, b))
+                .map(|(e, b)| prepared_resid(e, b))
                 .collect()
         })
         .collect();
@@ -250,14 +279,14 @@ fn prepare(scan: &Scan) -> Prepared {
 /// The searched frequency band [Hz] (None: the runs are too short or too
 /// coarse for any period of the range).
 pub fn band(scan: &Scan) -> Option<(f64, f64)> {
-    let pr = prepare(scan);
+    let pr = prepare(scan, true);
     band_of(&pr)
 }
 
 fn band_of(pr: &Prepared) -> Option<(f64, f64)> {
     let dt = pr.bases.iter().map(|b| b.dt).fold(0.0, f64::max);
-    // at least two cycles in the shortest run, four rows per cycle
-    let p_hi = PERIOD_MAX_S.min(pr.t_min / 2.0);
+    // at least `MIN_CYCLES` cycles in the shortest run, four rows per cycle
+    let p_hi = PERIOD_MAX_S.min(pr.t_min / MIN_CYCLES);
     let p_lo = PERIOD_MIN_S.max(4.0 * dt);
     (p_lo < p_hi && pr.t_max > 0.0).then(|| (1.0 / p_hi, 1.0 / p_lo))
 }
@@ -270,10 +299,13 @@ fn related(f: f64, g: f64, width: f64) -> bool {
 
 /// Strongest line in the search band `search` [Hz], with the number of
 /// tests it is corrected for (`n_tests`, or channels × independent
-/// frequencies of the band when None).
-fn detect(pr: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Option<Line> {
+/// frequencies of the band when None). Among the significant frequencies
+/// of a channel, the one whose sinusoid and harmonics explain the most of
+/// the residual as read (`raw`) is the line's fundamental; of those within
+/// `TIE` of that, the highest (a line's subharmonics fit it as a harmonic).
+fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Option<Line> {
     let df = 1.0 / (OVERSAMPLE * pr.t_max);
-    let (lo, hi) = (search.0 / 2.0, search.1 * 2.0);
+    let (lo, hi) = (search.0 / 4.0, (search.1 * 2.0).max(search.0 * 4.0));
     let n_grid = ((hi - lo) / df).ceil() as usize + 1;
     let grid: Vec<f64> = (0..n_grid).map(|i| lo + i as f64 * df).collect();
     let spec: Vec<(Vec<f64>, usize)> = grid
@@ -283,29 +315,52 @@ fn detect(pr: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Option<Lin
     let nc = pr.diffs.len();
     let n_tests =
         n_tests.unwrap_or_else(|| nc as f64 * ((search.1 - search.0) * pr.t_max).ceil().max(1.0));
-    let width = 1.5 / pr.t_min.max(1.0);
-    let mut best: Option<Line> = None;
+    let ln_level = (ALPHA / n_tests).ln();
+    let width = 1.0 / pr.t_min.max(1.0);
+    // per channel: (grid index, ln p, χ², dof) of every searched frequency
+    let mut tested: Vec<Vec<(usize, f64, f64, usize)>> = vec![Vec::new(); nc];
     for (i, &f) in grid.iter().enumerate() {
         if f < search.0 || f > search.1 || spec[i].1 == 0 {
             continue;
         }
-        for c in 0..nc {
+        for (c, t) in tested.iter_mut().enumerate() {
             let Some(s2) = background(&grid, &spec, c, f, width) else {
                 continue;
             };
             let (z, q) = (spec[i].0[c], spec[i].1);
-            let chi2 = z / s2;
-            let ln_p = ln_chi2_tail_even(chi2, q);
-            if best.as_ref().is_none_or(|b| ln_p < b.ln_p) {
-                best = Some(Line {
-                    chan: c,
-                    period_s: 1.0 / f,
-                    chi2,
-                    dof: q,
-                    ln_p,
-                    p_corrected: (ln_p.exp() * n_tests).min(1.0),
-                    n_tests,
-                });
+            t.push((i, ln_chi2_tail_even(z / s2, q), z / s2, q));
+        }
+    }
+    let line = |c: usize, t: &(usize, f64, f64, usize)| Line {
+        chan: c,
+        period_s: 1.0 / grid[t.0],
+        chi2: t.2,
+        dof: t.3,
+        ln_p: t.1,
+        p_corrected: (t.1.exp() * n_tests).min(1.0),
+        n_tests,
+    };
+    let mut best: Option<Line> = None;
+    for (c, t) in tested.iter().enumerate() {
+        let sig: Vec<&(usize, f64, f64, usize)> = t.iter().filter(|x| x.1 < ln_level).collect();
+        let pick = if sig.is_empty() {
+            t.iter().min_by(|a, b| a.1.total_cmp(&b.1))
+        } else {
+            let power = |x: &(usize, f64, f64, usize)| {
+                explained(&raw.bases, std::slice::from_ref(&raw.diffs[c]), grid[x.0]).0[0]
+            };
+            let pw: Vec<f64> = sig.iter().map(|x| power(x)).collect();
+            let top = pw.iter().copied().fold(0.0, f64::max);
+            sig.iter()
+                .zip(&pw)
+                .filter(|(_, p)| **p >= TIE * top)
+                .map(|(x, _)| *x)
+                .max_by_key(|x| x.0)
+        };
+        if let Some(x) = pick {
+            let l = line(c, x);
+            if best.as_ref().is_none_or(|b| l.ln_p < b.ln_p) {
+                best = Some(l);
             }
         }
     }
@@ -314,7 +369,12 @@ fn detect(pr: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Option<Lin
     Some(b)
 }
 
-/// Local background σ² per degree of freedom of channel `c` around f.
+/// Share of the largest explained power within which a higher frequency is
+/// preferred as the fundamental.
+const TIE: f64 = 0.95;
+
+/// Local background σ² per degree of freedom of channel `c` around f:
+/// over [f/2, 2f], or [f/4, 4f] when too few ordinates are left there.
 fn background(
     grid: &[f64],
     spec: &[(Vec<f64>, usize)],
@@ -322,18 +382,21 @@ fn background(
     f: f64,
     width: f64,
 ) -> Option<f64> {
-    let mut bg: Vec<f64> = grid
-        .iter()
-        .zip(spec)
-        .filter(|(&g, s)| g >= f / 2.0 && g <= 2.0 * f && s.1 > 0 && !related(f, g, width))
-        .map(|(_, s)| s.0[c] / (s.1 as f64 * chi2_median_per_dof(s.1)))
-        .collect();
-    if bg.len() < MIN_BACKGROUND {
-        return None;
+    for wide in [2.0, 4.0] {
+        let mut bg: Vec<f64> = grid
+            .iter()
+            .zip(spec)
+            .filter(|(&g, s)| g >= f / wide && g <= wide * f && s.1 > 0 && !related(f, g, width))
+            .map(|(_, s)| s.0[c] / (s.1 as f64 * chi2_median_per_dof(s.1)))
+            .collect();
+        if bg.len() < MIN_BACKGROUND {
+            continue;
+        }
+        bg.sort_by(f64::total_cmp);
+        let m = bg[bg.len() / 2];
+        return (m > 0.0).then_some(m);
     }
-    bg.sort_by(f64::total_cmp);
-    let m = bg[bg.len() / 2];
-    (m > 0.0).then_some(m)
+    None
 }
 
 /// The line's period refined on a finer grid around the peak (the
@@ -365,27 +428,32 @@ fn refine(pr: &Prepared, grid: &[f64], spec: &[(Vec<f64>, usize)], b: &mut Line,
 
 /// The strongest line of the residuals over the whole period range.
 pub fn strongest_line(scan: &Scan) -> Option<Line> {
-    let pr = prepare(scan);
+    let pr = prepare(scan, true);
     let band = band_of(&pr)?;
-    detect(&pr, band, None)
+    detect(&pr, &prepare(scan, false), band, None)
 }
 
 /// The strongest line within ±10 % of `period_s`, corrected for as many
 /// tests as `n_tests` (the original search's): whether a line survives
 /// another model.
 pub fn line_near(scan: &Scan, period_s: f64, n_tests: f64) -> Option<Line> {
-    let pr = prepare(scan);
+    let pr = prepare(scan, true);
     let f = 1.0 / period_s;
-    detect(&pr, (f / 1.1, f / 0.9), Some(n_tests))
+    detect(
+        &pr,
+        &prepare(scan, false),
+        (f / 1.1, f / 0.9),
+        Some(n_tests),
+    )
 }
 
 /// Per channel: the single-frequency test at `period_s` (ln p, corrected
 /// for the channels only: the frequency is fixed).
 pub fn at_period(scan: &Scan, period_s: f64) -> Vec<f64> {
-    let pr = prepare(scan);
+    let pr = prepare(scan, true);
     let f = 1.0 / period_s;
     let df = 1.0 / (OVERSAMPLE * pr.t_max);
-    let (lo, hi) = (f / 2.0, f * 2.0);
+    let (lo, hi) = (f / 4.0, f * 4.0);
     let n_grid = ((hi - lo) / df).ceil() as usize + 1;
     let grid: Vec<f64> = (0..n_grid).map(|i| lo + i as f64 * df).collect();
     let spec: Vec<(Vec<f64>, usize)> = grid
@@ -393,7 +461,7 @@ pub fn at_period(scan: &Scan, period_s: f64) -> Vec<f64> {
         .map(|&g| explained(&pr.bases, &pr.diffs, g))
         .collect();
     let (z, q) = explained(&pr.bases, &pr.diffs, f);
-    let width = 1.5 / pr.t_min.max(1.0);
+    let width = 1.0 / pr.t_min.max(1.0);
     (0..pr.diffs.len())
         .map(|c| match background(&grid, &spec, c, f, width) {
             Some(s2) if q > 0 => ln_chi2_tail_even(z[c] / s2, q),

@@ -9,7 +9,7 @@
 use serde_json::{json, Value};
 
 use super::effect_fit::Evaluator;
-use super::ident::{ModelFit, Problem};
+use super::ident::{ModelFit, Problem, Structure};
 use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
 use super::prep::Kind;
 use super::stats::r4;
@@ -127,7 +127,13 @@ fn gap(scan: &Scan, sub: &[Option<Vec<Vec<f64>>>]) -> Gap {
 /// channels), their amplitudes, the held-out gap with the waveforms fitted
 /// on the fit rows; `claimed` when the line is significant, large enough
 /// and does not widen the held-out gap.
-pub fn candidate(scan: &Scan) -> Option<(Finding, Line, bool)> {
+///
+/// `gap_scan`: the residual the held-out gap is scored on (its model fitted
+/// on the fit rows); `scan`, the one searched, may be the same model
+/// fitted on every row (`diagnose fit`: a model fitted on the fit blocks
+/// alone leaves a residual whose size alternates with the blocks, a line
+/// of its own).
+pub fn candidate(scan: &Scan, gap_scan: &Scan) -> Option<(Finding, Line, bool)> {
     let line = periodic::strongest_line(scan)?;
     let nc = scan.chans.len();
     let ln_alpha = (ALPHA / nc.max(1) as f64).ln();
@@ -141,7 +147,8 @@ pub fn candidate(scan: &Scan) -> Option<(Finding, Line, bool)> {
     let mut amp_best = 0.0;
     for &c in &on {
         let (amp, _) = periodic::waveform(scan, c, line.period_s, &|_, _| true);
-        let (_, held_wave) = periodic::waveform(scan, c, line.period_s, &|r, k| !scan.held[r][k]);
+        let (_, held_wave) =
+            periodic::waveform(gap_scan, c, line.period_s, &|r, k| !gap_scan.held[r][k]);
         sub[c] = Some(held_wave);
         let ch = &scan.chans[c];
         if c == line.chan {
@@ -155,8 +162,8 @@ pub fn candidate(scan: &Scan) -> Option<(Finding, Line, bool)> {
             "ln_p_at_period": r4(at[c]),
         }));
     }
-    let before = gap(scan, &vec![None; nc]);
-    let after = gap(scan, &sub);
+    let before = gap(gap_scan, &vec![None; nc]);
+    let after = gap(gap_scan, &sub);
     let best = &scan.chans[line.chan];
     let big_enough = amp_best >= MIN_AMP_NOISE * best.noise;
     let no_worse = |b: Option<(f64, f64)>, a: Option<(f64, f64)>| match (b, a) {
@@ -317,7 +324,8 @@ pub fn machine(
     if !wanted(only) {
         return;
     }
-    let cand = candidate(&scan_machine(ev, res0));
+    let scan = scan_machine(ev, res0);
+    let cand = candidate(&scan, &scan);
     let sel = findings.first().map(|f| f.effects.clone());
     merge(findings, tried, cand, |line| match sel {
         Some(e) if !e.is_empty() => ev
@@ -331,6 +339,7 @@ pub fn machine(
 /// (the line tested again on the selected effect's fit).
 pub fn fit(
     p: &Problem,
+    st: &Structure,
     nominal: &ModelFit,
     selected: Option<&ModelFit>,
     findings: &mut Vec<Finding>,
@@ -340,7 +349,18 @@ pub fn fit(
     if !wanted(only) {
         return;
     }
-    let cand = candidate(&scan_fit(p, nominal, nominal));
+    // the nominal's structure fitted on every row: the residual searched
+    let mut all_rows = p.ds.clone();
+    for r in all_rows.runs.iter_mut() {
+        r.held.iter_mut().for_each(|h| *h = false);
+    }
+    let pa = Problem::new(&all_rows);
+    let fa = pa.fit(st, None, None);
+    let cand = if fa.outs.iter().any(|o| o.failed) {
+        None
+    } else {
+        candidate(&scan_fit(&pa, &fa, &fa), &scan_fit(p, nominal, nominal))
+    };
     merge(findings, tried, cand, |line| match selected {
         Some(s) => line_survives(&scan_fit(p, s, nominal), line),
         None => true,
