@@ -20,7 +20,7 @@
 //! [f/2, 2f] away from f's harmonic relatives) is χ² with 2·H·runs degrees
 //! of freedom when the residual has no line at f. The smallest tail
 //! probability over channels and frequencies, multiplied by (channels ×
-//! independent frequencies), must be below `ALPHA`.
+//! trial frequencies, 5 per independent one), must be below `ALPHA`.
 
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -32,7 +32,7 @@ pub const PERIOD_MAX_S: f64 = 7200.0;
 /// and an on/off cycle's first three lines).
 pub const HARMONICS: usize = 3;
 /// Level of the test after the correction for the channels and the
-/// independent frequencies tried.
+/// trial frequencies.
 pub const ALPHA: f64 = 1e-3;
 /// Trial frequencies per independent frequency (1 / longest run).
 const OVERSAMPLE: f64 = 5.0;
@@ -298,7 +298,7 @@ fn related(f: f64, g: f64, width: f64) -> bool {
 }
 
 /// Strongest line in the search band `search` [Hz], with the number of
-/// tests it is corrected for (`n_tests`, or channels × independent
+/// tests it is corrected for (`n_tests`, or channels × trial
 /// frequencies of the band when None). Among the significant frequencies
 /// of a channel, the one whose sinusoid and harmonics explain the most of
 /// the residual as read (`raw`) is the line's fundamental; of those within
@@ -313,8 +313,16 @@ fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64
         .map(|&f| explained(&pr.bases, &pr.diffs, f))
         .collect();
     let nc = pr.diffs.len();
-    let n_tests =
-        n_tests.unwrap_or_else(|| nc as f64 * ((search.1 - search.0) * pr.t_max).ceil().max(1.0));
+    // every trial frequency of the band counts as a test (the grid is
+    // oversampled: this over-counts the independent ones, which pays for
+    // the background being a median of a few ordinates, not a known σ²)
+    let n_tests = n_tests.unwrap_or_else(|| {
+        let tried = grid
+            .iter()
+            .filter(|&&f| f >= search.0 && f <= search.1)
+            .count();
+        nc as f64 * tried.max(1) as f64
+    });
     let ln_level = (ALPHA / n_tests).ln();
     let width = 1.0 / pr.t_min.max(1.0);
     // per channel: (grid index, ln p, χ², dof) of every searched frequency
@@ -581,7 +589,7 @@ mod tests {
         let l = strongest_line(&scan_of(sine, dt)).unwrap();
         assert!(l.significant(), "{l:?}");
         assert!((l.period_s / 1500.0 - 1.0).abs() < 0.03, "{l:?}");
-        for seed in 10..16 {
+        for seed in 10..40 {
             let white: Vec<Vec<f64>> = (0..2).map(|r| noise(seed * 2 + r, n)).collect();
             let l = strongest_line(&scan_of(white, dt)).unwrap();
             assert!(!l.significant(), "seed {seed}: {l:?}");

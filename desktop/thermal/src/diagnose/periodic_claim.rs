@@ -21,7 +21,7 @@ pub const MIN_AMP_NOISE: f64 = 1.0;
 
 /// The ranking rule's sentence on periodic drivers.
 pub fn rule() -> String {
-    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × independent frequencies) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise unit, and must not widen the held-out gap; it ranks first when the line survives the selected effect and that effect is a sensor fault or leaves a larger held-out gap", HARMONICS - 1)
+    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × trial frequencies, 5 per independent one) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise unit, and must not widen the held-out gap; it ranks first when the line survives the selected effect and that effect is a sensor fault or leaves a larger held-out gap", HARMONICS - 1)
 }
 
 /// Machine-file mode: the scan of the nominal residual (`res0`).
