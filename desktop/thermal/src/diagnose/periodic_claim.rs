@@ -19,9 +19,13 @@ use super::Finding;
 /// the sensor's own noise is nothing a user acts on.
 pub const MIN_AMP_NOISE: f64 = 1.0;
 
+/// Share of the held-out gap (noise units) of the channels a line shows
+/// on that its waveform, fitted on the fit rows, must take away.
+pub const MIN_HELD_SHRINK: f64 = 0.1;
+
 /// The ranking rule's sentence on periodic drivers.
 pub fn rule() -> String {
-    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × trial frequencies, 5 per independent one) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise unit, and must not widen the held-out gap; it ranks first when the line survives the selected effect and that effect is a sensor fault or leaves a larger held-out gap", HARMONICS - 1)
+    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × trial frequencies, 5 per independent one) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise unit, the inputs (spindle_rpm, feed_activity) must not repeat at that period (the same test on them: then the line is the model's misfit of a repeating duty), its waveform fitted on the fit rows must take ≥ {:.0} % of the held-out gap of the channels it shows on away, and it must not widen the held-out gap; it ranks first when the line survives the selected effect and that effect is a sensor fault or leaves a larger held-out gap", HARMONICS - 1, MIN_HELD_SHRINK * 100.0)
 }
 
 /// Machine-file mode: the scan of the nominal residual (`res0`).
@@ -91,10 +95,13 @@ struct Gap {
     c: Option<(f64, f64)>,
 }
 
-fn gap(scan: &Scan, sub: &[Option<Vec<Vec<f64>>>]) -> Gap {
+fn gap(scan: &Scan, sub: &[Option<Vec<Vec<f64>>>], only: Option<&[usize]>) -> Gap {
     let (mut m, mut nm) = (0.0, 0usize);
     let mut unit = [(0.0, 0usize, 0.0f64); 2];
     for (ci, c) in scan.chans.iter().enumerate() {
+        if only.is_some_and(|o| !o.contains(&ci)) {
+            continue;
+        }
         for (r, e) in c.resid.iter().enumerate() {
             let (mut s, mut n) = (0.0, 0usize);
             for (k, v) in e.iter().enumerate() {
@@ -133,8 +140,13 @@ fn gap(scan: &Scan, sub: &[Option<Vec<Vec<f64>>>]) -> Gap {
 /// fitted on every row (`diagnose fit`: a model fitted on the fit blocks
 /// alone leaves a residual whose size alternates with the blocks, a line
 /// of its own).
-pub fn candidate(scan: &Scan, gap_scan: &Scan) -> Option<(Finding, Line, bool)> {
+pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding, Line, bool)> {
     let line = periodic::strongest_line(scan)?;
+    // a duty that repeats at the line's period drives the line through the
+    // model's misfit of the duty: not a driver of its own
+    let ni = inputs.chans.len().max(1) as f64;
+    let duty_lnp = periodic::at_period(inputs, line.period_s);
+    let duty_periodic = duty_lnp.iter().any(|l| *l < (ALPHA / ni).ln());
     let nc = scan.chans.len();
     let ln_alpha = (ALPHA / nc.max(1) as f64).ln();
     let at = periodic::at_period(scan, line.period_s);
@@ -162,8 +174,13 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan) -> Option<(Finding, Line, bool)> 
             "ln_p_at_period": r4(at[c]),
         }));
     }
-    let before = gap(gap_scan, &vec![None; nc]);
-    let after = gap(gap_scan, &sub);
+    let before = gap(gap_scan, &vec![None; nc], None);
+    let after = gap(gap_scan, &sub, None);
+    // on the channels it shows on, the line must take a share of the
+    // held-out gap away (a line inside what the model misses is no driver)
+    let on_before = gap(gap_scan, &vec![None; nc], Some(&on)).m;
+    let on_after = gap(gap_scan, &sub, Some(&on)).m;
+    let held_shrink = 1.0 - on_after / on_before.max(1e-18);
     let best = &scan.chans[line.chan];
     let big_enough = amp_best >= MIN_AMP_NOISE * best.noise;
     let no_worse = |b: Option<(f64, f64)>, a: Option<(f64, f64)>| match (b, a) {
@@ -171,6 +188,8 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan) -> Option<(Finding, Line, bool)> 
         _ => true,
     };
     let claimed = line.significant()
+        && !duty_periodic
+        && held_shrink >= MIN_HELD_SHRINK
         && big_enough
         && after.m.is_finite()
         && after.m <= before.m
@@ -210,6 +229,8 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan) -> Option<(Finding, Line, bool)> 
             "p_value_corrected": line.p_corrected,
             "level": ALPHA,
             "significant": line.significant(),
+            "duty_repeats_at_period": duty_periodic,
+            "held_out_shrink_on_its_channels": r4(held_shrink),
             "amplitude_over_noise": r4(amp_best / best.noise.max(1e-12)),
             "held_out_norm_gap_before": r4(before.m.sqrt()),
             "held_out_norm_gap_after": r4(after.m.sqrt()),
@@ -325,7 +346,30 @@ pub fn machine(
         return;
     }
     let scan = scan_machine(ev, res0);
-    let cand = candidate(&scan, &scan);
+    let inputs = Scan {
+        chans: ["spindle_rpm", "feed_activity"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| Chan {
+                name: n.to_string(),
+                is_disp: false,
+                noise: 1.0,
+                resid: ev
+                    .runs
+                    .iter()
+                    .map(|p| {
+                        if i == 0 {
+                            p.inputs.rpm.clone()
+                        } else {
+                            p.inputs.feed.clone()
+                        }
+                    })
+                    .collect(),
+            })
+            .collect(),
+        ..scan.clone()
+    };
+    let cand = candidate(&scan, &scan, &inputs);
     let sel = findings.first().map(|f| f.effects.clone());
     merge(findings, tried, cand, |line| match sel {
         Some(e) if !e.is_empty() => ev
@@ -359,7 +403,25 @@ pub fn fit(
     let cand = if fa.outs.iter().any(|o| o.failed) {
         None
     } else {
-        candidate(&scan_fit(&pa, &fa, &fa), &scan_fit(p, nominal, nominal))
+        let scan = scan_fit(&pa, &fa, &fa);
+        let runs = &p.ds.runs;
+        let inputs = Scan {
+            chans: [
+                |r: &super::series::RunData| r.rpm.clone(),
+                |r: &super::series::RunData| r.feed.clone(),
+            ]
+            .iter()
+            .filter(|get| runs.iter().all(|r| get(r).is_some()))
+            .map(|get| Chan {
+                name: "input".into(),
+                is_disp: false,
+                noise: 1.0,
+                resid: runs.iter().map(|r| get(r).unwrap_or_default()).collect(),
+            })
+            .collect(),
+            ..scan.clone()
+        };
+        candidate(&scan, &scan_fit(p, nominal, nominal), &inputs)
     };
     merge(findings, tried, cand, |line| match selected {
         Some(s) => line_survives(&scan_fit(p, s, nominal), line),
