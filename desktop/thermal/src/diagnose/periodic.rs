@@ -582,7 +582,9 @@ mod tests {
                 noise(r, n)
                     .iter()
                     .enumerate()
-                    .map(|(k, e)| 0.02 * e + 0.02 * (k as f64 * dt / 1500.0 * 6.283).sin())
+                    .map(|(k, e)| {
+                        0.02 * e + 0.02 * (k as f64 * dt / 1500.0 * std::f64::consts::TAU).sin()
+                    })
                     .collect()
             })
             .collect();
