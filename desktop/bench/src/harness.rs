@@ -12,6 +12,7 @@ mod draw;
 mod open;
 pub mod perturb;
 pub mod score;
+mod periodic;
 mod tally;
 
 pub use approx::{approx_text, run_approx_bench, ApproxConfig, Column, World, HELDOUT_SEEDS};
@@ -19,4 +20,5 @@ pub use closed::run_bench;
 pub use cross::{cross_cases, run_cross_bench, CrossCase, CROSS_KINDS};
 pub use draw::{random_duty, random_effect, BenchConfig};
 pub use open::{names_truth, open_cases, run_open_bench, run_open_machine_bench, OpenCase};
+pub use periodic::{periodic_cases, run_periodic_bench};
 pub use tally::{Visibility, VISIBLE_C, VISIBLE_UM};

@@ -43,6 +43,40 @@ pub enum TruthEffect {
     BearingNonlinear { k_w: f64, p: f64 },
     /// The air at the machine drifts by `rate_c_per_h` beyond `T_ambient`.
     AmbientDrift { rate_c_per_h: f64 },
+    /// A timer-driven chiller: the coolant (tank) follows a sawtooth (slow
+    /// rise over 80 % of the period, fast pull-down) or, `square`, an on/off
+    /// cycle of ± `amp_c` about the set point, period `period_s`.
+    ChillerWave {
+        period_s: f64,
+        amp_c: f64,
+        square: bool,
+        phase: f64,
+    },
+    /// The shop's HVAC cycles the air at the machine by ± `amp_c`
+    /// (a triangle: compressor on/off), period `period_s`; `T_ambient`
+    /// hangs away from the outlet and does not see it.
+    HvacCycle {
+        period_s: f64,
+        amp_c: f64,
+        phase: f64,
+    },
+}
+
+/// Periodic effect kinds (`bench-diagnose --periodic-only`); drawn only
+/// there, so the other benches' cases stay as they were.
+pub const PERIODIC_EFFECTS: [&str; 3] = ["chiller_sawtooth", "chiller_onoff", "hvac"];
+
+/// One cycle of a periodic effect at phase `x` (cycles), in −1..1.
+pub fn wave(x: f64, shape: &str) -> f64 {
+    let u = x.rem_euclid(1.0);
+    match shape {
+        // slow rise over 80 %, pull-down over 20 %
+        "sawtooth" if u < 0.8 => -1.0 + 2.0 * u / 0.8,
+        "sawtooth" => 1.0 - 2.0 * (u - 0.8) / 0.2,
+        "square" if u < 0.5 => 1.0,
+        "square" => -1.0,
+        _ => 1.0 - 4.0 * (u - 0.5).abs(),
+    }
 }
 
 impl TruthEffect {
@@ -54,6 +88,7 @@ impl TruthEffect {
             TruthEffect::ChillerCycling { .. } => "coolant",
             TruthEffect::BearingNonlinear { .. } => "bearing_nonlinear",
             TruthEffect::AmbientDrift { .. } => "ambient_drift",
+            TruthEffect::ChillerWave { .. } | TruthEffect::HvacCycle { .. } => "periodic",
         }
     }
 
@@ -83,6 +118,17 @@ impl TruthEffect {
             "bearing_nonlinear" => TruthEffect::BearingNonlinear {
                 k_w: u(g, 40.0, 120.0),
                 p: u(g, 2.5, 3.2),
+            },
+            "chiller_sawtooth" | "chiller_onoff" => TruthEffect::ChillerWave {
+                period_s: (u(g, 600f64.ln(), 3600f64.ln())).exp(),
+                amp_c: u(g, 0.3, 1.0),
+                square: kind == "chiller_onoff",
+                phase: g.uniform(),
+            },
+            "hvac" => TruthEffect::HvacCycle {
+                period_s: (u(g, 1800f64.ln(), 7200f64.ln())).exp(),
+                amp_c: u(g, 0.5, 1.5),
+                phase: g.uniform(),
             },
             _ => TruthEffect::AmbientDrift {
                 rate_c_per_h: sign * u(g, 0.15, 0.5),
@@ -357,6 +403,33 @@ pub fn simulate(
         TruthEffect::ChillerCycling { band_c, power_w } => Some((*band_c, *power_w)),
         _ => None,
     });
+    let chiller_wave = effects.iter().find_map(|e| match e {
+        TruthEffect::ChillerWave {
+            period_s,
+            amp_c,
+            square,
+            phase,
+        } => Some((
+            *period_s,
+            *amp_c,
+            if *square { "square" } else { "sawtooth" },
+            *phase,
+        )),
+        _ => None,
+    });
+    let hvac = |t: f64| -> f64 {
+        effects
+            .iter()
+            .map(|e| match e {
+                TruthEffect::HvacCycle {
+                    period_s,
+                    amp_c,
+                    phase,
+                } => amp_c * wave(t / period_s + phase, "triangle"),
+                _ => 0.0,
+            })
+            .sum()
+    };
     let t_set = 19.0;
     let mut x = DVector::from_element(NODES, amb_meas(0.0));
     x[TANK] = t_set;
@@ -371,7 +444,7 @@ pub fn simulate(
             seg += 1;
         }
         let (_, rpm, feed) = duty[seg];
-        let air = amb_meas(t) + drift * t / 3600.0;
+        let air = amb_meas(t) + drift * t / 3600.0 + hvac(t);
         follow_sites(&mut lagged, &x, effects, dt);
         if k % stride == 0 {
             let sample = Sample {
@@ -415,6 +488,9 @@ pub fn simulate(
         }
         if chiller.is_none() {
             x[TANK] = t_set;
+        }
+        if let Some((per, amp, shape, ph)) = chiller_wave {
+            x[TANK] = t_set + amp * wave((t + dt) / per + ph, shape);
         }
     }
     TruthRun {

@@ -5,7 +5,8 @@
 //!
 //! `bench-diagnose [--cases N] [--seed S] [--json] [--verbose] [--machines DIR] [--machine FILE]`
 //! (`--open-only`, `--open-machine-only`, `--closed-only`, `--cross-only`:
-//! one column alone)
+//! one column alone; `--periodic-only`: the periodic-driver column, both
+//! modes, `harness/periodic.rs`)
 //!
 //! The cross-model column runs `diagnose fit` on cases of the first
 //! simulator (`tcomp_thermal::sim`), which the fit mode was never tuned on.
@@ -29,7 +30,8 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp_bench::harness::{
     approx_text, run_approx_bench, run_bench, run_cross_bench, run_open_bench,
-    run_open_machine_bench, ApproxConfig, BenchConfig, Column, World, HELDOUT_SEEDS,
+    run_open_machine_bench, run_periodic_bench, ApproxConfig, BenchConfig, Column, World,
+    HELDOUT_SEEDS,
 };
 use tcomp_thermal::diagnose::{diagnose, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
@@ -47,6 +49,7 @@ fn run() -> Result<()> {
     let mut machine_only = false;
     let mut closed_only = false;
     let mut cross_only = false;
+    let mut periodic_only = false;
     let mut dir = desktop_dir().join("machines");
     let mut open_machine_file: Option<PathBuf> = None;
     let mut calibrate = false;
@@ -79,7 +82,8 @@ fn run() -> Result<()> {
             "--open-machine-only" => machine_only = true,
             "--closed-only" => closed_only = true,
             "--cross-only" => cross_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X)"),
+            "--periodic-only" => periodic_only = true,
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X)"),
         }
     }
     let machines = vec![
@@ -133,6 +137,10 @@ fn run() -> Result<()> {
     }
     let open_machine_path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
     let truth_machine = Machine::load(&open_machine_path)?;
+    if periodic_only {
+        println!("{}", run_periodic_bench(&truth_machine, &open_cfg)?);
+        return Ok(());
+    }
     let mut open_machine = run_open_machine_bench(&truth_machine, &open_cfg)?;
     open_machine["machine_file"] = serde_json::json!(open_machine_path.display().to_string());
     if machine_only {

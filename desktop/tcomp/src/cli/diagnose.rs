@@ -68,7 +68,7 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
     }
     for o in &opt.only {
         anyhow::ensure!(
-            tcomp_thermal::sim::ALL_EFFECT_NAMES.contains(&o.as_str()),
+            tcomp_thermal::sim::ALL_EFFECT_NAMES.contains(&o.as_str()) || o == "periodic",
             "--only: unknown effect `{o}`"
         );
     }

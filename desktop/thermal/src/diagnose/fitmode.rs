@@ -673,7 +673,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         .map(|(c, b)| score(&p, c, b, &fit, opt))
         .collect();
     rank(&mut scored);
-    let findings = claimed_findings(&scored);
+    let mut findings = claimed_findings(&scored);
     let selected = scored.iter().find(|s| s.claimed).map(|s| {
         selected_gaps(
             &p,
@@ -682,7 +682,18 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             &s.fit,
         )
     });
-    let tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
+    let sel_fit = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
+    let mut tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
+    // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
+    super::periodic_claim::fit(
+        &p,
+        &st,
+        &fit,
+        sel_fit.as_ref(),
+        &mut findings,
+        &mut tried,
+        &opt.only,
+    );
     let mut notes = ds.notes.clone();
     notes.push(format!(
         "nominal identified on {} run(s), {} rows, fit and held-out blocks in every run",
@@ -712,6 +723,6 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         nominal: nominal_json(&p, &st, &fit),
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
-        ranking_rule: fit_ranking_rule(opt),
+        ranking_rule: fit_ranking_rule(opt) + &super::periodic_claim::rule(),
     })
 }

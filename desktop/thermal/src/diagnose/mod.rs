@@ -14,6 +14,8 @@ pub mod ident;
 mod ident_fit;
 pub mod lag;
 pub mod open_effects;
+pub mod periodic;
+pub mod periodic_claim;
 mod placement;
 pub mod prep;
 mod release;
@@ -707,10 +709,13 @@ fn diagnose_core(
     if let Some(c) = &cal {
         sims += merge_releases(&judge, c, m, ps, &mut findings)?;
     }
+    let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
+    // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
+    periodic_claim::machine(&ev, &res0, &mut findings, &mut tried, &opt.only);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
-        tried: tried.into_iter().map(|t| t.0).collect(),
+        tried,
         where_,
         nominal_m_held: judge.m0,
         nominal_gap_um: judge.st0.gap_held(true),
@@ -724,7 +729,7 @@ fn diagnose_core(
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,
-        ranking_rule: RANKING_RULE.into(),
+        ranking_rule: RANKING_RULE.to_string() + &periodic_claim::rule(),
     })
 }
 

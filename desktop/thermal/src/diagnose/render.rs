@@ -116,6 +116,8 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
             f.gap_c.map_or("–".into(), |g| f2(g.1 .0)),
         );
     }
+    // periodic drivers (periodic_claim.rs)
+    s.push_str(&super::periodic_claim::report_md(&d.tried));
     let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
     let w = &d.where_;
     for (title, key, unit) in [
