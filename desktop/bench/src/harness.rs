@@ -10,9 +10,9 @@ mod closed;
 mod cross;
 mod draw;
 mod open;
+mod periodic;
 pub mod perturb;
 pub mod score;
-mod periodic;
 mod tally;
 
 pub use approx::{approx_text, run_approx_bench, ApproxConfig, Column, World, HELDOUT_SEEDS};

@@ -40,7 +40,27 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
-fn run() -> Result<()> {
+/// The command line, parsed.
+struct Args {
+    cases: usize,
+    seed: u64,
+    json: bool,
+    verbose: bool,
+    open_only: bool,
+    machine_only: bool,
+    closed_only: bool,
+    cross_only: bool,
+    periodic_only: bool,
+    dir: PathBuf,
+    open_machine_file: Option<PathBuf>,
+    calibrate: bool,
+    columns: Option<Vec<Column>>,
+    worlds: Vec<World>,
+    heldout: bool,
+    sigma: f64,
+}
+
+fn parse_args() -> Result<Args> {
     let mut cases = 60usize;
     let mut seed = 7u64;
     let mut json = false;
@@ -86,6 +106,45 @@ fn run() -> Result<()> {
             other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X)"),
         }
     }
+    Ok(Args {
+        cases,
+        seed,
+        json,
+        verbose,
+        open_only,
+        machine_only,
+        closed_only,
+        cross_only,
+        periodic_only,
+        dir,
+        open_machine_file,
+        calibrate,
+        columns,
+        worlds,
+        heldout,
+        sigma,
+    })
+}
+
+fn run() -> Result<()> {
+    let Args {
+        cases,
+        seed,
+        json,
+        verbose,
+        open_only,
+        machine_only,
+        closed_only,
+        cross_only,
+        periodic_only,
+        dir,
+        open_machine_file,
+        calibrate,
+        columns,
+        worlds,
+        heldout,
+        sigma,
+    } = parse_args()?;
     let machines = vec![
         Machine::load(&dir.join("turning-center-16.toml"))?,
         Machine::load(&dir.join("five-axis-20.toml"))?,
