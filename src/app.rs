@@ -409,13 +409,17 @@ impl<F: BackgroundErase> App<F> {
             FlashJob::Model { len, .. } => {
                 let staged = self.server.holding.staged();
                 let staged = staged.get(..len).unwrap_or(staged);
-                match Model::parse(staged) {
-                    Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
-                        self.install(Some(m));
-                        self.references.reset();
-                        true
-                    }
-                    _ => false,
+                // Parsed in place (one model on the stack), checked before
+                // it is stored.
+                let mut m = Model::empty(0, 0);
+                if m.parse_into(staged).is_ok()
+                    && self.store.finish(Some(staged), &settings).is_ok()
+                {
+                    self.install(Some(m));
+                    self.references.reset();
+                    true
+                } else {
+                    false
                 }
             }
             FlashJob::Settings { .. } => self.store.finish(None, &settings).is_ok(),
@@ -447,7 +451,11 @@ impl<F: BackgroundErase> App<F> {
     /// Store an image (factory programming, or the bench's initial model) and use it.
     #[inline(never)]
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
-        let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
+        // Parsed in place: one model on the stack.
+        let mut model = Model::empty(0, 0);
+        model
+            .parse_into(image)
+            .map_err(|e| result::of_image_error(&e))?;
         if matches!(self.job, Some(FlashJob::Model { .. })) {
             return Err(result::COMMIT_IN_PROGRESS);
         }
