@@ -131,7 +131,7 @@ impl<F: BackgroundErase> App<F> {
         App {
             server: Server::new(unit, baud),
             snapshot: Snapshot::default(),
-            compensation: Compensation::new(None, &map),
+            compensation: Compensation::empty(),
             store: ModelStore::new(flash, slot_size),
             map,
             progress: Progress::default(),
@@ -157,7 +157,11 @@ impl<F: BackgroundErase> App<F> {
     /// and kept reference stored with it, in force.
     #[inline(never)]
     pub fn load_stored(&mut self) {
-        let model = self.store.load(self.server.holding.scratch());
+        // Parsed straight into the compensator (no model on the stack).
+        let (store, buf) = (&mut self.store, self.server.holding.scratch());
+        self.compensation
+            .compensator()
+            .load_with(|m| store.load_into(buf, m));
         let blob = self.store.settings();
         let stored = blob
             .and_then(|b| b.get(..SETTINGS_LEN))
@@ -184,7 +188,7 @@ impl<F: BackgroundErase> App<F> {
         self.publish_references();
         self.snapshot.reference_state = u16::from(self.kept.is_some());
         self.publish_map();
-        self.install(model);
+        self.installed();
     }
 
     /// The settings in force (unit, baud, clamp and rate overrides).
@@ -334,7 +338,6 @@ impl<F: BackgroundErase> App<F> {
             core::array::from_fn(|i| self.compensation.vol_channel_of(i));
         self.map = map;
         self.publish_map();
-        let model = self.compensation.model().cloned();
         let moved = |rom: [u8; 8], before: Option<u8>| {
             rom != [0; 8]
                 && map
@@ -342,7 +345,7 @@ impl<F: BackgroundErase> App<F> {
                     .and_then(|c| u8::try_from(c).ok())
                     != before
         };
-        let changes = model.as_ref().is_some_and(|m| {
+        let changes = self.compensation.model().is_some_and(|m| {
             m.sensors
                 .iter()
                 .zip(resolved_before)
@@ -355,7 +358,9 @@ impl<F: BackgroundErase> App<F> {
                 })
         });
         if changes {
-            self.install(model);
+            // The model held now, restarted (as an upload of it would).
+            self.compensation.compensator().restart();
+            self.installed();
         }
         self.store_settings();
     }
@@ -404,13 +409,17 @@ impl<F: BackgroundErase> App<F> {
             FlashJob::Model { len, .. } => {
                 let staged = self.server.holding.staged();
                 let staged = staged.get(..len).unwrap_or(staged);
-                match Model::parse(staged) {
-                    Ok(m) if self.store.finish(Some(staged), &settings).is_ok() => {
-                        self.install(Some(m));
-                        self.references.reset();
-                        true
-                    }
-                    _ => false,
+                // Parsed in place (one model on the stack), checked before
+                // it is stored.
+                let mut m = Model::empty(0, 0);
+                if m.parse_into(staged).is_ok()
+                    && self.store.finish(Some(staged), &settings).is_ok()
+                {
+                    self.install(Some(m));
+                    self.references.reset();
+                    true
+                } else {
+                    false
                 }
             }
             FlashJob::Settings { .. } => self.store.finish(None, &settings).is_ok(),
@@ -442,7 +451,11 @@ impl<F: BackgroundErase> App<F> {
     /// Store an image (factory programming, or the bench's initial model) and use it.
     #[inline(never)]
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
-        let model = Model::parse(image).map_err(|e| result::of_image_error(&e))?;
+        // Parsed in place: one model on the stack.
+        let mut model = Model::empty(0, 0);
+        model
+            .parse_into(image)
+            .map_err(|e| result::of_image_error(&e))?;
         if matches!(self.job, Some(FlashJob::Model { .. })) {
             return Err(result::COMMIT_IN_PROGRESS);
         }
@@ -469,15 +482,21 @@ impl<F: BackgroundErase> App<F> {
         self.load_stored();
     }
 
-    /// No model and a fresh compensator. Not inlined: the new compensator's
-    /// temporaries are gone before a model is loaded.
-    #[inline(never)]
+    /// No model and a fresh compensator, in place.
     fn clear_compensation(&mut self) {
-        self.compensation = Compensation::new(None, &self.map);
+        self.compensation.clear();
     }
 
     fn install(&mut self, model: Option<Model>) {
-        self.compensation.load(model, &self.map);
+        self.compensation.compensator().load(model);
+        self.installed();
+    }
+
+    /// After the compensator's model changed or restarted: its sensors
+    /// resolved through the map in force, the kept reference and limits
+    /// applied, the model's registers published.
+    fn installed(&mut self) {
+        self.compensation.resolve(&self.map);
         self.apply_kept_reference();
         self.apply_limits();
         for (i, ch) in self.snapshot.sensor_channels.iter_mut().enumerate() {

@@ -43,20 +43,40 @@ fn resolve(s: &SensorRef, map: &ChannelMap) -> Option<u8> {
 
 impl Compensation {
     pub fn new(model: Option<Model>, map: &ChannelMap) -> Self {
-        let mut c = Compensation {
-            compensator: Compensator::new(None),
-            channel_of: [None; MAX_SENSORS],
-            vol_channel_of: [None; MAX_VOL_SENSORS],
-        };
+        let mut c = Self::empty();
         c.load(model, map);
         c
     }
 
-    /// Swap the model (after an upload) and resolve its sensors again.
-    pub fn load(&mut self, model: Option<Model>, map: &ChannelMap) {
+    /// `Compensation::new(None, _)` as one value, so that the app can be
+    /// built straight into its static (no model on the stack).
+    #[inline(always)]
+    pub fn empty() -> Self {
+        Compensation {
+            compensator: Compensator::empty(),
+            channel_of: [None; MAX_SENSORS],
+            vol_channel_of: [None; MAX_VOL_SENSORS],
+        }
+    }
+
+    /// Back to [`Compensation::empty`], in place.
+    pub fn clear(&mut self) {
+        self.compensator.clear();
         self.channel_of = [None; MAX_SENSORS];
         self.vol_channel_of = [None; MAX_VOL_SENSORS];
-        if let Some(m) = &model {
+    }
+
+    /// Swap the model (after an upload) and resolve its sensors again.
+    pub fn load(&mut self, model: Option<Model>, map: &ChannelMap) {
+        self.compensator.load(model);
+        self.resolve(map);
+    }
+
+    /// Resolve the model's sensors to bus channels through `map`.
+    pub fn resolve(&mut self, map: &ChannelMap) {
+        self.channel_of = [None; MAX_SENSORS];
+        self.vol_channel_of = [None; MAX_VOL_SENSORS];
+        if let Some(m) = self.compensator.model() {
             for (slot, s) in self.channel_of.iter_mut().zip(&m.sensors) {
                 *slot = resolve(s, map);
             }
@@ -66,7 +86,6 @@ impl Compensation {
                 }
             }
         }
-        self.compensator.load(model);
     }
 
     pub fn compensator(&mut self) -> &mut Compensator {

@@ -80,10 +80,26 @@ impl<F: NorFlash> ModelStore<F> {
     /// Find the newest valid slot and parse its model; `buf` is scratch
     /// (at least `MAX_IMAGE_BYTES`: a longer image is no valid slot).
     pub fn load(&mut self, buf: &mut [u8]) -> Option<Model> {
+        let mut m = Model::empty(0, 0);
+        self.load_into(buf, &mut m).then_some(m)
+    }
+
+    /// As [`ModelStore::load`], parsed into `model` in place (each slot's
+    /// image is checked by parsing it there; a board passes its
+    /// compensator's model, so no model sits on its stack). `false`: no
+    /// model (`model` then holds no valid model).
+    pub fn load_into(&mut self, buf: &mut [u8], model: &mut Model) -> bool {
+        // The chosen slot was parsed into `model` last, when it was checked.
+        self.load_header(buf, model).is_some()
+    }
+
+    /// The newest valid slot made the active one, its settings read and its
+    /// image in `buf`: the image's length (`None`: no model).
+    fn load_header(&mut self, buf: &mut [u8], model: &mut Model) -> Option<usize> {
         self.active = None;
         let mut best: Option<(usize, u32)> = None;
         for s in 0..2 {
-            if let Some(h) = self.valid_header(s, buf) {
+            if let Some(h) = self.valid_header(s, buf, model) {
                 let newer = match best {
                     None => true,
                     // Wrapping comparison: generation g+1 is newer than g.
@@ -95,14 +111,11 @@ impl<F: NorFlash> ModelStore<F> {
             }
         }
         let (s, g) = best?;
-        let h = self.valid_header(s, buf)?;
+        let h = self.valid_header(s, buf, model)?;
         self.active = Some((s, g));
         self.active_image = (h.len, h.crc);
         self.settings = self.read_settings(s, h.len);
-        if h.len == 0 {
-            return None;
-        }
-        Model::parse(buf.get(..h.len as usize)?).ok()
+        (h.len != 0).then_some(h.len as usize)
     }
 
     /// Offset of slot `s` (0 or 1; any other index reads as slot 1).
@@ -153,8 +166,8 @@ impl<F: NorFlash> ModelStore<F> {
     }
 
     /// Reads slot `s`'s image into `buf` and returns its header when the slot
-    /// holds a complete, CRC-correct image that parses.
-    fn valid_header(&mut self, s: usize, buf: &mut [u8]) -> Option<Header> {
+    /// holds a complete, CRC-correct image that parses (into `scratch`).
+    fn valid_header(&mut self, s: usize, buf: &mut [u8], scratch: &mut Model) -> Option<Header> {
         let base = self.slot_base(s);
         let mut h = [0u8; HEADER as usize];
         self.flash.read(base, &mut h).ok()?;
@@ -180,7 +193,7 @@ impl<F: NorFlash> ModelStore<F> {
         }
         let image = buf.get_mut(..len)?;
         self.flash.read(base + HEADER, image).ok()?;
-        if crc32(image) != header.crc || Model::parse(image).is_err() {
+        if crc32(image) != header.crc || scratch.parse_into(image).is_err() {
             return None;
         }
         Some(header)

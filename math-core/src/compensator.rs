@@ -91,7 +91,11 @@ pub struct StepOutput {
 }
 
 pub struct Compensator {
-    model: Option<Model>,
+    /// The model in force when `loaded` (held in place: a board parses an
+    /// image straight into it, [`Compensator::load_with`], so no second
+    /// copy of a model ever sits on its stack).
+    model: Model,
+    loaded: bool,
     features: FeatureState,
     last_step_ms: u64,
     served: [i32; MAX_DIRECTIONS],
@@ -110,34 +114,72 @@ impl Default for Compensator {
 
 impl Compensator {
     pub fn new(model: Option<Model>) -> Self {
-        let mut c = Compensator {
-            model: None,
+        let mut c = Self::empty();
+        c.load(model);
+        c
+    }
+
+    /// `Compensator::new(None)`, as one value (no model, nothing to
+    /// restart), so that it can be built straight where it is kept.
+    #[inline(always)]
+    pub fn empty() -> Self {
+        Compensator {
+            model: Model::empty(0, 0),
+            loaded: false,
             features: FeatureState::new(),
             last_step_ms: 0,
             served: [0; MAX_DIRECTIONS],
             last_eval: Evaluation::default(),
             limit_override: [(i32::MAX, i32::MAX); MAX_DIRECTIONS],
             main_mask: [0; MAX_DIRECTIONS],
-        };
-        c.load(model);
-        c
+        }
+    }
+
+    /// Back to [`Compensator::empty`] in place (no model, limits and served
+    /// correction cleared).
+    pub fn clear(&mut self) {
+        self.loaded = false;
+        self.features = FeatureState::new();
+        self.last_step_ms = 0;
+        self.served = [0; MAX_DIRECTIONS];
+        self.last_eval = Evaluation::default();
+        self.limit_override = [(i32::MAX, i32::MAX); MAX_DIRECTIONS];
+        self.main_mask = [0; MAX_DIRECTIONS];
     }
 
     pub fn model(&self) -> Option<&Model> {
-        self.model.as_ref()
+        self.loaded.then_some(&self.model)
     }
 
     /// Swap in a new model (or none). The reference and filters restart;
     /// the served correction is kept and moves to the new model's output at
     /// the new model's rate limit (no jump).
     pub fn load(&mut self, model: Option<Model>) {
+        self.loaded = false;
+        if let Some(m) = model {
+            self.model = m;
+            self.loaded = true;
+        }
+        self.restart();
+    }
+
+    /// As [`Compensator::load`], with the model filled in place by `fill`
+    /// (e.g. [`Model::parse_into`]); `false` from it: no model.
+    pub fn load_with(&mut self, fill: impl FnOnce(&mut Model) -> bool) {
+        self.loaded = false;
+        self.loaded = fill(&mut self.model);
+        self.restart();
+    }
+
+    /// As [`Compensator::load`] with the model held now (reference and
+    /// filters restart).
+    pub fn restart(&mut self) {
         self.main_mask = [0; MAX_DIRECTIONS];
-        if let Some(m) = &model {
+        if self.loaded {
             for (d, mask) in self.main_mask.iter_mut().enumerate() {
-                *mask = m.main_input_mask(d);
+                *mask = self.model.main_input_mask(d);
             }
         }
-        self.model = model;
         self.rereference();
     }
 
@@ -156,7 +198,7 @@ impl Compensator {
 
     /// The reference temperatures (1/16 °C) per model sensor, once taken.
     pub fn reference(&self) -> Option<&[i32]> {
-        let n = self.model.as_ref()?.sensors.len();
+        let n = self.model()?.sensors.len();
         self.features.reference(n)
     }
 
@@ -169,7 +211,7 @@ impl Compensator {
 
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
         let mut out = StepOutput::default();
-        let Some(model) = self.model.as_ref() else {
+        let Some(model) = self.loaded.then_some(&self.model) else {
             self.served = [0; MAX_DIRECTIONS];
             out.status = status::NO_MODEL;
             out.active = [ACTIVE_NONE; MAX_DIRECTIONS];

@@ -167,6 +167,56 @@ impl Volumetric {
     /// Validate a section: every premise of the overflow argument (module
     /// docs) is checked here, each refusal a named [`ImageError`].
     pub fn new(s: &VolumetricSpec<'_>) -> Result<Volumetric, ImageError> {
+        let spans = Self::check(s)?;
+        // Capacities checked by `check`.
+        let mut sensors = Vec::new();
+        let _ = sensors.extend_from_slice(s.sensors);
+        let mut terms = Vec::new();
+        let _ = terms.extend_from_slice(s.terms);
+        Ok(Volumetric {
+            slots: s.slots,
+            origin_um: s.origin_um,
+            stroke_um: s.stroke_um,
+            tool_max_um: s.tool_max_um,
+            max_correction: s.max_correction,
+            sensors,
+            terms,
+            spans,
+        })
+    }
+
+    /// An empty, unchecked section for the image parser to fill in place
+    /// (then [`Volumetric::check_in_place`]; never used unchecked).
+    pub(crate) fn blank() -> Self {
+        Volumetric {
+            slots: [0; 3],
+            origin_um: [0; 3],
+            stroke_um: [0; 3],
+            tool_max_um: 0,
+            max_correction: [0; 3],
+            sensors: Vec::new(),
+            terms: Vec::new(),
+            spans: [Span::default(); 4],
+        }
+    }
+
+    /// [`Volumetric::new`]'s checks, in its order, on a section filled in
+    /// place (the parser's: no copy of the terms on the stack).
+    pub(crate) fn check_in_place(&mut self) -> Result<(), ImageError> {
+        self.spans = Self::check(&VolumetricSpec {
+            slots: self.slots,
+            origin_um: self.origin_um,
+            stroke_um: self.stroke_um,
+            tool_max_um: self.tool_max_um,
+            max_correction: self.max_correction,
+            sensors: &self.sensors,
+            terms: &self.terms,
+        })?;
+        Ok(())
+    }
+
+    /// The checks of [`Volumetric::new`]; the spans of u, v, w and l.
+    fn check(s: &VolumetricSpec<'_>) -> Result<[Span; 4], ImageError> {
         let mut spans = [Span::default(); 4];
         let per_axis = spans
             .iter_mut()
@@ -204,7 +254,6 @@ impl Volumetric {
         spans[3] = Span::new(0, s.tool_max_um).ok_or(ImageError::VolumetricTool {
             value: s.tool_max_um,
         })?;
-        let mut sensors = Vec::new();
         for (vs, i) in s.sensors.iter().zip(0u8..) {
             if usize::from(vs.sensor.channel) >= MAX_SENSORS {
                 return Err(ImageError::SensorChannelOutOfRange {
@@ -220,11 +269,13 @@ impl Volumetric {
             {
                 return Err(ImageError::VolumetricTemperature { sensor: i });
             }
-            sensors.push(*vs).map_err(|_| ImageError::TooMany {
-                what: "volumetric sensors",
-                count: s.sensors.len(),
-                max: MAX_VOL_SENSORS,
-            })?;
+            if usize::from(i) >= MAX_VOL_SENSORS {
+                return Err(ImageError::TooMany {
+                    what: "volumetric sensors",
+                    count: s.sensors.len(),
+                    max: MAX_VOL_SENSORS,
+                });
+            }
         }
         if s.terms.is_empty() || s.terms.len() > MAX_VOL_TERMS {
             return Err(ImageError::TooMany {
@@ -233,9 +284,8 @@ impl Volumetric {
                 max: MAX_VOL_TERMS,
             });
         }
-        let mut terms = Vec::new();
         for t in s.terms {
-            if t.sensor != NONE && usize::from(t.sensor) >= sensors.len() {
+            if t.sensor != NONE && usize::from(t.sensor) >= s.sensors.len() {
                 return Err(ImageError::BadIndex {
                     what: "volumetric term sensor",
                     index: t.sensor,
@@ -246,19 +296,8 @@ impl Volumetric {
                     what: "volumetric term exponent",
                 });
             }
-            // Capacity checked above.
-            let _ = terms.push(*t);
         }
-        Ok(Volumetric {
-            slots: s.slots,
-            origin_um: s.origin_um,
-            stroke_um: s.stroke_um,
-            tool_max_um: s.tool_max_um,
-            max_correction: s.max_correction,
-            sensors,
-            terms,
-            spans,
-        })
+        Ok(spans)
     }
 
     /// Encoded payload length (section kind 3, without the 4-byte section header).

@@ -581,9 +581,12 @@ impl Holding {
                     return Err(WriteError::ModelRefused);
                 };
                 // The image, then its signature trailer if it carries one.
+                // Parsed in place: one model on the stack, not a second one
+                // on the way out of the parser.
+                let mut model = Model::empty(0, 0);
                 let parsed = split_signed(staged)
-                    .and_then(|signed| Model::parse(signed.image).map(|m| (signed, m)));
-                let (signed, model) = match parsed {
+                    .and_then(|signed| model.parse_into(signed.image).map(|()| signed));
+                let signed = match parsed {
                     Ok(ok) => ok,
                     Err(e) => {
                         self.result = result::of_image_error(&e);

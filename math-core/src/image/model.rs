@@ -67,6 +67,28 @@ impl Model {
         }
     }
 
+    /// [`Model::empty`] in place (no copy of a model on the stack).
+    pub fn clear(&mut self, model_version: u32, step_ms: u32) {
+        self.flags = 0;
+        self.model_version = model_version;
+        self.step_ms = step_ms;
+        self.warmup_s = 0;
+        self.sensors.clear();
+        self.directions.clear();
+        self.axes.clear();
+        self.inputs.clear();
+        self.nets.clear();
+        self.tables.clear();
+        self.fallbacks.clear();
+        self.fallback_terms.clear();
+        self.volumetric = None;
+        self.five_axis = None;
+        self.input_span = [Span::default(); MAX_INPUTS];
+        self.axis_span = [Span::default(); MAX_AXES];
+        self.axis_ref_q24 = [0; MAX_AXES];
+        self.crc = 0;
+    }
+
     /// The terms of fallback `k` (0-based).
     pub fn fallback_terms_of(&self, k: usize) -> &[Term] {
         match self.fallbacks.get(k) {

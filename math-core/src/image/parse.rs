@@ -44,26 +44,36 @@ impl Model {
     /// Parse and validate an image. `bytes` must be exactly the image
     /// (`total_len` bytes): anything after its CRC is refused.
     pub fn parse(bytes: &[u8]) -> Result<Model, ImageError> {
+        let mut m = Model::empty(0, 0);
+        m.parse_into(bytes)?;
+        Ok(m)
+    }
+
+    /// [`Model::parse`] into this model, in place (a board keeps no second
+    /// model on its stack). On an error the model is left partly filled:
+    /// the caller must not use it.
+    pub fn parse_into(&mut self, bytes: &[u8]) -> Result<(), ImageError> {
         let env = check_envelope(bytes)?;
         // From here on read only the body: a section running into the CRC is a length error.
         let mut r = Reader::new(env.body, 12);
-        let (mut m, n) = read_header(&mut r, env.flags)?;
-        read_sensors(&mut r, &mut m, n.sensors)?;
-        read_directions(&mut r, &mut m, n.directions)?;
-        read_axes(&mut r, &mut m, n.axes)?;
-        read_inputs(&mut r, &mut m, n.inputs)?;
-        read_nets(&mut r, &mut m, n.nets)?;
-        read_tables(&mut r, &mut m, n.tables)?;
+        let m = self;
+        let n = read_header(&mut r, env.flags, m)?;
+        read_sensors(&mut r, m, n.sensors)?;
+        read_directions(&mut r, m, n.directions)?;
+        read_axes(&mut r, m, n.axes)?;
+        read_inputs(&mut r, m, n.inputs)?;
+        read_nets(&mut r, m, n.nets)?;
+        read_tables(&mut r, m, n.tables)?;
         if env.version >= 2 {
-            parse_sections(&mut r, &mut m)?;
+            parse_sections(&mut r, m)?;
         }
         if !r.is_at_end() {
             return Err(ImageError::LengthMismatch);
         }
-        check_table_weight(&m)?;
-        super::semantic::check(&m)?;
+        check_table_weight(m)?;
+        super::semantic::check(m)?;
         m.crc = env.crc;
-        Ok(m)
+        Ok(())
     }
 }
 
@@ -117,8 +127,9 @@ fn check_envelope(bytes: &[u8]) -> Result<Envelope<'_>, ImageError> {
     })
 }
 
-/// The header after `total_len`: an empty model and the record counts.
-fn read_header(r: &mut Reader<'_>, flags: u16) -> Result<(Model, Counts), ImageError> {
+/// The header after `total_len`: `m` emptied with the header's values,
+/// and the record counts.
+fn read_header(r: &mut Reader<'_>, flags: u16, m: &mut Model) -> Result<Counts, ImageError> {
     let model_version = r.u32()?;
     if model_version == 0 {
         return Err(ImageError::ZeroModelVersion);
@@ -144,10 +155,10 @@ fn read_header(r: &mut Reader<'_>, flags: u16) -> Result<(Model, Counts), ImageE
     if flags & !FLAG_FIXED_REFERENCE != 0 {
         return Err(ImageError::BadValue { what: "flags" });
     }
-    let mut m = Model::empty(model_version, step_ms);
+    m.clear(model_version, step_ms);
     m.flags = flags;
     m.warmup_s = warmup_s;
-    Ok((m, n))
+    Ok(n)
 }
 
 /// Sensor records: bus channel in range, ROM code (if any) valid and unique.

@@ -9,7 +9,7 @@ use super::terms::{read_terms, TermRule};
 use super::types::{InputKind, SensorRef};
 use crate::five_axis::{FiveAxis, FiveAxisSpec, MAX_FOURIER_ORDER};
 use crate::limits::{MAX_FALLBACKS, MAX_SECTIONS, MAX_TERMS, MAX_VOL_SENSORS, MAX_VOL_TERMS};
-use crate::volumetric::{VolSensor, VolTerm, Volumetric, VolumetricSpec};
+use crate::volumetric::{VolSensor, VolTerm, Volumetric};
 use heapless::Vec;
 
 /// The v2 sections after the tables (see the module docs): each kind at
@@ -71,29 +71,39 @@ fn parse_volumetric(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError>
             max: MAX_VOL_TERMS,
         });
     }
-    let tool_max_um = r.i32()?;
-    let (mut origin_um, mut stroke_um, mut max_correction) = ([0i32; 3], [0i32; 3], [0i32; 3]);
-    for ((origin, stroke), max) in origin_um
+    // Read and checked in the model's own section (no copy of its terms
+    // on the stack); gone again if it is refused.
+    let v = m.volumetric.insert(Volumetric::blank());
+    let read = read_volumetric(r, v, slots, n_sensors, n_terms);
+    if read.is_err() {
+        m.volumetric = None;
+    }
+    read
+}
+
+/// The rest of section kind 3 into `v`, then [`Volumetric::new`]'s checks.
+fn read_volumetric(
+    r: &mut Reader<'_>,
+    v: &mut Volumetric,
+    slots: [u8; 3],
+    n_sensors: u8,
+    n_terms: usize,
+) -> Result<(), ImageError> {
+    v.slots = slots;
+    v.tool_max_um = r.i32()?;
+    for ((origin, stroke), max) in v
+        .origin_um
         .iter_mut()
-        .zip(stroke_um.iter_mut())
-        .zip(max_correction.iter_mut())
+        .zip(v.stroke_um.iter_mut())
+        .zip(v.max_correction.iter_mut())
     {
         *origin = r.i32()?;
         *stroke = r.i32()?;
         *max = r.i32()?;
     }
-    let sensors = read_vol_sensors(r, n_sensors)?;
-    let terms = read_vol_terms(r, n_terms)?;
-    m.volumetric = Some(Volumetric::new(&VolumetricSpec {
-        slots,
-        origin_um,
-        stroke_um,
-        tool_max_um,
-        max_correction,
-        sensors: &sensors,
-        terms: &terms,
-    })?);
-    Ok(())
+    read_vol_sensors(r, n_sensors, &mut v.sensors)?;
+    read_vol_terms(r, n_terms, &mut v.terms)?;
+    v.check_in_place()
 }
 
 /// Volumetric sensor records (16 B): identity as the image's sensors, then
@@ -101,12 +111,12 @@ fn parse_volumetric(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError>
 fn read_vol_sensors(
     r: &mut Reader<'_>,
     n: u8,
-) -> Result<Vec<VolSensor, MAX_VOL_SENSORS>, ImageError> {
-    let mut sensors = Vec::new();
+    sensors: &mut Vec<VolSensor, MAX_VOL_SENSORS>,
+) -> Result<(), ImageError> {
     for _ in 0..n {
-        push(&mut sensors, read_vol_sensor(r)?)?;
+        push(sensors, read_vol_sensor(r)?)?;
     }
-    Ok(sensors)
+    Ok(())
 }
 
 /// One volumetric sensor record. Out of line, as the loop over at most
@@ -130,8 +140,11 @@ fn read_vol_sensor(r: &mut Reader<'_>) -> Result<VolSensor, ImageError> {
 }
 
 /// Volumetric terms (16 B): packed exponents, sensor, padding, x, y, z.
-fn read_vol_terms(r: &mut Reader<'_>, n: usize) -> Result<Vec<VolTerm, MAX_VOL_TERMS>, ImageError> {
-    let mut terms = Vec::new();
+fn read_vol_terms(
+    r: &mut Reader<'_>,
+    n: usize,
+    terms: &mut Vec<VolTerm, MAX_VOL_TERMS>,
+) -> Result<(), ImageError> {
     for _ in 0..n {
         let [x, sensor, p1, p2] = r.array()?;
         if p1 != 0 || p2 != 0 {
@@ -139,9 +152,9 @@ fn read_vol_terms(r: &mut Reader<'_>, n: usize) -> Result<Vec<VolTerm, MAX_VOL_T
         }
         let coef = [r.i32()?, r.i32()?, r.i32()?];
         let exps = [x & 3, (x >> 2) & 3, (x >> 4) & 3, x >> 6];
-        push(&mut terms, VolTerm { exps, sensor, coef })?;
+        push(terms, VolTerm { exps, sensor, coef })?;
     }
-    Ok(terms)
+    Ok(())
 }
 
 /// Section kind 4: the five-axis part (validated by [`FiveAxis::new`];
