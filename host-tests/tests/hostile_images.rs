@@ -108,6 +108,15 @@ fn hostile() -> Vec<(&'static str, Model, u16)> {
     let mut m = demo(3);
     m.inputs[1].lag.as_mut().unwrap().tau_s = 0;
     cases.push(("lag 0", m, result::LAG_TOO_LONG));
+    for (name, t) in [
+        ("sensor reference at i32::MAX", i32::MAX),
+        ("sensor reference at i32::MIN", i32::MIN),
+        ("sensor reference at +125.0625 °C", 125 * 16 + 1),
+    ] {
+        let mut m = demo(3);
+        m.sensors[0].ref_temp = t;
+        cases.push((name, m, result::BAD_VALUE));
+    }
     let mut m = demo(3);
     for n in m.nets.iter_mut() {
         n.w1.iter_mut().flatten().for_each(|w| *w = i32::MAX);

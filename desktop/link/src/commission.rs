@@ -40,7 +40,9 @@ pub struct Commission {
 pub struct KeyState {
     pub unlock_key_set: bool,
     pub signing_key_stored: bool,
-    /// The stored public key, hex (empty: none).
+    /// Holding registers 50–65 in hex when a key is stored (empty: none):
+    /// the key last written there, which the board does not guarantee to be
+    /// the stored one (it never reads its stored key back).
     pub signing_key: String,
 }
 

@@ -77,6 +77,10 @@ impl Model {
     }
 }
 
+/// The DS18B20's measuring range in its own unit (1/16 °C).
+const DS18B20_MIN_SIXTEENTHS: i32 = -55 * 16;
+const DS18B20_MAX_SIXTEENTHS: i32 = 125 * 16;
+
 /// Length, magic, version, `total_len` and the CRC-32.
 fn check_envelope(bytes: &[u8]) -> Result<Envelope<'_>, ImageError> {
     let min_len = HEADER_LEN + CRC_LEN;
@@ -165,10 +169,22 @@ fn read_header(r: &mut Reader<'_>, flags: u16, m: &mut Model) -> Result<Counts, 
 fn read_sensors(r: &mut Reader<'_>, m: &mut Model, n: u8) -> Result<(), ImageError> {
     for sensor in 0..n {
         let rom = r.array::<8>()?;
-        let [channel, _, _, _] = r.array()?;
+        let [channel, reserved @ ..] = r.array::<4>()?;
         let ref_temp = r.i32()?;
         if usize::from(channel) >= MAX_SENSORS {
             return Err(ImageError::SensorChannelOutOfRange { sensor, channel });
+        }
+        if reserved != [0; 3] {
+            return Err(ImageError::BadValue {
+                what: "sensor record reserved bytes",
+            });
+        }
+        // A reference the sensor can never read would hold the model outside
+        // its envelope for good (DS18B20: −55 … +125 °C, 1/16 °C steps).
+        if !(DS18B20_MIN_SIXTEENTHS..=DS18B20_MAX_SIXTEENTHS).contains(&ref_temp) {
+            return Err(ImageError::BadValue {
+                what: "sensor reference temperature (outside the DS18B20's -55...+125 °C)",
+            });
         }
         if rom != [0; 8] {
             let [head @ .., check] = rom;

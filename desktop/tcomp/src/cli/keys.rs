@@ -117,9 +117,14 @@ pub fn commission_board(mut link: BoardLink, args: CommissionArgs) -> Result<()>
                 "none (factory code: commissioning only)"
             },
             if state.signing_key_stored {
-                state.signing_key.as_str()
+                // The board never reads its stored key back: registers 50-65
+                // hold whatever any master wrote there last.
+                format!(
+                    "stored (registers 50-65 show the key last written, which need not be the stored one: {}; a signed upload is the proof)",
+                    state.signing_key
+                )
             } else {
-                "none (unsigned models commit)"
+                "none (unsigned models commit)".to_string()
             }
         );
     }
