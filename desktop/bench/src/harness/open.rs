@@ -148,7 +148,7 @@ pub struct OpenCase {
 
 /// The open-world cases both open benches diagnose (same seed, same cases).
 pub fn open_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
-    use crate::truth::{random_duty as truth_duty, simulate, TruthEffect, TRUTH_EFFECTS};
+    use crate::truth::TRUTH_EFFECTS;
     let mut g = Rng::paired(cfg.seed ^ 0x5eed);
     let n = cfg.cases.max(6);
     let n_clean = (n / 6).max(1);
@@ -158,53 +158,66 @@ pub fn open_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
     plan.extend(std::iter::repeat_n(None, n_clean));
     let mut cases = Vec::with_capacity(plan.len());
     for (ci, kind) in plan.into_iter().enumerate() {
-        // two runs of half the case's hours: a light and a heavy duty
-        let half = cfg.hours / 2.0;
-        // an effect case must move its data by a visible amount somewhere
-        // (see `VISIBLE_C`): drawn again when it does not (a lag on a sensor
-        // whose body changes slowly reads like the body itself)
-        let mut redrawn = 0usize;
-        loop {
-            let effects: Vec<TruthEffect> = kind
-                .iter()
-                .map(|k| TruthEffect::random(k, &mut g, half))
-                .collect();
-            let mut visibility = Visibility::default();
-            let runs: Vec<(String, tcomp_data::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
-                .iter()
-                .enumerate()
-                .map(|(ri, &(lo, hi))| {
-                    let duty = truth_duty(&mut g, half, lo, hi);
-                    let seed = 5000 + 2 * ci as u64 + ri as u64;
-                    // a sensor fault happens once: in the second run only
-                    let eff: Vec<TruthEffect> = effects
-                        .iter()
-                        .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
-                        .cloned()
-                        .collect();
-                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
-                    if !eff.is_empty() {
-                        // the same run without the effect (same duty, same noise)
-                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
-                        visibility.add(&run, &clean);
-                    }
-                    (format!("open{ci}-{ri}"), run)
-                })
-                .collect();
-            if effects.is_empty() || visibility.visible() || redrawn >= 20 {
-                cases.push(OpenCase {
-                    kind,
-                    effects,
-                    runs,
-                    visibility,
-                    redrawn,
-                });
-                break;
-            }
-            redrawn += 1;
-        }
+        cases.push(draw_case(&mut g, kind, ci, cfg, 5000, "open"));
     }
     cases
+}
+
+/// One case of `kind` (None: clean): two runs of half the case's hours, a
+/// light and a heavy duty, named `<prefix><ci>-<run>`, noise seeded from
+/// `seed_base`. An effect case must move its data by a visible amount
+/// somewhere (see `VISIBLE_C`): drawn again when it does not (a lag on a
+/// sensor whose body changes slowly reads like the body itself), 20 times
+/// at most.
+pub(super) fn draw_case(
+    g: &mut Rng,
+    kind: Option<&'static str>,
+    ci: usize,
+    cfg: &BenchConfig,
+    seed_base: u64,
+    prefix: &str,
+) -> OpenCase {
+    use crate::truth::{random_duty, simulate, TruthEffect};
+    let half = cfg.hours / 2.0;
+    let mut redrawn = 0usize;
+    loop {
+        let effects: Vec<TruthEffect> = kind
+            .iter()
+            .map(|k| TruthEffect::random(k, g, half))
+            .collect();
+        let mut visibility = Visibility::default();
+        let runs: Vec<(String, tcomp_data::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
+            .iter()
+            .enumerate()
+            .map(|(ri, &(lo, hi))| {
+                let duty = random_duty(g, half, lo, hi);
+                let seed = seed_base + 2 * ci as u64 + ri as u64;
+                // a sensor fault happens once: in the second run only
+                let eff: Vec<TruthEffect> = effects
+                    .iter()
+                    .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
+                    .cloned()
+                    .collect();
+                let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
+                if !eff.is_empty() {
+                    // the same run without the effect (same duty, same noise)
+                    let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
+                    visibility.add(&run, &clean);
+                }
+                (format!("{prefix}{ci}-{ri}"), run)
+            })
+            .collect();
+        if effects.is_empty() || visibility.visible() || redrawn >= 20 {
+            return OpenCase {
+                kind,
+                effects,
+                runs,
+                visibility,
+                redrawn,
+            };
+        }
+        redrawn += 1;
+    }
 }
 
 /// Whether a diagnosis' selected effect names the truth effect (and, for

@@ -14,9 +14,9 @@ use tcomp_thermal::diagnose::{diagnose, fitmode::diagnose_fit, Diagnosis, Option
 use tcomp_thermal::sim::Machine;
 
 use super::draw::BenchConfig;
-use super::open::OpenCase;
-use super::tally::{mean, Visibility};
-use crate::truth::{random_duty, simulate, TruthEffect, PERIODIC_EFFECTS};
+use super::open::{draw_case, OpenCase};
+use super::tally::mean;
+use crate::truth::{TruthEffect, PERIODIC_EFFECTS};
 
 /// Case kinds of the column besides the clean ones.
 const KINDS: [&str; 4] = [
@@ -36,47 +36,9 @@ pub fn periodic_cases(cfg: &BenchConfig) -> Vec<OpenCase> {
         .map(|i| Some(KINDS[i % KINDS.len()]))
         .collect();
     plan.extend(std::iter::repeat_n(None, n_clean));
-    let half = cfg.hours / 2.0;
     let mut cases = Vec::new();
     for (ci, kind) in plan.into_iter().enumerate() {
-        let mut redrawn = 0usize;
-        loop {
-            let effects: Vec<TruthEffect> = kind
-                .iter()
-                .map(|k| TruthEffect::random(k, &mut g, half))
-                .collect();
-            let mut visibility = Visibility::default();
-            let runs: Vec<(String, tcomp_data::runcsv::Run)> = [(0.15, 0.55), (0.5, 1.0)]
-                .iter()
-                .enumerate()
-                .map(|(ri, &(lo, hi))| {
-                    let duty = random_duty(&mut g, half, lo, hi);
-                    let seed = 9000 + 2 * ci as u64 + ri as u64;
-                    let eff: Vec<TruthEffect> = effects
-                        .iter()
-                        .filter(|e| ri == 1 || !matches!(e, TruthEffect::SensorStep { .. }))
-                        .cloned()
-                        .collect();
-                    let run = simulate(&duty, &eff, half, cfg.sample_period_s, seed).run;
-                    if !eff.is_empty() {
-                        let clean = simulate(&duty, &[], half, cfg.sample_period_s, seed).run;
-                        visibility.add(&run, &clean);
-                    }
-                    (format!("periodic{ci}-{ri}"), run)
-                })
-                .collect();
-            if effects.is_empty() || visibility.visible() || redrawn >= 20 {
-                cases.push(OpenCase {
-                    kind,
-                    effects,
-                    runs,
-                    visibility,
-                    redrawn,
-                });
-                break;
-            }
-            redrawn += 1;
-        }
+        cases.push(draw_case(&mut g, kind, ci, cfg, 9000, "periodic"));
     }
     cases
 }
