@@ -192,3 +192,20 @@ pub fn free_tcp_port() -> u16 {
         .map(|a| a.port())
         .expect("a free local TCP port")
 }
+
+/// One request through `host-tests/py/modbus_master.py` (pymodbus, the real
+/// master the QEMU tests use); its JSON answer.
+pub fn modbus_master(args: &[&str]) -> serde_json::Value {
+    let script = workspace_root().join("host-tests/py/modbus_master.py");
+    let out = std::process::Command::new("python3")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python3");
+    assert!(
+        out.status.success(),
+        "modbus_master.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}

@@ -5,10 +5,8 @@
 //! image written, uploaded to QEMU, and at 20 five-axis poses the served
 //! correction equals the desktop's prediction from the written file
 //! (`board5::predict5`) bit for bit and removes most of the true error.
-use std::process::Command;
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
-use serde_json::Value;
+use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
@@ -19,21 +17,6 @@ use tcomp_geometry::rotary_identify::{identify_rotary, RotaryOptions};
 use tcomp_geometry::rotary_sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::volumetric::build;
 use thermocomp_core::five_axis::fstatus;
-
-fn master(args: &[&str]) -> Value {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]

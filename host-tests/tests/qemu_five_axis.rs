@@ -10,10 +10,8 @@
 //! `tcomp_geometry::board5::predict5` (the core's `five_axis::evaluate`) for
 //! the temperatures the board reports it used, bit for bit.
 use std::collections::{BTreeMap, BTreeSet};
-use std::process::Command;
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
-use serde_json::Value;
+use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
 use tcomp_geometry::board::{quantize, BoardOptions};
 use tcomp_geometry::board5::{
     predict5, quantize_five_axis, FiveAxisOptions, Location, LocationValue, RotaryModel,
@@ -22,21 +20,6 @@ use tcomp_geometry::five_axis::Fourier;
 use tcomp_geometry::volumetric::{VolTerm, VolumetricPoly};
 use thermocomp_core::five_axis::{fstatus, LOCATION_NAMES};
 use thermocomp_core::volumetric::vstatus;
-
-fn master(args: &[&str]) -> Value {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
 
 /// Six sensors on five plateaus of 60 rows each (T0c = 20 + k·c/4 °C on plateau k).
 fn trace(path: &std::path::Path) {

@@ -8,28 +8,11 @@
 //! `tcomp_geometry::board::predict`) for the temperatures the board
 //! reports it used, bit for bit, at several positions and temperatures.
 use std::collections::BTreeSet;
-use std::process::Command;
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
-use serde_json::Value;
+use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
 use tcomp_geometry::board::{predict, quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::volumetric::{VolTerm, VolumetricPoly};
 use thermocomp_core::volumetric::vstatus;
-
-fn master(args: &[&str]) -> Value {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
 
 /// Six sensors warming by whole 1/16 °C steps (T0c rises c + 1 sixteenths per row).
 fn trace(path: &std::path::Path, rows: u32) {
