@@ -2,6 +2,7 @@
 //! hardware traits the boards implement, so the real application code runs here.
 
 pub mod mock_flash;
+pub mod modbus;
 pub mod onewire_emu;
 pub mod qemu;
 
@@ -25,11 +26,7 @@ pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermoco
         (HR_NEW_UNLOCK_KEY, TEST_UNLOCK_KEY),
         (HR_COMMAND, CMD_SET_UNLOCK_KEY),
     ] {
-        let [a, b] = addr.to_be_bytes();
-        let [c, d] = v.to_be_bytes();
-        let mut f = vec![unit, 6, a, b, c, d];
-        f.extend_from_slice(&thermocomp_protocol::rtu::crc16(&f).to_le_bytes());
-        app.request(&f, 0, &mut reply);
+        app.request(&modbus::write1(unit, addr, v), 0, &mut reply);
         assert_eq!(
             reply.get(1),
             Some(&6),
@@ -66,4 +63,21 @@ pub fn commission_link(link: &mut tcomp_link::board_link::BoardLink) {
         signing_key: None,
     };
     assert!(commission(link, &c).unwrap().unlock_key_set);
+}
+
+/// Stage `file` and commit it over `link` with raw register writes (what a
+/// master that skips tcomp's own checks does), after unlocking with
+/// [`TEST_UNLOCK_KEY`]; the exception text ("accepted" if none) and HR_RESULT.
+pub fn raw_commit(link: &mut tcomp_link::board_link::BoardLink, file: &[u8]) -> (String, u16) {
+    use thermocomp_protocol::holding::*;
+    tcomp_link::board_link::unlock(link, TEST_UNLOCK_KEY).unwrap();
+    for (i, chunk) in modbus::be_words(file).chunks(100).enumerate() {
+        link.write_many(HR_STAGING + (i * 100) as u16, chunk)
+            .unwrap();
+    }
+    link.write_one(HR_STAGED_LEN, file.len() as u16).unwrap();
+    let e = link
+        .write_one(HR_COMMAND, CMD_COMMIT_MODEL)
+        .map_or_else(|e| e.to_string(), |()| "accepted".into());
+    (e, link.read_holdings(HR_RESULT, 1).unwrap()[0])
 }

@@ -1,45 +1,17 @@
 //! The application state both board tasks share: a model committed over
 //! Modbus lands in the flash slots and serves; a refused one changes
 //! nothing; the probe reading reaches its registers; a reboot finds the model.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{blank_app, demo_image, stage_and_send, SLOT};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::ProbeReading;
 use thermocomp::app::App;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 use thermocomp_protocol::states::ProbeState;
 
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
-
-fn write1(addr: u16, v: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = v.to_be_bytes();
-    frame(&[1, 6, a, b, c, d])
-}
-
-fn write_n(addr: u16, vals: &[u16]) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let mut body = vec![1, 0x10, a, b, 0, vals.len() as u8, (vals.len() * 2) as u8];
-    for v in vals {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
-    frame(&body)
-}
-
 fn image(version: u32) -> Vec<u8> {
-    let mut fm = thermocomp_core::float::demo_model(u64::from(version));
-    fm.model_version = version;
-    let (mut m, _) = fm.quantize().unwrap();
-    let mut b = vec![0u8; m.encoded_len()];
-    m.encode(&mut b).unwrap();
-    b
+    demo_image(u64::from(version), version)
 }
 
 fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
@@ -47,43 +19,16 @@ fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
 }
 
 fn upload_with(app: &mut App<MockFlash>, img: &[u8], command: u16) -> Vec<u8> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
     host_tests::commission(app);
-    app.request(
-        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
-        0,
-        &mut reply,
-    );
-    let mut padded = img.to_vec();
-    padded.resize(img.len().div_ceil(2) * 2, 0);
-    let words: Vec<u16> = padded
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect();
-    for (i, chunk) in words.chunks(100).enumerate() {
-        app.request(
-            &write_n(HR_STAGING + (i * 100) as u16, chunk),
-            0,
-            &mut reply,
-        );
-    }
-    app.request(&write1(HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
-    app.request(&write1(HR_COMMAND, command), 0, &mut reply);
     // The flash write runs in the background; the mock erases at once.
-    app.poll_flash();
+    let reply = stage_and_send(app, img, command);
     assert!(!app.flash_busy());
-    reply.to_vec()
+    reply
 }
 
 #[test]
 fn commit_over_modbus_serves_and_survives_a_reboot() {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     assert_eq!(app.snapshot.model_version, 0, "blank flash: no model");
     let v2 = image(2);
     let reply = upload(&mut app, &v2);
@@ -108,13 +53,7 @@ fn commit_over_modbus_serves_and_survives_a_reboot() {
 
 #[test]
 fn a_version_not_newer_is_refused_unless_the_rollback_command_commits_it() {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     assert_eq!(upload(&mut app, &image(3))[1], 6);
     assert_eq!(app.snapshot.model_version, 3);
     for older_or_same in [2, 3] {
@@ -146,13 +85,7 @@ fn a_version_not_newer_is_refused_unless_the_rollback_command_commits_it() {
 
 #[test]
 fn a_failing_flash_reports_store_failed_and_keeps_the_old_model() {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     upload(&mut app, &image(2));
     app.store.flash().budget = Some(3); // power fails during the next commit
     upload(&mut app, &image(4));
@@ -162,13 +95,7 @@ fn a_failing_flash_reports_store_failed_and_keeps_the_old_model() {
 
 #[test]
 fn probe_reading_reaches_its_registers() {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     let r = ProbeReading {
         state: ProbeState::Ok,
         tenth_um: Some(-12_345),

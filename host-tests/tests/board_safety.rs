@@ -4,14 +4,13 @@
 //! Modbus until command 6 clears it.
 use std::cell::RefCell;
 
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
-use thermocomp::acquisition::channel_map::ChannelMap;
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{blank_app, frame, read_inputs, write1, Reply};
 use thermocomp::app::{App, LinkChange};
 use thermocomp::fault::{self, kind, FaultBoard, FaultRecord, WORDS};
 use thermocomp::watchdog::{stalled, Feeder, Progress};
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 thread_local! {
     static RAM: RefCell<[u32; WORDS]> = const { RefCell::new([0; WORDS]) };
@@ -133,40 +132,8 @@ fn the_watchdog_is_fed_only_when_both_activities_progressed() {
     assert_eq!(f.check(&p), Ok(()));
 }
 
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
-
-fn write1(addr: u16, v: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = v.to_be_bytes();
-    frame(&[1, 6, a, b, c, d])
-}
-
-fn read_inputs(app: &mut App<MockFlash>, addr: u16, n: u16) -> Vec<u16> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = n.to_be_bytes();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    app.request(&frame(&[1, 4, a, b, c, d]), 0, &mut reply);
-    assert_eq!(reply[1], 4, "{reply:02x?}");
-    reply[3..3 + 2 * n as usize]
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect()
-}
-
 fn app() -> App<MockFlash> {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     host_tests::commission(&mut app);
     app
 }
@@ -174,9 +141,9 @@ fn app() -> App<MockFlash> {
 #[test]
 fn the_record_is_served_with_status_bit_9_until_command_6() {
     let mut app = app();
-    assert_eq!(read_inputs(&mut app, IR_FAULT_KIND, 20), vec![0; 20]);
+    assert_eq!(read_inputs(&mut app, IR_FAULT_KIND, 20, 0), vec![0; 20]);
     assert_eq!(
-        read_inputs(&mut app, IR_STATUS, 1)[0] & STATUS_FAULT_RECORDED,
+        read_inputs(&mut app, IR_STATUS, 1, 0)[0] & STATUS_FAULT_RECORDED,
         0
     );
     app.set_fault_record(Some(FaultRecord {
@@ -186,35 +153,35 @@ fn the_record_is_served_with_status_bit_9_until_command_6() {
         count: 2,
         detail: stalled::MEASUREMENT,
     }));
-    let r = read_inputs(&mut app, IR_FAULT_KIND, 20);
+    let r = read_inputs(&mut app, IR_FAULT_KIND, 20, 0);
     assert_eq!(&r[..9], &[3, 0x0001, 0x2345, 0, 7, 0, 2, 0, 1]);
     assert_eq!(&r[9..], &[0; 11], "reserved");
     assert_ne!(
-        read_inputs(&mut app, IR_STATUS, 1)[0] & STATUS_FAULT_RECORDED,
+        read_inputs(&mut app, IR_STATUS, 1, 0)[0] & STATUS_FAULT_RECORDED,
         0
     );
     // The register after the map's last one is past the map.
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     let [hi, lo] = IR_LAST.to_be_bytes();
     app.request(&frame(&[1, 4, hi, lo, 0, 2]), 0, &mut reply);
     assert_eq!((reply[1], reply[2]), (0x84, 2));
     // Command 6 needs the unlock, like every command.
-    app.request(&write1(HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
+    app.request(&write1(1, HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
     assert_eq!(reply[1], 0x86);
     app.request(
-        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+        &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
         0,
         &mut reply,
     );
-    let change = app.request(&write1(HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
+    let change = app.request(&write1(1, HR_COMMAND, CMD_CLEAR_FAULT), 0, &mut reply);
     assert_eq!(
         change,
         LinkChange::ClearFaultRecord,
         "the board clears its RAM copy"
     );
-    assert_eq!(read_inputs(&mut app, IR_FAULT_KIND, 9), vec![0; 9]);
+    assert_eq!(read_inputs(&mut app, IR_FAULT_KIND, 9, 0), vec![0; 9]);
     assert_eq!(
-        read_inputs(&mut app, IR_STATUS, 1)[0] & STATUS_FAULT_RECORDED,
+        read_inputs(&mut app, IR_STATUS, 1, 0)[0] & STATUS_FAULT_RECORDED,
         0
     );
 }
@@ -224,17 +191,17 @@ fn test_only_commands_are_refused_without_the_feature() {
     // host-tests builds the application without `test-faults`: a field
     // board answers commands 8 and 9 with ILLEGAL DATA VALUE.
     let mut app = app();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     // 99: a number without a command (12 and 13 are probe references;
     // 14–16 are allocated to another branch).
     for cmd in [CMD_TEST_PANIC, CMD_TEST_STALL, 99] {
         // Unlocked each time: a refused command locks the board again.
         app.request(
-            &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
+            &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
             0,
             &mut reply,
         );
-        let change = app.request(&write1(HR_COMMAND, cmd), 0, &mut reply);
+        let change = app.request(&write1(1, HR_COMMAND, cmd), 0, &mut reply);
         assert_eq!((reply[1], reply[2]), (0x86, 3), "command {cmd}");
         assert_eq!(change, LinkChange::None);
     }

@@ -4,8 +4,8 @@
 //! after a write of positions or angles and equal to the core's
 //! `five_axis::evaluate`, what it used in input registers 330–359, "not
 //! available" until the PLC has written A and C, and result codes 80–86.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
-use thermocomp::acquisition::channel_map::ChannelMap;
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{be_words, blank_app, encode, read_inputs, s32, words, write_n, Reply};
 use thermocomp::app::App;
 use thermocomp_core::five_axis::{self, fstatus, FiveAxis, FiveAxisSpec};
 use thermocomp_core::image::NONE;
@@ -13,47 +13,10 @@ use thermocomp_core::volumetric::*;
 use thermocomp_core::ImageError;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(unit: u8, body: &[u8]) -> Vec<u8> {
-    let mut f = vec![unit];
-    f.extend_from_slice(body);
-    let c = crc16(&f);
-    f.extend_from_slice(&c.to_le_bytes());
-    f
-}
-
-fn write_n(unit: u8, addr: u16, vals: &[u16]) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let mut body = vec![0x10, a, b, 0, vals.len() as u8, (vals.len() * 2) as u8];
-    for v in vals {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
-    frame(unit, &body)
-}
-
-fn words(v: &[i32]) -> Vec<u16> {
-    v.iter()
-        .flat_map(|&x| [((x as u32) >> 16) as u16, x as u16])
-        .collect()
-}
 
 /// FC04 of `n` input registers from `addr`.
 fn read(app: &mut App<MockFlash>, addr: u16, n: u8, now: u64) -> Vec<u16> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    let [a, b] = addr.to_be_bytes();
-    app.request(&frame(1, &[4, a, b, 0, n]), now, &mut reply);
-    assert_eq!(&reply[..3], &[1, 4, 2 * n], "{reply:02x?}");
-    reply[3..3 + 2 * usize::from(n)]
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect()
-}
-
-fn s32(w: &[u16], at: usize) -> i32 {
-    ((u32::from(w[at]) << 16) | u32::from(w[at + 1])) as i32
+    read_inputs(app, addr, u16::from(n), now)
 }
 
 fn section() -> Volumetric {
@@ -107,19 +70,11 @@ fn image(v: Option<Volumetric>, f: Option<FiveAxis>) -> Vec<u8> {
     let (mut m, _) = thermocomp_core::float::demo_model(1).quantize().unwrap();
     m.volumetric = v;
     m.five_axis = f;
-    let mut b = vec![0u8; m.encoded_len()];
-    m.encode(&mut b).unwrap();
-    b
+    encode(&mut m)
 }
 
 fn app() -> App<MockFlash> {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     host_tests::commission(&mut app);
     app
 }
@@ -130,7 +85,7 @@ fn served_correction_is_the_cores_five_axis_evaluation_at_the_plcs_pose() {
     let (v, f) = (section(), five());
     app.program(&image(Some(v.clone()), Some(f.clone())))
         .unwrap();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     // Positions and tool, but no angles yet: not available, and why.
     app.request(
         &write_n(1, HR_POSITIONS, &words(&[100_000, 200_000, -100_000])),
@@ -215,7 +170,7 @@ fn a_write_of_angles_alone_refreshes_at_once() {
     let (v, f) = (section(), five());
     app.program(&image(Some(v.clone()), Some(f.clone())))
         .unwrap();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     app.request(
         &write_n(1, HR_POSITIONS, &words(&[1, 2, -3])),
         0,
@@ -241,7 +196,7 @@ fn without_a_five_axis_section_angles_change_nothing() {
     let mut app = app();
     let v = section();
     app.program(&image(Some(v.clone()), None)).unwrap();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     app.request(
         &write_n(1, HR_POSITIONS, &words(&[5, 6, -7])),
         0,
@@ -310,16 +265,13 @@ fn five_axis_refusals_have_their_own_result_codes() {
     // A commit of kind 4 without kind 3 is refused with 80 over the wire.
     let mut app = app();
     let img = image(None, Some(five()));
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     app.request(
         &write_n(1, HR_UNLOCK, &[host_tests::TEST_UNLOCK_KEY]),
         0,
         &mut reply,
     );
-    let regs: Vec<u16> = img
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)]))
-        .collect();
+    let regs = be_words(&img);
     for (k, chunk) in regs.chunks(100).enumerate() {
         app.request(
             &write_n(1, HR_STAGING + 100 * k as u16, chunk),

@@ -3,35 +3,11 @@
 //! `semantic`, result codes 74–77) stand between it and the compensator.
 //! Each is refused over Modbus with its own result code, the board locks,
 //! and the old model keeps serving; `tcomp export` refuses the same image.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
-use thermocomp::acquisition::channel_map::ChannelMap;
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{blank_app, encode, stage_and_send};
 use thermocomp::app::App;
 use thermocomp_core::{ImageError, Model};
 use thermocomp_protocol::holding::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
-
-fn write1(addr: u16, v: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = v.to_be_bytes();
-    frame(&[1, 6, a, b, c, d])
-}
-
-fn write_n(addr: u16, vals: &[u16]) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let mut body = vec![1, 0x10, a, b, 0, vals.len() as u8, (vals.len() * 2) as u8];
-    for v in vals {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
-    frame(&body)
-}
 
 fn demo(version: u32) -> Model {
     let mut fm = thermocomp_core::float::demo_model(u64::from(version));
@@ -39,38 +15,9 @@ fn demo(version: u32) -> Model {
     fm.quantize().unwrap().0
 }
 
-fn seal(m: &mut Model) -> Vec<u8> {
-    let mut b = vec![0u8; m.encoded_len()];
-    let n = m.encode(&mut b).unwrap();
-    b.truncate(n);
-    b
-}
-
 /// Unlock (the board's own key), stage and commit `img`; the reply frame.
 fn upload(app: &mut App<MockFlash>, img: &[u8]) -> Vec<u8> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    app.request(
-        &write1(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
-        0,
-        &mut reply,
-    );
-    let mut padded = img.to_vec();
-    padded.resize(img.len().div_ceil(2) * 2, 0);
-    let words: Vec<u16> = padded
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect();
-    for (i, chunk) in words.chunks(100).enumerate() {
-        app.request(
-            &write_n(HR_STAGING + (i * 100) as u16, chunk),
-            0,
-            &mut reply,
-        );
-    }
-    app.request(&write1(HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
-    app.request(&write1(HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
-    app.poll_flash();
-    reply.to_vec()
+    stage_and_send(app, img, CMD_COMMIT_MODEL)
 }
 
 /// Each hostile change, the error the parser must name and its result code.
@@ -135,17 +82,11 @@ fn hostile() -> Vec<(&'static str, Model, u16)> {
 
 #[test]
 fn hostile_images_are_refused_with_their_own_codes_and_the_old_model_kept() {
-    let mut app = App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     host_tests::commission(&mut app);
-    app.program(&seal(&mut demo(2))).unwrap();
+    app.program(&encode(&mut demo(2))).unwrap();
     for (what, mut m, code) in hostile() {
-        let img = seal(&mut m);
+        let img = encode(&mut m);
         let err = Model::parse(&img).unwrap_err();
         assert_eq!(result::of_image_error(&err), code, "{what}: {err}");
         let reply = upload(&mut app, &img);
@@ -155,7 +96,7 @@ fn hostile_images_are_refused_with_their_own_codes_and_the_old_model_kept() {
         assert_eq!(app.snapshot.model_version, 2, "{what}: old model kept");
     }
     // The untouched model of the same version commits.
-    assert_eq!(upload(&mut app, &seal(&mut demo(3)))[1], 6);
+    assert_eq!(upload(&mut app, &encode(&mut demo(3)))[1], 6);
     assert_eq!(app.snapshot.model_version, 3);
 }
 
@@ -164,26 +105,26 @@ fn the_bounds_sit_where_the_limits_say() {
     use thermocomp_core::limits::{MAX_NET_WEIGHT_Q16, MAX_PREDICTION, MAX_TAU_S, MAX_WARMUP_S};
     let mut m = demo(3);
     m.warmup_s = MAX_WARMUP_S;
-    Model::parse(&seal(&mut m)).unwrap();
+    Model::parse(&encode(&mut m)).unwrap();
     m.warmup_s += 1;
     assert!(matches!(
-        Model::parse(&seal(&mut m)),
+        Model::parse(&encode(&mut m)),
         Err(ImageError::WarmupTooLong { .. })
     ));
     let mut m = demo(3);
     m.inputs[0].lag.as_mut().unwrap().tau_s = MAX_TAU_S;
-    Model::parse(&seal(&mut m)).unwrap();
+    Model::parse(&encode(&mut m)).unwrap();
     m.inputs[0].lag.as_mut().unwrap().tau_s += 1;
     assert!(matches!(
-        Model::parse(&seal(&mut m)),
+        Model::parse(&encode(&mut m)),
         Err(ImageError::LagTooLong { input: 0, .. })
     ));
     let mut m = demo(3);
     m.nets[0].w1[0][0] = MAX_NET_WEIGHT_Q16 as i32;
-    Model::parse(&seal(&mut m)).unwrap();
+    Model::parse(&encode(&mut m)).unwrap();
     m.nets[0].w1[0][0] = -(MAX_NET_WEIGHT_Q16 as i32) - 1;
     assert!(matches!(
-        Model::parse(&seal(&mut m)),
+        Model::parse(&encode(&mut m)),
         Err(ImageError::CoefficientRange { net: 0 })
     ));
     // One constant term worth exactly the bound on the static table's
@@ -193,11 +134,11 @@ fn the_bounds_sit_where_the_limits_say() {
     let direction = t.direction;
     t.terms.truncate(1);
     t.terms[0].coef = MAX_PREDICTION << 8;
-    Model::parse(&seal(&mut m)).unwrap();
+    Model::parse(&encode(&mut m)).unwrap();
     let t = m.tables.iter_mut().find(|t| t.axis == 0xFF).unwrap();
     t.terms[0].coef = -(MAX_PREDICTION << 8) - 1;
     assert_eq!(
-        Model::parse(&seal(&mut m)).unwrap_err(),
+        Model::parse(&encode(&mut m)).unwrap_err(),
         ImageError::PredictionBound { direction }
     );
 }

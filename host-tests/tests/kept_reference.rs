@@ -4,7 +4,8 @@
 //! reboot does not take a new one), command 11 and command 7 drop it, and a
 //! power cut at every flash operation of storing it leaves the old kept
 //! reference or the new one.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{self, demo_image, read_inputs, write_unlocked, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
@@ -12,31 +13,13 @@ use thermocomp::app::App;
 use thermocomp::settings::KeptReference;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::IR_REFERENCE_STATE;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
 
 fn command(app: &mut App<MockFlash>, cmd: u16) -> Vec<u8> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    for (a, v) in [(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), (HR_COMMAND, cmd)] {
-        let [a0, a1] = a.to_be_bytes();
-        let [v0, v1] = v.to_be_bytes();
-        app.request(&frame(&[1, 6, a0, a1, v0, v1]), 0, &mut reply);
-    }
-    reply.to_vec()
+    write_unlocked(app, HR_COMMAND, cmd)
 }
 
 fn input(app: &mut App<MockFlash>, addr: u16) -> u16 {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    let [a0, a1] = addr.to_be_bytes();
-    app.request(&frame(&[1, 4, a0, a1, 0, 1]), 0, &mut reply);
-    u16::from_be_bytes([reply[3], reply[4]])
+    read_inputs(app, addr, 1, 0)[0]
 }
 
 fn holding_result(app: &App<MockFlash>) -> u16 {
@@ -45,10 +28,7 @@ fn holding_result(app: &App<MockFlash>) -> u16 {
 
 /// The demo model (six sensors by channel 0–5), version 1.
 fn image() -> Vec<u8> {
-    let (mut m, _) = thermocomp_core::float::demo_model(1).quantize().unwrap();
-    let mut b = vec![0u8; m.encoded_len()];
-    m.encode(&mut b).unwrap();
-    b
+    demo_image(1, 1)
 }
 
 struct Rig {
@@ -92,15 +72,11 @@ impl Rig {
 }
 
 fn boot(rig: &Rig, flash: MockFlash) -> App<MockFlash> {
-    let mut app = App::new(flash, SLOT, 1, 115_200, *rig.acq.map());
-    host_tests::commission(&mut app);
-    app
+    modbus::boot(flash, *rig.acq.map())
 }
 
 fn power_cycle(rig: &Rig, app: &mut App<MockFlash>) -> App<MockFlash> {
-    let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
-    flash.power_on();
-    boot(rig, flash)
+    modbus::power_cycle(app, *rig.acq.map())
 }
 
 fn reference(app: &mut App<MockFlash>) -> Vec<i32> {

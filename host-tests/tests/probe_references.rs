@@ -7,7 +7,8 @@
 //! temperature drift: 0.5 µm/K injected, estimated by `tcomp fit`'s
 //! estimator from a run where the target does not move, removed by the
 //! board before a reading is used, to ≤ 0.05 µm/K.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{self, demo_image, read_inputs, write_unlocked, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::probe::{measure, Calibration, ProbeConfig, ProbeReading};
@@ -18,51 +19,21 @@ use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceSta
 use thermocomp_core::StepOutput;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 use thermocomp_protocol::states::ProbeState;
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
 
 /// Unlock, then write `v` to holding register `addr`.
 fn write(app: &mut App<MockFlash>, addr: u16, v: u16) -> Vec<u8> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    for (a, v) in [(HR_UNLOCK, host_tests::TEST_UNLOCK_KEY), (addr, v)] {
-        let [a0, a1] = a.to_be_bytes();
-        let [v0, v1] = v.to_be_bytes();
-        app.request(&frame(&[1, 6, a0, a1, v0, v1]), 0, &mut reply);
-    }
-    reply.to_vec()
+    write_unlocked(app, addr, v)
 }
 
 fn inputs(app: &mut App<MockFlash>, addr: u16, n: u8) -> Vec<u16> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    let [a0, a1] = addr.to_be_bytes();
-    app.request(&frame(&[1, 4, a0, a1, 0, n]), 0, &mut reply);
-    reply[3..3 + 2 * usize::from(n)]
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect()
+    read_inputs(app, addr, u16::from(n), 0)
 }
 
 /// HR_RESULT after the flash job the last command started (if any).
 fn settled_result(app: &mut App<MockFlash>) -> u16 {
     while app.poll_flash() {}
     app.server.holding.result
-}
-
-fn image(seed: u64, version: u32) -> Vec<u8> {
-    let mut fm = thermocomp_core::float::demo_model(seed);
-    fm.model_version = version;
-    let (mut m, _) = fm.quantize().unwrap();
-    let mut b = vec![0u8; m.encoded_len()];
-    m.encode(&mut b).unwrap();
-    b
 }
 
 struct Rig {
@@ -121,15 +92,11 @@ fn ok_reading(tenth_um: i32) -> ProbeReading {
 }
 
 fn boot(rig: &Rig, flash: MockFlash) -> App<MockFlash> {
-    let mut app = App::new(flash, SLOT, 1, 115_200, *rig.acq.map());
-    host_tests::commission(&mut app);
-    app
+    modbus::boot(flash, *rig.acq.map())
 }
 
 fn power_cycle(rig: &Rig, app: &mut App<MockFlash>) -> App<MockFlash> {
-    let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
-    flash.power_on();
-    boot(rig, flash)
+    modbus::power_cycle(app, *rig.acq.map())
 }
 
 /// The served corrections the host predicts: direction 0 with `st`, the others fresh.
@@ -148,7 +115,7 @@ fn predicted(out: &StepOutput, now: u64, st: &ReferenceState, max: &[i32]) -> Ve
 fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state_is_kept() {
     let mut rig = Rig::new();
     let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
-    app.program(&image(1, 1)).unwrap();
+    app.program(&demo_image(1, 1)).unwrap();
     let max: Vec<i32> = app
         .compensation
         .model()
@@ -286,7 +253,7 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
     app.set_probe(&ok_reading(out.corrections[0] + 20), Some((&rig.acq, now)));
     assert_eq!(settled_result(&mut app), result::OK);
     assert_eq!(app.references.state(0).unwrap().accepted, 1);
-    app.program(&image(2, 2)).unwrap();
+    app.program(&demo_image(2, 2)).unwrap();
     assert_eq!(app.references.state(0), Some(&ReferenceState::new(&p)));
     let app = power_cycle(&rig, &mut app);
     assert_eq!(app.references.state(0), Some(&ReferenceState::new(&p)));
@@ -296,7 +263,7 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
 fn a_probe_that_is_not_ok_or_without_its_temperature_takes_no_reference() {
     let mut rig = Rig::new();
     let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
-    app.program(&image(1, 1)).unwrap();
+    app.program(&demo_image(1, 1)).unwrap();
     write(&mut app, HR_PROBE_DIRECTION, 0);
     settled_result(&mut app);
     // The probe's DS18B20 on channel 5.
@@ -414,7 +381,7 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
     // The board with the estimate (holding registers 42–43) and the gauge
     // zero at the true gap: what a reference uses has the drift removed.
     let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
-    app.program(&image(1, 1)).unwrap();
+    app.program(&demo_image(1, 1)).unwrap();
     for (a, v) in [
         (HR_PROBE_DIRECTION, 0),
         (HR_PROBE_TEMP_CHANNEL, 5),
@@ -469,7 +436,7 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
 fn a_settings_store_ending_after_a_refused_probe_reference_does_not_report_ok() {
     let mut rig = Rig::new();
     let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
-    app.program(&image(1, 1)).unwrap();
+    app.program(&demo_image(1, 1)).unwrap();
     // Register 40 changes: a settings store starts (result 23); not settled.
     write(&mut app, HR_PROBE_DIRECTION, 0);
     assert!(app.flash_busy());

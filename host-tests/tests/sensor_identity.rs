@@ -11,7 +11,8 @@ use std::io::{Read, Write};
 use std::net::TcpListener;
 use std::time::Duration;
 
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{read_inputs, Reply, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, Ds18b20, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::rom::RomCode;
@@ -19,25 +20,10 @@ use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisi
 use thermocomp::app::App;
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, expected_request_len, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
+use thermocomp_protocol::rtu::expected_request_len;
 
 fn inputs(app: &mut App<MockFlash>, addr: u16, n: u16) -> Vec<u16> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    let [a0, a1] = addr.to_be_bytes();
-    app.request(&frame(&[1, 4, a0, a1, 0, n as u8]), 0, &mut reply);
-    assert_eq!(reply[1], 4, "{reply:02x?}");
-    reply[3..3 + 2 * n as usize]
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect()
+    read_inputs(app, addr, n, 0)
 }
 
 fn u32_at(app: &mut App<MockFlash>, addr: u16) -> u32 {
@@ -384,7 +370,7 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
     std::thread::spawn(move || {
         for stream in l.incoming() {
             let mut s = stream.unwrap();
-            let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+            let mut reply = Reply::new();
             let mut buf = Vec::new();
             let mut byte = [0u8; 1];
             while s.read_exact(&mut byte).is_ok() {

@@ -4,6 +4,7 @@
 //! settings or the new ones, with the model intact.
 use embedded_storage::nor_flash::NorFlash as _;
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::modbus::{self, frame, write1, Reply, SLOT};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
 use thermocomp::model_store::ModelStore;
@@ -11,9 +12,6 @@ use thermocomp::settings::Settings;
 use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_core::Model;
 use thermocomp_protocol::holding::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 
 fn image(version: u32) -> (Model, Vec<u8>) {
     let mut fm = thermocomp_core::float::demo_model(u64::from(version));
@@ -157,34 +155,18 @@ fn settings_decode_refuses_out_of_range_values() {
     assert_eq!(Settings::decode(&good[..good.len() - 1]), None);
 }
 
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
-
-fn write1(unit: u8, addr: u16, v: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = v.to_be_bytes();
-    frame(&[unit, 6, a, b, c, d])
-}
-
 fn app_on(flash: MockFlash) -> App<MockFlash> {
-    let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
-    host_tests::commission(&mut app);
-    app
+    modbus::boot(flash, ChannelMap::new())
 }
 
 fn power_cycle(app: &mut App<MockFlash>) -> App<MockFlash> {
-    let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
-    flash.power_on();
-    app_on(flash)
+    modbus::power_cycle(app, ChannelMap::new())
 }
 
 #[test]
 fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() {
     let mut app = app_on(MockFlash::new(2 * SLOT as usize));
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     assert_eq!(app.settings(), Settings::default());
     app.request(
         &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
@@ -301,7 +283,7 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     };
     let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
     host_tests::commission(&mut app);
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     let (_, img) = image(3);
     app.request(
         &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
@@ -356,7 +338,7 @@ fn the_channel_map_persists_and_a_swapped_sensor_goes_to_a_free_channel() {
     assert!(app.flash_busy(), "stored in the background");
     app.poll_flash();
     let read = |app: &mut App<MockFlash>| {
-        let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+        let mut reply = Reply::new();
         app.request(&frame(&[1, 4, 0, 170, 0, 4]), 0, &mut reply);
         let w: Vec<u16> = reply[3..11]
             .chunks(2)
@@ -437,7 +419,7 @@ fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
     host_tests::commission(&mut app);
     // The line is busy for the model's commit (commissioning stored the key).
     app.store.flash().busy_looks = 3;
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     let (_, img) = image(3);
     app.request(
         &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),

@@ -10,7 +10,8 @@ use std::net::TcpListener;
 use std::sync::{Arc, Mutex};
 
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
-use tcomp_link::board_link::{unlock, upload, BoardLink, Commit};
+use host_tests::raw_commit;
+use tcomp_link::board_link::{upload, BoardLink, Commit};
 use tcomp_link::commission::{commission, Commission, SigningKey};
 use tcomp_model::signing;
 use thermocomp::acquisition::channel_map::ChannelMap;
@@ -97,27 +98,6 @@ fn commissioned(keys: &Keys) -> (BoardLink, Arc<Mutex<App<MockFlash>>>) {
     .unwrap();
     assert!(state.unlock_key_set && state.signing_key_stored);
     (link, board)
-}
-
-/// Stage `file` and commit it with raw register writes (what a master
-/// that skips tcomp's own checks does); the exception text and HR_RESULT.
-fn raw_commit(link: &mut BoardLink, file: &[u8]) -> (String, u16) {
-    unlock(link, KEY).unwrap();
-    let mut padded = file.to_vec();
-    padded.resize(file.len().div_ceil(2) * 2, 0);
-    let words: Vec<u16> = padded
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect();
-    for (i, chunk) in words.chunks(100).enumerate() {
-        link.write_many(HR_STAGING + (i * 100) as u16, chunk)
-            .unwrap();
-    }
-    link.write_one(HR_STAGED_LEN, file.len() as u16).unwrap();
-    let e = link
-        .write_one(HR_COMMAND, CMD_COMMIT_MODEL)
-        .map_or_else(|e| e.to_string(), |()| "accepted".into());
-    (e, link.read_holdings(HR_RESULT, 1).unwrap()[0])
 }
 
 fn serving(board: &Arc<Mutex<App<MockFlash>>>) -> u32 {

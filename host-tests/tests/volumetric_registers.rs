@@ -2,7 +2,8 @@
 //! registers 180–199, tool length in holding registers 34–35, "not
 //! available" (0x8000 0000) whenever it cannot be computed, and the served
 //! value equal to the math core's evaluation at the PLC's positions.
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{blank_app, encode, frame, read_inputs, s32, words, write_n, Reply};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
@@ -11,47 +12,10 @@ use thermocomp_core::volumetric::*;
 use thermocomp_core::ImageError;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-const SLOT: u32 = (8 * ERASE_SIZE) as u32;
-
-fn frame(unit: u8, body: &[u8]) -> Vec<u8> {
-    let mut f = vec![unit];
-    f.extend_from_slice(body);
-    let c = crc16(&f);
-    f.extend_from_slice(&c.to_le_bytes());
-    f
-}
-
-fn write_n(unit: u8, addr: u16, vals: &[u16]) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let mut body = vec![0x10, a, b, 0, vals.len() as u8, (vals.len() * 2) as u8];
-    for v in vals {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
-    frame(unit, &body)
-}
-
-fn words(v: &[i32]) -> Vec<u16> {
-    v.iter()
-        .flat_map(|&x| [((x as u32) >> 16) as u16, x as u16])
-        .collect()
-}
 
 /// FC04 of 180–199 through the server: the words as a PLC sees them.
 fn read_block(app: &mut App<MockFlash>, now: u64) -> Vec<u16> {
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-    let [a, b] = IR_VOL_CORRECTION.to_be_bytes();
-    app.request(&frame(1, &[4, a, b, 0, 20]), now, &mut reply);
-    assert_eq!(&reply[..3], &[1, 4, 40], "{reply:02x?}");
-    reply[3..43]
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect()
-}
-
-fn s32(w: &[u16], at: usize) -> i32 {
-    ((u32::from(w[at]) << 16) | u32::from(w[at + 1])) as i32
+    read_inputs(app, IR_VOL_CORRECTION, 20, now)
 }
 
 fn section(sensors: &[VolSensor]) -> Volumetric {
@@ -80,19 +44,11 @@ fn section(sensors: &[VolSensor]) -> Volumetric {
 fn image(v: Option<Volumetric>) -> Vec<u8> {
     let (mut m, _) = thermocomp_core::float::demo_model(1).quantize().unwrap();
     m.volumetric = v;
-    let mut b = vec![0u8; m.encoded_len()];
-    m.encode(&mut b).unwrap();
-    b
+    encode(&mut m)
 }
 
 fn app() -> App<MockFlash> {
-    App::new(
-        MockFlash::new(2 * SLOT as usize),
-        SLOT,
-        1,
-        115_200,
-        ChannelMap::new(),
-    )
+    blank_app()
 }
 
 fn not_available(w: &[u16]) {
@@ -109,7 +65,7 @@ fn without_a_section_the_block_says_not_available() {
     assert_eq!(w[6], vstatus::NO_SECTION);
     assert_eq!(w[7], 0, "no terms");
     app.program(&image(None)).unwrap();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     app.request(
         &write_n(1, HR_POSITIONS, &words(&[1000, 2000, -3000])),
         5,
@@ -122,7 +78,7 @@ fn without_a_section_the_block_says_not_available() {
     // volumetric, identity and probe-reference ones.
     assert_eq!(IR_LAST, 359);
     let [a, b] = (IR_LAST + 1).to_be_bytes();
-    app.request(&frame(1, &[4, a, b, 0, 1]), 10, &mut reply);
+    app.request(&frame(&[1, 4, a, b, 0, 1]), 10, &mut reply);
     assert_eq!(&reply[1..3], &[0x84, 2], "{reply:02x?}");
 }
 
@@ -136,7 +92,7 @@ fn served_correction_equals_the_core_at_the_plcs_positions() {
     not_available(&w);
     assert_eq!(w[6] & vstatus::NO_POSITIONS, vstatus::NO_POSITIONS);
     assert_eq!(w[7], 4, "terms in the section");
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     let mut last_seq = s32(&w, 14) as u32;
     for (k, (pos, tool)) in [
         ([0, 0, -400_000], 0),
@@ -196,7 +152,7 @@ fn a_section_sensor_without_a_value_makes_it_not_available() {
         max: 1000,
     };
     app.program(&image(Some(section(&[s])))).unwrap();
-    let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
+    let mut reply = Reply::new();
     app.request(&write_n(1, HR_POSITIONS, &words(&[1, 2, 3])), 0, &mut reply);
     // A cycle on an acquisition that has read nothing: channel 2 has no value.
     let acq = TemperatureAcquisition::new(AcquisitionConfig::default(), ChannelMap::new());
