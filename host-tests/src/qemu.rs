@@ -193,19 +193,100 @@ pub fn free_tcp_port() -> u16 {
         .expect("a free local TCP port")
 }
 
-/// One request through `host-tests/py/modbus_master.py` (pymodbus, the real
-/// master the QEMU tests use); its JSON answer.
-pub fn modbus_master(args: &[&str]) -> serde_json::Value {
+/// Runs `host-tests/py/modbus_master.py` (pymodbus, the real master the
+/// QEMU tests use) with `args`. It never retries and exits 1 on any
+/// dropped frame, so every caller fails on a lossy link.
+pub fn modbus_master_output(args: &[&str]) -> std::process::Output {
     let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = std::process::Command::new("python3")
+    Command::new("python3")
         .arg(script)
         .args(args)
         .output()
-        .expect("python3");
+        .expect("python3")
+}
+
+/// One request through [`modbus_master_output`]; its JSON answer.
+pub fn modbus_master(args: &[&str]) -> serde_json::Value {
+    let out = modbus_master_output(args);
     assert!(
         out.status.success(),
-        "modbus_master.py: {}",
+        "modbus_master.py {args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    serde_json::from_slice(&out.stdout).unwrap()
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+/// What the firmware logs each time it starts serving Modbus (once a boot).
+pub const SERVING: &str = "serving Modbus RTU";
+
+/// How long a test waits for the bench board to boot (a loaded host).
+pub const BOOT: Duration = Duration::from_secs(60);
+
+/// QEMU's `-serial` value for UART0 as a TCP server on local `port`.
+pub fn tcp_serial(port: u16) -> String {
+    format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on")
+}
+
+impl BenchBoard {
+    /// The firmware's `serve trace model extra…` with UART0 on `serial`,
+    /// once it serves Modbus (fails with its log after [`BOOT`]).
+    pub fn serve(serial: &str, trace: &Path, model: &Path, extra: &[&str]) -> BenchBoard {
+        let mut args = vec!["serve", trace.to_str().unwrap(), model.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let board = BenchBoard::start(serial, &args);
+        assert!(board.wait_for(SERVING, BOOT), "{}", board.log());
+        board
+    }
+
+    /// Wait until the board has booted `n` times (its log says [`SERVING`]
+    /// `n` times); the host time it took. Fails with the log after `limit`.
+    pub fn wait_for_boots(&self, n: usize, limit: Duration) -> Duration {
+        let start = Instant::now();
+        while start.elapsed() < limit {
+            if self.log().matches(SERVING).count() >= n {
+                return start.elapsed();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        panic!("no boot #{n} within {limit:?}:\n{}", self.log());
+    }
+
+    /// As [`BenchBoard::serve`] on a free local TCP port; the board and the port.
+    pub fn serve_tcp(trace: &Path, model: &Path, extra: &[&str]) -> (BenchBoard, u16) {
+        let port = free_tcp_port();
+        let board = BenchBoard::serve(&tcp_serial(port), trace, model, extra);
+        (board, port)
+    }
+}
+
+/// One bench board at a time in a test binary: QEMU hands the guest one
+/// UART byte per main-loop turn, so parallel boards on a 2-core host
+/// stretch frames. Hold the guard for the test's length.
+pub fn one_board() -> std::sync::MutexGuard<'static, ()> {
+    static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A replay trace of six sensors, `rows` samples 15 s apart at 3000 rpm,
+/// sensor `c` (from 0) warming by `(c + 1) * step_c` °C a row.
+pub fn warming_trace(path: &Path, rows: u32, step_c: f64) {
+    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
+    for i in 0..rows {
+        csv += &format!("{},3000", i * 15);
+        for c in 0..6 {
+            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * step_c);
+        }
+        csv += "\n";
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
+/// The demo model of `seed` as version `version`, exported to `path` as
+/// `tcomp export` writes it; the image's bytes.
+pub fn export_demo(seed: u64, version: u32, path: &Path) -> Vec<u8> {
+    let mut fm = thermocomp_core::float::demo_model(seed);
+    fm.model_version = version;
+    tcomp_model::export::export(&fm, path).unwrap();
+    std::fs::read(path).unwrap()
 }

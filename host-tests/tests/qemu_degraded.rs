@@ -3,35 +3,16 @@
 //! emulated bus takes it off the bus: no presence), compensation with a
 //! model image carrying fallback models, and the Modbus register map read
 //! by pymodbus over QEMU's serial socket.
-use std::process::Command;
 use std::time::{Duration, Instant};
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use host_tests::qemu::{modbus_master, BenchBoard};
 use serde_json::Value;
 use thermocomp_core::compensator::status;
 use thermocomp_core::float::{demo_model, FloatFallback, FloatTerm};
 
 fn read(port: u16) -> Vec<Value> {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args([
-            "read",
-            "--port",
-            &port.to_string(),
-            "--samples",
-            "3",
-            "--degraded",
-        ])
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice::<Value>(&out.stdout)
-        .unwrap()
+    let p = port.to_string();
+    modbus_master(&["read", "--port", &p, "--samples", "3", "--degraded"])
         .as_array()
         .unwrap()
         .clone()
@@ -87,17 +68,7 @@ fn a_sensor_lost_mid_run_is_degraded_over_modbus_and_the_correction_continues() 
         },
     ];
     tcomp_model::export::export(&fm, &m).unwrap();
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "30"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&t, &m, &["30"]);
     let lost_s = u64::from(lost_row) * 15;
     let (mut before, mut after) = (0usize, Vec::new());
     let start = Instant::now();

@@ -6,7 +6,7 @@
 //! correction equals the desktop's prediction from the written file
 //! (`board5::predict5`) bit for bit and removes most of the true error.
 
-use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
+use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
@@ -68,17 +68,7 @@ fn an_exported_rotary_model_is_served_bit_for_bit() {
     tcomp_model::export::export_five(&float, Some((v, report)), Some(five), &m, None).unwrap();
     let model = thermocomp_core::Model::parse(&std::fs::read(&m).unwrap()).unwrap();
 
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "150"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", std::time::Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (_board, port) = BenchBoard::serve_tcp(&t, &m, &["150"]);
     let p_s = port.to_string();
     // 20 poses: x, y, z, tool (µm), A, C (0.001°).
     let poses: Vec<[i32; 6]> = (0..20i32)

@@ -11,7 +11,7 @@
 //! the temperatures the board reports it used, bit for bit.
 use std::collections::{BTreeMap, BTreeSet};
 
-use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
+use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_geometry::board::{quantize, BoardOptions};
 use tcomp_geometry::board5::{
     predict5, quantize_five_axis, FiveAxisOptions, Location, LocationValue, RotaryModel,
@@ -140,17 +140,7 @@ fn the_served_five_axis_correction_equals_the_desktop_bit_for_bit() {
     std::fs::write(&m, &buf).unwrap();
     let model = thermocomp_core::Model::parse(&buf).unwrap();
 
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "150"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", std::time::Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&t, &m, &["150"]);
     let p_s = port.to_string();
     // Positions and tool written, A and C not yet: not available, and why.
     let r = master(&["volumetric", "--port", &p_s, "--at=1,2,-3,4"]);

@@ -2,37 +2,9 @@
 //! framer on bytes timed in the receive interrupt. A request hidden inside
 //! another unit's frame is not executed, a frame with a long silence inside
 //! gets no answer, and two requests separated by a silence get two answers.
-use std::process::Command;
-use std::time::Duration;
-
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
-use serde_json::Value;
+use host_tests::modbus::frame;
+use host_tests::qemu::{export_demo, modbus_master as python, BenchBoard};
 use thermocomp_protocol::holding::*;
-use thermocomp_protocol::rtu::crc16;
-
-const BOOT: Duration = Duration::from_secs(60);
-
-fn python(args: &[&str]) -> Value {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
-}
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
 
 fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
@@ -47,18 +19,8 @@ fn boot() -> (BenchBoard, String) {
         csv += &format!("{},0,20,20.1,20.2,20.3,20.4,20.5\n", i * 15);
     }
     std::fs::write(&t, csv).unwrap();
-    let fm = thermocomp_core::float::demo_model(1);
-    tcomp_model::export::export(&fm, &m).unwrap();
-    let port = free_tcp_port();
-    let board = BenchBoard::start(
-        &format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on"),
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
+    export_demo(1, 1, &m);
+    let (board, port) = BenchBoard::serve_tcp(&t, &m, &["50"]);
     (board, port.to_string())
 }
 

@@ -8,14 +8,9 @@
 //! never the new sensor's reading.
 use std::time::{Duration, Instant};
 
-use host_tests::qemu::{free_tcp_port, BenchBoard};
+use host_tests::qemu::{export_demo, one_board, warming_trace, BenchBoard, BOOT};
 use tcomp_link::board_link::{record, upload, BoardLink, Commit};
 use thermocomp_protocol::registers::*;
-
-const BOOT: Duration = Duration::from_secs(60);
-
-/// One bench board at a time (see qemu_modbus.rs).
-static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn u32_of(w: &[u16]) -> u32 {
     u32::from(w[0]) << 16 | u32::from(w[1])
@@ -24,7 +19,7 @@ fn u32_of(w: &[u16]) -> u32 {
 #[test]
 #[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
 fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let dir = std::env::temp_dir().join(format!("thermocomp-qemu-rom-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (trace, v1, v2) = (
@@ -32,36 +27,10 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
         dir.join("v1.img"),
         dir.join("v2.img"),
     );
-    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
-    for i in 0..5000u32 {
-        csv += &format!("{},3000", i * 15);
-        for c in 0..6 {
-            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
-        }
-        csv += "\n";
-    }
-    std::fs::write(&trace, csv).unwrap();
-    let mut fm = thermocomp_core::float::demo_model(1);
-    fm.model_version = 1;
-    tcomp_model::export::export(&fm, &v1).unwrap();
+    warming_trace(&trace, 5000, 0.0001);
+    export_demo(1, 1, &v1);
     // Sensor 2 is swapped for a new one at row 300 (15 s of serving at 50 ms a row).
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &[
-            "serve",
-            trace.to_str().unwrap(),
-            v1.to_str().unwrap(),
-            "50",
-            "swap=2@300",
-        ],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&trace, &v1, &["50", "swap=2@300"]);
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
     // The calibration run: record names each column by its sensor's ROM code.
     let run_path = dir.join("recorded.csv");
@@ -138,15 +107,6 @@ fn a_model_named_by_rom_codes_survives_a_swap_on_the_bench_board() {
     assert_ne!(temps[6], NOT_AVAILABLE, "{temps:?}");
 }
 
-/// Wait until the board has booted `n` times (its log says so `n` times).
-fn wait_for_boots(board: &BenchBoard, n: usize) {
-    let start = Instant::now();
-    while board.log().matches("serving Modbus RTU").count() < n {
-        assert!(start.elapsed() < BOOT, "{}", board.log());
-        std::thread::sleep(Duration::from_millis(100));
-    }
-}
-
 fn command(link: &mut BoardLink, code: u16) {
     use thermocomp_protocol::holding::{HR_COMMAND, HR_UNLOCK};
     host_tests::commission_link(link);
@@ -171,37 +131,16 @@ fn wait_input(link: &mut BoardLink, board: &BenchBoard, addr: u16, want: u16) {
 #[test]
 #[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
 fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     use thermocomp_protocol::holding::{
         result, CMD_FORGET_REFERENCE, CMD_KEEP_REFERENCE, HR_RESULT,
     };
     let dir = std::env::temp_dir().join(format!("thermocomp-qemu-ref-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (trace, img) = (dir.join("trace.csv"), dir.join("v1.img"));
-    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
-    for i in 0..5000u32 {
-        csv += &format!("{},3000", i * 15);
-        for c in 0..6 {
-            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
-        }
-        csv += "\n";
-    }
-    std::fs::write(&trace, csv).unwrap();
-    let mut fm = thermocomp_core::float::demo_model(1);
-    fm.model_version = 1;
-    tcomp_model::export::export(&fm, &img).unwrap();
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &[
-            "serve",
-            trace.to_str().unwrap(),
-            img.to_str().unwrap(),
-            "50",
-        ],
-    );
-    wait_for_boots(&board, 1);
+    warming_trace(&trace, 5000, 0.0001);
+    export_demo(1, 1, &img);
+    let (board, port) = BenchBoard::serve_tcp(&trace, &img, &["50"]);
     let addr = format!("127.0.0.1:{port}");
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     assert_eq!(link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(), vec![0]);
@@ -214,7 +153,7 @@ fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
         std::thread::sleep(Duration::from_millis(100));
     }
     command(&mut link, 8);
-    wait_for_boots(&board, 2);
+    board.wait_for_boots(2, BOOT);
     // (The same connection: QEMU keeps the socket across the guest's reset.)
     assert_eq!(
         link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(),
@@ -231,6 +170,6 @@ fn a_kept_reference_survives_a_reset_of_the_bench_board_until_command_11() {
         std::thread::sleep(Duration::from_millis(100));
     }
     command(&mut link, 8);
-    wait_for_boots(&board, 3);
+    board.wait_for_boots(3, BOOT);
     assert_eq!(link.read_inputs(IR_REFERENCE_STATE, 1).unwrap(), vec![0]);
 }

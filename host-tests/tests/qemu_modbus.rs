@@ -1,47 +1,18 @@
 //! The QEMU bench with real Modbus masters nobody here wrote: pymodbus (RTU
 //! framing over QEMU's TCP serial socket) and mbpoll (RTU on a pty).
 use std::process::Command;
-use std::time::Duration;
 use thermocomp_protocol::registers::MAP_VERSION;
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use host_tests::qemu::{
+    export_demo, free_tcp_port, modbus_master as python, modbus_master_output as python_output,
+    one_board, tcp_serial, BenchBoard,
+};
 use serde_json::Value;
-
-const BOOT: Duration = Duration::from_secs(60);
-
-/// Runs the pymodbus master. It never retries and exits 1 on any dropped
-/// frame, so every caller fails on a lossy link.
-fn python_output(args: &[&str]) -> std::process::Output {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3")
-}
-
-fn python(args: &[&str]) -> Value {
-    let out = python_output(args);
-    assert!(
-        out.status.success(),
-        "modbus_master.py {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
-}
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("thermocomp-modbus-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn demo_image(seed: u64, version: u32, path: &std::path::Path) -> Vec<u8> {
-    let mut fm = thermocomp_core::float::demo_model(seed);
-    fm.model_version = version;
-    tcomp_model::export::export(&fm, path).unwrap();
-    std::fs::read(path).unwrap()
 }
 
 /// A short warm-up trace (6 sensors, 15 s samples).
@@ -58,44 +29,20 @@ fn trace(path: &std::path::Path, rows: u32) {
     std::fs::write(path, csv).unwrap();
 }
 
-/// One bench board at a time: QEMU hands the guest one UART byte per
-/// main-loop turn, so parallel boards on a 2-core host stretch frames.
-static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn serial() -> std::sync::MutexGuard<'static, ()> {
-    ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 fn boot(port: u16, trace: &std::path::Path, model: &std::path::Path, pace_ms: u32) -> BenchBoard {
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let pace = pace_ms.to_string();
-    let board = BenchBoard::start(
-        &serial,
-        &[
-            "serve",
-            trace.to_str().unwrap(),
-            model.to_str().unwrap(),
-            &pace,
-        ],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
-    board
+    BenchBoard::serve(&tcp_serial(port), trace, model, &[&pace_ms.to_string()])
 }
 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("bitexact");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     // Long enough (1500 samples, 30 ms each) that a loaded CI host still
     // sees many distinct samples; the test stops as soon as it has 20.
     trace(&t, 1500);
-    demo_image(1, 1, &m);
+    export_demo(1, 1, &m);
     let expected = tcomp_model::replay::replay_files(&t, &m).unwrap();
     let port = free_tcp_port();
     let board = boot(port, &t, &m, 30);
@@ -148,7 +95,7 @@ fn corrections_over_modbus_equal_the_desktop_core_bit_for_bit() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("upload");
     let (t, m1, m2) = (
         dir.join("trace.csv"),
@@ -156,8 +103,8 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
         dir.join("v2.img"),
     );
     trace(&t, 2000);
-    demo_image(1, 1, &m1);
-    let v2 = demo_image(2, 2, &m2);
+    export_demo(1, 1, &m1);
+    let v2 = export_demo(2, 2, &m2);
     let port = free_tcp_port();
     let board = boot(port, &t, &m1, 50);
     let p = port.to_string();
@@ -229,11 +176,11 @@ fn upload_over_modbus_takes_effect_and_a_corrupted_one_is_refused() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("crc");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
-    demo_image(1, 1, &m);
+    export_demo(1, 1, &m);
     let port = free_tcp_port();
     let _board = boot(port, &t, &m, 50);
     let r = python(&["badcrc", "--port", &port.to_string()]);
@@ -248,20 +195,12 @@ fn a_bad_crc_frame_gets_no_answer_and_the_next_good_one_does() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and mbpoll: scripts/test.sh"]
 fn mbpoll_reads_the_test_pattern_over_a_pty() {
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("mbpoll");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
-    demo_image(1, 1, &m);
-    let board = BenchBoard::start(
-        "pty",
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
+    export_demo(1, 1, &m);
+    let board = BenchBoard::serve("pty", &t, &m, &["50"]);
     let log = board.log();
     let pty = log
         .split_whitespace()
@@ -297,11 +236,11 @@ fn mbpoll_reads_the_test_pattern_over_a_pty() {
 fn a_dropped_frame_fails_the_master_after_one_try() {
     // Unit 7 is not this board: the request is never answered. The master
     // must send it once, count it dropped and fail.
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("dropped");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 100);
-    demo_image(1, 1, &m);
+    export_demo(1, 1, &m);
     let port = free_tcp_port();
     let _board = boot(port, &t, &m, 50);
     let p = port.to_string();
@@ -328,11 +267,11 @@ fn after_a_300_kb_flood_of_garbage_the_next_request_is_answered_within_a_second(
     // garbage's frame (no silence between them: the spec's framing, issue
     // 30); the master asks again every 100 ms, as after any response
     // timeout, and the first request after a silence is answered.
-    let _one = serial();
+    let _one = one_board();
     let dir = scratch("flood");
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t, 2000);
-    demo_image(1, 1, &m);
+    export_demo(1, 1, &m);
     let base = dir.join("uart");
     for end in ["in", "out"] {
         let fifo = dir.join(format!("uart.{end}"));
@@ -340,15 +279,7 @@ fn after_a_300_kb_flood_of_garbage_the_next_request_is_answered_within_a_second(
         let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
         assert!(made.success());
     }
-    let board = BenchBoard::start(
-        &format!("pipe:{}", base.display()),
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "50"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
+    let board = BenchBoard::serve(&format!("pipe:{}", base.display()), &t, &m, &["50"]);
     let r = python(&[
         "flood",
         "--pipe",

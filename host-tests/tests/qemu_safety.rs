@@ -5,30 +5,12 @@
 //! settings written over Modbus survive the reboot; a model commit is
 //! answered at once and written in the background (the flash model takes
 //! the real 1 s erase) while the measurement loop keeps its period.
-use std::process::Command;
 use std::time::{Duration, Instant};
 
-use host_tests::qemu::{free_tcp_port, workspace_root, BenchBoard};
+use host_tests::qemu::{
+    export_demo, modbus_master as python, one_board, warming_trace, BenchBoard, BOOT, SERVING,
+};
 use serde_json::Value;
-
-const BOOT: Duration = Duration::from_secs(60);
-const SERVING: &str = "serving Modbus RTU";
-
-fn python(args: &[&str]) -> Value {
-    let script = workspace_root().join("host-tests/py/modbus_master.py");
-    let out = Command::new("python3")
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "modbus_master.py {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
-}
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("thermocomp-safety-{}-{name}", std::process::id()));
@@ -40,23 +22,10 @@ fn scratch(name: &str) -> std::path::PathBuf {
 /// the demo model.
 fn files(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
-    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
-    for i in 0..5000u32 {
-        csv += &format!("{},3000", i * 15);
-        for c in 0..6 {
-            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.0001);
-        }
-        csv += "\n";
-    }
-    std::fs::write(&t, csv).unwrap();
-    let mut fm = thermocomp_core::float::demo_model(1);
-    fm.model_version = 1;
-    tcomp_model::export::export(&fm, &m).unwrap();
+    warming_trace(&t, 5000, 0.0001);
+    export_demo(1, 1, &m);
     (t, m)
 }
-
-/// One bench board at a time (see qemu_modbus.rs).
-static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn boot(dir: &std::path::Path) -> (BenchBoard, u16) {
     boot_paced(dir, "50")
@@ -68,31 +37,13 @@ fn boot_paced(dir: &std::path::Path, pace_ms: &str) -> (BenchBoard, u16) {
 
 fn boot_with(dir: &std::path::Path, extra: &[&str]) -> (BenchBoard, u16) {
     let (t, m) = files(dir);
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let mut args = vec!["serve", t.to_str().unwrap(), m.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    let board = BenchBoard::start(&serial, &args);
-    assert!(board.wait_for(SERVING, BOOT), "{}", board.log());
-    (board, port)
-}
-
-/// Wait until the board has booted `n` times; the host time it took.
-fn wait_for_boots(board: &BenchBoard, n: usize, limit: Duration) -> Duration {
-    let start = Instant::now();
-    while start.elapsed() < limit {
-        if board.log().matches(SERVING).count() >= n {
-            return start.elapsed();
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    panic!("no boot #{n} within {limit:?}:\n{}", board.log());
+    BenchBoard::serve_tcp(&t, &m, extra)
 }
 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let (board, port) = boot(&scratch("panic"));
     let p = port.to_string();
     let before = python(&["fault", "--port", &p]);
@@ -101,7 +52,7 @@ fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() 
     // Command 8: answered, then the panic; the fault path resets the board.
     let cmd = python(&["command", "--port", &p, "--code", "8"]);
     assert_eq!(cmd["exception"], Value::Null, "{cmd}");
-    wait_for_boots(&board, 2, BOOT);
+    board.wait_for_boots(2, BOOT);
     let log = board.log();
     assert!(log.contains("test panic requested by command 8"), "{log}");
     let after = python(&["fault", "--port", &p]);
@@ -123,7 +74,7 @@ fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() 
     assert_eq!(snap["model_version"], 1, "{snap}");
     // A second panic counts on.
     python(&["command", "--port", &p, "--code", "8"]);
-    wait_for_boots(&board, 3, BOOT);
+    board.wait_for_boots(3, BOOT);
     assert_eq!(python(&["fault", "--port", &p])["count"], 2);
     // Command 6 clears the record and the status bit; it stays cleared.
     let clear = python(&["command", "--port", &p, "--code", "6"]);
@@ -141,7 +92,7 @@ fn an_injected_panic_resets_the_board_and_the_record_is_read_back_over_modbus() 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let (board, port) = boot(&scratch("watchdog"));
     let p = port.to_string();
     // Fed while both tasks run: several timeouts' worth of serving, no reset.
@@ -159,7 +110,7 @@ fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
         still[0]["pattern"], 0x1234_5678,
         "Modbus still serves while stalled"
     );
-    let took = stalled_at.elapsed() + wait_for_boots(&board, 2, BOOT);
+    let took = stalled_at.elapsed() + board.wait_for_boots(2, BOOT);
     println!("watchdog reset {took:?} after the stall");
     // The 4 s timeout, and not much more (feeder period, host load).
     assert!(took >= Duration::from_millis(3_900), "{took:?}");
@@ -178,7 +129,7 @@ fn a_stalled_measurement_loop_trips_the_watchdog_and_the_record_says_so() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let (board, port) = boot(&scratch("settings"));
     let p = port.to_string();
     // Clamp direction 0 to 12.3 µm, rate of direction 1 to 5.0 µm/s, unit 7.
@@ -202,7 +153,7 @@ fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults
     assert_eq!(cmd["registers"][2], 0, "stored: {cmd}");
     let panic = python(&["command", "--port", &p, "--unit", "7", "--code", "8"]);
     assert_eq!(panic["exception"], Value::Null, "{panic}");
-    wait_for_boots(&board, 2, BOOT);
+    board.wait_for_boots(2, BOOT);
     // The boot log names the stored unit, not the default (issue 30).
     let log = board.log();
     let second = log.rsplit(SERVING).next().unwrap_or_default();
@@ -242,7 +193,7 @@ fn settings_written_over_modbus_survive_a_reboot_and_command_7_restores_defaults
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let dir = scratch("commit");
     // One sample per second, as on the NUCLEO.
     let (board, port) = boot_paced(&dir, "1000");
@@ -283,7 +234,7 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
     // programmed only into blank slots (issue 30).
     let panic = python(&["command", "--port", &p, "--code", "8"]);
     assert_eq!(panic["exception"], Value::Null, "{panic}");
-    wait_for_boots(&board, 2, BOOT);
+    board.wait_for_boots(2, BOOT);
     let snap = &python(&["read", "--port", &p])[0];
     assert_eq!(snap["model_version"], 2, "{snap}\n{}", board.log());
     assert!(
@@ -298,7 +249,7 @@ fn a_model_commit_is_answered_within_100_ms_while_the_loop_keeps_its_period() {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
 fn a_swapped_sensor_is_reported_missing_and_new_and_the_model_never_reads_it() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     // Sensor 2 (channel 2, the model's third input) is swapped at row 20.
     let (board, port) = boot_with(&scratch("swap"), &["50", "swap=2@20"]);
     let p = port.to_string();

@@ -9,7 +9,7 @@
 //! reports it used, bit for bit, at several positions and temperatures.
 use std::collections::BTreeSet;
 
-use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
+use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_geometry::board::{predict, quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::volumetric::{VolTerm, VolumetricPoly};
 use thermocomp_core::volumetric::vstatus;
@@ -85,17 +85,7 @@ fn the_served_volumetric_correction_equals_the_desktop_bit_for_bit() {
     let model = thermocomp_core::Model::parse(&std::fs::read(&m).unwrap()).unwrap();
     let n_terms = model.volumetric.as_ref().unwrap().terms.len();
 
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "150"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", std::time::Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&t, &m, &["150"]);
     let p_s = port.to_string();
     // Before the PLC writes positions: not available, and the reason.
     let w = master(&["inputs", "--port", &p_s, "--addr", "180", "--count", "20"]);
