@@ -7,7 +7,7 @@ use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
 use thermocomp::hal::flash::BackgroundErase;
 use thermocomp_protocol::holding::{HR_COMMAND, HR_STAGED_LEN, HR_STAGING, HR_UNLOCK};
-use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
+use thermocomp_protocol::rtu::{crc16, expected_request_len, MAX_FRAME};
 
 /// One model slot of the mock flash the tests give their boards (two slots).
 pub const SLOT: u32 = (8 * ERASE_SIZE) as u32;
@@ -150,4 +150,46 @@ pub fn power_cycle(app: &mut App<MockFlash>, map: ChannelMap) -> App<MockFlash> 
     let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
     flash.power_on();
     boot(flash, map)
+}
+
+/// A Modbus RTU device on a local TCP socket, as `tcomp`'s link talks to a
+/// board: the byte stream is cut into requests by their expected length and
+/// `answer` gives each one's reply (empty: silence). One client at a time;
+/// the socket's address.
+pub fn rtu_socket(mut answer: impl FnMut(&[u8]) -> Vec<u8> + Send + 'static) -> String {
+    use std::io::{Read, Write};
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        for stream in l.incoming() {
+            let Ok(mut s) = stream else { return };
+            let mut buf = Vec::new();
+            let mut byte = [0u8; 1];
+            while s.read_exact(&mut byte).is_ok() {
+                buf.push(byte[0]);
+                if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
+                    s.write_all(&answer(&buf)).unwrap();
+                    buf.clear();
+                }
+            }
+        }
+    });
+    addr
+}
+
+/// `app` answering each request, then driving its flash job one step as
+/// the board's feeder task does; the reply (empty: silence).
+pub fn answer<F: BackgroundErase>(app: &mut App<F>, request: &[u8]) -> Vec<u8> {
+    let mut reply = Reply::new();
+    app.request(request, 0, &mut reply);
+    app.poll_flash();
+    reply.to_vec()
+}
+
+/// The board's application behind [`rtu_socket`], its state shared with
+/// the test; the socket's address.
+pub fn app_on_socket<F: BackgroundErase + Send + 'static>(
+    app: std::sync::Arc<std::sync::Mutex<App<F>>>,
+) -> String {
+    rtu_socket(move |req| answer(&mut app.lock().unwrap(), req))
 }

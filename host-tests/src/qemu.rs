@@ -252,6 +252,15 @@ impl BenchBoard {
         panic!("no boot #{n} within {limit:?}:\n{}", self.log());
     }
 
+    /// The host pty QEMU put UART0 on (a board started on serial `pty`).
+    pub fn pty(&self) -> String {
+        self.log()
+            .split_whitespace()
+            .find(|w| w.starts_with("/dev/pts/"))
+            .expect("QEMU names the pty")
+            .to_string()
+    }
+
     /// As [`BenchBoard::serve`] on a free local TCP port; the board and the port.
     pub fn serve_tcp(trace: &Path, model: &Path, extra: &[&str]) -> (BenchBoard, u16) {
         let port = free_tcp_port();

@@ -4,42 +4,32 @@ use std::io::{Read, Write};
 use std::net::TcpListener;
 use std::time::Duration;
 
-use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
-use host_tests::qemu::{free_tcp_port, BenchBoard};
+use host_tests::mock_flash::MockFlash;
+use host_tests::modbus::{answer, blank_app, frame, rtu_socket, Reply};
+use host_tests::qemu::{export_demo, warming_trace, BenchBoard};
 use std::sync::{Arc, Mutex};
 use tcomp_link::board_link::{record, upload, BoardLink, Commit};
-use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
 use thermocomp::modbus::{Server, Snapshot};
 use thermocomp_protocol::holding::*;
-use thermocomp_protocol::rtu::{crc16, expected_request_len, MAX_FRAME};
+use thermocomp_protocol::rtu::crc16;
 
 /// The board's frame handler behind a TCP socket (one client), in a thread.
 fn fake_board(answer: bool) -> String {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = l.local_addr().unwrap().to_string();
-    std::thread::spawn(move || {
-        let (mut s, _) = l.accept().unwrap();
-        let mut server = Server::new(1, 115_200);
-        let snap = Snapshot {
-            sequence: 9,
-            ..Snapshot::default()
-        };
-        let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-        let mut buf = Vec::new();
-        let mut byte = [0u8; 1];
-        while s.read_exact(&mut byte).is_ok() {
-            buf.push(byte[0]);
-            if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
-                server.handle(&buf, 0, &snap, &mut reply);
-                if answer && !reply.is_empty() {
-                    s.write_all(&reply).unwrap();
-                }
-                buf.clear();
-            }
+    let mut server = Server::new(1, 115_200);
+    let snap = Snapshot {
+        sequence: 9,
+        ..Snapshot::default()
+    };
+    let mut reply = Reply::new();
+    rtu_socket(move |req| {
+        server.handle(req, 0, &snap, &mut reply);
+        if answer {
+            reply.to_vec()
+        } else {
+            vec![]
         }
-    });
-    addr
+    })
 }
 
 #[test]
@@ -77,16 +67,7 @@ fn inspectable_board(
     running: Option<&[u8]>,
     fault_at: Option<usize>,
 ) -> (String, Arc<Mutex<SharedBoard>>) {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = l.local_addr().unwrap().to_string();
-    let slot = (8 * ERASE_SIZE) as u32;
-    let mut app = App::new(
-        MockFlash::new(2 * slot as usize),
-        slot,
-        1,
-        115_200,
-        ChannelMap::new(),
-    );
+    let mut app = blank_app();
     host_tests::commission(&mut app);
     if let Some(image) = running {
         app.program(image).unwrap();
@@ -97,29 +78,14 @@ fn inspectable_board(
         fault_at,
     }));
     let shared = board.clone();
-    std::thread::spawn(move || {
-        let (mut s, _) = l.accept().unwrap();
-        let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-        let mut buf = Vec::new();
-        let mut byte = [0u8; 1];
-        while s.read_exact(&mut byte).is_ok() {
-            buf.push(byte[0]);
-            if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
-                let mut b = shared.lock().unwrap();
-                let k = b.requests.len();
-                b.requests.push(buf.clone());
-                if b.fault_at == Some(k) {
-                    let mut e = vec![buf[0], buf[1] | 0x80, 4];
-                    e.extend_from_slice(&crc16(&e).to_le_bytes());
-                    s.write_all(&e).unwrap();
-                } else {
-                    b.app.request(&buf, 0, &mut reply);
-                    // What the board's feeder task does: drive a flash write.
-                    b.app.poll_flash();
-                    s.write_all(&reply).unwrap();
-                }
-                buf.clear();
-            }
+    let addr = rtu_socket(move |req| {
+        let mut b = shared.lock().unwrap();
+        let k = b.requests.len();
+        b.requests.push(req.to_vec());
+        if b.fault_at == Some(k) {
+            frame(&[req[0], req[1] | 0x80, 4])
+        } else {
+            answer(&mut b.app, req)
         }
     });
     (addr, board)
@@ -250,31 +216,11 @@ fn upload_and_record_against_the_bench_board() {
         dir.join("v1.img"),
         dir.join("v2.img"),
     );
-    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03,T04,T05,T06\n");
-    for i in 0..3000 {
-        csv += &format!("{},3000", i * 15);
-        for c in 0..6 {
-            csv += &format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.01);
-        }
-        csv += "\n";
-    }
-    std::fs::write(&trace, csv).unwrap();
+    warming_trace(&trace, 3000, 0.01);
     for (v, p) in [(1u32, &v1), (2, &v2)] {
-        let mut fm = thermocomp_core::float::demo_model(u64::from(v));
-        fm.model_version = v;
-        tcomp_model::export::export(&fm, p).unwrap();
+        export_demo(u64::from(v), v, p);
     }
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", trace.to_str().unwrap(), v1.to_str().unwrap(), "50"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&trace, &v1, &["50"]);
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
     host_tests::commission_link(&mut link);
     let opts = host_tests::upload_opts(Commit::NewerOnly, false);

@@ -2,6 +2,7 @@
 //! model upload and commit, exceptions and silent discards per the spec,
 //! and random frames never panic it.
 use heapless::Vec as HVec;
+use host_tests::modbus::{be_words, encode, frame, read, write1, write_n};
 use host_tests::TEST_UNLOCK_KEY;
 use proptest::prelude::*;
 use thermocomp::modbus::registers::*;
@@ -10,34 +11,6 @@ use thermocomp_core::float::demo_model;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
-
-fn frame(body: &[u8]) -> Vec<u8> {
-    let mut f = body.to_vec();
-    f.extend_from_slice(&crc16(body).to_le_bytes());
-    f
-}
-
-fn read(unit: u8, fc: u8, addr: u16, count: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = count.to_be_bytes();
-    frame(&[unit, fc, a, b, c, d])
-}
-
-fn write1(unit: u8, addr: u16, v: u16) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = v.to_be_bytes();
-    frame(&[unit, 6, a, b, c, d])
-}
-
-fn write_n(unit: u8, addr: u16, vals: &[u16]) -> Vec<u8> {
-    let [a, b] = addr.to_be_bytes();
-    let [c, d] = (vals.len() as u16).to_be_bytes();
-    let mut body = vec![unit, 0x10, a, b, c, d, (vals.len() * 2) as u8];
-    for v in vals {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
-    frame(&body)
-}
 
 struct Bench {
     server: Server,
@@ -484,13 +457,7 @@ fn every_refused_write_locks_the_board() {
 }
 
 fn upload(b: &mut Bench, image: &[u8]) {
-    let mut padded = image.to_vec();
-    padded.resize(image.len().div_ceil(2) * 2, 0);
-    let words: Vec<u16> = padded
-        .chunks(2)
-        .map(|c| u16::from_be_bytes([c[0], c[1]]))
-        .collect();
-    for (i, chunk) in words.chunks(100).enumerate() {
+    for (i, chunk) in be_words(image).chunks(100).enumerate() {
         let (_, r) = b.ask(&write_n(17, HR_STAGING + (i * 100) as u16, chunk));
         assert_eq!(r[1], 0x10, "{r:02x?}");
     }
@@ -541,9 +508,7 @@ fn stage_and_send(b: &mut Bench, image: &[u8], staged_len: usize, command: u16) 
 }
 
 fn encoded(mut m: thermocomp_core::Model) -> Vec<u8> {
-    let mut img = vec![0u8; m.encoded_len()];
-    m.encode(&mut img).unwrap();
-    img
+    encode(&mut m)
 }
 
 #[test]

@@ -7,19 +7,14 @@
 //! references, see the chip refused, and report the error without
 //! references as exactly the model's 3 µm and with them clearly below.
 use std::process::Command;
-use std::time::Duration;
 
-use host_tests::qemu::{workspace_root, BenchBoard};
+use host_tests::qemu::{export_demo, one_board, workspace_root, BenchBoard};
 use serde_json::Value;
 
-const BOOT: Duration = Duration::from_secs(60);
 const ROWS: u32 = 1500;
 const ROW_S: u32 = 15;
 /// The model's error the references must learn, µm.
 const ERROR_UM: f64 = 3.0;
-
-/// One bench board at a time (see qemu_modbus.rs).
-static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn temps(i: u32) -> String {
     (0..6)
@@ -38,7 +33,7 @@ fn script(args: &[&str]) -> std::process::Output {
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and mbpoll: scripts/test.sh"]
 fn the_demo_reference_script_learns_a_known_model_error_over_mbpoll() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let dir = std::env::temp_dir().join(format!("thermocomp-demo-refs-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (plain, measured, probe, img, report) = (
@@ -54,9 +49,7 @@ fn the_demo_reference_script_learns_a_known_model_error_over_mbpoll() {
         csv += &format!("{},3000{}\n", i * ROW_S, temps(i));
     }
     std::fs::write(&plain, csv).unwrap();
-    let mut fm = thermocomp_core::float::demo_model(1);
-    fm.model_version = 1;
-    tcomp_model::export::export(&fm, &img).unwrap();
+    export_demo(1, 1, &img);
     let rows = tcomp_model::replay::replay_files(&plain, &img).unwrap();
     // The measured displacement of direction 0: its served correction + 3 µm.
     let mut csv = format!("# a synthetic run\n{header},dch1_um\n");
@@ -83,26 +76,8 @@ fn the_demo_reference_script_learns_a_known_model_error_over_mbpoll() {
         String::from_utf8_lossy(&out.stderr)
     );
 
-    let board = BenchBoard::start(
-        "pty",
-        &[
-            "serve",
-            probe.to_str().unwrap(),
-            img.to_str().unwrap(),
-            "10",
-        ],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
-    let log = board.log();
-    let pty = log
-        .split_whitespace()
-        .find(|w| w.starts_with("/dev/pts/"))
-        .expect("QEMU names the pty")
-        .to_string();
+    let board = BenchBoard::serve("pty", &probe, &img, &["10"]);
+    let pty = board.pty();
     let out = script(&[
         "run",
         "--pty",

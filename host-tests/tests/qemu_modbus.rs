@@ -201,12 +201,7 @@ fn mbpoll_reads_the_test_pattern_over_a_pty() {
     trace(&t, 100);
     export_demo(1, 1, &m);
     let board = BenchBoard::serve("pty", &t, &m, &["50"]);
-    let log = board.log();
-    let pty = log
-        .split_whitespace()
-        .find(|w| w.starts_with("/dev/pts/"))
-        .expect("QEMU names the pty")
-        .to_string();
+    let pty = board.pty();
     // One request, one try: mbpoll does not retry, and neither does this
     // test (a dropped frame fails it).
     let out = Command::new("mbpoll")

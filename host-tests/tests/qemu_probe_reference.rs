@@ -7,7 +7,7 @@
 //! changes nothing but the refused count.
 use std::time::{Duration, Instant};
 
-use host_tests::qemu::{free_tcp_port, BenchBoard};
+use host_tests::qemu::{export_demo, one_board, BenchBoard, BOOT};
 use tcomp_link::board_link::BoardLink;
 use tcomp_model::replay::ReplayRow;
 use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceState};
@@ -16,14 +16,10 @@ use thermocomp_protocol::holding::{
 };
 use thermocomp_protocol::registers::*;
 
-const BOOT: Duration = Duration::from_secs(60);
 const ROWS: u32 = 6000;
 const ROW_S: u32 = 15;
 /// Rows from here on read 80 µm off the model at the gauge (a chip on it).
 const CHIP_FROM_ROW: usize = 700;
-
-/// One bench board at a time (see qemu_modbus.rs).
-static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn u32_of(w: &[u16]) -> u32 {
     u32::from(w[0]) << 16 | u32::from(w[1])
@@ -162,7 +158,7 @@ fn reference(
 #[test]
 #[ignore = "needs the QEMU firmware and qemu-system-arm: scripts/test.sh"]
 fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_reset() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_board();
     let dir = std::env::temp_dir().join(format!("thermocomp-qemu-probe-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (plain, trace, img) = (
@@ -175,10 +171,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
         csv += &format!("{},3000{}\n", i * ROW_S, temps(i));
     }
     std::fs::write(&plain, csv).unwrap();
-    let mut fm = thermocomp_core::float::demo_model(1);
-    fm.model_version = 1;
-    tcomp_model::export::export(&fm, &img).unwrap();
-    let bytes = std::fs::read(&img).unwrap();
+    let bytes = export_demo(1, 1, &img);
     let model = thermocomp_core::Model::parse(&bytes).unwrap();
     let rows = tcomp_model::replay::replay_files(&plain, &img).unwrap();
     // The probe at the gauge reads direction 0's model output + 3 µm (the
@@ -206,22 +199,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     };
     assert!(!model.directions.is_empty());
 
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &[
-            "serve",
-            trace.to_str().unwrap(),
-            img.to_str().unwrap(),
-            "50",
-        ],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", BOOT),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&trace, &img, &["50"]);
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
     assert_eq!(link.read_inputs(IR_MAP_VERSION, 1).unwrap(), vec![3]);
     // No probe direction yet: command 12 is answered 63, nothing learned.
@@ -274,11 +252,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
     // A reset (test command 8): the trace and the board's time restart;
     // the stored state resumes with its last reference at the first cycle.
     command(&mut link, 8);
-    let start = Instant::now();
-    while board.log().matches("serving Modbus RTU").count() < 2 {
-        assert!(start.elapsed() < BOOT, "{}", board.log());
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    board.wait_for_boots(2, BOOT);
     let w = link.read_inputs(IR_REF_TIME, 6).unwrap();
     assert_eq!((w[4], w[5]), (2, 1), "counts kept:\n{}", board.log());
     let mut rebased = st;

@@ -7,12 +7,10 @@
 //! the model never reading the new sensor's value). `tcomp record` writes
 //! the ROM codes the board serves (input registers 200–279).
 use std::collections::BTreeMap;
-use std::io::{Read, Write};
-use std::net::TcpListener;
 use std::time::Duration;
 
 use host_tests::mock_flash::MockFlash;
-use host_tests::modbus::{read_inputs, Reply, SLOT};
+use host_tests::modbus::{app_on_socket, read_inputs, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, Ds18b20, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::rom::RomCode;
@@ -20,7 +18,6 @@ use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisi
 use thermocomp::app::App;
 use thermocomp_core::{Compensator, Model, StepInput, StepOutput};
 use thermocomp_protocol::registers::*;
-use thermocomp_protocol::rtu::expected_request_len;
 
 fn inputs(app: &mut App<MockFlash>, addr: u16, n: u16) -> Vec<u16> {
     read_inputs(app, addr, n, 0)
@@ -363,29 +360,8 @@ fn record_names_each_column_by_the_rom_code_the_board_serves() {
         app.cycle(&acq, now, now, Some(0));
     }
     let map = *acq.map();
-    let l = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = l.local_addr().unwrap().to_string();
     let shared = std::sync::Arc::new(std::sync::Mutex::new(app));
-    let board = shared.clone();
-    std::thread::spawn(move || {
-        for stream in l.incoming() {
-            let mut s = stream.unwrap();
-            let mut reply = Reply::new();
-            let mut buf = Vec::new();
-            let mut byte = [0u8; 1];
-            while s.read_exact(&mut byte).is_ok() {
-                buf.push(byte[0]);
-                if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
-                    let mut app = board.lock().unwrap();
-                    app.request(&buf, 0, &mut reply);
-                    // What the board's feeder task does: drive a flash write.
-                    app.poll_flash();
-                    s.write_all(&reply).unwrap();
-                    buf.clear();
-                }
-            }
-        }
-    });
+    let addr = app_on_socket(shared.clone());
     let dir = std::env::temp_dir().join(format!("thermocomp-rec-rom-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("recorded.csv");

@@ -5,11 +5,10 @@
 //! the old model keeps serving; the right signature commits; the keys
 //! survive a reboot; a stored signing key is replaced only with the old
 //! key's signature.
-use std::io::{Read, Write};
-use std::net::TcpListener;
 use std::sync::{Arc, Mutex};
 
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
+use host_tests::modbus::app_on_socket;
 use host_tests::raw_commit;
 use tcomp_link::board_link::{upload, BoardLink, Commit};
 use tcomp_link::commission::{commission, Commission, SigningKey};
@@ -17,7 +16,6 @@ use tcomp_model::signing;
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::app::App;
 use thermocomp_protocol::holding::*;
-use thermocomp_protocol::rtu::{expected_request_len, MAX_FRAME};
 
 const SLOT: u32 = (8 * ERASE_SIZE) as u32;
 /// The unlock key these tests give their boards.
@@ -26,30 +24,8 @@ const KEY: u16 = host_tests::TEST_UNLOCK_KEY;
 /// The board's application behind a socket (one client at a time), its
 /// state shared with the test.
 fn board_on_socket(app: App<MockFlash>) -> (String, Arc<Mutex<App<MockFlash>>>) {
-    let l = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = l.local_addr().unwrap().to_string();
     let board = Arc::new(Mutex::new(app));
-    let shared = board.clone();
-    std::thread::spawn(move || {
-        for stream in l.incoming() {
-            let Ok(mut s) = stream else { return };
-            let mut reply = heapless::Vec::<u8, MAX_FRAME>::new();
-            let mut buf = Vec::new();
-            let mut byte = [0u8; 1];
-            while s.read_exact(&mut byte).is_ok() {
-                buf.push(byte[0]);
-                if expected_request_len(&buf).is_some_and(|n| buf.len() >= n) {
-                    let mut app = shared.lock().unwrap();
-                    app.request(&buf, 0, &mut reply);
-                    // What the board's feeder task does: drive a flash write.
-                    app.poll_flash();
-                    s.write_all(&reply).unwrap();
-                    buf.clear();
-                }
-            }
-        }
-    });
-    (addr, board)
+    (app_on_socket(board.clone()), board)
 }
 
 fn fresh_app(flash: MockFlash) -> App<MockFlash> {
