@@ -2,38 +2,10 @@
 //! `tcomp geometry table --json` goes into the image (section kind 3), the
 //! served value stays within the reported quantisation bound of the f64
 //! polynomial, and what the board cannot hold is refused with one line.
+mod common;
+use common::{ok, refused};
 use std::path::Path;
-use std::process::{Command, Output};
 use tcomp_geometry::volumetric::VolumetricPoly;
-
-fn tcomp(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tcomp"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let out = tcomp(dir, args);
-    assert!(
-        out.status.success(),
-        "tcomp {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn refused(dir: &Path, args: &[&str], needle: &str) {
-    let out = tcomp(dir, args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "tcomp {args:?} accepted");
-    let line = err.trim_end();
-    assert!(
-        line.starts_with("error: ") && !line.contains('\n') && line.contains(needle),
-        "{line:?} lacks {needle:?}"
-    );
-}
 
 fn table(dir: &Path) -> VolumetricPoly {
     ok(

@@ -6,8 +6,9 @@
 //! then agrees with the identified model's f64 prediction within the
 //! quantisation bound and corrects the true tool-tip error at held-out
 //! poses. Refusals are one line.
+mod common;
+use common::{ok, refused};
 use std::path::Path;
-use std::process::{Command, Output};
 
 use tcomp_data::rng::Rng;
 use tcomp_geometry::kinematics::Structure;
@@ -17,35 +18,6 @@ use tcomp_geometry::study::ErrorsJson;
 use thermocomp_core::five_axis::{self, fstatus};
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::vstatus;
-
-fn tcomp(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tcomp"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let out = tcomp(dir, args);
-    assert!(
-        out.status.success(),
-        "tcomp {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn refused(dir: &Path, args: &[&str], needle: &str) {
-    let out = tcomp(dir, args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "tcomp {args:?} accepted");
-    let line = err.trim_end();
-    assert!(
-        line.starts_with("error: ") && !line.contains('\n') && line.contains(needle),
-        "{line:?} lacks {needle:?}"
-    );
-}
 
 /// sim-rotary → identify (lines) → table → identify-rotary, in `d`.
 fn identified_machine(d: &Path, seed: &str) {

@@ -44,3 +44,35 @@ pub fn run(args: &[&str], files: &[PathBuf]) -> Output {
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()
 }
+
+/// `tcomp <args>` run in `dir`.
+pub fn tcomp(dir: &Path, args: &[&str]) -> Output {
+    Command::new(EXE)
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// [`tcomp`] that must succeed; its standard output.
+pub fn ok(dir: &Path, args: &[&str]) -> String {
+    let out = tcomp(dir, args);
+    assert!(
+        out.status.success(),
+        "tcomp {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// [`tcomp`] that must fail with one line `error: …` naming `needle`.
+pub fn refused(dir: &Path, args: &[&str], needle: &str) {
+    let out = tcomp(dir, args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "tcomp {args:?} accepted");
+    let line = err.trim_end();
+    assert!(
+        line.starts_with("error: ") && !line.contains('\n') && line.contains(needle),
+        "{line:?} lacks {needle:?}"
+    );
+}
