@@ -395,29 +395,22 @@ fn fourier_weight(k: usize) -> u64 {
 /// A 3 × 3 rotation in Q30.
 type Rot = [[i64; 3]; 3];
 
-/// One error transform of the chain: nominal rotation and origin of its
-/// prefix, δ (pm), ε (nrad).
-type Transform<'a> = (&'a Rot, &'a [i64; 3], [i64; 3], [i64; 3]);
-
-const IDENTITY: Rot = [
-    [ONE_Q30 as i64, 0, 0],
-    [0, ONE_Q30 as i64, 0],
-    [0, 0, ONE_Q30 as i64],
-];
+/// One error transform of the chain: nominal rotation (None: the
+/// identity) and origin of its prefix, δ (pm), ε (nrad).
+type Transform<'a> = (Option<&'a Rot>, &'a [i64; 3], [i64; 3], [i64; 3]);
 
 /// R · v, rounded from Q30 (|v| < 2^32 per component: < 2^63).
 fn rotate(r: &Rot, v: &[i64; 3]) -> [i64; 3] {
     r.map(|row| round_shift(row[0] * v[0] + row[1] * v[1] + row[2] * v[2], 30))
 }
 
-/// (I − R)·δ, (I − R)·ε: a location twist in the R-test convention, in
-/// the frame the axis stands on (pm, nrad; one rounding of R·v each).
-#[inline(never)]
-fn rtest_twist(r: &Rot, (d, e): ([i64; 3], [i64; 3])) -> ([i64; 3], [i64; 3]) {
-    let (rd, re) = (rotate(r, &d), rotate(r, &e));
+/// (I − R)·(u, v) for a rotation by (cos, sin) in Q30 in the plane of
+/// (u, v): one rounding of R·v per component, as [`rotate`] would give
+/// (|u|, |v| < 2^32: the sums < 2^63).
+fn i_minus_r(c: i64, s: i64, u: i64, v: i64) -> (i64, i64) {
     (
-        [d[0] - rd[0], d[1] - rd[1], d[2] - rd[2]],
-        [e[0] - re[0], e[1] - re[1], e[2] - re[2]],
+        u - round_shift(c * u - s * v, 30),
+        v - round_shift(s * u + c * v, 30),
     )
 }
 
@@ -463,21 +456,29 @@ fn rotary_sum_fm(
     );
     if f.flags & FIVE_AXIS_RTEST_LOCATION != 0 {
         // R-test convention: the axis turns about its actual line, so its
-        // location error moves the table by (I − R(θ))·ξ_L in its base frame.
-        let rz: Rot = [[cc, -sc, 0], [sc, cc, 0], [0, 0, one]];
-        la = rtest_twist(&rx, la);
-        lc = rtest_twist(&rz, lc);
+        // location error moves the table by (I − R(θ))·ξ_L in its base
+        // frame: A's in the y-z plane, C's in the x-y plane (the component
+        // along the axis is 0).
+        let (ya, za) = i_minus_r(ca, sa, yoa, zoa);
+        let (ba, ga) = i_minus_r(ca, sa, boa, coa);
+        la = ([0, ya, za], [0, ba, ga]);
+        let (xc, yc) = i_minus_r(cc, sc, xoc, yoc);
+        let (ac, bc) = i_minus_r(cc, sc, aoc, boc);
+        lc = ([xc, yc, 0], [ac, bc, 0]);
     }
+    // L_A's prefix is the identity: no rotation (rotate would return v).
     let transforms: [Transform<'_>; 4] = [
-        (&IDENTITY, &pivot, la.0, la.1),
-        (&rx, &pivot, da, ea),
-        (&rx, &o_c, lc.0, lc.1),
-        (&rxz, &o_c, dc, ec),
+        (None, &pivot, la.0, la.1),
+        (Some(&rx), &pivot, da, ea),
+        (Some(&rx), &o_c, lc.0, lc.1),
+        (Some(&rxz), &o_c, dc, ec),
     ];
     let mut sum = [0i64; 3];
     for (r, o, delta, eps) in transforms {
-        let rd = rotate(r, &delta);
-        let re = rotate(r, &eps);
+        let (rd, re) = match r {
+            Some(r) => (rotate(r, &delta), rotate(r, &eps)),
+            None => (delta, eps),
+        };
         let arm = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
         let x = cross(&re, &arm);
         for ((s, d), x) in sum.iter_mut().zip(rd).zip(x) {
