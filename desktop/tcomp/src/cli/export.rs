@@ -40,7 +40,9 @@ pub struct ExportArgs {
     pub geometry_origin_mm: String,
     /// Add the five-axis section (image section kind 4): the rotary model
     /// of `tcomp geometry identify-rotary --model-out` (R-test convention,
-    /// converted to the board's rotating frame); needs --geometry.
+    /// converted to the board's rotating frame); needs --geometry. A model
+    /// with drift (--drift) is served in the section's R-test location
+    /// mode; its sensors join the volumetric section (channels: --run).
     #[arg(long)]
     pub rotary: Option<std::path::PathBuf>,
     /// Serve a rotary model whose identification marked terms unobservable.
