@@ -3,7 +3,7 @@
 //! unlock, broadcast allowed), the correction in 180–185 refreshed at once
 //! after a write of positions or angles and equal to the core's
 //! `five_axis::evaluate`, what it used in input registers 330–359, "not
-//! available" until the PLC has written A and C, and result codes 80–86.
+//! available" until the PLC has written A and C, and result codes 80–86 (87, an unknown flag bit, is the core's test).
 use host_tests::mock_flash::MockFlash;
 use host_tests::modbus::{be_words, blank_app, encode, read_inputs, s32, words, write_n, Reply};
 use thermocomp::app::App;

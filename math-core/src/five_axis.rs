@@ -34,6 +34,16 @@
 //! commands** (first order: moving the linear axes by −e cancels the
 //! error at the tool point; A and C are not corrected).
 //!
+//! **R-test location mode** (flag [`FIVE_AXIS_RTEST_LOCATION`], issue 31
+//! item 3): an identified model's location errors are a rotation about
+//! the actual axis line, zero at A = C = 0 — to first order the axis moves
+//! its table by `(I − R(θ))·ξ_L` in the frame it stands on. With the flag
+//! the L_A row serves δ, ε = (I − Rx(a))·(0, YOA, ZOA), (I − Rx(a))·(0, BOA,
+//! COA) and the L_C row (I − Rz(c))·(XOC, YOC, 0), (I − Rz(c))·(AOC, BOC, 0)
+//! (R, o unchanged), so a location error's **thermal drift** `(I − R)·ΔT·d`
+//! is served exactly: the slots stay linear in the temperatures. Without
+//! the flag (every image before it) the slots are served as written.
+//!
 //! Location errors (rtest.md names, [`LOCATION_NAMES`]) are `c₀ + Σᵢ cᵢ·ΔTᵢ`
 //! over the first `n_sensors` sensors of the kind-3 section (the same
 //! rises, clamped into the same envelopes). Component errors are static:
@@ -70,9 +80,12 @@
 //!   then the same δ, ε bounds.
 //! - rotations: Q30 entries ≤ 2^30; R·δ: three products < 2^60 each, sum
 //!   < 2^62; R·ε < 2^52; Rx(a)·offset < 2^58.
+//! - R-test mode: (I − R)·v has |·|₂ ≤ 2|v|₂ ≤ 2√2·10⁹ pm < 2^32 (two
+//!   non-zero components) or 2√2·10⁶ nrad < 2^22, within `rotate`'s premise.
 //! - arms: |p| ≤ 2^28 + 2^24, |o| ≤ 2^27 + 2^28 + 1, so |p − o| < 2^30 µm;
-//!   a cross-product component (nrad ≤ 2^21 × µm < 2^30) < 2^52 fm; four
-//!   transforms < 2^54 fm, plus 1000·Σ R·δ < 2^43: the rotary sum < 2^55.
+//!   a cross-product component (nrad ≤ 2^21 × µm < 2^30) < 2^52 fm (R-test
+//!   location rows: 2^22 nrad, < 2^53); four transforms < 3·2^53 < 2^55 fm,
+//!   plus 1000·Σ R·δ < 2^44: the rotary sum < 2^55.
 //! - total: kind-3's |acc| < 2^52 (its module docs) · 125 < 2^59, plus
 //!   2 · 2^55: < 2^60; the rounding adds 10⁸ < 2^27. The quotient is
 //!   clamped in i64 before it becomes an i32.
@@ -88,10 +101,13 @@
 //! products in Rx·Rz), δ within ½ pm, ε within ½ nrad (times |p − o|: 0.5 nm
 //! at a 1 m arm), the cross products exact, the final rounding ½ of
 //! 0.1 µm. The rotary part is therefore within ½·0.1 µm + 4·(0.5 nm per m
-//! of arm + 1 pm) of its exact value; the desktop's test checks it against
+//! of arm + 1 pm) of its exact value (R-test mode: the two location rows
+//! each add one rounding of R·ε, ½ nrad, and the location value's ½ nrad
+//! counts twice through I − R: 2 nm per m of arm each); the desktop's test checks it against
 //! `tcomp_geometry::five_axis::tool_tip_error_linear5`.
 
 use crate::image::error::ImageError;
+pub use crate::image::format::{FIVE_AXIS_FLAGS, FIVE_AXIS_RTEST_LOCATION};
 use crate::limits::MAX_CORRECTION;
 use crate::trig::{sin_cos_mdeg, MDEG_PER_TURN, ONE_Q30};
 use crate::volumetric::{vstatus, Volumetric, MAX_VOL_SENSORS, MAX_VOL_TOOL_UM};
@@ -149,6 +165,9 @@ pub struct FiveAxis {
     pub n_sensors: u8,
     /// Fourier order of the component errors (0: none).
     pub order: u8,
+    /// [`FIVE_AXIS_RTEST_LOCATION`]: the location slots are in the R-test
+    /// convention (see the module docs); 0: the board's `L·R` form.
+    pub flags: u8,
     /// Per location error ([`LOCATION_NAMES`]): the constant, then per
     /// kelvin of each sensor (pm or prad; unused columns 0).
     pub location: [[i32; 1 + MAX_VOL_SENSORS]; 8],
@@ -167,6 +186,7 @@ pub struct FiveAxisSpec {
     pub max_correction: [i32; 3],
     pub n_sensors: u8,
     pub order: u8,
+    pub flags: u8,
     pub location: [[i32; 1 + MAX_VOL_SENSORS]; 8],
     pub motion: [[[[i32; 2]; MAX_FOURIER_ORDER]; 6]; 2],
 }
@@ -196,6 +216,9 @@ impl FiveAxis {
     pub fn new(s: &FiveAxisSpec) -> Result<FiveAxis, ImageError> {
         if usize::from(s.order) > MAX_FOURIER_ORDER {
             return Err(ImageError::FiveAxisOrder { order: s.order });
+        }
+        if s.flags & !FIVE_AXIS_FLAGS != 0 {
+            return Err(ImageError::FiveAxisFlags { flags: s.flags });
         }
         if usize::from(s.n_sensors) > MAX_VOL_SENSORS {
             return Err(ImageError::FiveAxisSensors {
@@ -251,6 +274,7 @@ impl FiveAxis {
             max_correction: s.max_correction,
             n_sensors: s.n_sensors,
             order: s.order,
+            flags: s.flags,
             location: s.location,
             motion: s.motion,
         })
@@ -371,19 +395,23 @@ fn fourier_weight(k: usize) -> u64 {
 /// A 3 × 3 rotation in Q30.
 type Rot = [[i64; 3]; 3];
 
-/// One error transform of the chain: nominal rotation and origin of its
-/// prefix, δ (pm), ε (nrad).
-type Transform<'a> = (&'a Rot, &'a [i64; 3], [i64; 3], [i64; 3]);
-
-const IDENTITY: Rot = [
-    [ONE_Q30 as i64, 0, 0],
-    [0, ONE_Q30 as i64, 0],
-    [0, 0, ONE_Q30 as i64],
-];
+/// One error transform of the chain: nominal rotation (None: the
+/// identity) and origin of its prefix, δ (pm), ε (nrad).
+type Transform<'a> = (Option<&'a Rot>, &'a [i64; 3], [i64; 3], [i64; 3]);
 
 /// R · v, rounded from Q30 (|v| < 2^32 per component: < 2^63).
 fn rotate(r: &Rot, v: &[i64; 3]) -> [i64; 3] {
     r.map(|row| round_shift(row[0] * v[0] + row[1] * v[1] + row[2] * v[2], 30))
+}
+
+/// (I − R)·(u, v) for a rotation by (cos, sin) in Q30 in the plane of
+/// (u, v): one rounding of R·v per component, as [`rotate`] would give
+/// (|u|, |v| < 2^32: the sums < 2^63).
+fn i_minus_r(c: i64, s: i64, u: i64, v: i64) -> (i64, i64) {
+    (
+        u - round_shift(c * u - s * v, 30),
+        v - round_shift(s * u + c * v, 30),
+    )
 }
 
 /// a × b.
@@ -422,16 +450,35 @@ fn rotary_sum_fm(
     let [xoc, yoc, aoc, boc, yoa, zoa, boa, coa] = f.location_values(rise);
     let (da, ea) = f.motion_values(0, a);
     let (dc, ec) = f.motion_values(1, c);
+    let (mut la, mut lc) = (
+        ([0, yoa, zoa], [0, boa, coa]),
+        ([xoc, yoc, 0], [aoc, boc, 0]),
+    );
+    if f.flags & FIVE_AXIS_RTEST_LOCATION != 0 {
+        // R-test convention: the axis turns about its actual line, so its
+        // location error moves the table by (I − R(θ))·ξ_L in its base
+        // frame: A's in the y-z plane, C's in the x-y plane (the component
+        // along the axis is 0).
+        let (ya, za) = i_minus_r(ca, sa, yoa, zoa);
+        let (ba, ga) = i_minus_r(ca, sa, boa, coa);
+        la = ([0, ya, za], [0, ba, ga]);
+        let (xc, yc) = i_minus_r(cc, sc, xoc, yoc);
+        let (ac, bc) = i_minus_r(cc, sc, aoc, boc);
+        lc = ([xc, yc, 0], [ac, bc, 0]);
+    }
+    // L_A's prefix is the identity: no rotation (rotate would return v).
     let transforms: [Transform<'_>; 4] = [
-        (&IDENTITY, &pivot, [0, yoa, zoa], [0, boa, coa]),
-        (&rx, &pivot, da, ea),
-        (&rx, &o_c, [xoc, yoc, 0], [aoc, boc, 0]),
-        (&rxz, &o_c, dc, ec),
+        (None, &pivot, la.0, la.1),
+        (Some(&rx), &pivot, da, ea),
+        (Some(&rx), &o_c, lc.0, lc.1),
+        (Some(&rxz), &o_c, dc, ec),
     ];
     let mut sum = [0i64; 3];
     for (r, o, delta, eps) in transforms {
-        let rd = rotate(r, &delta);
-        let re = rotate(r, &eps);
+        let (rd, re) = match r {
+            Some(r) => (rotate(r, &delta), rotate(r, &eps)),
+            None => (delta, eps),
+        };
         let arm = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
         let x = cross(&re, &arm);
         for ((s, d), x) in sum.iter_mut().zip(rd).zip(x) {

@@ -225,7 +225,7 @@ fn every_refusal_is_typed() {
     let (_, good) = model_with(Some(vol()), Some(f.clone()));
     let at = good.len() - 4 - f.encoded_len();
     let mut b = good.clone();
-    b[at + 2] = 1;
+    b[at + 3] = 1; // byte 2 is the flags byte (the_flags_byte)
     reseal(&mut b);
     assert_eq!(
         Model::parse(&b).unwrap_err(),
@@ -324,10 +324,23 @@ fn f64_eval(
     };
     let (da, ea) = motion(0, a);
     let (dc, ec) = motion(1, c);
+    let (mut la, mut lc) = (
+        ([0.0, loc[4], loc[5]], [0.0, loc[6], loc[7]]),
+        ([loc[0], loc[1], 0.0], [loc[2], loc[3], 0.0]),
+    );
+    if f.flags & FIVE_AXIS_RTEST_LOCATION != 0 {
+        // (I − R(θ))·ξ in the axis's base frame.
+        let i_minus = |r: &[[f64; 3]; 3], v: [f64; 3]| {
+            let rv = mul(r, &v);
+            [0, 1, 2].map(|k| v[k] - rv[k])
+        };
+        la = (i_minus(&rx, la.0), i_minus(&rx, la.1));
+        lc = (i_minus(&rz, lc.0), i_minus(&rz, lc.1));
+    }
     let tr = [
-        (id, pivot, [0.0, loc[4], loc[5]], [0.0, loc[6], loc[7]]),
+        (id, pivot, la.0, la.1),
         (rx, pivot, da, ea),
-        (rx, oc, [loc[0], loc[1], 0.0], [loc[2], loc[3], 0.0]),
+        (rx, oc, lc.0, lc.1),
         (rxz, oc, dc, ec),
     ];
     let mut rot = [0.0; 3];
@@ -395,6 +408,102 @@ fn integer_evaluation_follows_the_f64_formula() {
     }
     assert_eq!(n, 72);
     println!("worst |served − f64| {worst:.3} (0.1 µm)");
+}
+
+/// The R-test location mode (flag bit 0): the same f64 formula with the
+/// location rows turned into (I − R(θ))·ξ_L(T), over poses and temperatures.
+#[test]
+fn rtest_location_mode_follows_the_f64_formula() {
+    let v = vol();
+    let mut s = spec();
+    s.flags = FIVE_AXIS_RTEST_LOCATION;
+    let f = FiveAxis::new(&s).unwrap();
+    let (mut worst, mut n) = (0.0f64, 0);
+    for ia in 0..9i32 {
+        for ic in 0..8 {
+            let ang = [-120_000 + ia * 30_000 - 17 * ia.signum(), ic * 45_000 - 1];
+            let pos = [100_000 * ic, 60_000 * ia, -350_000 + 20_000 * ic];
+            let tool = 50_000 + 10_000 * ia;
+            for temps in [[320, 352], [320 + 9 * ia, 352 - 7 * ic], [640, 160]] {
+                let (rot, total) = f64_eval(&v, &f, pos, tool, ang, &temps);
+                let got = evaluate(&v, &f, &pos, tool, ang, &temps.map(Some));
+                assert_eq!(got.status, vstatus::VALID, "{ang:?}");
+                for d in 0..3 {
+                    // ½ LSB, plus 4 nrad × arm (≤ 1 m) and the trig.
+                    let e = (f64::from(got.corrections[d]) - total[d]).abs();
+                    assert!(e <= 0.5 + 0.08, "{ang:?} {temps:?} d{d}: {e}");
+                    assert!((f64::from(got.rotary[d]) - rot[d]).abs() <= 0.58);
+                    worst = worst.max(e);
+                }
+                n += 1;
+            }
+        }
+    }
+    assert_eq!(n, 216);
+    println!("R-test mode: worst |served − f64| {worst:.3} (0.1 µm)");
+}
+
+/// In the R-test mode a location error, drifting or not, is zero at
+/// A = C = 0: with no component errors the total there is the kind-3
+/// correction bit for bit, at any temperature; away from zero it is not.
+#[test]
+fn rtest_locations_vanish_at_the_zero_pose() {
+    let v = vol();
+    let mut s = spec();
+    s.flags = FIVE_AXIS_RTEST_LOCATION;
+    s.order = 0;
+    s.motion = Default::default();
+    let f = FiveAxis::new(&s).unwrap();
+    let mut board = s;
+    board.flags = 0;
+    let fb = FiveAxis::new(&board).unwrap();
+    for temps in [[320, 352], [500, 100], [-100, 700]] {
+        let t = temps.map(Some);
+        let pos = [300_000, 200_000, -100_000];
+        let lin = v.evaluate(&pos, 80_000, &t);
+        let at0 = evaluate(&v, &f, &pos, 80_000, [0, 0], &t);
+        assert_eq!(at0.corrections, lin.corrections, "{temps:?}");
+        assert_eq!(at0.rotary, [0; 3]);
+        // The board's own convention serves the slots at A = C = 0.
+        let b0 = evaluate(&v, &fb, &pos, 80_000, [0, 0], &t);
+        assert_ne!(b0.rotary, [0; 3]);
+        let away = evaluate(&v, &f, &pos, 80_000, [30_000, 45_000], &t);
+        assert!(away.rotary.iter().any(|r| r.abs() > 10), "{away:?}");
+    }
+}
+
+/// Old images (flags byte 0) parse as before; the flag round-trips; an
+/// unknown flag bit is refused with its own error (result code 87).
+#[test]
+fn the_flags_byte() {
+    let f = FiveAxis::new(&spec()).unwrap();
+    assert_eq!(f.flags, 0);
+    let (_, old) = model_with(Some(vol()), Some(f.clone()));
+    let at = old.len() - 4 - f.encoded_len();
+    assert_eq!(old[at + 2], 0, "the old padding byte");
+    let mut s = spec();
+    s.flags = FIVE_AXIS_RTEST_LOCATION;
+    let fr = FiveAxis::new(&s).unwrap();
+    let (_, buf) = model_with(Some(vol()), Some(fr.clone()));
+    assert_eq!(buf.len(), old.len(), "same layout");
+    assert_eq!(buf[at + 2], FIVE_AXIS_RTEST_LOCATION);
+    assert_eq!(Model::parse(&buf).unwrap().five_axis, Some(fr));
+    for bad in [2u8, 0x81, 0xFF] {
+        let mut b = old.clone();
+        b[at + 2] = bad;
+        reseal(&mut b);
+        assert_eq!(
+            Model::parse(&b).unwrap_err(),
+            ImageError::FiveAxisFlags { flags: bad }
+        );
+        s.flags = bad;
+        assert_eq!(
+            FiveAxis::new(&s).unwrap_err(),
+            ImageError::FiveAxisFlags { flags: bad }
+        );
+    }
+    let msg = ImageError::FiveAxisFlags { flags: 2 }.to_string();
+    assert!(msg.contains("0x02") && !msg.contains('\n'), "{msg}");
 }
 
 #[test]
@@ -465,7 +574,16 @@ fn the_extreme_section_does_not_overflow() {
             }
         }
     }
-    let f = FiveAxis::new(&s).unwrap();
+    let board = FiveAxis::new(&s).unwrap();
+    s.flags = FIVE_AXIS_RTEST_LOCATION;
+    let rtest = FiveAxis::new(&s).unwrap();
+    for f in [board, rtest] {
+        extreme_poses(&v, &f);
+    }
+}
+
+fn extreme_poses(v: &Volumetric, f: &FiveAxis) {
+    let lim = 1i32 << 28;
     let (_, buf) = model_with(Some(v.clone()), Some(f.clone()));
     Model::parse(&buf).unwrap();
     let temps_edges = [[-160, 0], [960, 800], [-880, 2000]];
@@ -484,8 +602,8 @@ fn the_extreme_section_does_not_overflow() {
             for p in [-lim, lim, 0, i32::MIN, i32::MAX] {
                 for t in temps_edges {
                     let o = evaluate(
-                        &v,
-                        &f,
+                        v,
+                        f,
                         &[p, p.saturating_neg(), p],
                         i32::MAX,
                         [a, c],

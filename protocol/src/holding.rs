@@ -294,6 +294,8 @@ pub mod result {
             FiveAxisMaxCorrection = 85 => FIVE_AXIS_MAX_CORRECTION,
             /// Five-axis section: an error that can exceed 1 mm / 1 mrad.
             FiveAxisErrorTooLarge = 86 => FIVE_AXIS_ERROR_TOO_LARGE,
+            /// Five-axis section: flag bits this firmware does not read.
+            FiveAxisFlags = 87 => FIVE_AXIS_FLAGS,
             /// Command 10 (or 2 with a kept reference) accepted: the reference is
             /// taken at the next cycle with every model sensor fresh, then stored.
             ReferencePending = 50 => REFERENCE_PENDING,
@@ -377,6 +379,7 @@ pub mod result {
                 ImageError::FiveAxisAngleRange { .. } => ResultCode::FiveAxisAngleRange,
                 ImageError::FiveAxisMaxCorrection { .. } => ResultCode::FiveAxisMaxCorrection,
                 ImageError::FiveAxisErrorTooLarge { .. } => ResultCode::FiveAxisErrorTooLarge,
+                ImageError::FiveAxisFlags { .. } => ResultCode::FiveAxisFlags,
                 ImageError::BadSignatureTrailer => ResultCode::BadSignature,
                 ImageError::PredictionBound { .. } => ResultCode::PredictionBound,
                 ImageError::CoefficientRange { .. } => ResultCode::CoefficientRange,

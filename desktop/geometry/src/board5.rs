@@ -15,7 +15,8 @@ use std::collections::BTreeMap;
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 use thermocomp_core::five_axis::{
-    self, FiveAxis, FiveAxisSpec, FiveOutput, LOCATION_NAMES, MAX_FOURIER_ORDER, MOTION_LETTERS,
+    self, FiveAxis, FiveAxisSpec, FiveOutput, FIVE_AXIS_RTEST_LOCATION, LOCATION_NAMES,
+    MAX_FOURIER_ORDER, MOTION_LETTERS,
 };
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::Volumetric;
@@ -72,6 +73,17 @@ pub struct RotaryModel {
     /// Component errors EXA … ECA, EXC … ECC as Fourier series (missing: 0).
     #[serde(default)]
     pub motion: BTreeMap<String, Fourier>,
+    /// The location errors are in the R-test convention (a rotation about
+    /// the actual axis line, zero at A = C = 0): the board serves them as
+    /// `(I − R(θ))·ξ_L(T)` (section flag `FIVE_AXIS_RTEST_LOCATION`).
+    /// false: as written, constant in the angle (the board's `L·R` form).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub rtest_location: bool,
+}
+
+/// A sensor name without its run column's `T_`.
+fn bare(name: &str) -> &str {
+    name.strip_prefix("T_").unwrap_or(name)
 }
 
 /// How the section is laid out on the board.
@@ -191,7 +203,7 @@ pub fn quantize_five_axis(
     // Each of the model's sensors → its column in the volumetric section.
     let mut column = Vec::new();
     for name in &r.sensors {
-        match vol_sensors.iter().position(|v| v == name) {
+        match vol_sensors.iter().position(|v| bare(v) == bare(name)) {
             Some(j) => column.push(j),
             None => bail!(
                 "rotary errors read sensor {name}, which the volumetric section does not ({})",
@@ -265,6 +277,9 @@ pub fn quantize_five_axis(
         }
     }
     s.order = order as u8;
+    if r.rtest_location {
+        s.flags = FIVE_AXIS_RTEST_LOCATION;
+    }
     let f = FiveAxis::new(&s).map_err(|e| anyhow::anyhow!("{e}"))?;
     f.check_with(Some(vol))
         .map_err(|e| anyhow::anyhow!("{e}"))?;

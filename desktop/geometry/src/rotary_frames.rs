@@ -22,11 +22,15 @@
 //! exact up to the board's order ([`MAX_FOURIER_ORDER`]); higher harmonics
 //! are dropped and their RMS over a turn reported.
 //!
-//! The board's location slots therefore stay zero for a static model. A
-//! drifting location error `(I − R(θ))·ΔT·d` would need a product of a
-//! temperature and the angle, which section kind 4 does not have (its
-//! thermal terms are constant in the angle, its Fourier terms static):
-//! [`to_board`] refuses a model with drift rather than serve something else.
+//! The board's location slots therefore stay zero for a static model
+//! (an image any five-axis firmware reads). A drifting location error
+//! `(I − R(θ))·(ξ_L + Σ ΔT_k·d_k)` is a product of a temperature and the
+//! angle, which the board's `L·R` slots and static Fourier terms cannot
+//! hold; for a model with drift [`to_board`] uses the section's R-test
+//! location mode instead (flag `FIVE_AXIS_RTEST_LOCATION`: the board
+//! serves the slots as `(I − R(θ))·ξ_L(T)`): the slots carry the
+//! identified ξ_L and its per-kelvin drift as they are, and the Fourier
+//! terms only `E_rot = Rᵀ·E_fixed`. Both forms are exact to first order.
 
 use anyhow::{bail, Result};
 use nalgebra::{Point3, Vector3};
@@ -35,7 +39,9 @@ use thermocomp_core::five_axis::MAX_FOURIER_ORDER;
 
 use super::board5;
 use super::five_axis::Fourier;
-use super::rotary::{nominal_chain, reading_sensitivity, Axis5, Location, RotaryModel};
+use super::rotary::{
+    nominal_chain, reading_sensitivity, Axis5, Location, RotaryModel, LOCATION_NAMES,
+};
 
 /// A trigonometric polynomial `c0 + Σ_h α_h cos hθ + β_h sin hθ` (h ≥ 1).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -216,26 +222,54 @@ impl BoardConversion {
     }
 }
 
+/// The location slots of the R-test mode: each error's value and its
+/// per-kelvin drift, one column per drift sensor (board5's JSON form).
+fn rtest_slots(m: &RotaryModel) -> Result<BTreeMap<String, board5::LocationValue>> {
+    let mut seen = std::collections::BTreeSet::new();
+    for d in &m.drift {
+        if !seen.insert(d.sensor.as_str()) {
+            bail!("the rotary model drifts with sensor {} twice", d.sensor);
+        }
+    }
+    let value = m.location.to_array();
+    let slopes: Vec<[f64; 8]> = m.drift.iter().map(|d| d.per_kelvin.to_array()).collect();
+    Ok((LOCATION_NAMES.iter().enumerate())
+        .map(|(i, name)| {
+            let l = board5::Location {
+                value: value[i],
+                per_k: slopes.iter().map(|s| s[i]).collect(),
+            };
+            (name.to_string(), board5::LocationValue::Thermal(l))
+        })
+        .collect())
+}
+
 /// Convert an identified (R-test convention) model to the board's
 /// convention, harmonics above `max_order` (≤ [`MAX_FOURIER_ORDER`]) dropped.
-/// Refuses a model whose location errors drift (see the module docs).
+/// A model with drift keeps its location errors in the section's R-test
+/// location mode (see the module docs).
 pub fn to_board(m: &RotaryModel, max_order: usize) -> Result<BoardConversion> {
     m.check()?;
     if max_order > MAX_FOURIER_ORDER {
         bail!("the board takes Fourier orders up to {MAX_FOURIER_ORDER}, not {max_order}");
     }
-    if !m.drift.is_empty() {
-        bail!(
-            "the rotary model's location errors drift with {}: the board's five-axis section has no term for a drift that turns with the axis ((I − R(θ))·ΔT·d); export a model identified without --drift",
-            m.drift.iter().map(|d| format!("T_{}", d.sensor)).collect::<Vec<_>>().join(", ")
-        );
-    }
+    let rtest = !m.drift.is_empty();
+    let location = if rtest {
+        rtest_slots(m)?
+    } else {
+        BTreeMap::new()
+    };
     let mut motion = BTreeMap::new();
     let mut truncated_rms = BTreeMap::new();
     let mut order_needed = 0;
     for axis in [Axis5::A, Axis5::C] {
         let names = axis.names();
-        let loc = location_twist(&m.location, axis);
+        // In the R-test mode the board applies (I − R) to the slots itself.
+        let loc = if rtest {
+            [0.0; 6]
+        } else {
+            location_twist(&m.location, axis)
+        };
         // fixed-frame twist (I − R)·ξ_L + E_fixed, translations then angles
         let mut fixed: [[Trig; 3]; 2] = Default::default();
         for part in 0..2 {
@@ -264,8 +298,11 @@ pub fn to_board(m: &RotaryModel, max_order: usize) -> Result<BoardConversion> {
         model: board5::RotaryModel {
             pivot_a_mm: m.pivot_a_mm,
             offset_c_mm: m.offset_c_mm,
+            sensors: m.drift.iter().map(|d| d.sensor.clone()).collect(),
+            t_ref_c: m.drift.iter().map(|d| d.reference_c).collect(),
+            location,
             motion,
-            ..Default::default()
+            rtest_location: rtest,
         },
         truncated_rms,
         order_needed,

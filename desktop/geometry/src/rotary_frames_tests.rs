@@ -218,15 +218,128 @@ fn an_order_beyond_the_board_is_truncated_and_reported() {
 }
 
 #[test]
-fn drift_and_bad_orders_are_refused_in_one_line() {
+fn bad_orders_and_a_sensor_twice_are_refused_in_one_line() {
     let mut m = random_fixed(&mut Rng::new(2), 2);
     let e = to_board(&m, 5).unwrap_err().to_string();
     assert!(e.contains("up to 4") && !e.contains('\n'), "{e}");
-    m.drift.push(Drift {
-        sensor: "ctable".into(),
-        reference_c: 20.0,
-        per_kelvin: Location::default(),
-    });
+    assert!(!to_board(&m, 4).unwrap().model.rtest_location);
+    for _ in 0..2 {
+        m.drift.push(Drift {
+            sensor: "ctable".into(),
+            reference_c: 20.0,
+            per_kelvin: Location::default(),
+        });
+    }
     let e = to_board(&m, 4).unwrap_err().to_string();
-    assert!(e.contains("T_ctable") && !e.contains('\n'), "{e}");
+    assert!(e.contains("ctable twice") && !e.contains('\n'), "{e}");
+}
+
+/// A model whose location errors drift (identify-rotary --drift) goes to
+/// the section's R-test location mode: the served rotary part (integers,
+/// `five_axis::evaluate`) against the model's f64 first-order prediction
+/// at its location errors of that temperature state, at random poses ×
+/// random temperature states, within the stated bound; and the drift is
+/// really served (the same poses at another state move by microns).
+#[test]
+fn a_drifting_model_is_served_at_random_poses_and_temperature_states() {
+    use crate::board::{quantize, BoardOptions};
+    use crate::board5::FiveAxisOptions;
+    use crate::rotary_board::{add_drift_sensors, rotary_section, stated_bound};
+    use crate::sim::{random_errors, ErrorSizes};
+    use crate::volumetric::build;
+    use thermocomp_core::five_axis::{self, fstatus};
+    let mut rng = Rng::new(131);
+    let stroke = [800.0, 500.0, 400.0];
+    let st = Structure::parse("/XYZ").unwrap();
+    let lin = random_errors(stroke, &ErrorSizes::default(), &mut rng);
+    let mut poly = build(&st, stroke, &lin, None).unwrap();
+    let (mut worst, mut moved, mut n) = (0.0f64, 0.0f64, 0);
+    for case in 0..4 {
+        let mut m = random_fixed(&mut rng, 3);
+        let names = ["ctable", "trunnion", "bed"];
+        m.drift = (names.iter().zip([20.0, 21.3, 19.7]))
+            .map(|(s, r)| Drift {
+                sensor: s.to_string(),
+                reference_c: r,
+                per_kelvin: Location::from_array(std::array::from_fn(|k| {
+                    let s = if [2, 3, 6, 7].contains(&k) { 2.0 } else { 1.0 };
+                    rng.range(-s, s)
+                })),
+            })
+            .collect();
+        let mut p = poly.clone();
+        if case == 0 {
+            // one of them already read by the polynomial (as its run column)
+            p.sensors = vec!["T_bed".into()];
+            p.t_ref_c = vec![20.0];
+        }
+        add_drift_sensors(&mut p, &m).unwrap();
+        assert_eq!(p.sensors.len(), 3);
+        let opts = BoardOptions {
+            channels: vec![0, 1, 2],
+            slots: [0, 1, 2],
+            origin_mm: [0.0; 3],
+            tool_max_mm: 500.0,
+            max_correction_um: 1000.0,
+        };
+        let vol = quantize(&p, &opts).unwrap();
+        let o = FiveAxisOptions {
+            max_correction_um: 1000.0,
+            ..Default::default()
+        };
+        let (f, report) = rotary_section(&m, &vol, &p.sensors, &o, false).unwrap();
+        assert!(report.rtest_location && f.n_sensors == 3, "{report:?}");
+        assert!(report.max_error_um <= report.bound_um, "{report:?}");
+        for _ in 0..50 {
+            let (a, c) = (rng.range(-120.0, 120.0), rng.range(-360.0, 360.0));
+            let pos_um = stroke.map(|s| (rng.range(0.0, s) * 1e3).round() as i32);
+            let tool_um = (rng.range(50.0, 250.0) * 1e3).round() as i32;
+            let (am, cm) = ((a * 1e3).round() as i32, (c * 1e3).round() as i32);
+            let (ad, cd) = (f64::from(am) / 1e3, f64::from(cm) / 1e3);
+            let p_mm = [0, 1, 2].map(|k| f64::from(pos_um[k]) / 1e3);
+            let p_mm = [p_mm[0], p_mm[1], p_mm[2] + f64::from(tool_um) / 1e3];
+            let mut served_at = Vec::new();
+            for _ in 0..4 {
+                let t16: Vec<i32> = (vol.sensors.iter())
+                    .map(|s| s.sensor.ref_temp + (rng.range(-5.0, 8.0) * 16.0).round() as i32)
+                    .collect();
+                let temps: Vec<Option<i32>> = t16.iter().map(|t| Some(*t)).collect();
+                let out = five_axis::evaluate(&vol, &f, &pos_um, tool_um, [am, cm], &temps);
+                assert_eq!(out.five_status & fstatus::INCLUDED, fstatus::INCLUDED);
+                let by_name = (p.sensors.iter().zip(&t16))
+                    .map(|(n, t)| (n.trim_start_matches("T_").to_string(), f64::from(*t) / 16.0))
+                    .collect();
+                let loc = m.location_at(&by_name).unwrap();
+                let want = rotary_error_machine(&m, &loc, p_mm, ad, cd);
+                let arm = (Vector3::from(p_mm) / 1e3 - Vector3::from(m.pivot_a_mm) / 1e3).norm()
+                    + m.offset_c_mm.iter().map(|v| v.abs()).sum::<f64>() / 1e3;
+                let dt = (m.drift.iter())
+                    .map(|d| (by_name[&d.sensor] - d.reference_c).abs())
+                    .fold(0.0, f64::max);
+                let bound = stated_bound(&f, arm, dt);
+                for d in 0..3 {
+                    let e = (f64::from(out.rotary[d]) / 10.0 - want[d]).abs();
+                    assert!(e <= bound, "{e} > {bound} at A {ad} C {cd}");
+                    worst = worst.max(e);
+                }
+                served_at.push(out.rotary);
+                n += 1;
+            }
+            let spread = (0..3)
+                .map(|d| {
+                    let v: Vec<i32> = served_at.iter().map(|r| r[d]).collect();
+                    f64::from(v.iter().max().unwrap() - v.iter().min().unwrap()) / 10.0
+                })
+                .fold(0.0, f64::max);
+            moved = moved.max(spread);
+        }
+        poly = p.clone();
+        poly.sensors.clear();
+        poly.t_ref_c.clear();
+    }
+    println!(
+        "drift served: {n} poses × states, worst |served − model f64| {worst:.4} µm; the drift moves the served part by up to {moved:.1} µm between states"
+    );
+    assert_eq!(n, 800);
+    assert!(moved > 5.0, "the drift is served: {moved}");
 }

@@ -270,6 +270,12 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
             f.max_error_um,
             f.bound_um
         );
+        if f.rtest_location {
+            println!(
+                "  five-axis location errors in the R-test mode, drifting with {} (served as (I − R(θ))·ξ_L(T); needs firmware that reads the section's flags)",
+                f.drift_sensors.join(", ")
+            );
+        }
     }
 }
 

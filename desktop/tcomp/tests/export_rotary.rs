@@ -179,6 +179,9 @@ fn the_image_serves_the_identified_rotary_model_and_corrects_the_machine() {
     );
 }
 
+#[path = "export_rotary/drift.rs"]
+mod drift;
+
 #[test]
 fn bad_rotary_files_and_unobservable_models_are_refused_in_one_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -234,13 +237,24 @@ fn bad_rotary_files_and_unobservable_models_are_refused_in_one_line() {
     let a: Vec<&str> = allowed.iter().map(String::as_str).collect();
     ok(d, &a);
     m.unobservable.clear();
+    // A drifting model's sensors need their board channels (--run).
     m.drift.push(tcomp_geometry::rotary::Drift {
         sensor: "ctable".into(),
         reference_c: 20.0,
         per_kelvin: Default::default(),
     });
     std::fs::write(d.join("drift.json"), serde_json::to_string(&m).unwrap()).unwrap();
-    run(&export("drift.json"), "T_ctable");
+    run(&export("drift.json"), "--run");
+    // More sensors than the board's section takes.
+    for s in ["a", "b", "c", "e"] {
+        m.drift.push(tcomp_geometry::rotary::Drift {
+            sensor: s.into(),
+            reference_c: 20.0,
+            per_kelvin: Default::default(),
+        });
+    }
+    std::fs::write(d.join("drift5.json"), serde_json::to_string(&m).unwrap()).unwrap();
+    run(&export("drift5.json"), "at most 4");
     refused(
         d,
         &["export", "--demo", "--rotary", "part.json", "-o", "m.img"],

@@ -240,7 +240,7 @@ fn write_volumetric(w: &mut Writer<'_>, v: &Volumetric) {
 fn write_five_axis(w: &mut Writer<'_>, f: &FiveAxis) {
     w.put(&[SECTION_FIVE_AXIS, 0]);
     w.put(&len_u16(f.encoded_len()).to_le_bytes());
-    w.put(&[f.n_sensors, f.order, 0, 0]);
+    w.put(&[f.n_sensors, f.order, f.flags, 0]);
     let head = f.pivot_a_um.iter().chain(&f.offset_c_um);
     let head = head.chain(&f.a_range_mdeg).chain(&f.c_range_mdeg);
     for v in head.chain(&f.max_correction) {

@@ -2,8 +2,8 @@
 //! cannot be written ([`EncodeError`]).
 
 use super::format::{
-    FORMAT_VERSION, LOCATION_NAMES, MOTION_LETTERS, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
-    SECTION_VOLUMETRIC, UNITS_V1,
+    FIVE_AXIS_FLAGS, FORMAT_VERSION, LOCATION_NAMES, MOTION_LETTERS, SECTION_FALLBACKS,
+    SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
 };
 use crate::limits::{
     MAX_AXES, MAX_CORRECTION, MAX_FOURIER_ORDER, MAX_IMAGE_BYTES, MAX_NET_WEIGHT_Q16,
@@ -168,6 +168,11 @@ pub enum ImageError {
     FiveAxisErrorTooLarge {
         error: u8,
     },
+    /// Five-axis section: flag bits this build does not read (bit 0:
+    /// location errors in the R-test convention, [`FIVE_AXIS_FLAGS`]).
+    FiveAxisFlags {
+        flags: u8,
+    },
     /// A signature trailer ([`super::signed`]) of another algorithm, with
     /// non-zero padding, or cut short.
     BadSignatureTrailer,
@@ -322,7 +327,8 @@ impl core::fmt::Display for ImageError {
             | ImageError::FiveAxisGeometry
             | ImageError::FiveAxisAngleRange { .. }
             | ImageError::FiveAxisMaxCorrection { .. }
-            | ImageError::FiveAxisErrorTooLarge { .. } => five_axis_message(self, f),
+            | ImageError::FiveAxisErrorTooLarge { .. }
+            | ImageError::FiveAxisFlags { .. } => five_axis_message(self, f),
             ImageError::PredictionBound { direction } => write!(
                 f,
                 "direction {direction}: the model can predict beyond +-{} mm over its own input envelope (networks and tables bounded analytically)",
@@ -408,6 +414,10 @@ fn five_axis_message(e: &ImageError, f: &mut core::fmt::Formatter<'_>) -> core::
                     " can exceed 1 mm / 1 mrad in the temperature envelope, or has a non-zero unused coefficient"
                 )
             }
+            ImageError::FiveAxisFlags { flags } => write!(
+                f,
+                "five-axis section: flags {flags:#04x} not known to this build (it reads {FIVE_AXIS_FLAGS:#04x})"
+            ),
             _ => Ok(()),
     }
 }

@@ -30,3 +30,9 @@ pub const LOCATION_NAMES: [&str; 8] = ["XOC", "YOC", "AOC", "BOC", "YOA", "ZOA",
 /// Five-axis section: the component errors of each axis in the section's
 /// order, E{X,Y,Z,A,B,C}{axis} (the first three translations, pm; the last three angles, prad).
 pub const MOTION_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+/// Five-axis section flag (byte 2 of the payload; 0 in images before it):
+/// the location slots hold the errors in the R-test convention and are
+/// served as `(I − R(θ))·ξ_L(T)`, zero at A = C = 0 (`crate::five_axis`).
+pub const FIVE_AXIS_RTEST_LOCATION: u8 = 1 << 0;
+/// Every five-axis flag this build reads; another bit is refused.
+pub const FIVE_AXIS_FLAGS: u8 = FIVE_AXIS_RTEST_LOCATION;

@@ -49,7 +49,7 @@
 //!                (pm at full scale, or pm per kelvin of the sensor)
 //! kind 4  five-axis part of the volumetric correction (issue 31, crate::five_axis;
 //!         needs a kind-3 section, whose first n_sensors sensors it reads):
-//!         n_sensors u8, order u8, 0, 0, pivot_a i32 × 3 (µm, machine frame),
+//!         n_sensors u8, order u8, flags u8, 0, pivot_a i32 × 3 (µm, machine frame),
 //!         offset_c i32 × 3 (µm, A frame), A min, A max, C min, C max i32 (0.001°),
 //!         max_correction i32 × 3 (0.1 µm, the total's clamp),
 //!         location × 8 (XOC, YOC, AOC, BOC, YOA, ZOA, BOA, COA):
@@ -58,15 +58,18 @@
 //!         component errors, axis A then C, E{X,Y,Z,A,B,C} each:
 //!                per order k = 1 … order: cos coefficient i32, sin coefficient i32
 //!                (pm for X, Y, Z; prad for A, B, C);
-//!         56 B + 32 B per temperature column + 96 B per order
+//!         56 B + 32 B per temperature column + 96 B per order;
+//!         flags: bit 0 the location errors are in the R-test convention
+//!         (served as (I − R(θ))·ξ_L(T), zero at A = C = 0; images before
+//!         the flag have 0 there and are read as before), other bits refused
 //! ```
 //!
 //! The five-axis section's refusals (each a named [`ImageError`], result
-//! codes 80–86): no kind-3 section, more temperature columns than kind 3
+//! codes 80–87): no kind-3 section, more temperature columns than kind 3
 //! has sensors, order > 4, pivot/offset beyond ±2^27 µm or kind-3
 //! positions beyond ±2^28 µm, an angle range not increasing or beyond
 //! ±720°, a max correction outside 1..=`MAX_CORRECTION`, an error that can
-//! exceed 1 mm / 1 mrad, non-zero padding: the premises of the overflow
+//! exceed 1 mm / 1 mrad, an unknown flag (87), non-zero padding: the premises of the overflow
 //! argument in [`crate::five_axis`].
 //!
 //! The volumetric section is read on its own: it names its sensors like
@@ -121,8 +124,9 @@ pub(crate) mod types;
 
 pub use error::{EncodeError, ImageError};
 pub use format::{
-    crc32, rom_crc8, FLAG_FIXED_REFERENCE, FORMAT_VERSION, HEADER_LEN, MAGIC, NONE,
-    SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
+    crc32, rom_crc8, FIVE_AXIS_FLAGS, FIVE_AXIS_RTEST_LOCATION, FLAG_FIXED_REFERENCE,
+    FORMAT_VERSION, HEADER_LEN, MAGIC, NONE, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
+    SECTION_VOLUMETRIC, UNITS_V1,
 };
 pub use model::Model;
 pub use signed::{split_signed, SignedImage, MAX_SIGNED_BYTES};

@@ -160,8 +160,10 @@ fn read_vol_terms(
 /// Section kind 4: the five-axis part (validated by [`FiveAxis::new`];
 /// against kind 3 after every section is read).
 fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
-    let [n_sensors, order, p1, p2] = r.array()?;
-    if p1 != 0 || p2 != 0 {
+    // The flags byte was padding before the R-test location mode: an old
+    // image reads 0 there and is evaluated as before.
+    let [n_sensors, order, flags, pad] = r.array()?;
+    if pad != 0 {
         return Err(ImageError::BadValue {
             what: "five-axis section padding",
         });
@@ -178,6 +180,7 @@ fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> 
     let mut s = FiveAxisSpec {
         n_sensors,
         order,
+        flags,
         ..FiveAxisSpec::default()
     };
     r.i32s(s.pivot_a_um.iter_mut().chain(s.offset_c_um.iter_mut()))?;

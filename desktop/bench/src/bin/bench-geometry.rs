@@ -155,7 +155,12 @@ fn board_figures(
     }
     out.insert(
         "thermal_dense_five_axis".into(),
-        five_axis_figures(&dense, elf, dir)?,
+        five_axis_figures(&dense, elf, dir, false)?,
+    );
+    // The same section in the R-test location mode (a model with drift).
+    out.insert(
+        "thermal_dense_five_axis_rtest".into(),
+        five_axis_figures(&dense, elf, dir, true)?,
     );
     Ok(serde_json::Value::Object(out))
 }
@@ -164,10 +169,13 @@ fn board_figures(
 /// as dense as the board takes: the eight location errors with slopes on
 /// all three sensors, all twelve component errors to order 4; the whole
 /// evaluation (kind 3 + the rotary chain) counted on the bench firmware.
+/// `rtest`: the section's R-test location mode (issue 31 item 3: the
+/// location slots served as (I − R(θ))·ξ_L(T)).
 fn five_axis_figures(
     dense: &tcomp_geometry::volumetric::VolumetricPoly,
     elf: &std::path::Path,
     dir: &std::path::Path,
+    rtest: bool,
 ) -> anyhow::Result<serde_json::Value> {
     use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
     use tcomp_geometry::board5::{
@@ -188,6 +196,7 @@ fn five_axis_figures(
         offset_c_mm: [0.0, 0.0, 120.0],
         sensors: dense.sensors.clone(),
         t_ref_c: dense.t_ref_c.clone(),
+        rtest_location: rtest,
         ..Default::default()
     };
     for (k, name) in thermocomp_core::five_axis::LOCATION_NAMES
@@ -224,7 +233,11 @@ fn five_axis_figures(
     model.five_axis = Some(f);
     let mut buf = vec![0u8; model.encoded_len()];
     model.encode(&mut buf).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let img = dir.join("thermal_dense_five_axis.img");
+    let img = dir.join(if rtest {
+        "thermal_dense_five_axis_rtest.img"
+    } else {
+        "thermal_dense_five_axis.img"
+    });
     std::fs::write(&img, &buf)?;
     let insn = count_on_board(elf, &img, "five_axis_evaluate_insn_x100");
     Ok(serde_json::json!({
@@ -233,6 +246,7 @@ fn five_axis_figures(
         "section_bytes": report.section_bytes + five_bytes,
         "five_axis_section_bytes": five_bytes,
         "fourier_order": order,
+        "rtest_location": rtest,
         "image_bytes": buf.len(),
         "quantisation": report,
         "evaluate_instructions": insn.as_ref().ok(),

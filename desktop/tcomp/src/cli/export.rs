@@ -40,7 +40,9 @@ pub struct ExportArgs {
     pub geometry_origin_mm: String,
     /// Add the five-axis section (image section kind 4): the rotary model
     /// of `tcomp geometry identify-rotary --model-out` (R-test convention,
-    /// converted to the board's rotating frame); needs --geometry.
+    /// converted to the board's rotating frame); needs --geometry. A model
+    /// with drift (--drift) is served in the section's R-test location
+    /// mode; its sensors join the volumetric section (channels: --run).
     #[arg(long)]
     pub rotary: Option<std::path::PathBuf>,
     /// Serve a rotary model whose identification marked terms unobservable.
@@ -140,22 +142,28 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::bail!("say what to export: --demo or --model <fit.json> --run <csv>")
         }
     };
+    let rotary_model = rotary
+        .as_deref()
+        .map(tcomp_geometry::rotary::RotaryModel::read)
+        .transpose()?;
+    let mut vol_sensors = Vec::new();
     let section = match &geometry {
         Some(path) => Some(geometry_section(
             path,
             &float,
             run_for_geometry.as_deref(),
-            tool_max_mm,
-            &geometry_origin_mm,
-            max_correction_um,
+            (tool_max_mm, &geometry_origin_mm, max_correction_um),
+            rotary_model.as_ref(),
+            &mut vol_sensors,
         )?),
         None => None,
     };
-    let five = match (&rotary, &section) {
-        (Some(path), Some((vol, _))) => Some(rotary_section(
+    let five = match (&rotary, &rotary_model, &section) {
+        (Some(path), Some(m), Some((vol, _))) => Some(rotary_section(
             path,
+            m,
             vol,
-            geometry.as_deref(),
+            &vol_sensors,
             [&a_range_deg, &c_range_deg],
             max_correction_um,
             allow_unobservable,
@@ -171,29 +179,37 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
 /// find its sensors' board channels (the run's T_ columns, by name) and
 /// its X, Y, Z position slots (the model's axes of those names, else the
 /// first slots the model does not use), quantise it and report the cost.
+/// A `rotary` model's drift sensors join the section's sensors (no terms
+/// of their own: the five-axis section reads its temperatures there);
+/// `sensors` receives the section's sensor names.
 fn geometry_section(
     path: &std::path::Path,
     float: &thermocomp_core::float::FloatModel,
     run: Option<&std::path::Path>,
-    tool_max_mm: f64,
-    origin: &str,
-    max_correction_um: f64,
+    (tool_max_mm, origin, max_correction_um): (f64, &str, f64),
+    rotary: Option<&tcomp_geometry::rotary::RotaryModel>,
+    sensors: &mut Vec<String>,
 ) -> anyhow::Result<tcomp_model::export::GeometrySection> {
     use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
     let text = std::fs::read_to_string(path)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
-    let poly: tcomp_geometry::volumetric::VolumetricPoly =
-        serde_json::from_str(&text).map_err(|e| {
+    let mut poly: tcomp_geometry::volumetric::VolumetricPoly = serde_json::from_str(&text)
+        .map_err(|e| {
             anyhow::anyhow!(
                 "{}: not a `tcomp geometry table --json` output: {e}",
                 path.display()
             )
         })?;
+    if let Some(m) = rotary {
+        tcomp_geometry::rotary_board::add_drift_sensors(&mut poly, m)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    sensors.clone_from(&poly.sensors);
     let mut channels = Vec::new();
     if !poly.sensors.is_empty() {
         let run = run.ok_or_else(|| {
             anyhow::anyhow!(
-                "{}: the volumetric polynomial reads sensor(s) {}: --run <csv> gives their board channels",
+                "{}: the volumetric section reads sensor(s) {} (with the rotary model's drift): --run <csv> gives their board channels",
                 path.display(),
                 poly.sensors.join(", ")
             )
@@ -276,28 +292,18 @@ fn geometry_section(
     Ok((v, report))
 }
 
-/// `tcomp export --rotary`: the identified rotary model, converted to the
-/// board's convention and quantised beside the volumetric section `vol`
-/// (whose polynomial, at `geometry`, names the sensors).
+/// `tcomp export --rotary`: the identified rotary model `m` (read from
+/// `path`), converted to the board's convention and quantised beside the
+/// volumetric section `vol` (its sensors named `sensors`).
 fn rotary_section(
     path: &std::path::Path,
+    m: &tcomp_geometry::rotary::RotaryModel,
     vol: &thermocomp_core::volumetric::Volumetric,
-    geometry: Option<&std::path::Path>,
+    sensors: &[String],
     ranges: [&str; 2],
     max_correction_um: f64,
     allow_unobservable: bool,
 ) -> anyhow::Result<tcomp_model::export::FiveAxisSection> {
-    let m = tcomp_geometry::rotary::RotaryModel::read(path)?;
-    let sensors = match geometry {
-        Some(g) => {
-            let text = std::fs::read_to_string(g)
-                .map_err(|e| anyhow::anyhow!("reading {}: {e}", g.display()))?;
-            serde_json::from_str::<tcomp_geometry::volumetric::VolumetricPoly>(&text)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", g.display()))?
-                .sensors
-        }
-        None => Vec::new(),
-    };
     let range = |s: &str, flag: &str| -> anyhow::Result<[f64; 2]> {
         let v: Vec<f64> = s
             .split(',')
@@ -315,7 +321,7 @@ fn rotary_section(
         c_range_deg: range(ranges[1], "--c-range-deg")?,
         max_correction_um,
     };
-    tcomp_geometry::rotary_board::rotary_section(&m, vol, &sensors, &opts, allow_unobservable)
+    tcomp_geometry::rotary_board::rotary_section(m, vol, sensors, &opts, allow_unobservable)
         .map_err(|e| {
             anyhow::anyhow!(
                 "{}: {}",
