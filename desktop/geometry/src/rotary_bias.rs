@@ -169,4 +169,70 @@ mod tests {
             }
         }
     }
+
+    /// A model whose location constants are off (slopes nearly right) is
+    /// pulled back by readings at three other states: the held-out states'
+    /// tool-tip error left over shrinks.
+    #[test]
+    fn the_bias_step_reduces_the_error_at_held_out_states() {
+        use crate::rotary_check::{grid, BIAS_H, HELD_OUT_H};
+        use crate::rotary_sim::{warmup_temps, SENSORS};
+        let plan = RPlan::default_plan();
+        let mut rng = Rng::new(9);
+        let truth = random_rotary(&plan, &RotarySizes::default(), true, &mut rng);
+        let mut model = truth.clone();
+        let mut l = model.location.to_array();
+        for (k, v) in l.iter_mut().enumerate() {
+            *v += if matches!(k, 2 | 3 | 6 | 7) { 6.0 } else { 2.0 } * rng.range(-1.0, 1.0);
+        }
+        model.location = Location::from_array(l);
+        for d in &mut model.drift {
+            let mut p = d.per_kelvin.to_array();
+            p.iter_mut().for_each(|v| *v += 0.05 * rng.range(-1.0, 1.0));
+            d.per_kelvin = Location::from_array(p);
+        }
+        let end = 4.5 * 3600.0;
+        let at = |h: f64| -> BTreeMap<String, f64> {
+            SENSORS
+                .iter()
+                .map(|s| s.0.to_string())
+                .zip(warmup_temps(end + h * 3600.0, Some(end)))
+                .collect()
+        };
+        let stroke = [800.0, 700.0, 600.0];
+        let cal: Vec<RotaryCalibrationState> = BIAS_H[..3]
+            .iter()
+            .map(|h| {
+                simulate_state(
+                    &truth,
+                    None,
+                    &at(*h),
+                    &calibration_poses(stroke),
+                    0.5,
+                    &mut rng,
+                )
+                .unwrap()
+            })
+            .collect();
+        let biased = optimise_rotary_bias(&model, None, &cal).unwrap();
+        let left = |m: &RotaryModel| {
+            let mut s = 0.0;
+            let poses = grid(stroke);
+            for h in HELD_OUT_H {
+                let temps = at(h);
+                let (lt, lm) = (
+                    truth.location_at(&temps).unwrap(),
+                    m.location_at(&temps).unwrap(),
+                );
+                for p in &poses {
+                    let d = tool_tip_error(&truth, &lt, None, p) - tool_tip_error(m, &lm, None, p);
+                    s += d.norm_squared();
+                }
+            }
+            (s / (4 * poses.len()) as f64).sqrt()
+        };
+        let (before, after) = (left(&model), left(&biased));
+        println!("held-out RMS left: {before:.3} µm without, {after:.3} µm with the bias step");
+        assert!(after < 0.25 * before, "{after} vs {before}");
+    }
 }

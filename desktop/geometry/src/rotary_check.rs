@@ -209,8 +209,8 @@ pub const CASE_STROKE: [f64; 3] = [800.0, 700.0, 600.0];
 #[derive(Clone, Copy, Debug)]
 pub struct CaseOptions {
     pub noise_um: f64,
-    /// > 0: drift over a warm-up of this many cycles, fitted with every
-    /// sensor; the grid then at four held-out states of the cool-down.
+    /// Drift over a warm-up of this many cycles (0: none), fitted with
+    /// every sensor; the grid then at four held-out states of the cool-down.
     pub thermal_cycles: usize,
     pub linear: LinearInput,
     /// With drift: tool-tip readings at this many other states of the
@@ -269,27 +269,7 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         sensors,
         ..Default::default()
     };
-    let (id, lin_model) = match o.linear {
-        LinearInput::Known => (identify_rotary(&files, Some(lt), &ro)?, lc.truth.clone()),
-        LinearInput::Fixed => {
-            let li = Linear {
-                structure: st,
-                errors: &lc.identification.errors,
-            };
-            (
-                identify_rotary(&files, Some(li), &ro)?,
-                lc.identification.errors.clone(),
-            )
-        }
-        LinearInput::Joint => {
-            let prior = LinearPrior {
-                structure: st,
-                identification: &lc.identification,
-                lines: &lc.lines,
-            };
-            identify_rotary_joint(&files, &prior, &ro)?
-        }
-    };
+    let (id, lin_model) = fit(&files, &lc, lt, o.linear, &ro)?;
     let li = Linear {
         structure: st,
         errors: &lin_model,
@@ -304,40 +284,13 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         vec![BTreeMap::new()]
     };
     let biased = if thermal_cycles > 0 && o.bias_states > 0 {
-        let poses = calibration_poses(CASE_STROKE);
-        let mut cal = Vec::new();
-        for k in 0..o.bias_states {
-            let h = BIAS_H.get(k).copied().unwrap_or(6.0 + 2.0 * k as f64);
-            let temps = named(warmup_temps(end + h * 3600.0, Some(end)));
-            cal.push(simulate_state(
-                &truth,
-                Some(lt),
-                &temps,
-                &poses,
-                noise_um,
-                &mut rng,
-            )?);
-        }
+        let cal = bias_readings(&truth, lt, end, o, &mut rng)?;
         Some(optimise_rotary_bias(&id.model, Some(li), &cal)?)
     } else {
         None
     };
     let (location_error, worst_um, worst_urad) = location_errors(&truth, &id.model, &states)?;
-    let rec = component_recovery(&id.model, &truth);
-    let group = |ang: bool| {
-        let v: Vec<&(f64, f64)> = rec
-            .iter()
-            .filter(|(n, _)| {
-                (COMPONENT_NAMES.iter().position(|c| c == n).unwrap_or(0) % 6 >= 3) == ang
-            })
-            .map(|(_, v)| v)
-            .collect();
-        let k = v.len().max(1) as f64;
-        (
-            (v.iter().map(|x| x.0 * x.0).sum::<f64>() / k).sqrt(),
-            (v.iter().map(|x| x.1 * x.1).sum::<f64>() / k).sqrt(),
-        )
-    };
+    let (component_rms_um, component_rms_urad) = component_groups(&id.model, &truth);
     let poses = grid(CASE_STROKE);
     let tm = Machine5 {
         rotary: &truth,
@@ -413,8 +366,8 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         worst_um,
         worst_urad,
         location_error,
-        component_rms_um: group(false),
-        component_rms_urad: group(true),
+        component_rms_um,
+        component_rms_urad,
         condition_number: id.condition_number,
         unobservable: id.unobservable_terms.clone(),
         grid_true: fig(&sets[0]),
@@ -424,6 +377,82 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         grid_bias: biased.as_ref().map(|_| fig(&sets[4])),
         joint: id.linear.clone(),
     })
+}
+
+/// The rotary fit with the linear axes taken as `how` says; the linear
+/// model the compensation then uses.
+fn fit(
+    files: &[RTestFile],
+    lc: &LinearCase,
+    lt: Linear,
+    how: LinearInput,
+    ro: &RotaryOptions,
+) -> Result<(
+    super::rotary_identify::RotaryIdentification,
+    GeometricErrors,
+)> {
+    let st = &lc.structure;
+    Ok(match how {
+        LinearInput::Known => (identify_rotary(files, Some(lt), ro)?, lc.truth.clone()),
+        LinearInput::Fixed => {
+            let li = Linear {
+                structure: st,
+                errors: &lc.identification.errors,
+            };
+            (
+                identify_rotary(files, Some(li), ro)?,
+                lc.identification.errors.clone(),
+            )
+        }
+        LinearInput::Joint => {
+            let prior = LinearPrior {
+                structure: st,
+                identification: &lc.identification,
+                lines: &lc.lines,
+            };
+            identify_rotary_joint(files, &prior, ro)?
+        }
+    })
+}
+
+/// Tool-tip readings of the truth at `o.bias_states` states of the
+/// cool-down after the warm-up that ended at `end` s (`BIAS_H`).
+fn bias_readings(
+    truth: &RotaryModel,
+    lt: Linear,
+    end: f64,
+    o: &CaseOptions,
+    rng: &mut Rng,
+) -> Result<Vec<super::rotary_bias::RotaryCalibrationState>> {
+    let poses = calibration_poses(CASE_STROKE);
+    (0..o.bias_states)
+        .map(|k| {
+            let h = BIAS_H.get(k).copied().unwrap_or(6.0 + 2.0 * k as f64);
+            let temps = named(warmup_temps(end + h * 3600.0, Some(end)));
+            simulate_state(truth, Some(lt), &temps, &poses, o.noise_um, rng)
+        })
+        .collect()
+}
+
+/// RMS over the component errors of identified − true and of the truth,
+/// for the µm group and the µrad group.
+fn component_groups(model: &RotaryModel, truth: &RotaryModel) -> ((f64, f64), (f64, f64)) {
+    let rec = component_recovery(model, truth);
+    let group = |ang: bool| {
+        let v: Vec<&(f64, f64)> = rec
+            .iter()
+            .filter(|(n, _)| {
+                (COMPONENT_NAMES.iter().position(|c| c == n).unwrap_or(0) % 6 >= 3) == ang
+            })
+            .map(|(_, v)| v)
+            .collect();
+        let k = v.len().max(1) as f64;
+        (
+            (v.iter().map(|x| x.0 * x.0).sum::<f64>() / k).sqrt(),
+            (v.iter().map(|x| x.1 * x.1).sum::<f64>() / k).sqrt(),
+        )
+    };
+    (group(false), group(true))
 }
 
 /// Worst |identified − true| per location error over `states`, and the

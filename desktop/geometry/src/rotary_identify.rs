@@ -78,6 +78,27 @@ const LOC_SLOT: [(Axis5, usize); 8] = [
     (Axis5::A, 5),
 ];
 
+/// What the joint fit (`rotary_joint`) did with the linear model.
+#[derive(Clone, Debug, Serialize)]
+pub struct JointLinear {
+    /// Reading noise of each data set from its own fit [µm]: the lines'
+    /// (forward/backward averaged) and the R-test readings'.
+    pub sigma_lines_um: f64,
+    pub sigma_rtest_um: f64,
+    /// RMS over the R-test readings of the change of the linear model's
+    /// predicted tool-tip error (the part that went into the location
+    /// errors before) [µm].
+    pub change_at_rtest_rms_um: f64,
+    /// Residual RMS of the lines with the corrected model [µm] (the
+    /// 14-line fit's own is `line_residual_rms_um_before`).
+    pub line_residual_rms_um: f64,
+    pub line_residual_rms_um_before: f64,
+    /// Condition number of the joint problem (unit-norm columns of the
+    /// weighted design); `condition_number` of the identification stays the
+    /// R-test plan's own (as `plan-rotary` shows it).
+    pub joint_condition_number: Option<f64>,
+}
+
 /// One value with its standard uncertainty; `None` when not observable.
 #[derive(Clone, Debug, Serialize)]
 pub struct TermValue {
@@ -114,7 +135,7 @@ pub struct RotaryIdentification {
     pub unobservable_terms: Vec<String>,
     /// Joint fit with the lines (`rotary_joint`): what it did to the linear model.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub linear: Option<super::rotary_joint::JointLinear>,
+    pub linear: Option<JointLinear>,
     /// Joint fit: the linear model's parameter corrections (basis order).
     #[serde(skip)]
     pub linear_delta: Vec<f64>,
@@ -427,27 +448,7 @@ pub(crate) fn solve(
             sigma0 * var.sqrt() / norms[j]
         })
         .collect();
-    // null directions: small singular values, and the complement when m < n
-    let mut null: Vec<(DVector<f64>, f64)> = (0..sv.len())
-        .filter(|&i| sv[i] <= tol)
-        .map(|i| (vt.row(i).transpose(), sv[i]))
-        .collect();
-    if m < n {
-        let mut basis: Vec<DVector<f64>> = (0..sv.len()).map(|i| vt.row(i).transpose()).collect();
-        for k in 0..n {
-            let mut v = DVector::zeros(n);
-            v[k] = 1.0;
-            for q in &basis {
-                let d = q.dot(&v);
-                v -= q * d;
-            }
-            if v.norm() > 1e-6 {
-                v /= v.norm();
-                basis.push(v.clone());
-                null.push((v, 0.0));
-            }
-        }
-    }
+    let null = null_directions(sv.as_slice(), vt, tol, m, n);
     let (nests, _, _) = nest_spread(files);
     let (unobservable, unobs_terms, unobs_cols) = describe_null(files, o, cols, null);
     let value = |j: usize| (!unobs_cols.contains(&j)).then_some(x[j]);
@@ -535,6 +536,38 @@ pub(crate) fn solve(
         linear: None,
         linear_delta,
     })
+}
+
+/// Null directions: right singular vectors with a small singular value,
+/// and the complement of the row space when there are fewer rows than unknowns.
+fn null_directions(
+    sv: &[f64],
+    vt: &DMatrix<f64>,
+    tol: f64,
+    m: usize,
+    n: usize,
+) -> Vec<(DVector<f64>, f64)> {
+    let mut null: Vec<(DVector<f64>, f64)> = (0..sv.len())
+        .filter(|&i| sv[i] <= tol)
+        .map(|i| (vt.row(i).transpose(), sv[i]))
+        .collect();
+    if m < n {
+        let mut basis: Vec<DVector<f64>> = (0..sv.len()).map(|i| vt.row(i).transpose()).collect();
+        for k in 0..n {
+            let mut v = DVector::zeros(n);
+            v[k] = 1.0;
+            for q in &basis {
+                let d = q.dot(&v);
+                v -= q * d;
+            }
+            if v.norm() > 1e-6 {
+                v /= v.norm();
+                basis.push(v.clone());
+                null.push((v, 0.0));
+            }
+        }
+    }
+    null
 }
 
 /// The unobservable directions with their terms and reasons, every term
