@@ -141,6 +141,9 @@ pub struct CaseFigures {
     /// tool-tip readings at other states (`rotary_bias`), true and measured.
     pub grid_bias_true: Option<Figures>,
     pub grid_bias: Option<Figures>,
+    /// With the bias step: worst location error at the held-out states
+    /// (µm, µrad).
+    pub worst_bias: Option<(f64, f64)>,
     /// Joint fit: what it did to the linear model.
     pub joint: Option<super::rotary_joint::JointLinear>,
 }
@@ -290,6 +293,10 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         None
     };
     let (location_error, worst_um, worst_urad) = location_errors(&truth, &id.model, &states)?;
+    let worst_bias = match &biased {
+        Some(b) => location_errors(&truth, b, &states).map(|(_, u, r)| Some((u, r)))?,
+        None => None,
+    };
     let (component_rms_um, component_rms_urad) = component_groups(&id.model, &truth);
     let poses = grid(CASE_STROKE);
     let tm = Machine5 {
@@ -375,6 +382,7 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         grid_linear_only: fig(&sets[2]),
         grid_bias_true: biased.as_ref().map(|_| fig(&sets[3])),
         grid_bias: biased.as_ref().map(|_| fig(&sets[4])),
+        worst_bias,
         joint: id.linear.clone(),
     })
 }

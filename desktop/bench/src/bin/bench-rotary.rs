@@ -91,6 +91,8 @@ fn main() -> std::process::ExitCode {
             "grid_measured_after_rms_um_worst": worst(|c| c.grid.after_rms_um),
             "grid_linear_only_reduction_pct_least": least(|c| c.grid_linear_only.reduction_pct),
             "grid_bias_true_reduction_pct_least": bias(|c| c.grid_bias_true.as_ref().map(|f| f.reduction_pct)),
+            "location_worst_bias_um": bias(|c| c.worst_bias.map(|w| -w.0)).map(|v| -v),
+            "location_worst_bias_urad": bias(|c| c.worst_bias.map(|w| -w.1)).map(|v| -v),
             "grid_bias_measured_reduction_pct_least": bias(|c| c.grid_bias.as_ref().map(|f| f.reduction_pct)),
             "unobservable": cases.iter().flat_map(|c| c.unobservable.clone()).collect::<Vec<_>>(),
         });
