@@ -97,6 +97,10 @@ pub struct JointLinear {
     /// weighted design); `condition_number` of the identification stays the
     /// R-test plan's own (as `plan-rotary` shows it).
     pub joint_condition_number: Option<f64>,
+    /// Of the identification's `unknowns` and `readings`: the linear
+    /// model's parameters and the lines' readings.
+    pub linear_unknowns: usize,
+    pub line_readings: usize,
 }
 
 /// One value with its standard uncertainty; `None` when not observable.

@@ -108,7 +108,7 @@ pub fn identify_rotary_joint(
     let dof_l = ml.saturating_sub(prior.lines.len() + idl.rank).max(1) as f64;
     let sigma_l = (lrhs.iter().map(|x| x * x).sum::<f64>() / dof_l).sqrt();
     if !(sigma_r > 0.0 && sigma_l > 0.0) {
-        bail!("joint fit: the R-test files or the lines fit without residual (noise-free data); use the linear model as known input");
+        bail!("joint fit: the R-test files or the lines fit without residual (noise-free data); take the linear model as known input (identify-rotary --linear-fixed)");
     }
     let mut cols = d.cols.clone();
     let nr = cols.len();
@@ -162,6 +162,8 @@ pub fn identify_rotary_joint(
         line_residual_rms_um: rms(&after),
         line_residual_rms_um_before: rms(&lrhs),
         joint_condition_number: id.condition_number,
+        linear_unknowns: nl,
+        line_readings: ml,
     });
     id.condition_number = plain.condition_number;
     let params: Vec<f64> = idl

@@ -405,6 +405,12 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
         id.files, id.nest_positions, id.residual_rms_um
     );
     print_conditioning(id);
+    if let Some(j) = &id.linear {
+        println!(
+            "  linear axes fitted with the lines ({} of the unknowns, {} of the readings; condition number of the whole {:.0}): noise {:.3} µm (lines), {:.3} µm (R-test); their prediction at the R-test readings moved {:.3} µm RMS; lines' residual {:.3} → {:.3} µm",
+            j.linear_unknowns, j.line_readings, j.joint_condition_number.unwrap_or(f64::INFINITY), j.sigma_lines_um, j.sigma_rtest_um, j.change_at_rtest_rms_um, j.line_residual_rms_um_before, j.line_residual_rms_um
+        );
+    }
     let tl = truth.map(|t| t.location.to_array());
     println!("  location errors (± 1σ):");
     for (k, t) in id.location.iter().enumerate() {
