@@ -11,11 +11,13 @@ use std::collections::BTreeMap;
 
 use super::check::{figures, Compared, Figures};
 use super::errors::GeometricErrors;
-use super::identify::{identify, to_reference_convention, Degrees, LineObs};
+use super::identify::{identify, to_reference_convention, Degrees, Identification, LineObs};
 use super::kinematics::Structure;
 use super::lines::{average_runs, plan14};
 use super::rotary::{tool_tip_error, Linear, RotaryModel, COMPONENT_NAMES, LOCATION_NAMES};
+use super::rotary_bias::{calibration_poses, optimise_rotary_bias, simulate_state};
 use super::rotary_identify::{identify_rotary, RotaryOptions};
+use super::rotary_joint::{identify_rotary_joint, LinearPrior};
 use super::rotary_sim::{
     axis_of, random_rotary, simulate, warmup_temps, CycleSetup, RPlan, RotarySizes, SENSORS,
 };
@@ -113,6 +115,8 @@ pub fn component_recovery(id: &RotaryModel, truth: &RotaryModel) -> BTreeMap<Str
 #[derive(Clone, Debug, Serialize)]
 pub struct CaseFigures {
     pub seed: u64,
+    /// How the linear model entered the rotary fit.
+    pub linear_input: LinearInput,
     /// |identified − true| per location error (at held-out states with drift).
     pub location_error: BTreeMap<String, f64>,
     pub worst_um: f64,
@@ -123,10 +127,48 @@ pub struct CaseFigures {
     pub component_rms_urad: (f64, f64),
     pub condition_number: Option<f64>,
     pub unobservable: Vec<String>,
-    /// Grid: compensated with linear and rotary models.
+    /// Grid, compensated with linear and rotary models, scored against the
+    /// true tool-tip error (no reading noise on the scored poses): the
+    /// figure the targets are compared with.
+    pub grid_true: Figures,
+    /// The same against the "measured" error (truth + σ per direction, as
+    /// a check with a real instrument would see it; before this field the
+    /// only one).
     pub grid: Figures,
-    /// Grid: compensated with the linear (14-line) model only.
+    /// Grid: compensated with the linear (14-line) model only (measured).
     pub grid_linear_only: Figures,
+    /// With drift and bias states: the location constants re-optimised on
+    /// tool-tip readings at other states (`rotary_bias`), true and measured.
+    pub grid_bias_true: Option<Figures>,
+    pub grid_bias: Option<Figures>,
+    /// With the bias step: worst location error at the held-out states
+    /// (µm, µrad).
+    pub worst_bias: Option<(f64, f64)>,
+    /// Joint fit: what it did to the linear model.
+    pub joint: Option<super::rotary_joint::JointLinear>,
+}
+
+/// How the rotary fit takes the linear axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearInput {
+    /// The true linear errors (isolates the rotary fit).
+    Known,
+    /// The 14-line model as known input (its error aliases into the rotary terms).
+    Fixed,
+    /// The 14 lines and the R-test files in one fit (`rotary_joint`); the
+    /// compensation then uses the corrected linear model.
+    Joint,
+}
+
+/// The linear machine of a case.
+pub struct LinearCase {
+    pub structure: Structure,
+    /// Truth in the 14-line reference convention.
+    pub truth: GeometricErrors,
+    pub identification: Identification,
+    /// The averaged lines it was identified from.
+    pub lines: Vec<LineObs>,
 }
 
 /// The linear machine of a case: truth in the 14-line reference convention
@@ -136,6 +178,12 @@ pub fn linear_case(
     noise_um: f64,
     rng: &mut Rng,
 ) -> Result<(Structure, GeometricErrors, GeometricErrors)> {
+    let c = linear_case_full(stroke, noise_um, rng)?;
+    Ok((c.structure, c.truth, c.identification.errors))
+}
+
+/// `linear_case` with the identification and its lines.
+pub fn linear_case_full(stroke: [f64; 3], noise_um: f64, rng: &mut Rng) -> Result<LinearCase> {
     let st = Structure::parse("/XYZ")?;
     let raw = random_errors(stroke, &ErrorSizes::default(), rng);
     let truth = to_reference_convention(&raw, stroke);
@@ -147,36 +195,63 @@ pub fn linear_case(
     for spec in plan14(stroke, 100.0, 100.0) {
         files.extend(measure_line(&st, &truth, &spec, &setup, None, rng));
     }
-    let obs: Vec<LineObs> = average_runs(&files)?.into_iter().map(|a| a.obs).collect();
-    let id = identify(&st, &obs, Degrees::default(), stroke)?;
-    Ok((st, truth, id.errors))
+    let lines: Vec<LineObs> = average_runs(&files)?.into_iter().map(|a| a.obs).collect();
+    let identification = identify(&st, &lines, Degrees::default(), stroke)?;
+    Ok(LinearCase {
+        structure: st,
+        truth,
+        identification,
+        lines,
+    })
 }
 
 /// Stroke of the simulated machine: the plan's R-test poses stay inside it.
 pub const CASE_STROKE: [f64; 3] = [800.0, 700.0, 600.0];
 
-/// One machine through the whole chain. `thermal_cycles` > 0: drift over a
-/// warm-up, fitted with every sensor; the grid then at four held-out
-/// states of the cool-down after it. `linear_known`: the rotary fit and the
-/// compensation take the true linear errors instead of the 14-line ones
-/// (separates the rotary identification from the linear one's residue).
-pub fn run_case(
-    seed: u64,
-    noise_um: f64,
-    thermal_cycles: usize,
-    linear_known: bool,
-) -> Result<CaseFigures> {
+/// What one simulated machine goes through.
+#[derive(Clone, Copy, Debug)]
+pub struct CaseOptions {
+    pub noise_um: f64,
+    /// Drift over a warm-up of this many cycles (0: none), fitted with
+    /// every sensor; the grid then at four held-out states of the cool-down.
+    pub thermal_cycles: usize,
+    pub linear: LinearInput,
+    /// With drift: tool-tip readings at this many other states of the
+    /// cool-down (0.25 h, 1.5 h, 4 h, 6 h … after the stop) for the bias step.
+    pub bias_states: usize,
+}
+
+impl Default for CaseOptions {
+    fn default() -> Self {
+        CaseOptions {
+            noise_um: 0.5,
+            thermal_cycles: 0,
+            linear: LinearInput::Joint,
+            bias_states: 0,
+        }
+    }
+}
+
+/// Hours after the warm-up's stop of the held-out states and of the bias
+/// step's calibration states (never the same).
+pub const HELD_OUT_H: [f64; 4] = [0.5, 1.0, 2.0, 3.0];
+pub const BIAS_H: [f64; 4] = [0.25, 1.5, 4.0, 6.0];
+
+fn named(t: Vec<f64>) -> BTreeMap<String, f64> {
+    SENSORS.iter().map(|s| s.0.to_string()).zip(t).collect()
+}
+
+/// One machine through the whole chain (seed `seed`, `CaseOptions`).
+pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
+    let (noise_um, thermal_cycles) = (o.noise_um, o.thermal_cycles);
     let mut rng = Rng::new(seed);
     let plan = RPlan::default_plan();
-    let (st, lin_truth, lin_id) = linear_case(CASE_STROKE, noise_um, &mut rng)?;
+    let lc = linear_case_full(CASE_STROKE, noise_um, &mut rng)?;
+    let st = &lc.structure;
     let truth = random_rotary(&plan, &RotarySizes::default(), thermal_cycles > 0, &mut rng);
     let lt = Linear {
-        structure: &st,
-        errors: &lin_truth,
-    };
-    let li = Linear {
-        structure: &st,
-        errors: if linear_known { &lin_truth } else { &lin_id },
+        structure: st,
+        errors: &lc.truth,
     };
     let setup = CycleSetup {
         noise_um,
@@ -193,41 +268,184 @@ pub fn run_case(
     } else {
         vec![]
     };
-    let id = identify_rotary(
-        &files,
-        Some(li),
-        &RotaryOptions {
-            sensors,
-            ..Default::default()
-        },
-    )?;
+    let ro = RotaryOptions {
+        sensors,
+        ..Default::default()
+    };
+    let (id, lin_model) = fit(&files, &lc, lt, o.linear, &ro)?;
+    let li = Linear {
+        structure: st,
+        errors: &lin_model,
+    };
     let end = setup.cycle_period_s * thermal_cycles as f64;
     let states: Vec<BTreeMap<String, f64>> = if thermal_cycles > 0 {
-        [0.5, 1.0, 2.0, 3.0]
+        HELD_OUT_H
             .iter()
-            .map(|h| {
-                let t = warmup_temps(end + h * 3600.0, Some(end));
-                SENSORS.iter().map(|s| s.0.to_string()).zip(t).collect()
-            })
+            .map(|h| named(warmup_temps(end + h * 3600.0, Some(end))))
             .collect()
     } else {
         vec![BTreeMap::new()]
     };
-    let mut location_error: BTreeMap<String, f64> = BTreeMap::new();
-    for temps in &states {
-        let (t, m) = (
-            truth.location_at(temps)?.to_array(),
-            id.model.location_at(temps)?.to_array(),
-        );
-        for k in 0..8 {
-            let e = location_error
-                .entry(LOCATION_NAMES[k].to_string())
-                .or_insert(0.0);
-            *e = e.max((t[k] - m[k]).abs());
+    let biased = if thermal_cycles > 0 && o.bias_states > 0 {
+        let cal = bias_readings(&truth, lt, end, o, &mut rng)?;
+        Some(optimise_rotary_bias(&id.model, Some(li), &cal)?)
+    } else {
+        None
+    };
+    let (location_error, worst_um, worst_urad) = location_errors(&truth, &id.model, &states)?;
+    let worst_bias = match &biased {
+        Some(b) => location_errors(&truth, b, &states).map(|(_, u, r)| Some((u, r)))?,
+        None => None,
+    };
+    let (component_rms_um, component_rms_urad) = component_groups(&id.model, &truth);
+    let poses = grid(CASE_STROKE);
+    let tm = Machine5 {
+        rotary: &truth,
+        linear: Some(lt),
+    };
+    let none = RotaryModel {
+        pivot_a_mm: truth.pivot_a_mm,
+        offset_c_mm: truth.offset_c_mm,
+        ..Default::default()
+    };
+    let mut sets: [Vec<Compared>; 5] = Default::default();
+    for (k, temps) in states.iter().enumerate() {
+        let state = format!("S{k}");
+        let m5 = |r| Machine5 {
+            rotary: r,
+            linear: Some(li),
+        };
+        // one noise stream per state: the same draws with and without the bias step
+        let state_rng = || Rng::new(seed.wrapping_mul(7919).wrapping_add(k as u64));
+        let mut quiet = Rng::new(0);
+        sets[0].extend(compare(
+            &tm,
+            &m5(&id.model),
+            &poses,
+            temps,
+            0.0,
+            &state,
+            &mut quiet,
+        )?);
+        sets[1].extend(compare(
+            &tm,
+            &m5(&id.model),
+            &poses,
+            temps,
+            noise_um,
+            &state,
+            &mut state_rng(),
+        )?);
+        sets[2].extend(compare(
+            &tm,
+            &m5(&none),
+            &poses,
+            temps,
+            noise_um,
+            &state,
+            &mut rng,
+        )?);
+        if let Some(b) = &biased {
+            sets[3].extend(compare(
+                &tm,
+                &m5(b),
+                &poses,
+                temps,
+                0.0,
+                &state,
+                &mut quiet,
+            )?);
+            sets[4].extend(compare(
+                &tm,
+                &m5(b),
+                &poses,
+                temps,
+                noise_um,
+                &state,
+                &mut state_rng(),
+            )?);
         }
     }
-    let worst = |names: &[&str]| names.iter().map(|n| location_error[*n]).fold(0.0, f64::max);
-    let rec = component_recovery(&id.model, &truth);
+    let fig = |v: &Vec<Compared>| figures(&v.iter().collect::<Vec<_>>());
+    Ok(CaseFigures {
+        seed,
+        linear_input: o.linear,
+        worst_um,
+        worst_urad,
+        location_error,
+        component_rms_um,
+        component_rms_urad,
+        condition_number: id.condition_number,
+        unobservable: id.unobservable_terms.clone(),
+        grid_true: fig(&sets[0]),
+        grid: fig(&sets[1]),
+        grid_linear_only: fig(&sets[2]),
+        grid_bias_true: biased.as_ref().map(|_| fig(&sets[3])),
+        grid_bias: biased.as_ref().map(|_| fig(&sets[4])),
+        worst_bias,
+        joint: id.linear.clone(),
+    })
+}
+
+/// The rotary fit with the linear axes taken as `how` says; the linear
+/// model the compensation then uses.
+fn fit(
+    files: &[RTestFile],
+    lc: &LinearCase,
+    lt: Linear,
+    how: LinearInput,
+    ro: &RotaryOptions,
+) -> Result<(
+    super::rotary_identify::RotaryIdentification,
+    GeometricErrors,
+)> {
+    let st = &lc.structure;
+    Ok(match how {
+        LinearInput::Known => (identify_rotary(files, Some(lt), ro)?, lc.truth.clone()),
+        LinearInput::Fixed => {
+            let li = Linear {
+                structure: st,
+                errors: &lc.identification.errors,
+            };
+            (
+                identify_rotary(files, Some(li), ro)?,
+                lc.identification.errors.clone(),
+            )
+        }
+        LinearInput::Joint => {
+            let prior = LinearPrior {
+                structure: st,
+                identification: &lc.identification,
+                lines: &lc.lines,
+            };
+            identify_rotary_joint(files, &prior, ro)?
+        }
+    })
+}
+
+/// Tool-tip readings of the truth at `o.bias_states` states of the
+/// cool-down after the warm-up that ended at `end` s (`BIAS_H`).
+fn bias_readings(
+    truth: &RotaryModel,
+    lt: Linear,
+    end: f64,
+    o: &CaseOptions,
+    rng: &mut Rng,
+) -> Result<Vec<super::rotary_bias::RotaryCalibrationState>> {
+    let poses = calibration_poses(CASE_STROKE);
+    (0..o.bias_states)
+        .map(|k| {
+            let h = BIAS_H.get(k).copied().unwrap_or(6.0 + 2.0 * k as f64);
+            let temps = named(warmup_temps(end + h * 3600.0, Some(end)));
+            simulate_state(truth, Some(lt), &temps, &poses, o.noise_um, rng)
+        })
+        .collect()
+}
+
+/// RMS over the component errors of identified − true and of the truth,
+/// for the µm group and the µrad group.
+fn component_groups(model: &RotaryModel, truth: &RotaryModel) -> ((f64, f64), (f64, f64)) {
+    let rec = component_recovery(model, truth);
     let group = |ang: bool| {
         let v: Vec<&(f64, f64)> = rec
             .iter()
@@ -242,54 +460,31 @@ pub fn run_case(
             (v.iter().map(|x| x.1 * x.1).sum::<f64>() / k).sqrt(),
         )
     };
-    let poses = grid(CASE_STROKE);
-    let tm = Machine5 {
-        rotary: &truth,
-        linear: Some(lt),
-    };
-    let none = RotaryModel {
-        pivot_a_mm: truth.pivot_a_mm,
-        offset_c_mm: truth.offset_c_mm,
-        ..Default::default()
-    };
-    let (mut all, mut lin_only) = (Vec::new(), Vec::new());
-    for (k, temps) in states.iter().enumerate() {
-        let state = format!("S{k}");
-        all.extend(compare(
-            &tm,
-            &Machine5 {
-                rotary: &id.model,
-                linear: Some(li),
-            },
-            &poses,
-            temps,
-            noise_um,
-            &state,
-            &mut rng,
-        )?);
-        lin_only.extend(compare(
-            &tm,
-            &Machine5 {
-                rotary: &none,
-                linear: Some(li),
-            },
-            &poses,
-            temps,
-            noise_um,
-            &state,
-            &mut rng,
-        )?);
+    (group(false), group(true))
+}
+
+/// Worst |identified − true| per location error over `states`, and the
+/// worst offset [µm] and tilt [µrad].
+pub fn location_errors(
+    truth: &RotaryModel,
+    model: &RotaryModel,
+    states: &[BTreeMap<String, f64>],
+) -> Result<(BTreeMap<String, f64>, f64, f64)> {
+    let mut out: BTreeMap<String, f64> = BTreeMap::new();
+    for temps in states {
+        let (t, m) = (
+            truth.location_at(temps)?.to_array(),
+            model.location_at(temps)?.to_array(),
+        );
+        for k in 0..8 {
+            let e = out.entry(LOCATION_NAMES[k].to_string()).or_insert(0.0);
+            *e = e.max((t[k] - m[k]).abs());
+        }
     }
-    Ok(CaseFigures {
-        seed,
-        worst_um: worst(&["XOC", "YOC", "YOA", "ZOA"]),
-        worst_urad: worst(&["AOC", "BOC", "BOA", "COA"]),
-        location_error,
-        component_rms_um: group(false),
-        component_rms_urad: group(true),
-        condition_number: id.condition_number,
-        unobservable: id.unobservable_terms.clone(),
-        grid: figures(&all.iter().collect::<Vec<_>>()),
-        grid_linear_only: figures(&lin_only.iter().collect::<Vec<_>>()),
-    })
+    let worst = |names: &[&str]| names.iter().map(|n| out[*n]).fold(0.0, f64::max);
+    let (um, urad) = (
+        worst(&["XOC", "YOC", "YOA", "ZOA"]),
+        worst(&["AOC", "BOC", "BOA", "COA"]),
+    );
+    Ok((out, um, urad))
 }

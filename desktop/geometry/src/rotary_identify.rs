@@ -53,7 +53,7 @@ impl Default for RotaryOptions {
 
 /// An unknown of the fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Col {
+pub(crate) enum Col {
     Loc(usize),
     Drift(usize, usize),
     /// Harmonic `h` of component `k` of an axis, cos (false) or sin (true).
@@ -61,6 +61,9 @@ enum Col {
     /// First harmonic of a whirl pair (i, j): P: a_i = 1, b_j = −1; Q: b_i = 1, a_j = 1.
     Whirl(Axis5, usize, bool),
     Const(usize, usize),
+    /// Correction of the linear model's parameter `j` (its basis order;
+    /// joint fit with the 14 lines, `rotary_joint`).
+    Lin(usize),
 }
 
 /// (axis, index in the six fixed-frame errors) of each location error.
@@ -74,6 +77,31 @@ const LOC_SLOT: [(Axis5, usize); 8] = [
     (Axis5::A, 4),
     (Axis5::A, 5),
 ];
+
+/// What the joint fit (`rotary_joint`) did with the linear model.
+#[derive(Clone, Debug, Serialize)]
+pub struct JointLinear {
+    /// Reading noise of each data set from its own fit [µm]: the lines'
+    /// (forward/backward averaged) and the R-test readings'.
+    pub sigma_lines_um: f64,
+    pub sigma_rtest_um: f64,
+    /// RMS over the R-test readings of the change of the linear model's
+    /// predicted tool-tip error (the part that went into the location
+    /// errors before) [µm].
+    pub change_at_rtest_rms_um: f64,
+    /// Residual RMS of the lines with the corrected model [µm] (the
+    /// 14-line fit's own is `line_residual_rms_um_before`).
+    pub line_residual_rms_um: f64,
+    pub line_residual_rms_um_before: f64,
+    /// Condition number of the joint problem (unit-norm columns of the
+    /// weighted design); `condition_number` of the identification stays the
+    /// R-test plan's own (as `plan-rotary` shows it).
+    pub joint_condition_number: Option<f64>,
+    /// Of the identification's `unknowns` and `readings`: the linear
+    /// model's parameters and the lines' readings.
+    pub linear_unknowns: usize,
+    pub line_readings: usize,
+}
 
 /// One value with its standard uncertainty; `None` when not observable.
 #[derive(Clone, Debug, Serialize)]
@@ -109,6 +137,12 @@ pub struct RotaryIdentification {
     pub unobservable: Vec<Unobservable>,
     /// Names (`XOC`, `EZC`, `XOC/T_ctable` …) in an unobservable direction.
     pub unobservable_terms: Vec<String>,
+    /// Joint fit with the lines (`rotary_joint`): what it did to the linear model.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub linear: Option<JointLinear>,
+    /// Joint fit: the linear model's parameter corrections (basis order).
+    #[serde(skip)]
+    pub linear_delta: Vec<f64>,
 }
 
 impl Col {
@@ -129,6 +163,7 @@ impl Col {
                 )
             }
             Col::Const(f, d) => format!("offset of {} d{}", files[f].name, ['x', 'y', 'z'][d]),
+            Col::Lin(j) => format!("linear parameter {j}"),
         }
     }
     /// The error names this unknown belongs to (none for the file offsets).
@@ -142,11 +177,12 @@ impl Col {
                 vec![ax.names()[i].to_string(), ax.names()[j].to_string()]
             }
             Col::Const(..) => vec![],
+            Col::Lin(_) => vec!["linear axes".to_string()],
         }
     }
 }
 
-fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
+pub(crate) fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
     let mut cols: Vec<Col> = (0..8).map(Col::Loc).collect();
     for s in 0..o.sensors.len() {
         cols.extend((0..8).map(|j| Col::Drift(j, s)));
@@ -175,8 +211,9 @@ fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
     cols
 }
 
-/// The reading (workpiece frame, µm) one unit of `col` produces at a pose.
-fn effect(
+/// The reading (workpiece frame, µm) one unit of `col` produces at a pose
+/// (zero for the linear model's columns: `rotary_joint` fills those).
+pub(crate) fn effect(
     col: Col,
     s: &ReadingSensitivity,
     a: f64,
@@ -224,6 +261,7 @@ fn effect(
             }
             u
         }
+        Col::Lin(_) => Vector3::zeros(),
     }
 }
 
@@ -260,6 +298,29 @@ pub fn identify_rotary(
     lin: Option<Linear>,
     o: &RotaryOptions,
 ) -> Result<RotaryIdentification> {
+    let d = design(files, lin, o)?;
+    let rows = d.b.len();
+    solve(files, o, &d.cols, d.a, d.b, &d.reference, rows, 1.0)
+}
+
+/// The R-test part of the least-squares problem.
+pub(crate) struct Design {
+    pub cols: Vec<Col>,
+    pub a: DMatrix<f64>,
+    pub b: DVector<f64>,
+    /// Reference temperatures of the drift (the files' means).
+    pub reference: Vec<f64>,
+    /// Sensitivities and pose of each reading (three rows each), in order.
+    pub poses: Vec<(ReadingSensitivity, [f64; 3], [f64; 3])>,
+}
+
+/// Rows of every reading: unknowns, readings minus the linear model's
+/// exact tool-tip error (`lin`).
+pub(crate) fn design(
+    files: &[RTestFile],
+    lin: Option<Linear>,
+    o: &RotaryOptions,
+) -> Result<Design> {
     let Some(first) = files.first() else {
         bail!("no R-test files");
     };
@@ -308,6 +369,7 @@ pub fn identify_rotary(
     let mut a = DMatrix::<f64>::zeros(m, n);
     let mut b = DVector::<f64>::zeros(m);
     let mut i = 0;
+    let mut poses = Vec::with_capacity(n_rows);
     for (fi, f) in files.iter().enumerate() {
         for r in &f.rows {
             let s = reading_sensitivity(f.pivot_a_mm, f.offset_c_mm, f.nest_mm, r.a_deg, r.c_deg);
@@ -326,19 +388,32 @@ pub fn identify_rotary(
             for d in 0..3 {
                 b[i + d] = r.d_um[d] - lin_e[d];
             }
+            poses.push((s, r.pos_mm, f.tool_mm));
             i += 3;
         }
     }
-    solve(files, o, &cols, a, b, &reference)
+    Ok(Design {
+        cols,
+        a,
+        b,
+        reference,
+        poses,
+    })
 }
 
-fn solve(
+/// Solve the weighted problem: the first `rtest_rows` rows are R-test
+/// readings divided by `sigma_r` (1: unweighted), any rows after them other
+/// data (the lines of a joint fit) in the same units of σ.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn solve(
     files: &[RTestFile],
     o: &RotaryOptions,
     cols: &[Col],
     a: DMatrix<f64>,
     b: DVector<f64>,
     reference: &[f64],
+    rtest_rows: usize,
+    sigma_r: f64,
 ) -> Result<RotaryIdentification> {
     let (m, n) = a.shape();
     let norms: Vec<f64> = (0..n)
@@ -367,7 +442,8 @@ fn solve(
     }
     let x: Vec<f64> = (0..n).map(|j| xn[j] / norms[j]).collect();
     let resid = &a * DVector::from_vec(x.clone()) - &b;
-    let residual_rms_um = (resid.norm_squared() / m.max(1) as f64).sqrt();
+    let rt = resid.rows(0, rtest_rows.min(m));
+    let residual_rms_um = sigma_r * (rt.norm_squared() / rt.len().max(1) as f64).sqrt();
     let dof = m.saturating_sub(rank).max(1);
     let sigma0 = (resid.norm_squared() / dof as f64).sqrt();
     let sigma: Vec<f64> = (0..n)
@@ -376,27 +452,7 @@ fn solve(
             sigma0 * var.sqrt() / norms[j]
         })
         .collect();
-    // null directions: small singular values, and the complement when m < n
-    let mut null: Vec<(DVector<f64>, f64)> = (0..sv.len())
-        .filter(|&i| sv[i] <= tol)
-        .map(|i| (vt.row(i).transpose(), sv[i]))
-        .collect();
-    if m < n {
-        let mut basis: Vec<DVector<f64>> = (0..sv.len()).map(|i| vt.row(i).transpose()).collect();
-        for k in 0..n {
-            let mut v = DVector::zeros(n);
-            v[k] = 1.0;
-            for q in &basis {
-                let d = q.dot(&v);
-                v -= q * d;
-            }
-            if v.norm() > 1e-6 {
-                v /= v.norm();
-                basis.push(v.clone());
-                null.push((v, 0.0));
-            }
-        }
-    }
+    let null = null_directions(sv.as_slice(), vt, tol, m, n);
     let (nests, _, _) = nest_spread(files);
     let (unobservable, unobs_terms, unobs_cols) = describe_null(files, o, cols, null);
     let value = |j: usize| (!unobs_cols.contains(&j)).then_some(x[j]);
@@ -409,6 +465,7 @@ fn solve(
     let mut loc = [0.0; 8];
     let mut drift = vec![[0.0; 8]; o.sensors.len()];
     let (mut location, mut drift_v, mut comps) = (Vec::new(), Vec::new(), Vec::new());
+    let mut linear_delta = Vec::new();
     for (j, col) in cols.iter().enumerate() {
         let tv = |name: String, unit: &str| TermValue {
             name,
@@ -447,6 +504,7 @@ fn solve(
                 comps.push(tv(col.name(o, files), unit));
             }
             Col::Const(..) => {}
+            Col::Lin(_) => linear_delta.push(x[j]),
         }
     }
     model.location = Location::from_array(loc);
@@ -479,7 +537,41 @@ fn solve(
         residual_rms_um,
         unobservable,
         unobservable_terms: unobs_terms.into_iter().collect(),
+        linear: None,
+        linear_delta,
     })
+}
+
+/// Null directions: right singular vectors with a small singular value,
+/// and the complement of the row space when there are fewer rows than unknowns.
+fn null_directions(
+    sv: &[f64],
+    vt: &DMatrix<f64>,
+    tol: f64,
+    m: usize,
+    n: usize,
+) -> Vec<(DVector<f64>, f64)> {
+    let mut null: Vec<(DVector<f64>, f64)> = (0..sv.len())
+        .filter(|&i| sv[i] <= tol)
+        .map(|i| (vt.row(i).transpose(), sv[i]))
+        .collect();
+    if m < n {
+        let mut basis: Vec<DVector<f64>> = (0..sv.len()).map(|i| vt.row(i).transpose()).collect();
+        for k in 0..n {
+            let mut v = DVector::zeros(n);
+            v[k] = 1.0;
+            for q in &basis {
+                let d = q.dot(&v);
+                v -= q * d;
+            }
+            if v.norm() > 1e-6 {
+                v /= v.norm();
+                basis.push(v.clone());
+                null.push((v, 0.0));
+            }
+        }
+    }
+    null
 }
 
 /// The unobservable directions with their terms and reasons, every term

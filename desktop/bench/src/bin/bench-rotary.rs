@@ -1,73 +1,99 @@
-//! `bench-rotary [--json] [--seeds N] [--noise-um S] [--thermal-cycles K]`:
-//! the five-axis chain of issue 31 on N random machines (default 10,
-//! σ = 0.5 µm on every reading): linear errors identified from 14 simulated
-//! lines, R-test files of the default plan (3 nests, 129 poses each)
-//! written and read back, the eight location errors identified together
-//! with the component errors and a constant per file, then the tool-tip
-//! error over the held-out grid (27 positions × A −90…90° × C 0…315° × 2
-//! tools) before and after. Prints the worst location-error recovery, the
-//! component errors' RMS recovery and the grid reduction; with
-//! `--thermal-cycles K` (e.g. 18) the location errors drift with three
-//! sensors over a warm-up and the grid is scored at four held-out states
-//! of the cool-down after it. `--linear-known`: the true linear errors
-//! instead of the 14-line identification (isolates the rotary fit).
-use tcomp_geometry::rotary_check::run_case;
+//! `bench-rotary [--json] [--seeds N] [--first-seed S] [--noise-um S]
+//! [--thermal-cycles K] [--bias-states B] [--linear joint|fixed|known]`:
+//! the five-axis chain of issue 31 on N random machines (default 10, seeds
+//! S…S+N−1, default 1001; σ = 0.5 µm on every reading): linear errors
+//! identified from 14 simulated lines, R-test files of the default plan (3
+//! nests, 129 poses each) written and read back, the eight location errors
+//! identified together with the component errors and a constant per file,
+//! then the tool-tip error over the held-out grid (27 positions × A
+//! −90…90° × C 0…315° × 2 tools) before and after, scored against the true
+//! error and against the "measured" one (σ per direction). `--linear`:
+//! `joint` (default) fits the 14 lines and the R-test files in one problem,
+//! `fixed` takes the 14-line model as known input, `known` the true linear
+//! errors (isolates the rotary fit). `--thermal-cycles K` (e.g. 18): the
+//! location errors drift with three sensors over a warm-up and the grid is
+//! scored at four held-out states of the cool-down; `--bias-states B`
+//! (with drift): the location constants re-optimised on tool-tip readings
+//! at B other cool-down states, scored beside the model without it.
+use tcomp_geometry::rotary_check::{run_case, CaseFigures, CaseOptions, LinearInput};
 
 fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(|| {
         let args: Vec<String> = std::env::args().skip(1).collect();
         tcomp_data::cli_error::check_args(
             &args,
-            &["--json", "--linear-known"],
-            &["--seeds", "--noise-um", "--thermal-cycles"],
+            &["--json"],
+            &[
+                "--seeds",
+                "--first-seed",
+                "--noise-um",
+                "--thermal-cycles",
+                "--bias-states",
+                "--linear",
+            ],
         )?;
         let val = |k: &str, d: f64| -> anyhow::Result<f64> {
             match args.iter().position(|a| a == k) {
                 Some(i) => args
                     .get(i + 1)
                     .and_then(|v| v.parse().ok())
-                    .ok_or_else(|| anyhow::anyhow!("{k} needs a number")),
+                    .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| anyhow::anyhow!("{k} needs a number ≥ 0")),
                 None => Ok(d),
             }
         };
-        let (seeds, noise, cycles) = (
+        let linear = match args.iter().position(|a| a == "--linear") {
+            None => LinearInput::Joint,
+            Some(i) => match args.get(i + 1).map(String::as_str) {
+                Some("joint") => LinearInput::Joint,
+                Some("fixed") => LinearInput::Fixed,
+                Some("known") => LinearInput::Known,
+                _ => anyhow::bail!("--linear: joint, fixed or known"),
+            },
+        };
+        let (seeds, first) = (
             val("--seeds", 10.0)? as u64,
-            val("--noise-um", 0.5)?,
-            val("--thermal-cycles", 0.0)? as usize,
+            val("--first-seed", 1001.0)? as u64,
         );
+        let o = CaseOptions {
+            noise_um: val("--noise-um", 0.5)?,
+            thermal_cycles: val("--thermal-cycles", 0.0)? as usize,
+            linear,
+            bias_states: val("--bias-states", 0.0)? as usize,
+        };
         let json = args.iter().any(|a| a == "--json");
         let mut cases = Vec::new();
-        for seed in 1..=seeds {
-            let c = run_case(
-                1000 + seed,
-                noise,
-                cycles,
-                args.iter().any(|a| a == "--linear-known"),
-            )?;
+        for seed in first..first + seeds {
+            let c = run_case(seed, &o)?;
             if !json {
-                println!(
-                    "machine {:2}: location worst {:.2} µm / {:.2} µrad; components rms {:.2} of {:.2} µm, {:.2} of {:.2} µrad; cond {:.0}; grid {:.2} → {:.2} µm ({:.1} %), linear model only {:.2} µm ({:.1} %)",
-                    c.seed, c.worst_um, c.worst_urad, c.component_rms_um.0, c.component_rms_um.1,
-                    c.component_rms_urad.0, c.component_rms_urad.1, c.condition_number.unwrap_or(f64::INFINITY),
-                    c.grid.before_rms_um, c.grid.after_rms_um, c.grid.reduction_pct,
-                    c.grid_linear_only.after_rms_um, c.grid_linear_only.reduction_pct
-                );
+                print_case(&c);
             }
             cases.push(c);
         }
-        let worst = |f: fn(&tcomp_geometry::rotary_check::CaseFigures) -> f64| {
-            cases.iter().map(f).fold(0.0, f64::max)
+        let worst = |f: fn(&CaseFigures) -> f64| cases.iter().map(f).fold(0.0, f64::max);
+        let least = |f: fn(&CaseFigures) -> f64| cases.iter().map(f).fold(f64::INFINITY, f64::min);
+        let mean = |f: fn(&CaseFigures) -> f64| {
+            cases.iter().map(f).sum::<f64>() / cases.len().max(1) as f64
         };
-        let least = |f: fn(&tcomp_geometry::rotary_check::CaseFigures) -> f64| {
-            cases.iter().map(f).fold(f64::INFINITY, f64::min)
+        let bias = |f: fn(&CaseFigures) -> Option<f64>| {
+            let v: Vec<f64> = cases.iter().filter_map(f).collect();
+            (!v.is_empty()).then(|| v.iter().copied().fold(f64::INFINITY, f64::min))
         };
         let summary = serde_json::json!({
-            "machines": cases.len(), "noise_um": noise, "thermal_cycles": cycles,
+            "machines": cases.len(), "first_seed": first, "noise_um": o.noise_um,
+            "thermal_cycles": o.thermal_cycles, "linear_input": o.linear, "bias_states": o.bias_states,
             "location_worst_um": worst(|c| c.worst_um), "location_worst_urad": worst(|c| c.worst_urad),
-            "component_rms_um_worst": worst(|c| c.component_rms_um.0), "component_true_rms_um_mean": cases.iter().map(|c| c.component_rms_um.1).sum::<f64>() / cases.len().max(1) as f64,
-            "component_rms_urad_worst": worst(|c| c.component_rms_urad.0), "component_true_rms_urad_mean": cases.iter().map(|c| c.component_rms_urad.1).sum::<f64>() / cases.len().max(1) as f64,
-            "grid_reduction_pct_least": least(|c| c.grid.reduction_pct),
+            "component_rms_um_worst": worst(|c| c.component_rms_um.0), "component_true_rms_um_mean": mean(|c| c.component_rms_um.1),
+            "component_rms_urad_worst": worst(|c| c.component_rms_urad.0), "component_true_rms_urad_mean": mean(|c| c.component_rms_urad.1),
+            "grid_true_reduction_pct_least": least(|c| c.grid_true.reduction_pct),
+            "grid_true_after_rms_um_worst": worst(|c| c.grid_true.after_rms_um),
+            "grid_measured_reduction_pct_least": least(|c| c.grid.reduction_pct),
+            "grid_measured_after_rms_um_worst": worst(|c| c.grid.after_rms_um),
             "grid_linear_only_reduction_pct_least": least(|c| c.grid_linear_only.reduction_pct),
+            "grid_bias_true_reduction_pct_least": bias(|c| c.grid_bias_true.as_ref().map(|f| f.reduction_pct)),
+            "location_worst_bias_um": bias(|c| c.worst_bias.map(|w| -w.0)).map(|v| -v),
+            "location_worst_bias_urad": bias(|c| c.worst_bias.map(|w| -w.1)).map(|v| -v),
+            "grid_bias_measured_reduction_pct_least": bias(|c| c.grid_bias.as_ref().map(|f| f.reduction_pct)),
             "unobservable": cases.iter().flat_map(|c| c.unobservable.clone()).collect::<Vec<_>>(),
         });
         if json {
@@ -80,4 +106,21 @@ fn main() -> std::process::ExitCode {
         }
         Ok(())
     })
+}
+
+fn print_case(c: &CaseFigures) {
+    let bias = match (&c.grid_bias_true, &c.grid_bias) {
+        (Some(t), Some(m)) => format!(
+            "; bias step {:.2} µm ({:.1} %) true, {:.1} % measured",
+            t.after_rms_um, t.reduction_pct, m.reduction_pct
+        ),
+        _ => String::new(),
+    };
+    println!(
+        "machine {:4}: location worst {:.2} µm / {:.2} µrad; components rms {:.2} of {:.2} µm, {:.2} of {:.2} µrad; cond {:.0}; grid {:.2} → {:.2} µm true ({:.1} %), {:.2} µm measured ({:.1} %); linear model only {:.1} %{bias}",
+        c.seed, c.worst_um, c.worst_urad, c.component_rms_um.0, c.component_rms_um.1,
+        c.component_rms_urad.0, c.component_rms_urad.1, c.condition_number.unwrap_or(f64::INFINITY),
+        c.grid_true.before_rms_um, c.grid_true.after_rms_um, c.grid_true.reduction_pct,
+        c.grid.after_rms_um, c.grid.reduction_pct, c.grid_linear_only.reduction_pct
+    );
 }

@@ -8,12 +8,14 @@ use std::path::PathBuf;
 
 use tcomp_data::rng::Rng;
 use tcomp_geometry::check::figures;
-use tcomp_geometry::identify::{identify, Degrees, LineObs};
+use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, LineFile};
 use tcomp_geometry::rotary::{Linear, RotaryModel};
+use tcomp_geometry::rotary_bias::{calibration_poses, optimise_rotary_bias, simulate_state};
 use tcomp_geometry::rotary_check::{compare, grid, linear_case, Machine5, CASE_STROKE};
 use tcomp_geometry::rotary_identify::{identify_rotary, RotaryIdentification, RotaryOptions};
+use tcomp_geometry::rotary_joint::{identify_rotary_joint, LinearPrior};
 use tcomp_geometry::rotary_sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rtest::RTestFile;
 use tcomp_geometry::study::ErrorsJson;
@@ -58,10 +60,20 @@ pub struct IdentifyRotaryArgs {
     /// R-test files of one turntable.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// The linear axes' errors as known input: an errors JSON (`geometry
-    /// identify --json`, `simulate`'s errors.json) or the 14 line files.
+    /// The linear axes: the 14 line files (fitted together with the R-test
+    /// files: the linear model's own error then does not alias into the
+    /// rotary terms) or an errors JSON (`geometry identify --json`,
+    /// `simulate`'s errors.json), taken as known input.
     #[arg(long, num_args = 1..)]
     pub lines: Vec<PathBuf>,
+    /// With line files: take their 14-line model as known input instead of
+    /// fitting the lines and the R-test files together.
+    #[arg(long)]
+    pub linear_fixed: bool,
+    /// With line files (joint fit): write the corrected linear model here
+    /// (errors JSON, for `geometry table` and the export).
+    #[arg(long)]
+    pub linear_out: Option<PathBuf>,
     #[arg(long, default_value_t = 3)]
     pub order_c: usize,
     #[arg(long, default_value_t = 2)]
@@ -100,6 +112,12 @@ pub struct CheckRotaryArgs {
     /// Sensor temperatures of the scored state, e.g. ctable=24.5,trunnion=22,bed=21.
     #[arg(long)]
     pub temps: Option<String>,
+    /// Bias step (seed 001 s21–s22): simulated tool-tip readings of the
+    /// truth at these other states (`;`-separated, each as --temps; 160
+    /// poses each, σ --noise-um), the model's location constants
+    /// re-optimised on them and scored beside the model without it.
+    #[arg(long)]
+    pub bias_temps: Option<String>,
     #[arg(long, default_value_t = 0.5)]
     pub noise_um: f64,
     #[arg(long, default_value_t = 1)]
@@ -248,10 +266,19 @@ fn print_conditioning(id: &RotaryIdentification) {
     }
 }
 
+/// The linear axes as the rotary fit takes them.
+enum LinearIn {
+    None,
+    /// An errors JSON: known input.
+    Known(Structure, Box<tcomp_geometry::GeometricErrors>),
+    /// Line files: their identification and the averaged lines.
+    Lines(Structure, Box<Identification>, Vec<LineObs>, [f64; 3]),
+}
+
 /// The linear axes' errors from an errors JSON or line files.
-fn linear_input(paths: &[PathBuf]) -> Result<Option<(Structure, tcomp_geometry::GeometricErrors)>> {
+fn linear_input(paths: &[PathBuf]) -> Result<LinearIn> {
     match paths {
-        [] => Ok(None),
+        [] => Ok(LinearIn::None),
         [p] if p.extension().is_some_and(|e| e == "json") => {
             let ej = ErrorsJson::read(p)?;
             if !ej.unobservable_terms.is_empty() {
@@ -262,7 +289,7 @@ fn linear_input(paths: &[PathBuf]) -> Result<Option<(Structure, tcomp_geometry::
                 );
             }
             let st = Structure::parse(&ej.structure).with_context(|| p.display().to_string())?;
-            Ok(Some((st, ej.to_errors()?)))
+            Ok(LinearIn::Known(st, Box::new(ej.to_errors()?)))
         }
         _ => {
             let files: Vec<LineFile> = paths
@@ -274,7 +301,7 @@ fn linear_input(paths: &[PathBuf]) -> Result<Option<(Structure, tcomp_geometry::
             let stroke = super::geometry_smooth::stroke_from(None, &obs)?;
             let id = identify(&st, &obs, Degrees::default(), stroke)?;
             tcomp_geometry::guard::refuse_unobservable(&id, obs.len(), false)?;
-            Ok(Some((st, id.errors)))
+            Ok(LinearIn::Lines(st, Box::new(id), obs, stroke))
         }
     }
 }
@@ -297,16 +324,39 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         bail!("--drift: the files have no T_ columns");
     }
     let lin = linear_input(&a.lines)?;
-    let l = lin.as_ref().map(|(st, e)| Linear {
-        structure: st,
-        errors: e,
-    });
     let o = RotaryOptions {
         order_c: a.order_c,
         order_a: a.order_a,
         sensors,
     };
-    let id = identify_rotary(&files, l, &o)?;
+    if a.linear_out.is_some() && (a.linear_fixed || !matches!(lin, LinearIn::Lines(..))) {
+        bail!("--linear-out needs the line files as --lines and no --linear-fixed (only the joint fit changes the linear model)");
+    }
+    let fixed = |st: &Structure, e: &tcomp_geometry::GeometricErrors| {
+        let l = Linear {
+            structure: st,
+            errors: e,
+        };
+        identify_rotary(&files, Some(l), &o)
+    };
+    let id = match &lin {
+        LinearIn::None => identify_rotary(&files, None, &o)?,
+        LinearIn::Known(st, e) => fixed(st, e)?,
+        LinearIn::Lines(st, idl, ..) if a.linear_fixed => fixed(st, &idl.errors)?,
+        LinearIn::Lines(st, idl, obs, stroke) => {
+            let prior = LinearPrior {
+                structure: st,
+                identification: idl,
+                lines: obs,
+            };
+            let (id, corrected) = identify_rotary_joint(&files, &prior, &o)?;
+            if let Some(p) = &a.linear_out {
+                let ej = ErrorsJson::from_errors(&corrected, st, *stroke, 11);
+                write_json(p, &serde_json::to_value(&ej)?)?;
+            }
+            id
+        }
+    };
     let truth = a.truth.as_ref().map(|p| RotaryModel::read(p)).transpose()?;
     if let Some(p) = &a.model_out {
         write_json(p, &serde_json::to_value(&id.model)?)?;
@@ -355,6 +405,12 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
         id.files, id.nest_positions, id.residual_rms_um
     );
     print_conditioning(id);
+    if let Some(j) = &id.linear {
+        println!(
+            "  linear axes fitted with the lines ({} of the unknowns, {} of the readings; condition number of the whole {:.0}): noise {:.3} µm (lines), {:.3} µm (R-test); their prediction at the R-test readings moved {:.3} µm RMS; lines' residual {:.3} → {:.3} µm",
+            j.linear_unknowns, j.line_readings, j.joint_condition_number.unwrap_or(f64::INFINITY), j.sigma_lines_um, j.sigma_rtest_um, j.change_at_rtest_rms_um, j.line_residual_rms_um_before, j.line_residual_rms_um
+        );
+    }
     let tl = truth.map(|t| t.location.to_array());
     println!("  location errors (± 1σ):");
     for (k, t) in id.location.iter().enumerate() {
@@ -445,23 +501,63 @@ pub fn check_rotary_cmd(a: CheckRotaryArgs) -> Result<()> {
             errors: e,
         }),
     };
-    let pts = compare(
-        &t5,
-        &m5,
-        &poses,
-        &temps,
-        a.noise_um,
-        "check",
-        &mut Rng::new(a.seed),
-    )?;
-    let f = figures(&pts.iter().collect::<Vec<_>>());
+    let fig = |m: &Machine5, noise: f64| -> Result<tcomp_geometry::check::Figures> {
+        // the same noise draws for every model scored
+        let pts = compare(
+            &t5,
+            m,
+            &poses,
+            &temps,
+            noise,
+            "check",
+            &mut Rng::new(a.seed),
+        )?;
+        Ok(figures(&pts.iter().collect::<Vec<_>>()))
+    };
+    let (f, ft) = (fig(&m5, a.noise_um)?, fig(&m5, 0.0)?);
+    let bias = match a.bias_temps.as_deref() {
+        None => None,
+        Some(list) => {
+            let mut rng = Rng::new(a.seed.wrapping_add(1));
+            let poses = calibration_poses(stroke);
+            let mut cal = Vec::new();
+            for st in list.split(';').filter(|x| !x.trim().is_empty()) {
+                let temps = parse_temps(st)?;
+                cal.push(simulate_state(
+                    &truth, t5.linear, &temps, &poses, a.noise_um, &mut rng,
+                )?);
+            }
+            if cal.is_empty() {
+                bail!("--bias-temps: no state given");
+            }
+            let b = optimise_rotary_bias(&model, m5.linear, &cal)?;
+            let mb = Machine5 {
+                rotary: &b,
+                linear: m5.linear,
+            };
+            Some((fig(&mb, a.noise_um)?, fig(&mb, 0.0)?, cal.len()))
+        }
+    };
     if a.json {
-        println!("{}", serde_json::json!({"grid": f, "temps_c": temps}));
+        let mut v = serde_json::json!({"grid": f, "grid_true": ft, "temps_c": temps});
+        if let (Some((b, bt, n)), Some(o)) = (&bias, v.as_object_mut()) {
+            o.insert("bias_states".into(), (*n).into());
+            o.insert("grid_bias".into(), serde_json::to_value(b)?);
+            o.insert("grid_bias_true".into(), serde_json::to_value(bt)?);
+        }
+        println!("{v}");
     } else {
         println!(
-            "five-axis grid ({} poses: 27 positions × A −90…90° every 30° × C 0…315° every 45° × 2 tools): tool-tip RMS {:.2} µm before, {:.2} µm after ({:.1} % less); max {:.2} → {:.2} µm",
-            f.points, f.before_rms_um, f.after_rms_um, f.reduction_pct, f.before_max_um, f.after_max_um
+            "five-axis grid ({} poses: 27 positions × A −90…90° every 30° × C 0…315° every 45° × 2 tools): tool-tip RMS {:.2} µm before, {:.2} µm after ({:.1} % less) against the true error; against the measured one (σ {} µm per direction) {:.2} → {:.2} µm ({:.1} % less), max {:.2} → {:.2} µm",
+            ft.points, ft.before_rms_um, ft.after_rms_um, ft.reduction_pct, a.noise_um,
+            f.before_rms_um, f.after_rms_um, f.reduction_pct, f.before_max_um, f.after_max_um
         );
+        if let Some((b, bt, n)) = &bias {
+            println!(
+                "  with the location constants re-optimised on tool-tip readings at {n} other state(s): {:.2} µm after ({:.1} % less) true, {:.2} µm ({:.1} %) measured",
+                bt.after_rms_um, bt.reduction_pct, b.after_rms_um, b.reduction_pct
+            );
+        }
     }
     Ok(())
 }
