@@ -45,9 +45,16 @@ fn a_speed_law_the_runs_cannot_tell_is_listed_one_they_can_is_named() {
     let kept = kept_share(&d);
     assert!(kept < SPEED_MIN_KEPT, "kept {kept}");
     let why = untestable_reason(&d, "bearing_nonlinear").expect("speed law listed");
-    assert!(why.contains("collinear with the nominal's own freedom"), "{why}");
+    assert!(
+        why.contains("collinear with the nominal's own freedom"),
+        "{why}"
+    );
     assert!(d.tried.iter().all(|f| f.name != "bearing_nonlinear"));
-    assert!(d.findings.is_empty(), "{:?}", d.findings.first().map(|f| &f.name));
+    assert!(
+        d.findings.is_empty(),
+        "{:?}",
+        d.findings.first().map(|f| &f.name)
+    );
 
     // case 18 (≈ 45 W·(n/n_max)^2.57): its speeds leave ≈ 16 %: the runs can
     // test the law, so it is not listed, and it is named

@@ -59,7 +59,7 @@ pub fn untestable(
         ));
     } else if let Some(kept) = speed_kept.filter(|k| *k < reach::SPEED_MIN_KEPT) {
         v.push((speed, format!(
-            "collinear with the nominal's own freedom on these runs: fitted on the fit rows, the nominal's speed terms (n and n^e through its modes, run levels, decays) leave at most {:.0} % (held-out RMS) of any steeper law's signature ((n/n_max)^p, p of {:?}, through any of its modes), below the {:.0} % the test needs; the runs' speeds do not spread enough to tell a steeper law from the nominal's own terms",
+            "collinear with the nominal's own freedom on these runs: fitted on the fit rows, the nominal's speed terms (n and n^e through its modes, run levels, decays) leave at most {:.1} % (held-out RMS) of any steeper law's signature ((n/n_max)^p, p of {:?}, through any of its modes), below the {:.1} % the test needs; the runs' speeds do not spread enough to tell a steeper law from the nominal's own terms",
             kept * 100.0,
             open_effects::STEEP_EXPONENTS,
             reach::SPEED_MIN_KEPT * 100.0
@@ -670,7 +670,7 @@ fn fit_ranking_rule(opt: &Options) -> String {
 /// How the computed `untestable` entries are decided (for `ranking_rule`).
 fn untestable_rule() -> String {
     format!(
-        "; untestable is computed from the runs per effect: the speed law is listed when the runs lack spindle_rpm, runs of different mean speed or {} speed levels, or when the nominal fitted on the fit rows leaves less than {:.0} % (held-out RMS) of every steeper law's signature (n/n_max)^p through any of its modes (then it is not tried either); a sensor lag where an injected lag would not clear the lag test's margins (`sensor_lag_reach_s`); effects without a driver column in the runs",
+        "; untestable is computed from the runs per effect: the speed law is listed when the runs lack spindle_rpm, runs of different mean speed or {} speed levels, or when the nominal fitted on the fit rows leaves less than {:.1} % (held-out RMS) of every steeper law's signature (n/n_max)^p through any of its modes (then it is not tried either); a sensor lag where an injected lag would not clear the lag test's margins (`sensor_lag_reach_s`); effects without a driver column in the runs",
         open_effects::MIN_SPEED_LEVELS,
         reach::SPEED_MIN_KEPT * 100.0
     )

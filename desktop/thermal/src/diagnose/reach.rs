@@ -19,11 +19,12 @@ use tcomp_data::linalg::ridge_multi;
 
 /// Held-out RMS share of a steeper speed law's signature that the nominal
 /// must leave for the runs to test it. Below it (the nominal's own n and
-/// n^e terms through its modes absorb ≥ 88 % of every steeper law's
+/// n^e terms through its modes absorb ≥ 88.5 % of every steeper law's
 /// signature: the runs' speeds do not spread enough), the speed-law test
-/// never named a true steep law on the open-world truth model (seeds 7, 11:
-/// 7 cases below, all silent; 6 named, all at 0.13–0.83).
-pub const SPEED_MIN_KEPT: f64 = 0.12;
+/// never named a true steep law on the benchmarks' development seeds (open
+/// world seeds 7, 11 and cross model seed 11: 10 such cases, all 0.066–0.111
+/// and silent; every named one kept ≥ 0.1197, seed 3's case 18 the lowest).
+pub const SPEED_MIN_KEPT: f64 = 0.115;
 
 /// The held-out RMS share the nominal's columns of output `o` leave of each
 /// signature (fitted on the fit rows where `o` is measured; `sigs[i][r]`
