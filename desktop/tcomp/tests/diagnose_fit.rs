@@ -402,8 +402,16 @@ fn a_lagging_sensor_is_named_against_its_body() {
         .map(|u| u["name"].as_str().unwrap())
         .collect();
     assert!(names.iter().any(|n| n.starts_with("ambient_drift")));
-    // two runs of different mean speed: the speed law is tested, not listed
-    assert!(names.iter().all(|n| !n.starts_with("bearing_nonlinear")));
+    // two runs of different mean speed and six speeds, but each speed held
+    // for an hour or more: the nominal's own n and n^e terms absorb ≈ 96 %
+    // of any steeper law's signature (`reach`), so the law is listed for
+    // that (not for the runs' speeds) and not tried
+    let why = untestable_reason(&d, "bearing_nonlinear");
+    assert!(
+        why.contains("collinear with the nominal's own freedom"),
+        "{why}"
+    );
+    assert!(d.tried.iter().all(|f| f.name != "bearing_nonlinear"));
     assert!(d.findings.iter().all(|f| f.name != "ambient_drift"));
 }
 

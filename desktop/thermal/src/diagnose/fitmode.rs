@@ -9,6 +9,7 @@ use serde_json::{json, Value};
 
 use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
+use super::reach;
 use super::render::SelectedGaps;
 use super::series;
 use super::stats::{ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView};
@@ -16,7 +17,11 @@ use super::{Diagnosis, Finding, Options};
 use tcomp_data::runcsv::Run;
 
 /// Effects an identified nominal absorbs (or the data cannot show), with why.
-pub fn untestable(p: &Problem, lag_reach: &[Option<f64>]) -> Vec<(String, String)> {
+pub fn untestable(
+    p: &Problem,
+    lag_reach: &[Option<f64>],
+    speed_kept: Option<f64>,
+) -> Vec<(String, String)> {
     let ds = p.ds;
     let mut v = vec![
         ("convection".to_string(), "a different convection level only changes the gains and time constants the nominal is identified with; without a machine file it is not a gap".to_string()),
@@ -52,6 +57,13 @@ pub fn untestable(p: &Problem, lag_reach: &[Option<f64>]) -> Vec<(String, String
                 open_effects::speed_levels(p).len()
             ),
         ));
+    } else if let Some(kept) = speed_kept.filter(|k| *k < reach::SPEED_MIN_KEPT) {
+        v.push((speed, format!(
+            "collinear with the nominal's own freedom on these runs: fitted on the fit rows, the nominal's speed terms (n and n^e through its modes, run levels, decays) leave at most {:.1} % (held-out RMS) of any steeper law's signature ((n/n_max)^p, p of {:?}, through any of its modes), below the {:.1} % the test needs; the runs' speeds do not spread enough to tell a steeper law from the nominal's own terms",
+            kept * 100.0,
+            open_effects::STEEP_EXPONENTS,
+            reach::SPEED_MIN_KEPT * 100.0
+        )));
     } else {
         // tested (`open_effects::speed_nonlinearity`): not listed
     }
@@ -524,6 +536,7 @@ fn fit_candidates(
     st: &Structure,
     fit: &ModelFit,
     only: &dyn Fn(&str) -> bool,
+    speed_kept: Option<f64>,
 ) -> Vec<(Candidate, Option<ModelFit>)> {
     let mut cands: Vec<(Candidate, Option<ModelFit>)> = Vec::new();
     if only("sensor_offset") {
@@ -543,7 +556,10 @@ fn fit_candidates(
     if only("coolant") {
         cands.extend(open_effects::periodic(p, st, fit).map(|c| (c, None)));
     }
-    if only("bearing_nonlinear") {
+    // a speed law the runs cannot tell from the nominal's own terms
+    // (`reach`, listed untestable) is not tried
+    let speed_testable = speed_kept.is_none_or(|k| k >= reach::SPEED_MIN_KEPT);
+    if only("bearing_nonlinear") && speed_testable {
         cands.extend(open_effects::speed_nonlinearity(p).map(|(c, b)| (c, Some(b))));
         cands.extend(
             open_effects::speed_nonlinearity_against_nominal(p, st, fit).map(|c| (c, None)),
@@ -651,6 +667,15 @@ fn fit_ranking_rule(opt: &Options) -> String {
     ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes), claimed there only when it halves the held-out gap, and reported once, in the better-ranked form"
 }
 
+/// How the computed `untestable` entries are decided (for `ranking_rule`).
+fn untestable_rule() -> String {
+    format!(
+        "; untestable is computed from the runs per effect: the speed law is listed when the runs lack spindle_rpm, runs of different mean speed or {} speed levels, or when the nominal fitted on the fit rows leaves less than {:.1} % (held-out RMS) of every steeper law's signature (n/n_max)^p through any of its modes (then it is not tried either); a sensor lag where an injected lag would not clear the lag test's margins (`sensor_lag_reach_s`); effects without a driver column in the runs",
+        open_effects::MIN_SPEED_LEVELS,
+        reach::SPEED_MIN_KEPT * 100.0
+    )
+}
+
 /// Diagnose runs without a machine file.
 pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
@@ -665,7 +690,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     }
     let where_ = where_of(&p, &fit);
     let only = |n: &str| opt.only.is_empty() || opt.only.iter().any(|o| o == n);
-    let cands = fit_candidates(&p, &st, &fit, &only);
+    let speed_reach = reach::speed_law_kept(&p, &st);
+    let speed_kept = speed_reach.as_ref().map(|r| r.0);
+    let cands = fit_candidates(&p, &st, &fit, &only, speed_kept);
     let lag_reach = sensor_lag_reach(&p, &cands, only("sensor_lag"));
     let n_cands = cands.len();
     let mut scored: Vec<Scored> = cands
@@ -711,7 +738,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         notes,
         seconds: t0.elapsed().as_secs_f64(),
         sims: n_cands,
-        untestable: untestable(&p, &lag_reach),
+        untestable: untestable(&p, &lag_reach, speed_kept),
         lag_reach: p
             .ds
             .sensors
@@ -720,9 +747,15 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             .zip(lag_reach.iter().copied())
             .collect(),
         missing: ds.missing.clone(),
-        nominal: nominal_json(&p, &st, &fit),
+        nominal: {
+            let mut n = nominal_json(&p, &st, &fit);
+            if let (Some(o), Some(r)) = (n.as_object_mut(), &speed_reach) {
+                o.insert("speed_law_reach".into(), r.1.clone());
+            }
+            n
+        },
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
-        ranking_rule: fit_ranking_rule(opt) + &super::periodic_claim::rule(),
+        ranking_rule: fit_ranking_rule(opt) + &super::periodic_claim::rule() + &untestable_rule(),
     })
 }

@@ -18,6 +18,7 @@ pub mod periodic;
 pub mod periodic_claim;
 mod placement;
 pub mod prep;
+pub mod reach;
 mod release;
 pub mod render;
 pub mod sensor_step;
