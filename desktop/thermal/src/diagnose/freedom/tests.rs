@@ -82,8 +82,8 @@ fn compressed_freedom_matches_the_full_one() {
         let raw = ev.residuals(eff).unwrap();
         let st = ev.stats_of(&raw);
         let (mut rf, mut rc) = (raw.clone(), raw.clone());
-        let df = full.correct(&mut rf);
-        let dc = comp.correct(&mut rc);
+        full.correct(&mut rf);
+        comp.correct(&mut rc);
         let (sf, sc) = (ev.stats_of(&rf), ev.stats_of(&rc));
         let (jf, jc) = (sf.j_fit(), sc.j_fit());
         // what a claim is judged by: the criterion (a claim needs a BIC
