@@ -25,7 +25,9 @@
 //! (`diagnose fit`), on `--worlds open,cross` (default both), scored named /
 //! honest / wrong / silent with false alarms on clean cases. `--heldout`
 //! runs the held-out seeds (`HELDOUT_SEEDS`: 101, 103, 107) instead of
-//! `--seed`; never tune on them. One line per case and column on stderr.
+//! `--seed`; never tune on them. One line per case and column on stderr
+//! (wall and CPU seconds). `--threads N`: diagnose on N threads (default:
+//! every core; `--threads 1` for the one-core time).
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use tcomp_bench::harness::{
@@ -58,6 +60,7 @@ struct Args {
     worlds: Vec<World>,
     heldout: bool,
     sigma: f64,
+    threads: Option<usize>,
 }
 
 fn parse_args() -> Result<Args> {
@@ -77,6 +80,7 @@ fn parse_args() -> Result<Args> {
     let mut worlds = vec![World::Open, World::Cross];
     let mut heldout = false;
     let mut sigma = tcomp_bench::harness::perturb::DESIGN_SIGMA;
+    let mut threads = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -95,6 +99,14 @@ fn parse_args() -> Result<Args> {
             }
             "--heldout" => heldout = true,
             "--sigma" => sigma = args.next().context("--sigma X")?.parse().context("--sigma X")?,
+            "--threads" => {
+                threads = Some(
+                    args.next()
+                        .context("--threads N")?
+                        .parse()
+                        .context("--threads N")?,
+                )
+            }
             "--json" => json = true,
             "--calibrate" => calibrate = true,
             "--verbose" => verbose = true,
@@ -103,7 +115,7 @@ fn parse_args() -> Result<Args> {
             "--closed-only" => closed_only = true,
             "--cross-only" => cross_only = true,
             "--periodic-only" => periodic_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X)"),
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X, --threads N)"),
         }
     }
     Ok(Args {
@@ -123,6 +135,7 @@ fn parse_args() -> Result<Args> {
         worlds,
         heldout,
         sigma,
+        threads,
     })
 }
 
@@ -144,12 +157,14 @@ fn run() -> Result<()> {
         worlds,
         heldout,
         sigma,
+        threads,
     } = parse_args()?;
     let machines = vec![
         Machine::load(&dir.join("turning-center-16.toml"))?,
         Machine::load(&dir.join("five-axis-20.toml"))?,
     ];
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let open_cfg = BenchConfig {
         cases,
         seed,

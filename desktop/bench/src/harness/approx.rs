@@ -104,6 +104,8 @@ struct Tally {
     false_alarms: usize,
     clean_findings: usize,
     times: Vec<f64>,
+    /// CPU seconds (user + system, every thread) per case.
+    cpu: Vec<f64>,
     misses: Vec<Value>,
 }
 
@@ -141,6 +143,8 @@ impl Tally {
             "clean_with_parameter_findings": self.clean_findings,
             "mean_seconds_per_case": mean(&self.times),
             "max_seconds_per_case": self.times.iter().copied().fold(0.0, f64::max),
+            "mean_cpu_seconds_per_case": mean(&self.cpu),
+            "max_cpu_seconds_per_case": self.cpu.iter().copied().fold(0.0, f64::max),
             "per_effect": self.per.iter().map(|(k, v)| (k.clone(), json!({"cases": v.iter().sum::<usize>(), "named": v[0], "honest": v[1], "wrong": v[2], "silent": v[3]}))).collect::<serde_json::Map<_, _>>(),
             "misses": self.misses,
         })
@@ -189,21 +193,37 @@ fn world_cases<'a>(
     })
 }
 
-/// The diagnosis of one case in one column (default flags), timed.
+/// CPU time (user + system, all threads) of this process so far, seconds
+/// (`/proc/self/stat`; 0 where there is none).
+fn cpu_s() -> f64 {
+    let read = || -> Option<f64> {
+        let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+        let rest = s.get(s.rfind(')')? + 2..)?;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let utime: f64 = f.get(11)?.parse().ok()?;
+        let stime: f64 = f.get(12)?.parse().ok()?;
+        Some((utime + stime) / 100.0)
+    };
+    read().unwrap_or(0.0)
+}
+
+/// The diagnosis of one case in one column (default flags), timed: wall
+/// and CPU seconds.
 fn diagnose_column(
     col: Column,
     case: &Case,
     opt: &Options,
     sigma: f64,
     dseed: u64,
-) -> Result<(Diagnosis, f64)> {
+) -> Result<(Diagnosis, f64, f64)> {
+    let c0 = cpu_s();
     let t = std::time::Instant::now();
     let d = match col {
         Column::Exact => diagnose(case.exact, &case.runs, opt)?,
         Column::Design => diagnose(&perturb_machine(case.exact, sigma, dseed)?, &case.runs, opt)?,
         Column::Fit => diagnose_fit(&case.runs, opt)?,
     };
-    Ok((d, t.elapsed().as_secs_f64()))
+    Ok((d, t.elapsed().as_secs_f64(), cpu_s() - c0))
 }
 
 /// Run every selected world and column on one seed's cases, into `tallies`
@@ -224,10 +244,11 @@ fn run_seed(
         for (ci, case) in cases.iter().enumerate() {
             let dseed = design_seed(cfg.seed, w.tag(), ci);
             for &col in &acfg.columns {
-                let (d, secs) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
+                let (d, secs, cpu) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
                 let dj = d.to_json();
                 let t = tallies.entry((w.key(), col.key())).or_default();
                 t.times.push(secs);
+                t.cpu.push(cpu);
                 let verdict = match (&case.truth, case.kind) {
                     (Some(truth), Some(kind)) => {
                         let o = score_effect(&dj, truth);
@@ -258,12 +279,13 @@ fn run_seed(
                     }));
                 }
                 eprintln!(
-                    "{} seed {} case {ci:3} {:17} {:10} {:.2} s  truth {}  got {}",
+                    "{} seed {} case {ci:3} {:17} {:10} {:.2} s (cpu {:.2} s)  truth {}  got {}",
                     w.key(),
                     cfg.seed,
                     col.key(),
                     verdict,
                     secs,
+                    cpu,
                     case.describe,
                     Value::from(got)
                 );
@@ -303,6 +325,7 @@ pub fn run_approx_bench(
             p.false_alarms += t.false_alarms;
             p.clean_findings += t.clean_findings;
             p.times.extend(t.times);
+            p.cpu.extend(t.cpu);
             p.misses.extend(t.misses);
         }
     }

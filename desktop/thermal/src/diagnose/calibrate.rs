@@ -440,6 +440,7 @@ fn coarsen(p: &Prepared, max_rows: usize) -> Prepared {
 
 /// Calibrate the machine's uncertain parameters on the fit rows.
 pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calibration> {
+    let t0 = std::time::Instant::now();
     let ps: Vec<Prepared> = full.iter().map(|p| coarsen(p, CAL_ROWS)).collect();
     let ps = &ps[..];
     let ks = knobs(m);
@@ -512,6 +513,13 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         }
     }
     let cal = apply(m, &ks, &theta);
+    if std::env::var_os("TCOMP_DIAG_TIMING").is_some() {
+        eprintln!(
+            "diagnose timing: calibration {nk} knobs, {sims} coarse sims ({} rows per run), {:.3} s",
+            ps.first().map_or(0, |p| p.rows()),
+            t0.elapsed().as_secs_f64()
+        );
+    }
     // held-out gap by design and calibrated (noise units, µm, °C)
     let st_d = Evaluator::new(m, full)?.stats(&[])?;
     let st_c = Evaluator::new(&cal, full)?.stats(&[])?;

@@ -9,23 +9,60 @@
 //! correction is a box-constrained least-squares fit on the fit rows
 //! (projected Gauss–Seidel) whose box is the tolerance: a candidate can
 //! absorb no more of a wrong design than the null hypothesis could.
+//!
+//! Speed: that projection runs for every evaluation of every candidate
+//! (≈ 800 per diagnosis; ≈ 70 % of a diagnosis' time when it multiplied
+//! the full sensitivity matrix, ≈ 35 k rows × ≈ 95 values, twice, and ran
+//! 200 Gauss–Seidel sweeps). S is compressed to `REL_TOL` (relative
+//! Frobenius norm in the criterion's weights) twice over: the ≈ 95
+//! strongly collinear columns are kept in the basis of the eigenvectors V
+//! of SᵀDS (D: the channels' weights on every row) that carry all but
+//! `REL_TOL`² of its trace, and each column of SV is kept on a coarser
+//! time grid (`knots.rs`) read by linear interpolation where that is as
+//! close (on the benches' 10 s runs it is not: every row is kept).
+//! `REL_TOL` is 10⁻⁶, not the 10⁻³ a forward difference's own error
+//! would suggest: what is left once an effect is explained lies in the
+//! small directions, and 10⁻³ moved the criterion by ≈ 13 and the
+//! held-out gap by 8 % there (`freedom/tests.rs`; 10⁻⁶: ≤ 0.1).
+//! A fit's criterion
+//! needs only the fit rows' SSE per channel, which `fit_sse` gives from
+//! B̃ᵀB̃ and B̃ᵀr without forming the corrected residuals; the box QP's
+//! sweeps read A by contiguous columns (`boxqp.rs`). `freedom/tests.rs`
+//! checks the compressed freedom against the full one.
+
+mod knots;
+
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::box_qp;
+use super::boxqp::box_qp_counted;
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
+use knots::Knots;
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
-    /// ∂(simulated channel)/∂θ: one row per (run, channel, row) in order,
-    /// one column per knob.
-    sens: DMatrix<f64>,
-    /// Weight per flattened row: the channel's on fit rows, 0 on held-out.
-    wf: Vec<f64>,
+    /// K: the sensitivities in the kept directions (B = SV) at the knots,
+    /// one column per direction; B̃ = H K on every row (H: `knots`).
+    knots_b: DMatrix<f64>,
+    knots: Knots,
+    /// Per flattened row: its first knot and the next knot's weight
+    /// (`Knots::row_weights`; precomputed: the pass runs per evaluation).
+    row_knot: Vec<u32>,
+    row_wb: Vec<f64>,
+    /// Per channel (in `stats_of`'s order): its knots, weight, B̃ᵀB̃ over
+    /// its fit rows.
+    chans: Vec<FitChannel>,
+    /// Per flattened row: is it a fit row; its channel.
+    fit: Vec<bool>,
+    /// Per flattened row: was the calibrated nominal's residual missing.
+    missing: Vec<bool>,
+    /// Kept directions (knobs × directions).
+    v: DMatrix<f64>,
     /// Calibrated θ, its bounds and prior precision per knob.
     theta: Vec<f64>,
     lo: Vec<f64>,
@@ -33,10 +70,145 @@ pub struct Freedom {
     prec: Vec<f64>,
     /// SᵀWS over the fit rows plus the prior precision.
     a: DMatrix<f64>,
+    /// Projections done and Gauss–Seidel sweeps, for `TCOMP_DIAG_TIMING`
+    /// (printed when the freedom is dropped).
+    calls: AtomicU64,
+    sweeps: AtomicU64,
+    ns: AtomicU64,
+}
+
+/// ∂(simulated channel)/∂θ of one knob: run → channel → row.
+type Column = Vec<Vec<Vec<f64>>>;
+
+/// The weight per channel (fit rows), as the criterion has it.
+fn channel_weights(ev: &Evaluator, r0: &[Vec<Vec<f64>>]) -> Vec<f64> {
+    ev.stats_of(r0)
+        .ch
+        .iter()
+        .map(|c| 1.0 / (c.sse_fit / c.n_fit.max(1) as f64 + (0.1 * c.s).powi(2)))
+        .collect()
+}
+
+/// The sensitivity of every channel to one knob by a forward difference.
+fn sensitivity(
+    m: &Machine,
+    ks: &[Knob],
+    theta: &[f64],
+    ps: &[Prepared],
+    r0: &[Vec<Vec<f64>>],
+    i: usize,
+) -> Result<Column> {
+    let h = 0.02;
+    let mut t = theta.to_vec();
+    t[i] += h;
+    let mi = apply(m, ks, &t);
+    let ri = Evaluator::new(&mi, ps)?.residuals(&[])?;
+    // residual = measured − simulated: ∂sim = −∂residual
+    Ok(r0
+        .iter()
+        .zip(&ri)
+        .map(|(a, b)| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| {
+                    x.iter()
+                        .zip(y)
+                        .map(|(p, q)| {
+                            let d = (p - q) / h;
+                            if d.is_finite() {
+                                d
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect())
+}
+
+/// The kept directions of S: eigenvectors of SᵀDS (D: `wall` per row),
+/// largest eigenvalue first, leaving out the smallest ones whose
+/// eigenvalues sum to at most `rel_tol`² of the trace (‖D(S − SVVᵀ)‖ ≤
+/// `rel_tol`·‖DS‖, Frobenius); every direction when `rel_tol` is 0.
+pub(crate) fn directions(sens: &DMatrix<f64>, wall: &[f64], rel_tol: f64) -> DMatrix<f64> {
+    let nk = sens.ncols();
+    let sd = DMatrix::from_fn(sens.nrows(), nk, |r, c| sens[(r, c)] * wall[r].sqrt());
+    let g = sd.tr_mul(&sd);
+    let eig = nalgebra::SymmetricEigen::new(g);
+    let mut order: Vec<usize> = (0..nk).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let trace: f64 = eig.eigenvalues.iter().map(|l| l.max(0.0)).sum();
+    let budget = rel_tol * rel_tol * trace;
+    let (mut dropped, mut kept) = (0.0, order.len());
+    while kept > 1 {
+        let l = eig.eigenvalues[order[kept - 1]].max(0.0);
+        if dropped + l > budget {
+            break;
+        }
+        dropped += l;
+        kept -= 1;
+    }
+    if timing() {
+        eprintln!(
+            "diagnose timing: {kept} of {nk} directions kept (dropped {:.1e} of the trace)",
+            dropped / trace.max(1e-300)
+        );
+    }
+    DMatrix::from_fn(nk, kept, |r, c| eig.eigenvectors[(r, order[c])])
+}
+
+/// The compression's error budget, relative (see the module comment).
+pub const REL_TOL: f64 = 1e-6;
+
+/// What the fit rows need, per channel (in `stats_of`'s order).
+struct FitChannel {
+    /// Its knots.
+    k0: usize,
+    k1: usize,
+    /// Its weight in the criterion.
+    w: f64,
+    /// B̃ᵀB̃ over its fit rows (missing rows left out).
+    m: DMatrix<f64>,
+}
+
+/// Per flattened row: the channel's weight, fit or not, missing or not;
+/// per channel: its rows and weight.
+struct Rows {
+    wall: Vec<f64>,
+    fit: Vec<bool>,
+    missing: Vec<bool>,
+    lens: Vec<usize>,
+    w: Vec<f64>,
+}
+
+fn rows_of(ps: &[Prepared], r0: &[Vec<Vec<f64>>], w: &[f64]) -> Rows {
+    let mut o = Rows {
+        wall: Vec::new(),
+        fit: Vec::new(),
+        missing: Vec::new(),
+        lens: Vec::new(),
+        w: w.to_vec(),
+    };
+    let mut ci = 0;
+    for (p, rr) in ps.iter().zip(r0) {
+        for ch in rr {
+            for (k, v) in ch.iter().enumerate() {
+                o.wall.push(w[ci]);
+                o.fit.push(p.is_fit(k));
+                o.missing.push(!v.is_finite());
+            }
+            o.lens.push(ch.len());
+            ci += 1;
+        }
+    }
+    o
 }
 
 impl Freedom {
-    /// Sensitivities at the calibrated θ (one simulation per knob).
+    /// Sensitivities at the calibrated θ (one simulation per knob),
+    /// compressed to `REL_TOL`.
     pub(crate) fn new(
         m: &Machine,
         ks: &[Knob],
@@ -44,80 +216,84 @@ impl Freedom {
         ps: &[Prepared],
         threads: usize,
     ) -> Result<Freedom> {
+        Freedom::with_tol(m, ks, theta, ps, threads, REL_TOL)
+    }
+
+    /// The same compressed to `rel_tol` (0: every direction, every row).
+    pub(crate) fn with_tol(
+        m: &Machine,
+        ks: &[Knob],
+        theta: &[f64],
+        ps: &[Prepared],
+        threads: usize,
+        rel_tol: f64,
+    ) -> Result<Freedom> {
+        let t0 = std::time::Instant::now();
         let cal = apply(m, ks, theta);
         let ev = Evaluator::new(&cal, ps)?;
         let r0 = ev.residuals(&[])?;
-        let st = ev.stats_of(&r0);
-        let w: Vec<f64> = st
-            .ch
-            .iter()
-            .map(|c| 1.0 / (c.sse_fit / c.n_fit.max(1) as f64 + (0.1 * c.s).powi(2)))
-            .collect();
-        let h = 0.02;
+        let rows = rows_of(ps, &r0, &channel_weights(&ev, &r0));
         let idx: Vec<usize> = (0..ks.len()).collect();
-        let cols = par_map(&idx, threads, |&i| -> Result<Vec<Vec<Vec<f64>>>> {
-            let mut t = theta.to_vec();
-            t[i] += h;
-            let mi = apply(m, ks, &t);
-            let ri = Evaluator::new(&mi, ps)?.residuals(&[])?;
-            // residual = measured − simulated: ∂sim = −∂residual
-            Ok(r0
-                .iter()
-                .zip(&ri)
-                .map(|(a, b)| {
-                    a.iter()
-                        .zip(b)
-                        .map(|(x, y)| {
-                            x.iter()
-                                .zip(y)
-                                .map(|(p, q)| {
-                                    let d = (p - q) / h;
-                                    if d.is_finite() {
-                                        d
-                                    } else {
-                                        0.0
-                                    }
-                                })
-                                .collect()
-                        })
-                        .collect()
-                })
-                .collect())
-        })
-        .into_iter()
-        .collect::<Result<Vec<_>>>()?;
+        let cols = par_map(&idx, threads, |&i| sensitivity(m, ks, theta, ps, &r0, i))
+            .into_iter()
+            .collect::<Result<Vec<_>>>()?;
         let nk = ks.len();
-        let prec: Vec<f64> = ks.iter().map(|k| 1.0 / k.sigma().powi(2)).collect();
-        let mut wf = Vec::new();
-        let mut ci = 0;
-        for (p, rr) in ps.iter().zip(&r0) {
-            for ch in rr {
-                wf.extend((0..ch.len()).map(|k| if p.is_fit(k) { w[ci] } else { 0.0 }));
-                ci += 1;
-            }
-        }
-        let n_all = wf.len();
-        let sens = DMatrix::from_fn(n_all, nk, |_, _| 0.0);
-        let mut sens = sens;
+        let n_all = rows.wall.len();
+        let mut sens = DMatrix::zeros(n_all, nk);
         for (i, col) in cols.iter().enumerate() {
             let flat: Vec<f64> = col.iter().flatten().flatten().copied().collect();
             sens.column_mut(i).copy_from_slice(&flat);
         }
-        let ws = DMatrix::from_fn(n_all, nk, |r, c| sens[(r, c)] * wf[r]);
-        let mut a = sens.transpose() * ws;
+        drop(cols);
+        let v = directions(&sens, &rows.wall, rel_tol);
+        let basis = &sens * &v;
+        drop(sens);
+        let (knots, err) = knots::choose(&basis, &rows.lens, &rows.wall, rel_tol);
+        let knots_b = knots.sample(&basis);
+        drop(basis);
+        let chans = fit_channels(&knots, &knots_b, &rows);
+        // SᵀWS ≈ V (Σ w B̃ᵀB̃) Vᵀ on the fit rows
+        let nd = v.ncols();
+        let mut bwb = DMatrix::zeros(nd, nd);
+        for c in &chans {
+            bwb += &c.m * c.w;
+        }
+        let mut a = &v * bwb * v.transpose();
+        // exactly symmetric (the solver reads columns as rows)
+        a = (&a + a.transpose()) * 0.5;
+        let prec: Vec<f64> = ks.iter().map(|k| 1.0 / k.sigma().powi(2)).collect();
         for i in 0..nk {
             a[(i, i)] += prec[i];
         }
         let (lo, hi): (Vec<f64>, Vec<f64>) = ks.iter().map(Knob::bounds).unzip();
-        Ok(Freedom {
-            sens,
-            wf,
+        if timing() {
+            eprintln!(
+                "diagnose timing: freedom {nk} knobs → {nd} directions × {} knots (every {} rows, error {err:.1e}), {n_all} rows, {:.3} s",
+                knots.n_knots,
+                knots.f,
+                t0.elapsed().as_secs_f64()
+            );
+        }
+        let (row_knot, row_wb) = knots.row_weights();
+        let fr = Freedom {
+            knots_b,
+            knots,
+            row_knot,
+            row_wb,
+            chans,
+            fit: rows.fit,
+            missing: rows.missing,
+            v,
             theta: theta.to_vec(),
             lo,
             hi,
             prec,
             a,
-        })
+            calls: AtomicU64::new(0),
+            sweeps: AtomicU64::new(0),
+            ns: AtomicU64::new(0),
+        };
+        Ok(fr)
     }
 
     /// Number of design values that may move.
@@ -129,41 +305,91 @@ impl Freedom {
         self.theta.is_empty()
     }
 
+    /// Directions of the design values kept and rows between knots.
+    pub fn compression(&self) -> (usize, usize) {
+        (self.v.ncols(), self.knots.f)
+    }
+
+    /// The bounded correction δ for the data's pull `b` (box QP).
+    fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let nk = self.len();
+        let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
+        let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
+        let (d, sweeps) = box_qp_counted(&self.a, b, &lo, &hi);
+        self.calls.fetch_add(1, Relaxed);
+        self.sweeps.fetch_add(sweeps as u64, Relaxed);
+        d
+    }
+
     /// The bounded correction δ of the design values that best explains
     /// `res` on the fit rows (with the prior), and `res` with it removed
     /// (every row).
     pub fn correct(&self, res: &mut [Vec<Vec<f64>>]) -> Vec<f64> {
-        let nk = self.len();
-        if nk == 0 {
+        if self.is_empty() {
             return Vec::new();
         }
-        let b = self.pull_of(res);
-        let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
-        let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
-        let d = box_qp(&self.a, &b, &lo, &hi);
-        let corr = &self.sens * DVector::from_column_slice(&d);
-        let mut k = 0;
-        for rr in res.iter_mut() {
-            for r in rr.iter_mut() {
-                for v in r.iter_mut() {
-                    *v -= corr[k];
-                    k += 1;
-                }
-            }
+        let t0 = std::time::Instant::now();
+        let (h, _) = self.fit_products(res);
+        let d = self.solve(&self.pull_from(&h));
+        let c = self.v.tr_mul(&DVector::from_column_slice(&d));
+        let mut ck: Vec<f64> = (&self.knots_b * c).iter().copied().collect();
+        ck.push(0.0);
+        for ((v, &j), &wb) in res
+            .iter_mut()
+            .flatten()
+            .flatten()
+            .zip(&self.row_knot)
+            .zip(&self.row_wb)
+        {
+            let j = j as usize;
+            *v -= (1.0 - wb) * ck[j] + wb * ck[j + 1];
         }
+        self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
         d
     }
 
-    /// Sᵀ W r − prior: the data's pull on every knob at the calibrated θ.
-    fn pull_of(&self, res: &[Vec<Vec<f64>>]) -> Vec<f64> {
-        let wr: Vec<f64> = res
+    /// Per channel: B̃ᵀr over its fit rows (non-finite r as 0), and Σ r²
+    /// over the finite ones; None where r is non-finite on a row the
+    /// calibrated nominal had (B̃ᵀB̃ counts that row).
+    fn fit_products(&self, res: &[Vec<Vec<f64>>]) -> (Vec<DVector<f64>>, Option<Vec<f64>>) {
+        let mut consistent = true;
+        // z = Hᵀ r over the fit rows (one more knot: a knot row's next one)
+        let mut z = vec![0.0; self.knots.n_knots + 1];
+        let mut rr = vec![0.0; self.chans.len()];
+        let mut row = 0;
+        for (ci, ch) in res.iter().flatten().enumerate() {
+            for &v in ch {
+                if self.fit[row] {
+                    if v.is_finite() {
+                        let (j, wb) = (self.row_knot[row] as usize, self.row_wb[row]);
+                        z[j] += (1.0 - wb) * v;
+                        z[j + 1] += wb * v;
+                        rr[ci] += v * v;
+                    } else {
+                        consistent &= self.missing[row];
+                    }
+                }
+                row += 1;
+            }
+        }
+        let h = self
+            .chans
             .iter()
-            .flatten()
-            .flatten()
-            .zip(&self.wf)
-            .map(|(r, w)| if r.is_finite() { r * w } else { 0.0 })
+            .map(|c| {
+                let zc = DVector::from_column_slice(&z[c.k0..c.k1]);
+                self.knots_b.rows(c.k0, c.k1 - c.k0).tr_mul(&zc)
+            })
             .collect();
-        let g = self.sens.tr_mul(&DVector::from_vec(wr));
+        (h, consistent.then_some(rr))
+    }
+
+    /// Sᵀ W r − prior from the channels' B̃ᵀr.
+    fn pull_from(&self, h: &[DVector<f64>]) -> Vec<f64> {
+        let mut s = DVector::zeros(self.v.ncols());
+        for (c, hc) in self.chans.iter().zip(h) {
+            s.axpy(c.w, hc, 1.0);
+        }
+        let g = &self.v * s;
         (0..self.len())
             .map(|i| g[i] - self.prec[i] * self.theta[i])
             .collect()
@@ -172,7 +398,30 @@ impl Freedom {
     /// Where each knob would go with its bound released: the data's pull
     /// at the calibrated θ (positive: wants a larger value).
     pub fn pull(&self, _ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Vec<f64> {
-        self.pull_of(res)
+        self.pull_from(&self.fit_products(res).0)
+    }
+
+    /// The fit rows' SSE per channel after the correction, from
+    /// |r − B̃c|² = |r|² − 2 cᵀB̃ᵀr + cᵀ(B̃ᵀB̃)c (c = Vᵀδ), without
+    /// forming the corrected residuals.
+    pub fn fit_sse_of(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
+        if self.is_empty() {
+            return None;
+        }
+        let t0 = std::time::Instant::now();
+        let (h, rr) = self.fit_products(res);
+        let rr = rr?;
+        let d = self.solve(&self.pull_from(&h));
+        let c = self.v.tr_mul(&DVector::from_column_slice(&d));
+        let out = self
+            .chans
+            .iter()
+            .zip(&h)
+            .zip(rr)
+            .map(|((ch, hc), r2)| (r2 - 2.0 * c.dot(hc) + (&ch.m * &c).dot(&c)).max(0.0))
+            .collect();
+        self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+        Some(out)
     }
 
     pub fn theta(&self) -> &[f64] {
@@ -184,8 +433,57 @@ impl Freedom {
     }
 }
 
+/// Per channel: its knots and B̃ᵀB̃ over its fit rows that were not missing.
+fn fit_channels(knots: &Knots, kb: &DMatrix<f64>, rows: &Rows) -> Vec<FitChannel> {
+    let nd = kb.ncols();
+    let n_all = rows.fit.len();
+    let bt = knots.expand(kb, n_all);
+    let mut out = Vec::new();
+    let mut r0 = 0;
+    for (ci, &l) in rows.lens.iter().enumerate() {
+        let used: Vec<usize> = (r0..r0 + l)
+            .filter(|&r| rows.fit[r] && !rows.missing[r])
+            .collect();
+        let b = DMatrix::from_fn(used.len(), nd, |r, c| bt[(used[r], c)]);
+        let m = b.tr_mul(&b);
+        let (k0, k1) = knots.seg_knots(ci);
+        out.push(FitChannel {
+            k0,
+            k1,
+            w: rows.w[ci],
+            m,
+        });
+        r0 += l;
+    }
+    out
+}
+
+/// `TCOMP_DIAG_TIMING` set: the diagnosis prints where its time goes.
+pub(crate) fn timing() -> bool {
+    std::env::var_os("TCOMP_DIAG_TIMING").is_some()
+}
+
+impl Drop for Freedom {
+    fn drop(&mut self) {
+        if timing() {
+            let calls = self.calls.load(Relaxed);
+            eprintln!(
+                "diagnose timing: {calls} projections, {:.3} s, {:.1} Gauss–Seidel sweeps each",
+                self.ns.load(Relaxed) as f64 * 1e-9,
+                self.sweeps.load(Relaxed) as f64 / calls.max(1) as f64
+            );
+        }
+    }
+}
+
 impl Projection for Freedom {
     fn project(&self, res: &mut [Vec<Vec<f64>>]) {
         self.correct(res);
     }
+    fn fit_sse(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
+        self.fit_sse_of(res)
+    }
 }
+
+#[cfg(test)]
+mod tests;

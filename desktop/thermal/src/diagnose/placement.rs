@@ -137,7 +137,7 @@ fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
             power_w: v[1],
             load_frac: v[2],
         };
-        ev.stats(&[e]).map_or(f64::INFINITY, |s| s.j_fit())
+        ev.j_fit(&[e]).unwrap_or(f64::INFINITY)
     };
     let mut best = (init.clone(), j(&init));
     for i in 0..=40 {
