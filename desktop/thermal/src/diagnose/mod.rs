@@ -6,6 +6,7 @@
 pub mod boxqp;
 pub mod calibrate;
 pub mod candidate;
+pub mod design_heat;
 pub mod effect_fit;
 pub mod fitmode;
 pub mod freedom;
@@ -397,6 +398,8 @@ struct Judge<'a> {
     /// BIC's penalty per parameter: ln of the fit rows.
     lnn: f64,
     opt: &'a Options,
+    /// The calibration's freedom (None: the file taken as exact).
+    freedom: Option<&'a freedom::Freedom>,
 }
 
 impl Judge<'_> {
@@ -434,9 +437,22 @@ impl Judge<'_> {
         ))
     }
 
+    /// Why a finding's heat effect cannot be told from the design's own
+    /// heat error (`design_heat.rs`; only against a calibrated file).
+    fn barred(&self, f: &Finding) -> Option<String> {
+        self.freedom?;
+        f.effects
+            .iter()
+            .find_map(|e| design_heat::within_tolerance(self.ev.m, self.ev.runs, e))
+    }
+
     // never an effect that widens the held-out displacement gap (beyond
     // 2 %, below what an RMS over the held-out rows can resolve)
     fn supported(&self, f: &Finding, m_ref: f64) -> bool {
+        self.margins(f, m_ref) && self.barred(f).is_none()
+    }
+
+    fn margins(&self, f: &Finding, m_ref: f64) -> bool {
         let opt = self.opt;
         f.dbic <= -opt.min_dbic
             && f.gap_um.is_none_or(|((b, _), (a, _))| a <= b * 1.02 + 1e-9)
@@ -606,7 +622,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
@@ -681,6 +697,7 @@ fn diagnose_core(
         lnn: (st0.n_fit().max(2) as f64).ln(),
         st0,
         opt,
+        freedom: cal.as_ref().map(|c| c.freedom),
     };
     let where_ = where_analysis(ps, &res0);
     let cands = placement::candidates(&ev, &res0, &opt.only);
@@ -691,6 +708,16 @@ fn diagnose_core(
     });
     sims += singles.iter().map(|f| f.evals).sum::<usize>();
     let (tried, ok_idx) = judge_singles(&judge, &singles)?;
+    // heat effects the margins would claim but the design's own heat
+    // tolerance covers: untestable, with the reason
+    let mut untestable: Vec<(String, String)> = Vec::new();
+    for (f, _) in &tried {
+        if let (true, Some(why)) = (judge.margins(f, judge.m0), judge.barred(f)) {
+            if !untestable.iter().any(|u| u.0 == f.name) {
+                untestable.push((f.name.clone(), why));
+            }
+        }
+    }
     let singles_ok: Vec<Finding> = ok_idx.iter().map(|&i| tried[i].0.clone()).collect();
     let best_single = singles_ok.first();
     let pairs = pairs_to_try(&tried, &ok_idx, best_single, judge.m0, opt);
@@ -724,7 +751,7 @@ fn diagnose_core(
         notes: run_notes(ps),
         seconds: t0.elapsed().as_secs_f64(),
         sims,
-        untestable: Vec::new(),
+        untestable,
         lag_reach: Vec::new(),
         missing: ps.iter().flat_map(|p| p.missing.clone()).collect(),
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
@@ -763,7 +790,8 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
             d
         }
     };
-    d.untestable = placement::untestable(m, &ps, &opt.only);
+    d.untestable
+        .extend(placement::untestable(m, &ps, &opt.only));
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
 }
