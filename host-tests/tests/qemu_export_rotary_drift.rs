@@ -14,7 +14,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use host_tests::qemu::{free_tcp_port, modbus_master as master, BenchBoard};
+use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
@@ -130,17 +130,7 @@ fn an_exported_drifting_rotary_model_is_served_bit_for_bit() {
         .map(|s| Some(s.sensor.ref_temp))
         .collect();
 
-    let port = free_tcp_port();
-    let serial = format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on");
-    let board = BenchBoard::start(
-        &serial,
-        &["serve", t.to_str().unwrap(), m.to_str().unwrap(), "200"],
-    );
-    assert!(
-        board.wait_for("serving Modbus RTU", std::time::Duration::from_secs(60)),
-        "{}",
-        board.log()
-    );
+    let (board, port) = BenchBoard::serve_tcp(&t, &m, &["200"]);
     let p_s = port.to_string();
     let poses = poses();
     let args: Vec<String> = poses

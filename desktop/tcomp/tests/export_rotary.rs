@@ -39,15 +39,7 @@ fn identified_machine_as(d: &Path, seed: &str, joint: bool) {
             seed,
         ],
     );
-    let mut lines: Vec<String> = std::fs::read_dir(d.join("lines"))
-        .unwrap()
-        .map(|e| format!("lines/{}", e.unwrap().file_name().to_string_lossy()))
-        .filter(|n| n.ends_with(".csv"))
-        .collect();
-    lines.sort();
-    let mut args = vec!["geometry", "identify", "--json"];
-    args.extend(lines.iter().map(String::as_str));
-    std::fs::write(d.join("lin.json"), ok(d, &args)).unwrap();
+    let lines = identify_lines(d);
     let mut rotary = vec![
         "geometry",
         "identify-rotary",
@@ -70,6 +62,20 @@ fn identified_machine_as(d: &Path, seed: &str, joint: bool) {
     };
     let vol = ok(d, &["geometry", "table", "--model", table_from, "--json"]);
     std::fs::write(d.join("vol.json"), vol).unwrap();
+}
+
+/// The simulated 14 line files (sorted) identified into `lin.json`.
+fn identify_lines(d: &Path) -> Vec<String> {
+    let mut lines: Vec<String> = std::fs::read_dir(d.join("lines"))
+        .unwrap()
+        .map(|e| format!("lines/{}", e.unwrap().file_name().to_string_lossy()))
+        .filter(|n| n.ends_with(".csv"))
+        .collect();
+    lines.sort();
+    let mut args = vec!["geometry", "identify", "--json"];
+    args.extend(lines.iter().map(String::as_str));
+    std::fs::write(d.join("lin.json"), ok(d, &args)).unwrap();
+    lines
 }
 
 struct Figures {

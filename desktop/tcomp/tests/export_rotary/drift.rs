@@ -37,15 +37,7 @@ fn drifting_machine(d: &Path, seed: &str) {
             seed,
         ],
     );
-    let mut lines: Vec<String> = std::fs::read_dir(d.join("lines"))
-        .unwrap()
-        .map(|e| format!("lines/{}", e.unwrap().file_name().to_string_lossy()))
-        .filter(|n| n.ends_with(".csv"))
-        .collect();
-    lines.sort();
-    let mut args = vec!["geometry", "identify", "--json"];
-    args.extend(lines.iter().map(String::as_str));
-    std::fs::write(d.join("lin.json"), ok(d, &args)).unwrap();
+    super::identify_lines(d);
     let vol = ok(d, &["geometry", "table", "--model", "lin.json", "--json"]);
     std::fs::write(d.join("vol.json"), vol).unwrap();
     let mut cycles: Vec<String> = std::fs::read_dir(d)
