@@ -15,6 +15,7 @@ use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose, RotaryModel};
 use tcomp_geometry::rotary_frames::rotary_error_machine;
 use tcomp_geometry::study::ErrorsJson;
+use tcomp_geometry::GeometricErrors;
 use thermocomp_core::five_axis::{self, fstatus};
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::vstatus;
@@ -78,6 +79,36 @@ fn identify_lines(d: &Path) -> Vec<String> {
     lines
 }
 
+/// What `sim-rotary` and `identify-rotary` wrote in `d`: the true and the
+/// identified rotary model, the true linear errors.
+struct Written {
+    truth: RotaryModel,
+    model: RotaryModel,
+    lin: ErrorsJson,
+    structure: Structure,
+    lin_errors: GeometricErrors,
+}
+
+impl Written {
+    fn read(d: &Path) -> Self {
+        let lin = ErrorsJson::read(&d.join("errors.json")).unwrap();
+        Written {
+            truth: RotaryModel::read(&d.join("rotary-truth.json")).unwrap(),
+            model: RotaryModel::read(&d.join("rotary.json")).unwrap(),
+            structure: Structure::parse(&lin.structure).unwrap(),
+            lin_errors: lin.to_errors().unwrap(),
+            lin,
+        }
+    }
+
+    fn linear(&self) -> Linear<'_> {
+        Linear {
+            structure: &self.structure,
+            errors: &self.lin_errors,
+        }
+    }
+}
+
 struct Figures {
     served_vs_model_um: f64,
     before_rms_um: f64,
@@ -87,15 +118,9 @@ struct Figures {
 /// Held-out poses (random positions, tools, A over ±90°, C over a turn):
 /// the image's prediction against the identified model and against the truth.
 fn score(d: &Path, img: &Model, seed: u64) -> Figures {
-    let truth = RotaryModel::read(&d.join("rotary-truth.json")).unwrap();
-    let model = RotaryModel::read(&d.join("rotary.json")).unwrap();
-    let lin = ErrorsJson::read(&d.join("errors.json")).unwrap();
-    let st = Structure::parse(&lin.structure).unwrap();
-    let lin_errors = lin.to_errors().unwrap();
-    let lt = Linear {
-        structure: &st,
-        errors: &lin_errors,
-    };
+    let w = Written::read(d);
+    let (truth, model, lin) = (&w.truth, &w.model, &w.lin);
+    let lt = w.linear();
     let (v, f) = (
         img.volumetric.as_ref().unwrap(),
         img.five_axis.as_ref().unwrap(),
@@ -119,7 +144,7 @@ fn score(d: &Path, img: &Model, seed: u64) -> Figures {
         let pos_mm = pos_um.map(|p| f64::from(p) / 1e3);
         let tool = f64::from(tool_um) / 1e3;
         let p_mm = [pos_mm[0], pos_mm[1], pos_mm[2] + tool];
-        let want = rotary_error_machine(&model, &model.location, p_mm, a, c);
+        let want = rotary_error_machine(model, &model.location, p_mm, a, c);
         for k in 0..3 {
             worst = worst.max((f64::from(out.rotary[k]) / 10.0 - want[k]).abs());
         }
@@ -130,7 +155,7 @@ fn score(d: &Path, img: &Model, seed: u64) -> Figures {
             tool_mm: [0.0, 0.0, tool],
         };
         let rot = nominal_chain(truth.pivot_a_mm, truth.offset_c_mm, a, c).rotation;
-        let t = rot * tool_tip_error(&truth, &truth.location, Some(lt), &pose);
+        let t = rot * tool_tip_error(truth, &truth.location, Some(lt), &pose);
         let served = out.corrections.map(|v| f64::from(v) / 10.0);
         before += t.norm_squared();
         after += (0..3).map(|k| (t[k] - served[k]).powi(2)).sum::<f64>();

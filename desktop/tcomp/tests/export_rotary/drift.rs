@@ -7,15 +7,13 @@
 //! with the board) follows the identified model's f64 prediction within
 //! the stated bound, and the true tool-tip error (linear + rotary with its
 //! drift) is reduced.
-use super::{ok, Path};
+use super::{ok, Path, Written};
 use std::collections::BTreeMap;
 
 use tcomp_data::rng::Rng;
-use tcomp_geometry::kinematics::Structure;
-use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose, RotaryModel};
+use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Pose};
 use tcomp_geometry::rotary_frames::rotary_error_machine;
 use tcomp_geometry::rotary_sim::warmup_temps;
-use tcomp_geometry::study::ErrorsJson;
 use thermocomp_core::five_axis::{self, fstatus, FIVE_AXIS_RTEST_LOCATION};
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::vstatus;
@@ -63,15 +61,9 @@ fn drifting_machine(d: &Path, seed: &str) {
 /// image served at the references: the drift left out) at four held-out
 /// cool-down states × 100 random poses.
 fn score(d: &Path, img: &Model, seed: u64) -> (f64, f64, f64, f64) {
-    let truth = RotaryModel::read(&d.join("rotary-truth.json")).unwrap();
-    let model = RotaryModel::read(&d.join("rotary.json")).unwrap();
-    let lin = ErrorsJson::read(&d.join("errors.json")).unwrap();
-    let st = Structure::parse(&lin.structure).unwrap();
-    let lin_errors = lin.to_errors().unwrap();
-    let lt = Linear {
-        structure: &st,
-        errors: &lin_errors,
-    };
+    let w = Written::read(d);
+    let (truth, model, lin) = (&w.truth, &w.model, &w.lin);
+    let lt = w.linear();
     let (v, f) = (
         img.volumetric.as_ref().unwrap(),
         img.five_axis.as_ref().unwrap(),
@@ -113,7 +105,7 @@ fn score(d: &Path, img: &Model, seed: u64) -> (f64, f64, f64, f64) {
             let pos_mm = pos_um.map(|p| f64::from(p) / 1e3);
             let tool = f64::from(tool_um) / 1e3;
             let p_mm = [pos_mm[0], pos_mm[1], pos_mm[2] + tool];
-            let want = rotary_error_machine(&model, &loc_model, p_mm, a, c);
+            let want = rotary_error_machine(model, &loc_model, p_mm, a, c);
             for k in 0..3 {
                 worst = worst.max((f64::from(out.rotary[k]) / 10.0 - want[k]).abs());
             }
@@ -124,7 +116,7 @@ fn score(d: &Path, img: &Model, seed: u64) -> (f64, f64, f64, f64) {
                 tool_mm: [0.0, 0.0, tool],
             };
             let rot = nominal_chain(truth.pivot_a_mm, truth.offset_c_mm, a, c).rotation;
-            let e = rot * tool_tip_error(&truth, &loc_truth, Some(lt), &pose);
+            let e = rot * tool_tip_error(truth, &loc_truth, Some(lt), &pose);
             before += e.norm_squared();
             after += (0..3)
                 .map(|k| (e[k] - f64::from(out.corrections[k]) / 10.0).powi(2))
