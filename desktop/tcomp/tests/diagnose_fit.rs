@@ -401,7 +401,27 @@ fn a_lagging_sensor_is_named_against_its_body() {
         .iter()
         .map(|u| u["name"].as_str().unwrap())
         .collect();
-    assert!(names.iter().any(|n| n.starts_with("ambient_drift")));
+    // an air drift beyond T_ambient is listed only when the nominal's own
+    // columns reproduce an air ramp (`nominal.ambient_drift_reach`), and
+    // then not tried; otherwise it is tried
+    let kept = j["nominal"]["ambient_drift_reach"]["kept_share"]
+        .as_f64()
+        .unwrap();
+    let listed = names.iter().any(|n| n.starts_with("ambient_drift"));
+    let tried = d.tried.iter().any(|f| f.name == "ambient_drift");
+    assert_eq!(
+        listed,
+        kept < tcomp_thermal::diagnose::reach::AMBIENT_MIN_KEPT,
+        "kept {kept}"
+    );
+    assert_eq!(tried, !listed, "kept {kept}");
+    if listed {
+        let why = untestable_reason(&d, "ambient_drift");
+        assert!(
+            why.contains("collinear with the nominal's own freedom"),
+            "{why}"
+        );
+    }
     // two runs of different mean speed and six speeds, but each speed held
     // for an hour or more: the nominal's own n and n^e terms absorb ≈ 96 %
     // of any steeper law's signature (`reach`), so the law is listed for

@@ -7,7 +7,7 @@ use super::prep::Prepared;
 pub const Z_MIN: f64 = 2.33;
 /// Longest held-out block [s]: a held-out stretch is cut into blocks of at
 /// most this length (the slow thermal misfit changes little within one).
-const BLOCK_S: f64 = 600.0;
+pub const BLOCK_S: f64 = 600.0;
 
 /// Held-out blocks: each contiguous stretch of held-out rows of a run
 /// where `touched` (the effect changes the prediction there), cut into
@@ -81,6 +81,12 @@ pub fn held_out_z(ps: &[Prepared], r0: &[Vec<Vec<f64>>], r1: &[Vec<Vec<f64>>]) -
             (n > 0).then(|| ((s0 / n as f64 + 1.0) / (s1 / n as f64 + 1.0)).ln())
         })
         .collect();
+    z_of(&d)
+}
+
+/// mean(d) / (sd(d) / √n) of the per-block log reductions; NaN with fewer
+/// than two blocks.
+pub fn z_of(d: &[f64]) -> f64 {
     if d.len() < 2 {
         return f64::NAN;
     }
