@@ -246,6 +246,12 @@ fn run_seed(
             for &col in &acfg.columns {
                 let (d, secs, cpu) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
                 let dj = d.to_json();
+                // a debugging aid: the whole diagnosis per case
+                if let Ok(dir) = std::env::var("TCOMP_BENCH_DUMP") {
+                    let f = format!("{dir}/{}_{}_{}_{ci}.json", w.key(), col.key(), cfg.seed);
+                    let tried: Vec<Value> = d.tried.iter().map(|f| f.to_json()).collect();
+                    std::fs::write(&f, json!({"d": dj, "tried": tried}).to_string())?;
+                }
                 let t = tallies.entry((w.key(), col.key())).or_default();
                 t.times.push(secs);
                 t.cpu.push(cpu);
