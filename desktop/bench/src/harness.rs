@@ -9,6 +9,7 @@ mod approx;
 mod closed;
 mod cross;
 mod draw;
+pub mod file_truth;
 mod open;
 mod periodic;
 pub mod perturb;

@@ -2,11 +2,13 @@
 //! constructed diagnoses, and the design-file perturbation (lognormal,
 //! seeded, every design number changed, reproducible).
 use serde_json::json;
+use tcomp_bench::harness::file_truth::{design_keys, judge_finding, FileVerdict};
 use tcomp_bench::harness::perturb::{
     design_numbers, design_seed, perturb_machine, perturb_spec, DESIGN_SIGMA,
 };
 use tcomp_bench::harness::score::{
-    finding_physics, score_clean, score_effect, untestable_covers, Outcome, Physics, Truth,
+    count_findings, finding_physics, score_clean, score_effect, untestable_covers, DrawnFile,
+    Outcome, Physics, Truth,
 };
 use tcomp_thermal::sim::Machine;
 
@@ -139,15 +141,119 @@ fn a_parameter_finding_names_the_effect_by_its_physics() {
     );
 }
 
+/// A parameter finding as `diagnose` ranks it among the effects.
+fn finding(parameter: &str, factor: f64, tol: f64) -> serde_json::Value {
+    json!({
+        "name": format!("parameter:{parameter}"),
+        "params": {"parameter": parameter, "factor": factor, "tolerance": tol},
+        "evidence": {"kind": "design value outside its tolerance"},
+    })
+}
+
+/// The factors of a drawn file: every design number of `m` ×1 except `set`.
+fn factors(m: &Machine, set: &[(&str, f64)]) -> Vec<(String, f64)> {
+    design_numbers(&m.spec)
+        .into_iter()
+        .map(|(k, _)| {
+            let f = set.iter().find(|s| s.0 == k).map_or(1.0, |s| s.1);
+            (k, f)
+        })
+        .collect()
+}
+
 #[test]
-fn a_clean_case_alarms_on_an_effect_and_counts_findings_apart() {
-    let none = score_clean(&json!({"effects": [], "untestable": [{"name": "convection"}]}));
-    assert!(!none.false_alarm && !none.finding);
-    let eff = score_clean(&json!({"effects": [{"name": "ballscrew"}]}));
-    assert!(eff.false_alarm && !eff.finding);
-    let fnd =
-        score_clean(&json!({"effects": [], "findings": [{"parameter": "node c0 c_j_per_k"}]}));
-    assert!(!fnd.false_alarm && fnd.finding);
+fn a_parameter_finding_is_true_of_the_file_only_outside_its_tolerance_and_the_right_way() {
+    let m = truth_machine();
+    // link h1-h2 drawn ×2.5: the file needs ×0.4, outside ±25 %
+    let fs = factors(
+        &m,
+        &[("link h1-h2 g_w_per_k", 2.5), ("node h3 c_j_per_k", 1.15)],
+    );
+    let v = |f: &serde_json::Value| judge_finding(f, &m.spec, &fs);
+    assert_eq!(v(&finding("link:h1-h2", 0.45, 0.25)), FileVerdict::True);
+    // named either way round
+    assert_eq!(v(&finding("link:h2-h1", 0.45, 0.25)), FileVerdict::True);
+    // the finding moves it up: wrong direction
+    assert_eq!(
+        v(&finding("link:h1-h2", 1.8, 0.25)),
+        FileVerdict::WrongDirection
+    );
+    // h3's capacity drawn ×1.15: needs ×0.87, inside the tolerance
+    assert_eq!(
+        v(&finding("capacity:h3", 0.5, 0.25)),
+        FileVerdict::InsideTolerance
+    );
+    // the tolerance the diagnosis used decides: ±10 % leaves it outside
+    assert_eq!(v(&finding("capacity:h3", 0.8, 0.10)), FileVerdict::True);
+    assert_eq!(
+        v(&finding("capacity:nowhere", 0.5, 0.25)),
+        FileVerdict::Unknown
+    );
+    // a group: the geometric mean of what its members need
+    let links: Vec<String> = design_numbers(&m.spec)
+        .into_iter()
+        .map(|(k, _)| k)
+        .filter(|k| k.starts_with("link "))
+        .collect();
+    assert_eq!(design_keys("link", &m.spec), links);
+    let half: Vec<(&str, f64)> = links.iter().map(|k| (k.as_str(), 2.0)).collect();
+    let all_off = factors(&m, &half);
+    assert_eq!(
+        judge_finding(&finding("link", 0.55, 0.25), &m.spec, &all_off),
+        FileVerdict::True
+    );
+    // one member far off moves the group's mean too little
+    assert_eq!(
+        judge_finding(&finding("link", 0.55, 0.25), &m.spec, &fs),
+        FileVerdict::InsideTolerance
+    );
+    // the spindle's heat: its sources, bearings and motor loss together
+    let heat = design_keys("heat:spindle", &m.spec);
+    assert!(
+        !heat.is_empty()
+            && heat.iter().all(|k| k.starts_with("source ")
+                || k.starts_with("bearing ")
+                || k == "motor_loss_frac")
+    );
+}
+
+#[test]
+fn a_clean_case_alarms_on_an_effect_or_a_finding_untrue_of_the_file() {
+    let m = truth_machine();
+    let none = score_clean(
+        &json!({"effects": [], "untestable": [{"name": "convection"}]}),
+        None,
+    );
+    assert!(!none.false_alarm && none.true_findings + none.false_findings == 0);
+    let eff = score_clean(&json!({"effects": [{"name": "ballscrew"}]}), None);
+    assert!(eff.false_alarm && eff.effect);
+    // a finding true of the drawn file is no false alarm; with the exact
+    // file (no drawn factors) it is one
+    let fs = factors(&m, &[("link h1-h2 g_w_per_k", 2.5)]);
+    let file = Some(DrawnFile {
+        spec: &m.spec,
+        factors: &fs,
+    });
+    let d = json!({"effects": [finding("link:h1-h2", 0.45, 0.25)]});
+    let c = score_clean(&d, file);
+    assert!(!c.false_alarm && !c.effect && c.true_findings == 1 && c.false_findings == 0);
+    assert!(score_clean(&d, None).false_alarm);
+    let wrong =
+        json!({"effects": [finding("link:h1-h2", 0.45, 0.25), finding("capacity:h3", 0.6, 0.25)]});
+    let c = score_clean(&wrong, file);
+    assert!(c.false_alarm && c.true_findings == 1 && c.false_findings == 1);
+    // effect cases: a finding naming the effect's physics, one true of the
+    // file, one neither
+    let three = json!({"effects": [finding("film", 1.9, 0.25), finding("link:h1-h2", 0.45, 0.25), finding("capacity:h3", 0.6, 0.25)]});
+    let conv = truth("convection", None, None);
+    assert_eq!(score_effect(&three, &conv), Outcome::Named);
+    let n = count_findings(&three, Some(&conv), file);
+    assert_eq!((n.names_effect, n.true_of_file, n.neither), (1, 1, 1));
+    // the group decides the physics, not a node's name
+    assert_eq!(
+        finding_physics(&finding("capacity:motor", 0.5, 0.25)),
+        Some(Physics::Capacity)
+    );
 }
 
 fn truth_machine() -> Machine {
@@ -213,8 +319,24 @@ fn the_cross_model_machines_are_perturbed_too() {
         // bearings (f0, f1) and the rotor rod are design numbers there
         assert!(before.iter().any(|(k, _)| k.ends_with(" f0")), "{f}");
         assert!(before.iter().any(|(k, _)| k == "rod k_w_per_mk"), "{f}");
-        let p = perturb_machine(&m, DESIGN_SIGMA, 3).unwrap();
+        let (p, _) = perturb_machine(&m, DESIGN_SIGMA, 3).unwrap();
         let after = design_numbers(&p.spec);
         assert!(before.iter().zip(&after).all(|(a, b)| a.1 != b.1), "{f}");
+        // every calibration group names design numbers of the file
+        for g in ["capacity", "film", "link", "jacket", "heat", "length"] {
+            let ks = design_keys(g, &m.spec);
+            assert!(
+                ks.iter().all(|k| before.iter().any(|b| &b.0 == k)),
+                "{f} {g}"
+            );
+        }
+        // the rod's ends are links to its first and last slice
+        let r = m.spec.rod.as_ref().unwrap();
+        let front = r.front.as_ref().unwrap();
+        assert_eq!(
+            design_keys(&format!("link:{}-rod:0", front.node), &m.spec),
+            ["rod front g_w_per_k"]
+        );
+        assert_eq!(design_keys("capacity:rod", &m.spec), ["rod cp_j_per_kgk"]);
     }
 }

@@ -14,9 +14,13 @@ use tcomp_thermal::sim::Machine;
 
 use super::cross::cross_cases;
 use super::draw::BenchConfig;
+use super::file_truth::{is_parameter_finding, judge_finding, FileVerdict};
 use super::open::open_cases;
 use super::perturb::{design_seed, perturb_machine};
-use super::score::{score_clean, score_effect, truth_of_open, truth_of_sim, Outcome, Truth};
+use super::score::{
+    count_findings, score_clean, score_effect, truth_of_open, truth_of_sim, DrawnFile, Outcome,
+    Truth,
+};
 use super::tally::mean;
 
 /// Seeds never tuned on: report them apart (`bench-diagnose --columns …
@@ -101,8 +105,18 @@ struct Tally {
     /// kind → [named, honest, wrong, silent]
     per: BTreeMap<String, [usize; 4]>,
     clean: usize,
+    /// Clean cases with an effect named or a finding not true of the file.
     false_alarms: usize,
-    clean_findings: usize,
+    /// Clean cases with an effect named.
+    clean_effects: usize,
+    /// Clean cases with a finding not true of the file.
+    clean_false_findings: usize,
+    /// Parameter findings on clean cases: true of the drawn file, not.
+    clean_true_findings: usize,
+    clean_findings_not_true: usize,
+    /// Parameter findings on effect cases: naming the effect's physics,
+    /// true of the file, neither.
+    effect_findings: [usize; 3],
     times: Vec<f64>,
     /// CPU seconds (user + system, every thread) per case.
     cpu: Vec<f64>,
@@ -140,7 +154,15 @@ impl Tally {
             "wrong_rate": rate(tot[2]),
             "clean_cases": self.clean,
             "false_alarms": self.false_alarms,
-            "clean_with_parameter_findings": self.clean_findings,
+            "clean_with_effect_named": self.clean_effects,
+            "clean_with_false_findings": self.clean_false_findings,
+            "clean_true_file_findings": self.clean_true_findings,
+            "clean_false_findings": self.clean_findings_not_true,
+            "effect_case_findings": {
+                "naming_the_effect": self.effect_findings[0],
+                "true_of_file": self.effect_findings[1],
+                "neither": self.effect_findings[2],
+            },
             "mean_seconds_per_case": mean(&self.times),
             "max_seconds_per_case": self.times.iter().copied().fold(0.0, f64::max),
             "mean_cpu_seconds_per_case": mean(&self.cpu),
@@ -207,23 +229,39 @@ fn cpu_s() -> f64 {
     read().unwrap_or(0.0)
 }
 
-/// The diagnosis of one case in one column (default flags), timed: wall
-/// and CPU seconds.
+/// What one column's diagnosis of a case gave: the diagnosis, wall and CPU
+/// seconds, and the factors drawn on the design file (design column).
+struct ColumnRun {
+    d: Diagnosis,
+    secs: f64,
+    cpu: f64,
+    factors: Option<Vec<(String, f64)>>,
+}
+
+/// The diagnosis of one case in one column (default flags), timed.
 fn diagnose_column(
     col: Column,
     case: &Case,
     opt: &Options,
     sigma: f64,
     dseed: u64,
-) -> Result<(Diagnosis, f64, f64)> {
+) -> Result<ColumnRun> {
     let c0 = cpu_s();
     let t = std::time::Instant::now();
-    let d = match col {
-        Column::Exact => diagnose(case.exact, &case.runs, opt)?,
-        Column::Design => diagnose(&perturb_machine(case.exact, sigma, dseed)?, &case.runs, opt)?,
-        Column::Fit => diagnose_fit(&case.runs, opt)?,
+    let (d, factors) = match col {
+        Column::Exact => (diagnose(case.exact, &case.runs, opt)?, None),
+        Column::Design => {
+            let (m, f) = perturb_machine(case.exact, sigma, dseed)?;
+            (diagnose(&m, &case.runs, opt)?, Some(f))
+        }
+        Column::Fit => (diagnose_fit(&case.runs, opt)?, None),
     };
-    Ok((d, t.elapsed().as_secs_f64(), cpu_s() - c0))
+    Ok(ColumnRun {
+        d,
+        secs: t.elapsed().as_secs_f64(),
+        cpu: cpu_s() - c0,
+        factors,
+    })
 }
 
 /// Run every selected world and column on one seed's cases, into `tallies`
@@ -244,14 +282,19 @@ fn run_seed(
         for (ci, case) in cases.iter().enumerate() {
             let dseed = design_seed(cfg.seed, w.tag(), ci);
             for &col in &acfg.columns {
-                let (d, secs, cpu) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
-                let dj = d.to_json();
+                let run = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
+                let (secs, cpu) = (run.secs, run.cpu);
+                let dj = run.d.to_json();
                 // a debugging aid: the whole diagnosis per case
                 if let Ok(dir) = std::env::var("TCOMP_BENCH_DUMP") {
                     let f = format!("{dir}/{}_{}_{}_{ci}.json", w.key(), col.key(), cfg.seed);
-                    let tried: Vec<Value> = d.tried.iter().map(|f| f.to_json()).collect();
+                    let tried: Vec<Value> = run.d.tried.iter().map(|f| f.to_json()).collect();
                     std::fs::write(&f, json!({"d": dj, "tried": tried}).to_string())?;
                 }
+                let file = run.factors.as_deref().map(|factors| DrawnFile {
+                    spec: &case.exact.spec,
+                    factors,
+                });
                 let t = tallies.entry((w.key(), col.key())).or_default();
                 t.times.push(secs);
                 t.cpu.push(cpu);
@@ -259,13 +302,20 @@ fn run_seed(
                     (Some(truth), Some(kind)) => {
                         let o = score_effect(&dj, truth);
                         t.add_effect(kind, o);
+                        let fc = count_findings(&dj, Some(truth), file);
+                        t.effect_findings[0] += fc.names_effect;
+                        t.effect_findings[1] += fc.true_of_file;
+                        t.effect_findings[2] += fc.neither;
                         o.label()
                     }
                     _ => {
-                        let c = score_clean(&dj);
+                        let c = score_clean(&dj, file);
                         t.clean += 1;
                         t.false_alarms += c.false_alarm as usize;
-                        t.clean_findings += c.finding as usize;
+                        t.clean_effects += c.effect as usize;
+                        t.clean_false_findings += (c.false_findings > 0) as usize;
+                        t.clean_true_findings += c.true_findings;
+                        t.clean_findings_not_true += c.false_findings;
                         if c.false_alarm {
                             "FALSE ALARM"
                         } else {
@@ -276,7 +326,17 @@ fn run_seed(
                 let got: Vec<Value> = ["effects", "findings"]
                     .iter()
                     .flat_map(|k| dj[*k].as_array().cloned().unwrap_or_default())
-                    .map(|e| json!({"name": e["name"], "params": e["params"]}))
+                    .map(|e| {
+                        let mut g = json!({"name": e["name"], "params": e["params"]});
+                        if is_parameter_finding(&e) {
+                            let v = file.map_or(FileVerdict::Unknown, |f| {
+                                judge_finding(&e, f.spec, f.factors)
+                            });
+                            g["file"] = json!(format!("{v:?}"));
+                            g["z"] = e["evidence"]["held_out_z"].clone();
+                        }
+                        g
+                    })
                     .collect();
                 if verdict != "named" && verdict != "clean ok" {
                     t.misses.push(json!({
@@ -329,7 +389,13 @@ pub fn run_approx_bench(
             }
             p.clean += t.clean;
             p.false_alarms += t.false_alarms;
-            p.clean_findings += t.clean_findings;
+            p.clean_effects += t.clean_effects;
+            p.clean_false_findings += t.clean_false_findings;
+            p.clean_true_findings += t.clean_true_findings;
+            p.clean_findings_not_true += t.clean_findings_not_true;
+            for i in 0..3 {
+                p.effect_findings[i] += t.effect_findings[i];
+            }
             p.times.extend(t.times);
             p.cpu.extend(t.cpu);
             p.misses.extend(t.misses);
@@ -342,7 +408,7 @@ pub fn run_approx_bench(
         "heldout_seeds": HELDOUT_SEEDS,
         "heldout": acfg.seeds == HELDOUT_SEEDS,
         "cases_per_seed": cfg.cases,
-        "scoring": "named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable; wrong: something else named; silent: nothing named or listed. Clean: false alarm = an effect named; parameter findings counted apart",
+        "scoring": "parameter findings (effects entries whose evidence kind is 'design value outside its tolerance') are told from effects. named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable; wrong: something else named; silent: nothing named or listed. A parameter finding is true of the drawn design file (harness/file_truth.rs) when the correction the file needs on the design numbers it names (truth / design: 1/factor drawn, the geometric mean over a group or multi-number parameter) lies outside the tolerance the diagnosis used and its fitted/design factor is on the same side of 1; with the exact file no finding is true. Clean: false alarm = an effect named or a finding not true of the file; true file findings counted apart. Effect cases: findings counted as naming the effect's physics, true of the file, or neither",
         "columns": table_json(&pooled),
         "per_seed": per_seed,
     }))
@@ -368,16 +434,16 @@ pub fn approx_text(v: &Value) -> String {
         "issue 27 columns, seeds {}, σ(log) {}: effect cases named / honest / wrong / silent; clean false alarms; s per case\n",
         v["seeds"], v["sigma_log"]
     );
-    s += "world        column             effect  named  honest  wrong  silent  named%  n+h%  wrong%  clean  false-alarms  clean-findings  s/case(mean/max)\n";
+    s += "world        column             effect  named  honest  wrong  silent  named%  n+h%  wrong%  clean  false-alarms  true-file-findings  false-findings  s/case(mean/max)\n";
     if let Some(ws) = v["columns"].as_object() {
         for (w, cols) in ws {
             for (c, t) in cols.as_object().into_iter().flatten() {
                 let f = |k: &str| t[k].as_f64().unwrap_or(f64::NAN);
                 s += &format!(
-                    "{w:12} {c:18} {:6} {:6} {:7} {:6} {:7} {:6.1} {:5.1} {:7.1} {:6} {:13} {:15} {:.2}/{:.2}\n",
+                    "{w:12} {c:18} {:6} {:6} {:7} {:6} {:7} {:6.1} {:5.1} {:7.1} {:6} {:13} {:19} {:15} {:.2}/{:.2}\n",
                     t["effect_cases"], t["named"], t["honest"], t["wrong"], t["silent"],
                     100.0 * f("named_rate"), 100.0 * f("named_or_honest_rate"), 100.0 * f("wrong_rate"),
-                    t["clean_cases"], t["false_alarms"], t["clean_with_parameter_findings"],
+                    t["clean_cases"], t["false_alarms"], t["clean_true_file_findings"], t["clean_false_findings"],
                     f("mean_seconds_per_case"), f("max_seconds_per_case"),
                 );
             }

@@ -109,11 +109,16 @@ pub fn perturb_spec(
 }
 
 /// A machine compiled from `perturb_spec` of `m`'s design (checked as a
-/// hand-written file is).
-pub fn perturb_machine(m: &Machine, sigma: f64, seed: u64) -> Result<Machine> {
-    let (spec, _) = perturb_spec(&m.spec, sigma, seed);
+/// hand-written file is), with the factors drawn (key, factor): the
+/// scorer judges parameter findings against them (`file_truth.rs`).
+pub fn perturb_machine(
+    m: &Machine,
+    sigma: f64,
+    seed: u64,
+) -> Result<(Machine, Vec<(String, f64)>)> {
+    let (spec, factors) = perturb_spec(&m.spec, sigma, seed);
     spec.validate()?;
-    Machine::compile(spec)
+    Ok((Machine::compile(spec)?, factors))
 }
 
 /// The seed of case `case` of world `world` (0 open, 1 cross) under the

@@ -3,11 +3,14 @@
 //! the first parameter finding names the effect's physics while no effect
 //! is named), *honest* (nothing named, and the true effect is listed under
 //! `untestable`), *wrong* (something else named), *silent* (nothing named,
-//! nothing listed). Works on the JSON so that fields a later diagnosis adds
-//! (`findings`: design parameters that had to leave their tolerance) are
-//! read when present.
+//! nothing listed). Works on the JSON: parameter findings (design values
+//! that had to leave their tolerance) are the `effects` entries whose
+//! evidence says so, or a `findings` list; each is judged against the drawn
+//! design file by `file_truth.rs`.
 
 use serde_json::Value;
+
+use super::file_truth::{is_parameter_finding, judge_finding};
 
 /// What a parameter finding says physically (from its keys and words).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -160,11 +163,35 @@ impl Outcome {
     }
 }
 
-/// A clean case: an effect named (a false alarm) and/or a parameter finding.
+/// A clean case: an effect named, parameter findings true of the drawn
+/// file, and findings that are not (`file_truth.rs`). A false alarm is an
+/// effect named or a finding not true of the file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct CleanOutcome {
     pub false_alarm: bool,
-    pub finding: bool,
+    /// An effect (not a parameter finding) named.
+    pub effect: bool,
+    /// Parameter findings true of the drawn file.
+    pub true_findings: usize,
+    /// Parameter findings not true of it (every finding with the exact file).
+    pub false_findings: usize,
+}
+
+/// The parameter findings of one diagnosis against the drawn file: naming
+/// the effect's physics (effect cases), true of the file, neither.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct FindingCounts {
+    pub names_effect: usize,
+    pub true_of_file: usize,
+    pub neither: usize,
+}
+
+/// The design file a column gave the diagnosis, when it was drawn: the
+/// exact spec and the factors drawn on its design numbers.
+#[derive(Clone, Copy)]
+pub struct DrawnFile<'a> {
+    pub spec: &'a tcomp_thermal::sim::machine::spec::MachineSpec,
+    pub factors: &'a [(String, f64)],
 }
 
 fn rule(kind: &str) -> Option<&'static KindRule> {
@@ -178,6 +205,32 @@ fn list(d: &Value, key: &str) -> Vec<Value> {
         .unwrap_or_default()
 }
 
+/// The effects the diagnosis names: its `effects` ranking without the
+/// parameter findings it carries.
+pub fn effects_of(d: &Value) -> Vec<Value> {
+    list(d, "effects")
+        .into_iter()
+        .filter(|e| !is_parameter_finding(e))
+        .collect()
+}
+
+/// Its parameter findings: those in the `effects` ranking (in rank order),
+/// then any `findings` list.
+pub fn findings_of(d: &Value) -> Vec<Value> {
+    let mut f: Vec<Value> = list(d, "effects")
+        .into_iter()
+        .filter(is_parameter_finding)
+        .collect();
+    f.extend(list(d, "findings"));
+    f
+}
+
+/// Whether the finding `f` is true of the drawn file (never without one:
+/// the exact file needs no number outside its tolerance).
+fn true_of(f: &Value, file: Option<DrawnFile>) -> bool {
+    file.is_some_and(|x| judge_finding(f, x.spec, x.factors).is_true())
+}
+
 /// The physics of a parameter finding: its `physics`, `meaning`, `kind`,
 /// `group`, `parameter` or `name` field (first that classifies), else any
 /// of its words.
@@ -189,6 +242,24 @@ pub fn finding_physics(f: &Value) -> Option<Physics> {
             .find(|(_, words)| words.iter().any(|w| t.contains(w)))
             .map(|(p, _)| *p)
     };
+    // the diagnosis' own findings carry their tolerance group as
+    // `params.parameter` (`group` or `group:element`): the group decides,
+    // not words of a node name (a link to a node called `motor`)
+    let group = f["params"]["parameter"]
+        .as_str()
+        .map(|p| p.split(':').next().unwrap_or(p));
+    let by_group = match group {
+        Some("film") => Some(Physics::Convection),
+        Some("jacket") => Some(Physics::Coolant),
+        Some("heat") => Some(Physics::HeatSource),
+        Some("link") => Some(Physics::Joint),
+        Some("length") => Some(Physics::Geometry),
+        Some("capacity") => Some(Physics::Capacity),
+        _ => None,
+    };
+    if by_group.is_some() {
+        return by_group;
+    }
     for key in ["physics", "meaning", "kind", "group", "parameter", "name"] {
         if let Some(p) = f.get(key).and_then(Value::as_str).and_then(classify) {
             return Some(p);
@@ -243,8 +314,8 @@ pub fn untestable_covers(entry: &str, truth: &Truth) -> bool {
 
 /// Score an effect case.
 pub fn score_effect(d: &Value, truth: &Truth) -> Outcome {
-    let effects = list(d, "effects");
-    let findings = list(d, "findings");
+    let effects = effects_of(d);
+    let findings = findings_of(d);
     let r = rule(&truth.kind);
     if let (Some(top), Some(r)) = (effects.first(), r) {
         if effect_names(top, truth, r) {
@@ -274,12 +345,37 @@ pub fn score_effect(d: &Value, truth: &Truth) -> Outcome {
     }
 }
 
-/// Score a clean case.
-pub fn score_clean(d: &Value) -> CleanOutcome {
+/// Score a clean case given the file the diagnosis had (`None`: the exact
+/// file, or no file).
+pub fn score_clean(d: &Value, file: Option<DrawnFile>) -> CleanOutcome {
+    let effect = !effects_of(d).is_empty();
+    let findings = findings_of(d);
+    let true_findings = findings.iter().filter(|f| true_of(f, file)).count();
+    let false_findings = findings.len() - true_findings;
     CleanOutcome {
-        false_alarm: !list(d, "effects").is_empty(),
-        finding: !list(d, "findings").is_empty(),
+        false_alarm: effect || false_findings > 0,
+        effect,
+        true_findings,
+        false_findings,
     }
+}
+
+/// Count the parameter findings of `d`: those whose physics names the
+/// truth's effect (`truth`: an effect case), those true of the drawn file,
+/// and the rest.
+pub fn count_findings(d: &Value, truth: Option<&Truth>, file: Option<DrawnFile>) -> FindingCounts {
+    let r = truth.and_then(|t| rule(&t.kind));
+    let mut c = FindingCounts::default();
+    for f in findings_of(d) {
+        if r.is_some_and(|r| finding_physics(&f).is_some_and(|p| r.physics.contains(&p))) {
+            c.names_effect += 1;
+        } else if true_of(&f, file) {
+            c.true_of_file += 1;
+        } else {
+            c.neither += 1;
+        }
+    }
+    c
 }
 
 /// The truth of an open-world (truth model) effect.

@@ -622,7 +622,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins; ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
@@ -637,13 +637,22 @@ struct CalNull<'a> {
 }
 
 /// Parameter findings that earn the margins, merged into the ranking: one
-/// that leaves less held-out gap than the selected effect goes first.
+/// that leaves less held-out gap than the selected effect goes first. A
+/// release is a finding only when its fitted value really left the
+/// tolerance and it can be told from every other release that earns the
+/// margins: the best must beat each of them on the held-out blocks by the
+/// noise gate's own test (z ≥ `gate::Z_MIN`); when it cannot, the data say
+/// some design value is off but not which (collinear values), and the
+/// release is listed untestable instead. Only the best release is named:
+/// the others explain the same gap worse. Beside a selected effect it must
+/// also beat that effect by the same test.
 fn merge_releases(
     judge: &Judge,
     cal: &CalNull,
     m: &Machine,
     ps: &[Prepared],
     findings: &mut Vec<Finding>,
+    untestable: &mut Vec<(String, String)>,
 ) -> Result<usize> {
     let null = release::Null {
         design: cal.design,
@@ -656,23 +665,57 @@ fn merge_releases(
         m0: judge.m0,
         lnn: judge.lnn,
     };
-    let (rel, sims) = release::release_findings(&null, ps)?;
-    let mut ok: Vec<Finding> = rel
+    let (rel, mut sims) = release::release_findings(&null, ps)?;
+    let mut ok: Vec<release::Tried> = rel
         .into_iter()
-        .filter(|f| judge.supported(f, judge.m0))
+        .filter(|t| t.outside && judge.supported(&t.finding, judge.m0))
         .collect();
-    ok.sort_by(|a, b| a.m_after.total_cmp(&b.m_after));
-    for (i, f) in ok.into_iter().enumerate() {
-        let first = i == 0 && findings.first().is_none_or(|t| f.m_after < t.m_after);
-        if first {
-            findings.insert(0, with_role(&f, "selected"));
-        } else {
-            findings.push(with_role(
-                &f,
-                "alternative: supported alone but explains less than the selected finding",
-            ));
+    ok.sort_by(|a, b| a.finding.m_after.total_cmp(&b.finding.m_after));
+    let Some(best) = ok.first() else {
+        return Ok(sims);
+    };
+    // rivals: the releases the best cannot be told from
+    let rivals: Vec<&release::Tried> = ok[1..]
+        .iter()
+        .filter(|t| !(gate::held_out_z(ps, &t.res, &best.res) >= gate::Z_MIN))
+        .collect();
+    // rivals within the best's own group still say which group: the
+    // group's release is named (not one of its members)
+    let mut best = best;
+    if rivals.iter().all(|t| t.group == best.group) {
+        if let Some(g) = rivals.iter().find(|t| t.whole_group) {
+            best = g;
         }
     }
+    let undecided = rivals
+        .iter()
+        .any(|t| t.group != best.group || !best.whole_group);
+    if undecided {
+        let names: Vec<&str> = std::iter::once(ok[0].finding.name.as_str())
+            .chain(rivals.iter().map(|t| t.finding.name.as_str()))
+            .collect();
+        untestable.push((
+            "design value outside its tolerance".into(),
+            format!(
+                "the runs need a design value outside its tolerance but cannot tell which: {} explain the held-out gap alike (z < {} between them)",
+                names.join(", "),
+                gate::Z_MIN
+            ),
+        ));
+        return Ok(sims);
+    }
+    // beside a selected effect the finding must explain the held-out gap
+    // significantly better than that effect (the same test): otherwise it
+    // only re-explains the effect's gap (a lagging sensor read as a larger
+    // capacity) and is not named
+    if let Some(top) = findings.first() {
+        let res_top = judge.ev.residuals(&top.effects)?;
+        sims += 1;
+        if !(gate::held_out_z(ps, &res_top, &best.res) >= gate::Z_MIN) {
+            return Ok(sims);
+        }
+    }
+    findings.insert(0, with_role(&best.finding, "selected"));
     Ok(sims)
 }
 
@@ -735,7 +778,7 @@ fn diagnose_core(
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
     let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
     if let Some(c) = &cal {
-        sims += merge_releases(&judge, c, m, ps, &mut findings)?;
+        sims += merge_releases(&judge, c, m, ps, &mut findings, &mut untestable)?;
     }
     let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)

@@ -124,8 +124,33 @@ pub(crate) struct Null<'a> {
     pub lnn: f64,
 }
 
+/// The released machine's residuals with the calibration's freedom, its
+/// stats and fit criterion, and the freedom's own correction δ of every
+/// knob (the released knobs move by it too: their fitted value is
+/// θ + γ + δ, not θ + γ).
+fn eval_with_correction(m: &Machine, ps: &[Prepared], fr: &Freedom) -> Result<(Judged, Vec<f64>)> {
+    let ev = Evaluator::new(m, ps)?;
+    let mut r = ev.residuals(&[])?;
+    let delta = fr.correct(&mut r);
+    let st = ev.stats_of(&r);
+    Ok(((st.j_fit(), st, r), delta))
+}
+
+/// One release tried: the finding (not yet judged) and its held-out
+/// residuals (to tell it from the other releases).
+pub(crate) struct Tried {
+    pub finding: Finding,
+    pub res: Vec<Vec<Vec<f64>>>,
+    /// Whether the fitted value(s) left the tolerance (design-weighted:
+    /// Σ fitted / Σ design outside 1 ± tol).
+    pub outside: bool,
+    /// Its tolerance group; whether it releases the whole group.
+    pub group: &'static str,
+    pub whole_group: bool,
+}
+
 /// Every release tried, as findings (not yet judged) and simulations used.
-pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Finding>, usize)> {
+pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>, usize)> {
     let pull = n.freedom.pull(ps, n.res0);
     let mut out = Vec::new();
     let mut sims = 0usize;
@@ -159,20 +184,27 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Finding
             }
         }
         let gamma = 0.5 * (a + b);
-        let (j, st, res1) = eval(&at(gamma), ps, n.freedom)?;
+        let ((j, st, res1), delta) = eval_with_correction(&at(gamma), ps, n.freedom)?;
         sims += 1;
         let design: f64 = sub.iter().map(|k| design_value(n.design, k)).sum();
         let th = n.freedom.theta();
         let fitted: f64 = r
             .idx
             .iter()
-            .map(|&i| design_value(n.design, &n.knobs[i]) * (th[i] + gamma).exp())
+            .map(|&i| {
+                let d = delta.get(i).copied().unwrap_or(0.0);
+                design_value(n.design, &n.knobs[i]) * (th[i] + gamma + d).exp()
+            })
             .sum();
         let factor = if design > 0.0 {
             fitted / design
         } else {
             f64::NAN
         };
+        let tol = sub.iter().map(|k| k.tol).fold(0.0, f64::max);
+        // a release that ends inside the tolerance (a group ×0.87, or γ
+        // pointing back inwards) is no value that had to leave it
+        let outside = factor < 1.0 - tol || factor > 1.0 + tol;
         let k_params = 1 + usize::from(r.element.is_some());
         let dbic = j - n.j0 + k_params as f64 * n.lnn;
         let z = super::gate::held_out_z(ps, n.res0, &res1);
@@ -181,7 +213,7 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Finding
             _ => format!("parameter:{}", r.key),
         };
         let what = meaning(r.group, r.element.as_deref(), factor);
-        out.push(Finding {
+        let finding = Finding {
             name,
             effects: Vec::new(),
             dbic,
@@ -204,9 +236,16 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Finding
                 "design": r4(design),
                 "fitted": r4(fitted),
                 "factor": r4(factor),
-                "tolerance": r4(sub.iter().map(|k| k.tol).fold(0.0, f64::max)),
+                "tolerance": r4(tol),
                 "meaning": what,
             })),
+        };
+        out.push(Tried {
+            finding,
+            res: res1,
+            outside,
+            group: r.group,
+            whole_group: r.element.is_none() && r.idx.len() > 1,
         });
     }
     Ok((out, sims))
