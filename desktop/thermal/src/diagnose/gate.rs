@@ -151,9 +151,11 @@ pub fn step_jump_share(
             if run.as_ref().is_some_and(|r| *r != p.name) {
                 continue;
             }
-            let Some(ci) = p.channels.iter().position(|c| {
-                c.name == *sensor && matches!(c.kind, super::prep::Kind::Temp(_))
-            }) else {
+            let Some(ci) = p
+                .channels
+                .iter()
+                .position(|c| c.name == *sensor && matches!(c.kind, super::prep::Kind::Temp(_)))
+            else {
                 continue;
             };
             let Some(k0) = (0..p.rows()).find(|&k| p.inputs.time(k) >= *at_s) else {
