@@ -104,3 +104,174 @@ pub fn z_of(d: &[f64]) -> f64 {
 pub fn passes(m_before: f64, z: f64) -> bool {
     m_before > 1.0 && z >= Z_MIN
 }
+
+/// Rows on each side of a step's onset over which its jump is measured.
+pub const JUMP_ROWS: usize = 3;
+/// A step inside a run is a sensor fault only if the nominal residual jumps
+/// by at least this share of the fitted step at its onset: a fault is a
+/// jump, while a design error (a capacity, a loss to air) changes the
+/// residual smoothly, at the pace of the machine's time constants, and a
+/// constant fitted from the warm-up on absorbs it without any jump there.
+pub const JUMP_SHARE_MIN: f64 = 0.5;
+
+fn mean_finite(v: &[f64]) -> f64 {
+    let (s, n) = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
+/// The smallest jump share over the steps inside a run among `effects`
+/// (sensor offsets with an onset): the nominal residual's mean over
+/// `JUMP_ROWS` rows from the onset minus over the `JUMP_ROWS` rows before,
+/// in the step's direction, over the step's size (averaged over the runs
+/// it acts in; at the onset or, when held-out rows precede it, at the best
+/// of those rows). None when there is no such step; NaN when no run has rows
+/// on both sides of the onset.
+pub fn step_jump_share(
+    ps: &[Prepared],
+    r0: &[Vec<Vec<f64>>],
+    effects: &[crate::sim::Effect],
+) -> Option<f64> {
+    let mut worst: Option<f64> = None;
+    for e in effects {
+        let crate::sim::Effect::SensorOffset {
+            sensor,
+            offset_c,
+            at_s,
+            run,
+        } = e
+        else {
+            continue;
+        };
+        if *at_s <= 0.0 {
+            continue;
+        }
+        let mut jumps = Vec::new();
+        for (pi, p) in ps.iter().enumerate() {
+            if run.as_ref().is_some_and(|r| *r != p.name) {
+                continue;
+            }
+            let Some(ci) = p
+                .channels
+                .iter()
+                .position(|c| c.name == *sensor && matches!(c.kind, super::prep::Kind::Temp(_)))
+            else {
+                continue;
+            };
+            let Some(k0) = (0..p.rows()).find(|&k| p.inputs.time(k) >= *at_s) else {
+                continue;
+            };
+            if k0 < JUMP_ROWS || k0 + JUMP_ROWS > p.rows() {
+                continue;
+            }
+            // the onset is placed on fit rows: after held-out rows it may
+            // lie anywhere among them, so the jump is sought there too
+            let mut lo = k0;
+            while lo > JUMP_ROWS && p.held[lo - 1] {
+                lo -= 1;
+            }
+            let r = &r0[pi][ci];
+            let j = (lo..=k0)
+                .map(|k| {
+                    (mean_finite(&r[k..k + JUMP_ROWS]) - mean_finite(&r[k - JUMP_ROWS..k]))
+                        * offset_c.signum()
+                })
+                .filter(|j| j.is_finite())
+                .fold(f64::NAN, f64::max);
+            if j.is_finite() {
+                jumps.push(j);
+            }
+        }
+        let share = if jumps.is_empty() || *offset_c == 0.0 {
+            f64::NAN
+        } else {
+            jumps.iter().sum::<f64>() / jumps.len() as f64 / offset_c.abs()
+        };
+        worst = Some(match worst {
+            None => share,
+            Some(w) if w.is_nan() || share.is_nan() => f64::NAN,
+            Some(w) => w.min(share),
+        });
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{Effect, Inputs};
+
+    // one run of 10 s rows with one sensor channel `T1`; rows 40..60 held out
+    fn run(n: usize) -> Prepared {
+        Prepared {
+            name: "r".into(),
+            inputs: Inputs {
+                t0: 0.0,
+                dt: 10.0,
+                rpm: vec![0.0; n],
+                feed: vec![0.0; n],
+                coolant: vec![0.0; n],
+                ambient: vec![20.0; n],
+            },
+            channels: vec![super::super::prep::Channel {
+                name: "T1".into(),
+                kind: super::super::prep::Kind::Temp(0),
+                meas: vec![0.0; n],
+                s: 0.02,
+            }],
+            held: (0..n).map(|k| (40..60).contains(&k)).collect(),
+            decimation: 1,
+            notes: Vec::new(),
+            missing: Vec::new(),
+        }
+    }
+
+    fn offset(c: f64, at_s: f64) -> Effect {
+        Effect::SensorOffset {
+            sensor: "T1".into(),
+            offset_c: c,
+            at_s,
+            run: None,
+        }
+    }
+
+    #[test]
+    fn a_step_jumps_and_a_warm_up_misfit_does_not() {
+        let n = 100;
+        let ps = [run(n)];
+        // a 0.5 °C fault at row 20 (200 s)
+        let step: Vec<f64> = (0..n).map(|k| if k >= 20 { 0.5 } else { 0.0 }).collect();
+        let j = step_jump_share(&ps, &[vec![step]], &[offset(0.5, 200.0)]).unwrap();
+        assert!((j - 1.0).abs() < 1e-9, "{j}");
+        // a design error: the residual rises with a 10 min time constant,
+        // an offset fitted from row 20 on absorbs its level, with no jump
+        let smooth: Vec<f64> = (0..n)
+            .map(|k| 0.5 * (1.0 - (-(k as f64) * 10.0 / 600.0).exp()))
+            .collect();
+        let j = step_jump_share(&ps, &[vec![smooth]], &[offset(0.4, 200.0)]).unwrap();
+        assert!(j < JUMP_SHARE_MIN, "{j}");
+        // a step of the other sign than fitted is no jump of the fit
+        let down: Vec<f64> = (0..n).map(|k| if k >= 20 { -0.5 } else { 0.0 }).collect();
+        let j = step_jump_share(&ps, &[vec![down]], &[offset(0.5, 200.0)]).unwrap();
+        assert!(j < 0.0, "{j}");
+        // no step inside a run: nothing to test
+        assert!(step_jump_share(&ps, &[vec![vec![0.0; n]]], &[offset(0.5, 0.0)]).is_none());
+    }
+
+    #[test]
+    fn a_step_among_held_out_rows_is_found_at_the_next_fit_row() {
+        let n = 100;
+        let ps = [run(n)];
+        // the fault happens at row 50 (held out); the scan placed it on the
+        // first fit row after, 60
+        let step: Vec<f64> = (0..n).map(|k| if k >= 50 { 0.5 } else { 0.0 }).collect();
+        let j = step_jump_share(&ps, &[vec![step]], &[offset(0.5, 600.0)]).unwrap();
+        assert!((j - 1.0).abs() < 1e-9, "{j}");
+    }
+}

@@ -415,6 +415,9 @@ impl Judge<'_> {
         let z = gate::held_out_z(self.ev.runs, self.res0, &res1);
         if let Some(o) = ev_json.as_object_mut() {
             o.insert("held_out_z".into(), json!(r4(z.min(1e6))));
+            if let Some(j) = gate::step_jump_share(self.ev.runs, self.res0, &fr.effects) {
+                o.insert("step_jump_share".into(), json!(r4(j)));
+            }
         }
         Ok((
             Finding {
@@ -448,8 +451,15 @@ impl Judge<'_> {
 
     // never an effect that widens the held-out displacement gap (beyond
     // 2 %, below what an RMS over the held-out rows can resolve)
+    // and never a step inside a run that is no jump of the residual at
+    // its onset (`gate::step_jump_share`)
     fn supported(&self, f: &Finding, m_ref: f64) -> bool {
-        self.margins(f, m_ref) && self.barred(f).is_none()
+        self.margins(f, m_ref) && self.barred(f).is_none() && self.jumps(f)
+    }
+
+    fn jumps(&self, f: &Finding) -> bool {
+        gate::step_jump_share(self.ev.runs, self.res0, &f.effects)
+            .is_none_or(|j| j >= gate::JUMP_SHARE_MIN)
     }
 
     fn margins(&self, f: &Finding, m_ref: f64) -> bool {
@@ -622,7 +632,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
