@@ -245,6 +245,23 @@ fn run_seed(
             let dseed = design_seed(cfg.seed, w.tag(), ci);
             for &col in &acfg.columns {
                 let (d, secs, cpu) = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
+                if cfg.verbose {
+                    // every candidate with the figures its gates judged
+                    for f in &d.tried {
+                        eprintln!(
+                            "      tried {:18} m {:.2} -> {:.2} dbic {:.1} z {} {}",
+                            f.name,
+                            f.m_before,
+                            f.m_after,
+                            f.dbic,
+                            f.evidence["held_out_z"],
+                            f.params_json()
+                        );
+                    }
+                    for (n, why) in &d.untestable {
+                        eprintln!("      untestable {n}: {why}");
+                    }
+                }
                 let dj = d.to_json();
                 let t = tallies.entry((w.key(), col.key())).or_default();
                 t.times.push(secs);
