@@ -284,11 +284,29 @@ fn run_seed(
             for &col in &acfg.columns {
                 let run = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;
                 let (secs, cpu) = (run.secs, run.cpu);
-                let dj = run.d.to_json();
+                let d = &run.d;
+                if cfg.verbose {
+                    // every candidate with the figures its gates judged
+                    for f in &d.tried {
+                        eprintln!(
+                            "      tried {:18} m {:.2} -> {:.2} dbic {:.1} z {} {}",
+                            f.name,
+                            f.m_before,
+                            f.m_after,
+                            f.dbic,
+                            f.evidence["held_out_z"],
+                            f.params_json()
+                        );
+                    }
+                    for (n, why) in &d.untestable {
+                        eprintln!("      untestable {n}: {why}");
+                    }
+                }
+                let dj = d.to_json();
                 // a debugging aid: the whole diagnosis per case
                 if let Ok(dir) = std::env::var("TCOMP_BENCH_DUMP") {
                     let f = format!("{dir}/{}_{}_{}_{ci}.json", w.key(), col.key(), cfg.seed);
-                    let tried: Vec<Value> = run.d.tried.iter().map(|f| f.to_json()).collect();
+                    let tried: Vec<Value> = d.tried.iter().map(|f| f.to_json()).collect();
                     std::fs::write(&f, json!({"d": dj, "tried": tried}).to_string())?;
                 }
                 let file = run.factors.as_deref().map(|factors| DrawnFile {
