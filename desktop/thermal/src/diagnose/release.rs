@@ -10,12 +10,14 @@
 use anyhow::Result;
 use serde_json::json;
 
+use super::calibrate;
 use super::calibrate::{apply, design_value, Knob};
 use super::effect_fit::Evaluator;
+use super::freedom;
 use super::freedom::Freedom;
 use super::prep::Prepared;
 use super::stats::r4;
-use super::Finding;
+use super::{gate, with_role, Finding, Judge};
 use crate::sim::machine::tolerance::GROUPS;
 use crate::sim::Machine;
 
@@ -249,4 +251,94 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
         });
     }
     Ok((out, sims))
+}
+
+/// The calibrated null: the design file, its knobs and the freedom.
+pub(super) struct CalNull<'a> {
+    pub(super) design: &'a Machine,
+    pub(super) knobs: &'a [calibrate::Knob],
+    pub(super) freedom: &'a freedom::Freedom,
+}
+
+/// Parameter findings that earn the margins, merged into the ranking: one
+/// that leaves less held-out gap than the selected effect goes first. A
+/// release is a finding only when its fitted value really left the
+/// tolerance and it can be told from every other release that earns the
+/// margins: the best must beat each of them on the held-out blocks by the
+/// noise gate's own test (z ≥ `gate::Z_MIN`); when it cannot, the data say
+/// some design value is off but not which (collinear values), and the
+/// release is listed untestable instead. Only the best release is named:
+/// the others explain the same gap worse. Beside a selected effect it must
+/// also beat that effect by the same test.
+pub(super) fn merge_releases(
+    judge: &Judge,
+    cal: &CalNull,
+    m: &Machine,
+    ps: &[Prepared],
+    findings: &mut Vec<Finding>,
+    untestable: &mut Vec<(String, String)>,
+) -> Result<usize> {
+    let null = Null {
+        design: cal.design,
+        calibrated: m,
+        knobs: cal.knobs,
+        freedom: cal.freedom,
+        res0: judge.res0,
+        st0: &judge.st0,
+        j0: judge.j0,
+        m0: judge.m0,
+        lnn: judge.lnn,
+    };
+    let (rel, mut sims) = release_findings(&null, ps)?;
+    let mut ok: Vec<Tried> = rel
+        .into_iter()
+        .filter(|t| t.outside && judge.supported(&t.finding, judge.m0))
+        .collect();
+    ok.sort_by(|a, b| a.finding.m_after.total_cmp(&b.finding.m_after));
+    let Some(best) = ok.first() else {
+        return Ok(sims);
+    };
+    // rivals: the releases the best cannot be told from
+    let rivals: Vec<&Tried> = ok[1..]
+        .iter()
+        .filter(|t| !(gate::held_out_z(ps, &t.res, &best.res) >= gate::Z_MIN))
+        .collect();
+    // rivals within the best's own group still say which group: the
+    // group's release is named (not one of its members)
+    let mut best = best;
+    if rivals.iter().all(|t| t.group == best.group) {
+        if let Some(g) = rivals.iter().find(|t| t.whole_group) {
+            best = g;
+        }
+    }
+    let undecided = rivals
+        .iter()
+        .any(|t| t.group != best.group || !best.whole_group);
+    if undecided {
+        let names: Vec<&str> = std::iter::once(ok[0].finding.name.as_str())
+            .chain(rivals.iter().map(|t| t.finding.name.as_str()))
+            .collect();
+        untestable.push((
+            "design value outside its tolerance".into(),
+            format!(
+                "the runs need a design value outside its tolerance but cannot tell which: {} explain the held-out gap alike (z < {} between them)",
+                names.join(", "),
+                gate::Z_MIN
+            ),
+        ));
+        return Ok(sims);
+    }
+    // beside a selected effect the finding must explain the held-out gap
+    // significantly better than that effect (the same test): otherwise it
+    // only re-explains the effect's gap (a lagging sensor read as a larger
+    // capacity) and is not named
+    if let Some(top) = findings.first() {
+        let res_top = judge.ev.residuals(&top.effects)?;
+        sims += 1;
+        if !(gate::held_out_z(ps, &res_top, &best.res) >= gate::Z_MIN) {
+            return Ok(sims);
+        }
+    }
+    findings.insert(0, with_role(&best.finding, "selected"));
+    Ok(sims)
 }
