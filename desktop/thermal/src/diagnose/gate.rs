@@ -2,6 +2,7 @@
 //! removes is significant against the measured noise.
 
 use super::prep::Prepared;
+use super::stats::mean_finite;
 
 /// One-sided z at 1 %: a claimed reduction must reach it.
 pub const Z_MIN: f64 = 2.33;
@@ -114,18 +115,6 @@ pub const JUMP_ROWS: usize = 3;
 /// constant fitted from the warm-up on absorbs it without any jump there.
 pub const JUMP_SHARE_MIN: f64 = 0.5;
 
-fn mean_finite(v: &[f64]) -> f64 {
-    let (s, n) = v
-        .iter()
-        .filter(|x| x.is_finite())
-        .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        s / n as f64
-    }
-}
-
 /// The smallest jump share over the steps inside a run among `effects`
 /// (sensor offsets with an onset): the nominal residual's mean over
 /// `JUMP_ROWS` rows from the onset minus over the `JUMP_ROWS` rows before,
@@ -179,7 +168,8 @@ pub fn step_jump_share(
             let r = &r0[pi][ci];
             let j = (lo..=k0)
                 .map(|k| {
-                    (mean_finite(&r[k..k + JUMP_ROWS]) - mean_finite(&r[k - JUMP_ROWS..k]))
+                    (mean_finite(r[k..k + JUMP_ROWS].iter().copied())
+                        - mean_finite(r[k - JUMP_ROWS..k].iter().copied()))
                         * offset_c.signum()
                 })
                 .filter(|j| j.is_finite())

@@ -27,15 +27,7 @@ const STEP_OVER_CHANGE_JUMPS: f64 = 3.0;
 const JUMP_W: usize = 3;
 
 fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
-    let (s, n) = e[a..b]
-        .iter()
-        .filter(|x| x.is_finite())
-        .fold((0.0, 0usize), |acc, x| (acc.0 + x, acc.1 + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        s / n as f64
-    }
+    super::stats::mean_finite(e[a..b].iter().copied())
 }
 
 /// How long after a run's first spindle start the nominal's misfit of the

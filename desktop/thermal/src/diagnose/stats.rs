@@ -97,18 +97,7 @@ pub fn phases(rpm: &[f64], dt: f64) -> Vec<&'static str> {
 pub fn phases_from_temperatures(sensors: &[&[f64]], dt: f64) -> Vec<&'static str> {
     let n = sensors.first().map_or(0, |s| s.len());
     let mean: Vec<f64> = (0..n)
-        .map(|k| {
-            let (s, c) = sensors
-                .iter()
-                .map(|v| v[k])
-                .filter(|x| x.is_finite())
-                .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
-            if c == 0 {
-                f64::NAN
-            } else {
-                s / c as f64
-            }
-        })
+        .map(|k| mean_finite(sensors.iter().map(|v| v[k])))
         .collect();
     let w = ((600.0 / dt).round() as usize).max(1);
     let sm = moving_avg(&mean, w);
@@ -356,6 +345,19 @@ pub fn moves(values: &[f64]) -> bool {
 /// Rows of one value that make a channel stuck (fewer: a short run that may
 /// be steady).
 pub const STUCK_MIN_ROWS: usize = 30;
+
+/// Mean of the finite values (NaN marks a missing reading); NaN when none.
+pub fn mean_finite(v: impl IntoIterator<Item = f64>) -> f64 {
+    let (s, n) = v
+        .into_iter()
+        .filter(|x| x.is_finite())
+        .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
 
 #[cfg(test)]
 mod tests {
