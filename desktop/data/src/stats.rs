@@ -27,6 +27,19 @@ pub fn pearson(a: &[Option<f64>], b: &[Option<f64>]) -> f64 {
     sxy / (sxx * syy).sqrt()
 }
 
+/// Mean of the finite values (NaN marks a missing reading); NaN when none.
+pub fn mean_finite(v: impl IntoIterator<Item = f64>) -> f64 {
+    let (s, n) = v
+        .into_iter()
+        .filter(|x| x.is_finite())
+        .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
 /// Decimate by `f`: the mean of each block of `f` rows (the last block may be
 /// shorter), over the block's finite values; NaN for a block without one.
 /// Block `i` starts at row `i·f`, so the decimated grid is `(0..n).step_by(f)`.
@@ -36,15 +49,7 @@ pub fn block_means(v: &[f64], f: usize) -> Vec<f64> {
         .step_by(f)
         .map(|s| {
             let e = (s + f).min(v.len());
-            let (sum, cnt) = v[s..e]
-                .iter()
-                .filter(|x| x.is_finite())
-                .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
-            if cnt == 0 {
-                f64::NAN
-            } else {
-                sum / cnt as f64
-            }
+            mean_finite(v[s..e].iter().copied())
         })
         .collect()
 }

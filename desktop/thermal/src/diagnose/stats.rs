@@ -3,6 +3,7 @@
 
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
+pub use tcomp_data::stats::mean_finite;
 
 /// Pearson correlation over rows where both are finite (the crate's one
 /// Pearson, `select::pearson`).
@@ -345,19 +346,6 @@ pub fn moves(values: &[f64]) -> bool {
 /// Rows of one value that make a channel stuck (fewer: a short run that may
 /// be steady).
 pub const STUCK_MIN_ROWS: usize = 30;
-
-/// Mean of the finite values (NaN marks a missing reading); NaN when none.
-pub fn mean_finite(v: impl IntoIterator<Item = f64>) -> f64 {
-    let (s, n) = v
-        .into_iter()
-        .filter(|x| x.is_finite())
-        .fold((0.0, 0usize), |a, x| (a.0 + x, a.1 + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        s / n as f64
-    }
-}
 
 #[cfg(test)]
 mod tests {
