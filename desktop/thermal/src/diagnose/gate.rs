@@ -192,6 +192,37 @@ pub fn step_jump_share(
     worst
 }
 
+/// A lone step inside a run (`sensor_offset` with an onset) that the gate
+/// cannot test: fewer than two held-out blocks of its run lie after its
+/// onset (a step late in the last fit block). Its `untestable` entry (name,
+/// why); None for anything else.
+pub fn late_step(ps: &[Prepared], effects: &[crate::sim::Effect]) -> Option<(String, String)> {
+    let [crate::sim::Effect::SensorOffset {
+        sensor,
+        offset_c,
+        at_s,
+        run: Some(run),
+    }] = effects
+    else {
+        return None;
+    };
+    let pi = ps.iter().position(|p| p.name == *run)?;
+    let p = &ps[pi];
+    let k0 = (0..p.rows()).find(|&k| p.inputs.time(k) >= *at_s)?;
+    let after = blocks(ps, |i, _, b| i == pi && b > k0)
+        .into_iter()
+        .filter(|&(_, a, b)| b > k0.max(a))
+        .count();
+    (*at_s > 0.0 && after < 2).then(|| {
+        (
+            format!("sensor_offset (step after the last held-out block) on {sensor}"),
+            format!(
+                "a step of {offset_c:+.2} °C at {at_s:.0} s in run {run} fits the fit rows, but {after} held-out block(s) of at most {BLOCK_S:.0} s follow its onset: the noise gate needs two; a run held out after the onset (or a longer run) can test it"
+            ),
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,5 +294,38 @@ mod tests {
         let step: Vec<f64> = (0..n).map(|k| if k >= 50 { 0.5 } else { 0.0 }).collect();
         let j = step_jump_share(&ps, &[vec![step]], &[offset(0.5, 600.0)]).unwrap();
         assert!((j - 1.0).abs() < 1e-9, "{j}");
+    }
+
+    #[test]
+    fn a_step_with_fewer_than_two_held_out_blocks_after_it_is_untestable() {
+        // 300 rows of 10 s; rows 40..140 held out: 1000 s, two blocks
+        let mut p = run(300);
+        p.held = (0..300).map(|k| (40..140).contains(&k)).collect();
+        let ps = [p];
+        let step = |at_s: f64| Effect::SensorOffset {
+            sensor: "T1".into(),
+            offset_c: 0.8,
+            at_s,
+            run: Some("r".into()),
+        };
+        // before the held-out stretch: the gate has its two blocks
+        assert!(late_step(&ps, &[step(200.0)]).is_none());
+        // inside its second block: one left
+        let (name, why) = late_step(&ps, &[step(1100.0)]).expect("one block left");
+        assert!(
+            name.starts_with("sensor_offset") && name.ends_with("on T1"),
+            "{name}"
+        );
+        assert!(why.contains("1 held-out block"), "{why}");
+        // after it: none
+        assert!(why.contains("+0.80 °C"), "{why}");
+        assert!(late_step(&ps, &[step(2000.0)])
+            .unwrap()
+            .1
+            .contains("0 held-out"));
+        // a constant offset, a step in no named run, or a pair: not this test's
+        assert!(late_step(&ps, &[step(0.0)]).is_none());
+        assert!(late_step(&ps, &[offset(0.8, 2000.0)]).is_none());
+        assert!(late_step(&ps, &[step(2000.0), step(2500.0)]).is_none());
     }
 }

@@ -416,7 +416,13 @@ impl Judge<'_> {
         let mut ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
         let z = gate::held_out_z(self.ev.runs, self.res0, &res1);
         if let Some(o) = ev_json.as_object_mut() {
-            o.insert("held_out_z".into(), json!(r4(z.min(1e6))));
+            // NaN (fewer than two held-out blocks): no test, null
+            let zj = if z.is_nan() {
+                Value::Null
+            } else {
+                json!(r4(z.min(1e6)))
+            };
+            o.insert("held_out_z".into(), zj);
             if let Some(j) = gate::step_jump_share(self.ev.runs, self.res0, &fr.effects) {
                 o.insert("step_jump_share".into(), json!(r4(j)));
             }
@@ -493,6 +499,20 @@ impl Judge<'_> {
         Ok(f.dbic <= dbic_base - opt.min_dbic
             && f.m_after <= m_base * (1.0 - opt.min_rel)
             && m_base - f.m_after >= opt.min_abs)
+    }
+}
+
+impl Judge<'_> {
+    // a pair's gain over its base single must itself be significant against
+    // the measured noise (the same held-out z ≥ 2.33), not only earn the
+    // margins: a small partner (a low-exponent bearing heat, a slow drift)
+    // otherwise soaks up what is left of a design error
+    fn beats_single_in_noise(&self, single: &FitResult, pair: &FitResult) -> Result<bool> {
+        let r_single = self.ev.residuals(&single.effects)?;
+        let r_pair = self.ev.residuals(&pair.effects)?;
+        let m_single = self.ev.stats_of(&r_single).m_held();
+        let z = gate::held_out_z(self.ev.runs, &r_single, &r_pair);
+        Ok(gate::passes(m_single, z))
     }
 }
 
@@ -575,6 +595,7 @@ fn best_pair(
             && ref_m - f.m_after >= opt.min_abs
             && best.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
             && judge.partner_earns_its_place(fr, &f)?
+            && judge.beats_single_in_noise(&tried[a].1, fr)?
         {
             best = Some((f, a, b));
         }
@@ -634,7 +655,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect; a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
@@ -680,6 +701,16 @@ fn diagnose_core(
         if let (true, Some(why)) = (judge.margins(f, judge.m0), judge.barred(f)) {
             if !untestable.iter().any(|u| u.0 == f.name) {
                 untestable.push((f.name.clone(), why));
+            }
+        }
+    }
+    // a step the fit rows show but no held-out stretch follows
+    for (f, _) in &tried {
+        if f.dbic <= -opt.min_dbic && judge.jumps(f) {
+            if let Some(u) = gate::late_step(ps, &f.effects) {
+                if !untestable.iter().any(|x| x.0 == u.0) {
+                    untestable.push(u);
+                }
             }
         }
     }
