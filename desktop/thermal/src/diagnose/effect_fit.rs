@@ -153,7 +153,7 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Residuals before the calibration's freedom.
-    fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
+    pub(crate) fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
         let mut all = Vec::with_capacity(self.runs.len());
         for p in self.runs {
             // an effect located in one run (a sensor step) acts there only

@@ -55,11 +55,25 @@ fn blocks(
 /// for little), then mean(d) / (sd(d) / √blocks). NaN with fewer than two
 /// blocks.
 pub fn held_out_z(ps: &[Prepared], r0: &[Vec<Vec<f64>>], r1: &[Vec<Vec<f64>>]) -> f64 {
+    held_out_z_acting(ps, r0, r1, (r0, r1))
+}
+
+/// `held_out_z` with the blocks an effect acts on read from `acts` (the
+/// residuals before and after it *before* the calibration's freedom: the
+/// freedom re-solves its correction for every trial and so moves every
+/// row a little, which would count every held-out block as acted on and
+/// dilute a local effect, a step late in one run, among blocks with d ≈ 0).
+pub fn held_out_z_acting(
+    ps: &[Prepared],
+    r0: &[Vec<Vec<f64>>],
+    r1: &[Vec<Vec<f64>>],
+    acts: (&[Vec<Vec<f64>>], &[Vec<Vec<f64>>]),
+) -> f64 {
     let touched = |pi: usize, a: usize, b: usize| {
         let p = &ps[pi];
         p.channels.iter().enumerate().any(|(ci, c)| {
             (a..b).any(|k| {
-                let e = r0[pi][ci][k] - r1[pi][ci][k];
+                let e = acts.0[pi][ci][k] - acts.1[pi][ci][k];
                 e.is_finite() && e.abs() > 1e-3 * c.s
             })
         })
@@ -294,6 +308,28 @@ mod tests {
         let step: Vec<f64> = (0..n).map(|k| if k >= 50 { 0.5 } else { 0.0 }).collect();
         let j = step_jump_share(&ps, &[vec![step]], &[offset(0.5, 600.0)]).unwrap();
         assert!((j - 1.0).abs() < 1e-9, "{j}");
+    }
+
+    #[test]
+    fn a_late_step_is_judged_on_the_blocks_it_acts_on_not_on_the_freedom_s_ripple() {
+        // 600 rows of 10 s; held out: 60..120, 180..240, …: five 600 s blocks
+        let n = 600;
+        let mut p = run(n);
+        p.held = (0..n).map(|k| (k / 60) % 2 == 1).collect();
+        let ps = [p];
+        // a 0.5 °C step from row 400 (two held-out blocks after it)
+        let ripple = |k: usize| 0.01 * (k % 7) as f64;
+        let r0: Vec<f64> = (0..n)
+            .map(|k| ripple(k) + if k >= 400 { 0.5 } else { 0.0 })
+            .collect();
+        let raw1: Vec<f64> = (0..n).map(ripple).collect();
+        // the freedom's re-solved correction moves every row a little
+        let r1: Vec<f64> = raw1.iter().map(|v| v + 0.001).collect();
+        let (r0, raw1, r1) = ([vec![r0]], [vec![raw1]], [vec![r1]]);
+        let diluted = held_out_z(&ps, &r0, &r1);
+        let acting = held_out_z_acting(&ps, &r0, &r1, (&r0, &raw1));
+        assert!(diluted < Z_MIN, "{diluted}");
+        assert!(acting >= Z_MIN, "{acting}");
     }
 
     #[test]

@@ -392,6 +392,8 @@ fn evidence(
 struct Judge<'a> {
     ev: &'a Evaluator<'a>,
     res0: &'a [Vec<Vec<f64>>],
+    /// The nominal's residuals before the freedom (where an effect acts).
+    raw0: Vec<Vec<Vec<f64>>>,
     st0: Stats,
     /// The nominal's fit criterion on the fit rows.
     j0: f64,
@@ -414,7 +416,9 @@ impl Judge<'_> {
         let st = self.ev.stats_of(&res1);
         let st0 = &self.st0;
         let mut ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
-        let z = gate::held_out_z(self.ev.runs, self.res0, &res1);
+        let raw1 = self.ev.raw_residuals(&fr.effects)?;
+        let acts = (&self.raw0[..], &raw1[..]);
+        let z = gate::held_out_z_acting(self.ev.runs, self.res0, &res1, acts);
         if let Some(o) = ev_json.as_object_mut() {
             // NaN (fewer than two held-out blocks): no test, null
             let zj = if z.is_nan() {
@@ -511,7 +515,11 @@ impl Judge<'_> {
         let r_single = self.ev.residuals(&single.effects)?;
         let r_pair = self.ev.residuals(&pair.effects)?;
         let m_single = self.ev.stats_of(&r_single).m_held();
-        let z = gate::held_out_z(self.ev.runs, &r_single, &r_pair);
+        let acts = (
+            self.ev.raw_residuals(&single.effects)?,
+            self.ev.raw_residuals(&pair.effects)?,
+        );
+        let z = gate::held_out_z_acting(self.ev.runs, &r_single, &r_pair, (&acts.0, &acts.1));
         Ok(gate::passes(m_single, z))
     }
 }
@@ -655,7 +663,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the held-out blocks' mean reduction of the squared gap in noise units, with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the mean reduction of the squared gap in noise units over the held-out blocks (≤ 600 s) the effect acts on (read from its own change of the prediction, before the freedom's correction, which moves every row a little), with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
@@ -678,6 +686,7 @@ fn diagnose_core(
     let judge = Judge {
         ev: &ev,
         res0: &res0,
+        raw0: ev.raw_residuals(&[])?,
         j0: st0.j_fit(),
         m0: st0.m_held(),
         lnn: (st0.n_fit().max(2) as f64).ln(),
