@@ -4,6 +4,9 @@
 use super::prep::Prepared;
 use super::stats::mean_finite;
 
+/// Residuals: run → channel → row.
+type Residuals = [Vec<Vec<f64>>];
+
 /// One-sided z at 1 %: a claimed reduction must reach it.
 pub const Z_MIN: f64 = 2.33;
 /// Longest held-out block [s]: a held-out stretch is cut into blocks of at
@@ -67,7 +70,7 @@ pub fn held_out_z_acting(
     ps: &[Prepared],
     r0: &[Vec<Vec<f64>>],
     r1: &[Vec<Vec<f64>>],
-    acts: (&[Vec<Vec<f64>>], &[Vec<Vec<f64>>]),
+    acts: (&Residuals, &Residuals),
 ) -> f64 {
     let touched = |pi: usize, a: usize, b: usize| {
         let p = &ps[pi];
@@ -112,6 +115,20 @@ pub fn z_of(d: &[f64]) -> f64 {
         return if mean > 0.0 { f64::INFINITY } else { 0.0 };
     }
     mean / (var / nb).sqrt()
+}
+
+/// Whether `more` (a pair) beats `base` (its base single) by the gate
+/// itself, not only by the margins: a small partner (a low-exponent bearing
+/// heat, a slow drift) otherwise soaks up what is left of a design error.
+pub fn beats_in_noise(
+    ev: &super::effect_fit::Evaluator,
+    base: &[crate::sim::Effect],
+    more: &[crate::sim::Effect],
+) -> anyhow::Result<bool> {
+    let (r_base, r_more) = (ev.residuals(base)?, ev.residuals(more)?);
+    let acts = (ev.raw_residuals(base)?, ev.raw_residuals(more)?);
+    let z = held_out_z_acting(ev.runs, &r_base, &r_more, (&acts.0, &acts.1));
+    Ok(passes(ev.stats_of(&r_base).m_held(), z))
 }
 
 /// Whether a reduction passes the gate: the held-out gap before is above

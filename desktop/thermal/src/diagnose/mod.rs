@@ -506,24 +506,6 @@ impl Judge<'_> {
     }
 }
 
-impl Judge<'_> {
-    // a pair's gain over its base single must itself be significant against
-    // the measured noise (the same held-out z ≥ 2.33), not only earn the
-    // margins: a small partner (a low-exponent bearing heat, a slow drift)
-    // otherwise soaks up what is left of a design error
-    fn beats_single_in_noise(&self, single: &FitResult, pair: &FitResult) -> Result<bool> {
-        let r_single = self.ev.residuals(&single.effects)?;
-        let r_pair = self.ev.residuals(&pair.effects)?;
-        let m_single = self.ev.stats_of(&r_single).m_held();
-        let acts = (
-            self.ev.raw_residuals(&single.effects)?,
-            self.ev.raw_residuals(&pair.effects)?,
-        );
-        let z = gate::held_out_z_acting(self.ev.runs, &r_single, &r_pair, (&acts.0, &acts.1));
-        Ok(gate::passes(m_single, z))
-    }
-}
-
 /// A candidate as tried: its finding and its fit.
 type Tried = (Finding, FitResult);
 
@@ -603,7 +585,7 @@ fn best_pair(
             && ref_m - f.m_after >= opt.min_abs
             && best.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
             && judge.partner_earns_its_place(fr, &f)?
-            && judge.beats_single_in_noise(&tried[a].1, fr)?
+            && gate::beats_in_noise(judge.ev, &tried[a].1.effects, &fr.effects)?
         {
             best = Some((f, a, b));
         }
