@@ -75,6 +75,9 @@ impl Stats {
     }
 }
 
+/// Residuals: run → channel → row.
+pub(crate) type Residuals = Vec<Vec<Vec<f64>>>;
+
 /// A correction every evaluation's residuals get: the calibration's
 /// bounded freedom (`freedom.rs`), left to the null and every candidate.
 pub trait Projection: Sync {
@@ -128,6 +131,17 @@ impl<'a> Evaluator<'a> {
         Ok(all)
     }
 
+    /// The residuals before the calibration's freedom and after it (where
+    /// an effect acts, and what it leaves), from one simulation.
+    pub(crate) fn raw_and_residuals(&self, effects: &[Effect]) -> Result<(Residuals, Residuals)> {
+        let raw = self.raw_residuals(effects)?;
+        let mut all = raw.clone();
+        if let Some(f) = self.freedom {
+            f.project(&mut all);
+        }
+        Ok((raw, all))
+    }
+
     /// The fit-rows criterion of a set of effects (`stats(..).j_fit()`),
     /// without projecting the held-out rows when the freedom can say the
     /// fit rows' SSE directly: the fits' objective, evaluated ≈ 1000 times
@@ -153,7 +167,7 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Residuals before the calibration's freedom.
-    pub(crate) fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
+    fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
         let mut all = Vec::with_capacity(self.runs.len());
         for p in self.runs {
             // an effect located in one run (a sensor step) acts there only

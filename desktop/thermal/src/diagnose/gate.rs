@@ -125,9 +125,9 @@ pub fn beats_in_noise(
     base: &[crate::sim::Effect],
     more: &[crate::sim::Effect],
 ) -> anyhow::Result<bool> {
-    let (r_base, r_more) = (ev.residuals(base)?, ev.residuals(more)?);
-    let acts = (ev.raw_residuals(base)?, ev.raw_residuals(more)?);
-    let z = held_out_z_acting(ev.runs, &r_base, &r_more, (&acts.0, &acts.1));
+    let (raw_base, r_base) = ev.raw_and_residuals(base)?;
+    let (raw_more, r_more) = ev.raw_and_residuals(more)?;
+    let z = held_out_z_acting(ev.runs, &r_base, &r_more, (&raw_base, &raw_more));
     Ok(passes(ev.stats_of(&r_base).m_held(), z))
 }
 
@@ -242,7 +242,7 @@ pub fn late_step(ps: &[Prepared], effects: &[crate::sim::Effect]) -> Option<(Str
     let k0 = (0..p.rows()).find(|&k| p.inputs.time(k) >= *at_s)?;
     let after = blocks(ps, |i, _, b| i == pi && b > k0)
         .into_iter()
-        .filter(|&(_, a, b)| b > k0.max(a))
+        .filter(|&(_, _, b)| b > k0)
         .count();
     (*at_s > 0.0 && after < 2).then(|| {
         (
@@ -370,8 +370,8 @@ mod tests {
             "{name}"
         );
         assert!(why.contains("1 held-out block"), "{why}");
-        // after it: none
         assert!(why.contains("+0.80 °C"), "{why}");
+        // after it: none
         assert!(late_step(&ps, &[step(2000.0)])
             .unwrap()
             .1

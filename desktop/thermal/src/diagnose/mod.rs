@@ -412,11 +412,10 @@ impl Judge<'_> {
     }
 
     fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
-        let res1 = self.ev.residuals(&fr.effects)?;
+        let (raw1, res1) = self.ev.raw_and_residuals(&fr.effects)?;
         let st = self.ev.stats_of(&res1);
         let st0 = &self.st0;
         let mut ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
-        let raw1 = self.ev.raw_residuals(&fr.effects)?;
         let acts = (&self.raw0[..], &raw1[..]);
         let z = gate::held_out_z_acting(self.ev.runs, self.res0, &res1, acts);
         if let Some(o) = ev_json.as_object_mut() {
@@ -663,12 +662,12 @@ fn diagnose_core(
         cal.as_ref()
             .map(|c| c.freedom as &dyn effect_fit::Projection),
     );
-    let res0 = ev.residuals(&[])?;
+    let (raw0, res0) = ev.raw_and_residuals(&[])?;
     let st0 = ev.stats_of(&res0);
     let judge = Judge {
         ev: &ev,
         res0: &res0,
-        raw0: ev.raw_residuals(&[])?,
+        raw0,
         j0: st0.j_fit(),
         m0: st0.m_held(),
         lnn: (st0.n_fit().max(2) as f64).ln(),
