@@ -215,6 +215,13 @@ fn a_parameter_finding_is_true_of_the_file_only_outside_its_tolerance_and_the_ri
                 || k.starts_with("bearing ")
                 || k == "motor_loss_frac")
     );
+    // one heated node: only what sits on it (the nose bearing seat h1)
+    let node = design_keys("heat:h1", &m.spec);
+    assert!(
+        !node.is_empty() && node.iter().all(|k| k.ends_with(" h1 w_at_nmax")),
+        "{node:?}"
+    );
+    assert!(node.len() < heat.len(), "{node:?} against {heat:?}");
 }
 
 #[test]

@@ -107,19 +107,21 @@ pub fn design_keys(parameter: &str, spec: &MachineSpec) -> Vec<String> {
             }
         }
         "heat" => {
+            // a driver (`spindle`, `feed`) or one heated node
             let spindle = all || is("spindle");
-            if spindle && spec.motor_node.is_some() {
+            if spec.motor_node.as_deref().is_some_and(|m| spindle || is(m)) {
                 out.push("motor_loss_frac".into());
             }
-            for b in spec.bearings.iter().filter(|_| spindle) {
+            for b in spec.bearings.iter().filter(|b| spindle || is(&b.node)) {
                 out.push(format!("bearing {} f0", b.node));
                 out.push(format!("bearing {} f1", b.node));
             }
             for (i, s) in spec.sources.iter().enumerate() {
-                let take = match s.driver {
-                    Driver::Spindle => spindle,
-                    Driver::Feed => all || is("feed"),
-                };
+                let take = is(&s.node)
+                    || match s.driver {
+                        Driver::Spindle => spindle,
+                        Driver::Feed => all || is("feed"),
+                    };
                 if take {
                     out.push(format!("source {i} {} w_at_nmax", s.node));
                 }

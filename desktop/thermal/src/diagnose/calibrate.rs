@@ -51,6 +51,9 @@ pub(crate) struct Knob {
     pub element: Option<String>,
     /// Its tolerance (fraction): θ ∈ [ln(1 − tol), ln(1 + tol)].
     pub tol: f64,
+    /// The element key whose tolerance applies when the file names none
+    /// for `element` (a heated node: its driver, `spindle` or `feed`).
+    tol_from: Option<String>,
 }
 
 impl Knob {
@@ -61,6 +64,7 @@ impl Knob {
             group,
             element,
             tol: 0.0,
+            tol_from: None,
         }
     }
     /// Bounds of θ (ln factor) inside the tolerance.
@@ -215,11 +219,18 @@ fn add_jacket_knobs(m: &Machine, sets: &mut KnobSets) {
 }
 
 /// Heat gains: one scale per driver (the spindle-driven sources, bearings
-/// and motor loss; the feed-driven sources). The split of the heat budget
-/// between sources stays the design's: that split is where the heat
-/// effects (bearing heat, ball-screw heat) act, and a gain per source
-/// would absorb them.
+/// and motor loss; the feed-driven sources), and one per heated node inside
+/// the same tolerance. A drawing's heat numbers are off per source (each
+/// bearing's friction factors, each loss), not only per driver: without a
+/// gain per node the split between sources was taken as exact and a lone
+/// bearing 20 % off read as an extra bearing heat on a healthy machine.
+/// The per-node gain is bounded by the tolerance, so an effect that needs
+/// more (or another speed law) still shows — as a heat effect or, released,
+/// as "heat source stronger than designed".
 fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
+    if add_heat_node_knobs(m, sets) {
+        return;
+    }
     let driven_by = |driver: crate::sim::machine::Driver| -> Vec<usize> {
         (0..m.spec.sources.len())
             .filter(|&s| m.spec.sources[s].driver == driver && m.spec.sources[s].w_at_nmax > 0.0)
@@ -254,6 +265,57 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
             Some("feed".into()),
         ));
     }
+}
+
+/// One heat gain per node that carries heat (its sources of either driver,
+/// its bearings, the motor loss) when more than one node does: with one,
+/// the driver gains already cover it.
+fn add_heat_node_knobs(m: &Machine, sets: &mut KnobSets) -> bool {
+    let mut heated: Vec<usize> = Vec::new();
+    let sources_at = |i: usize| -> Vec<usize> {
+        (0..m.spec.sources.len())
+            .filter(|&s| {
+                m.spec.sources[s].w_at_nmax > 0.0
+                    && node_index(m, &m.spec.sources[s].node) == Some(i)
+            })
+            .collect()
+    };
+    let bearings_at = |i: usize| -> Vec<usize> {
+        (0..m.spec.bearings.len())
+            .filter(|&b| node_index(m, &m.spec.bearings[b].node) == Some(i))
+            .collect()
+    };
+    let motor_at =
+        |i: usize| m.motor_node == Some(i) && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
+    for i in 0..m.n {
+        if !sources_at(i).is_empty() || !bearings_at(i).is_empty() || motor_at(i) {
+            heated.push(i);
+        }
+    }
+    if heated.len() < 2 {
+        return false;
+    }
+    for i in heated {
+        let n = node_name(m, i);
+        let t = Target::Heat {
+            sources: sources_at(i),
+            bearings: bearings_at(i),
+            motor: motor_at(i),
+        };
+        let spindle_driven = motor_at(i)
+            || !bearings_at(i).is_empty()
+            || sources_at(i)
+                .iter()
+                .any(|&s| m.spec.sources[s].driver == crate::sim::machine::Driver::Spindle);
+        let mut k = Knob::new(format!("heat at {n}"), t, "heat", Some(n));
+        k.tol_from = Some(if spindle_driven { "spindle" } else { "feed" }.into());
+        sets.common.push(k);
+    }
+    true
+}
+
+fn node_index(m: &Machine, name: &str) -> Option<usize> {
+    m.names.iter().position(|n| n == name)
 }
 
 /// Displacement: per term, or one lever per direction.
@@ -293,14 +355,20 @@ pub(crate) fn knobs(m: &Machine) -> Vec<Knob> {
     let tol = &m.spec.tolerance;
     let mut ks = sets.chosen();
     for k in ks.iter_mut() {
-        k.tol = crate::sim::machine::tolerance::of(tol, k.group, k.element.as_deref());
+        // a heated node's own key, else its driver's (`heat:spindle`)
+        let named = |e: &String| tol.contains_key(&format!("{}:{e}", k.group));
+        let element = match (&k.element, &k.tol_from) {
+            (Some(e), Some(f)) if !named(e) => Some(f.as_str()),
+            (e, _) => e.as_deref(),
+        };
+        k.tol = crate::sim::machine::tolerance::of(tol, k.group, element);
     }
     ks.retain(|k| k.tol > 0.0);
     ks
 }
 
-/// The design value a knob scales (summed over its elements; heat: the
-/// sources' W at full drive; length: |mm|).
+/// The design value a knob scales (summed over its elements; heat: W at
+/// full drive — sources, bearings at n_max, motor loss; length: |mm|).
 pub(crate) fn design_value(m: &Machine, k: &Knob) -> f64 {
     match &k.target {
         Target::Capacity(v) => v.iter().map(|&i| m.c[i]).sum(),
@@ -310,7 +378,24 @@ pub(crate) fn design_value(m: &Machine, k: &Knob) -> f64 {
             .coolant
             .as_ref()
             .map_or(0.0, |c| v.iter().map(|&j| c.jacket[j].1).sum()),
-        Target::Heat { sources, .. } => sources.iter().map(|&s| m.spec.sources[s].w_at_nmax).sum(),
+        Target::Heat {
+            sources,
+            bearings,
+            motor,
+        } => {
+            let n_max = m.spec.n_max_rpm;
+            let src: f64 = sources.iter().map(|&s| m.spec.sources[s].w_at_nmax).sum();
+            let brg: f64 = bearings
+                .iter()
+                .map(|&b| m.spec.bearings[b].heat_w(n_max))
+                .sum();
+            let mot = if *motor {
+                m.spec.motor_loss_frac * m.spec.rated_power_w
+            } else {
+                0.0
+            };
+            src + brg + mot
+        }
         Target::Term(d, v) => v.iter().map(|&t| m.dir_terms[*d][t].1.abs()).sum(),
     }
 }
@@ -537,7 +622,7 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         .collect();
     let r4 = super::stats::r4;
     let json = json!({
-        "method": "each uncertain design value (capacity, loss to ambient, link and jacket conductance per element; heat gain per driver (spindle, feed); displacement length per term) scaled by exp(θ), θ fitted on the fit rows by Gauss–Newton on the diagnosis criterion plus a Gaussian prior",
+        "method": "each uncertain design value (capacity, loss to ambient, link and jacket conductance per element; heat gain per heated node (sources, bearings and motor loss on it; per driver when one node carries heat); displacement length per term) scaled by exp(θ), θ fitted on the fit rows by Gauss–Newton on the diagnosis criterion plus a Gaussian prior",
         "bounds": "each design value within its tolerance (machine file [tolerance], default ±25 %): factor 1 − tol … 1 + tol; prior one σ = half the tolerance (ln)",
         "tolerances": tol_summary(&ks),
         "parameters": nk,
@@ -551,7 +636,7 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         "gap_c_calibrated": st_c.gap_held(false).map(|g| r4(g.0)),
         "largest_changes": moved.iter().take(8).map(|&(i, t)| json!({"name": ks[i].name, "factor": r4(t.exp())})).collect::<Vec<_>>(),
         "on_bound": on_bound,
-        "absorbed": "an effect that acts like a change of these parameters (a different convection level or loss, the heat budget's overall level per driver, a displacement lever) is absorbed by the calibration: it is no gap and is not named",
+        "absorbed": "an effect that acts like a change of these parameters (a different convection level or loss, a node's heat within its tolerance, a displacement lever) is absorbed by the calibration: it is no gap and is not named",
     });
     let note = format!(
         "machine file calibrated on the fit rows within its tolerances ({nk} design values, {}): held-out gap {:.2} → {:.2} (noise units){}",
@@ -590,4 +675,25 @@ fn tol_summary(ks: &[Knob]) -> String {
         })
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_heated_node_takes_its_own_tolerance_else_its_driver_s() {
+        let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../machines/turning-center-16.toml");
+        let mut spec = Machine::load(&p).unwrap().spec;
+        spec.tolerance.insert("heat:spindle".into(), 0.1);
+        spec.tolerance.insert("heat:rear_bearing".into(), 0.4);
+        let m = Machine::compile(spec).unwrap();
+        let ks = knobs(&m);
+        let tol = |name: &str| ks.iter().find(|k| k.name == name).map(|k| k.tol);
+        assert_eq!(tol("heat at rear_bearing"), Some(0.4));
+        assert_eq!(tol("heat at front_bearing"), Some(0.1));
+        // one gain per heated node: no driver gain on top of them
+        assert!(ks.iter().all(|k| !k.name.starts_with("spindle heat")));
+    }
 }

@@ -1,20 +1,18 @@
 //! A heat effect inside the design's own heat tolerance is not testable.
 //!
-//! The calibration scales the heat budget per driver (spindle, feed) but
-//! keeps the design's split between sources (`calibrate.rs`: a gain per
-//! source would absorb the heat effects). Yet every source's heat is a
-//! design number with a tolerance, like any other: a drawing that puts
-//! 50 W on the nose bearing where 60 W flow leaves 10 W at that node that
-//! neither the calibration nor the noise gate can tell from an extra heat
-//! source there. So an extra heat at a node (`bearing_nonlinear`,
-//! `ballscrew`) that, at the highest speed (feed) the runs reach, adds no
-//! more than the heat tolerance of the heat the calibrated design already
-//! puts at every node it acts on cannot be told from a design error of
-//! that node's own heat: it is not claimed, and it is listed untestable
-//! with the figures. (At its peak, not over the runs: a steep speed law
-//! is small at low speed, where the design error is not the question.)
-//! A heat effect where the design has no heat, or larger than that share,
-//! is judged as before.
+//! Every heated node's heat is a design number with a tolerance, and the
+//! calibration may move it within that tolerance (`calibrate.rs`: one
+//! heat gain per heated node). A drawing that puts 50 W on the nose
+//! bearing where 60 W flow leaves 10 W at that node that the data cannot
+//! tell from an extra heat source there. So an extra heat at a node
+//! (`bearing_nonlinear`, `ballscrew`) that, at the highest speed (feed) the
+//! runs reach, adds no more than the heat tolerance of the heat the
+//! calibrated design already puts at every node it acts on cannot be told
+//! from a design error of that node's own heat: it is not claimed, and it
+//! is listed untestable with the figures. (At its peak, not over the runs:
+//! a steep speed law is small at low speed, where the design error is not
+//! the question.) A heat effect where the design has no heat, or larger
+//! than that share, is judged as before.
 
 use super::prep::Prepared;
 use crate::sim::machine::tolerance;

@@ -6,7 +6,8 @@
 //! Keys (every value a fraction: 0.25 = ±25 %, 0 = exact):
 //! `default`; a group `capacity`, `film`, `link`, `jacket`, `heat`, `length`;
 //! one element `"capacity:<node>"`, `"film:<node>"`, `"link:<a>-<b>"`,
-//! `"jacket:<node>"`, `"heat:spindle"`, `"heat:feed"`,
+//! `"jacket:<node>"`, `"heat:spindle"`, `"heat:feed"`, `"heat:<node>"` (the
+//! sources, bearings and motor loss on one node),
 //! `"length:<direction>:<node>"` (`rod` as the node for the spindle rod).
 //! The most specific key wins.
 
@@ -44,6 +45,10 @@ fn element_keys(s: &MachineSpec) -> Vec<String> {
     }
     v.push("heat:spindle".into());
     v.push("heat:feed".into());
+    // one heated node: its sources, bearings and motor loss together
+    v.extend(s.sources.iter().map(|x| format!("heat:{}", x.node)));
+    v.extend(s.bearings.iter().map(|x| format!("heat:{}", x.node)));
+    v.extend(s.motor_node.iter().map(|x| format!("heat:{x}")));
     for d in &s.directions {
         v.extend(
             d.terms
