@@ -7,6 +7,7 @@ pub mod boxqp;
 pub mod calibrate;
 pub mod candidate;
 pub mod design_heat;
+pub mod design_mimic;
 pub mod effect_fit;
 mod fit_untestable;
 pub mod fitmode;
@@ -451,13 +452,15 @@ impl Judge<'_> {
         ))
     }
 
-    /// Why a finding's heat effect cannot be told from the design's own
-    /// heat error (`design_heat.rs`; only against a calibrated file).
+    /// Why a finding's effect cannot be told from design errors within
+    /// tolerance: a node's heat (`design_heat.rs`), the film coefficients
+    /// or levers (`design_mimic.rs`); only against a calibrated file.
     fn barred(&self, f: &Finding) -> Option<String> {
         self.freedom?;
-        f.effects
-            .iter()
-            .find_map(|e| design_heat::within_tolerance(self.ev.m, self.ev.runs, e))
+        f.effects.iter().find_map(|e| {
+            design_heat::within_tolerance(self.ev.m, self.ev.runs, e)
+                .or_else(|| design_mimic::within_tolerance(self.ev.m, e))
+        })
     }
 
     // never an effect that widens the held-out displacement gap (beyond
@@ -644,7 +647,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the mean reduction of the squared gap in noise units over the held-out blocks (≤ 600 s) the effect acts on (read from its own change of the prediction, before the freedom's correction, which moves every row a little), with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on is not claimed, alone or in a pair (the design's split of heat between sources is not calibrated, so it cannot be told from a design error of that node's heat): it is listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the mean reduction of the squared gap in noise units over the held-out blocks (≤ 600 s) the effect acts on (read from its own change of the prediction, before the freedom's correction, which moves every row a little), with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on, a convection whose added loss is within the film tolerance of the design's loss at every node with an area, and a bending within the length tolerance of both its nodes' levers, are not claimed, alone or in a pair (each cannot be told from a design error of those values): they are listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
