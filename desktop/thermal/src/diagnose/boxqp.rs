@@ -13,8 +13,22 @@ pub fn box_qp(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
 /// column i is row i), contiguous, so the sweep's dot products vectorise:
 /// it runs for every evaluation of every candidate.
 pub fn box_qp_counted(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> (Vec<f64>, usize) {
+    box_qp_from(a, b, lo, hi, &vec![0.0; b.len()])
+}
+
+/// `box_qp_counted` with the sweeps started from `x0` (clamped). Started
+/// from the unconstrained optimum A⁻¹b, the sweeps only have to settle the
+/// few values on a bound: from 0 they crawl along the near-collinear
+/// directions of a large calibration and stop at the sweep cap unsettled.
+pub fn box_qp_from(
+    a: &DMatrix<f64>,
+    b: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    x0: &[f64],
+) -> (Vec<f64>, usize) {
     let n = b.len();
-    let mut x: Vec<f64> = (0..n).map(|i| 0.0f64.clamp(lo[i], hi[i])).collect();
+    let mut x: Vec<f64> = (0..n).map(|i| x0[i].clamp(lo[i], hi[i])).collect();
     let cols = a.as_slice();
     for sweep in 0..200 {
         let mut moved = 0.0f64;

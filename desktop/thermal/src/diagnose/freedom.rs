@@ -37,7 +37,7 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::box_qp_counted;
+use super::boxqp::box_qp_from;
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
@@ -70,6 +70,8 @@ pub struct Freedom {
     prec: Vec<f64>,
     /// SᵀWS over the fit rows plus the prior precision.
     a: DMatrix<f64>,
+    /// Its Cholesky factor: the unconstrained optimum starts the box QP.
+    a_chol: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
     /// Projections done and Gauss–Seidel sweeps, for `TCOMP_DIAG_TIMING`
     /// (printed when the freedom is dropped).
     calls: AtomicU64,
@@ -289,6 +291,7 @@ impl Freedom {
             lo,
             hi,
             prec,
+            a_chol: a.clone().cholesky(),
             a,
             calls: AtomicU64::new(0),
             sweeps: AtomicU64::new(0),
@@ -316,7 +319,11 @@ impl Freedom {
         let nk = self.len();
         let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
         let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
-        let (d, sweeps) = box_qp_counted(&self.a, b, &lo, &hi);
+        let free = self.a_chol.as_ref().map_or_else(
+            || vec![0.0; nk],
+            |c| c.solve(&DVector::from_column_slice(b)).as_slice().to_vec(),
+        );
+        let (d, sweeps) = box_qp_from(&self.a, b, &lo, &hi, &free);
         self.calls.fetch_add(1, Relaxed);
         self.sweeps.fetch_add(sweeps as u64, Relaxed);
         d
