@@ -37,7 +37,7 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::box_qp_from;
+use super::boxqp::box_qp_exact;
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
@@ -323,7 +323,7 @@ impl Freedom {
             || vec![0.0; nk],
             |c| c.solve(&DVector::from_column_slice(b)).as_slice().to_vec(),
         );
-        let (d, sweeps) = box_qp_from(&self.a, b, &lo, &hi, &free);
+        let (d, sweeps) = box_qp_exact(&self.a, b, &lo, &hi, &free);
         self.calls.fetch_add(1, Relaxed);
         self.sweeps.fetch_add(sweeps as u64, Relaxed);
         d
@@ -499,7 +499,7 @@ impl Drop for Freedom {
         if timing() {
             let calls = self.calls.load(Relaxed);
             eprintln!(
-                "diagnose timing: {calls} projections, {:.3} s, {:.1} Gauss–Seidel sweeps each",
+                "diagnose timing: {calls} projections, {:.3} s, {:.1} box-QP steps each",
                 self.ns.load(Relaxed) as f64 * 1e-9,
                 self.sweeps.load(Relaxed) as f64 / calls.max(1) as f64
             );
