@@ -16,11 +16,10 @@ pub fn box_qp_counted(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> (V
     box_qp_from(a, b, lo, hi, &vec![0.0; b.len()])
 }
 
-/// `box_qp_counted` with the sweeps started from `x0` (clamped). The
-/// freedom starts them from the unconstrained optimum A⁻¹b: its sweeps,
-/// capped, still end near the cap (≈ 197 of 200 on the bench's cases, the
-/// directions of a large calibration are near-collinear), but end closer
-/// to the optimum than sweeps from 0.
+/// `box_qp_counted` with the sweeps started from `x0` (clamped): the
+/// fallback of `box_qp_exact`. Capped, the sweeps end unsettled on a large
+/// calibration (≈ 197 of 200 on the bench's cases: its directions are
+/// near-collinear).
 pub fn box_qp_from(
     a: &DMatrix<f64>,
     b: &[f64],
