@@ -218,15 +218,16 @@ fn add_jacket_knobs(m: &Machine, sets: &mut KnobSets) {
     }
 }
 
-/// Heat gains: one scale per driver (the spindle-driven sources, bearings
-/// and motor loss; the feed-driven sources), and one per heated node inside
-/// the same tolerance. A drawing's heat numbers are off per source (each
-/// bearing's friction factors, each loss), not only per driver: without a
-/// gain per node the split between sources was taken as exact and a lone
-/// bearing 20 % off read as an extra bearing heat on a healthy machine.
-/// The per-node gain is bounded by the tolerance, so an effect that needs
-/// more (or another speed law) still shows — as a heat effect or, released,
-/// as "heat source stronger than designed".
+/// Heat gains: one per heated node (`add_heat_node_knobs`) when more than
+/// one node carries heat, else one per driver (the spindle-driven sources,
+/// bearings and motor loss; the feed-driven sources). A drawing's heat
+/// numbers are off per source (each bearing's friction factors, each loss),
+/// not only per driver: with one gain per driver the split between sources
+/// was taken as exact and a lone bearing 20 % off read as an extra bearing
+/// heat on a healthy machine. The per-node gain is bounded by the
+/// tolerance, so an effect that needs more (or another speed law) still
+/// shows — as a heat effect or, released, as "heat source stronger than
+/// designed".
 fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
     if add_heat_node_knobs(m, sets) {
         return;
@@ -269,44 +270,44 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
 
 /// One heat gain per node that carries heat (its sources of either driver,
 /// its bearings, the motor loss) when more than one node does: with one,
-/// the driver gains already cover it.
+/// the driver gains already cover it. Its tolerance falls back to its
+/// driver's (`heat:spindle`, `heat:feed`) when the file names none for it.
 fn add_heat_node_knobs(m: &Machine, sets: &mut KnobSets) -> bool {
-    let mut heated: Vec<usize> = Vec::new();
-    let sources_at = |i: usize| -> Vec<usize> {
-        (0..m.spec.sources.len())
+    use crate::sim::machine::Driver;
+    // a node's sources, bearings and whether the motor loss sits on it
+    type NodeHeat = (Vec<usize>, Vec<usize>, bool);
+    let heat_at = |i: usize| -> NodeHeat {
+        let sources = (0..m.spec.sources.len())
             .filter(|&s| {
                 m.spec.sources[s].w_at_nmax > 0.0
                     && node_index(m, &m.spec.sources[s].node) == Some(i)
             })
-            .collect()
-    };
-    let bearings_at = |i: usize| -> Vec<usize> {
-        (0..m.spec.bearings.len())
+            .collect();
+        let bearings = (0..m.spec.bearings.len())
             .filter(|&b| node_index(m, &m.spec.bearings[b].node) == Some(i))
-            .collect()
+            .collect();
+        let motor = m.motor_node == Some(i) && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
+        (sources, bearings, motor)
     };
-    let motor_at =
-        |i: usize| m.motor_node == Some(i) && m.spec.motor_loss_frac * m.spec.rated_power_w > 0.0;
-    for i in 0..m.n {
-        if !sources_at(i).is_empty() || !bearings_at(i).is_empty() || motor_at(i) {
-            heated.push(i);
-        }
-    }
+    let heated: Vec<(usize, NodeHeat)> = (0..m.n)
+        .map(|i| (i, heat_at(i)))
+        .filter(|(_, (s, b, motor))| !s.is_empty() || !b.is_empty() || *motor)
+        .collect();
     if heated.len() < 2 {
         return false;
     }
-    for i in heated {
+    for (i, (sources, bearings, motor)) in heated {
+        let spindle_driven = motor
+            || !bearings.is_empty()
+            || sources
+                .iter()
+                .any(|&s| m.spec.sources[s].driver == Driver::Spindle);
         let n = node_name(m, i);
         let t = Target::Heat {
-            sources: sources_at(i),
-            bearings: bearings_at(i),
-            motor: motor_at(i),
+            sources,
+            bearings,
+            motor,
         };
-        let spindle_driven = motor_at(i)
-            || !bearings_at(i).is_empty()
-            || sources_at(i)
-                .iter()
-                .any(|&s| m.spec.sources[s].driver == crate::sim::machine::Driver::Spindle);
         let mut k = Knob::new(format!("heat at {n}"), t, "heat", Some(n));
         k.tol_from = Some(if spindle_driven { "spindle" } else { "feed" }.into());
         sets.common.push(k);

@@ -37,8 +37,11 @@ fn convection(m: &Machine, h: f64) -> Option<String> {
             "film",
             m.names.get(i).map(String::as_str),
         );
+        if !(m.g_amb[i] > 0.0) {
+            return None; // the design has no loss there to be off
+        }
         let share = h * m.area[i] / m.g_amb[i];
-        if !(m.g_amb[i] > 0.0) || share > tol {
+        if share > tol {
             return None;
         }
         worst = worst.max(share / tol);

@@ -72,7 +72,7 @@ pub struct Freedom {
     a: DMatrix<f64>,
     /// Its Cholesky factor: the unconstrained optimum starts the box QP.
     a_chol: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
-    /// Projections done and Gauss–Seidel sweeps, for `TCOMP_DIAG_TIMING`
+    /// Projections done and box-QP steps, for `TCOMP_DIAG_TIMING`
     /// (printed when the freedom is dropped).
     calls: AtomicU64,
     sweeps: AtomicU64,
