@@ -37,7 +37,7 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::box_qp_exact;
+use super::boxqp::{box_qp_exact, box_qp_exact_inv};
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
@@ -47,8 +47,12 @@ use knots::Knots;
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
     /// K: the sensitivities in the kept directions (B = SV) at the knots,
-    /// one column per direction; B̃ = H K on every row (H: `knots`).
-    knots_b: DMatrix<f64>,
+    /// one column per direction, column-major; B̃ = H K on every row (H:
+    /// `knots`). Stored in f32 (every product sums in f64): the passes
+    /// over it are bound by reading it, and B̃ᵀB̃ is formed from the same
+    /// rounded values, so the criterion stays consistent; the rounding
+    /// (≈ 3·10⁻⁸ relative) is far inside `REL_TOL`.
+    knots_b: Vec<f32>,
     knots: Knots,
     /// Per flattened row: its first knot and the next knot's weight
     /// (`Knots::row_weights`; precomputed: the pass runs per evaluation).
@@ -61,6 +65,16 @@ pub struct Freedom {
     fit: Vec<bool>,
     /// Per flattened row: was the calibrated nominal's residual missing.
     missing: Vec<bool>,
+    /// The calibrated nominal's residual per flattened row and its B̃ᵀr
+    /// per channel: an evaluation's B̃ᵀr is this plus B̃ᵀ of what changed,
+    /// read only over the knots it changed (a sensor effect touches one
+    /// channel, a step only the rows after it).
+    base_r: Vec<f64>,
+    base_h: Vec<DVector<f64>>,
+    /// Knot rows of B̃ read, and rows that could have been, for
+    /// `TCOMP_DIAG_TIMING`.
+    knots_read: AtomicU64,
+    knots_all: AtomicU64,
     /// Kept directions (knobs × directions).
     v: DMatrix<f64>,
     /// Calibrated θ, its bounds and prior precision per knob.
@@ -70,8 +84,9 @@ pub struct Freedom {
     prec: Vec<f64>,
     /// SᵀWS over the fit rows plus the prior precision.
     a: DMatrix<f64>,
-    /// Its Cholesky factor: the unconstrained optimum starts the box QP.
-    a_chol: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
+    /// Its inverse (None: not positive definite): the unconstrained
+    /// optimum starts the box QP, and its steps solve the held values.
+    a_inv: Option<DMatrix<f64>>,
     /// Projections done and box-QP steps, for `TCOMP_DIAG_TIMING`
     /// (printed when the freedom is dropped).
     calls: AtomicU64,
@@ -252,8 +267,9 @@ impl Freedom {
         let basis = &sens * &v;
         drop(sens);
         let (knots, err) = knots::choose(&basis, &rows.lens, &rows.wall, rel_tol);
-        let knots_b = knots.sample(&basis);
+        let mut knots_b = knots.sample(&basis);
         drop(basis);
+        knots_b.apply(|v| *v = *v as f32 as f64);
         let chans = fit_channels(&knots, &knots_b, &rows);
         // SᵀWS ≈ V (Σ w B̃ᵀB̃) Vᵀ on the fit rows
         let nd = v.ncols();
@@ -278,25 +294,34 @@ impl Freedom {
             );
         }
         let (row_knot, row_wb) = knots.row_weights();
-        let fr = Freedom {
-            knots_b,
+        let mut fr = Freedom {
+            knots_b: knots_b.iter().map(|&v| v as f32).collect(),
             knots,
             row_knot,
             row_wb,
             chans,
             fit: rows.fit,
             missing: rows.missing,
+            base_r: Vec::new(),
+            base_h: Vec::new(),
+            knots_read: AtomicU64::new(0),
+            knots_all: AtomicU64::new(0),
             v,
             theta: theta.to_vec(),
             lo,
             hi,
             prec,
-            a_chol: a.clone().cholesky(),
+            a_inv: a.clone().cholesky().map(|c| c.inverse()),
             a,
             calls: AtomicU64::new(0),
             sweeps: AtomicU64::new(0),
             ns: AtomicU64::new(0),
         };
+        // from an empty base: every row differs from 0 where it is finite
+        fr.base_h = vec![DVector::zeros(nd); fr.chans.len()];
+        fr.base_r = vec![0.0; n_all];
+        fr.base_h = fr.fit_products(&r0).0;
+        fr.base_r = r0.iter().flatten().flatten().copied().collect();
         Ok(fr)
     }
 
@@ -319,11 +344,10 @@ impl Freedom {
         let nk = self.len();
         let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
         let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
-        let free = self.a_chol.as_ref().map_or_else(
-            || vec![0.0; nk],
-            |c| c.solve(&DVector::from_column_slice(b)).as_slice().to_vec(),
-        );
-        let (d, sweeps) = box_qp_exact(&self.a, b, &lo, &hi, &free);
+        let (d, sweeps) = match &self.a_inv {
+            Some(p) => box_qp_exact_inv(&self.a, p, b, &lo, &hi),
+            None => box_qp_exact(&self.a, b, &lo, &hi, &vec![0.0; nk]),
+        };
         self.calls.fetch_add(1, Relaxed);
         self.sweeps.fetch_add(sweeps as u64, Relaxed);
         d
@@ -340,8 +364,14 @@ impl Freedom {
         let (h, _) = self.fit_products(res);
         let d = self.solve(&self.pull_from(&h));
         let c = self.v.tr_mul(&DVector::from_column_slice(&d));
-        let mut ck: Vec<f64> = (&self.knots_b * c).iter().copied().collect();
-        ck.push(0.0);
+        // B̃c at the knots, one column at a time (contiguous)
+        let nkn = self.knots.n_knots;
+        let mut ck = vec![0.0; nkn + 1];
+        for (col, &cj) in self.knots_b.chunks_exact(nkn).zip(c.iter()) {
+            for (o, &bv) in ck.iter_mut().zip(col) {
+                *o += cj * bv as f64;
+            }
+        }
         for ((v, &j), &wb) in res
             .iter_mut()
             .flatten()
@@ -358,40 +388,62 @@ impl Freedom {
 
     /// Per channel: B̃ᵀr over its fit rows (non-finite r as 0), and Σ r²
     /// over the finite ones; None where r is non-finite on a row the
-    /// calibrated nominal had (B̃ᵀB̃ counts that row).
+    /// calibrated nominal had (B̃ᵀB̃ counts that row). B̃ᵀr is the
+    /// nominal's plus B̃ᵀ(r − r₀) over the knots where r differs from it.
     fn fit_products(&self, res: &[Vec<Vec<f64>>]) -> (Vec<DVector<f64>>, Option<Vec<f64>>) {
+        let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
         let mut consistent = true;
-        // z = Hᵀ r over the fit rows (one more knot: a knot row's next one)
+        // z = Hᵀ(r − r₀) over the fit rows (one more knot: a knot row's next one)
         let mut z = vec![0.0; self.knots.n_knots + 1];
         let mut rr = vec![0.0; self.chans.len()];
+        // per channel: the knots z touches, [first, end)
+        let mut touched = vec![(usize::MAX, 0usize); self.chans.len()];
         let mut row = 0;
         for (ci, ch) in res.iter().flatten().enumerate() {
-            for &v in ch {
+            let base = &self.base_r[row..row + ch.len()];
+            for (&v, &b) in ch.iter().zip(base) {
                 if self.fit[row] {
                     if v.is_finite() {
-                        let (j, wb) = (self.row_knot[row] as usize, self.row_wb[row]);
-                        z[j] += (1.0 - wb) * v;
-                        z[j + 1] += wb * v;
                         rr[ci] += v * v;
                     } else {
                         consistent &= self.missing[row];
+                    }
+                    if v.to_bits() != b.to_bits() {
+                        let d = fin(v) - fin(b);
+                        let (j, wb) = (self.row_knot[row] as usize, self.row_wb[row]);
+                        z[j] += (1.0 - wb) * d;
+                        z[j + 1] += wb * d;
+                        let t = &mut touched[ci];
+                        *t = (t.0.min(j), t.1.max(j + 2));
                     }
                 }
                 row += 1;
             }
         }
+        let (mut read, mut all) = (0u64, 0u64);
         let h = self
             .chans
             .iter()
-            .map(|c| {
-                let mut hc = DVector::zeros(self.knots_b.ncols());
+            .zip(&self.base_h)
+            .zip(&touched)
+            .map(|((c, h0), &(t0, t1))| {
+                let mut hc = h0.clone();
                 for &(a, b) in &c.fit_spans {
-                    let zc = DVector::from_column_slice(&z[a..b]);
-                    hc += self.knots_b.rows(a, b - a).tr_mul(&zc);
+                    all += (b - a) as u64;
+                    let (a, b) = (a.max(t0), b.min(t1));
+                    if a < b {
+                        read += (b - a) as u64;
+                        let nkn = self.knots.n_knots;
+                        for (o, col) in hc.iter_mut().zip(self.knots_b.chunks_exact(nkn)) {
+                            *o += dot32(&col[a..b], &z[a..b]);
+                        }
+                    }
                 }
                 hc
             })
             .collect();
+        self.knots_read.fetch_add(read, Relaxed);
+        self.knots_all.fetch_add(all, Relaxed);
         (h, consistent.then_some(rr))
     }
 
@@ -489,6 +541,25 @@ fn spans(on: &[bool], k0: usize) -> Vec<(usize, usize)> {
     out
 }
 
+/// Σ b·z with b stored in f32, summed in f64 in four running sums
+/// (vectorised: the pass over B̃ is the freedom's hot loop).
+fn dot32(b: &[f32], z: &[f64]) -> f64 {
+    let (cb, cz) = (b.chunks_exact(4), z.chunks_exact(4));
+    let tail: f64 = cb
+        .remainder()
+        .iter()
+        .zip(cz.remainder())
+        .map(|(&x, y)| x as f64 * y)
+        .sum();
+    let mut s = [0.0f64; 4];
+    for (x, y) in cb.zip(cz) {
+        for k in 0..4 {
+            s[k] += x[k] as f64 * y[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
+}
+
 /// `TCOMP_DIAG_TIMING` set: the diagnosis prints where its time goes.
 pub(crate) fn timing() -> bool {
     std::env::var_os("TCOMP_DIAG_TIMING").is_some()
@@ -499,9 +570,11 @@ impl Drop for Freedom {
         if timing() {
             let calls = self.calls.load(Relaxed);
             eprintln!(
-                "diagnose timing: {calls} projections, {:.3} s, {:.1} box-QP steps each",
+                "diagnose timing: {calls} projections, {:.3} s, {:.1} box-QP steps each, {:.0} % of B̃'s fit knots read",
                 self.ns.load(Relaxed) as f64 * 1e-9,
-                self.sweeps.load(Relaxed) as f64 / calls.max(1) as f64
+                self.sweeps.load(Relaxed) as f64 / calls.max(1) as f64,
+                100.0 * self.knots_read.load(Relaxed) as f64
+                    / self.knots_all.load(Relaxed).max(1) as f64
             );
         }
     }
