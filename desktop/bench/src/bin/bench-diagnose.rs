@@ -61,10 +61,12 @@ struct Args {
     heldout: bool,
     sigma: f64,
     threads: Option<usize>,
+    first_case: usize,
 }
 
 fn parse_args() -> Result<Args> {
     let mut cases = 60usize;
+    let mut first_case = 0usize;
     let mut seed = 7u64;
     let mut json = false;
     let mut verbose = false;
@@ -107,6 +109,13 @@ fn parse_args() -> Result<Args> {
                         .context("--threads N")?,
                 )
             }
+            "--first-case" => {
+                first_case = args
+                    .next()
+                    .context("--first-case N")?
+                    .parse()
+                    .context("--first-case N")?
+            }
             "--json" => json = true,
             "--calibrate" => calibrate = true,
             "--verbose" => verbose = true,
@@ -115,7 +124,7 @@ fn parse_args() -> Result<Args> {
             "--closed-only" => closed_only = true,
             "--cross-only" => cross_only = true,
             "--periodic-only" => periodic_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X, --threads N)"),
+            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X, --threads N, --first-case N)"),
         }
     }
     Ok(Args {
@@ -136,6 +145,7 @@ fn parse_args() -> Result<Args> {
         heldout,
         sigma,
         threads,
+        first_case,
     })
 }
 
@@ -158,6 +168,7 @@ fn run() -> Result<()> {
         heldout,
         sigma,
         threads,
+        first_case,
     } = parse_args()?;
     let machines = vec![
         Machine::load(&dir.join("turning-center-16.toml"))?,
@@ -191,6 +202,7 @@ fn run() -> Result<()> {
             worlds,
             sigma,
             seeds,
+            first_case,
         };
         return run_columns(&path, &machines, &open_cfg, &acfg, json);
     }

@@ -97,6 +97,9 @@ pub struct ApproxConfig {
     /// σ of the log design factor.
     pub sigma: f64,
     pub seeds: Vec<u64>,
+    /// Cases before this index are drawn but not diagnosed (to look at
+    /// one case without running those before it).
+    pub first_case: usize,
 }
 
 /// One world × column: outcome counts, clean cases, times.
@@ -279,7 +282,7 @@ fn run_seed(
     };
     for &w in &acfg.worlds {
         let cases = world_cases(w, truth_machine, machines, cfg)?;
-        for (ci, case) in cases.iter().enumerate() {
+        for (ci, case) in cases.iter().enumerate().skip(acfg.first_case) {
             let dseed = design_seed(cfg.seed, w.tag(), ci);
             for &col in &acfg.columns {
                 let run = diagnose_column(col, case, &opt, acfg.sigma, dseed)?;

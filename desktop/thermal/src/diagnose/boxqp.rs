@@ -3,23 +3,12 @@
 
 use nalgebra::DMatrix;
 
-/// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi (A symmetric positive
-/// definite), by projected Gauss–Seidel from 0 (clamped).
-pub fn box_qp(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
-    box_qp_counted(a, b, lo, hi).0
-}
-
-/// `box_qp` and the sweeps it took. A is read by columns (A symmetric:
-/// column i is row i), contiguous, so the sweep's dot products vectorise:
-/// it runs for every evaluation of every candidate.
-pub fn box_qp_counted(a: &DMatrix<f64>, b: &[f64], lo: &[f64], hi: &[f64]) -> (Vec<f64>, usize) {
-    box_qp_from(a, b, lo, hi, &vec![0.0; b.len()])
-}
-
-/// `box_qp_counted` with the sweeps started from `x0` (clamped): the
-/// fallback of `box_qp_exact`. Capped, the sweeps end unsettled on a large
-/// calibration (≈ 197 of 200 on the bench's cases: its directions are
-/// near-collinear).
+/// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi by projected Gauss–Seidel
+/// from `x0` (clamped), and the sweeps it took: the fallback of
+/// `box_qp_exact`. A is read by columns (A symmetric: column i is row i),
+/// contiguous, so the sweep's dot products vectorise. Capped, the sweeps
+/// end unsettled on a large calibration (≈ 197 of 200 on the bench's
+/// cases: its directions are near-collinear).
 pub fn box_qp_from(
     a: &DMatrix<f64>,
     b: &[f64],
@@ -276,7 +265,7 @@ mod tests {
                     x[i]
                 );
             }
-            let (gs, _) = box_qp_counted(&a, &b, &lo, &hi);
+            let (gs, _) = box_qp_from(&a, &b, &lo, &hi, &vec![0.0; n]);
             assert!(
                 objective(&a, &b, &x) <= objective(&a, &b, &gs) + 1e-12,
                 "seed {seed}"

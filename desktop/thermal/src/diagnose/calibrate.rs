@@ -575,7 +575,17 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         }
         let dlo: Vec<f64> = (0..nk).map(|i| lo[i] - theta[i]).collect();
         let dhi: Vec<f64> = (0..nk).map(|i| hi[i] - theta[i]).collect();
-        let delta = super::boxqp::box_qp(&a, &g, &dlo, &dhi);
+        // exact (active set, from the unconstrained step): the capped
+        // sweeps from 0 ended unsettled along the near-collinear knobs
+        let free = a.clone().cholesky().map_or_else(
+            || vec![0.0; nk],
+            |c| {
+                c.solve(&nalgebra::DVector::from_column_slice(&g))
+                    .as_slice()
+                    .to_vec()
+            },
+        );
+        let delta = super::boxqp::box_qp_exact(&a, &g, &dlo, &dhi, &free).0;
         // step halving on the criterion (data + prior)
         let mut step = 1.0;
         let mut moved = false;
