@@ -7,13 +7,12 @@
 //! (the sensitivity of every channel to every design value, one simulation
 //! per value, computed once) and, for every trial, the design values'
 //! correction is a box-constrained least-squares fit on the fit rows
-//! (projected Gauss–Seidel) whose box is the tolerance: a candidate can
-//! absorb no more of a wrong design than the null hypothesis could.
+//! (exact: an active set, `boxqp.rs`) whose box is the tolerance: a
+//! candidate can absorb no more of a wrong design than the null hypothesis
+//! could.
 //!
 //! Speed: that projection runs for every evaluation of every candidate
-//! (≈ 800 per diagnosis; ≈ 70 % of a diagnosis' time when it multiplied
-//! the full sensitivity matrix, ≈ 35 k rows × ≈ 95 values, twice, and ran
-//! 200 Gauss–Seidel sweeps). S is compressed to `REL_TOL` (relative
+//! (≈ 800 per diagnosis). S is compressed to `REL_TOL` (relative
 //! Frobenius norm in the criterion's weights) twice over: the ≈ 95
 //! strongly collinear columns are kept in the basis of the eigenvectors V
 //! of SᵀDS (D: the channels' weights on every row) that carry all but
@@ -24,11 +23,14 @@
 //! would suggest: what is left once an effect is explained lies in the
 //! small directions, and 10⁻³ moved the criterion by ≈ 13 and the
 //! held-out gap by 8 % there (`freedom/tests.rs`; 10⁻⁶: ≤ 0.1).
-//! A fit's criterion
-//! needs only the fit rows' SSE per channel, which `fit_sse` gives from
-//! B̃ᵀB̃ and B̃ᵀr without forming the corrected residuals; the box QP's
-//! sweeps read A by contiguous columns (`boxqp.rs`). `freedom/tests.rs`
-//! checks the compressed freedom against the full one.
+//! A fit's criterion needs only the fit rows' SSE per channel, which
+//! `fit_sse` gives from B̃ᵀB̃ and B̃ᵀr without forming the corrected
+//! residuals. The pass over B̃ (≈ 35 k rows × ≈ 95 directions) bounds
+//! the time, by reading it: B̃ is kept in f32, and B̃ᵀr is the calibrated
+//! nominal's plus B̃ᵀ(r − r₀) over the knots where r changed (a sensor
+//! effect changes one channel, a step only the rows after it); the box
+//! QP's steps solve the held values' multipliers from A⁻¹, computed once.
+//! `freedom/tests.rs` checks the compressed freedom against the full one.
 
 mod knots;
 

@@ -132,3 +132,71 @@ fn compressed_freedom_matches_the_full_one() {
         );
     }
 }
+
+/// B̃ᵀr over the fit rows from scratch: every row, every direction.
+fn products_from_scratch(fr: &Freedom, res: &[Vec<Vec<f64>>]) -> Vec<Vec<f64>> {
+    let nkn = fr.knots.n_knots;
+    let b = |k: usize, d: usize| {
+        if k < nkn {
+            fr.knots_b[d * nkn + k] as f64
+        } else {
+            0.0
+        }
+    };
+    let nd = fr.knots_b.len() / nkn;
+    let mut out = Vec::new();
+    let mut row = 0;
+    for ch in res.iter().flatten() {
+        let mut h = vec![0.0; nd];
+        for &v in ch {
+            if fr.fit[row] && v.is_finite() {
+                let (j, wb) = (fr.row_knot[row] as usize, fr.row_wb[row]);
+                for (d, hd) in h.iter_mut().enumerate() {
+                    *hd += ((1.0 - wb) * b(j, d) + wb * b(j + 1, d)) * v;
+                }
+            }
+            row += 1;
+        }
+        out.push(h);
+    }
+    out
+}
+
+#[test]
+fn b_transpose_r_from_the_nominal_s_matches_it_from_scratch_and_reads_only_what_changed() {
+    let (design, ps) = setup();
+    let cal = calibrate(&design, &ps, 2).unwrap();
+    let fr = Freedom::new(&design, &cal.knobs, &cal.theta, &ps, 2).unwrap();
+    let ev = crate::diagnose::effect_fit::Evaluator::new(&cal.machine, &ps).unwrap();
+    let r0 = ev.residuals(&[]).unwrap();
+    // one channel of the second run changed after row 700 (a step), and
+    // every channel changed (a thermal effect)
+    let mut step = r0.clone();
+    step[1][2].iter_mut().skip(700).for_each(|v| *v += 0.4);
+    let thermal = ev.residuals(&[Effect::Ballscrew { k_w: 30.0 }]).unwrap();
+    for (what, res) in [("nominal", &r0), ("step", &step), ("thermal", &thermal)] {
+        let before = (fr.knots_read.load(Relaxed), fr.knots_all.load(Relaxed));
+        let (h, rr) = fr.fit_products(res);
+        let read = fr.knots_read.load(Relaxed) - before.0;
+        let all = fr.knots_all.load(Relaxed) - before.1;
+        let want = products_from_scratch(&fr, res);
+        for (c, (hc, wc)) in h.iter().zip(&want).enumerate() {
+            let scale = wc.iter().map(|x| x.abs()).fold(1e-12, f64::max);
+            for (x, y) in hc.iter().zip(wc) {
+                assert!(
+                    (x - y).abs() <= 1e-9 * scale,
+                    "{what} channel {c}: {x} vs {y}"
+                );
+            }
+        }
+        assert!(rr.is_some(), "{what}: no missing rows");
+        match what {
+            "nominal" => assert_eq!(read, 0, "the nominal itself reads nothing"),
+            "step" => assert!(
+                read > 0 && read * 10 < all,
+                "a one-channel step read {read} of {all} knots"
+            ),
+            _ => assert!(read * 10 > all * 9, "a thermal effect read {read} of {all}"),
+        }
+    }
+}
