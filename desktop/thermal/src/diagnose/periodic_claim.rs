@@ -2,8 +2,8 @@
 //! `periodic.rs` on the nominal's residual, a finding with its period and
 //! amplitude, and where it ranks against the other effects: a line still
 //! there after the selected effect is something that effect does not
-//! explain; it goes first when the selected effect is a sensor fault (a
-//! sawtooth's ramp-and-drop reads locally as a step) or explains less of
+//! explain; it goes first when the selected effect is a sensor step (a
+//! sawtooth's ramp-and-drop reads locally as one) or explains less of
 //! the held-out gap.
 
 use serde_json::{json, Value};
@@ -31,7 +31,7 @@ pub const MIN_HELD_SHRINK: f64 = 0.1;
 
 /// The ranking rule's sentence on periodic drivers.
 pub fn rule() -> String {
-    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × trial frequencies, 5 per independent one) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise units, the inputs (spindle_rpm, feed_activity) must not repeat at that period (the same test on them: then the line is the model's misfit of a repeating duty), its waveform fitted on the fit rows must take ≥ {:.0} % of the held-out gap of the channels it shows on away, and it must not widen the held-out gap; it ranks first when the line survives the selected effect and that effect is a sensor fault or leaves a larger held-out gap", HARMONICS - 1, MIN_HELD_SHRINK * 100.0)
+    format!("; periodic drivers (periodic, {PERIOD_MIN_S:.0}–{PERIOD_MAX_S:.0} s): per channel, the residual differenced, a level and slope per run projected out, sin/cos of f and {} harmonics fitted per run (phase free per run); their χ² against the local background (median over [f/2, 2f] away from f's harmonic relatives) must have a tail probability × (channels × trial frequencies, 5 per independent one) below {ALPHA}, an amplitude ≥ {MIN_AMP_NOISE} noise units, the inputs (spindle_rpm, feed_activity) must not repeat at that period (the same test on them: then the line is the model's misfit of a repeating duty), its waveform fitted on the fit rows must take ≥ {:.0} % of the held-out gap of the channels it shows on away, and it must not widen the held-out gap; it ranks first when the line survives the selected effect (still significant and ≥ {MIN_AMP_NOISE} noise units in that effect's residual) and that effect is a sensor offset or step (a sawtooth reads locally as a step; a lag cannot make a line) or leaves a larger held-out gap", HARMONICS - 1, MIN_HELD_SHRINK * 100.0)
 }
 
 /// Machine-file mode: the scan of the nominal residual (`res0`).
@@ -253,10 +253,12 @@ fn set_role(f: &mut Finding, role: &str) {
     }
 }
 
-fn is_sensor_fault(f: &Finding) -> bool {
-    f.name
-        .split('+')
-        .all(|n| matches!(n, "sensor_offset" | "sensor_lag"))
+/// A selected effect made only of sensor offsets (steps): a sawtooth's
+/// ramp-and-drop reads locally as one. A lag is not among them: it only
+/// filters what the sensor's node does, so it cannot make a line — a line
+/// on a lagging sensor is the node's own swing, which the lag explains.
+fn reads_as_step(f: &Finding) -> bool {
+    f.name.split('+').all(|n| n == "sensor_offset")
 }
 
 /// Put the periodic candidate among the findings. `survives`: whether the
@@ -290,7 +292,7 @@ pub fn merge(
             "alternative: the selected effect explains this periodic line",
         );
         findings.push(f);
-    } else if is_sensor_fault(sel) || f.m_after <= sel.m_after {
+    } else if reads_as_step(sel) || f.m_after <= sel.m_after {
         set_role(&mut f, "selected");
         for g in findings.iter_mut() {
             if g.evidence["role"] == "selected" {
@@ -310,9 +312,15 @@ pub fn merge(
     }
 }
 
-/// Whether the line (period, tests) is still significant in `scan`.
+/// Whether the line (period, tests) is still claimable in `scan`:
+/// significant and at least `MIN_AMP_NOISE` noise units on its channel,
+/// as a claim must be (a selected effect that leaves a trace of the line,
+/// significant over hours of samples but under the floor, explains it).
 pub fn line_survives(scan: &Scan, line: &Line) -> bool {
-    periodic::line_near(scan, line.period_s, line.n_tests).is_some_and(|l| l.significant())
+    periodic::line_near(scan, line.period_s, line.n_tests).is_some_and(|l| {
+        let (amp, _) = periodic::waveform(scan, l.chan, l.period_s, &|_, _| true);
+        l.significant() && amp >= MIN_AMP_NOISE * scan.chans[l.chan].noise
+    })
 }
 
 /// The report's paragraph on the periodic scan (empty when none ran).
