@@ -38,19 +38,20 @@ pub fn box_qp_from(
     (x, 200)
 }
 
-/// A dot product in four running sums (vectorised).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+/// A dot product in four running sums of f64 (vectorised); `a` may be
+/// stored in f32 (the freedom's B̃), widened as it is read.
+pub(crate) fn dot<T: Copy + Into<f64>>(a: &[T], b: &[f64]) -> f64 {
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let tail: f64 = ca
         .remainder()
         .iter()
         .zip(cb.remainder())
-        .map(|(x, y)| x * y)
+        .map(|(&x, y)| x.into() * y)
         .sum();
     let mut s = [0.0f64; 4];
     for (x, y) in ca.zip(cb) {
         for k in 0..4 {
-            s[k] += x[k] * y[k];
+            s[k] += x[k].into() * y[k];
         }
     }
     (s[0] + s[1]) + (s[2] + s[3]) + tail

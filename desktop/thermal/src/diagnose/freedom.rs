@@ -39,7 +39,7 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::{box_qp_exact, box_qp_exact_inv};
+use super::boxqp::{box_qp_exact, box_qp_exact_inv, dot};
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
@@ -437,7 +437,7 @@ impl Freedom {
                         read += (b - a) as u64;
                         let nkn = self.knots.n_knots;
                         for (o, col) in hc.iter_mut().zip(self.knots_b.chunks_exact(nkn)) {
-                            *o += dot32(&col[a..b], &z[a..b]);
+                            *o += dot(&col[a..b], &z[a..b]);
                         }
                     }
                 }
@@ -541,25 +541,6 @@ fn spans(on: &[bool], k0: usize) -> Vec<(usize, usize)> {
         }
     }
     out
-}
-
-/// Σ b·z with b stored in f32, summed in f64 in four running sums
-/// (vectorised: the pass over B̃ is the freedom's hot loop).
-fn dot32(b: &[f32], z: &[f64]) -> f64 {
-    let (cb, cz) = (b.chunks_exact(4), z.chunks_exact(4));
-    let tail: f64 = cb
-        .remainder()
-        .iter()
-        .zip(cz.remainder())
-        .map(|(&x, y)| x as f64 * y)
-        .sum();
-    let mut s = [0.0f64; 4];
-    for (x, y) in cb.zip(cz) {
-        for k in 0..4 {
-            s[k] += x[k] as f64 * y[k];
-        }
-    }
-    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
 /// `TCOMP_DIAG_TIMING` set: the diagnosis prints where its time goes.
