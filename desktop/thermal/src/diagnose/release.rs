@@ -143,6 +143,8 @@ fn eval_with_correction(m: &Machine, ps: &[Prepared], fr: &Freedom) -> Result<(J
 pub(crate) struct Tried {
     pub finding: Finding,
     pub res: Vec<Vec<Vec<f64>>>,
+    /// The calibrated machine with this release applied.
+    pub released: Machine,
     /// Whether the fitted value(s) left the tolerance (design-weighted:
     /// Σ fitted / Σ design outside 1 ± tol).
     pub outside: bool,
@@ -245,6 +247,7 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
         out.push(Tried {
             finding,
             res: res1,
+            released: at(gamma),
             outside,
             group: r.group,
             whole_group: r.element.is_none() && r.idx.len() > 1,
@@ -339,6 +342,23 @@ pub(super) fn merge_releases(
             return Ok(sims);
         }
     }
+    // an effect beside the finding must still add to the released null
+    // (its parameters as fitted against the calibrated one): otherwise it
+    // only absorbed the local misfit the release explains
+    let ev_rel = Evaluator::new(&best.released, ps)?.with_freedom(Some(cal.freedom));
+    let mut kept = Vec::new();
+    for f in findings.drain(..) {
+        if f.effects.is_empty() {
+            kept.push(f);
+            continue;
+        }
+        let res_both = ev_rel.residuals(&f.effects)?;
+        sims += 1;
+        if gate::held_out_z(ps, &best.res, &res_both) >= gate::Z_MIN {
+            kept.push(f);
+        }
+    }
+    *findings = kept;
     findings.insert(0, with_role(&best.finding, "selected"));
     Ok(sims)
 }
