@@ -345,7 +345,12 @@ pub(super) fn merge_releases(
     // an effect beside the finding must still add to the released null
     // (its parameters as fitted against the calibrated one): otherwise it
     // only absorbed the local misfit the release explains
+    if findings.iter().all(|f| f.effects.is_empty()) {
+        findings.insert(0, with_role(&best.finding, "selected"));
+        return Ok(sims);
+    }
     let ev_rel = Evaluator::new(&best.released, ps)?.with_freedom(Some(cal.freedom));
+    sims += ps.len();
     let mut kept = Vec::new();
     for f in findings.drain(..) {
         if f.effects.is_empty() {
