@@ -345,5 +345,15 @@ fn the_cross_model_machines_are_perturbed_too() {
             ["rod front g_w_per_k"]
         );
         assert_eq!(design_keys("capacity:rod", &m.spec), ["rod cp_j_per_kgk"]);
+        // a bearing node's viscous term is its own knob: `<node>:f0` names
+        // f0 only, the node's knob the rest (f1 and whatever else sits there)
+        let b = &m.spec.bearings[0].node;
+        assert_eq!(
+            design_keys(&format!("heat:{b}:f0"), &m.spec),
+            [format!("bearing {b} f0")]
+        );
+        let node = design_keys(&format!("heat:{b}"), &m.spec);
+        assert!(node.contains(&format!("bearing {b} f1")), "{f} {node:?}");
+        assert!(!node.contains(&format!("bearing {b} f0")), "{f} {node:?}");
     }
 }

@@ -107,13 +107,23 @@ pub fn design_keys(parameter: &str, spec: &MachineSpec) -> Vec<String> {
             }
         }
         "heat" => {
-            // a driver (`spindle`, `feed`) or one heated node
+            // a driver (`spindle`, `feed`), one heated node, or the
+            // viscous term of a node's bearings (`<node>:f0`; the node's
+            // own knob then scales the rest)
             let spindle = all || is("spindle");
+            if let Some(node) = element.and_then(|e| e.strip_suffix(":f0")) {
+                for b in spec.bearings.iter().filter(|b| b.node == node) {
+                    out.push(format!("bearing {} f0", b.node));
+                }
+                return out;
+            }
             if spec.motor_node.as_deref().is_some_and(|m| spindle || is(m)) {
                 out.push("motor_loss_frac".into());
             }
             for b in spec.bearings.iter().filter(|b| spindle || is(&b.node)) {
-                out.push(format!("bearing {} f0", b.node));
+                if spindle || !viscous_split(spec, &b.node) {
+                    out.push(format!("bearing {} f0", b.node));
+                }
                 out.push(format!("bearing {} f1", b.node));
             }
             for (i, s) in spec.sources.iter().enumerate() {
@@ -142,6 +152,26 @@ pub fn design_keys(parameter: &str, spec: &MachineSpec) -> Vec<String> {
         _ => {}
     }
     out
+}
+
+/// Whether the calibration gives the viscous term (f0) of `node`'s
+/// bearings a knob of its own (`diagnose::calibrate`: when the node has
+/// other heat — a load term, a source, the motor loss).
+fn viscous_split(spec: &MachineSpec, node: &str) -> bool {
+    let at = |b: &&tcomp_thermal::sim::machine::BearingSpec| b.node == node;
+    let viscous = spec.bearings.iter().filter(at).any(|b| b.f0 > 0.0);
+    let other = spec
+        .bearings
+        .iter()
+        .filter(at)
+        .any(|b| b.f1 * b.load_n > 0.0)
+        || spec
+            .sources
+            .iter()
+            .any(|s| s.node == node && s.w_at_nmax > 0.0)
+        || (spec.motor_node.as_deref() == Some(node)
+            && spec.motor_loss_frac * spec.rated_power_w > 0.0);
+    viscous && other
 }
 
 /// The correction the drawn file needs on `parameter` (truth / design: the

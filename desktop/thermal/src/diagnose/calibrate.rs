@@ -37,8 +37,22 @@ pub(crate) enum Target {
         sources: Vec<usize>,
         bearings: Vec<usize>,
         motor: bool,
+        terms: Terms,
     },
     Term(usize, Vec<usize>),
+}
+
+/// Which terms of its bearings' Palmgren friction a heat knob scales: the
+/// viscous term (f0, heat ∝ n^(5/3)) and the load term (f1, heat ∝ n) are
+/// two design numbers, each with its tolerance and its own speed law. One
+/// gain on both kept the file's split between them exact: a lubrication
+/// factor 30 % low then read as an extra heat of speed law ≈ n^1.4 on a
+/// healthy machine (cross model, design file σ 15 %).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Terms {
+    Both,
+    Viscous,
+    Load,
 }
 
 #[derive(Clone, Debug)]
@@ -51,9 +65,10 @@ pub(crate) struct Knob {
     pub element: Option<String>,
     /// Its tolerance (fraction): θ ∈ [ln(1 − tol), ln(1 + tol)].
     pub tol: f64,
-    /// The element key whose tolerance applies when the file names none
-    /// for `element` (a heated node: its driver, `spindle` or `feed`).
-    tol_from: Option<String>,
+    /// The element keys whose tolerance applies, first named first, when
+    /// the file names none for `element` (a heated node: its driver,
+    /// `spindle` or `feed`; a node's viscous term: the node, its driver).
+    tol_from: Vec<String>,
 }
 
 impl Knob {
@@ -64,7 +79,7 @@ impl Knob {
             group,
             element,
             tol: 0.0,
-            tol_from: None,
+            tol_from: Vec::new(),
         }
     }
     /// Bounds of θ (ln factor) inside the tolerance.
@@ -245,6 +260,7 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
             sources: spindle,
             bearings: (0..m.spec.bearings.len()).collect(),
             motor,
+            terms: Terms::Both,
         };
         sets.common.push(Knob::new(
             "spindle heat (all spindle-driven sources, bearings, motor)".into(),
@@ -258,6 +274,7 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
             sources: feed,
             bearings: vec![],
             motor: false,
+            terms: Terms::Both,
         };
         sets.common.push(Knob::new(
             "feed heat (all feed-driven sources)".into(),
@@ -272,6 +289,9 @@ fn add_heat_knobs(m: &Machine, sets: &mut KnobSets) {
 /// its bearings, the motor loss) when more than one node does: with one,
 /// the driver gains already cover it. Its tolerance falls back to its
 /// driver's (`heat:spindle`, `heat:feed`) when the file names none for it.
+/// The viscous term (f0) of a node's bearings is a knob of its own
+/// (`heat:<node>:f0`, tolerance falling back to the node's, then the
+/// driver's) when the node has other heat: see [`Terms`].
 fn add_heat_node_knobs(m: &Machine, sets: &mut KnobSets) -> bool {
     use crate::sim::machine::Driver;
     // a node's sources, bearings and whether the motor loss sits on it
@@ -303,13 +323,41 @@ fn add_heat_node_knobs(m: &Machine, sets: &mut KnobSets) -> bool {
                 .iter()
                 .any(|&s| m.spec.sources[s].driver == Driver::Spindle);
         let n = node_name(m, i);
+        let driver = if spindle_driven { "spindle" } else { "feed" };
+        let b = &m.spec.bearings;
+        let viscous: Vec<usize> = bearings
+            .iter()
+            .copied()
+            .filter(|&j| b[j].f0 > 0.0)
+            .collect();
+        let other_heat =
+            !sources.is_empty() || motor || bearings.iter().any(|&j| b[j].f1 * b[j].load_n > 0.0);
+        // the viscous term its own knob when the node has other heat
+        let split = !viscous.is_empty() && other_heat;
+        if split {
+            let t = Target::Heat {
+                sources: Vec::new(),
+                bearings: viscous,
+                motor: false,
+                terms: Terms::Viscous,
+            };
+            let mut k = Knob::new(
+                format!("viscous bearing friction (f0) at {n}"),
+                t,
+                "heat",
+                Some(format!("{n}:f0")),
+            );
+            k.tol_from = vec![n.clone(), driver.into()];
+            sets.common.push(k);
+        }
         let t = Target::Heat {
             sources,
             bearings,
             motor,
+            terms: if split { Terms::Load } else { Terms::Both },
         };
         let mut k = Knob::new(format!("heat at {n}"), t, "heat", Some(n));
-        k.tol_from = Some(if spindle_driven { "spindle" } else { "feed" }.into());
+        k.tol_from = vec![driver.into()];
         sets.common.push(k);
     }
     true
@@ -357,10 +405,15 @@ pub(crate) fn knobs(m: &Machine) -> Vec<Knob> {
     let mut ks = sets.chosen();
     for k in ks.iter_mut() {
         // a heated node's own key, else its driver's (`heat:spindle`)
-        let named = |e: &String| tol.contains_key(&format!("{}:{e}", k.group));
-        let element = match (&k.element, &k.tol_from) {
-            (Some(e), Some(f)) if !named(e) => Some(f.as_str()),
-            (e, _) => e.as_deref(),
+        let named = |e: &str| tol.contains_key(&format!("{}:{e}", k.group));
+        let element = match &k.element {
+            Some(e) if !named(e) && !k.tol_from.is_empty() => k
+                .tol_from
+                .iter()
+                .find(|f| named(f))
+                .or(k.tol_from.last())
+                .map(String::as_str),
+            e => e.as_deref(),
         };
         k.tol = crate::sim::machine::tolerance::of(tol, k.group, element);
     }
@@ -383,12 +436,21 @@ pub(crate) fn design_value(m: &Machine, k: &Knob) -> f64 {
             sources,
             bearings,
             motor,
+            terms,
         } => {
             let n_max = m.spec.n_max_rpm;
             let src: f64 = sources.iter().map(|&s| m.spec.sources[s].w_at_nmax).sum();
             let brg: f64 = bearings
                 .iter()
-                .map(|&b| m.spec.bearings[b].heat_w(n_max))
+                .map(|&b| {
+                    let mut b = m.spec.bearings[b].clone();
+                    match terms {
+                        Terms::Both => {}
+                        Terms::Viscous => b.f1 = 0.0,
+                        Terms::Load => b.f0 = 0.0,
+                    }
+                    b.heat_w(n_max)
+                })
                 .sum();
             let mot = if *motor {
                 m.spec.motor_loss_frac * m.spec.rated_power_w
@@ -421,13 +483,18 @@ pub(crate) fn apply(m: &Machine, ks: &[Knob], theta: &[f64]) -> Machine {
                 sources,
                 bearings,
                 motor,
+                terms,
             } => {
                 sources
                     .iter()
                     .for_each(|&s| c.spec.sources[s].w_at_nmax *= f);
                 for &b in bearings {
-                    c.spec.bearings[b].f0 *= f;
-                    c.spec.bearings[b].f1 *= f;
+                    if *terms != Terms::Load {
+                        c.spec.bearings[b].f0 *= f;
+                    }
+                    if *terms != Terms::Viscous {
+                        c.spec.bearings[b].f1 *= f;
+                    }
                 }
                 if *motor {
                     c.spec.motor_loss_frac *= f;
@@ -706,5 +773,55 @@ mod tests {
         assert_eq!(tol("heat at front_bearing"), Some(0.1));
         // one gain per heated node: no driver gain on top of them
         assert!(ks.iter().all(|k| !k.name.starts_with("spindle heat")));
+    }
+
+    #[test]
+    fn a_bearing_s_viscous_term_is_a_knob_of_its_own_that_scales_only_f0() {
+        let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../machines/turning-center-16.toml");
+        let mut spec = Machine::load(&p).unwrap().spec;
+        spec.tolerance.insert("heat:spindle".into(), 0.1);
+        spec.tolerance.insert("heat:rear_bearing".into(), 0.4);
+        spec.tolerance.insert("heat:front_bearing:f0".into(), 0.3);
+        let m = Machine::compile(spec).unwrap();
+        let ks = knobs(&m);
+        let knob = |name: &str| ks.iter().find(|k| k.name == name).unwrap();
+        let front = knob("viscous bearing friction (f0) at front_bearing");
+        let rear = knob("viscous bearing friction (f0) at rear_bearing");
+        // its own key, else its node's, else the driver's
+        assert_eq!(front.tol, 0.3);
+        assert_eq!(rear.tol, 0.4);
+        assert_eq!(front.element.as_deref(), Some("front_bearing:f0"));
+        // the two knobs of a node split its bearing heat at n_max
+        let load = knob("heat at front_bearing");
+        let b = m
+            .spec
+            .bearings
+            .iter()
+            .find(|b| b.node == "front_bearing")
+            .unwrap();
+        let whole = b.heat_w(m.spec.n_max_rpm);
+        let parts = design_value(&m, front) + design_value(&m, load);
+        assert!((parts - whole).abs() < 1e-9 * whole, "{parts} vs {whole}");
+        assert!(design_value(&m, front) > 0.0 && design_value(&m, load) > 0.0);
+        // applied, the viscous knob moves f0 only; the node's knob f1 only
+        let i = m
+            .spec
+            .bearings
+            .iter()
+            .position(|b| b.node == "front_bearing")
+            .unwrap();
+        let fi = ks.iter().position(|k| k.name == front.name).unwrap();
+        let li = ks.iter().position(|k| k.name == load.name).unwrap();
+        let mut th = vec![0.0; ks.len()];
+        th[fi] = 0.2f64.ln_1p();
+        let a = apply(&m, &ks, &th);
+        assert!((a.spec.bearings[i].f0 - 1.2 * b.f0).abs() < 1e-12);
+        assert_eq!(a.spec.bearings[i].f1, b.f1);
+        let mut th = vec![0.0; ks.len()];
+        th[li] = 0.2f64.ln_1p();
+        let a = apply(&m, &ks, &th);
+        assert_eq!(a.spec.bearings[i].f0, b.f0);
+        assert!((a.spec.bearings[i].f1 - 1.2 * b.f1).abs() < 1e-12);
     }
 }

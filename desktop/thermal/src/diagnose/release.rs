@@ -91,6 +91,11 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
         ),
         ("link", Some(_)) if !more => format!("loose joint{of}: conductance ×{f:.2}"),
         ("link", _) => format!("conductance{of} ×{f:.2} against the design"),
+        ("heat", Some(e)) if e.ends_with(":f0") => format!(
+            "viscous bearing friction (f0) at {} ×{f:.2}: lubrication (oil quantity or viscosity) {} than designed",
+            e.trim_end_matches(":f0"),
+            if more { "heavier" } else { "lighter" }
+        ),
         ("heat", _) => format!(
             "heat source{of} {} than designed: ×{f:.2}",
             if more { "stronger" } else { "weaker" }
@@ -244,6 +249,18 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
                 "meaning": what,
             })),
         };
+        if std::env::var_os("TCOMP_DIAG_RELEASES").is_some() {
+            eprintln!(
+                "      release {:28} factor {:.3} outside {} m {:.2} -> {:.2} dbic {:.1} z {:.2}",
+                r.key,
+                factor,
+                outside,
+                n.m0,
+                st.m_held(),
+                dbic,
+                z
+            );
+        }
         out.push(Tried {
             finding,
             res: res1,

@@ -7,7 +7,8 @@
 //! `default`; a group `capacity`, `film`, `link`, `jacket`, `heat`, `length`;
 //! one element `"capacity:<node>"`, `"film:<node>"`, `"link:<a>-<b>"`,
 //! `"jacket:<node>"`, `"heat:spindle"`, `"heat:feed"`, `"heat:<node>"` (the
-//! sources, bearings and motor loss on one node),
+//! sources, bearings and motor loss on one node), `"heat:<node>:f0"` (the
+//! viscous friction term of its bearings; else the node's tolerance),
 //! `"length:<direction>:<node>"` (`rod` as the node for the spindle rod).
 //! The most specific key wins.
 
@@ -48,6 +49,8 @@ fn element_keys(s: &MachineSpec) -> Vec<String> {
     // one heated node: its sources, bearings and motor loss together
     v.extend(s.sources.iter().map(|x| format!("heat:{}", x.node)));
     v.extend(s.bearings.iter().map(|x| format!("heat:{}", x.node)));
+    // the viscous term (f0) of the bearings on one node
+    v.extend(s.bearings.iter().map(|x| format!("heat:{}:f0", x.node)));
     v.extend(s.motor_node.iter().map(|x| format!("heat:{x}")));
     for d in &s.directions {
         v.extend(
