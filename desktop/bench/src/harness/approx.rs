@@ -301,6 +301,17 @@ fn run_seed(
                             f.params_json()
                         );
                     }
+                    // the drawn file: heat numbers and every number off by
+                    // more than the default tolerance
+                    let tol = tcomp_thermal::sim::machine::tolerance::DEFAULT_TOLERANCE;
+                    for (k, f) in run.factors.iter().flatten() {
+                        if f.ln().abs() > tol.ln_1p()
+                            || k.starts_with("bearing")
+                            || k.starts_with("source")
+                        {
+                            eprintln!("      drawn {k} ×{f:.3}");
+                        }
+                    }
                     for (n, why) in &d.untestable {
                         eprintln!("      untestable {n}: {why}");
                     }
