@@ -254,6 +254,14 @@ pub fn late_step(ps: &[Prepared], effects: &[crate::sim::Effect]) -> Option<(Str
     })
 }
 
+/// A sensor fault (lag, offset) changes no displacement: a wider µm gap
+/// beside it is the calibration freedom's re-fit to the corrected readings
+/// (the null had bent a design value to follow the fault), so the µm gate
+/// does not judge it.
+pub(super) fn sensor_only(f: &super::Finding) -> bool {
+    !f.effects.is_empty() && f.effects.iter().all(|e| e.is_sensor_only())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

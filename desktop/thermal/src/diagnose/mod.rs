@@ -479,7 +479,8 @@ impl Judge<'_> {
     fn margins(&self, f: &Finding, m_ref: f64) -> bool {
         let opt = self.opt;
         f.dbic <= -opt.min_dbic
-            && f.gap_um.is_none_or(|((b, _), (a, _))| a <= b * 1.02 + 1e-9)
+            && (gate::sensor_only(f)
+                || f.gap_um.is_none_or(|((b, _), (a, _))| a <= b * 1.02 + 1e-9))
             && f.m_after.is_finite()
             && f.m_after <= m_ref * (1.0 - opt.min_rel)
             && m_ref - f.m_after >= opt.min_abs
@@ -525,8 +526,9 @@ fn judge_singles(judge: &Judge, singles: &[FitResult]) -> Result<(Vec<Tried>, Ve
     Ok((tried, ok_idx))
 }
 
-/// Pairs to fit: the best single plus each other candidate (forward step),
-/// skipped when the best single already leaves only noise.
+/// Pairs to fit: the best single plus each other candidate that alone
+/// narrows the held-out gap (forward step), skipped when the best single
+/// already leaves only noise.
 fn pairs_to_try(
     tried: &[Tried],
     ok_idx: &[usize],
@@ -552,7 +554,12 @@ fn pairs_to_try(
     let mut pairs = Vec::new();
     if let (true, Some(bi)) = (need_pairs, base_idx) {
         for j in 0..tried.len() {
-            if j != bi && tried[j].1.cands[0].kind != tried[bi].1.cands[0].kind {
+            // a partner that alone widens the held-out gap explains nothing
+            // of the runs by itself: beside a base it only corrects the
+            // base's fit (cross model, design file σ 15 %: a bending or a
+            // film loss beside a lag). Not fitted.
+            let narrows_alone = tried[j].0.m_after < m0;
+            if j != bi && narrows_alone && tried[j].1.cands[0].kind != tried[bi].1.cands[0].kind {
                 pairs.push((bi, j));
             }
         }
@@ -647,7 +654,7 @@ fn run_notes(ps: &[Prepared]) -> Vec<String> {
     notes
 }
 
-const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the mean reduction of the squared gap in noise units over the held-out blocks (≤ 600 s) the effect acts on (read from its own change of the prediction, before the freedom's correction, which moves every row a little), with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first, and an effect stays beside it only when, applied to the released null, it still reduces the held-out gap by the same test: otherwise it only absorbed the misfit the release explains); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's; a pair only when its added effect earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on, a convection whose added loss is within the film tolerance of the design's loss at every node with an area, and a bending within the length tolerance of both its nodes' levers, are not claimed, alone or in a pair (each cannot be told from a design error of those values): they are listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
+const RANKING_RULE: &str = "the null hypothesis is the machine file calibrated within its tolerances on the fit rows (with --exact: the file as written); single effects and pairs are fitted on the fit part with the same bounded calibration freedom left to them; an effect is claimed when its BIC improves by at least min_dbic, the held-out gap (noise units) shrinks by min_rel and min_abs, and the reduction is significant against the measured noise: one-sided z ≥ 2.33 (1 %) on the mean reduction of the squared gap in noise units over the held-out blocks (≤ 600 s) the effect acts on (read from its own change of the prediction, before the freedom's correction, which moves every row a little), with the held-out gap before above one noise unit (at or under it nothing is named); a design value (or group) on its tolerance bound that the data push outwards is released (×0.25…×4) and claimed as a finding by the same margins when its fitted value (with the freedom's own correction) ends outside the tolerance and it beats every other release that earns them by the same held-out z ≥ 2.33 (rivals within its own group: the group's release is named; any other rival: nothing is named and it is listed untestable, the data cannot tell which design value is off); only the best release is named, and beside a selected effect only when it beats that effect by the same test (it then ranks first, and an effect stays beside it only when, applied to the released null, it still reduces the held-out gap by the same test: otherwise it only absorbed the misfit the release explains); ranked by held-out gap after; never an effect whose held-out µm gap is more than 2 % wider than the nominal's (a sensor lag or offset changes no displacement: it is not judged by the µm gap); a pair only when its added effect, fitted alone, narrows the held-out gap (alone it must not widen it: then it only corrects its base's fit), earns the same margins against the pair's own base effect and the pair's held-out reduction against its base single is itself significant (the same z ≥ 2.33); a heat effect (bearing_nonlinear, ballscrew) that at the highest speed (feed) of the runs adds no more than the heat tolerance of the calibrated design's heat at every node it acts on, a convection whose added loss is within the film tolerance of the design's loss at every node with an area, and a bending within the length tolerance of both its nodes' levers, are not claimed, alone or in a pair (each cannot be told from a design error of those values): they are listed untestable; a sensor_offset with an onset inside a run (a step), alone or in a pair, only when the nominal residual of that sensor jumps at the onset by at least half the fitted step (mean of the 3 rows from the onset against the 3 before, in the step's direction): a fault is a jump, while a design error (a capacity, a loss) moves the residual at the pace of the machine's time constants, and an offset placed in the warm-up would absorb it; a step that earns the BIC margin and jumps but has fewer than two held-out blocks after its onset cannot be tested: it is listed untestable (sensor_offset, step after the last held-out block), not claimed";
 
 /// Diagnose prepared runs against the nominal machine (taken as exact).
 pub fn diagnose_prepared(m: &Machine, ps: &[Prepared], opt: &Options) -> Result<Diagnosis> {
