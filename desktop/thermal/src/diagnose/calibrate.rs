@@ -759,14 +759,20 @@ fn tol_summary(ks: &[Knob]) -> String {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_heated_node_takes_its_own_tolerance_else_its_driver_s() {
+    /// The first simulator's turning centre with these tolerances.
+    fn turning_center(tolerances: &[(&str, f64)]) -> Machine {
         let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("../machines/turning-center-16.toml");
         let mut spec = Machine::load(&p).unwrap().spec;
-        spec.tolerance.insert("heat:spindle".into(), 0.1);
-        spec.tolerance.insert("heat:rear_bearing".into(), 0.4);
-        let m = Machine::compile(spec).unwrap();
+        for &(k, t) in tolerances {
+            spec.tolerance.insert(k.into(), t);
+        }
+        Machine::compile(spec).unwrap()
+    }
+
+    #[test]
+    fn a_heated_node_takes_its_own_tolerance_else_its_driver_s() {
+        let m = turning_center(&[("heat:spindle", 0.1), ("heat:rear_bearing", 0.4)]);
         let ks = knobs(&m);
         let tol = |name: &str| ks.iter().find(|k| k.name == name).map(|k| k.tol);
         assert_eq!(tol("heat at rear_bearing"), Some(0.4));
@@ -777,13 +783,11 @@ mod tests {
 
     #[test]
     fn a_bearing_s_viscous_term_is_a_knob_of_its_own_that_scales_only_f0() {
-        let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../machines/turning-center-16.toml");
-        let mut spec = Machine::load(&p).unwrap().spec;
-        spec.tolerance.insert("heat:spindle".into(), 0.1);
-        spec.tolerance.insert("heat:rear_bearing".into(), 0.4);
-        spec.tolerance.insert("heat:front_bearing:f0".into(), 0.3);
-        let m = Machine::compile(spec).unwrap();
+        let m = turning_center(&[
+            ("heat:spindle", 0.1),
+            ("heat:rear_bearing", 0.4),
+            ("heat:front_bearing:f0", 0.3),
+        ]);
         let ks = knobs(&m);
         let knob = |name: &str| ks.iter().find(|k| k.name == name).unwrap();
         let front = knob("viscous bearing friction (f0) at front_bearing");
