@@ -798,23 +798,18 @@ mod tests {
         assert_eq!(front.element.as_deref(), Some("front_bearing:f0"));
         // the two knobs of a node split its bearing heat at n_max
         let load = knob("heat at front_bearing");
-        let b = m
-            .spec
-            .bearings
-            .iter()
-            .find(|b| b.node == "front_bearing")
-            .unwrap();
-        let whole = b.heat_w(m.spec.n_max_rpm);
-        let parts = design_value(&m, front) + design_value(&m, load);
-        assert!((parts - whole).abs() < 1e-9 * whole, "{parts} vs {whole}");
-        assert!(design_value(&m, front) > 0.0 && design_value(&m, load) > 0.0);
-        // applied, the viscous knob moves f0 only; the node's knob f1 only
         let i = m
             .spec
             .bearings
             .iter()
             .position(|b| b.node == "front_bearing")
             .unwrap();
+        let b = &m.spec.bearings[i];
+        let whole = b.heat_w(m.spec.n_max_rpm);
+        let parts = design_value(&m, front) + design_value(&m, load);
+        assert!((parts - whole).abs() < 1e-9 * whole, "{parts} vs {whole}");
+        assert!(design_value(&m, front) > 0.0 && design_value(&m, load) > 0.0);
+        // applied, the viscous knob moves f0 only; the node's knob f1 only
         let fi = ks.iter().position(|k| k.name == front.name).unwrap();
         let li = ks.iter().position(|k| k.name == load.name).unwrap();
         let mut th = vec![0.0; ks.len()];
