@@ -260,15 +260,17 @@ fn claim(
             && c.evidence["few_fit_rows_after"].as_bool() == Some(true)
             && m_a.is_finite()
             && m_a <= STEP_HELD_REL * m_b);
-    // the speed law against the nominal itself must halve its gap: the
-    // nominal's own speed terms may have absorbed part of the law, and a
-    // misfit that grows with load reads as a steeper law (on clean runs the
-    // heat-adding law left ≥ 54 % of the gap on the truth model, 4 seeds,
-    // and ≥ 60 % on the first simulator's machines, 2 seeds)
-    let nominal_ref_ok =
-        c.evidence["against_nominal"].as_bool() != Some(true) || m_a <= SPEED_NOMINAL_REL * m_b;
+    // the speed law (against its reference or the nominal itself) must
+    // take most of the gap: the nominal's own speed terms may have absorbed
+    // part of the law, and a nominal that extrapolates badly to another
+    // speed, or a misfit that grows with load, reads as a steeper law (on
+    // clean runs the heat-adding law left ≥ 54 % of the gap on the truth
+    // model, 4 seeds, ≥ 60 % on the first simulator's machines, 2 seeds,
+    // and 47–54 % on the cross model, 5 seeds; every true law named on the
+    // cross model's development seeds 11 and 13 left ≤ 37 % on one form)
+    let steep_enough = c.name != "bearing_nonlinear" || m_a <= SPEED_CLAIM_REL * m_b;
     let claimed = claimable
-        && nominal_ref_ok
+        && steep_enough
         && beats_nominal
         && bic_ok
         && m_a.is_finite()
@@ -477,9 +479,10 @@ pub const STEP_HELD_REL: f64 = 0.5;
 /// without its fit-row BIC (see `nominal_halved`).
 pub const SPEED_HELD_REL: f64 = 0.5;
 
-/// Held-out gap after / before at which the speed law scored against the
-/// nominal itself is claimed (see `nominal_ref_ok`).
-pub const SPEED_NOMINAL_REL: f64 = 0.5;
+/// Held-out gap after / before at most for the speed law (either form) to
+/// be claimed (see `steep_enough`); between this and `1 − FIT_MIN_REL` it
+/// is listed untestable (`speed_law_inconclusive`).
+pub const SPEED_CLAIM_REL: f64 = 0.4;
 
 /// Relative held-out shrink (noise units, affected outputs) to claim an effect.
 pub const FIT_MIN_REL: f64 = 0.3;
@@ -592,6 +595,45 @@ fn rank(scored: &mut [Scored]) {
     });
 }
 
+/// The speed law when it was tried, not claimed in either form, and yet
+/// took a material part of the held-out gap (the general margins: ≥
+/// `FIT_MIN_REL` of it and ≥ `FIT_MIN_ABS`, adding heat) without the
+/// `SPEED_CLAIM_REL` a claim needs: these runs show something steeper in
+/// speed than the nominal but cannot tell a steeper bearing law from the
+/// nominal's own misfit at the speeds they visit.
+fn speed_law_inconclusive(scored: &[Scored]) -> Option<(String, String)> {
+    let laws = || {
+        scored
+            .iter()
+            .filter(|s| s.finding.name == "bearing_nonlinear")
+    };
+    if laws().any(|s| s.claimed) {
+        return None;
+    }
+    let f = laws()
+        .map(|s| &s.finding)
+        .filter(|f| {
+            f.evidence["at_bound"]
+                .as_array()
+                .is_some_and(|a| a.is_empty())
+                && f.m_after.is_finite()
+                && f.m_after <= (1.0 - FIT_MIN_REL) * f.m_before
+                && f.m_before - f.m_after >= FIT_MIN_ABS
+        })
+        .min_by(|a, b| (a.m_after / a.m_before).total_cmp(&(b.m_after / b.m_before)))?;
+    Some((
+        "bearing_nonlinear".into(),
+        format!(
+            "a steeper speed law (exponent {}) takes the held-out mean squared gap from {:.2} to {:.2} (noise units²), {:.0} % left where a claim needs ≤ {:.0} %: these runs show heat steeper in speed than the nominal's but cannot tell a steeper bearing law from the nominal's own misfit at the speeds they visit",
+            f.params.as_ref().map_or(Value::Null, |p| p["exponent"].clone()),
+            f.m_before,
+            f.m_after,
+            100.0 * f.m_after / f.m_before,
+            100.0 * SPEED_CLAIM_REL
+        ),
+    ))
+}
+
 /// The claimed findings in rank order, the first selected. The speed law
 /// is tried against two references: reported once, in its best-ranked
 /// claimed form.
@@ -628,7 +670,7 @@ fn fit_ranking_rule(opt: &Options) -> String {
         FIT_MIN_ABS,
         gate::BLOCK_S,
         gate::Z_MIN
-    ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes), claimed there only when it halves the held-out gap, and reported once, in the better-ranked form"
+    ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most 40 % of the held-out gap it is scored on (between 40 % and 70 %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form"
 }
 
 /// How the computed `untestable` entries are decided (for `ranking_rule`).
@@ -667,6 +709,8 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         .map(|(c, b)| score(&p, c, b, &fit, opt))
         .collect();
     rank(&mut scored);
+    let mut untestable = untestable(&p, &lag_reach, speed_kept, ambient_kept);
+    untestable.extend(speed_law_inconclusive(&scored));
     let mut findings = claimed_findings(&scored);
     let selected = scored.iter().find(|s| s.claimed).map(|s| {
         selected_gaps(
@@ -705,7 +749,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         notes,
         seconds: t0.elapsed().as_secs_f64(),
         sims: n_cands,
-        untestable: untestable(&p, &lag_reach, speed_kept, ambient_kept),
+        untestable,
         lag_reach: p
             .ds
             .sensors

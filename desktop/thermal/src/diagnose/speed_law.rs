@@ -218,7 +218,7 @@ pub fn speed_nonlinearity<'a>(p: &Problem<'a>) -> Option<(Candidate, ModelFit)> 
 /// reference of `speed_nonlinearity` fits a machine worse than the nominal
 /// (its bilinear term does not suit every machine), this one still tests
 /// the law; being against a nominal that may absorb part of it, it is
-/// claimed only when it halves the held-out gap (`SPEED_NOMINAL_REL`).
+/// claimed only when it leaves at most `SPEED_CLAIM_REL` of the held-out gap.
 pub fn speed_nonlinearity_against_nominal(
     p: &Problem,
     st: &Structure,
