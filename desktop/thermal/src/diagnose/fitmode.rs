@@ -775,3 +775,52 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         ranking_rule: fit_ranking_rule(opt) + &super::periodic_claim::rule() + &untestable_rule(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{speed_law_inconclusive, Scored};
+    use crate::diagnose::ident::ModelFit;
+    use crate::diagnose::Finding;
+    use serde_json::json;
+
+    fn law(claimed: bool, m_b: f64, m_a: f64, at_bound: &[&str]) -> Scored {
+        Scored {
+            finding: Finding {
+                name: "bearing_nonlinear".into(),
+                effects: Vec::new(),
+                dbic: -100.0,
+                m_before: m_b,
+                m_after: m_a,
+                gap_um: None,
+                gap_c: None,
+                evidence: json!({ "at_bound": at_bound }),
+                params: Some(json!({ "exponent": 4.0 })),
+            },
+            claimed,
+            gain: m_b - m_a,
+            fit: ModelFit { outs: Vec::new() },
+            before: None,
+        }
+    }
+
+    #[test]
+    fn a_law_taking_half_the_gap_unclaimed_is_inconclusive() {
+        let (name, why) = speed_law_inconclusive(&[law(false, 11.92, 5.62, &[])]).unwrap();
+        assert_eq!(name, "bearing_nonlinear");
+        assert!(why.contains("47 % left"), "{why}");
+        assert!(why.contains("≤ 40 %"), "{why}");
+    }
+
+    #[test]
+    fn a_claimed_weak_or_cooling_law_is_not_listed() {
+        // claimed in its other form
+        let both = [law(false, 11.0, 6.0, &[]), law(true, 10.0, 3.0, &[])];
+        assert!(speed_law_inconclusive(&both).is_none());
+        // under 30 % of the gap, or under one noise variance
+        assert!(speed_law_inconclusive(&[law(false, 10.0, 8.0, &[])]).is_none());
+        assert!(speed_law_inconclusive(&[law(false, 1.5, 0.9, &[])]).is_none());
+        // fitted as cooling (on its bound)
+        let cooling = law(false, 10.0, 5.0, &["extra heat c at its bound 0"]);
+        assert!(speed_law_inconclusive(&[cooling]).is_none());
+    }
+}
