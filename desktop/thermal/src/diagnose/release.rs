@@ -604,8 +604,8 @@ mod tests {
 
     #[test]
     fn a_group_release_moving_other_values_out_is_a_rival() {
-        // 0: one lever ×2.07 up (outside); 1: the length group, two other
-        // levers out both ways (not outside as a whole)
+        // 0: one lever ×2.07 up (outside); 1: the length group, another
+        // lever out upwards and this one downwards (not outside as a whole)
         let rel = [
             shape(true, &[(4, true)], "length", false, 1.33),
             shape(false, &[(2, true), (4, false)], "length", true, 1.29),
