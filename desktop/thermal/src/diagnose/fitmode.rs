@@ -267,7 +267,8 @@ fn claim(
     // clean runs the heat-adding law left ≥ 54 % of the gap on the truth
     // model, 4 seeds, ≥ 60 % on the first simulator's machines, 2 seeds,
     // and 47–54 % on the cross model, 5 seeds; every true law named on the
-    // cross model's development seeds 11 and 13 left ≤ 37 % on one form)
+    // cross model's development seeds 11 and 13 left ≤ 37 % on one form,
+    // one on the open world's seed 11 (case 18) 44 %: a thin margin)
     let steep_enough = c.name != "bearing_nonlinear" || m_a <= SPEED_CLAIM_REL * m_b;
     let claimed = claimable
         && steep_enough
@@ -482,7 +483,7 @@ pub const SPEED_HELD_REL: f64 = 0.5;
 /// Held-out gap after / before at most for the speed law (either form) to
 /// be claimed (see `steep_enough`); between this and `1 − FIT_MIN_REL` it
 /// is listed untestable (`speed_law_inconclusive`).
-pub const SPEED_CLAIM_REL: f64 = 0.4;
+pub const SPEED_CLAIM_REL: f64 = 0.45;
 
 /// Relative held-out shrink (noise units, affected outputs) to claim an effect.
 pub const FIT_MIN_REL: f64 = 0.3;
@@ -670,7 +671,7 @@ fn fit_ranking_rule(opt: &Options) -> String {
         FIT_MIN_ABS,
         gate::BLOCK_S,
         gate::Z_MIN
-    ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most 40 % of the held-out gap it is scored on (between 40 % and 70 %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form"
+    ) + "; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most 45 % of the held-out gap it is scored on (between 45 % and 70 %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form"
 }
 
 /// How the computed `untestable` entries are decided (for `ranking_rule`).
@@ -808,7 +809,7 @@ mod tests {
         let (name, why) = speed_law_inconclusive(&[law(false, 11.92, 5.62, &[])]).unwrap();
         assert_eq!(name, "bearing_nonlinear");
         assert!(why.contains("47 % left"), "{why}");
-        assert!(why.contains("≤ 40 %"), "{why}");
+        assert!(why.contains("≤ 45 %"), "{why}");
     }
 
     #[test]
