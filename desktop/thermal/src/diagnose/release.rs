@@ -337,12 +337,12 @@ fn keep_adding(
 }
 
 /// Why a finding is untestable beside a release `t` that ended inside its
-/// tolerance and explains the held-out gap as well (`m_after`: the
+/// tolerance (`lead`: how the finding failed against it; `m_after`: the
 /// finding's own held-out gap, squared noise units).
-fn explained_inside_why(t: &Tried, m_after: f64) -> String {
+fn explained_inside_why(lead: &str, t: &Tried, m_after: f64) -> String {
     let p = t.finding.params.clone().unwrap_or_default();
     format!(
-        "a design value within its tolerance explains the held-out gap as well: {} ×{:.2} of its design value (tolerance ±{:.0} %) leaves {:.2} noise units of {:.2}, the finding {:.2} (z < {} between them)",
+        "{lead} a design value within its tolerance: {} ×{:.2} of its design value (tolerance ±{:.0} %) leaves {:.2} noise units of {:.2}, the finding alone {:.2} (z < {})",
         p["parameter"].as_str().unwrap_or("?"),
         p["factor"].as_f64().unwrap_or(f64::NAN),
         100.0 * p["tolerance"].as_f64().unwrap_or(f64::NAN),
@@ -401,9 +401,9 @@ enum Choice {
 /// (or the other way) out of their tolerance than the best (two levers off
 /// in opposite directions read as one lever ×2.07 the wrong way, while the
 /// group's release explained the gap as well; a group's release that only
-/// moves the best's own value out is the best again): rivals in the best's own group name
-/// the group's release when it left the tolerance itself; otherwise the
-/// runs cannot tell which value is off.
+/// moves the best's own value out is the best again): rivals in the best's
+/// own group name the group's release when it left the tolerance itself;
+/// otherwise the runs cannot tell which value is off.
 fn choose(rel: &[Shape], told_apart: impl Fn(usize, usize) -> bool) -> Choice {
     let by_gap = |a: &usize, b: &usize| rel[*a].m_after.total_cmp(&rel[*b].m_after);
     let Some(first) = (0..rel.len()).filter(|&i| rel[i].outside).min_by(by_gap) else {
@@ -490,7 +490,14 @@ pub(super) fn merge_releases(
         let (n, dropped) = keep_adding(cal, ps, t, findings)?;
         sims += n;
         for f in dropped {
-            untestable.push((f.name.clone(), explained_inside_why(t, f.m_after)));
+            untestable.push((
+                f.name.clone(),
+                explained_inside_why(
+                    "it reduces the held-out gap no further on top of",
+                    t,
+                    f.m_after,
+                ),
+            ));
         }
     }
     let shapes: Vec<Shape> = supported.iter().map(Shape::of).collect();
@@ -504,7 +511,11 @@ pub(super) fn merge_releases(
             let b = &supported[best].finding;
             untestable.push((
                 b.name.clone(),
-                explained_inside_why(&supported[by], b.m_after),
+                explained_inside_why(
+                    "it explains the held-out gap no better than",
+                    &supported[by],
+                    b.m_after,
+                ),
             ));
             return Ok(sims);
         }
