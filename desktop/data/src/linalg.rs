@@ -11,6 +11,27 @@ use nalgebra::{DMatrix, DVector};
 /// largest singular value) carry only rounding noise and are dropped.
 const SVD_RCOND: f64 = 1e-12;
 
+/// A dot product in four running sums of f64 (vectorised, where an
+/// iterator's single running sum is not); `a` may be stored in f32,
+/// widened as it is read. Written by hand: nalgebra's small dynamic
+/// products walk columns with a scalar axpy.
+pub fn dot<T: Copy + Into<f64>>(a: &[T], b: &[f64]) -> f64 {
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(&x, y)| x.into() * y)
+        .sum();
+    let mut s = [0.0f64; 4];
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            s[k] += x[k].into() * y[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
+}
+
 /// `min |X w − y|² + ridge·|w|²` for the rows of `X`; with `intercept` a
 /// leading column of ones is added (never penalised). Returns `[c0, c1..]`
 /// with an intercept, `[c1..]` without.

@@ -251,6 +251,56 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     Ok(out)
 }
 
+/// One step's `x ← Φx + Ψb` with Φ and Ψ side by side, column-major,
+/// each column padded to whole blocks of `BLOCK` rows: a block of the
+/// result is summed in registers over all 2n columns, in column order
+/// (the sum `gemv` forms, term for term). nalgebra's `gemv` walks the
+/// columns with a generic scalar axpy through memory, and was most of a
+/// simulation's time.
+struct Transition {
+    n: usize,
+    /// Rows per column, padded.
+    n_pad: usize,
+    /// Φ's columns, then Ψ's, each `n_pad` long (zeros past row n).
+    cols: Vec<f64>,
+}
+
+const BLOCK: usize = 8;
+
+impl Transition {
+    fn new((phi, psi): &(DMatrix<f64>, DMatrix<f64>)) -> Transition {
+        let n = phi.nrows();
+        let n_pad = n.div_ceil(BLOCK) * BLOCK;
+        let mut cols = vec![0.0; 2 * n * n_pad];
+        for (dst, src) in cols.chunks_exact_mut(n_pad).zip(
+            phi.as_slice()
+                .chunks_exact(n)
+                .chain(psi.as_slice().chunks_exact(n)),
+        ) {
+            dst[..n].copy_from_slice(src);
+        }
+        Transition { n, n_pad, cols }
+    }
+
+    fn apply(&self, x: &[f64], b: &[f64], out: &mut [f64]) {
+        for r0 in (0..self.n).step_by(BLOCK) {
+            let mut acc = [0.0f64; BLOCK];
+            let (phi, psi) = self.cols.split_at(self.n * self.n_pad);
+            for (m, v) in [(phi, x), (psi, b)] {
+                for (col, &v) in m.chunks_exact(self.n_pad).zip(v) {
+                    let blk: &[f64; BLOCK] =
+                        col[r0..r0 + BLOCK].try_into().unwrap_or(&[0.0; BLOCK]);
+                    for k in 0..BLOCK {
+                        acc[k] += v * blk[k];
+                    }
+                }
+            }
+            let w = BLOCK.min(self.n - r0);
+            out[r0..r0 + w].copy_from_slice(&acc[..w]);
+        }
+    }
+}
+
 /// The network under the active effects: its conductances to ambient and
 /// to the coolant, and its step matrices `(Φ, Ψ)` for every combination of
 /// coolant flows.
@@ -263,8 +313,8 @@ struct Network<'a> {
     /// Conductance to the coolant per node while the `coolant` effect is on.
     g_cool: Vec<f64>,
     /// `(Φ, Ψ)` indexed by `flowing | cool_on << 1`, the base (neither) taken out.
-    mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4],
-    base: (DMatrix<f64>, DMatrix<f64>),
+    mats: [Option<Transition>; 4],
+    base: Transition,
     /// Coolant set point (0 without a circuit).
     supply: f64,
     n_screw: f64,
@@ -322,7 +372,7 @@ impl<'a> Network<'a> {
                 g_cool[i] += g / m.coolant_nodes.len() as f64;
             }
         }
-        let mut mats: [Option<(DMatrix<f64>, DMatrix<f64>)>; 4] = Default::default();
+        let mut mats: [Option<Transition>; 4] = Default::default();
         for (key, slot) in mats.iter_mut().enumerate() {
             let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
             if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
@@ -333,7 +383,10 @@ impl<'a> Network<'a> {
                     (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 }
                 })
                 .collect();
-            *slot = Some(discretize_cached(&state_matrix(m, &g_amb, &g), dt)?);
+            *slot = Some(Transition::new(&discretize_cached(
+                &state_matrix(m, &g_amb, &g),
+                dt,
+            )?));
         }
         let base = mats[0]
             .take()
@@ -407,10 +460,9 @@ impl<'a> Network<'a> {
         let ta = inp.ambient[k] + drift_at(&self.act.drift, tm);
         let (flowing, cool_on) = self.forcing(inp, k, tm, ta, s);
         let key = usize::from(flowing) | (usize::from(cool_on) << 1);
-        let (phi, psi) = self.mats[key].as_ref().unwrap_or(&self.base);
+        let tr = self.mats[key].as_ref().unwrap_or(&self.base);
         self.chiller_step(s, ta, flowing, dt);
-        s.next.gemv(1.0, phi, &s.x, 0.0);
-        s.next.gemv(1.0, psi, &s.b, 1.0);
+        tr.apply(s.x.as_slice(), s.b.as_slice(), s.next.as_mut_slice());
         std::mem::swap(&mut s.x, &mut s.next);
     }
 
@@ -736,4 +788,33 @@ pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<tcomp_data:
             ("ambient", format!("{} °C nominal", m.spec.ambient_c)),
         ],
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_blocked_step_is_phi_x_plus_psi_b() {
+        let mut g = Rng::paired(3);
+        // sizes below, at and across the block
+        for n in [1, 5, BLOCK, BLOCK + 1, 27] {
+            let mut r = || g.uniform() - 0.5;
+            let phi = DMatrix::from_fn(n, n, |_, _| r());
+            let psi = DMatrix::from_fn(n, n, |_, _| r());
+            let x = DVector::from_fn(n, |_, _| r());
+            let b = DVector::from_fn(n, |_, _| r());
+            let want = &phi * &x + &psi * &b;
+            let mut got = vec![f64::NAN; n];
+            Transition::new(&(phi, psi)).apply(x.as_slice(), b.as_slice(), &mut got);
+            for i in 0..n {
+                assert!(
+                    (got[i] - want[i]).abs() < 1e-12,
+                    "n {n}, row {i}: {} vs {}",
+                    got[i],
+                    want[i]
+                );
+            }
+        }
+    }
 }
