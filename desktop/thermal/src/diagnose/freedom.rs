@@ -29,7 +29,9 @@
 //! the time, by reading it: B̃ is kept in f32, and B̃ᵀr is the calibrated
 //! nominal's plus B̃ᵀ(r − r₀) over the knots where r changed (a sensor
 //! effect changes one channel, a step only the rows after it); the box
-//! QP's steps solve the held values' multipliers from A⁻¹, computed once.
+//! QP's steps solve the held values' multipliers from A⁻¹, computed once,
+//! and start from the calibrated nominal's own active set (a trial's
+//! optimum is near it: ≈ 15–23 steps instead of ≈ 54).
 //! `freedom/tests.rs` checks the compressed freedom against the full one.
 
 mod knots;

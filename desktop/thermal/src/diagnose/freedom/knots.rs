@@ -95,13 +95,21 @@ impl Knots {
     }
 
     /// The knots' matrix read on every row (interpolated).
+    /// Column by column (contiguous; a row at a time strides over every
+    /// column), the sum `for_each`'s weights give, term for term.
     pub fn expand(&self, k: &DMatrix<f64>, n_rows: usize) -> DMatrix<f64> {
+        let (js, ws) = self.row_weights();
         let mut out = DMatrix::zeros(n_rows, k.ncols());
-        self.for_each(|r, j, w| {
-            for c in 0..k.ncols() {
-                out[(r, c)] += w * k[(j, c)];
+        for (mut o, kc) in out.column_iter_mut().zip(k.column_iter()) {
+            for ((v, &j), &wb) in o.iter_mut().zip(&js).zip(&ws) {
+                let j = j as usize;
+                *v = if wb == 0.0 {
+                    kc[j]
+                } else {
+                    (1.0 - wb) * kc[j] + wb * kc[j + 1]
+                };
             }
-        });
+        }
         out
     }
 }
@@ -134,4 +142,27 @@ pub(crate) fn choose(b: &DMatrix<f64>, lens: &[usize], wall: &[f64], rel_tol: f6
         }
     }
     (Knots::new(lens, 1), 0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expand_reads_every_row_as_for_each_weighs_it() {
+        // segments shorter than, equal to and longer than a step; an empty one
+        let lens = [1, 3, 0, 7, 10];
+        for f in [1, 2, 3, 4] {
+            let kn = Knots::new(&lens, f);
+            let k = DMatrix::from_fn(kn.n_knots, 3, |r, c| (r * 7 + c * 13) as f64 * 0.37 - 2.0);
+            let n: usize = lens.iter().sum();
+            let mut want = DMatrix::zeros(n, 3);
+            kn.for_each(|r, j, w| {
+                for c in 0..3 {
+                    want[(r, c)] += w * k[(j, c)];
+                }
+            });
+            assert_eq!(kn.expand(&k, n), want, "every {f} rows");
+        }
+    }
 }
