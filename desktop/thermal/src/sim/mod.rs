@@ -270,13 +270,15 @@ const BLOCK: usize = 8;
 
 impl Transition {
     fn new((phi, psi): &(DMatrix<f64>, DMatrix<f64>)) -> Transition {
+        // (the `max(1)`s: no chunk size of 0 for a network without nodes,
+        // which the machine file's checks already refuse)
         let n = phi.nrows();
-        let n_pad = n.div_ceil(BLOCK) * BLOCK;
+        let n_pad = n.div_ceil(BLOCK).max(1) * BLOCK;
         let mut cols = vec![0.0; 2 * n * n_pad];
         for (dst, src) in cols.chunks_exact_mut(n_pad).zip(
             phi.as_slice()
-                .chunks_exact(n)
-                .chain(psi.as_slice().chunks_exact(n)),
+                .chunks_exact(n.max(1))
+                .chain(psi.as_slice().chunks_exact(n.max(1))),
         ) {
             dst[..n].copy_from_slice(src);
         }
@@ -799,7 +801,7 @@ mod tests {
     fn the_blocked_step_is_phi_x_plus_psi_b() {
         let mut g = Rng::paired(3);
         // sizes below, at and across the block
-        for n in [1, 5, BLOCK, BLOCK + 1, 27] {
+        for n in [0, 1, 5, BLOCK, BLOCK + 1, 27] {
             let mut r = || g.uniform() - 0.5;
             let phi = DMatrix::from_fn(n, n, |_, _| r());
             let psi = DMatrix::from_fn(n, n, |_, _| r());
