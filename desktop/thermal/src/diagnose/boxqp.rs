@@ -2,7 +2,7 @@
 //! the freedom left to candidates both solve one).
 
 use nalgebra::DMatrix;
-pub(crate) use tcomp_data::linalg::dot;
+use tcomp_data::linalg::dot;
 
 /// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi by projected Gauss–Seidel
 /// from `x0` (clamped), and the sweeps it took: the fallback of

@@ -41,12 +41,13 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
-use super::boxqp::{box_qp_exact, box_qp_exact_inv_from, dot};
+use super::boxqp::{box_qp_exact, box_qp_exact_inv_from};
 use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
 use knots::Knots;
+use tcomp_data::linalg::dot;
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
