@@ -109,13 +109,16 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
 /// Fit criterion, stats and residuals of one released machine.
 type Judged = (f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>);
 
-/// The judged quantities of a machine (with the freedom): fit criterion,
-/// stats and residuals.
-fn eval(m: &Machine, ps: &[Prepared], fr: &Freedom) -> Result<Judged> {
-    let ev = Evaluator::new(m, ps)?.with_freedom(Some(fr as &dyn super::effect_fit::Projection));
-    let r = ev.residuals(&[])?;
-    let st = ev.stats_of(&r);
-    Ok((st.j_fit(), st, r))
+/// The fit criterion of a machine with the freedom: the release's line
+/// search needs nothing else, and `Evaluator::j_fit` has it from the
+/// freedom's fit-row products without correcting every row.
+fn j_fit(m: &Machine, ps: &[Prepared], fr: &Freedom) -> f64 {
+    Evaluator::new(m, ps)
+        .and_then(|ev| {
+            ev.with_freedom(Some(fr as &dyn super::effect_fit::Projection))
+                .j_fit(&[])
+        })
+        .unwrap_or(f64::INFINITY)
 }
 
 /// The nominal the released factor acts on, and what the judge needs.
@@ -175,7 +178,7 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
             .collect();
         let mut vals = Vec::new();
         for &g in &grid {
-            vals.push(eval(&at(g), ps, n.freedom).map_or(f64::INFINITY, |e| e.0));
+            vals.push(j_fit(&at(g), ps, n.freedom));
             sims += 1;
         }
         let bi = (0..grid.len())
@@ -186,8 +189,8 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
         let phi = 0.618_033_988_749_895;
         for _ in 0..8 {
             let (c, d) = (b - phi * (b - a), a + phi * (b - a));
-            let fc = eval(&at(c), ps, n.freedom).map_or(f64::INFINITY, |e| e.0);
-            let fd = eval(&at(d), ps, n.freedom).map_or(f64::INFINITY, |e| e.0);
+            let fc = j_fit(&at(c), ps, n.freedom);
+            let fd = j_fit(&at(d), ps, n.freedom);
             sims += 2;
             if fc < fd {
                 b = d;
