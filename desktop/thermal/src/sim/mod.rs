@@ -1,7 +1,8 @@
 //! Machine thermal simulator: a lumped thermal network (heat capacities,
 //! conductances, motor loss and Palmgren bearing heat) with a 1-D
 //! finite-difference spindle shaft, stepped with the exact zero-order-hold
-//! discretisation (`x ← Φx + Ψb`, stable for any step), thermal expansion
+//! discretisation in the network's modes (`modal.rs`: the same step as
+//! `x ← Φx + Ψb`, stable for any step, in O(n)), thermal expansion
 //! mapped to displacement per direction, DS18B20 quantisation and seeded
 //! noise, and switchable candidate effects (`effects.rs`).
 
@@ -9,6 +10,7 @@ pub mod duty;
 pub mod effects;
 pub mod limits;
 pub mod machine;
+mod modal;
 
 use anyhow::{bail, Result};
 use tcomp_data::rng::Rng;
@@ -17,8 +19,10 @@ pub use duty::{Duty, Inputs};
 pub use effects::{Effect, ALL_EFFECT_NAMES, EFFECT_NAMES};
 pub use machine::{Machine, Probe};
 
+use modal::{Modes, PerStep};
 use nalgebra::{DMatrix, DVector};
-use tcomp_data::linalg::{discretize, solve};
+use std::rc::Rc;
+use tcomp_data::linalg::solve;
 
 /// Noise-free simulator output at the output samples.
 #[derive(Clone, Debug)]
@@ -160,44 +164,59 @@ fn saw(t: f64, amp: f64, period: f64) -> f64 {
     amp * ((t / period).rem_euclid(1.0) - 0.5)
 }
 
-/// [`discretize`] with a small per-thread cache keyed by the exact bits of
-/// `A` and `dt`: a diagnosis re-simulates the same network many times with
-/// other heat inputs (heat effects, heat-gain calibration), and the matrix
-/// exponential is most of a coarse simulation's cost. Same result, bit for bit.
-fn discretize_cached(a: &DMatrix<f64>, dt: f64) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
-    type Entry = (Vec<u64>, (DMatrix<f64>, DMatrix<f64>));
+/// [`Modes::new`] with a small per-thread cache keyed by the exact bits of
+/// everything it reads: a diagnosis re-simulates the same network many
+/// times with other heat inputs (heat effects, heat-gain calibration), and
+/// the eigen-decomposition is most of a coarse simulation's cost. Same
+/// result, bit for bit.
+fn modes_cached(
+    k: &DMatrix<f64>,
+    c: &[f64],
+    dt: f64,
+    per: &PerStep,
+    read: &[usize],
+    dirs: &[Vec<(usize, f64)>],
+) -> Result<Rc<Modes>> {
+    type Entry = (Vec<u64>, Rc<Modes>);
     thread_local! {
         static CACHE: std::cell::RefCell<std::collections::VecDeque<Entry>> =
             const { std::cell::RefCell::new(std::collections::VecDeque::new()) };
     }
     const KEEP: usize = 16;
-    let mut key: Vec<u64> = Vec::with_capacity(a.len() + 2);
-    key.push(a.nrows() as u64);
+    let mut key: Vec<u64> = Vec::with_capacity(k.len() + 4 * c.len() + read.len() + 2);
+    key.push(c.len() as u64);
     key.push(dt.to_bits());
-    key.extend(a.iter().map(|v| v.to_bits()));
-    if let Some(hit) = CACHE.with(|c| c.borrow().iter().find(|e| e.0 == key).map(|e| e.1.clone())) {
+    key.extend(
+        k.iter()
+            .chain(c)
+            .chain(per.g_amb)
+            .chain(per.g_jacket)
+            .chain(per.g_cool)
+            .map(|v| v.to_bits()),
+    );
+    key.extend(read.iter().map(|&i| i as u64));
+    for terms in dirs {
+        key.push(u64::MAX);
+        key.extend(terms.iter().flat_map(|&(i, l)| [i as u64, l.to_bits()]));
+    }
+    if let Some(hit) = CACHE.with(|cache| {
+        cache
+            .borrow()
+            .iter()
+            .find(|e| e.0 == key)
+            .map(|e| e.1.clone())
+    }) {
         return Ok(hit);
     }
-    let d = discretize(a, dt)?;
-    CACHE.with(|c| {
-        let mut c = c.borrow_mut();
-        if c.len() >= KEEP {
-            c.pop_front();
+    let modes = Rc::new(Modes::new(k, c, dt, per, read, dirs)?);
+    CACHE.with(|cache| {
+        let mut cache = cache.borrow_mut();
+        if cache.len() >= KEEP {
+            cache.pop_front();
         }
-        c.push_back((key, d.clone()));
+        cache.push_back((key, modes.clone()));
     });
-    Ok(d)
-}
-
-/// The state matrix `A` (dx/dt = A x + b) for the given ambient and
-/// coolant conductances.
-fn state_matrix(m: &Machine, g_amb: &[f64], g_cool: &[f64]) -> DMatrix<f64> {
-    let mut a = -conductance(m, g_amb);
-    for i in 0..m.n {
-        a[(i, i)] -= g_cool[i];
-        a.row_mut(i).unscale_mut(m.c[i]);
-    }
-    a
+    Ok(modes)
 }
 
 /// The conductance matrix `L + diag(g_amb)` (W/K) of the network.
@@ -232,14 +251,14 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     let dt = inp.dt;
     let net = Network::new(m, &act, dt)?;
     let ta0 = inp.ambient.first().copied().unwrap_or(m.spec.ambient_c);
-    let mut state = State::new(net.rest_state(ta0)?, net.supply);
+    let mut state = State::new(m, &net.read, net.rest_state(ta0)?, net.supply);
     let k_total = inp.len();
     let mut rec = Recorder::new(m, act.bend, state.x.clone(), k_total.div_ceil(stride));
     for k in 0..k_total {
         let t = inp.time(k);
         if k % stride == 0 {
             let amb_now = inp.ambient[k] + drift_at(&act.drift, t);
-            rec.record(t, amb_now, &state.x, state.t_cool);
+            rec.record(t, amb_now, &state.x, &state.lin, state.t_cool);
         }
         if k + 1 == k_total {
             break;
@@ -251,106 +270,69 @@ pub fn simulate(m: &Machine, inp: &Inputs, effects: &[Effect], stride: usize) ->
     Ok(out)
 }
 
-/// One step's `x ← Φx + Ψb` with Φ and Ψ side by side, column-major,
-/// each column padded to whole blocks of `BLOCK` rows: a block of the
-/// result is summed in registers over all 2n columns, in column order.
-/// nalgebra's `gemv` walks the columns with a generic scalar axpy through
-/// memory, and was most of a simulation's time; its sums are grouped
-/// otherwise, so results move in the last bits (a fit's parameters in the
-/// 6th digit on one case in 40 of the cross bench, every verdict the same).
-struct Transition {
-    n: usize,
-    /// Rows per column, padded.
-    n_pad: usize,
-    /// Φ's columns, then Ψ's, each `n_pad` long (zeros past row n).
-    cols: Vec<f64>,
-}
-
-const BLOCK: usize = 8;
-
-impl Transition {
-    fn new((phi, psi): &(DMatrix<f64>, DMatrix<f64>)) -> Transition {
-        // (the `max(1)`s: no chunk size of 0 for a network without nodes,
-        // which the machine file's checks already refuse)
-        let n = phi.nrows();
-        let n_pad = n.div_ceil(BLOCK).max(1) * BLOCK;
-        let mut cols = vec![0.0; 2 * n * n_pad];
-        for (dst, src) in cols.chunks_exact_mut(n_pad).zip(
-            phi.as_slice()
-                .chunks_exact(n.max(1))
-                .chain(psi.as_slice().chunks_exact(n.max(1))),
-        ) {
-            dst[..n].copy_from_slice(src);
-        }
-        Transition { n, n_pad, cols }
-    }
-
-    fn apply(&self, x: &[f64], b: &[f64], out: &mut [f64]) {
-        for r0 in (0..self.n).step_by(BLOCK) {
-            let mut acc = [0.0f64; BLOCK];
-            let (phi, psi) = self.cols.split_at(self.n * self.n_pad);
-            for (m, v) in [(phi, x), (psi, b)] {
-                for (col, &v) in m.chunks_exact(self.n_pad).zip(v) {
-                    let blk: &[f64; BLOCK] =
-                        col[r0..r0 + BLOCK].try_into().unwrap_or(&[0.0; BLOCK]);
-                    for k in 0..BLOCK {
-                        acc[k] += v * blk[k];
-                    }
-                }
-            }
-            let w = BLOCK.min(self.n - r0);
-            out[r0..r0 + w].copy_from_slice(&acc[..w]);
-        }
-    }
-}
-
 /// The network under the active effects: its conductances to ambient and
-/// to the coolant, and its step matrices `(Φ, Ψ)` for every combination of
-/// coolant flows.
+/// to the coolant, and its modes for every combination of coolant flows.
 struct Network<'a> {
     m: &'a Machine,
     act: &'a Active,
     g_amb: Vec<f64>,
     /// Conductance to the coolant per node while the circuit flows (its jackets).
     g_jacket: Vec<f64>,
-    /// Conductance to the coolant per node while the `coolant` effect is on.
-    g_cool: Vec<f64>,
-    /// `(Φ, Ψ)` indexed by `flowing | cool_on << 1`, the base (neither) taken out.
-    mats: [Option<Transition>; 4],
-    base: Transition,
+    /// Modes indexed by `flowing | cool_on << 1` (None: a state that cannot occur).
+    modes: [Option<Rc<Modes>>; 4],
+    /// The nodes whose temperature something reads: sensors, bending,
+    /// coolant jackets (the directions read their lever-weighted sums).
+    read: Vec<usize>,
     /// Coolant set point (0 without a circuit).
     supply: f64,
     n_screw: f64,
     feed_sources: bool,
 }
 
-/// What changes from step to step: the node temperatures, the coolant tank
-/// and the scratch vectors of the stepping loop.
+/// What changes from step to step: the node temperatures (valid at the
+/// read nodes), the modal state, the coolant tank and the scratch vectors
+/// of the stepping loop.
 struct State {
     x: DVector<f64>,
-    next: DVector<f64>,
-    /// Forcing `Ψ` multiplies, per node [K/s].
-    b: DVector<f64>,
+    /// Modal coordinates in the modes of `key` (None before the first step).
+    z: Vec<f64>,
+    key: Option<usize>,
+    /// Heat per node that changes only with speed and feed [W], and its
+    /// modal increment (`w_slow`) in the current modes.
+    f_slow: Vec<f64>,
+    w_slow: Vec<f64>,
+    /// Whether `w_slow` must be mapped again.
+    slow_dirty: bool,
+    /// The step's modal increment, the outputs (scratch).
+    w: Vec<f64>,
+    outs: Vec<f64>,
+    /// Per direction: Σ lever × temperature over its terms.
+    lin: Vec<f64>,
     /// Spindle heat per node [W] at `last_rpm`.
     q: Vec<f64>,
-    /// Feed heat per node [W] (scratch).
-    qf: Vec<f64>,
     last_rpm: f64,
+    last_feed: f64,
     /// Coolant temperature (the set point unless the chiller cycles).
     t_cool: f64,
     chiller_on: bool,
 }
 
 impl State {
-    fn new(x: DVector<f64>, supply: f64) -> State {
+    fn new(m: &Machine, read: &[usize], x: DVector<f64>, supply: f64) -> State {
         let n = x.len();
         State {
-            next: DVector::zeros(n),
-            b: DVector::zeros(n),
+            outs: vec![0.0; read.len() + m.dir_terms.len()],
+            lin: lever_sums(m, &x),
+            z: vec![0.0; n],
+            key: None,
+            f_slow: vec![0.0; n],
+            w_slow: vec![0.0; n],
+            slow_dirty: true,
+            w: vec![0.0; n],
             q: vec![0.0; n],
-            qf: vec![0.0; n],
             x,
             last_rpm: f64::NAN,
+            last_feed: f64::NAN,
             t_cool: supply,
             chiller_on: false,
         }
@@ -362,7 +344,7 @@ impl<'a> Network<'a> {
         let n = m.n;
         let g_amb: Vec<f64> = (0..n).map(|i| m.g_amb[i] + act.h * m.area[i]).collect();
         // conductance to the coolant per node: the circuit's jackets while it
-        // flows, the `coolant` effect while it is on; Φ, Ψ per combination
+        // flows, the `coolant` effect while it is on; modes per combination
         let mut g_jacket = vec![0.0; n];
         if let Some(c) = &m.coolant {
             for &(i, g) in &c.jacket {
@@ -375,33 +357,48 @@ impl<'a> Network<'a> {
                 g_cool[i] += g / m.coolant_nodes.len() as f64;
             }
         }
-        let mut mats: [Option<Transition>; 4] = Default::default();
-        for (key, slot) in mats.iter_mut().enumerate() {
+        let mut read: Vec<usize> = m
+            .sensor_probe
+            .iter()
+            .filter_map(|p| match p {
+                Probe::Node(i) => Some(*i),
+                _ => None,
+            })
+            .chain(m.bending.iter().flat_map(|&(a, b, _)| [a, b]))
+            .chain(
+                m.coolant
+                    .iter()
+                    .flat_map(|c| c.jacket.iter().map(|&(i, _)| i)),
+            )
+            .collect();
+        read.sort_unstable();
+        read.dedup();
+        let per = PerStep {
+            g_amb: &g_amb,
+            g_jacket: &g_jacket,
+            g_cool: &g_cool,
+        };
+        let base = conductance(m, &g_amb);
+        let mut modes: [Option<Rc<Modes>>; 4] = Default::default();
+        for (key, slot) in modes.iter_mut().enumerate() {
             let (jacket, cool) = (key & 1 != 0, key & 2 != 0);
             if (jacket && m.coolant.is_none()) || (cool && act.cool.is_none()) {
                 continue;
             }
-            let g: Vec<f64> = (0..n)
-                .map(|i| {
-                    (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 }
-                })
-                .collect();
-            *slot = Some(Transition::new(&discretize_cached(
-                &state_matrix(m, &g_amb, &g),
-                dt,
-            )?));
+            let mut k = base.clone();
+            for i in 0..n {
+                k[(i, i)] +=
+                    (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 };
+            }
+            *slot = Some(modes_cached(&k, &m.c, dt, &per, &read, &m.dir_terms)?);
         }
-        let base = mats[0]
-            .take()
-            .ok_or_else(|| anyhow::anyhow!("thermal network: no base discretisation"))?;
         Ok(Network {
             m,
             act,
             g_amb,
             g_jacket,
-            g_cool,
-            mats,
-            base,
+            modes,
+            read,
             supply: m.coolant.as_ref().map_or(0.0, |c| c.supply_c),
             n_screw: m.ballscrew_nodes.len().max(1) as f64,
             feed_sources: m
@@ -459,62 +456,90 @@ impl<'a> Network<'a> {
         if rpm != s.last_rpm {
             self.spindle_heat(rpm, &mut s.q);
             s.last_rpm = rpm;
+            s.slow_dirty = true;
+        }
+        if inp.feed[k] != s.last_feed {
+            s.last_feed = inp.feed[k];
+            s.slow_dirty = true;
         }
         let ta = inp.ambient[k] + drift_at(&self.act.drift, tm);
-        let (flowing, cool_on) = self.forcing(inp, k, tm, ta, s);
+        let (flowing, cool_on, tc) = self.coolant_state(inp, k, tm, ta);
         let key = usize::from(flowing) | (usize::from(cool_on) << 1);
-        let tr = self.mats[key].as_ref().unwrap_or(&self.base);
+        // a state the network was not built for cannot occur (`coolant_state`
+        // turns each flow on only where its matrices exist): keep the base
+        let key = if self.modes[key].is_some() { key } else { 0 };
+        let Some(modes) = self.modes[key].as_deref() else {
+            return;
+        };
+        match s.key {
+            None => s.z = modes.to_modes(s.x.as_slice(), &self.m.c),
+            Some(old) if old != key => {
+                if let Some(from) = self.modes[old].as_deref() {
+                    s.z = from.in_other(modes, &s.z);
+                }
+                s.slow_dirty = true;
+            }
+            _ => {}
+        }
+        s.key = Some(key);
+        if s.slow_dirty {
+            self.slow_heat(inp, k, s);
+            modes.heat(&s.f_slow, &mut s.w_slow);
+            s.slow_dirty = false;
+        }
+        // the jackets see the tank as it was at the step's start
+        let t_jacket = if flowing { s.t_cool } else { 0.0 };
+        let tc = if cool_on { tc } else { 0.0 };
+        for (i, w) in s.w.iter_mut().enumerate() {
+            *w = s.w_slow[i]
+                + ta * modes.per_ambient[i]
+                + t_jacket * modes.per_jacket[i]
+                + tc * modes.per_cool[i];
+        }
         self.chiller_step(s, ta, flowing, dt);
-        tr.apply(s.x.as_slice(), s.b.as_slice(), s.next.as_mut_slice());
-        std::mem::swap(&mut s.x, &mut s.next);
+        modes.step(&mut s.z, &s.w);
+        modes.outputs(&s.z, &mut s.outs);
+        let (temps, lin) = s.outs.split_at(self.read.len());
+        for (&i, &v) in self.read.iter().zip(temps) {
+            s.x[i] = v;
+        }
+        s.lin.copy_from_slice(lin);
     }
 
-    /// The forcing `b` of row `k` (mid-step time `tm`, ambient `ta`): heat,
-    /// ambient, and the coolant where it flows. Returns whether the circuit
-    /// flows and whether the `coolant` effect is on.
-    fn forcing(&self, inp: &Inputs, k: usize, tm: f64, ta: f64, s: &mut State) -> (bool, bool) {
+    /// The heat [W] per node of row `k` that changes only with the speed
+    /// and the feed: the spindle's, the ambient offsets', the feed's and
+    /// the ballscrew effect's.
+    fn slow_heat(&self, inp: &Inputs, k: usize, s: &mut State) {
         let m = self.m;
         for i in 0..m.n {
-            s.b[i] = (s.q[i] + self.g_amb[i] * (ta + m.amb_offset[i])) / m.c[i];
+            s.f_slow[i] = s.q[i] + self.g_amb[i] * m.amb_offset[i];
         }
         if self.feed_sources && inp.feed[k] > 0.0 {
-            s.qf.iter_mut().for_each(|v| *v = 0.0);
-            m.heat_feed(inp.feed[k], &mut s.qf);
-            for i in 0..m.n {
-                s.b[i] += s.qf[i] / m.c[i];
-            }
+            m.heat_feed(inp.feed[k], &mut s.f_slow);
         }
         if self.act.screw != 0.0 && inp.feed[k] != 0.0 {
             for &i in &m.ballscrew_nodes {
-                s.b[i] += self.act.screw * inp.feed[k] / self.n_screw / m.c[i];
+                s.f_slow[i] += self.act.screw * inp.feed[k] / self.n_screw;
             }
         }
+    }
+
+    /// Whether the circuit flows in row `k` (mid-step time `tm`, ambient
+    /// `ta`), whether the `coolant` effect is on, and its supply [°C].
+    fn coolant_state(&self, inp: &Inputs, k: usize, tm: f64, ta: f64) -> (bool, bool, f64) {
+        let m = self.m;
         let flowing = m.coolant_flows(inp.rpm[k], inp.coolant[k]);
-        if flowing {
-            for (i, g) in self.g_jacket.iter().enumerate() {
-                if *g > 0.0 {
-                    s.b[i] += g * s.t_cool / m.c[i];
-                }
-            }
-        }
-        let cool_on = match self.act.cool {
+        match self.act.cool {
             Some((_, off, amp, per)) => {
                 let on = if m.coolant.is_some() {
                     flowing
                 } else {
                     inp.coolant[k] > 0.5
                 };
-                if on {
-                    let tc = ta + off + saw(tm, amp, per);
-                    for &i in &m.coolant_nodes {
-                        s.b[i] += self.g_cool[i] * tc / m.c[i];
-                    }
-                }
-                on
+                (flowing, on, ta + off + saw(tm, amp, per))
             }
-            None => false,
-        };
-        (flowing, cool_on)
+            None => (flowing, false, 0.0),
+        }
     }
 
     /// The tank under a cycling chiller over one step of `dt` (its time
@@ -562,8 +587,10 @@ struct Recorder<'a> {
     m: &'a Machine,
     /// Gain of the `bending` effect.
     bend: f64,
-    /// Node temperatures at the start: displacements are rises from them.
+    /// Node temperatures at the start and each direction's lever sum of
+    /// them: displacements are rises from them.
     x0: DVector<f64>,
+    lin0: Vec<f64>,
     out: SimOut,
 }
 
@@ -572,6 +599,7 @@ impl<'a> Recorder<'a> {
         Recorder {
             m,
             bend,
+            lin0: lever_sums(m, &x0),
             x0,
             out: SimOut {
                 temps: vec![Vec::with_capacity(n_out); m.sensor_cols.len()],
@@ -581,8 +609,10 @@ impl<'a> Recorder<'a> {
         }
     }
 
-    /// Sensor readings and displacements at time `t` for node temperatures `x`.
-    fn record(&mut self, t: f64, amb_now: f64, x: &DVector<f64>, t_cool: f64) {
+    /// Sensor readings and displacements at time `t` for node temperatures
+    /// `x` (read at the sensors' and bending's nodes) and the directions'
+    /// lever sums `lin`.
+    fn record(&mut self, t: f64, amb_now: f64, x: &DVector<f64>, lin: &[f64], t_cool: f64) {
         let (m, x0) = (self.m, &self.x0);
         self.out.t.push(t);
         for (s, probe) in m.sensor_probe.iter().enumerate() {
@@ -592,11 +622,8 @@ impl<'a> Recorder<'a> {
                 Probe::Coolant => t_cool,
             });
         }
-        for (d, terms) in m.dir_terms.iter().enumerate() {
-            let mut v = 0.0;
-            for &(i, al) in terms {
-                v += al * (x[i] - x0[i]);
-            }
+        for d in 0..m.dir_terms.len() {
+            let mut v = lin[d] - self.lin0[d];
             if let Some((a, bn, di)) = m.bending {
                 if di == d {
                     v += self.bend * ((x[a] - x0[a]) - (x[bn] - x0[bn]));
@@ -605,6 +632,15 @@ impl<'a> Recorder<'a> {
             self.out.disp[d].push(v);
         }
     }
+}
+
+/// Per direction: Σ lever × temperature over its terms, for node
+/// temperatures `x`.
+fn lever_sums(m: &Machine, x: &DVector<f64>) -> Vec<f64> {
+    m.dir_terms
+        .iter()
+        .map(|terms| terms.iter().map(|&(i, al)| al * x[i]).sum())
+        .collect()
 }
 
 /// Sensor lag (first-order, exact for a signal linear between samples)
@@ -791,33 +827,4 @@ pub fn sim_run(m: &Machine, duty: &Duty, opt: &SimOptions) -> Result<tcomp_data:
             ("ambient", format!("{} °C nominal", m.spec.ambient_c)),
         ],
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_blocked_step_is_phi_x_plus_psi_b() {
-        let mut g = Rng::paired(3);
-        // sizes below, at and across the block
-        for n in [0, 1, 5, BLOCK, BLOCK + 1, 27] {
-            let mut r = || g.uniform() - 0.5;
-            let phi = DMatrix::from_fn(n, n, |_, _| r());
-            let psi = DMatrix::from_fn(n, n, |_, _| r());
-            let x = DVector::from_fn(n, |_, _| r());
-            let b = DVector::from_fn(n, |_, _| r());
-            let want = &phi * &x + &psi * &b;
-            let mut got = vec![f64::NAN; n];
-            Transition::new(&(phi, psi)).apply(x.as_slice(), b.as_slice(), &mut got);
-            for i in 0..n {
-                assert!(
-                    (got[i] - want[i]).abs() < 1e-12,
-                    "n {n}, row {i}: {} vs {}",
-                    got[i],
-                    want[i]
-                );
-            }
-        }
-    }
 }
