@@ -602,8 +602,14 @@ impl<'a> Recorder<'a> {
             lin0: lever_sums(m, &x0),
             x0,
             out: SimOut {
-                temps: vec![Vec::with_capacity(n_out); m.sensor_cols.len()],
-                disp: vec![Vec::with_capacity(n_out); m.dir_cols.len()],
+                // (not `vec![Vec::with_capacity(..); k]`: its clones start empty
+                // and grew by reallocation, row by row)
+                temps: (0..m.sensor_cols.len())
+                    .map(|_| Vec::with_capacity(n_out))
+                    .collect(),
+                disp: (0..m.dir_cols.len())
+                    .map(|_| Vec::with_capacity(n_out))
+                    .collect(),
                 t: Vec::with_capacity(n_out),
             },
         }

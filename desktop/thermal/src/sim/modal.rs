@@ -60,6 +60,10 @@ impl Modes {
         dirs: &[Vec<(usize, f64)>],
     ) -> Result<Modes> {
         let n = c.len();
+        if n == 0 {
+            // the machine file's checks refuse it already
+            bail!("thermal network: no nodes");
+        }
         let isq: Vec<f64> = c.iter().map(|v| 1.0 / v.sqrt()).collect();
         let s = DMatrix::from_fn(n, n, |i, j| k[(i, j)] * isq[i] * isq[j]);
         if s.iter().any(|v| !v.is_finite()) {
