@@ -1,7 +1,8 @@
 //! The desktop's one linear-algebra entry point, on `nalgebra`: least squares
 //! by SVD (never the normal equations: lagged temperature features are
 //! nearly collinear), SPD solves by Cholesky for the Levenberg–Marquardt
-//! step, and the matrix exponential for the simulator's exact step.
+//! step, and the matrix exponential (the exact zero-order-hold step the
+//! simulator's modal step is tested against).
 //! A solver that cannot give an answer returns an error, never zeros.
 
 use anyhow::{bail, Result};
@@ -180,24 +181,54 @@ pub fn solve(a: DMatrix<f64>, b: &[f64]) -> Result<Vec<f64>> {
 /// solves thousands of small, well-posed systems: Cholesky on the scaled
 /// Gram matrix (SVD only when it fails) is the fast path there.
 pub fn ridge_multi(x: &DMatrix<f64>, y: &DMatrix<f64>, lambda: f64) -> Option<DMatrix<f64>> {
-    let p = x.ncols();
-    let mut scale = DVector::zeros(p);
-    for j in 0..p {
-        let n = x.column(j).norm();
-        scale[j] = if n > 0.0 { 1.0 / n } else { 0.0 };
+    RidgeFactor::new(x, lambda).solve(y)
+}
+
+/// What a ridge fit needs of X alone (the column scaling, the factored
+/// Gram matrix), to solve for several right-hand sides on the same rows:
+/// the same arithmetic as [`ridge_multi`], which goes through it.
+pub struct RidgeFactor {
+    scale: DVector<f64>,
+    xs: DMatrix<f64>,
+    solver: RidgeSolver,
+}
+
+enum RidgeSolver {
+    Cholesky(nalgebra::Cholesky<f64, nalgebra::Dyn>),
+    /// The Gram matrix was not positive definite (rank-deficient X).
+    Svd(nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>),
+}
+
+impl RidgeFactor {
+    pub fn new(x: &DMatrix<f64>, lambda: f64) -> RidgeFactor {
+        let p = x.ncols();
+        let mut scale = DVector::zeros(p);
+        for j in 0..p {
+            let n = x.column(j).norm();
+            scale[j] = if n > 0.0 { 1.0 / n } else { 0.0 };
+        }
+        let xs = x * DMatrix::from_diagonal(&scale);
+        let mut g = xs.tr_mul(&xs);
+        for j in 0..p {
+            g[(j, j)] += lambda.max(1e-12);
+        }
+        let solver = match g.clone().cholesky() {
+            Some(c) => RidgeSolver::Cholesky(c),
+            None => RidgeSolver::Svd(g.svd(true, true)),
+        };
+        RidgeFactor { scale, xs, solver }
     }
-    let xs = x * DMatrix::from_diagonal(&scale);
-    let mut g = xs.tr_mul(&xs);
-    for j in 0..p {
-        g[(j, j)] += lambda.max(1e-12);
+
+    /// The coefficients for each column of `y` (None: not finite).
+    pub fn solve(&self, y: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        let rhs = self.xs.tr_mul(y);
+        let b = match &self.solver {
+            RidgeSolver::Cholesky(c) => c.solve(&rhs),
+            RidgeSolver::Svd(s) => s.solve(&rhs, 1e-12).ok()?,
+        };
+        let b = DMatrix::from_diagonal(&self.scale) * b;
+        b.iter().all(|v| v.is_finite()).then_some(b)
     }
-    let rhs = xs.tr_mul(y);
-    let b = match g.clone().cholesky() {
-        Some(c) => c.solve(&rhs),
-        None => g.svd(true, true).solve(&rhs, 1e-12).ok()?,
-    };
-    let b = DMatrix::from_diagonal(&scale) * b;
-    b.iter().all(|v| v.is_finite()).then_some(b)
 }
 
 /// Ridge least squares with column scaling: `argmin |y − Xb|² + λ|Db|²`,
@@ -211,6 +242,24 @@ pub fn ridge(x: &DMatrix<f64>, y: &DVector<f64>, lambda: f64) -> Option<DVector<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_ridge_factor_reused_gives_what_a_fresh_fit_gives_bit_for_bit() {
+        // the diagnosis reuses one factor for every output on the same rows
+        let x = DMatrix::from_fn(40, 4, |i, j| {
+            ((i * 7 + j * 3) as f64 * 0.37).sin() + j as f64
+        });
+        let f = RidgeFactor::new(&x, 1e-6);
+        for s in [0.3, -2.0, 11.0] {
+            let y = DVector::from_fn(40, |i, _| (i as f64 * s).cos());
+            let once = ridge(&x, &y, 1e-6).unwrap();
+            let reused = f
+                .solve(&DMatrix::from_column_slice(40, 1, y.as_slice()))
+                .unwrap();
+            let bits = |v: &[f64]| v.iter().map(|b| b.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(once.as_slice()), bits(reused.as_slice()));
+        }
+    }
 
     #[test]
     fn least_squares_recovers_a_plane_with_collinear_columns() {

@@ -30,6 +30,7 @@ pub use super::speed_law::{
     MIN_SPEED_LEVELS, PALMGREN_EXPONENT, STEEP_EXPONENTS,
 };
 use super::stats::r4;
+use tcomp_data::linalg::RidgeFactor;
 
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag:
 /// above the largest seen on clean runs (0.19 on the open-world benchmark's
@@ -52,7 +53,7 @@ fn held(v: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// The body map of one displacement seen through a lag of `tau`: the
+/// The body map of each displacement of `outs` seen through a lag of `tau`: the
 /// displacement is a static linear map of the true node temperatures, so
 /// its lagged version is the same map of the lagged temperatures. Every
 /// sensor rise and the displacement pass through the same first-order lag
@@ -63,13 +64,13 @@ fn held(v: &[f64]) -> Vec<f64> {
 /// Σ L_i·rise_i, ridge least squares on the fit rows. `injected` puts a
 /// lag of its own on one sensor's reading first (the test's power, see
 /// `lag_reach`).
-fn lagged_body_map(
+fn lagged_body_maps(
     p: &Problem,
-    o: usize,
+    outs: &[usize],
     tau: f64,
     own: Option<usize>,
     injected: Option<(usize, f64)>,
-) -> OutFit {
+) -> Vec<OutFit> {
     let ds = p.ds;
     let ns = ds.sensors.len();
     let nr = ds.runs.len();
@@ -98,78 +99,106 @@ fn lagged_body_map(
                 .collect()
         })
         .collect();
-    let target: Vec<Vec<f64>> = ds
-        .runs
-        .iter()
-        .enumerate()
-        .map(|(r, run)| {
-            let y = super::lag::lag_signal(&held(&p.meas[r][o]), run.dt, tau);
-            y.iter()
-                .zip(&p.meas[r][o])
-                .map(|(a, m)| if m.is_finite() { *a } else { f64::NAN })
-                .collect()
+    // the sensors' lagged rises and the fit rows' factor do not depend
+    // on the output: built once, reused while the rows are the same
+    let mut last: Option<(Vec<(usize, usize)>, RidgeFactor)> = None;
+    outs.iter()
+        .map(|&o| {
+            let target: Vec<Vec<f64>> = ds
+                .runs
+                .iter()
+                .enumerate()
+                .map(|(r, run)| {
+                    let y = super::lag::lag_signal(&held(&p.meas[r][o]), run.dt, tau);
+                    y.iter()
+                        .zip(&p.meas[r][o])
+                        .map(|(a, m)| if m.is_finite() { *a } else { f64::NAN })
+                        .collect()
+                })
+                .collect();
+            let nc = ns;
+            let k = nc + nr;
+            let mut rows = Vec::new();
+            for (r, run) in ds.runs.iter().enumerate() {
+                for kk in 0..run.rows() {
+                    if !run.held[kk] && target[r][kk].is_finite() {
+                        rows.push((r, kk));
+                    }
+                }
+            }
+            let val = |r: usize, kk: usize, j: usize| -> f64 {
+                if j < nc {
+                    cols[r][j][kk]
+                } else if j - nc == r {
+                    1.0
+                } else {
+                    0.0
+                }
+            };
+            let mut f = OutFit {
+                k,
+                ..Default::default()
+            };
+            let coef = if rows.len() > k + 2 {
+                let x = || {
+                    nalgebra::DMatrix::from_fn(rows.len(), k, |i, j| val(rows[i].0, rows[i].1, j))
+                };
+                let y = nalgebra::DVector::from_iterator(
+                    rows.len(),
+                    rows.iter().map(|&(r, kk)| target[r][kk]),
+                );
+                ridge_on(&mut last, &rows, x, &y)
+            } else {
+                None
+            };
+            let Some(coef) = coef else {
+                let held = (0..ds.runs.len())
+                    .map(|r| {
+                        let run = &ds.runs[r];
+                        (0..run.rows())
+                            .filter(|&kk| run.held[kk] && p.meas[r][o][kk].is_finite())
+                            .count()
+                    })
+                    .sum();
+                let sizes: Vec<usize> = ds.runs.iter().map(|r| r.rows()).collect();
+                return OutFit::failed(k, &sizes, rows.len(), held);
+            };
+            // with `own`: that sensor's coefficient as lagged and as read
+            f.extra_coef = own.map(|i| coef[i]).into_iter().collect();
+            for (r, run) in ds.runs.iter().enumerate() {
+                let mut res = Vec::with_capacity(run.rows());
+                for kk in 0..run.rows() {
+                    let pred: f64 = (0..k).map(|j| coef[j] * val(r, kk, j)).sum();
+                    let e = target[r][kk] - pred;
+                    if !e.is_finite() {
+                        res.push(f64::NAN);
+                        continue;
+                    }
+                    f.add_residual(e, run.held[kk]);
+                    res.push(e);
+                }
+                f.resid.push(res);
+            }
+            f
         })
-        .collect();
-    let nc = ns;
-    let k = nc + nr;
-    let mut rows = Vec::new();
-    for (r, run) in ds.runs.iter().enumerate() {
-        for kk in 0..run.rows() {
-            if !run.held[kk] && target[r][kk].is_finite() {
-                rows.push((r, kk));
-            }
-        }
+        .collect()
+}
+
+/// The ridge fit (λ 10⁻⁶) of `y` on the matrix `x` builds for `rows`:
+/// the factor of `last` when it was made for the same rows (the same
+/// matrix), else a new one kept in `last`.
+fn ridge_on(
+    last: &mut Option<(Vec<(usize, usize)>, RidgeFactor)>,
+    rows: &[(usize, usize)],
+    x: impl FnOnce() -> nalgebra::DMatrix<f64>,
+    y: &nalgebra::DVector<f64>,
+) -> Option<nalgebra::DVector<f64>> {
+    if last.as_ref().is_none_or(|(r, _)| r.as_slice() != rows) {
+        *last = Some((rows.to_vec(), RidgeFactor::new(&x(), 1e-6)));
     }
-    let val = |r: usize, kk: usize, j: usize| -> f64 {
-        if j < nc {
-            cols[r][j][kk]
-        } else if j - nc == r {
-            1.0
-        } else {
-            0.0
-        }
-    };
-    let mut f = OutFit {
-        k,
-        ..Default::default()
-    };
-    let coef = if rows.len() > k + 2 {
-        let x = nalgebra::DMatrix::from_fn(rows.len(), k, |i, j| val(rows[i].0, rows[i].1, j));
-        let y =
-            nalgebra::DVector::from_iterator(rows.len(), rows.iter().map(|&(r, kk)| target[r][kk]));
-        tcomp_data::linalg::ridge(&x, &y, 1e-6)
-    } else {
-        None
-    };
-    let Some(coef) = coef else {
-        let held = (0..ds.runs.len())
-            .map(|r| {
-                let run = &ds.runs[r];
-                (0..run.rows())
-                    .filter(|&kk| run.held[kk] && p.meas[r][o][kk].is_finite())
-                    .count()
-            })
-            .sum();
-        let sizes: Vec<usize> = ds.runs.iter().map(|r| r.rows()).collect();
-        return OutFit::failed(k, &sizes, rows.len(), held);
-    };
-    // with `own`: that sensor's coefficient as lagged and as read
-    f.extra_coef = own.map(|i| coef[i]).into_iter().collect();
-    for (r, run) in ds.runs.iter().enumerate() {
-        let mut res = Vec::with_capacity(run.rows());
-        for kk in 0..run.rows() {
-            let pred: f64 = (0..k).map(|j| coef[j] * val(r, kk, j)).sum();
-            let e = target[r][kk] - pred;
-            if !e.is_finite() {
-                res.push(f64::NAN);
-                continue;
-            }
-            f.add_residual(e, run.held[kk]);
-            res.push(e);
-        }
-        f.resid.push(res);
-    }
-    f
+    let (_, factor) = last.as_ref()?;
+    let y = nalgebra::DMatrix::from_column_slice(y.len(), 1, y.as_slice());
+    factor.solve(&y).map(|b| b.column(0).into_owned())
 }
 
 /// The displacement outputs a body map explains (`None` without one, or
@@ -232,14 +261,8 @@ pub fn lag_reach(p: &Problem) -> Vec<Option<f64>> {
     let ns = p.ds.sensors.len();
     let seen = |s: usize, tau: f64| -> bool {
         let inj = Some((s, tau));
-        let base: Vec<OutFit> = disp
-            .iter()
-            .map(|&o| lagged_body_map(p, o, tau, None, inj))
-            .collect();
-        let own: Vec<OutFit> = disp
-            .iter()
-            .map(|&o| lagged_body_map(p, o, tau, Some(s), inj))
-            .collect();
+        let base = lagged_body_maps(p, &disp, tau, None, inj);
+        let own = lagged_body_maps(p, &disp, tau, Some(s), inj);
         let (all, least) = body_gain(p, &disp, &base, &own);
         all >= LAG_MIN_FIT_REL && least >= LAG_MIN_RUN_REL
     };
@@ -299,16 +322,9 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
     let per_tau: Vec<(Vec<OutFit>, Vec<Vec<OutFit>>)> = LAG_GRID
         .par_iter()
         .map(|&tau| {
-            let base: Vec<OutFit> = disp
-                .iter()
-                .map(|&o| lagged_body_map(p, o, tau, None, None))
-                .collect();
+            let base = lagged_body_maps(p, &disp, tau, None, None);
             let own: Vec<Vec<OutFit>> = (0..ns)
-                .map(|s| {
-                    disp.iter()
-                        .map(|&o| lagged_body_map(p, o, tau, Some(s), None))
-                        .collect()
-                })
+                .map(|s| lagged_body_maps(p, &disp, tau, Some(s), None))
                 .collect();
             (base, own)
         })
