@@ -43,7 +43,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::boxqp::{box_qp_exact, box_qp_exact_inv_from};
 use super::calibrate::{apply, Knob};
-use super::effect_fit::{par_map, Evaluator, Projection};
+use super::effect_fit::{par_map, Evaluator, FitResult, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
 use knots::Knots;
@@ -568,6 +568,20 @@ fn spans(on: &[bool], k0: usize) -> Vec<(usize, usize)> {
         }
     }
     out
+}
+
+/// With `TCOMP_DIAG_TIMING`: each fit's candidates and evaluations.
+pub(crate) fn print_evals(what: &str, fits: &[FitResult]) {
+    if timing() {
+        for f in fits {
+            let kinds: Vec<&str> = f.cands.iter().map(|c| c.kind).collect();
+            eprintln!(
+                "diagnose timing: {what} {} {} evals",
+                kinds.join("+"),
+                f.evals
+            );
+        }
+    }
 }
 
 /// `TCOMP_DIAG_TIMING` set: the diagnosis prints where its time goes.

@@ -693,14 +693,7 @@ fn diagnose_core(
         fit_cands(&ev, std::slice::from_ref(c), None, opt.budget + 15 * d)
     });
     sims += singles.iter().map(|f| f.evals).sum::<usize>();
-    if freedom::timing() {
-        for f in &singles {
-            eprintln!(
-                "diagnose timing: single {} {} evals",
-                f.cands[0].kind, f.evals
-            );
-        }
-    }
+    freedom::print_evals("single", &singles);
     let (tried, ok_idx) = judge_singles(&judge, &singles)?;
     // heat effects the margins would claim but the design's own heat
     // tolerance covers: untestable, with the reason
@@ -736,16 +729,7 @@ fn diagnose_core(
         )
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
-    if freedom::timing() {
-        for f in &pair_fits {
-            let kinds: Vec<&str> = f.cands.iter().map(|c| c.kind).collect();
-            eprintln!(
-                "diagnose timing: pair {} {} evals",
-                kinds.join("+"),
-                f.evals
-            );
-        }
-    }
+    freedom::print_evals("pair", &pair_fits);
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
     let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
     if let Some(c) = &cal {

@@ -14,6 +14,7 @@
 
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
+use std::rc::Rc;
 
 /// One coolant state's modes.
 pub(super) struct Modes {
@@ -162,6 +163,61 @@ impl Modes {
             out[r0..r0 + w].copy_from_slice(&acc[..w]);
         }
     }
+}
+
+/// [`Modes::new`] with a small per-thread cache keyed by the exact bits of
+/// everything it reads: a diagnosis re-simulates the same network many
+/// times with other heat inputs (heat effects, heat-gain calibration), and
+/// the eigen-decomposition is most of a coarse simulation's cost. Same
+/// result, bit for bit.
+pub(super) fn cached(
+    k: &DMatrix<f64>,
+    c: &[f64],
+    dt: f64,
+    per: &PerStep,
+    read: &[usize],
+    dirs: &[Vec<(usize, f64)>],
+) -> Result<Rc<Modes>> {
+    type Entry = (Vec<u64>, Rc<Modes>);
+    thread_local! {
+        static CACHE: std::cell::RefCell<std::collections::VecDeque<Entry>> =
+            const { std::cell::RefCell::new(std::collections::VecDeque::new()) };
+    }
+    const KEEP: usize = 16;
+    let mut key: Vec<u64> = Vec::with_capacity(k.len() + 4 * c.len() + read.len() + 2);
+    key.push(c.len() as u64);
+    key.push(dt.to_bits());
+    key.extend(
+        k.iter()
+            .chain(c)
+            .chain(per.g_amb)
+            .chain(per.g_jacket)
+            .chain(per.g_cool)
+            .map(|v| v.to_bits()),
+    );
+    key.extend(read.iter().map(|&i| i as u64));
+    for terms in dirs {
+        key.push(u64::MAX);
+        key.extend(terms.iter().flat_map(|&(i, l)| [i as u64, l.to_bits()]));
+    }
+    if let Some(hit) = CACHE.with(|cache| {
+        cache
+            .borrow()
+            .iter()
+            .find(|e| e.0 == key)
+            .map(|e| e.1.clone())
+    }) {
+        return Ok(hit);
+    }
+    let modes = Rc::new(Modes::new(k, c, dt, per, read, dirs)?);
+    CACHE.with(|cache| {
+        let mut cache = cache.borrow_mut();
+        if cache.len() >= KEEP {
+            cache.pop_front();
+        }
+        cache.push_back((key, modes.clone()));
+    });
+    Ok(modes)
 }
 
 #[cfg(test)]
