@@ -50,8 +50,10 @@ pub(super) struct PerStep<'a> {
 }
 
 impl Modes {
-    /// The modes of `C dx/dt = −K x + F` for a step of `dt`, with the rows
-    /// of the `read` nodes. `k` must be symmetric (a conductance matrix).
+    /// The modes of `C dx/dt = −K x + F` for a step of `dt`, with the
+    /// outputs: the `read` nodes' temperatures and each direction's lever
+    /// sum (`dirs`: node, lever). `k` must be symmetric (a conductance
+    /// matrix).
     pub(super) fn new(
         k: &DMatrix<f64>,
         c: &[f64],
