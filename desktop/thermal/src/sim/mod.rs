@@ -19,7 +19,7 @@ pub use duty::{Duty, Inputs};
 pub use effects::{Effect, ALL_EFFECT_NAMES, EFFECT_NAMES};
 pub use machine::{Machine, Probe};
 
-use modal::{Modes, PerStep};
+use modal::Modes;
 use nalgebra::{DMatrix, DVector};
 use std::rc::Rc;
 use tcomp_data::linalg::solve;
@@ -239,7 +239,8 @@ struct Network<'a> {
 /// of the stepping loop.
 struct State {
     x: DVector<f64>,
-    /// Modal coordinates in the modes of `key` (None before the first step).
+    /// Modal coordinates in the modes of `key`, which is None before the
+    /// first step.
     z: Vec<f64>,
     key: Option<usize>,
     /// Heat per node that changes only with speed and feed [W], and its
@@ -318,11 +319,6 @@ impl<'a> Network<'a> {
             .collect();
         read.sort_unstable();
         read.dedup();
-        let per = PerStep {
-            g_amb: &g_amb,
-            g_jacket: &g_jacket,
-            g_cool: &g_cool,
-        };
         let base = conductance(m, &g_amb);
         let mut modes: [Option<Rc<Modes>>; 4] = Default::default();
         for (key, slot) in modes.iter_mut().enumerate() {
@@ -335,7 +331,16 @@ impl<'a> Network<'a> {
                 k[(i, i)] +=
                     (if jacket { g_jacket[i] } else { 0.0 }) + if cool { g_cool[i] } else { 0.0 };
             }
-            *slot = Some(modal::cached(&k, &m.c, dt, &per, &read, &m.dir_terms)?);
+            *slot = Some(modal::cached(&modal::Spec {
+                k: &k,
+                c: &m.c,
+                dt,
+                g_amb: &g_amb,
+                g_jacket: &g_jacket,
+                g_cool: &g_cool,
+                read: &read,
+                dirs: &m.dir_terms,
+            })?);
         }
         Ok(Network {
             m,
@@ -411,7 +416,7 @@ impl<'a> Network<'a> {
         let (flowing, cool_on, tc) = self.coolant_state(inp, k, tm, ta);
         let key = usize::from(flowing) | (usize::from(cool_on) << 1);
         // a state the network was not built for cannot occur (`coolant_state`
-        // turns each flow on only where its matrices exist): keep the base
+        // turns each flow on only where its modes exist): keep the base
         let key = if self.modes[key].is_some() { key } else { 0 };
         let Some(modes) = self.modes[key].as_deref() else {
             return;

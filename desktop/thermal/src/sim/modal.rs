@@ -42,26 +42,39 @@ pub(super) struct Modes {
 /// Rows summed together in registers when the outputs are read.
 const BLOCK: usize = 8;
 
-/// The per-step heat vectors [W/K] a state scales by a temperature.
-pub(super) struct PerStep<'a> {
+/// What one coolant state's modes are made of.
+pub(super) struct Spec<'a> {
+    /// K: the symmetric conductance matrix [W/K] (links, losses to ambient
+    /// and coolant in this state).
+    pub k: &'a DMatrix<f64>,
+    /// C: the capacities [J/K].
+    pub c: &'a [f64],
+    /// The step [s].
+    pub dt: f64,
+    /// The per-step heat vectors [W/K] scaled by a temperature every step:
+    /// ambient, coolant through the jackets, the `coolant` effect's supply.
     pub g_amb: &'a [f64],
     pub g_jacket: &'a [f64],
     pub g_cool: &'a [f64],
+    /// The outputs: the nodes whose temperatures are read, and each
+    /// direction's (node, lever) terms.
+    pub read: &'a [usize],
+    pub dirs: &'a [Vec<(usize, f64)>],
 }
 
 impl Modes {
     /// The modes of `C dx/dt = −K x + F` for a step of `dt`, with the
     /// outputs: the `read` nodes' temperatures and each direction's lever
-    /// sum (`dirs`: node, lever). `k` must be symmetric (a conductance
-    /// matrix).
-    pub(super) fn new(
-        k: &DMatrix<f64>,
-        c: &[f64],
-        dt: f64,
-        per: &PerStep,
-        read: &[usize],
-        dirs: &[Vec<(usize, f64)>],
-    ) -> Result<Modes> {
+    /// sum.
+    pub(super) fn new(spec: &Spec) -> Result<Modes> {
+        let Spec {
+            k,
+            c,
+            dt,
+            read,
+            dirs,
+            ..
+        } = *spec;
         let n = c.len();
         if n == 0 {
             // the machine file's checks refuse it already
@@ -110,9 +123,9 @@ impl Modes {
             }
         }
         Ok(Modes {
-            per_ambient: map(per.g_amb),
-            per_jacket: map(per.g_jacket),
-            per_cool: map(per.g_cool),
+            per_ambient: map(spec.g_amb),
+            per_jacket: map(spec.g_jacket),
+            per_cool: map(spec.g_cool),
             u,
             decay,
             gain,
@@ -172,14 +185,15 @@ impl Modes {
 /// times with other heat inputs (heat effects, heat-gain calibration), and
 /// the eigen-decomposition is most of a coarse simulation's cost. Same
 /// result, bit for bit.
-pub(super) fn cached(
-    k: &DMatrix<f64>,
-    c: &[f64],
-    dt: f64,
-    per: &PerStep,
-    read: &[usize],
-    dirs: &[Vec<(usize, f64)>],
-) -> Result<Rc<Modes>> {
+pub(super) fn cached(spec: &Spec) -> Result<Rc<Modes>> {
+    let Spec {
+        k,
+        c,
+        dt,
+        read,
+        dirs,
+        ..
+    } = *spec;
     type Entry = (Vec<u64>, Rc<Modes>);
     thread_local! {
         static CACHE: std::cell::RefCell<std::collections::VecDeque<Entry>> =
@@ -192,9 +206,9 @@ pub(super) fn cached(
     key.extend(
         k.iter()
             .chain(c)
-            .chain(per.g_amb)
-            .chain(per.g_jacket)
-            .chain(per.g_cool)
+            .chain(spec.g_amb)
+            .chain(spec.g_jacket)
+            .chain(spec.g_cool)
             .map(|v| v.to_bits()),
     );
     key.extend(read.iter().map(|&i| i as u64));
@@ -211,7 +225,7 @@ pub(super) fn cached(
     }) {
         return Ok(hit);
     }
-    let modes = Rc::new(Modes::new(k, c, dt, per, read, dirs)?);
+    let modes = Rc::new(Modes::new(spec)?);
     CACHE.with(|cache| {
         let mut cache = cache.borrow_mut();
         if cache.len() >= KEEP {
@@ -257,11 +271,6 @@ mod tests {
                 }
                 k
             };
-            let per = PerStep {
-                g_amb: &g_amb,
-                g_jacket: &g_jacket,
-                g_cool: &g_cool,
-            };
             let read: Vec<usize> = (0..n).collect();
             // one direction over every other node, levers 0.5 and 2
             let dirs = vec![(0..n)
@@ -270,8 +279,18 @@ mod tests {
                 .collect::<Vec<_>>()];
             let dt = 10.0;
             let (k0, k1) = (k_of(&vec![0.0; n]), k_of(&g_jacket));
-            let m0 = Modes::new(&k0, &c, dt, &per, &read, &dirs).unwrap();
-            let m1 = Modes::new(&k1, &c, dt, &per, &read, &dirs).unwrap();
+            let spec = |k| Spec {
+                k,
+                c: &c,
+                dt,
+                g_amb: &g_amb,
+                g_jacket: &g_jacket,
+                g_cool: &g_cool,
+                read: &read,
+                dirs: &dirs,
+            };
+            let m0 = Modes::new(&spec(&k0)).unwrap();
+            let m1 = Modes::new(&spec(&k1)).unwrap();
             let a_of = |k: &DMatrix<f64>| DMatrix::from_fn(n, n, |i, j| -k[(i, j)] / c[i]);
             let d0 = discretize(&a_of(&k0), dt).unwrap();
             let d1 = discretize(&a_of(&k1), dt).unwrap();
