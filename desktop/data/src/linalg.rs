@@ -33,6 +33,39 @@ pub fn dot<T: Copy + Into<f64>>(a: &[T], b: &[f64]) -> f64 {
     (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
+/// `dot(a, b)` for K vectors b at once, each the same sum as `dot`'s,
+/// term for term: the K sums interleave (one dot waits on its own
+/// additions), and `a` is read once for all of them.
+pub fn dot_many<T: Copy + Into<f64>, const K: usize>(a: &[T], bs: [&[f64]; K]) -> [f64; K] {
+    let n = bs.iter().map(|b| b.len()).fold(a.len(), usize::min);
+    let full = n / 4 * 4;
+    let mut s = [[0.0f64; 4]; K];
+    for i in (0..full).step_by(4) {
+        let x: [f64; 4] = [
+            a[i].into(),
+            a[i + 1].into(),
+            a[i + 2].into(),
+            a[i + 3].into(),
+        ];
+        for (sk, b) in s.iter_mut().zip(&bs) {
+            let y = &b[i..i + 4];
+            for k in 0..4 {
+                sk[k] += x[k] * y[k];
+            }
+        }
+    }
+    let mut out = [0.0; K];
+    for ((o, sk), b) in out.iter_mut().zip(&s).zip(&bs) {
+        let tail: f64 = a[full..n]
+            .iter()
+            .zip(&b[full..n])
+            .map(|(&x, y)| x.into() * y)
+            .sum();
+        *o = (sk[0] + sk[1]) + (sk[2] + sk[3]) + tail;
+    }
+    out
+}
+
 /// `min |X w − y|² + ridge·|w|²` for the rows of `X`; with `intercept` a
 /// leading column of ones is added (never penalised). Returns `[c0, c1..]`
 /// with an intercept, `[c1..]` without.
@@ -242,6 +275,31 @@ pub fn ridge(x: &DMatrix<f64>, y: &DVector<f64>, lambda: f64) -> Option<DVector<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dot_many_gives_each_dot_bit_for_bit() {
+        // lengths around the four-term blocks; awkward magnitudes
+        for n in [0, 1, 3, 4, 5, 8, 13, 101] {
+            let a: Vec<f32> = (0..n)
+                .map(|i| ((i * 37 % 11) as f32 - 5.3) * 1.7e-3)
+                .collect();
+            let b: Vec<Vec<f64>> = (0..3)
+                .map(|k| {
+                    (0..n)
+                        .map(|i| ((i * 13 + k * 7) % 17) as f64 * 0.1 - 0.83 + 1e9 * (i % 2) as f64)
+                        .collect()
+                })
+                .collect();
+            let many = dot_many(&a, [&b[0][..], &b[1][..], &b[2][..]]);
+            for k in 0..3 {
+                assert_eq!(
+                    many[k].to_bits(),
+                    dot(&a, &b[k]).to_bits(),
+                    "n {n}, vector {k}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn a_ridge_factor_reused_gives_what_a_fresh_fit_gives_bit_for_bit() {

@@ -88,6 +88,11 @@ pub trait Projection: Sync {
     fn fit_sse(&self, _res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
         None
     }
+    /// `fit_sse` of several residual sets at once (a projection that reads
+    /// a large matrix per set can read it once for all).
+    fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
+        sets.iter().map(|r| self.fit_sse(r)).collect()
+    }
 }
 
 /// Simulates the prepared runs with a set of effects.
@@ -147,27 +152,19 @@ impl<'a> Evaluator<'a> {
     /// fit rows' SSE directly: the fits' objective, evaluated ≈ 1000 times
     /// per diagnosis.
     pub fn j_fit(&self, effects: &[Effect]) -> Result<f64> {
-        let mut raw = self.raw_residuals(effects)?;
-        let Some(f) = self.freedom else {
-            return Ok(self.stats_of(&raw).j_fit());
-        };
-        match f.fit_sse(&raw) {
-            Some(sse) => {
-                let mut st = self.stats_of(&raw);
-                for (c, s) in st.ch.iter_mut().zip(sse) {
-                    c.sse_fit = s;
-                }
-                Ok(st.j_fit())
-            }
-            None => {
-                f.project(&mut raw);
-                Ok(self.stats_of(&raw).j_fit())
-            }
-        }
+        let raw = self.raw_residuals(effects)?;
+        Ok(j_fit_of_raws(self.runs, self.freedom, vec![Some(raw)])[0])
+    }
+
+    /// `j_fit` of several sets of effects (∞ where one cannot be
+    /// simulated): a grid's trials share the freedom's pass.
+    pub fn j_fit_many(&self, sets: &[Vec<Effect>]) -> Vec<f64> {
+        let raws = sets.iter().map(|e| self.raw_residuals(e).ok()).collect();
+        j_fit_of_raws(self.runs, self.freedom, raws)
     }
 
     /// Residuals before the calibration's freedom.
-    fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
+    pub(crate) fn raw_residuals(&self, effects: &[Effect]) -> Result<Vec<Vec<Vec<f64>>>> {
         let mut all = Vec::with_capacity(self.runs.len());
         for p in self.runs {
             // an effect located in one run (a sensor step) acts there only
@@ -200,42 +197,94 @@ impl<'a> Evaluator<'a> {
     }
 
     pub fn stats_of(&self, res: &[Vec<Vec<f64>>]) -> Stats {
-        let mut ch = Vec::new();
-        for (ri, (p, rr)) in self.runs.iter().zip(res).enumerate() {
-            for (ci, (c, r)) in p.channels.iter().zip(rr).enumerate() {
-                let mut s = ChStats {
-                    run: ri,
-                    ch: ci,
-                    is_disp: matches!(c.kind, Kind::Disp(_)),
-                    s: c.s,
-                    sse_fit: 0.0,
-                    n_fit: 0,
-                    sse_held: 0.0,
-                    n_held: 0,
-                    peak_held: 0.0,
-                };
-                for (k, v) in r.iter().enumerate() {
-                    if !v.is_finite() {
-                        continue;
-                    }
-                    if p.is_fit(k) {
-                        s.sse_fit += v * v;
-                        s.n_fit += 1;
-                    } else {
-                        s.sse_held += v * v;
-                        s.n_held += 1;
-                        s.peak_held = s.peak_held.max(v.abs());
-                    }
-                }
-                ch.push(s);
-            }
-        }
-        Stats { ch }
+        stats_of(self.runs, res)
     }
 
     pub fn stats(&self, effects: &[Effect]) -> Result<Stats> {
         Ok(self.stats_of(&self.residuals(effects)?))
     }
+}
+
+/// Per-channel sums of residuals of `runs` on the fit and held-out rows.
+pub(crate) fn stats_of(runs: &[Prepared], res: &[Vec<Vec<f64>>]) -> Stats {
+    let mut ch = Vec::new();
+    for (ri, (p, rr)) in runs.iter().zip(res).enumerate() {
+        for (ci, (c, r)) in p.channels.iter().zip(rr).enumerate() {
+            let mut s = ChStats {
+                run: ri,
+                ch: ci,
+                is_disp: matches!(c.kind, Kind::Disp(_)),
+                s: c.s,
+                sse_fit: 0.0,
+                n_fit: 0,
+                sse_held: 0.0,
+                n_held: 0,
+                peak_held: 0.0,
+            };
+            for (k, v) in r.iter().enumerate() {
+                if !v.is_finite() {
+                    continue;
+                }
+                if p.is_fit(k) {
+                    s.sse_fit += v * v;
+                    s.n_fit += 1;
+                } else {
+                    s.sse_held += v * v;
+                    s.n_held += 1;
+                    s.peak_held = s.peak_held.max(v.abs());
+                }
+            }
+            ch.push(s);
+        }
+    }
+    Stats { ch }
+}
+
+/// The fit criterion of residual sets of `runs` before the freedom `f`
+/// (another machine's residuals too, as a release's line search has
+/// them; ∞ for a set that could not be simulated); the freedom's pass
+/// over B̃ shared by all of them.
+pub(crate) fn j_fit_of_raws(
+    runs: &[Prepared],
+    f: Option<&dyn Projection>,
+    raws: Vec<Option<Residuals>>,
+) -> Vec<f64> {
+    let simulated: Vec<bool> = raws.iter().map(Option::is_some).collect();
+    let mut raws: Vec<Residuals> = raws.into_iter().flatten().collect();
+    let js: Vec<f64> = match f {
+        None => raws.iter().map(|r| stats_of(runs, r).j_fit()).collect(),
+        Some(f) => {
+            let refs: Vec<&[Vec<Vec<f64>>]> = raws.iter().map(|r| r.as_slice()).collect();
+            let sses = f.fit_sse_many(&refs);
+            raws.iter_mut()
+                .zip(sses)
+                .map(|(raw, sse)| match sse {
+                    Some(sse) => {
+                        let mut st = stats_of(runs, raw);
+                        for (c, s) in st.ch.iter_mut().zip(sse) {
+                            c.sse_fit = s;
+                        }
+                        st.j_fit()
+                    }
+                    None => {
+                        f.project(raw);
+                        stats_of(runs, raw).j_fit()
+                    }
+                })
+                .collect()
+        }
+    };
+    let mut js = js.into_iter();
+    simulated
+        .into_iter()
+        .map(|s| {
+            if s {
+                js.next().unwrap_or(f64::INFINITY)
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect()
 }
 
 /// One fitted parameter: physical bounds, log or linear mapping from u ∈ [0, 1].
@@ -390,7 +439,9 @@ pub fn effects_of(cands: &[Cand], u: &[f64]) -> Vec<Effect> {
 }
 
 /// Bounded Nelder–Mead on [0,1]^d (points clamped). Returns (best u, value, evals).
-pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
+/// `f` evaluates several points at once (the start's simplex and a
+/// shrink's points share the freedom's pass).
+pub fn nelder_mead<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     f: &mut F,
     x0: &[f64],
     step: f64,
@@ -408,14 +459,8 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
         };
         pts.push(x);
     }
-    let mut evals = 0;
-    let mut vals: Vec<f64> = pts
-        .iter()
-        .map(|x| {
-            evals += 1;
-            f(x)
-        })
-        .collect();
+    let mut evals = pts.len();
+    let mut vals: Vec<f64> = f(&pts);
     while evals < max_evals {
         let mut idx: Vec<usize> = (0..=d).collect();
         idx.sort_by(|&a, &b| vals[a].total_cmp(&vals[b]));
@@ -441,11 +486,11 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
             x
         };
         let xr = along(-1.0);
-        let fr = f(&xr);
+        let fr = f(std::slice::from_ref(&xr))[0];
         evals += 1;
         if fr < vals[0] {
             let xe = along(-2.0);
-            let fe = f(&xe);
+            let fe = f(std::slice::from_ref(&xe))[0];
             evals += 1;
             if fe < fr {
                 pts[d] = xe;
@@ -460,11 +505,11 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
         } else {
             let (xc, fc) = if fr < vals[d] {
                 let x = along(-0.5);
-                let v = f(&x);
+                let v = f(std::slice::from_ref(&x))[0];
                 (x, v)
             } else {
                 let x = along(0.5);
-                let v = f(&x);
+                let v = f(std::slice::from_ref(&x))[0];
                 (x, v)
             };
             evals += 1;
@@ -476,9 +521,10 @@ pub fn nelder_mead<F: FnMut(&[f64]) -> f64>(
                     for j in 0..d {
                         pts[i][j] = pts[0][j] + 0.5 * (pts[i][j] - pts[0][j]);
                     }
-                    vals[i] = f(&pts[i]);
-                    evals += 1;
                 }
+                let shrunk = f(&pts[1..]);
+                vals[1..].copy_from_slice(&shrunk);
+                evals += d;
             }
         }
     }
@@ -508,10 +554,7 @@ pub fn fit_cands(
     budget: usize,
 ) -> FitResult {
     let d: usize = cands.iter().map(|c| params_of(c.kind).len()).sum();
-    let mut obj = |u: &[f64]| -> f64 {
-        let eff = effects_of(cands, u);
-        ev.j_fit(&eff).unwrap_or(f64::INFINITY)
-    };
+    let mut obj = |us: &[Vec<f64>]| -> Vec<f64> { j_fit_at(ev, cands, us) };
     let mut evals = 0;
     let init = (cands.len() == 1 && cands[0].init.len() == d).then(|| {
         params_of(cands[0].kind)
@@ -528,24 +571,9 @@ pub fn fit_cands(
                 2 => 4,
                 _ => 3,
             };
-            let mut best = (vec![0.5; d], f64::INFINITY);
-            let total = g.pow(d as u32);
-            for idx in 0..total {
-                let mut r = idx;
-                let u: Vec<f64> = (0..d)
-                    .map(|_| {
-                        let i = r % g;
-                        r /= g;
-                        (i as f64 + 0.5) / g as f64
-                    })
-                    .collect();
-                let v = obj(&u);
-                evals += 1;
-                if v < best.1 {
-                    best = (u, v);
-                }
-            }
-            best.0
+            let (u, n) = best_on_grid(ev, cands, &[], d, g);
+            evals += n;
+            u
         }
     };
     let (u, j, e) = nelder_mead(&mut obj, &x0, 0.5 / (d as f64 + 1.0).max(2.0), budget);
@@ -560,6 +588,52 @@ pub fn fit_cands(
     }
 }
 
+/// Trials evaluated together: their residual sets (≈ 0.5 MB each) are
+/// held at once, and the freedom reads B̃ once for all of them.
+const BATCH: usize = 9;
+
+/// The fit criterion of `cands` at each of `us` (∞ where one cannot be
+/// simulated), in batches sharing the freedom's pass.
+fn j_fit_at(ev: &Evaluator, cands: &[Cand], us: &[Vec<f64>]) -> Vec<f64> {
+    us.chunks(BATCH)
+        .flat_map(|chunk| {
+            let sets: Vec<Vec<Effect>> = chunk.iter().map(|u| effects_of(cands, u)).collect();
+            ev.j_fit_many(&sets)
+        })
+        .collect()
+}
+
+/// The best point of a g^d grid of cell centres over the last d
+/// parameters of `cands` (the first ones fixed at `fixed`): the point
+/// (last d only) and the evaluations spent. The first of equal values wins.
+fn best_on_grid(
+    ev: &Evaluator,
+    cands: &[Cand],
+    fixed: &[f64],
+    d: usize,
+    g: usize,
+) -> (Vec<f64>, usize) {
+    let pts: Vec<Vec<f64>> = (0..g.pow(d as u32))
+        .map(|idx| {
+            let mut r = idx;
+            let ua = (0..d).map(|_| {
+                let i = r % g;
+                r /= g;
+                (i as f64 + 0.5) / g as f64
+            });
+            fixed.iter().copied().chain(ua).collect()
+        })
+        .collect();
+    let vals = j_fit_at(ev, cands, &pts);
+    let mut best = (vec![0.5; d], f64::INFINITY);
+    for (u, v) in pts.iter().zip(vals) {
+        if v < best.1 {
+            best = (u[fixed.len()..].to_vec(), v);
+        }
+    }
+    (best.0, pts.len())
+}
+
 /// Add one candidate to an already fitted set: a coarse grid over the new
 /// parameters with the base fixed, then a joint Nelder–Mead polish.
 pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) -> FitResult {
@@ -571,25 +645,8 @@ pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) ->
         2 => 3,
         _ => 2,
     };
-    let mut evals = 0;
-    let mut best = (vec![0.5; d], f64::INFINITY);
-    for idx in 0..g.pow(d as u32) {
-        let mut r = idx;
-        let ua: Vec<f64> = (0..d)
-            .map(|_| {
-                let i = r % g;
-                r /= g;
-                (i as f64 + 0.5) / g as f64
-            })
-            .collect();
-        let u: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
-        let v = ev.j_fit(&effects_of(&cands, &u)).unwrap_or(f64::INFINITY);
-        evals += 1;
-        if v < best.1 {
-            best = (ua, v);
-        }
-    }
-    let start: Vec<f64> = base.u.iter().chain(&best.0).copied().collect();
+    let (ua, evals) = best_on_grid(ev, &cands, &base.u, d, g);
+    let start: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
     let mut r = fit_cands(ev, &cands, Some(start), budget);
     r.evals += evals;
     r

@@ -47,7 +47,7 @@ use super::effect_fit::{par_map, Evaluator, FitResult, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
 use knots::Knots;
-use tcomp_data::linalg::dot;
+use tcomp_data::linalg::{dot, dot_many};
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
@@ -101,6 +101,46 @@ pub struct Freedom {
     calls: AtomicU64,
     sweeps: AtomicU64,
     ns: AtomicU64,
+}
+
+/// `dot(a, z)` for every z, four (or two) at a time through `dot_many`.
+fn dots(a: &[f32], zs: &[&[f64]]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(zs.len());
+    let mut rest = zs;
+    while !rest.is_empty() {
+        match rest {
+            [z0, z1, z2, z3, ..] => {
+                out.extend(dot_many(a, [*z0, *z1, *z2, *z3]));
+                rest = &rest[4..];
+            }
+            [z0, z1, ..] => {
+                out.extend(dot_many(a, [*z0, *z1]));
+                rest = &rest[2..];
+            }
+            [z0, ..] => {
+                out.push(dot(a, z0));
+                rest = &rest[1..];
+            }
+            [] => {}
+        }
+    }
+    out
+}
+
+/// Per channel B̃ᵀr, and Σ r² per channel (None: a row missing that the
+/// calibrated nominal had).
+type Products = (Vec<DVector<f64>>, Option<Vec<f64>>);
+
+/// One residual set against the calibrated nominal's (`Freedom::diff_of`).
+struct Diff {
+    /// Hᵀ(r − r₀) at the knots (one more: a knot row's next one).
+    z: Vec<f64>,
+    /// Σ r² per channel over the finite fit rows.
+    rr: Vec<f64>,
+    /// No row missing that the nominal had.
+    consistent: bool,
+    /// Per channel: the knots z touches, [first, end).
+    touched: Vec<(usize, usize)>,
 }
 
 /// ∂(simulated channel)/∂θ of one knob: run → channel → row.
@@ -420,7 +460,71 @@ impl Freedom {
     /// over the finite ones; None where r is non-finite on a row the
     /// calibrated nominal had (B̃ᵀB̃ counts that row). B̃ᵀr is the
     /// nominal's plus B̃ᵀ(r − r₀) over the knots where r differs from it.
-    fn fit_products(&self, res: &[Vec<Vec<f64>>]) -> (Vec<DVector<f64>>, Option<Vec<f64>>) {
+    fn fit_products(&self, res: &[Vec<Vec<f64>>]) -> Products {
+        let mut out = self.fit_products_many(&[res]);
+        out.pop().unwrap_or_else(|| (self.base_h.clone(), None))
+    }
+
+    /// `fit_products` of several residual sets with one pass over B̃:
+    /// the pass is bound by reading B̃ (≈ 4 M values, not in cache), so
+    /// each column's knots are read once for every set while they are in
+    /// L1. Each set's sums are the single pass's, term for term.
+    fn fit_products_many(
+        &self,
+        sets: &[&[Vec<Vec<f64>>]],
+    ) -> Vec<Products> {
+        let diffs: Vec<Diff> = sets.iter().map(|r| self.diff_of(r)).collect();
+        let mut hs: Vec<Vec<DVector<f64>>> = vec![self.base_h.clone(); diffs.len()];
+        let (mut read, mut all) = (0u64, 0u64);
+        let nkn = self.knots.n_knots;
+        for (ci, c) in self.chans.iter().enumerate() {
+            for &(a, b) in &c.fit_spans {
+                all += (b - a) as u64 * diffs.len() as u64;
+                // per set: the span's knots it changed
+                let cut: Vec<(usize, usize)> = diffs
+                    .iter()
+                    .map(|d| {
+                        let (t0, t1) = d.touched[ci];
+                        (a.max(t0), b.min(t1))
+                    })
+                    .collect();
+                // the sets that read the same knots (usually all: a
+                // simulated effect changes every row) share each dot's pass
+                let mut groups: Vec<((usize, usize), Vec<usize>)> = Vec::new();
+                for (i, &r) in cut.iter().enumerate() {
+                    if r.0 >= r.1 {
+                        continue;
+                    }
+                    match groups.iter_mut().find(|g| g.0 == r) {
+                        Some(g) => g.1.push(i),
+                        None => groups.push((r, vec![i])),
+                    }
+                }
+                for (o, col) in self.knots_b.chunks_exact(nkn).enumerate() {
+                    for &((a, b), ref idx) in &groups {
+                        let zs: Vec<&[f64]> = idx.iter().map(|&i| &diffs[i].z[a..b]).collect();
+                        for (&i, v) in idx.iter().zip(dots(&col[a..b], &zs)) {
+                            hs[i][ci][o] += v;
+                        }
+                    }
+                }
+                read += cut
+                    .iter()
+                    .map(|&(a, b)| b.saturating_sub(a) as u64)
+                    .sum::<u64>();
+            }
+        }
+        self.knots_read.fetch_add(read, Relaxed);
+        self.knots_all.fetch_add(all, Relaxed);
+        hs.into_iter()
+            .zip(diffs)
+            .map(|(h, d)| (h, d.consistent.then_some(d.rr)))
+            .collect()
+    }
+
+    /// The row pass of `fit_products`: Hᵀ(r − r₀), Σ r² and the knots
+    /// touched per channel.
+    fn diff_of(&self, res: &[Vec<Vec<f64>>]) -> Diff {
         let fin = |v: f64| if v.is_finite() { v } else { 0.0 };
         let mut consistent = true;
         // z = Hᵀ(r − r₀) over the fit rows (one more knot: a knot row's next one)
@@ -450,31 +554,12 @@ impl Freedom {
                 row += 1;
             }
         }
-        let (mut read, mut all) = (0u64, 0u64);
-        let h = self
-            .chans
-            .iter()
-            .zip(&self.base_h)
-            .zip(&touched)
-            .map(|((c, h0), &(t0, t1))| {
-                let mut hc = h0.clone();
-                for &(a, b) in &c.fit_spans {
-                    all += (b - a) as u64;
-                    let (a, b) = (a.max(t0), b.min(t1));
-                    if a < b {
-                        read += (b - a) as u64;
-                        let nkn = self.knots.n_knots;
-                        for (o, col) in hc.iter_mut().zip(self.knots_b.chunks_exact(nkn)) {
-                            *o += dot(&col[a..b], &z[a..b]);
-                        }
-                    }
-                }
-                hc
-            })
-            .collect();
-        self.knots_read.fetch_add(read, Relaxed);
-        self.knots_all.fetch_add(all, Relaxed);
-        (h, consistent.then_some(rr))
+        Diff {
+            z,
+            rr,
+            consistent,
+            touched,
+        }
     }
 
     /// Sᵀ W r − prior from the channels' B̃ᵀr.
@@ -499,23 +584,37 @@ impl Freedom {
     /// |r − B̃c|² = |r|² − 2 cᵀB̃ᵀr + cᵀ(B̃ᵀB̃)c (c = Vᵀδ), without
     /// forming the corrected residuals.
     pub fn fit_sse_of(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
+        self.fit_sse_many(&[res]).pop().flatten()
+    }
+
+    /// `fit_sse_of` of several residual sets, sharing the pass over B̃
+    /// (`fit_products_many`): a grid's or a line search's trials.
+    pub fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
         if self.is_empty() {
-            return None;
+            return vec![None; sets.len()];
         }
         let t0 = std::time::Instant::now();
-        let (h, rr) = self.fit_products(res);
-        let rr = rr?;
-        let d = self.solve(&self.pull_from(&h));
-        let c = self.v.tr_mul(&DVector::from_column_slice(&d));
         let out = self
-            .chans
-            .iter()
-            .zip(&h)
-            .zip(rr)
-            .map(|((ch, hc), r2)| (r2 - 2.0 * c.dot(hc) + (&ch.m * &c).dot(&c)).max(0.0))
+            .fit_products_many(sets)
+            .into_iter()
+            .map(|(h, rr)| {
+                let rr = rr?;
+                let d = self.solve(&self.pull_from(&h));
+                let c = self.v.tr_mul(&DVector::from_column_slice(&d));
+                Some(
+                    self.chans
+                        .iter()
+                        .zip(&h)
+                        .zip(rr)
+                        .map(|((ch, hc), r2)| {
+                            (r2 - 2.0 * c.dot(hc) + (&ch.m * &c).dot(&c)).max(0.0)
+                        })
+                        .collect(),
+                )
+            })
             .collect();
         self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
-        Some(out)
+        out
     }
 
     pub fn theta(&self) -> &[f64] {
@@ -610,6 +709,9 @@ impl Projection for Freedom {
     }
     fn fit_sse(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
         self.fit_sse_of(res)
+    }
+    fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
+        Freedom::fit_sse_many(self, sets)
     }
 }
 

@@ -164,6 +164,13 @@ fn prepared_resid(e: &[f64], b: &RunBasis) -> Vec<f64> {
 
 /// Explained sum of squares of sin/cos at f, 2f, … per channel (summed
 /// over runs) and its degrees of freedom.
+///
+/// Speed (≈ 3,000 calls of ≈ 6 k rows per diagnosis): the q ≤ 6 columns
+/// are kept interleaved by row, and the sums that read them (the
+/// nuisance's coefficients, the Gram matrix, each channel's projections)
+/// run side by side in one pass, each still one running sum over the rows
+/// in order — the same sums as one dot at a time, not waiting on each
+/// other's additions.
 fn explained(bases: &[RunBasis], diffs: &[Vec<Vec<f64>>], f: f64) -> (Vec<f64>, usize) {
     let nc = diffs.len();
     let mut out = vec![0.0; nc];
@@ -178,37 +185,59 @@ fn explained(bases: &[RunBasis], diffs: &[Vec<Vec<f64>>], f: f64) -> (Vec<f64>, 
             continue;
         }
         let w = std::f64::consts::TAU * f;
-        let mut cols: Vec<Vec<f64>> = Vec::with_capacity(2 * h_max);
-        for h in 1..=h_max {
-            let (s, c): (Vec<f64>, Vec<f64>) =
-                b.tm.iter().map(|t| (h as f64 * w * t).sin_cos()).unzip();
-            cols.push(s);
-            cols.push(c);
+        let q = 2 * h_max;
+        // row t: sin, cos of f, then of 2f, …
+        let mut m = vec![0.0; n * q];
+        for (row, t) in m.chunks_exact_mut(q).zip(&b.tm) {
+            for h in 1..=h_max {
+                let (s, c) = (h as f64 * w * t).sin_cos();
+                row[2 * h - 2] = s;
+                row[2 * h - 1] = c;
+            }
         }
-        for c in cols.iter_mut() {
-            project_out(c, b);
+        for u in &b.nuis {
+            let c = row_sums(&m, q, u);
+            for (row, &uv) in m.chunks_exact_mut(q).zip(u) {
+                for (x, ci) in row.iter_mut().zip(&c) {
+                    *x -= ci * uv;
+                }
+            }
         }
-        let q = cols.len();
-        let g = DMatrix::from_fn(q, q, |i, j| {
-            cols[i]
-                .iter()
-                .zip(&cols[j])
-                .map(|(x, y)| x * y)
-                .sum::<f64>()
-        });
+        let mut g = DMatrix::zeros(q, q);
+        for i in 0..q {
+            let mut acc = [0.0f64; 2 * HARMONICS];
+            for row in m.chunks_exact(q) {
+                for j in i..q {
+                    acc[j] += row[i] * row[j];
+                }
+            }
+            for j in i..q {
+                g[(i, j)] = acc[j];
+                g[(j, i)] = acc[j];
+            }
+        }
         let Some(ch) = g.cholesky() else {
             continue;
         };
         for (c, d) in diffs.iter().enumerate() {
-            let dv = &d[r];
-            let bv = nalgebra::DVector::from_fn(q, |i, _| {
-                cols[i].iter().zip(dv).map(|(x, y)| x * y).sum::<f64>()
-            });
+            let bv = nalgebra::DVector::from_column_slice(&row_sums(&m, q, &d[r]));
             out[c] += bv.dot(&ch.solve(&bv));
         }
         dof += q;
     }
     (out, dof)
+}
+
+/// Σ_t m[t][i]·v[t] for every column i of the row-interleaved `m` (q
+/// columns), each one running sum over t in order.
+fn row_sums(m: &[f64], q: usize, v: &[f64]) -> Vec<f64> {
+    let mut acc = [0.0f64; 2 * HARMONICS];
+    for (row, &x) in m.chunks_exact(q).zip(v) {
+        for (a, y) in acc.iter_mut().zip(row) {
+            *a += y * x;
+        }
+    }
+    acc[..q].to_vec()
 }
 
 /// ln P(χ²_dof > x) for even `dof` (closed form: a Poisson sum).
@@ -511,7 +540,9 @@ pub fn waveform(
             .collect();
         let p = 4 + 2 * HARMONICS;
         let coef = if rows.len() > 2 * p {
-            let x = DMatrix::from_fn(rows.len(), p, |i, j| row(rows[i])[j]);
+            // each row's terms once (not once per column)
+            let xr: Vec<Vec<f64>> = rows.iter().map(|&k| row(k)).collect();
+            let x = DMatrix::from_fn(rows.len(), p, |i, j| xr[i][j]);
             let y = nalgebra::DVector::from_fn(rows.len(), |i, _| e[rows[i]]);
             tcomp_data::linalg::ridge(&x, &y, 1e-9)
         } else {
@@ -570,6 +601,71 @@ mod tests {
                 noise: 1.0,
                 resid,
             }],
+        }
+    }
+
+    /// `explained` as written first: one column, one dot at a time.
+    fn explained_by_single_dots(
+        bases: &[RunBasis],
+        diffs: &[Vec<Vec<f64>>],
+        f: f64,
+    ) -> (Vec<f64>, usize) {
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (mut out, mut dof) = (vec![0.0; diffs.len()], 0);
+        for (r, b) in bases.iter().enumerate() {
+            let h_max = (1..=HARMONICS)
+                .filter(|&h| h as f64 * f * b.dt < 0.45)
+                .count();
+            if h_max == 0 || b.tm.len() < 4 * HARMONICS + 4 {
+                continue;
+            }
+            let w = std::f64::consts::TAU * f;
+            let mut cols = Vec::new();
+            for h in 1..=h_max {
+                let (s, c): (Vec<f64>, Vec<f64>) =
+                    b.tm.iter().map(|t| (h as f64 * w * t).sin_cos()).unzip();
+                cols.push(s);
+                cols.push(c);
+            }
+            cols.iter_mut().for_each(|c| project_out(c, b));
+            let q = cols.len();
+            let g = DMatrix::from_fn(q, q, |i, j| dot(&cols[i], &cols[j]));
+            let ch = g.cholesky().expect("independent columns");
+            for (c, d) in diffs.iter().enumerate() {
+                let bv = nalgebra::DVector::from_fn(q, |i, _| dot(&cols[i], &d[r]));
+                out[c] += bv.dot(&ch.solve(&bv));
+            }
+            dof += q;
+        }
+        (out, dof)
+    }
+
+    #[test]
+    fn the_side_by_side_sums_are_the_single_dots_bit_for_bit() {
+        // two runs of different lengths, three channels, a gap in one
+        let dt = 10.0;
+        let resid: Vec<Vec<f64>> = vec![noise(3, 700), noise(4, 513)];
+        let mut scan = scan_of(resid, dt);
+        for k in [5, 6, 7] {
+            scan.chans[0].resid[1][k] = f64::NAN;
+        }
+        for c in 1..3 {
+            let mut ch = scan.chans[0].clone();
+            ch.resid = vec![noise(10 + c as u64, 700), noise(20 + c as u64, 513)];
+            scan.chans.push(ch);
+        }
+        for diff in [true, false] {
+            let pr = prepare(&scan, diff);
+            // one to three harmonics under the rate's limit
+            for f in [1.0 / 4000.0, 1.0 / 700.0, 1.0 / 55.0, 1.0 / 31.0] {
+                let (a, qa) = explained(&pr.bases, &pr.diffs, f);
+                let (b, qb) = explained_by_single_dots(&pr.bases, &pr.diffs, f);
+                assert_eq!(qa, qb, "f {f}");
+                assert!(qa > 0);
+                for (x, y) in a.iter().zip(&b) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "f {f}, differenced {diff}");
+                }
+            }
         }
     }
 

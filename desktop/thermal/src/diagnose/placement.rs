@@ -131,34 +131,49 @@ fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
     if init.len() != 3 {
         return init;
     }
-    let j = |v: &[f64]| -> f64 {
-        let e = Effect::Chiller {
-            band_c: v[0],
-            power_w: v[1],
-            load_frac: v[2],
-        };
-        ev.j_fit(&[e]).unwrap_or(f64::INFINITY)
+    // the scans' trials in batches (they share the freedom's pass over B̃)
+    let j = |vs: &[[f64; 3]]| -> Vec<f64> {
+        let sets: Vec<Vec<Effect>> = vs
+            .iter()
+            .map(|v| {
+                vec![Effect::Chiller {
+                    band_c: v[0],
+                    power_w: v[1],
+                    load_frac: v[2],
+                }]
+            })
+            .collect();
+        sets.chunks(11).flat_map(|c| ev.j_fit_many(c)).collect()
     };
-    let mut best = (init.clone(), j(&init));
-    for i in 0..=40 {
-        // power × 0.8 … 1.25, log-spaced (≈ 1.1 % apart)
-        let scale = (0.8f64.ln() + (1.25f64 / 0.8).ln() * i as f64 / 40.0).exp();
-        let v = [init[0], init[1] * scale, init[2]];
-        let f = j(&v);
-        if f < best.1 {
-            best = (v.to_vec(), f);
+    let first = [init[0], init[1], init[2]];
+    let mut best = (first, j(&[first])[0]);
+    let keep_best = |best: &mut ([f64; 3], f64), vs: &[[f64; 3]]| {
+        for (v, f) in vs.iter().zip(j(vs)) {
+            if f < best.1 {
+                *best = (*v, f);
+            }
         }
-    }
-    let base = best.0.clone();
-    for i in 0..=10 {
-        let lf = (base[2] - 0.1 + 0.02 * i as f64).clamp(0.05, 0.95);
-        let v = [base[0], base[1], lf];
-        let f = j(&v);
-        if f < best.1 {
-            best = (v.to_vec(), f);
-        }
-    }
-    best.0
+    };
+    // power × 0.8 … 1.25, log-spaced (≈ 1.1 % apart)
+    let powers: Vec<[f64; 3]> = (0..=40)
+        .map(|i| {
+            let scale = (0.8f64.ln() + (1.25f64 / 0.8).ln() * i as f64 / 40.0).exp();
+            [init[0], init[1] * scale, init[2]]
+        })
+        .collect();
+    keep_best(&mut best, &powers);
+    let base = best.0;
+    let shares: Vec<[f64; 3]> = (0..=10)
+        .map(|i| {
+            [
+                base[0],
+                base[1],
+                (base[2] - 0.1 + 0.02 * i as f64).clamp(0.05, 0.95),
+            ]
+        })
+        .collect();
+    keep_best(&mut best, &shares);
+    best.0.to_vec()
 }
 
 /// Start values of a cycling chiller from the coolant sensor (a sensor on

@@ -12,7 +12,7 @@ use serde_json::json;
 
 use super::calibrate;
 use super::calibrate::{apply, design_value, Knob};
-use super::effect_fit::Evaluator;
+use super::effect_fit::{j_fit_of_raws, Evaluator, Projection};
 use super::freedom;
 use super::freedom::Freedom;
 use super::prep::Prepared;
@@ -109,16 +109,20 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
 /// Fit criterion, stats and residuals of one released machine.
 type Judged = (f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>);
 
-/// The fit criterion of a machine with the freedom: the release's line
+/// The fit criterion of machines with the freedom: the release's line
 /// search needs nothing else, and `Evaluator::j_fit` has it from the
-/// freedom's fit-row products without correcting every row.
-fn j_fit(m: &Machine, ps: &[Prepared], fr: &Freedom) -> f64 {
-    Evaluator::new(m, ps)
-        .and_then(|ev| {
-            ev.with_freedom(Some(fr as &dyn super::effect_fit::Projection))
-                .j_fit(&[])
+/// freedom's fit-row products without correcting every row; the machines
+/// of one step share the freedom's pass over B̃ (∞: not simulated).
+fn j_fit(ms: &[Machine], ps: &[Prepared], fr: &Freedom) -> Vec<f64> {
+    let raws = ms
+        .iter()
+        .map(|m| {
+            Evaluator::new(m, ps)
+                .and_then(|ev| ev.raw_residuals(&[]))
+                .ok()
         })
-        .unwrap_or(f64::INFINITY)
+        .collect();
+    j_fit_of_raws(ps, Some(fr as &dyn Projection), raws)
 }
 
 /// The nominal the released factor acts on, and what the judge needs.
@@ -176,11 +180,9 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
         let grid: Vec<f64> = (0..9)
             .map(|i| -RELEASE_LN + 2.0 * RELEASE_LN * i as f64 / 8.0)
             .collect();
-        let mut vals = Vec::new();
-        for &g in &grid {
-            vals.push(j_fit(&at(g), ps, n.freedom));
-            sims += 1;
-        }
+        let ms: Vec<Machine> = grid.iter().map(|&g| at(g)).collect();
+        let vals = j_fit(&ms, ps, n.freedom);
+        sims += grid.len();
         let bi = (0..grid.len())
             .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
             .unwrap_or(4);
@@ -189,8 +191,8 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
         let phi = 0.618_033_988_749_895;
         for _ in 0..8 {
             let (c, d) = (b - phi * (b - a), a + phi * (b - a));
-            let fc = j_fit(&at(c), ps, n.freedom);
-            let fd = j_fit(&at(d), ps, n.freedom);
+            let v = j_fit(&[at(c), at(d)], ps, n.freedom);
+            let (fc, fd) = (v[0], v[1]);
             sims += 2;
             if fc < fd {
                 b = d;
