@@ -469,10 +469,7 @@ impl Freedom {
     /// the pass is bound by reading B̃ (≈ 4 M values, not in cache), so
     /// each column's knots are read once for every set while they are in
     /// L1. Each set's sums are the single pass's, term for term.
-    fn fit_products_many(
-        &self,
-        sets: &[&[Vec<Vec<f64>>]],
-    ) -> Vec<Products> {
+    fn fit_products_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Products> {
         let diffs: Vec<Diff> = sets.iter().map(|r| self.diff_of(r)).collect();
         let mut hs: Vec<Vec<DVector<f64>>> = vec![self.base_h.clone(); diffs.len()];
         let (mut read, mut all) = (0u64, 0u64);
