@@ -736,3 +736,56 @@ pub(crate) fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync + Send>(
         _ => run(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Counts the points a batch-evaluating objective is asked for.
+    fn counted(
+        g: impl Fn(f64) -> f64,
+    ) -> (
+        impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+        std::rc::Rc<std::cell::Cell<usize>>,
+    ) {
+        let n = std::rc::Rc::new(std::cell::Cell::new(0));
+        let n2 = n.clone();
+        let f = move |us: &[Vec<f64>]| {
+            n2.set(n2.get() + us.len());
+            us.iter().map(|u| g(u[0])).collect()
+        };
+        (f, n)
+    }
+
+    #[test]
+    fn brent_finds_an_inner_minimum_in_fewer_trials_than_nelder_mead() {
+        // a smooth, asymmetric bottom at u = 0.3171
+        let g = |u: f64| (u - 0.3171).powi(2) * (1.0 + 3.0 * (u - 0.3171)) + 7.0;
+        let (mut f, n) = counted(g);
+        let (u, j, e) = brent_in_cell(&mut f, 0.3, 1.0 / 9.0, 100);
+        assert!((u[0] - 0.3171).abs() < 3.0 * BRENT_T, "{u:?}");
+        assert!((j - 7.0).abs() < 1e-6);
+        assert_eq!(e, n.get(), "every trial counted");
+        let (mut f, n_nm) = counted(g);
+        let (u_nm, _, _) = nelder_mead(&mut f, &[0.3], 0.25, 100);
+        assert!((u_nm[0] - 0.3171).abs() < 1e-3);
+        assert!(
+            n.get() < n_nm.get(),
+            "Brent {} trials, Nelder–Mead {}",
+            n.get(),
+            n_nm.get()
+        );
+    }
+
+    #[test]
+    fn brent_returns_the_bound_itself_when_the_minimum_is_on_it() {
+        for (c, edge) in [(0.5 / 9.0, 0.0), (8.5 / 9.0, 1.0)] {
+            // falls towards the edge all the way
+            let g = move |u: f64| (u - edge).abs() + 2.0;
+            let (mut f, _) = counted(g);
+            let (u, j, _) = brent_in_cell(&mut f, c, 1.0 / 9.0, 100);
+            assert_eq!(u[0], edge);
+            assert_eq!(j, 2.0);
+        }
+    }
+}
