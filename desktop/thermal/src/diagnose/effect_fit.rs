@@ -741,14 +741,11 @@ pub(crate) fn par_map<T: Sync, R: Send, F: Fn(&T) -> R + Sync + Send>(
 mod tests {
     use super::*;
 
+    type Count = std::rc::Rc<std::cell::Cell<usize>>;
+
     /// Counts the points a batch-evaluating objective is asked for.
-    fn counted(
-        g: impl Fn(f64) -> f64,
-    ) -> (
-        impl FnMut(&[Vec<f64>]) -> Vec<f64>,
-        std::rc::Rc<std::cell::Cell<usize>>,
-    ) {
-        let n = std::rc::Rc::new(std::cell::Cell::new(0));
+    fn counted(g: impl Fn(f64) -> f64) -> (impl FnMut(&[Vec<f64>]) -> Vec<f64>, Count) {
+        let n = Count::default();
         let n2 = n.clone();
         let f = move |us: &[Vec<f64>]| {
             n2.set(n2.get() + us.len());
