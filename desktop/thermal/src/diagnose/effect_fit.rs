@@ -542,10 +542,11 @@ const BRENT_T: f64 = 1e-4;
 /// The minimum of `f` over [c − w, c + w] ∩ [0, 1] by Brent's method
 /// (argmin's `BrentOpt`, to 3·`BRENT_T` in u), and the
 /// interval's end on [0, 1]'s edge when it is lower (an effect at its
-/// parameter's bound). Returns (u, value, evaluations).
+/// parameter's bound); the cell's centre `c` (its value known) when
+/// neither is lower, or Brent fails. Returns (u, value, evaluations).
 fn brent_in_cell<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     f: &mut F,
-    c: f64,
+    (c, jc): (f64, f64),
     w: f64,
     max_evals: usize,
 ) -> (Vec<f64>, f64, usize) {
@@ -574,7 +575,10 @@ fn brent_in_cell<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             let n = r.problem.problem.as_ref().map_or(0, |p| p.0.borrow().1);
             Some((u, j, n))
         });
-    let (mut u, mut j, mut n) = best.unwrap_or((c, f64::INFINITY, 0));
+    let (mut u, mut j, mut n) = best.unwrap_or((c, jc, 0));
+    if j.is_nan() || j > jc {
+        (u, j) = (c, jc);
+    }
     for edge in [0.0, 1.0] {
         if (edge == a || edge == b) && (u - edge).abs() < 3.0 * BRENT_T {
             let je = f(&[vec![edge]])[0];
@@ -624,13 +628,13 @@ pub fn fit_cands(
                 2 => 4,
                 _ => 3,
             };
-            let (u, n) = best_on_grid(ev, cands, &[], d, g);
+            let (u, ju, n) = best_on_grid(ev, cands, &[], d, g);
             evals += n;
             if d == 1 {
                 // one parameter: Brent's method in the grid's best cell
                 // and its neighbours (≈ 12 trials where Nelder–Mead
                 // takes ≈ 30)
-                let (u, j, e) = brent_in_cell(&mut obj, u[0], 1.0 / g as f64, budget);
+                let (u, j, e) = brent_in_cell(&mut obj, (u[0], ju), 1.0 / g as f64, budget);
                 return FitResult {
                     cands: cands.to_vec(),
                     effects: effects_of(cands, &u),
@@ -679,7 +683,7 @@ fn best_on_grid(
     fixed: &[f64],
     d: usize,
     g: usize,
-) -> (Vec<f64>, usize) {
+) -> (Vec<f64>, f64, usize) {
     let pts: Vec<Vec<f64>> = (0..g.pow(d as u32))
         .map(|idx| {
             let mut r = idx;
@@ -698,7 +702,7 @@ fn best_on_grid(
             best = (u[fixed.len()..].to_vec(), v);
         }
     }
-    (best.0, pts.len())
+    (best.0, best.1, pts.len())
 }
 
 /// Add one candidate to an already fitted set: a coarse grid over the new
@@ -712,7 +716,7 @@ pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) ->
         2 => 3,
         _ => 2,
     };
-    let (ua, evals) = best_on_grid(ev, &cands, &base.u, d, g);
+    let (ua, _, evals) = best_on_grid(ev, &cands, &base.u, d, g);
     let start: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
     let mut r = fit_cands(ev, &cands, Some(start), budget);
     r.evals += evals;
@@ -759,7 +763,7 @@ mod tests {
         // a smooth, asymmetric bottom at u = 0.3171
         let g = |u: f64| (u - 0.3171).powi(2) * (1.0 + 3.0 * (u - 0.3171)) + 7.0;
         let (mut f, n) = counted(g);
-        let (u, j, e) = brent_in_cell(&mut f, 0.3, 1.0 / 9.0, 100);
+        let (u, j, e) = brent_in_cell(&mut f, (0.3, g(0.3)), 1.0 / 9.0, 100);
         assert!((u[0] - 0.3171).abs() < 3.0 * BRENT_T, "{u:?}");
         assert!((j - 7.0).abs() < 1e-6);
         assert_eq!(e, n.get(), "every trial counted");
@@ -775,12 +779,27 @@ mod tests {
     }
 
     #[test]
+    fn brent_keeps_the_cell_centre_when_every_trial_fails() {
+        // a simulation that fails away from the centre (∞)
+        let g = |u: f64| {
+            if (u - 0.5).abs() < 1e-12 {
+                3.0
+            } else {
+                f64::INFINITY
+            }
+        };
+        let (mut f, _) = counted(g);
+        let (u, j, _) = brent_in_cell(&mut f, (0.5, 3.0), 1.0 / 9.0, 100);
+        assert_eq!((u[0], j), (0.5, 3.0));
+    }
+
+    #[test]
     fn brent_returns_the_bound_itself_when_the_minimum_is_on_it() {
         for (c, edge) in [(0.5 / 9.0, 0.0), (8.5 / 9.0, 1.0)] {
             // falls towards the edge all the way
             let g = move |u: f64| (u - edge).abs() + 2.0;
             let (mut f, _) = counted(g);
-            let (u, j, _) = brent_in_cell(&mut f, c, 1.0 / 9.0, 100);
+            let (u, j, _) = brent_in_cell(&mut f, (c, g(c)), 1.0 / 9.0, 100);
             assert_eq!(u[0], edge);
             assert_eq!(j, 2.0);
         }
