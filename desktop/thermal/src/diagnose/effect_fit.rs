@@ -157,10 +157,15 @@ impl<'a> Evaluator<'a> {
     }
 
     /// `j_fit` of several sets of effects (∞ where one cannot be
-    /// simulated): a grid's trials share the freedom's pass.
+    /// simulated): a grid's trials share the freedom's pass, `BATCH` at a
+    /// time (their residual sets, ≈ 0.5 MB each, are held at once).
     pub fn j_fit_many(&self, sets: &[Vec<Effect>]) -> Vec<f64> {
-        let raws = sets.iter().map(|e| self.raw_residuals(e).ok()).collect();
-        j_fit_of_raws(self.runs, self.freedom, raws)
+        sets.chunks(BATCH)
+            .flat_map(|chunk| {
+                let raws = chunk.iter().map(|e| self.raw_residuals(e).ok()).collect();
+                j_fit_of_raws(self.runs, self.freedom, raws)
+            })
+            .collect()
     }
 
     /// Residuals before the calibration's freedom.
@@ -620,8 +625,9 @@ pub fn fit_cands(
             .map(|(p, v)| p.to_u(*v))
             .collect::<Vec<f64>>()
     });
-    let x0 = match start.or(init) {
-        Some(s) => s,
+    let nm_step = 0.5 / (d as f64 + 1.0).max(2.0);
+    let (u, j, e) = match start.or(init) {
+        Some(x0) => nelder_mead(&mut obj, &x0, nm_step, budget),
         None => {
             let g: usize = match d {
                 1 => 9,
@@ -632,22 +638,14 @@ pub fn fit_cands(
             evals += n;
             if d == 1 {
                 // one parameter: Brent's method in the grid's best cell
-                // and its neighbours (≈ 12 trials where Nelder–Mead
+                // and its neighbours (≈ 15 trials where Nelder–Mead
                 // takes ≈ 30)
-                let (u, j, e) = brent_in_cell(&mut obj, (u[0], ju), 1.0 / g as f64, budget);
-                return FitResult {
-                    cands: cands.to_vec(),
-                    effects: effects_of(cands, &u),
-                    u,
-                    j,
-                    k: d + cands.iter().map(Cand::located).sum::<usize>(),
-                    evals: evals + e,
-                };
+                brent_in_cell(&mut obj, (u[0], ju), 1.0 / g as f64, budget)
+            } else {
+                nelder_mead(&mut obj, &u, nm_step, budget)
             }
-            u
         }
     };
-    let (u, j, e) = nelder_mead(&mut obj, &x0, 0.5 / (d as f64 + 1.0).max(2.0), budget);
     evals += e;
     FitResult {
         cands: cands.to_vec(),
@@ -666,17 +664,14 @@ const BATCH: usize = 9;
 /// The fit criterion of `cands` at each of `us` (∞ where one cannot be
 /// simulated), in batches sharing the freedom's pass.
 fn j_fit_at(ev: &Evaluator, cands: &[Cand], us: &[Vec<f64>]) -> Vec<f64> {
-    us.chunks(BATCH)
-        .flat_map(|chunk| {
-            let sets: Vec<Vec<Effect>> = chunk.iter().map(|u| effects_of(cands, u)).collect();
-            ev.j_fit_many(&sets)
-        })
-        .collect()
+    let sets: Vec<Vec<Effect>> = us.iter().map(|u| effects_of(cands, u)).collect();
+    ev.j_fit_many(&sets)
 }
 
 /// The best point of a g^d grid of cell centres over the last d
 /// parameters of `cands` (the first ones fixed at `fixed`): the point
-/// (last d only) and the evaluations spent. The first of equal values wins.
+/// (last d only), its value and the evaluations spent. The first of
+/// equal values wins.
 fn best_on_grid(
     ev: &Evaluator,
     cands: &[Cand],

@@ -143,7 +143,7 @@ fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
                 }]
             })
             .collect();
-        sets.chunks(11).flat_map(|c| ev.j_fit_many(c)).collect()
+        ev.j_fit_many(&sets)
     };
     let first = [init[0], init[1], init[2]];
     let mut best = (first, j(&[first])[0]);

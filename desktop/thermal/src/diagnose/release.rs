@@ -110,7 +110,7 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
 type Judged = (f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>);
 
 /// The fit criterion of machines with the freedom: the release's line
-/// search needs nothing else, and `Evaluator::j_fit` has it from the
+/// search needs nothing else, and `j_fit_of_raws` has it from the
 /// freedom's fit-row products without correcting every row; the machines
 /// of one step share the freedom's pass over B̃ (∞: not simulated).
 fn j_fit(ms: &[Machine], ps: &[Prepared], fr: &Freedom) -> Vec<f64> {
