@@ -26,7 +26,9 @@
 //! A fit's criterion needs only the fit rows' SSE per channel, which
 //! `fit_sse` gives from B̃ᵀB̃ and B̃ᵀr without forming the corrected
 //! residuals. The pass over B̃ (≈ 35 k rows × ≈ 95 directions) bounds
-//! the time, by reading it: B̃ is kept in f32, and B̃ᵀr is the calibrated
+//! the time, by reading it: B̃ is kept in f32, each channel's block in its
+//! own ≈ 10–40 leading directions (`channel_basis.rs`, to 10⁻⁷: the pass
+//! reads ≈ 23 of 95 columns per row on the benches), and B̃ᵀr is the calibrated
 //! nominal's plus B̃ᵀ(r − r₀) over the knots where r changed (a sensor
 //! effect changes one channel, a step only the rows after it); the box
 //! QP's steps solve the held values' multipliers from A⁻¹, computed once,
@@ -34,6 +36,7 @@
 //! optimum is near it: ≈ 15–23 steps instead of ≈ 54).
 //! `freedom/tests.rs` checks the compressed freedom against the full one.
 
+mod channel_basis;
 mod knots;
 
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -46,6 +49,7 @@ use super::calibrate::{apply, Knob};
 use super::effect_fit::{par_map, Evaluator, FitResult, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
+use channel_basis::ChannelBasis;
 use knots::Knots;
 use tcomp_data::linalg::{dot, dot_many};
 
@@ -231,16 +235,21 @@ pub(crate) fn directions(sens: &DMatrix<f64>, wall: &[f64], rel_tol: f64) -> DMa
 /// The compression's error budget, relative (see the module comment).
 pub const REL_TOL: f64 = 1e-6;
 
+/// Each channel's block of B̃ kept to this (relative Frobenius,
+/// `channel_basis.rs`) for the pass: a tenth of `REL_TOL`, scaled with it
+/// (0: every direction).
+const PASS_TOL: f64 = 1e-7;
+
 /// What the fit rows need, per channel (in `stats_of`'s order).
 struct FitChannel {
     /// Its weight in the criterion.
     w: f64,
     /// B̃ᵀB̃ over its fit rows (missing rows left out).
     m: DMatrix<f64>,
-    /// Its knot ranges that touch a fit row: B̃ᵀr reads only these (the
-    /// held-out blocks are ≈ 40 % of the rows, and the pass is bound by
-    /// reading B̃).
-    fit_spans: Vec<(usize, usize)>,
+    /// Its knot ranges that touch a fit row, in its own few directions:
+    /// B̃ᵀr reads only these (the held-out blocks are ≈ 40 % of the rows,
+    /// and the pass is bound by reading B̃).
+    basis: ChannelBasis,
 }
 
 /// Per flattened row: the channel's weight, fit or not, missing or not;
@@ -326,7 +335,11 @@ impl Freedom {
         let mut knots_b = knots.sample(&basis);
         drop(basis);
         knots_b.apply(|v| *v = *v as f32 as f64);
-        let chans = fit_channels(&knots, &knots_b, &rows);
+        let bases: Vec<ChannelBasis> = fit_spans(&knots, &rows)
+            .iter()
+            .map(|sp| ChannelBasis::truncate(&mut knots_b, sp, PASS_TOL * rel_tol / REL_TOL))
+            .collect();
+        let chans = fit_channels(&knots, &knots_b, &rows, bases);
         // SᵀWS ≈ V (Σ w B̃ᵀB̃) Vᵀ on the fit rows
         let nd = v.ncols();
         let mut bwb = DMatrix::zeros(nd, nd);
@@ -342,11 +355,13 @@ impl Freedom {
         }
         let (lo, hi): (Vec<f64>, Vec<f64>) = ks.iter().map(Knob::bounds).unzip();
         if timing() {
+            let ranks: Vec<usize> = chans.iter().map(|c| c.basis.rank()).collect();
             eprintln!(
-                "diagnose timing: freedom {nk} knobs → {nd} directions × {} knots (every {} rows, error {err:.1e}), {n_all} rows, {:.3} s",
+                "diagnose timing: freedom {nk} knobs → {nd} directions × {} knots (every {} rows, error {err:.1e}), {n_all} rows, {:.3} s; the pass reads {:.1} directions per channel (ranks {ranks:?})",
                 knots.n_knots,
                 knots.f,
-                t0.elapsed().as_secs_f64()
+                t0.elapsed().as_secs_f64(),
+                ranks.iter().sum::<usize>() as f64 / ranks.len().max(1) as f64
             );
         }
         let (row_knot, row_wb) = knots.row_weights();
@@ -473,9 +488,11 @@ impl Freedom {
         let diffs: Vec<Diff> = sets.iter().map(|r| self.diff_of(r)).collect();
         let mut hs: Vec<Vec<DVector<f64>>> = vec![self.base_h.clone(); diffs.len()];
         let (mut read, mut all) = (0u64, 0u64);
-        let nkn = self.knots.n_knots;
         for (ci, c) in self.chans.iter().enumerate() {
-            for &(a, b) in &c.fit_spans {
+            let cb = &c.basis;
+            // Pᵀz per set in the channel's own directions
+            let mut hp = vec![vec![0.0; cb.rank()]; diffs.len()];
+            for &(a, b, off) in &cb.spans {
                 all += (b - a) as u64 * diffs.len() as u64;
                 // per set: the span's knots it changed
                 let cut: Vec<(usize, usize)> = diffs
@@ -497,11 +514,12 @@ impl Freedom {
                         None => groups.push((r, vec![i])),
                     }
                 }
-                for (o, col) in self.knots_b.chunks_exact(nkn).enumerate() {
-                    for &((a, b), ref idx) in &groups {
-                        let zs: Vec<&[f64]> = idx.iter().map(|&i| &diffs[i].z[a..b]).collect();
-                        for (&i, v) in idx.iter().zip(dots(&col[a..b], &zs)) {
-                            hs[i][ci][o] += v;
+                for (o, col) in cb.p.chunks_exact(cb.len.max(1)).enumerate() {
+                    for &((a1, b1), ref idx) in &groups {
+                        let zs: Vec<&[f64]> = idx.iter().map(|&i| &diffs[i].z[a1..b1]).collect();
+                        let pc = &col[off + a1 - a..off + b1 - a];
+                        for (&i, v) in idx.iter().zip(dots(pc, &zs)) {
+                            hp[i][o] += v;
                         }
                     }
                 }
@@ -509,6 +527,11 @@ impl Freedom {
                     .iter()
                     .map(|&(a, b)| b.saturating_sub(a) as u64)
                     .sum::<u64>();
+            }
+            for (h, p) in hs.iter_mut().zip(&hp) {
+                if p.iter().any(|&x| x != 0.0) {
+                    h[ci] += &cb.v * DVector::from_column_slice(p);
+                }
             }
         }
         self.knots_read.fetch_add(read, Relaxed);
@@ -623,26 +646,40 @@ impl Freedom {
     }
 }
 
-/// Per channel: its knots and B̃ᵀB̃ over its fit rows that were not missing.
-fn fit_channels(knots: &Knots, kb: &DMatrix<f64>, rows: &Rows) -> Vec<FitChannel> {
-    let n_all = rows.fit.len();
-    let bt = knots.expand(kb, n_all);
+/// Per channel: its knot ranges that a fit row reads.
+fn fit_spans(knots: &Knots, rows: &Rows) -> Vec<Vec<(usize, usize)>> {
     // knots a fit row reads (a row between knots j and j+1 touches both)
     let mut touched = vec![false; knots.n_knots + 1];
     knots.for_each(|r, j, _| touched[j] |= rows.fit[r]);
+    (0..rows.lens.len())
+        .map(|ci| {
+            let (k0, k1) = knots.seg_knots(ci);
+            spans(&touched[k0..k1], k0)
+        })
+        .collect()
+}
+
+/// Per channel: its basis and B̃ᵀB̃ over its fit rows that were not missing.
+fn fit_channels(
+    knots: &Knots,
+    kb: &DMatrix<f64>,
+    rows: &Rows,
+    bases: Vec<ChannelBasis>,
+) -> Vec<FitChannel> {
+    let n_all = rows.fit.len();
+    let bt = knots.expand(kb, n_all);
     let mut out = Vec::new();
     let mut r0 = 0;
-    for (ci, &l) in rows.lens.iter().enumerate() {
+    for ((ci, &l), basis) in rows.lens.iter().enumerate().zip(bases) {
         let used: Vec<usize> = (r0..r0 + l)
             .filter(|&r| rows.fit[r] && !rows.missing[r])
             .collect();
         let b = bt.select_rows(&used);
         let m = b.transpose() * &b;
-        let (k0, k1) = knots.seg_knots(ci);
         out.push(FitChannel {
             w: rows.w[ci],
             m,
-            fit_spans: spans(&touched[k0..k1], k0),
+            basis,
         });
         r0 += l;
     }

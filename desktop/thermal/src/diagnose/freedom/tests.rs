@@ -133,17 +133,29 @@ fn compressed_freedom_matches_the_full_one() {
     }
 }
 
-/// B̃ᵀr over the fit rows from scratch: every row, every direction.
+/// B̃ᵀr over the fit rows from scratch: every row, every direction, B̃
+/// as each channel's basis holds it at its fit knots.
 fn products_from_scratch(fr: &Freedom, res: &[Vec<Vec<f64>>]) -> Vec<Vec<f64>> {
     let nkn = fr.knots.n_knots;
-    let b = |k: usize, d: usize| {
-        if k < nkn {
-            fr.knots_b[d * nkn + k] as f64
-        } else {
-            0.0
-        }
-    };
     let nd = fr.knots_b.len() / nkn;
+    // knot → its row of B̃ (one past the end: zeros)
+    let kb: Vec<Vec<f64>> = (0..=nkn)
+        .map(|k| {
+            let held = fr.chans.iter().find_map(|c| c.basis.row(k));
+            held.unwrap_or_else(|| {
+                (0..nd)
+                    .map(|d| {
+                        if k < nkn {
+                            fr.knots_b[d * nkn + k] as f64
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+        })
+        .collect();
+    let b = |k: usize, d: usize| kb[k][d];
     let mut out = Vec::new();
     let mut row = 0;
     for ch in res.iter().flatten() {
