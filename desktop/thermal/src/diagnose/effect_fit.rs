@@ -2,6 +2,7 @@
 //! bounded Nelder–Mead fitter.
 
 use anyhow::Result;
+use nalgebra::DVector;
 
 use super::prep::{Kind, Prepared};
 use crate::sim::{apply_sensor_effects, simulate, Effect, Machine, SimOut};
@@ -92,6 +93,17 @@ pub trait Projection: Sync {
     /// a large matrix per set can read it once for all).
     fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
         sets.iter().map(|r| self.fit_sse(r)).collect()
+    }
+    /// Per set and channel the sums the fit SSE is computed from (B̃ᵀr),
+    /// linear in the residuals: a family of trials that are linear
+    /// combinations of a few sets (`drift_family.rs`) combines them
+    /// instead of passing over B̃ per trial. None: not available.
+    fn pull_products(&self, _sets: &[&[Vec<Vec<f64>>]]) -> Option<Vec<Vec<DVector<f64>>>> {
+        None
+    }
+    /// `fit_sse` from a set's B̃ᵀr per channel and its Σ r² per channel.
+    fn fit_sse_from(&self, _h: &[DVector<f64>], _rr: &[f64]) -> Option<Vec<f64>> {
+        None
     }
 }
 
@@ -604,6 +616,8 @@ pub struct FitResult {
     pub effects: Vec<Effect>,
     pub j: f64,
     pub k: usize,
+    /// Simulations the fit ran (one per trial, but those of a `TrialFn`'s
+    /// set-up where one gives the trials).
     pub evals: usize,
 }
 
@@ -615,8 +629,28 @@ pub fn fit_cands(
     start: Option<Vec<f64>>,
     budget: usize,
 ) -> FitResult {
+    fit_cands_with(ev, cands, start, budget, None)
+}
+
+/// A trial's criterion at a point of the fit's unit cube computed without
+/// a simulation (`drift_family.rs`), and the simulations it took to set up.
+pub type TrialFn<'f> = (&'f dyn Fn(&[f64]) -> f64, usize);
+
+/// `fit_cands`, its trials given by `trial` when there is one.
+pub fn fit_cands_with(
+    ev: &Evaluator,
+    cands: &[Cand],
+    start: Option<Vec<f64>>,
+    budget: usize,
+    trial: Option<TrialFn>,
+) -> FitResult {
     let d: usize = cands.iter().map(|c| params_of(c.kind).len()).sum();
-    let mut obj = |us: &[Vec<f64>]| -> Vec<f64> { j_fit_at(ev, cands, us) };
+    let mut obj = |us: &[Vec<f64>]| -> Vec<f64> {
+        match trial {
+            Some((f, _)) => us.iter().map(|u| f(u)).collect(),
+            None => j_fit_at(ev, cands, us),
+        }
+    };
     let mut evals = 0;
     let init = (cands.len() == 1 && cands[0].init.len() == d).then(|| {
         params_of(cands[0].kind)
@@ -634,7 +668,7 @@ pub fn fit_cands(
                 2 => 4,
                 _ => 3,
             };
-            let (u, ju, n) = best_on_grid(ev, cands, &[], d, g);
+            let (u, ju, n) = best_on_grid(&mut obj, &[], d, g);
             evals += n;
             if d == 1 {
                 // one parameter: Brent's method in the grid's best cell
@@ -647,6 +681,10 @@ pub fn fit_cands(
         }
     };
     evals += e;
+    if let Some((_, sims)) = trial {
+        // its trials ran no simulation
+        evals = sims;
+    }
     FitResult {
         cands: cands.to_vec(),
         effects: effects_of(cands, &u),
@@ -673,8 +711,7 @@ fn j_fit_at(ev: &Evaluator, cands: &[Cand], us: &[Vec<f64>]) -> Vec<f64> {
 /// (last d only), its value and the evaluations spent. The first of
 /// equal values wins.
 fn best_on_grid(
-    ev: &Evaluator,
-    cands: &[Cand],
+    obj: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
     fixed: &[f64],
     d: usize,
     g: usize,
@@ -690,7 +727,7 @@ fn best_on_grid(
             fixed.iter().copied().chain(ua).collect()
         })
         .collect();
-    let vals = j_fit_at(ev, cands, &pts);
+    let vals = obj(&pts);
     let mut best = (vec![0.5; d], f64::INFINITY);
     for (u, v) in pts.iter().zip(vals) {
         if v < best.1 {
@@ -711,7 +748,7 @@ pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) ->
         2 => 3,
         _ => 2,
     };
-    let (ua, _, evals) = best_on_grid(ev, &cands, &base.u, d, g);
+    let (ua, _, evals) = best_on_grid(&mut |us| j_fit_at(ev, &cands, us), &base.u, d, g);
     let start: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
     let mut r = fit_cands(ev, &cands, Some(start), budget);
     r.evals += evals;

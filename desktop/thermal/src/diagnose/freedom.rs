@@ -617,24 +617,23 @@ impl Freedom {
         let out = self
             .fit_products_many(sets)
             .into_iter()
-            .map(|(h, rr)| {
-                let rr = rr?;
-                let d = self.solve(&self.pull_from(&h));
-                let c = self.v.tr_mul(&DVector::from_column_slice(&d));
-                Some(
-                    self.chans
-                        .iter()
-                        .zip(&h)
-                        .zip(rr)
-                        .map(|((ch, hc), r2)| {
-                            (r2 - 2.0 * c.dot(hc) + (&ch.m * &c).dot(&c)).max(0.0)
-                        })
-                        .collect(),
-                )
-            })
+            .map(|(h, rr)| Some(self.sse_from(&h, &rr?)))
             .collect();
         self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
         out
+    }
+
+    /// The fit rows' SSE per channel after the correction, from B̃ᵀr and
+    /// Σ r² per channel.
+    fn sse_from(&self, h: &[DVector<f64>], rr: &[f64]) -> Vec<f64> {
+        let d = self.solve(&self.pull_from(h));
+        let c = self.v.tr_mul(&DVector::from_column_slice(&d));
+        self.chans
+            .iter()
+            .zip(h)
+            .zip(rr)
+            .map(|((ch, hc), r2)| (r2 - 2.0 * c.dot(hc) + (&ch.m * &c).dot(&c)).max(0.0))
+            .collect()
     }
 
     pub fn theta(&self) -> &[f64] {
@@ -747,7 +746,22 @@ impl Projection for Freedom {
     fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
         Freedom::fit_sse_many(self, sets)
     }
+    fn pull_products(&self, sets: &[&[Vec<Vec<f64>>]]) -> Option<Vec<Vec<DVector<f64>>>> {
+        if self.is_empty() {
+            return None;
+        }
+        self.fit_products_many(sets)
+            .into_iter()
+            .map(|(h, rr)| rr.map(|_| h))
+            .collect()
+    }
+    fn fit_sse_from(&self, h: &[DVector<f64>], rr: &[f64]) -> Option<Vec<f64>> {
+        let t0 = std::time::Instant::now();
+        let out = self.sse_from(h, rr);
+        self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+        Some(out)
+    }
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

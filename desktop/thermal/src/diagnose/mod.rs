@@ -8,6 +8,7 @@ pub mod calibrate;
 pub mod candidate;
 pub mod design_heat;
 pub mod design_mimic;
+mod drift_family;
 pub mod effect_fit;
 mod fit_untestable;
 pub mod fitmode;
@@ -34,7 +35,7 @@ use anyhow::{bail, Result};
 use serde_json::{json, Value};
 
 use crate::sim::{Effect, Machine};
-use effect_fit::{fit_cands, par_map, Evaluator, FitResult, Stats};
+use effect_fit::{par_map, Evaluator, FitResult, Stats};
 use prep::{prepare, Kind, Prepared};
 pub use render::report_md;
 pub use stats::phases;
@@ -690,7 +691,7 @@ fn diagnose_core(
     let mut sims = 1usize;
     let singles: Vec<FitResult> = par_map(&cands, opt.threads, |c| {
         let d = effect_fit::params_of(c.kind).len();
-        fit_cands(&ev, std::slice::from_ref(c), None, opt.budget + 15 * d)
+        drift_family::fit_alone(&ev, c, opt.budget + 15 * d)
     });
     sims += singles.iter().map(|f| f.evals).sum::<usize>();
     freedom::print_evals("single", &singles);

@@ -13,7 +13,7 @@ fn desktop() -> PathBuf {
 }
 
 /// Two 4 h runs of the truth with a ball-screw heat the design lacks.
-fn setup() -> (Machine, Vec<Prepared>) {
+pub(crate) fn setup() -> (Machine, Vec<Prepared>) {
     let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
     let duty = Duty::load(&desktop().join("duty/production-mixed.toml")).unwrap();
     let runs: Vec<_> = (0..2)
