@@ -112,6 +112,34 @@ impl Knots {
         }
         out
     }
+
+    /// Σ wall·(b − its interpolation from the knots)² over every row and
+    /// column — what `expand(sample(b))` leaves — stopping as soon as it
+    /// exceeds `budget` (None): a grid that fails does so within a few
+    /// rows, and expanding the whole matrix for each candidate grid was a
+    /// third of the freedom's set-up.
+    pub fn error2_within(&self, b: &DMatrix<f64>, wall: &[f64], budget: f64) -> Option<f64> {
+        let f = self.f;
+        let mut err2 = 0.0;
+        for col in b.column_iter() {
+            for &(r0, l, _) in &self.segs {
+                for t in 0..l {
+                    let j = t / f;
+                    let (a, e) = (j * f, ((j + 1) * f).min(l - 1));
+                    if t == a || e == a {
+                        continue; // a knot: exact
+                    }
+                    let wb = (t - a) as f64 / (e - a) as f64;
+                    let d = col[r0 + t] - ((1.0 - wb) * col[r0 + a] + wb * col[r0 + e]);
+                    err2 += wall[r0 + t] * d * d;
+                }
+                if err2 > budget {
+                    return None;
+                }
+            }
+        }
+        Some(err2)
+    }
 }
 
 /// Candidate grids, coarsest first.
@@ -131,13 +159,20 @@ pub(crate) fn choose(b: &DMatrix<f64>, lens: &[usize], wall: &[f64], rel_tol: f6
     if rel_tol > 0.0 && norm2 > 0.0 {
         for f in STEPS {
             let k = Knots::new(lens, f);
-            let err2 = wsum(&(b - k.expand(&k.sample(b), b.nrows())));
-            let rel = (err2 / norm2).sqrt();
+            let err2 = k.error2_within(b, wall, rel_tol * rel_tol * norm2);
             if super::timing() {
-                eprintln!("diagnose timing: knots every {f} rows: error {rel:.1e}");
+                match err2 {
+                    Some(e) => eprintln!(
+                        "diagnose timing: knots every {f} rows: error {:.1e}",
+                        (e / norm2).sqrt()
+                    ),
+                    None => {
+                        eprintln!("diagnose timing: knots every {f} rows: error > {rel_tol:.0e}")
+                    }
+                }
             }
-            if rel <= rel_tol {
-                return (k, rel);
+            if let Some(e) = err2 {
+                return (k, (e / norm2).sqrt());
             }
         }
     }
@@ -147,6 +182,29 @@ pub(crate) fn choose(b: &DMatrix<f64>, lens: &[usize], wall: &[f64], rel_tol: f6
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_streamed_error_is_what_the_expanded_knots_leave() {
+        let lens = [5, 0, 17, 9];
+        let n: usize = lens.iter().sum();
+        let b = DMatrix::from_fn(n, 3, |r, c| ((r * r) as f64 * 0.013 + c as f64).sin());
+        let wall: Vec<f64> = (0..n).map(|r| 1.0 + (r % 3) as f64).collect();
+        for f in [2, 3, 4, 8] {
+            let k = Knots::new(&lens, f);
+            let d = &b - k.expand(&k.sample(&b), n);
+            let want: f64 = d
+                .column_iter()
+                .map(|c| c.iter().zip(&wall).map(|(v, w)| w * v * v).sum::<f64>())
+                .sum();
+            let got = k.error2_within(&b, &wall, f64::INFINITY).unwrap();
+            assert!(
+                (got - want).abs() <= 1e-12 * want,
+                "every {f}: {got} vs {want}"
+            );
+            assert!(want > 0.0);
+            assert_eq!(k.error2_within(&b, &wall, 0.5 * want), None, "every {f}");
+        }
+    }
 
     #[test]
     fn expand_reads_every_row_as_for_each_weighs_it() {
