@@ -10,7 +10,8 @@
 //! sums: per channel Σ r² = vᵀGv (v = (1, c), G the Gram matrix of r₀ and
 //! the D_j) and the freedom's B̃ᵀr = h₀ + Σ c_j (h_j − h₀). A fit of the
 //! drift (≈ 117 trials, each a simulation and a pass over B̃) then costs
-//! four simulations, one pass and a box QP per trial. A fifth simulation
+//! three simulations (r₀ is the nominal's), one pass over B̃ for the
+//! four sets and a box QP per trial. A fourth simulation
 //! checks the linearity on the machine at hand: where it does not hold to
 //! 10⁻⁹, the family is not used and every trial simulates as before.
 
