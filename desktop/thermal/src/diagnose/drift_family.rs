@@ -16,10 +16,11 @@
 //! 10⁻⁹, the family is not used and every trial simulates as before.
 
 use nalgebra::{DMatrix, DVector};
+use std::cell::RefCell;
 
 use super::effect_fit::{
-    build, fit_cands, fit_cands_with, params_of, stats_of, Cand, Evaluator, FitResult, Projection,
-    Residuals, Stats,
+    build, fit_cands, fit_cands_with, params_of, stats_of, ActiveSet, Cand, Evaluator, FitResult,
+    Projection, Residuals, Stats,
 };
 use crate::sim::Effect;
 
@@ -60,6 +61,8 @@ pub(crate) struct DriftFamily<'a> {
     gram: Vec<DMatrix<f64>>,
     /// With a freedom: per channel B̃ᵀr of r₀ and of r₀ + D_j.
     h: Option<[Vec<DVector<f64>>; 4]>,
+    /// The last trial's active set (the fit's trials run in order).
+    active: RefCell<ActiveSet>,
 }
 
 impl<'a> DriftFamily<'a> {
@@ -112,6 +115,7 @@ impl<'a> DriftFamily<'a> {
             st: stats_of(ev.runs, &r0),
             gram,
             h,
+            active: RefCell::new(ActiveSet::new()),
         };
         // the check: a trial away from the units, simulated
         let v = [1.3, 7.0, -0.2];
@@ -153,7 +157,7 @@ impl<'a> DriftFamily<'a> {
                         x
                     })
                     .collect();
-                match f.fit_sse_from(&hc, &rr) {
+                match f.fit_sse_from(&hc, &rr, &mut self.active.borrow_mut()) {
                     Some(s) => s,
                     None => return f64::INFINITY,
                 }
@@ -242,7 +246,12 @@ mod tests {
                         .collect(),
                 )
             }
-            fn fit_sse_from(&self, _h: &[DVector<f64>], rr: &[f64]) -> Option<Vec<f64>> {
+            fn fit_sse_from(
+                &self,
+                _h: &[DVector<f64>],
+                rr: &[f64],
+                _start: &mut ActiveSet,
+            ) -> Option<Vec<f64>> {
                 Some(rr.to_vec())
             }
         }

@@ -79,6 +79,12 @@ impl Stats {
 /// Residuals: run → channel → row.
 pub(crate) type Residuals = Vec<Vec<Vec<f64>>>;
 
+/// Which design values ended on which bound in a fit's last projection
+/// (−1 lo, +1 hi, 0 free; empty: the calibrated nominal's): the next box
+/// QP starts there. Same optimum, fewer steps (a drift pair: 13 instead
+/// of 68); each fit keeps its own, so no answer depends on the threads.
+pub type ActiveSet = Vec<i8>;
+
 /// A correction every evaluation's residuals get: the calibration's
 /// bounded freedom (`freedom.rs`), left to the null and every candidate.
 pub trait Projection: Sync {
@@ -90,8 +96,13 @@ pub trait Projection: Sync {
         None
     }
     /// `fit_sse` of several residual sets at once (a projection that reads
-    /// a large matrix per set can read it once for all).
-    fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
+    /// a large matrix per set can read it once for all), each solve
+    /// starting from the last one's `start`.
+    fn fit_sse_many(
+        &self,
+        sets: &[&[Vec<Vec<f64>>]],
+        _start: &mut ActiveSet,
+    ) -> Vec<Option<Vec<f64>>> {
         sets.iter().map(|r| self.fit_sse(r)).collect()
     }
     /// Per set and channel the sums the fit SSE is computed from (B̃ᵀr),
@@ -102,7 +113,12 @@ pub trait Projection: Sync {
         None
     }
     /// `fit_sse` from a set's B̃ᵀr per channel and its Σ r² per channel.
-    fn fit_sse_from(&self, _h: &[DVector<f64>], _rr: &[f64]) -> Option<Vec<f64>> {
+    fn fit_sse_from(
+        &self,
+        _h: &[DVector<f64>],
+        _rr: &[f64],
+        _start: &mut ActiveSet,
+    ) -> Option<Vec<f64>> {
         None
     }
 }
@@ -165,17 +181,18 @@ impl<'a> Evaluator<'a> {
     /// per diagnosis.
     pub fn j_fit(&self, effects: &[Effect]) -> Result<f64> {
         let raw = self.raw_residuals(effects)?;
-        Ok(j_fit_of_raws(self.runs, self.freedom, vec![Some(raw)])[0])
+        let fresh = &mut ActiveSet::new();
+        Ok(j_fit_of_raws(self.runs, self.freedom, vec![Some(raw)], fresh)[0])
     }
 
     /// `j_fit` of several sets of effects (∞ where one cannot be
     /// simulated): a grid's trials share the freedom's pass, `BATCH` at a
     /// time (their residual sets, ≈ 0.5 MB each, are held at once).
-    pub fn j_fit_many(&self, sets: &[Vec<Effect>]) -> Vec<f64> {
+    pub fn j_fit_many(&self, sets: &[Vec<Effect>], start: &mut ActiveSet) -> Vec<f64> {
         sets.chunks(BATCH)
             .flat_map(|chunk| {
                 let raws = chunk.iter().map(|e| self.raw_residuals(e).ok()).collect();
-                j_fit_of_raws(self.runs, self.freedom, raws)
+                j_fit_of_raws(self.runs, self.freedom, raws, start)
             })
             .collect()
     }
@@ -265,6 +282,7 @@ pub(crate) fn j_fit_of_raws(
     runs: &[Prepared],
     f: Option<&dyn Projection>,
     raws: Vec<Option<Residuals>>,
+    start: &mut ActiveSet,
 ) -> Vec<f64> {
     let simulated: Vec<bool> = raws.iter().map(Option::is_some).collect();
     let mut raws: Vec<Residuals> = raws.into_iter().flatten().collect();
@@ -272,7 +290,7 @@ pub(crate) fn j_fit_of_raws(
         None => raws.iter().map(|r| stats_of(runs, r).j_fit()).collect(),
         Some(f) => {
             let refs: Vec<&[Vec<Vec<f64>>]> = raws.iter().map(|r| r.as_slice()).collect();
-            let sses = f.fit_sse_many(&refs);
+            let sses = f.fit_sse_many(&refs, start);
             raws.iter_mut()
                 .zip(sses)
                 .map(|(raw, sse)| match sse {
@@ -645,10 +663,11 @@ pub fn fit_cands_with(
     trial: Option<TrialFn>,
 ) -> FitResult {
     let d: usize = cands.iter().map(|c| params_of(c.kind).len()).sum();
+    let mut active = ActiveSet::new();
     let mut obj = |us: &[Vec<f64>]| -> Vec<f64> {
         match trial {
             Some((f, _)) => us.iter().map(|u| f(u)).collect(),
-            None => j_fit_at(ev, cands, us),
+            None => j_fit_at(ev, cands, us, &mut active),
         }
     };
     let mut evals = 0;
@@ -701,9 +720,9 @@ const BATCH: usize = 9;
 
 /// The fit criterion of `cands` at each of `us` (∞ where one cannot be
 /// simulated), in batches sharing the freedom's pass.
-fn j_fit_at(ev: &Evaluator, cands: &[Cand], us: &[Vec<f64>]) -> Vec<f64> {
+fn j_fit_at(ev: &Evaluator, cands: &[Cand], us: &[Vec<f64>], start: &mut ActiveSet) -> Vec<f64> {
     let sets: Vec<Vec<Effect>> = us.iter().map(|u| effects_of(cands, u)).collect();
-    ev.j_fit_many(&sets)
+    ev.j_fit_many(&sets, start)
 }
 
 /// The best point of a g^d grid of cell centres over the last d
@@ -748,7 +767,13 @@ pub fn fit_added(ev: &Evaluator, base: &FitResult, add: &Cand, budget: usize) ->
         2 => 3,
         _ => 2,
     };
-    let (ua, _, evals) = best_on_grid(&mut |us| j_fit_at(ev, &cands, us), &base.u, d, g);
+    let mut start = ActiveSet::new();
+    let (ua, _, evals) = best_on_grid(
+        &mut |us| j_fit_at(ev, &cands, us, &mut start),
+        &base.u,
+        d,
+        g,
+    );
     let start: Vec<f64> = base.u.iter().chain(&ua).copied().collect();
     let mut r = fit_cands(ev, &cands, Some(start), budget);
     r.evals += evals;

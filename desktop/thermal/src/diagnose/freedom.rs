@@ -46,7 +46,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::boxqp::{box_qp_exact, box_qp_exact_inv_from};
 use super::calibrate::{apply, Knob};
-use super::effect_fit::{par_map, Evaluator, FitResult, Projection};
+use super::effect_fit::{par_map, ActiveSet, Evaluator, FitResult, Projection};
 use super::prep::Prepared;
 use crate::sim::Machine;
 use channel_basis::ChannelBasis;
@@ -394,7 +394,7 @@ impl Freedom {
         fr.base_r = vec![0.0; n_all];
         fr.base_h = fr.fit_products(&r0).0;
         fr.base_r = r0.iter().flatten().flatten().copied().collect();
-        let d0 = fr.solve(&fr.pull_from(&fr.base_h));
+        let d0 = fr.solve(&fr.pull_from(&fr.base_h), &mut ActiveSet::new());
         fr.side0 = (0..nk)
             .map(|i| {
                 let (lo, hi) = (fr.lo[i] - fr.theta[i], fr.hi[i] - fr.theta[i]);
@@ -424,17 +424,27 @@ impl Freedom {
         (self.v.ncols(), self.knots.f)
     }
 
-    /// The bounded correction δ for the data's pull `b` (box QP).
-    fn solve(&self, b: &[f64]) -> Vec<f64> {
+    /// The bounded correction δ for the data's pull `b` (box QP), started
+    /// from `start`'s active set (empty: the calibrated nominal's), which
+    /// it leaves at its own.
+    fn solve(&self, b: &[f64], start: &mut ActiveSet) -> Vec<f64> {
         let nk = self.len();
         let lo: Vec<f64> = (0..nk).map(|i| self.lo[i] - self.theta[i]).collect();
         let hi: Vec<f64> = (0..nk).map(|i| self.hi[i] - self.theta[i]).collect();
+        let from: &[i8] = if start.len() == nk {
+            start
+        } else {
+            &self.side0
+        };
         let (d, sweeps) = match &self.a_inv {
-            Some(p) => box_qp_exact_inv_from(&self.a, p, b, &lo, &hi, &self.side0),
+            Some(p) => box_qp_exact_inv_from(&self.a, p, b, &lo, &hi, from),
             None => box_qp_exact(&self.a, b, &lo, &hi, &vec![0.0; nk]),
         };
         self.calls.fetch_add(1, Relaxed);
         self.sweeps.fetch_add(sweeps as u64, Relaxed);
+        *start = (0..nk)
+            .map(|i| i8::from(d[i] >= hi[i]) - i8::from(d[i] <= lo[i]))
+            .collect();
         d
     }
 
@@ -447,7 +457,7 @@ impl Freedom {
         }
         let t0 = std::time::Instant::now();
         let (h, _) = self.fit_products(res);
-        let d = self.solve(&self.pull_from(&h));
+        let d = self.solve(&self.pull_from(&h), &mut ActiveSet::new());
         let c = self.v.tr_mul(&DVector::from_column_slice(&d));
         // B̃c at the knots, one column at a time (contiguous)
         let nkn = self.knots.n_knots;
@@ -604,12 +614,18 @@ impl Freedom {
     /// |r − B̃c|² = |r|² − 2 cᵀB̃ᵀr + cᵀ(B̃ᵀB̃)c (c = Vᵀδ), without
     /// forming the corrected residuals.
     pub fn fit_sse_of(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
-        self.fit_sse_many(&[res]).pop().flatten()
+        self.fit_sse_many(&[res], &mut ActiveSet::new())
+            .pop()
+            .flatten()
     }
 
     /// `fit_sse_of` of several residual sets, sharing the pass over B̃
     /// (`fit_products_many`): a grid's or a line search's trials.
-    pub fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
+    pub fn fit_sse_many(
+        &self,
+        sets: &[&[Vec<Vec<f64>>]],
+        start: &mut ActiveSet,
+    ) -> Vec<Option<Vec<f64>>> {
         if self.is_empty() {
             return vec![None; sets.len()];
         }
@@ -617,7 +633,7 @@ impl Freedom {
         let out = self
             .fit_products_many(sets)
             .into_iter()
-            .map(|(h, rr)| Some(self.sse_from(&h, &rr?)))
+            .map(|(h, rr)| Some(self.sse_from(&h, &rr?, start)))
             .collect();
         self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
         out
@@ -625,8 +641,8 @@ impl Freedom {
 
     /// The fit rows' SSE per channel after the correction, from B̃ᵀr and
     /// Σ r² per channel.
-    fn sse_from(&self, h: &[DVector<f64>], rr: &[f64]) -> Vec<f64> {
-        let d = self.solve(&self.pull_from(h));
+    fn sse_from(&self, h: &[DVector<f64>], rr: &[f64], start: &mut ActiveSet) -> Vec<f64> {
+        let d = self.solve(&self.pull_from(h), start);
         let c = self.v.tr_mul(&DVector::from_column_slice(&d));
         self.chans
             .iter()
@@ -743,8 +759,12 @@ impl Projection for Freedom {
     fn fit_sse(&self, res: &[Vec<Vec<f64>>]) -> Option<Vec<f64>> {
         self.fit_sse_of(res)
     }
-    fn fit_sse_many(&self, sets: &[&[Vec<Vec<f64>>]]) -> Vec<Option<Vec<f64>>> {
-        Freedom::fit_sse_many(self, sets)
+    fn fit_sse_many(
+        &self,
+        sets: &[&[Vec<Vec<f64>>]],
+        start: &mut ActiveSet,
+    ) -> Vec<Option<Vec<f64>>> {
+        Freedom::fit_sse_many(self, sets, start)
     }
     fn pull_products(&self, sets: &[&[Vec<Vec<f64>>]]) -> Option<Vec<Vec<DVector<f64>>>> {
         if self.is_empty() {
@@ -755,9 +775,14 @@ impl Projection for Freedom {
             .map(|(h, rr)| rr.map(|_| h))
             .collect()
     }
-    fn fit_sse_from(&self, h: &[DVector<f64>], rr: &[f64]) -> Option<Vec<f64>> {
+    fn fit_sse_from(
+        &self,
+        h: &[DVector<f64>],
+        rr: &[f64],
+        start: &mut ActiveSet,
+    ) -> Option<Vec<f64>> {
         let t0 = std::time::Instant::now();
-        let out = self.sse_from(h, rr);
+        let out = self.sse_from(h, rr, start);
         self.ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
         Some(out)
     }

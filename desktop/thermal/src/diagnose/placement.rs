@@ -3,7 +3,7 @@
 //! bearing's extra heat, a chiller's start) are placed: on the nominal
 //! residual of the fit rows.
 
-use super::effect_fit::{Cand, Evaluator};
+use super::effect_fit::{ActiveSet, Cand, Evaluator};
 use super::prep::{Kind, Prepared};
 use crate::sim::{Effect, ALL_EFFECT_NAMES};
 
@@ -132,7 +132,8 @@ fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
         return init;
     }
     // the scans' trials in batches (they share the freedom's pass over B̃)
-    let j = |vs: &[[f64; 3]]| -> Vec<f64> {
+    let mut start = ActiveSet::new();
+    let mut j = |vs: &[[f64; 3]]| -> Vec<f64> {
         let sets: Vec<Vec<Effect>> = vs
             .iter()
             .map(|v| {
@@ -143,11 +144,11 @@ fn chiller_refine(ev: &Evaluator, init: Vec<f64>) -> Vec<f64> {
                 }]
             })
             .collect();
-        ev.j_fit_many(&sets)
+        ev.j_fit_many(&sets, &mut start)
     };
     let first = [init[0], init[1], init[2]];
     let mut best = (first, j(&[first])[0]);
-    let keep_best = |best: &mut ([f64; 3], f64), vs: &[[f64; 3]]| {
+    let mut keep_best = |best: &mut ([f64; 3], f64), vs: &[[f64; 3]]| {
         for (v, f) in vs.iter().zip(j(vs)) {
             if f < best.1 {
                 *best = (*v, f);

@@ -12,7 +12,7 @@ use serde_json::json;
 
 use super::calibrate;
 use super::calibrate::{apply, design_value, Knob};
-use super::effect_fit::{j_fit_of_raws, Evaluator, Projection};
+use super::effect_fit::{j_fit_of_raws, ActiveSet, Evaluator, Projection};
 use super::freedom;
 use super::freedom::Freedom;
 use super::prep::Prepared;
@@ -122,7 +122,7 @@ fn j_fit(ms: &[Machine], ps: &[Prepared], fr: &Freedom) -> Vec<f64> {
                 .ok()
         })
         .collect();
-    j_fit_of_raws(ps, Some(fr as &dyn Projection), raws)
+    j_fit_of_raws(ps, Some(fr as &dyn Projection), raws, &mut ActiveSet::new())
 }
 
 /// The nominal the released factor acts on, and what the judge needs.
