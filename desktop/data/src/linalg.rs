@@ -272,9 +272,59 @@ pub fn ridge(x: &DMatrix<f64>, y: &DVector<f64>, lambda: f64) -> Option<DVector<
     ridge_multi(x, &y, lambda).map(|b| b.column(0).into_owned())
 }
 
+/// The eigenvectors of the symmetric `g`, largest eigenvalue first,
+/// leaving out the smallest ones whose eigenvalues sum to at most
+/// `rel_tol`² of the trace (at least `min_keep` kept), and the share of
+/// the trace left out: for g = MᵀM, ‖M − MVVᵀ‖ ≤ `rel_tol`·‖M‖ (Frobenius).
+pub fn leading_eigenvectors(g: DMatrix<f64>, rel_tol: f64, min_keep: usize) -> (DMatrix<f64>, f64) {
+    let n = g.ncols();
+    let eig = nalgebra::SymmetricEigen::new(g);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let trace: f64 = eig.eigenvalues.iter().map(|l| l.max(0.0)).sum();
+    let budget = rel_tol * rel_tol * trace;
+    let (mut dropped, mut kept) = (0.0, n);
+    while kept > min_keep {
+        let l = eig.eigenvalues[order[kept - 1]].max(0.0);
+        if dropped + l > budget {
+            break;
+        }
+        dropped += l;
+        kept -= 1;
+    }
+    let v = DMatrix::from_fn(n, kept, |r, c| eig.eigenvectors[(r, order[c])]);
+    (v, dropped / trace.max(1e-300))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_leading_eigenvectors_leave_out_at_most_the_budget() {
+        // M with singular values 10, 1, 1e-4, 1e-9 (orthogonal columns)
+        let m = DMatrix::from_fn(6, 4, |r, c| {
+            if r == c {
+                [10.0, 1.0, 1e-4, 1e-9][c]
+            } else {
+                0.0
+            }
+        });
+        let g = m.transpose() * &m;
+        let total = 101.0 + 1e-8 + 1e-18;
+        for (tol, want) in [(1e-3, 2), (1e-6, 3), (1e-12, 4), (0.5, 1)] {
+            let (v, dropped) = leading_eigenvectors(g.clone(), tol, 0);
+            assert_eq!(v.ncols(), want, "tol {tol}");
+            assert!(
+                dropped <= tol * tol,
+                "tol {tol}: dropped {dropped} of {total}"
+            );
+            // largest first: the first column is the 10's direction
+            assert!((v[(0, 0)].abs() - 1.0).abs() < 1e-12);
+        }
+        // at least `min_keep`
+        assert_eq!(leading_eigenvectors(g, 10.0, 2).0.ncols(), 2);
+    }
 
     #[test]
     fn dot_many_gives_each_dot_bit_for_bit() {

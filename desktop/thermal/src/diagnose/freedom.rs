@@ -51,7 +51,7 @@ use super::prep::Prepared;
 use crate::sim::Machine;
 use channel_basis::ChannelBasis;
 use knots::Knots;
-use tcomp_data::linalg::{dot, dot_many};
+use tcomp_data::linalg::{dot, dot_many, leading_eigenvectors};
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
@@ -209,27 +209,14 @@ pub(crate) fn directions(sens: &DMatrix<f64>, wall: &[f64], rel_tol: f64) -> DMa
     // scalar loop, and this product (rows × knobs²) was a third of the
     // freedom's set-up
     let g = sd.transpose() * &sd;
-    let eig = nalgebra::SymmetricEigen::new(g);
-    let mut order: Vec<usize> = (0..nk).collect();
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let trace: f64 = eig.eigenvalues.iter().map(|l| l.max(0.0)).sum();
-    let budget = rel_tol * rel_tol * trace;
-    let (mut dropped, mut kept) = (0.0, order.len());
-    while kept > 1 {
-        let l = eig.eigenvalues[order[kept - 1]].max(0.0);
-        if dropped + l > budget {
-            break;
-        }
-        dropped += l;
-        kept -= 1;
-    }
+    let (v, dropped) = leading_eigenvectors(g, rel_tol, 1);
     if timing() {
         eprintln!(
-            "diagnose timing: {kept} of {nk} directions kept (dropped {:.1e} of the trace)",
-            dropped / trace.max(1e-300)
+            "diagnose timing: {} of {nk} directions kept (dropped {dropped:.1e} of the trace)",
+            v.ncols()
         );
     }
-    DMatrix::from_fn(nk, kept, |r, c| eig.eigenvectors[(r, order[c])])
+    v
 }
 
 /// The compression's error budget, relative (see the module comment).

@@ -13,6 +13,7 @@
 //! criterion stays an exact sum of squares of one consistent B̃.
 
 use nalgebra::DMatrix;
+use tcomp_data::linalg::leading_eigenvectors;
 
 /// One channel's fit knots in its own directions.
 pub(crate) struct ChannelBasis {
@@ -50,7 +51,8 @@ impl ChannelBasis {
             k.rows_mut(off, b - a).copy_from(&kb.rows(a, b - a));
         }
         let v = if rel_tol > 0.0 {
-            leading(&k, rel_tol)
+            // gemm (`transpose() *`), not the scalar `tr_mul`
+            leading_eigenvectors(k.transpose() * &k, rel_tol, 0).0
         } else {
             DMatrix::identity(nd, nd)
         };
@@ -87,29 +89,6 @@ impl ChannelBasis {
                 .collect(),
         )
     }
-}
-
-/// The leading eigenvectors of KᵀK that leave out at most `rel_tol`² of
-/// its trace (‖K − KVVᵀ‖ ≤ `rel_tol`·‖K‖, Frobenius), largest first.
-fn leading(k: &DMatrix<f64>, rel_tol: f64) -> DMatrix<f64> {
-    let nd = k.ncols();
-    // gemm (`transpose() *`), not the scalar `tr_mul`
-    let g = k.transpose() * k;
-    let eig = nalgebra::SymmetricEigen::new(g);
-    let mut order: Vec<usize> = (0..nd).collect();
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let trace: f64 = eig.eigenvalues.iter().map(|l| l.max(0.0)).sum();
-    let budget = rel_tol * rel_tol * trace;
-    let (mut dropped, mut kept) = (0.0, nd);
-    while kept > 0 {
-        let l = eig.eigenvalues[order[kept - 1]].max(0.0);
-        if dropped + l > budget {
-            break;
-        }
-        dropped += l;
-        kept -= 1;
-    }
-    DMatrix::from_fn(nd, kept, |r, c| eig.eigenvectors[(r, order[c])])
 }
 
 #[cfg(test)]
