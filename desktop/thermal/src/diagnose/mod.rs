@@ -18,6 +18,7 @@ pub mod ident;
 mod ident_fit;
 pub mod lag;
 pub mod open_effects;
+mod optim;
 pub mod periodic;
 pub mod periodic_claim;
 mod placement;
