@@ -503,6 +503,7 @@ pub fn effects_of(cands: &[Cand], u: &[f64]) -> Vec<Effect> {
     out
 }
 
+/// Result of fitting a set of candidates.
 #[derive(Clone, Debug)]
 pub struct FitResult {
     pub cands: Vec<Cand>,

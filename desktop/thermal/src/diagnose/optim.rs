@@ -156,8 +156,6 @@ pub(crate) fn brent_in_cell<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     (vec![u], j, n)
 }
 
-/// Result of fitting a set of candidates.
-
 #[cfg(test)]
 mod tests {
     use super::*;
