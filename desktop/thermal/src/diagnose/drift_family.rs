@@ -51,6 +51,9 @@ fn coefficients(v: &[f64]) -> [f64; 3] {
     [amp_c * phi.cos(), amp_c * phi.sin(), rate_c_per_h]
 }
 
+/// One vector per channel.
+type PerChannel = Vec<DVector<f64>>;
+
 /// The drift's trials from three unit responses.
 pub(crate) struct DriftFamily<'a> {
     freedom: Option<&'a dyn Projection>,
@@ -59,8 +62,9 @@ pub(crate) struct DriftFamily<'a> {
     /// Per channel: the Gram matrix of (r₀, D₁, D₂, D₃) over its finite
     /// fit rows.
     gram: Vec<DMatrix<f64>>,
-    /// With a freedom: per channel B̃ᵀr of r₀ and of r₀ + D_j.
-    h: Option<[Vec<DVector<f64>>; 4]>,
+    /// With a freedom: per channel B̃ᵀr₀ and each B̃ᵀD_j (formed once,
+    /// not per trial).
+    h: Option<(PerChannel, [PerChannel; 3])>,
     /// The last trial's active set (the fit's trials run in order).
     active: RefCell<ActiveSet>,
 }
@@ -107,7 +111,12 @@ impl<'a> DriftFamily<'a> {
                     .map(|r| r.as_slice())
                     .collect();
                 let mut hs = f.pull_products(&sets)?.into_iter();
-                Some([hs.next()?, hs.next()?, hs.next()?, hs.next()?])
+                let h0 = hs.next()?;
+                let d = |hj: Vec<DVector<f64>>| -> Vec<DVector<f64>> {
+                    hj.iter().zip(&h0).map(|(x, y)| x - y).collect()
+                };
+                let dh = [d(hs.next()?), d(hs.next()?), d(hs.next()?)];
+                Some((h0, dh))
             }
         };
         let fam = DriftFamily {
@@ -147,12 +156,12 @@ impl<'a> DriftFamily<'a> {
             .map(|g| (g * &w).dot(&w).max(0.0))
             .collect();
         let sse = match (&self.h, self.freedom) {
-            (Some(h), Some(f)) => {
-                let hc: Vec<DVector<f64>> = (0..h[0].len())
+            (Some((h0, dh)), Some(f)) => {
+                let hc: Vec<DVector<f64>> = (0..h0.len())
                     .map(|ch| {
-                        let mut x = h[0][ch].clone();
+                        let mut x = h0[ch].clone();
                         for j in 0..3 {
-                            x += (&h[j + 1][ch] - &h[0][ch]) * c[j];
+                            x += &dh[j][ch] * c[j];
                         }
                         x
                     })
