@@ -12,6 +12,7 @@ need_debian qemu-system-arm:qemu-system-arm arm-none-eabi-size:binutils-arm-none
 need_python pymodbus:pymodbus serial:pyserial
 
 say "checking the structure rules (no import circle between files, files <= 800 and functions <= 150 lines)"
+python3 scripts/check-structure.py --self-test
 python3 scripts/check-structure.py
 
 say "building the bench firmware for QEMU (release, $FW_TARGET)"
