@@ -12,10 +12,9 @@ use super::gate;
 use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use super::reach;
-use super::render::SelectedGaps;
 use super::series;
 use super::stats::{ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView};
-use super::{Diagnosis, Finding, Options};
+use super::types::{Diagnosis, Finding, Options, SelectedGaps};
 use tcomp_data::runcsv::Run;
 
 /// Residual evidence of "no effect": per-channel held-out RMS against the

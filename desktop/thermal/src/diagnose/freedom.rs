@@ -39,6 +39,7 @@
 
 mod channel_basis;
 mod knots;
+mod timing;
 
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
@@ -53,6 +54,7 @@ use crate::sim::Machine;
 use channel_basis::ChannelBasis;
 use knots::Knots;
 use tcomp_data::linalg::{dot, dot_many, leading_eigenvectors};
+pub(crate) use timing::timing;
 
 /// The linearised, bounded calibration freedom on the full grid.
 pub struct Freedom {
@@ -718,11 +720,6 @@ pub(crate) fn print_evals(what: &str, fits: &[FitResult]) {
             );
         }
     }
-}
-
-/// `TCOMP_DIAG_TIMING` set: the diagnosis prints where its time goes.
-pub(crate) fn timing() -> bool {
-    std::env::var_os("TCOMP_DIAG_TIMING").is_some()
 }
 
 impl Drop for Freedom {

@@ -16,6 +16,7 @@ pub mod freedom;
 pub mod gate;
 pub mod ident;
 mod ident_fit;
+mod judge;
 pub mod lag;
 pub mod open_effects;
 mod optim;
@@ -31,17 +32,21 @@ pub mod sensor_step;
 pub mod series;
 pub mod speed_law;
 pub mod stats;
+mod types;
 
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
 
-use crate::sim::{Effect, Machine};
-use effect_fit::{par_map, Evaluator, FitResult, Stats};
+use crate::sim::Machine;
+use effect_fit::{par_map, Evaluator, FitResult};
+use judge::Judge;
 use prep::{prepare, Kind, Prepared};
 pub use render::report_md;
 pub use stats::phases;
-use stats::{corr, first_order, r4, rms_of, ResidualView};
+use stats::ResidualView;
 use tcomp_data::runcsv::Run;
+use types::with_role;
+pub use types::{Diagnosis, Finding, Options};
 
 /// Where the nominal model's gap lies (all rows of all runs).
 fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
@@ -62,153 +67,6 @@ fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
         }
     }
     stats::where_json(&views)
-}
-
-/// Settings of a diagnosis.
-#[derive(Clone, Debug)]
-pub struct Options {
-    /// Fraction of each run's time used to fit (of the run when there is one
-    /// run, of every hold-out block when there are several).
-    pub fit_fraction: f64,
-    /// With several runs: every run is cut into blocks of this length [s];
-    /// the first `fit_fraction` of each block is fitted, the rest held out.
-    pub holdout_block_s: f64,
-    /// Decimate runs above this many rows.
-    pub max_rows: usize,
-    /// BIC improvement required to claim an effect.
-    pub min_dbic: f64,
-    /// Relative held-out reduction required (0..1).
-    pub min_rel: f64,
-    /// Absolute held-out reduction required (noise-variance units).
-    pub min_abs: f64,
-    /// Nelder–Mead evaluations per single candidate.
-    pub budget: usize,
-    /// Try at most 2× this many pairs (best single + another candidate).
-    pub pair_top: usize,
-    /// Threads for fitting candidates in parallel.
-    pub threads: usize,
-    /// Restrict the candidates (empty = all applicable).
-    pub only: Vec<String>,
-    /// Take the machine file as exact (no calibration within its
-    /// tolerances): the behaviour before issue 27.
-    pub exact: bool,
-    /// Accepted for compatibility, no effect: the default calibrates the
-    /// file within its tolerances (`calibrate.rs`); `exact` turns that off.
-    pub calibrate: bool,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            fit_fraction: 0.6,
-            holdout_block_s: 3600.0,
-            max_rows: 3000,
-            min_dbic: 10.0,
-            min_rel: 0.15,
-            min_abs: 0.5,
-            budget: 45,
-            pair_top: 8,
-            threads: std::thread::available_parallelism()
-                .map_or(1, |n| n.get())
-                .min(8),
-            only: Vec::new(),
-            exact: false,
-            calibrate: false,
-        }
-    }
-}
-
-/// One supported effect (or combination) of the diagnosis.
-#[derive(Clone, Debug)]
-pub struct Finding {
-    pub name: String,
-    pub effects: Vec<Effect>,
-    pub dbic: f64,
-    pub m_before: f64,
-    pub m_after: f64,
-    pub gap_um: Option<((f64, f64), (f64, f64))>,
-    pub gap_c: Option<((f64, f64), (f64, f64))>,
-    pub evidence: Value,
-    /// Parameters of an effect that is not a simulator effect (`diagnose fit`).
-    pub params: Option<Value>,
-}
-
-impl Finding {
-    pub fn params_json(&self) -> Value {
-        if let Some(p) = &self.params {
-            p.clone()
-        } else if self.effects.len() == 1 {
-            self.effects[0].params_json()
-        } else {
-            let mut o = serde_json::Map::new();
-            for e in &self.effects {
-                o.insert(e.name().to_string(), e.params_json());
-            }
-            Value::Object(o)
-        }
-    }
-
-    pub fn to_json(&self) -> Value {
-        json!({
-            "name": self.name,
-            "params": self.params_json(),
-            "gap_before_um": self.gap_um.map(|g| g.0 .0),
-            "gap_after_um": self.gap_um.map(|g| g.1 .0),
-            "gap_before_c": self.gap_c.map(|g| g.0 .0),
-            "gap_after_c": self.gap_c.map(|g| g.1 .0),
-            "evidence": self.evidence,
-        })
-    }
-}
-
-/// Everything a diagnosis found.
-#[derive(Clone, Debug)]
-pub struct Diagnosis {
-    pub machine: String,
-    pub findings: Vec<Finding>,
-    /// All single candidates tried (for the report), supported or not.
-    pub tried: Vec<Finding>,
-    pub where_: Value,
-    pub nominal_m_held: f64,
-    pub nominal_gap_um: Option<(f64, f64)>,
-    pub nominal_gap_c: Option<(f64, f64)>,
-    pub notes: Vec<String>,
-    pub seconds: f64,
-    pub sims: usize,
-    /// Effects the data cannot test, with the reason.
-    pub untestable: Vec<(String, String)>,
-    /// `diagnose fit`: per sensor, the shortest lag [s] the body-map test
-    /// would see on it (`None`: none up to the grid's longest). Empty in
-    /// machine-file mode and without a displacement.
-    pub lag_reach: Vec<(String, Option<f64>)>,
-    /// One line per missing input: what is missing and what that costs.
-    pub missing: Vec<String>,
-    /// The nominal model and its own held-out fit.
-    pub nominal: Value,
-    /// Evidence for "no effect": residual against noise, whiteness.
-    pub no_effect: Value,
-    /// How findings are ranked and when one is claimed.
-    pub ranking_rule: String,
-    /// Held-out RMS by channel and by phase, before and after the selected
-    /// effect (for the report's plots).
-    pub selected_gaps: Option<render::SelectedGaps>,
-}
-
-impl Diagnosis {
-    pub fn to_json(&self) -> Value {
-        json!({
-            "effects": self.findings.iter().map(Finding::to_json).collect::<Vec<_>>(),
-            "where": self.where_,
-            "gap_before_um": self.nominal_gap_um.map(|g| g.0),
-            "gap_before_c": self.nominal_gap_c.map(|g| g.0),
-            "untestable": self.untestable.iter().map(|(n, r)| json!({"name": n, "reason": r})).collect::<Vec<_>>(),
-            "sensor_lag_reach_s": self.lag_reach.iter().map(|(n, t)| (n.clone(), json!(t))).collect::<serde_json::Map<_, _>>(),
-            "missing": self.missing,
-            "nominal": self.nominal,
-            "no_effect": self.no_effect,
-            "ranking_rule": self.ranking_rule,
-        })
-    }
 }
 
 /// Prepare runs and choose the fit/held-out split: with one run the last
@@ -238,277 +96,6 @@ pub fn prepare_all(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result
         p.hold_from(from);
     }
     Ok(ps)
-}
-
-/// Evidence: signature correlation (nominal residual vs the effect's change
-/// of the prediction, noise-normalised, held-out rows) and the correlation of
-/// the most affected channel's residual with the effect's physical driver.
-fn evidence(
-    ev: &Evaluator,
-    res0: &[Vec<Vec<f64>>],
-    fr: &FitResult,
-    st0: &Stats,
-    st1: &Stats,
-    dbic: f64,
-) -> Value {
-    let Ok(res1) = ev.residuals(&fr.effects) else {
-        return json!({});
-    };
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for (pi, p) in ev.runs.iter().enumerate() {
-        let none_held = p.held.iter().all(|h| !h);
-        for (ci, c) in p.channels.iter().enumerate() {
-            for k in 0..p.rows() {
-                let r0 = res0[pi][ci][k];
-                let r1 = res1[pi][ci][k];
-                if p.held[k] || none_held {
-                    a.push(r0 / c.s);
-                    b.push((r0 - r1) / c.s);
-                }
-            }
-        }
-    }
-    let sig = corr(&a, &b);
-    // most affected channel
-    let mut best = (0usize, 0usize, f64::MIN);
-    for (c0, c1) in st0.ch.iter().zip(&st1.ch) {
-        let n = (c0.n_fit + c0.n_held).max(1) as f64;
-        let gain = (c0.sse_fit + c0.sse_held - c1.sse_fit - c1.sse_held) / n / (c0.s * c0.s);
-        if gain > best.2 {
-            best = (c0.run, c0.ch, gain);
-        }
-    }
-    let (pi, ci) = (best.0, best.1);
-    let p = &ev.runs[pi];
-    let ch = &p.channels[ci];
-    let dt = p.inputs.dt;
-    let kind = fr.cands.iter().map(|c| c.kind).next().unwrap_or("");
-    let (driver_name, driver): (&str, Vec<f64>) = match kind {
-        "convection" => ("mean predicted rise above ambient", {
-            let out = crate::sim::simulate(ev.m, &p.inputs, &[], 1).ok();
-            match out {
-                Some(o) => (0..p.rows())
-                    .map(|k| {
-                        o.temps.iter().map(|s| s[k]).sum::<f64>() / o.temps.len().max(1) as f64
-                            - p.inputs.ambient[k]
-                    })
-                    .collect(),
-                None => vec![],
-            }
-        }),
-        "ambient_drift" => ("time", (0..p.rows()).map(|k| p.inputs.time(k)).collect()),
-        "sensor_lag" => ("rate of change of the predicted reading", {
-            let out = crate::sim::simulate(ev.m, &p.inputs, &[], 1).ok();
-            match (out, ch.kind) {
-                (Some(o), Kind::Temp(i)) => {
-                    let s = &o.temps[i];
-                    (0..s.len())
-                        .map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / dt })
-                        .collect()
-                }
-                _ => vec![],
-            }
-        }),
-        "bearing_nonlinear" => (
-            "spindle speed² (lagged 20 min)",
-            first_order(
-                &p.inputs.rpm.iter().map(|r| r * r).collect::<Vec<_>>(),
-                dt,
-                1200.0,
-            ),
-        ),
-        "coolant" => (
-            "coolant_on (lagged 20 min)",
-            first_order(&p.inputs.coolant, dt, 1200.0),
-        ),
-        "chiller" => (
-            "the cycling chiller's change of this channel's prediction",
-            {
-                let one: Vec<Effect> = fr.effects.clone();
-                match (
-                    crate::sim::simulate(ev.m, &p.inputs, &one, 1),
-                    crate::sim::simulate(ev.m, &p.inputs, &[], 1),
-                    ch.kind,
-                ) {
-                    (Ok(a), Ok(b), Kind::Temp(i)) => a.temps[i]
-                        .iter()
-                        .zip(&b.temps[i])
-                        .map(|(x, y)| x - y)
-                        .collect(),
-                    (Ok(a), Ok(b), Kind::Disp(i)) => a.disp[i]
-                        .iter()
-                        .zip(&b.disp[i])
-                        .map(|(x, y)| x - y)
-                        .collect(),
-                    _ => vec![],
-                }
-            },
-        ),
-        "ballscrew" => (
-            "feed_activity (lagged 1 h)",
-            first_order(&p.inputs.feed, dt, 3600.0),
-        ),
-        "bending" => ("predicted temperature gradient of the bending pair", {
-            let d0 =
-                crate::sim::simulate(ev.m, &p.inputs, &[Effect::Bending { k_um_per_k: 1.0 }], 1);
-            let d1 = crate::sim::simulate(ev.m, &p.inputs, &[], 1);
-            match (d0, d1, ev.m.bending) {
-                (Ok(a), Ok(b), Some((_, _, di))) => a.disp[di]
-                    .iter()
-                    .zip(&b.disp[di])
-                    .map(|(x, y)| x - y)
-                    .collect(),
-                _ => vec![],
-            }
-        }),
-        _ => ("constant (a bias)", vec![1.0; p.rows()]),
-    };
-    let r = &res0[pi][ci];
-    let driver_corr = if kind == "sensor_offset" {
-        let (rms, _, _) = rms_of(r.iter().copied());
-        let mean = r.iter().filter(|v| v.is_finite()).sum::<f64>()
-            / r.iter().filter(|v| v.is_finite()).count().max(1) as f64;
-        if rms > 0.0 {
-            mean / rms
-        } else {
-            0.0
-        }
-    } else {
-        corr(r, &driver)
-    };
-    json!({
-        "signature_corr": r4(sig),
-        "channel": ch.name,
-        "driver": driver_name,
-        "driver_corr": r4(driver_corr),
-        "delta_bic": (dbic * 10.0).round() / 10.0,
-        "held_out_norm_gap_before": r4(st0.m_held().sqrt()),
-        "held_out_norm_gap_after": r4(st1.m_held().sqrt()),
-        "gap_before_c": st0.gap_held(false).map(|g| r4(g.0)),
-        "gap_after_c": st1.gap_held(false).map(|g| r4(g.0)),
-        "peak_before_um": st0.gap_held(true).map(|g| r4(g.1)),
-        "peak_after_um": st1.gap_held(true).map(|g| r4(g.1)),
-    })
-}
-
-/// The nominal's fit and the margins every candidate is judged by.
-struct Judge<'a> {
-    ev: &'a Evaluator<'a>,
-    res0: &'a [Vec<Vec<f64>>],
-    /// The nominal's residuals before the freedom (where an effect acts).
-    raw0: Vec<Vec<Vec<f64>>>,
-    st0: Stats,
-    /// The nominal's fit criterion on the fit rows.
-    j0: f64,
-    /// The nominal's held-out gap (noise units).
-    m0: f64,
-    /// BIC's penalty per parameter: ln of the fit rows.
-    lnn: f64,
-    opt: &'a Options,
-    /// The calibration's freedom (None: the file taken as exact).
-    freedom: Option<&'a freedom::Freedom>,
-}
-
-impl Judge<'_> {
-    fn dbic(&self, fr: &FitResult) -> f64 {
-        fr.j - self.j0 + fr.k as f64 * self.lnn
-    }
-
-    fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
-        let (raw1, res1) = self.ev.raw_and_residuals(&fr.effects)?;
-        let st = self.ev.stats_of(&res1);
-        let st0 = &self.st0;
-        let mut ev_json = evidence(self.ev, self.res0, fr, st0, &st, dbic);
-        let acts = (&self.raw0[..], &raw1[..]);
-        let z = gate::held_out_z_acting(self.ev.runs, self.res0, &res1, acts);
-        if let Some(o) = ev_json.as_object_mut() {
-            // NaN (fewer than two held-out blocks): no test, null
-            let zj = if z.is_nan() {
-                Value::Null
-            } else {
-                json!(r4(z.min(1e6)))
-            };
-            o.insert("held_out_z".into(), zj);
-            if let Some(j) = gate::step_jump_share(self.ev.runs, self.res0, &fr.effects) {
-                o.insert("step_jump_share".into(), json!(r4(j)));
-            }
-        }
-        Ok((
-            Finding {
-                name: fr
-                    .cands
-                    .iter()
-                    .map(|c| c.kind)
-                    .collect::<Vec<_>>()
-                    .join("+"),
-                effects: fr.effects.clone(),
-                dbic,
-                m_before: self.m0,
-                m_after: st.m_held(),
-                gap_um: st0.gap_held(true).zip(st.gap_held(true)),
-                gap_c: st0.gap_held(false).zip(st.gap_held(false)),
-                evidence: ev_json,
-                params: None,
-            },
-            st,
-        ))
-    }
-
-    /// Why a finding's effect cannot be told from design errors within
-    /// tolerance: a node's heat (`design_heat.rs`), the film coefficients
-    /// or levers (`design_mimic.rs`); only against a calibrated file.
-    fn barred(&self, f: &Finding) -> Option<String> {
-        self.freedom?;
-        f.effects.iter().find_map(|e| {
-            design_heat::within_tolerance(self.ev.m, self.ev.runs, e)
-                .or_else(|| design_mimic::within_tolerance(self.ev.m, e))
-        })
-    }
-
-    // never an effect that widens the held-out displacement gap (beyond
-    // 2 %, below what an RMS over the held-out rows can resolve)
-    // and never a step inside a run that is no jump of the residual at
-    // its onset (`gate::step_jump_share`)
-    fn supported(&self, f: &Finding, m_ref: f64) -> bool {
-        self.margins(f, m_ref) && self.barred(f).is_none() && self.jumps(f)
-    }
-
-    fn jumps(&self, f: &Finding) -> bool {
-        gate::step_jump_share(self.ev.runs, self.res0, &f.effects)
-            .is_none_or(|j| j >= gate::JUMP_SHARE_MIN)
-    }
-
-    fn margins(&self, f: &Finding, m_ref: f64) -> bool {
-        let opt = self.opt;
-        f.dbic <= -opt.min_dbic
-            && (gate::sensor_only(f)
-                || f.gap_um.is_none_or(|((b, _), (a, _))| a <= b * 1.02 + 1e-9))
-            && f.m_after.is_finite()
-            && f.m_after <= m_ref * (1.0 - opt.min_rel)
-            && m_ref - f.m_after >= opt.min_abs
-            && gate::passes(
-                self.m0,
-                f.evidence["held_out_z"].as_f64().unwrap_or(f64::NAN),
-            )
-    }
-
-    // the added effect must itself earn the margins: the pair's own fit
-    // without it (its base effect at the pair's parameters) is the
-    // reference, so a joint polish of the base alone never names a pair
-    fn partner_earns_its_place(&self, fr: &FitResult, f: &Finding) -> Result<bool> {
-        let Some(last) = fr.cands.last() else {
-            return Ok(true);
-        };
-        let opt = self.opt;
-        let k_partner = effect_fit::params_of(last.kind).len() + last.located();
-        let n_base = fr.effects.len() - 1;
-        let st = self.ev.stats(&fr.effects[..n_base])?;
-        let dbic_base = st.j_fit() - self.j0 + (fr.k - k_partner) as f64 * self.lnn;
-        let m_base = st.m_held();
-        Ok(f.dbic <= dbic_base - opt.min_dbic
-            && f.m_after <= m_base * (1.0 - opt.min_rel)
-            && m_base - f.m_after >= opt.min_abs)
-    }
 }
 
 /// A candidate as tried: its finding and its fit.
@@ -602,14 +189,6 @@ fn best_pair(
         }
     }
     Ok(best)
-}
-
-fn with_role(f: &Finding, role: &str) -> Finding {
-    let mut g = f.clone();
-    if let Some(o) = g.evidence.as_object_mut() {
-        o.insert("role".into(), json!(role));
-    }
-    g
 }
 
 /// The selected explanation first (a pair, then its members), then the

@@ -15,9 +15,11 @@ use super::calibrate::{apply, design_value, Knob};
 use super::effect_fit::{j_fit_of_raws, ActiveSet, Evaluator, Projection};
 use super::freedom;
 use super::freedom::Freedom;
+use super::gate;
+use super::judge::Judge;
 use super::prep::Prepared;
 use super::stats::r4;
-use super::{gate, with_role, Finding, Judge};
+use super::types::{with_role, Finding};
 use crate::sim::machine::tolerance::GROUPS;
 use crate::sim::Machine;
 

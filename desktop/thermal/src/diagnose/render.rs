@@ -8,17 +8,8 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use serde_json::Value;
 
-use super::Diagnosis;
-
-/// Held-out RMS before and after the selected effect.
-#[derive(Clone, Debug, Default)]
-pub struct SelectedGaps {
-    pub effect: String,
-    /// (channel, is displacement, before, after)
-    pub channels: Vec<(String, bool, f64, f64)>,
-    /// (phase, °C before, °C after)
-    pub phases: Vec<(String, f64, f64)>,
-}
+use super::types::Diagnosis;
+pub use super::types::SelectedGaps;
 
 fn f2(x: f64) -> String {
     if x.is_finite() {

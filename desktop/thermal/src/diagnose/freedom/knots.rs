@@ -160,7 +160,7 @@ pub(crate) fn choose(b: &DMatrix<f64>, lens: &[usize], wall: &[f64], rel_tol: f6
         for f in STEPS {
             let k = Knots::new(lens, f);
             let err2 = k.error2_within(b, wall, rel_tol * rel_tol * norm2);
-            if super::timing() {
+            if super::timing::timing() {
                 match err2 {
                     Some(e) => eprintln!(
                         "diagnose timing: knots every {f} rows: error {:.1e}",
