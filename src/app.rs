@@ -23,8 +23,10 @@ use crate::model_store::ModelStore;
 use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
 
 mod probe;
+mod records;
 use crate::model_store::MAX_SETTINGS_BYTES;
-use crate::settings::{KeptReference, Settings, StoredKeys, ENCODED_LEN as SETTINGS_LEN};
+use crate::settings::{KeptReference, Settings, ENCODED_LEN as SETTINGS_LEN};
+use crate::settings_store::SettingsStore;
 use crate::volumetric::VolContext;
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
@@ -34,8 +36,9 @@ use thermocomp_protocol::rtu::MAX_FRAME;
 use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
 
-// The slots' settings block holds the settings, the channel map, a kept
-// reference, the probe references and the keys.
+// The old slots' settings block (read once, to migrate it to the settings
+// store) held the settings, the channel map, a kept reference, the probe
+// references and the keys.
 const _: () = assert!(
     SETTINGS_LEN
         + CHANNEL_MAP_BYTES
@@ -53,6 +56,12 @@ pub struct App<F: NorFlash> {
     pub snapshot: Snapshot,
     pub compensation: Compensation,
     pub store: ModelStore<F>,
+    /// Settings, keys, the kept reference and the probe-reference terms
+    /// ([`crate::settings_store`], in the flash area the board names).
+    settings_store: SettingsStore,
+    /// CRC-32 of each record as the store holds it (`None`: not stored or
+    /// unknown): only records that changed are written ([`records`]).
+    written: [Option<u32>; crate::settings_store::RECORDS],
     map: ChannelMap,
     /// What the watchdog feeder looks at ([`crate::watchdog`]).
     pub progress: Progress,
@@ -92,8 +101,8 @@ pub struct App<F: NorFlash> {
 enum FlashJob {
     /// Store the staged image (this long) with the settings in force.
     Model { len: usize, erasing: bool },
-    /// Store the settings in force with the model held now.
-    Settings { erasing: bool },
+    /// Store the records that changed in the settings store.
+    Settings,
 }
 
 /// What the board must do after a request (after sending the reply).
@@ -132,6 +141,8 @@ impl<F: BackgroundErase> App<F> {
             server: Server::new(unit, baud),
             snapshot: Snapshot::default(),
             compensation: Compensation::empty(),
+            settings_store: SettingsStore::new(flash.settings_area()),
+            written: [None; crate::settings_store::RECORDS],
             store: ModelStore::new(flash, slot_size),
             map,
             progress: Progress::default(),
@@ -162,29 +173,20 @@ impl<F: BackgroundErase> App<F> {
         self.compensation
             .compensator()
             .load_with(|m| store.load_into(buf, m));
-        let blob = self.store.settings();
-        let stored = blob
-            .and_then(|b| b.get(..SETTINGS_LEN))
-            .and_then(Settings::decode);
-        if let Some(map) = blob
-            .and_then(|b| b.get(SETTINGS_LEN..SETTINGS_LEN + CHANNEL_MAP_BYTES))
-            .and_then(|b| ChannelMap::from_bytes(b).ok())
-        {
-            self.map = map;
-        }
-        // After the map: the kept reference (tag 'R'), the probe references
-        // (tag 'Q') and the keys (tag 'K'), each optional, read by their tag.
-        let tail = blob
-            .and_then(|b| b.get(SETTINGS_LEN + CHANNEL_MAP_BYTES..))
-            .map(crate::settings::tail_records)
-            .unwrap_or_default();
-        self.kept = tail.kept;
-        let keys = tail.keys.unwrap_or_default();
-        self.server.holding.keys = crate::modbus::keys::Keys::stored(keys.unlock, keys.signing);
+        // The settings store, or (a board updated from the old layout, whose
+        // store holds no settings yet) the old slot's settings block, then
+        // copied to the store at once.
+        let stored = match self.load_records() {
+            Some(stored) => Some(stored),
+            None => {
+                let legacy = self.load_slot_settings();
+                if self.store.settings().is_some() {
+                    self.migrate();
+                }
+                legacy
+            }
+        };
         apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
-        if let Some(setup) = tail.references.and_then(|r| self.references.decode(r)) {
-            self.server.holding.probe = setup;
-        }
         self.publish_references();
         self.snapshot.reference_state = u16::from(self.kept.is_some());
         self.publish_map();
@@ -202,48 +204,17 @@ impl<F: BackgroundErase> App<F> {
         }
     }
 
-    /// Store the settings in force with the model (A/B slots, power-cut
-    /// safe); a flash failure leaves them applied until the next reboot and
-    /// says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
+    /// Store what changed of the settings, keys, kept reference and probe
+    /// terms ([`crate::settings_store`], power-cut safe per record; no
+    /// model-slot erase); a flash failure leaves them applied until the
+    /// next reboot and says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
     fn store_settings(&mut self) {
-        let bytes = self.persisted();
-        if self.store.settings() == Some(&bytes[..]) || self.job.is_some() {
+        if self.job.is_some() || !self.records_dirty() {
             return;
         }
-        self.job = Some(FlashJob::Settings { erasing: false });
+        self.job = Some(FlashJob::Settings);
         self.server.holding.busy = true;
         self.server.holding.result = result::COMMIT_IN_PROGRESS;
-    }
-
-    /// What the slots keep besides the model: the settings, then the
-    /// channel map (ROM code per channel), then the kept reference if any.
-    fn persisted(&self) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
-        self.persisted_with(false)
-    }
-
-    /// As [`App::persisted`]; `fresh_terms`: with the probe references
-    /// reset (what a new model stores).
-    fn persisted_with(&self, fresh_terms: bool) -> heapless::Vec<u8, MAX_SETTINGS_BYTES> {
-        let mut v = heapless::Vec::new();
-        let _ = v.extend_from_slice(&self.settings().encode());
-        let _ = v.extend_from_slice(&self.map.to_bytes());
-        if let Some(k) = &self.kept {
-            let _ = v.extend_from_slice(&k.encode());
-        }
-        let setup = &self.server.holding.probe;
-        let _ = v.extend_from_slice(&if fresh_terms {
-            References::new().encode(setup)
-        } else {
-            self.references.encode(setup)
-        });
-        let keys = StoredKeys {
-            unlock: self.server.holding.keys.unlock,
-            signing: self.server.holding.keys.signing,
-        };
-        if !keys.is_empty() {
-            let _ = v.extend_from_slice(&keys.encode());
-        }
-        v
     }
 
     /// The kept reference sample (commands 10, 11), if any.
@@ -384,8 +355,15 @@ impl<F: BackgroundErase> App<F> {
         let Some(job) = self.job else {
             return false;
         };
-        let erasing = match job {
-            FlashJob::Model { erasing, .. } | FlashJob::Settings { erasing } => erasing,
+        let FlashJob::Model { len, erasing } = job else {
+            // A record store erases at most one 16 KiB page, and only when
+            // its page is full: still only while the line is quiet.
+            if !self.store.ready_to_erase() {
+                return true;
+            }
+            let ok = self.store_records().is_ok();
+            self.end_job(job, ok);
+            return false;
         };
         if !erasing {
             if !self.store.ready_to_erase() {
@@ -395,38 +373,24 @@ impl<F: BackgroundErase> App<F> {
                 self.end_job(job, false);
                 return false;
             }
-            self.job = Some(match job {
-                FlashJob::Model { len, .. } => FlashJob::Model { len, erasing: true },
-                FlashJob::Settings { .. } => FlashJob::Settings { erasing: true },
-            });
+            self.job = Some(FlashJob::Model { len, erasing: true });
         }
         if !self.store.erase_done() {
             return true;
         }
-        // A new model's terms restart: stored so with it.
-        let settings = self.persisted_with(matches!(job, FlashJob::Model { .. }));
-        let ok = match job {
-            FlashJob::Model { len, .. } => {
-                let staged = self.server.holding.staged();
-                let staged = staged.get(..len).unwrap_or(staged);
-                // Parsed in place (one model on the stack), checked before
-                // it is stored.
-                let mut m = Model::empty(0, 0);
-                if m.parse_into(staged).is_ok()
-                    && self.store.finish(Some(staged), &settings).is_ok()
-                {
-                    self.install(Some(m));
-                    self.references.reset();
-                    true
-                } else {
-                    false
-                }
-            }
-            FlashJob::Settings { .. } => self.store.finish(None, &settings).is_ok(),
-        };
+        let staged = self.server.holding.staged();
+        let staged = staged.get(..len).unwrap_or(staged);
+        // Parsed in place (one model on the stack), checked before it is stored.
+        let mut m = Model::empty(0, 0);
+        let ok = m.parse_into(staged).is_ok() && self.store.finish(Some(staged), &[]).is_ok();
+        if ok {
+            self.install(Some(m));
+            // A new model's terms restart; the stored ones name the old
+            // model's CRC and are not loaded with this one.
+            self.references.reset();
+            let _ = self.store_records();
+        }
         self.end_job(job, ok);
-        // Settings changed while the model was written are in the slot
-        // already (the settings in force at `finish`).
         false
     }
 
@@ -438,8 +402,8 @@ impl<F: BackgroundErase> App<F> {
         match (job, ok) {
             (FlashJob::Model { .. }, true) => h.result = result::OK,
             (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
-            (FlashJob::Settings { .. }, true) => h.result = after,
-            (FlashJob::Settings { .. }, false) => h.result = result::SETTINGS_NOT_STORED,
+            (FlashJob::Settings, true) => h.result = after,
+            (FlashJob::Settings, false) => h.result = result::SETTINGS_NOT_STORED,
         }
     }
 
@@ -459,18 +423,16 @@ impl<F: BackgroundErase> App<F> {
         if matches!(self.job, Some(FlashJob::Model { .. })) {
             return Err(result::COMMIT_IN_PROGRESS);
         }
-        // With the settings and map in force (a pending settings write is
-        // done by this one); a new model's terms restart.
+        // A new model's terms restart (stored with its CRC; a pending
+        // settings write is done by this one).
         self.references.reset();
-        let persisted = self.persisted();
-        self.store
-            .commit_with(image, &persisted)
-            .map_err(|_| result::STORE_FAILED)?;
+        self.store.commit(image).map_err(|_| result::STORE_FAILED)?;
         if self.job.is_some() {
             self.job = None;
             self.server.holding.busy = false;
         }
         self.install(Some(model));
+        let _ = self.store_records();
         Ok(())
     }
 

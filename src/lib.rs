@@ -15,5 +15,6 @@ pub mod model_store;
 pub mod probe_reference;
 pub mod runtime;
 pub mod settings;
+pub mod settings_store;
 pub mod volumetric;
 pub mod watchdog;

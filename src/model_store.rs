@@ -73,6 +73,11 @@ impl<F: NorFlash> ModelStore<F> {
         (!self.settings.is_empty()).then_some(&self.settings[..])
     }
 
+    /// CRC-32 of the active slot's image (0: no model).
+    pub fn active_crc(&self) -> u32 {
+        self.active_image.1
+    }
+
     pub fn flash(&mut self) -> &mut F {
         &mut self.flash
     }

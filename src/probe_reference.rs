@@ -239,61 +239,102 @@ impl References {
         }
     }
 
-    /// The stored block: the setup (holding registers 40–45) and the states.
-    #[allow(
-        clippy::indexing_slicing,
-        reason = "constant offsets; 12 + d·STATE_BYTES + STATE_BYTES <= BLOCK_LEN for d < MAX_DIRECTIONS"
-    )]
+    /// The stored block of the old slot layout (before issue 47): the
+    /// setup (holding registers 40–45) and the states. Still written by
+    /// tests that build an old-layout board; the board itself now keeps
+    /// the setup and each direction's state as records of their own
+    /// ([`crate::settings_store`]).
     pub fn encode(&self, setup: &ProbeSetup) -> [u8; BLOCK_LEN] {
         let mut b = [0u8; BLOCK_LEN];
-        b[0] = TAG;
-        b[1] = VERSION;
-        b[2] = setup.direction.unwrap_or(NONE_U8);
-        b[3..5].copy_from_slice(&setup.samples.to_le_bytes());
-        b[5] = setup.temp_channel.unwrap_or(NONE_U8);
-        b[6..8].copy_from_slice(&setup.drift_nm_per_k.to_le_bytes());
-        b[8..12].copy_from_slice(&setup.gauge_zero.to_le_bytes());
-        for (d, st) in self.states.iter().enumerate() {
-            let at = 2 + SETUP_LEN + d * STATE_BYTES;
-            b[at..at + STATE_BYTES].copy_from_slice(&st.to_bytes());
+        let (head, states) = b.split_at_mut(SETUP_RECORD_LEN);
+        head.copy_from_slice(&encode_setup(setup));
+        let (chunks, _) = states.as_chunks_mut::<STATE_BYTES>();
+        for (c, st) in chunks.iter_mut().zip(&self.states) {
+            *c = st.to_bytes();
         }
         b
     }
 
-    /// A stored block back: the setup and the states in force, to be
-    /// re-based at the first cycle. `None` (nothing changed) for another
-    /// tag, version or length, a value out of range or a state the core refuses.
+    /// A stored block of the old slot layout back: the setup and the
+    /// states in force, to be re-based at the first cycle. `None` (nothing
+    /// changed) for another tag, version or length, a value out of range
+    /// or a state the core refuses.
     pub fn decode(&mut self, b: &[u8]) -> Option<ProbeSetup> {
-        let (&[tag, version, dir, s0, s1, ch, k0, k1, g0, g1, g2, g3], rest) =
-            b.split_first_chunk::<12>()?;
-        if b.len() != BLOCK_LEN || tag != TAG || version != VERSION {
+        if b.len() != BLOCK_LEN {
             return None;
         }
-        let index = |v: u8, n: usize| match v {
-            NONE_U8 => Some(None),
-            v if usize::from(v) < n => Some(Some(v)),
-            _ => None,
-        };
-        let samples = u16::from_le_bytes([s0, s1]);
-        if !(1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&samples) {
-            return None;
-        }
-        let setup = ProbeSetup {
-            direction: index(dir, MAX_DIRECTIONS)?,
-            samples,
-            temp_channel: index(ch, thermocomp_protocol::MAX_CHANNELS)?,
-            drift_nm_per_k: i16::from_le_bytes([k0, k1]),
-            gauge_zero: i32::from_le_bytes([g0, g1, g2, g3]),
-        };
+        let (head, rest) = b.split_at_checked(SETUP_RECORD_LEN)?;
+        let setup = decode_setup(head)?;
         let mut states = [ReferenceState::default(); MAX_DIRECTIONS];
         let (chunks, _) = rest.as_chunks::<STATE_BYTES>();
         for (st, c) in states.iter_mut().zip(chunks) {
             *st = ReferenceState::from_bytes(c).ok()?;
         }
-        self.states = states;
-        self.rebase = true;
+        self.load_states(states);
         Some(setup)
     }
+
+    /// Direction `d`'s state as stored (`None`: no such direction).
+    pub fn state_bytes(&self, d: usize) -> Option<[u8; STATE_BYTES]> {
+        self.states.get(d).map(ReferenceState::to_bytes)
+    }
+
+    /// Stored states in force, to be re-based at the first cycle.
+    pub fn load_states(&mut self, states: [ReferenceState; MAX_DIRECTIONS]) {
+        self.states = states;
+        self.rebase = true;
+    }
+}
+
+/// Length of the stored probe setup: tag, version, 10 bytes of setup.
+pub const SETUP_RECORD_LEN: usize = 2 + SETUP_LEN;
+
+/// The probe setup (holding registers 40–45) as stored.
+pub fn encode_setup(setup: &ProbeSetup) -> [u8; SETUP_RECORD_LEN] {
+    let [s0, s1] = setup.samples.to_le_bytes();
+    let [k0, k1] = setup.drift_nm_per_k.to_le_bytes();
+    let [g0, g1, g2, g3] = setup.gauge_zero.to_le_bytes();
+    [
+        TAG,
+        VERSION,
+        setup.direction.unwrap_or(NONE_U8),
+        s0,
+        s1,
+        setup.temp_channel.unwrap_or(NONE_U8),
+        k0,
+        k1,
+        g0,
+        g1,
+        g2,
+        g3,
+    ]
+}
+
+/// A stored probe setup back; `None` for another tag, version or length,
+/// or a value out of range.
+pub fn decode_setup(b: &[u8]) -> Option<ProbeSetup> {
+    let &[tag, version, dir, s0, s1, ch, k0, k1, g0, g1, g2, g3] = b else {
+        return None;
+    };
+    if tag != TAG || version != VERSION {
+        return None;
+    }
+    let index = |v: u8, n: usize| match v {
+        NONE_U8 => Some(None),
+        v if usize::from(v) < n => Some(Some(v)),
+        _ => None,
+    };
+    let samples = u16::from_le_bytes([s0, s1]);
+    if !(1..=crate::acquisition::probe::MAX_OVERSAMPLE).contains(&samples) {
+        return None;
+    }
+    Some(ProbeSetup {
+        direction: index(dir, MAX_DIRECTIONS)?,
+        samples,
+        temp_channel: index(ch, thermocomp_protocol::MAX_CHANNELS)?,
+        drift_nm_per_k: i16::from_le_bytes([k0, k1]),
+        gauge_zero: i32::from_le_bytes([g0, g1, g2, g3]),
+    })
 }
 
 /// Division rounding to nearest, ties away from zero.

@@ -28,8 +28,11 @@ impl NorFlashError for MockError {
     }
 }
 
+#[derive(Clone)]
 pub struct MockFlash {
     pub bytes: Vec<u8>,
+    /// Erases per `ERASE_SIZE` sector since creation (the wear bench).
+    pub erase_counts: Vec<u64>,
     /// Operations (word programs, sector erases) left before the power fails.
     pub budget: Option<u64>,
     pub powered: bool,
@@ -37,13 +40,27 @@ pub struct MockFlash {
 }
 
 impl MockFlash {
+    /// `size` bytes for the model slots, then the settings store's area.
     pub fn new(size: usize) -> Self {
+        let page = thermocomp::settings_store::PAGE as usize;
+        let settings_at = size.div_ceil(page) * page;
+        let total = settings_at + thermocomp::settings_store::AREA_BYTES as usize;
         MockFlash {
-            bytes: vec![0xFF; size],
+            bytes: vec![0xFF; total],
+            erase_counts: vec![0; total / ERASE_SIZE],
             budget: None,
             powered: true,
             operations: 0,
         }
+    }
+
+    /// Where the settings store's area starts: the last
+    /// [`thermocomp::settings_store::AREA_BYTES`] of the mock (after the
+    /// `size` bytes [`MockFlash::new`] was asked for, rounded up to a store
+    /// page), so a mock whose `bytes` are replaced by another's keeps it.
+    pub fn settings_at(&self) -> u32 {
+        let len = u32::try_from(self.bytes.len()).expect("mock flash under 4 GiB");
+        len.saturating_sub(thermocomp::settings_store::AREA_BYTES)
     }
 
     pub fn power_on(&mut self) {
@@ -108,6 +125,12 @@ impl NorFlash for MockFlash {
                 return Err(e);
             }
             self.bytes[sector..sector + ERASE_SIZE].fill(0xFF);
+            // (`bytes` may have been replaced by a longer copy.)
+            let n = self.bytes.len() / ERASE_SIZE;
+            if self.erase_counts.len() < n {
+                self.erase_counts.resize(n, 0);
+            }
+            self.erase_counts[sector / ERASE_SIZE] += 1;
         }
         Ok(())
     }
@@ -140,4 +163,8 @@ impl NorFlash for MockFlash {
 
 /// Erases at once (the default blocking erase): the application's
 /// background commit runs start → done → program in one `poll_flash`.
-impl thermocomp::hal::flash::BackgroundErase for MockFlash {}
+impl thermocomp::hal::flash::BackgroundErase for MockFlash {
+    fn settings_area(&self) -> std::ops::Range<u32> {
+        self.settings_at()..self.settings_at() + thermocomp::settings_store::AREA_BYTES
+    }
+}

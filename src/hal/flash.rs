@@ -1,5 +1,6 @@
-//! Flash whose erase may run in the background: the model/settings slots
-//! ([`crate::model_store`]). A commit starts the erase of the inactive slot,
+//! The board's flash: the model slots ([`crate::model_store`]), whose erase
+//! may run in the background, and the settings store's own small sectors
+//! ([`crate::settings_store`]). A commit starts the erase of the inactive slot,
 //! the application goes on (Modbus answers, the measurement loop keeps its
 //! period), and programming follows once [`BackgroundErase::erase_done`].
 //!
@@ -10,6 +11,12 @@
 use embedded_storage::nor_flash::NorFlash;
 
 pub trait BackgroundErase: NorFlash {
+    /// Where the settings store lives in this flash
+    /// ([`crate::settings_store`]): [`crate::settings_store::AREA_BYTES`]
+    /// on [`crate::settings_store::PAGE`] boundaries, sectors of its own,
+    /// apart from the model slots at `[0, 2 · slot size)`.
+    fn settings_area(&self) -> core::ops::Range<u32>;
+
     /// Start erasing `[from, to)`; may return before the erase is done.
     fn start_erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         self.erase(from, to)

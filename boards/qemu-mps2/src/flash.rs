@@ -1,4 +1,5 @@
-//! The model slots on the bench board: the MODEL_SLOTS region of memory.x
+//! The model slots and the settings store on the bench board: the
+//! MODEL_SLOTS region of memory.x (slots first, the store's 48 KiB after)
 //! (SSRAM on mps2-an386, so it keeps its contents only while QEMU runs),
 //! behind the same NorFlash trait as the real board's flash, with NOR rules:
 //! erase sets 0xFF, programming only clears bits, aligned writes.
@@ -19,6 +20,10 @@ extern "C" {
 
 pub const SLOTS_BYTES: usize = 128 * 1024;
 pub const SLOT_SIZE: u32 = (SLOTS_BYTES / 2) as u32;
+/// The settings store's area, right after the slots (on the NUCLEO it is
+/// sectors 1–3, three 16 KiB sectors of its own).
+const SETTINGS_AT: usize = SLOTS_BYTES;
+const TOTAL_BYTES: usize = SETTINGS_AT + thermocomp::settings_store::AREA_BYTES as usize;
 
 #[derive(Debug, Clone, Copy)]
 pub enum RamNorError {
@@ -59,7 +64,7 @@ impl RamNor {
         let mem = unsafe {
             core::slice::from_raw_parts_mut(
                 core::ptr::addr_of_mut!(__model_slots_start),
-                SLOTS_BYTES,
+                TOTAL_BYTES,
             )
         };
         Some(RamNor {
@@ -85,7 +90,7 @@ impl ReadNorFlash for RamNor {
         Ok(())
     }
     fn capacity(&self) -> usize {
-        SLOTS_BYTES
+        TOTAL_BYTES
     }
 }
 
@@ -123,6 +128,11 @@ impl NorFlash for RamNor {
 }
 
 impl thermocomp::hal::flash::BackgroundErase for RamNor {
+    #[allow(clippy::cast_possible_truncation, reason = "TOTAL_BYTES < 4 GiB")]
+    fn settings_area(&self) -> core::ops::Range<u32> {
+        SETTINGS_AT as u32..TOTAL_BYTES as u32
+    }
+
     fn start_erase(&mut self, from: u32, to: u32) -> Result<(), RamNorError> {
         self.erase(from, to)?;
         let ms = SLOT_ERASE_MS * u64::from(to - from) / u64::from(SLOT_SIZE);
