@@ -158,6 +158,48 @@ pub struct Turntable {
     pub c: RotaryErrors,
 }
 
+/// `tooltip --turntable` takes a turntable description (`pivot_a_mm`,
+/// `offset_c_mm`, `A`, `C`) and nothing else: any other key means another
+/// kind of file, named in the refusal (an `identify-rotary` model read as a
+/// turntable would be an error-free one, 11–28 µm off: issue 49).
+pub fn refuse_non_turntable(path: &Path) -> Result<()> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: not a turntable file: {e}", path.display()))?;
+    let Some(o) = v.as_object() else {
+        bail!(
+            "{}: not a turntable file (not a JSON object)",
+            path.display()
+        );
+    };
+    let has = |k: &str| o.contains_key(k);
+    let what = if has("location") || has("components") {
+        Some("an identify-rotary model (R-test convention: location, components), not a turntable description; it is what `export --rotary` and `check-rotary --model` read")
+    } else if has("errors") && has("structure") {
+        Some("an errors file of the linear axes; give it as --errors")
+    } else if has("terms") && has("stroke_mm") {
+        Some("a volumetric table (`geometry table --json`), not a turntable description")
+    } else {
+        None
+    };
+    if let Some(w) = what {
+        bail!("{}: this is {w}", path.display());
+    }
+    let extra: Vec<&String> = o
+        .keys()
+        .filter(|k| !["pivot_a_mm", "offset_c_mm", "A", "C"].contains(&k.as_str()))
+        .collect();
+    if !extra.is_empty() {
+        bail!(
+            "{}: not a turntable file: unknown key(s) {} (a turntable has pivot_a_mm, offset_c_mm, A, C)",
+            path.display(),
+            extra.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    Ok(())
+}
+
 impl Turntable {
     pub fn read(path: &Path) -> Result<Turntable> {
         let text =

@@ -581,6 +581,87 @@ pub fn leave_one_line_out(
     })
 }
 
+/// The stated adequacy test (`adequacy::assess`) of an identification from
+/// lines: the design with an explicit zero per line (the same fit as the
+/// centring), each line's rows divided by its stated noise `line_sigma_um`
+/// (σ per reading; σ/√2 for a line whose two runs were averaged), each
+/// line held out in turn. Returns the verdict and the posterior covariance
+/// of `id.params` for the stated noise (not yet inflated).
+pub fn line_adequacy(
+    st: &Structure,
+    lines: &[LineObs],
+    id: &Identification,
+    line_sigma_um: &[f64],
+    noise: super::adequacy::StatedNoise,
+) -> anyhow::Result<(super::adequacy::Adequacy, DMatrix<f64>)> {
+    let n = id.basis.columns.len();
+    let nl = lines.len();
+    let m: usize = lines.iter().map(|l| l.points.len()).sum();
+    let mut a = DMatrix::<f64>::zeros(m, n + nl);
+    let mut b = DVector::<f64>::zeros(m);
+    let mut groups = Vec::new();
+    let mut i = 0;
+    for (k, l) in lines.iter().enumerate() {
+        let s = line_sigma_um[k];
+        let mut g = Vec::new();
+        for p in &l.points {
+            let row = id.basis.row(st, l.direction, p.pos_mm, l.tool_offset_mm);
+            for (j, v) in row.iter().enumerate() {
+                a[(i, j)] = v / s;
+            }
+            a[(i, n + k)] = 1.0 / s;
+            b[i] = p.disp_um / s;
+            g.push(i);
+            i += 1;
+        }
+        groups.push(g);
+    }
+    let mut labels: Vec<String> = id.basis.columns.iter().map(|c| c.label()).collect();
+    labels.extend((0..nl).map(|_| String::new()));
+    let held = (line_sigma_um.iter().map(|s| s * s).sum::<f64>() / nl.max(1) as f64).sqrt();
+    let p = super::adequacy::Problem {
+        a: &a,
+        b: &b,
+        groups: &groups,
+        rank_tol: RANK_TOL,
+        holdout_sigma_um: held,
+        labels: &labels,
+        holdout: "leave-one-line-out",
+    };
+    let r = super::adequacy::assess(&p, noise)?;
+    Ok((r.adequacy, r.covariance.view((0, 0), (n, n)).into_owned()))
+}
+
+/// Posterior standard deviation of `term` at axis position `q_mm` from the
+/// parameters' covariance `cov` (basis order) [µm or µrad].
+pub fn term_sigma(basis: &Basis, cov: &DMatrix<f64>, term: Term, q_mm: f64) -> f64 {
+    let g: Vec<(usize, f64)> = basis
+        .columns
+        .iter()
+        .enumerate()
+        .filter_map(|(j, c)| match *c {
+            Column::Term { term: t, power } if t == term => Some((j, basis.phi(t, power, q_mm))),
+            _ => None,
+        })
+        .collect();
+    let mut v = 0.0;
+    for &(i, gi) in &g {
+        for &(j, gj) in &g {
+            v += gi * gj * cov[(i, j)];
+        }
+    }
+    v.max(0.0).sqrt()
+}
+
+/// Posterior standard deviation of squareness `i` (EC0Y, EB0Z, EA0Z) [µrad].
+pub fn squareness_sigma(basis: &Basis, cov: &DMatrix<f64>, i: usize) -> f64 {
+    basis
+        .columns
+        .iter()
+        .position(|c| *c == Column::Squareness(i))
+        .map_or(0.0, |j| cov[(j, j)].max(0.0).sqrt())
+}
+
 /// The reading noise without a model: the fourth difference of successive
 /// readings along a line takes out any shape up to a cubic (a wave of half
 /// a stroke over 40 target steps keeps 1 % of itself) and leaves white

@@ -18,6 +18,7 @@ pub use errors::{Axis, Component, GeometricErrors, Poly, Squareness, Term};
 pub use kinematics::{
     sensitivity, tool_tip_error_exact, tool_tip_error_linear, Sensitivity, Structure,
 };
+pub mod adequacy;
 pub mod bench_rich;
 pub mod board;
 pub mod board5;

@@ -129,6 +129,12 @@ pub struct RotaryModel {
     /// --partial`): their values here are placeholders (zero), not errors.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub unobservable: Vec<String>,
+    /// The identification's adequacy verdict (issue 49; `identify-rotary`
+    /// writes it). Absent in older files: unknown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequate: Option<bool>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequacy: Option<super::adequacy::Adequacy>,
 }
 
 /// A rotary axis.
@@ -444,6 +450,7 @@ mod tests {
             .map(|(n, c, s)| (n.to_string(), Fourier { cos: c, sin: s }))
             .collect(),
             unobservable: vec![],
+            ..Default::default()
         }
     }
 

@@ -143,6 +143,95 @@ pub struct RotaryIdentification {
     /// Joint fit: the linear model's parameter corrections (basis order).
     #[serde(skip)]
     pub linear_delta: Vec<f64>,
+    /// The stated adequacy test ([`RotaryIdentification::assess`]); the
+    /// σ's of `location`, `drift`, `components` are then the stated
+    /// noise's posterior σ × `sigma_inflation`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adequacy: Option<super::adequacy::Adequacy>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adequate: Option<bool>,
+    /// The problem as solved, for `assess`.
+    #[serde(skip)]
+    pub(crate) design: Option<StoredDesign>,
+}
+
+/// The least-squares problem `solve` saw, with the weights it applied.
+#[derive(Clone, Debug)]
+pub(crate) struct StoredDesign {
+    pub a: DMatrix<f64>,
+    pub b: DVector<f64>,
+    pub rtest_rows: usize,
+    /// Weight already applied to the R-test rows (1/σ_R; 1 unweighted)
+    /// and to any rows after them (the lines of a joint fit: 1/σ_L).
+    pub weight_r: f64,
+    pub weight_l: f64,
+    /// Rows of each file (held out in turn).
+    pub groups: Vec<Vec<usize>>,
+    /// Error name of each unknown (empty for the files' offsets).
+    pub labels: Vec<String>,
+    pub cols: Vec<Col>,
+}
+
+impl RotaryIdentification {
+    /// The stated adequacy test (`adequacy::assess`, each file held out in
+    /// turn) at the stated noise of one R-test reading; the lines of a
+    /// joint fit (averaged runs) at that noise / √2. Replaces the σ's by
+    /// the stated noise's posterior σ × the inflation, and records the
+    /// verdict here and in the model.
+    pub fn assess(&mut self, noise: super::adequacy::StatedNoise) -> Result<()> {
+        let Some(d) = self.design.as_ref() else {
+            bail!("internal: identification without its design");
+        };
+        let (m, _) = d.a.shape();
+        let mut a = d.a.clone();
+        let mut b = d.b.clone();
+        for i in 0..m {
+            let f = if i < d.rtest_rows {
+                1.0 / (d.weight_r * noise.um)
+            } else {
+                std::f64::consts::SQRT_2 / (d.weight_l * noise.um)
+            };
+            a.row_mut(i).scale_mut(f);
+            b[i] *= f;
+        }
+        let p = super::adequacy::Problem {
+            a: &a,
+            b: &b,
+            groups: &d.groups,
+            rank_tol: RANK_TOL,
+            holdout_sigma_um: noise.um,
+            labels: &d.labels,
+            holdout: "leave-one-file-out",
+        };
+        let r = super::adequacy::assess(&p, noise)?;
+        let f = r.adequacy.sigma_inflation;
+        let (mut il, mut id, mut ic) = (0, 0, 0);
+        for (j, col) in d.cols.iter().enumerate() {
+            let tv = match col {
+                Col::Loc(_) => {
+                    il += 1;
+                    self.location.get_mut(il - 1)
+                }
+                Col::Drift(..) => {
+                    id += 1;
+                    self.drift.get_mut(id - 1)
+                }
+                Col::Comp(..) | Col::Whirl(..) => {
+                    ic += 1;
+                    self.components.get_mut(ic - 1)
+                }
+                _ => None,
+            };
+            if let Some(tv) = tv.filter(|t| t.sigma.is_some()) {
+                tv.sigma = Some(f * r.covariance[(j, j)].max(0.0).sqrt());
+            }
+        }
+        self.adequate = Some(r.adequacy.adequate);
+        self.model.adequate = Some(r.adequacy.adequate);
+        self.model.adequacy = Some(r.adequacy.clone());
+        self.adequacy = Some(r.adequacy);
+        Ok(())
+    }
 }
 
 impl Col {
@@ -523,7 +612,33 @@ pub(crate) fn solve(
             .filter(|s| *s > tol)
             .fold(f64::INFINITY, f64::min)
     });
+    let mut groups = Vec::new();
+    let mut row = 0;
+    for f in files {
+        groups.push((row..row + 3 * f.rows.len()).collect());
+        row += 3 * f.rows.len();
+    }
+    let labels = cols
+        .iter()
+        .map(|c| match c {
+            Col::Const(..) => String::new(),
+            _ => c.terms(o).join("/"),
+        })
+        .collect();
+    let design = StoredDesign {
+        a,
+        b,
+        rtest_rows,
+        weight_r: 1.0 / sigma_r,
+        weight_l: 1.0,
+        groups,
+        labels,
+        cols: cols.to_vec(),
+    };
     Ok(RotaryIdentification {
+        adequacy: None,
+        adequate: None,
+        design: Some(design),
         model,
         location,
         drift: drift_v,

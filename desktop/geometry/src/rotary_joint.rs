@@ -142,6 +142,14 @@ pub fn identify_rotary_joint(
         b[mr + i] = y / sigma_l;
     }
     let mut id = solve(files, o, &cols, a, b, &d.reference, mr, sigma_r)?;
+    if let Some(st) = id.design.as_mut() {
+        st.weight_l = 1.0 / sigma_l;
+        for (j, c) in cols.iter().enumerate() {
+            if let Col::Lin(k) = c {
+                st.labels[j] = basis.columns[*k].label();
+            }
+        }
+    }
     if id.linear_delta.len() != nl {
         bail!(
             "internal: joint fit returned {} linear corrections for {nl}",

@@ -164,6 +164,7 @@ pub fn random_rotary(plan: &RPlan, s: &RotarySizes, thermal: bool, rng: &mut Rng
         drift,
         components,
         unobservable: Vec::new(),
+        ..Default::default()
     }
     .canonical()
 }

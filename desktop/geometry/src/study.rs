@@ -19,6 +19,10 @@ pub struct TermJson {
     pub values: Vec<f64>,
     pub unit: String,
     pub poly: Poly,
+    /// Posterior standard deviation at `positions_mm` (identify), inflated
+    /// by the measured misfit (`adequacy.sigma_inflation`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sigma: Vec<f64>,
 }
 
 #[derive(Serialize, Deserialize, Debug, Clone)]
@@ -30,6 +34,12 @@ pub struct ErrorsJson {
     /// Errors the lines did not determine (`identify --partial`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub unobservable_terms: Vec<String>,
+    /// The adequacy verdict of the identification (issue 49); absent in
+    /// files from before the test (then: unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequate: Option<bool>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequacy: Option<crate::adequacy::Adequacy>,
 }
 
 impl ErrorsJson {
@@ -54,6 +64,7 @@ impl ErrorsJson {
                         values,
                         unit: t.component.unit().to_string(),
                         poly,
+                        sigma: Vec::new(),
                     },
                 )
             })
@@ -64,6 +75,8 @@ impl ErrorsJson {
             errors,
             squareness_urad: e.squareness,
             unobservable_terms: Vec::new(),
+            adequate: None,
+            adequacy: None,
         }
     }
 

@@ -85,6 +85,13 @@ pub struct VolumetricPoly {
     pub unobservable_terms: Vec<String>,
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub unobservable_accepted: bool,
+    /// The adequacy verdict of the model the table was built from (issue
+    /// 49; `geometry table` copies it): `export --geometry` refuses
+    /// `false` unless `--accept-inadequate`, warns when absent (unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequate: Option<bool>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adequacy: Option<crate::adequacy::Adequacy>,
 }
 
 impl VolumetricPoly {
@@ -204,6 +211,8 @@ pub fn build(
         max_fit_error_um: 0.0,
         unobservable_terms: Vec::new(),
         unobservable_accepted: false,
+        adequate: None,
+        adequacy: None,
     };
     // Check on points off the fitting grid, at the reference and 5 K above it.
     let mut worst = 0.0f64;

@@ -48,6 +48,10 @@ pub struct ExportArgs {
     /// Serve a rotary model whose identification marked terms unobservable.
     #[arg(long, requires = "rotary")]
     pub allow_unobservable: bool,
+    /// Serve a volumetric table or rotary model that failed the adequacy
+    /// test (`geometry identify`/`identify-rotary`; docs/geometry.md).
+    #[arg(long)]
+    pub accept_inadequate: bool,
     /// A range and C range of the five-axis section (degrees, min,max);
     /// outside, the angle is held at the edge and flagged.
     #[arg(
@@ -89,12 +93,21 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         geometry_origin_mm,
         rotary,
         allow_unobservable,
+        accept_inadequate,
         a_range_deg,
         c_range_deg,
         out,
         sign,
         json,
     } = args;
+    // The adequacy verdicts (refused first; warnings once the image is written).
+    let mut adequacy_warnings = Vec::new();
+    for p in geometry.iter().chain(&rotary) {
+        adequacy_warnings.extend(tcomp_geometry::adequacy::check_json_file(
+            p,
+            accept_inadequate,
+        )?);
+    }
     if rotary.is_some() && geometry.is_none() {
         anyhow::bail!(
             "--rotary needs --geometry <vol.json>: the five-axis section adds to the volumetric section"
@@ -172,6 +185,9 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
     };
     let summary = tcomp_model::export::export_five(&float, section, five, &out, sign.as_ref())?;
     tcomp_model::export::print_summary(&summary, &out, json);
+    adequacy_warnings
+        .iter()
+        .for_each(|w| eprintln!("warning: {w}"));
     Ok(())
 }
 

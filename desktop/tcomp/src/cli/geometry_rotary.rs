@@ -89,6 +89,14 @@ pub struct IdentifyRotaryArgs {
     /// Write the identified model (JSON) here.
     #[arg(long)]
     pub model_out: Option<PathBuf>,
+    /// Noise of one R-test reading [µm] for the adequacy test (default:
+    /// the documented 0.5 µm, said so in the report).
+    #[arg(long)]
+    pub noise_um: Option<f64>,
+    /// Write the model even when it fails the adequacy test (marked
+    /// `"adequate": false`, σ's inflated by the misfit).
+    #[arg(long)]
+    pub accept_inadequate: bool,
     /// A true model (sim-rotary's rotary-truth.json): print the recovery.
     #[arg(long)]
     pub truth: Option<PathBuf>,
@@ -276,11 +284,19 @@ enum LinearIn {
 }
 
 /// The linear axes' errors from an errors JSON or line files.
-fn linear_input(paths: &[PathBuf]) -> Result<LinearIn> {
+fn linear_input(paths: &[PathBuf], accept_inadequate: bool) -> Result<LinearIn> {
     match paths {
         [] => Ok(LinearIn::None),
         [p] if p.extension().is_some_and(|e| e == "json") => {
             let ej = ErrorsJson::read(p)?;
+            if let Some(w) = tcomp_geometry::adequacy::check_model_file(
+                ej.adequate,
+                p,
+                accept_inadequate,
+                ej.adequacy.as_ref().map(|a| a.failure.as_str()),
+            )? {
+                eprintln!("warning: {w}");
+            }
             if !ej.unobservable_terms.is_empty() {
                 bail!(
                     "{}: the linear model has unobservable terms ({}); it cannot be known input",
@@ -323,7 +339,8 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
     if a.drift.is_some() && sensors.is_empty() {
         bail!("--drift: the files have no T_ columns");
     }
-    let lin = linear_input(&a.lines)?;
+    let noise = tcomp_geometry::adequacy::StatedNoise::new(a.noise_um)?;
+    let lin = linear_input(&a.lines, a.accept_inadequate)?;
     let o = RotaryOptions {
         order_c: a.order_c,
         order_a: a.order_a,
@@ -339,7 +356,7 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         };
         identify_rotary(&files, Some(l), &o)
     };
-    let id = match &lin {
+    let mut id = match &lin {
         LinearIn::None => identify_rotary(&files, None, &o)?,
         LinearIn::Known(st, e) => fixed(st, e)?,
         LinearIn::Lines(st, idl, ..) if a.linear_fixed => fixed(st, &idl.errors)?,
@@ -357,6 +374,20 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
             id
         }
     };
+    id.assess(noise)?;
+    let adq = id
+        .adequacy
+        .clone()
+        .ok_or_else(|| anyhow::anyhow!("internal: no adequacy verdict"))?;
+    if !adq.adequate && !a.accept_inadequate {
+        bail!(
+            "{}",
+            adq.refusal(
+                &format!("the rotary model of these {} R-test files", files.len()),
+                "measure more: more nests, tool lengths and sweeps (`tcomp geometry plan-rotary`), the linear axes with more lines (`tcomp geometry plan`)"
+            )
+        );
+    }
     let truth = a.truth.as_ref().map(|p| RotaryModel::read(p)).transpose()?;
     if let Some(p) = &a.model_out {
         write_json(p, &serde_json::to_value(&id.model)?)?;
@@ -369,6 +400,13 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         println!("{v}");
     } else {
         print_identification(&id, truth.as_ref());
+        super::geometry::print_adequacy(&adq);
+    }
+    if !adq.adequate {
+        eprintln!(
+            "warning: the rotary model is inadequate ({}); going on (--accept-inadequate): marked \"adequate\": false, σ's inflated ×{:.1}",
+            adq.failure, adq.sigma_inflation
+        );
     }
     let bad: Vec<&String> = id
         .unobservable_terms

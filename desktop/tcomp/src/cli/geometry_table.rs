@@ -19,6 +19,10 @@ pub struct TableArgs {
     /// table then carries them and `export --geometry` takes it).
     #[arg(long)]
     pub allow_unobservable: bool,
+    /// Build from a model that failed the adequacy test (the table is then
+    /// marked `"adequate": false`, and `export --geometry` asks again).
+    #[arg(long)]
+    pub accept_inadequate: bool,
     #[arg(long)]
     pub json: bool,
 }
@@ -43,8 +47,26 @@ pub struct TooltipArgs {
     /// Use a model whose identification marked errors unobservable.
     #[arg(long)]
     pub allow_unobservable: bool,
+    /// Use a model that failed the adequacy test (output marked).
+    #[arg(long)]
+    pub accept_inadequate: bool,
     #[arg(long)]
     pub json: bool,
+}
+
+/// The errors file's adequacy verdict: refused when inadequate (unless
+/// `accept`), a warning on stderr when accepted or unknown. Returns the
+/// verdict (`None`: unknown).
+fn model_adequacy(ej: &ErrorsJson, path: &std::path::Path, accept: bool) -> Result<Option<bool>> {
+    if let Some(w) = tcomp_geometry::adequacy::check_model_file(
+        ej.adequate,
+        path,
+        accept,
+        ej.adequacy.as_ref().map(|a| a.failure.as_str()),
+    )? {
+        eprintln!("warning: {w}");
+    }
+    Ok(ej.adequate)
 }
 
 pub fn parse_triple(s: &str, what: &str) -> Result<[f64; 3]> {
@@ -65,17 +87,19 @@ pub fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
     use tcomp_geometry::five_axis::{
         tool_tip_error_exact5, tool_tip_error_linear5, RotaryPos, Turntable,
     };
-    let (st, lin) = match &a.errors {
+    let (st, lin, adequate) = match &a.errors {
         Some(p) => {
             let ej = ErrorsJson::read(p)?;
             let st = Structure::parse(&ej.structure)
                 .with_context(|| format!("{}: structure", p.display()))?;
             tcomp_geometry::guard::refuse_model(&ej.unobservable_terms, p, a.allow_unobservable)?;
-            (st, ej.to_errors()?)
+            let adequate = model_adequacy(&ej, p, a.accept_inadequate)?;
+            (st, ej.to_errors()?, adequate)
         }
         None => (
             Structure::parse(&a.structure).context("--structure")?,
             GeometricErrors::zero(),
+            None,
         ),
     };
     let v: Vec<f64> = a
@@ -89,7 +113,10 @@ pub fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
     }
     let tool = parse_triple(&a.tool, "--tool")?;
     let turntable = match &a.turntable {
-        Some(p) => Turntable::read(p)?,
+        Some(p) => {
+            tcomp_geometry::five_axis::refuse_non_turntable(p)?;
+            Turntable::read(p)?
+        }
         None if v.len() == 5 => bail!("--at gives rotary angles but no --turntable file"),
         None => Turntable::default(),
     };
@@ -106,7 +133,7 @@ pub fn tooltip_cmd(a: TooltipArgs) -> Result<()> {
             serde_json::json!({"frame": "workpiece", "unit": "um",
                 "exact_um": [exact.x, exact.y, exact.z],
                 "first_order_um": [linear.x, linear.y, linear.z],
-                "length_um": exact.norm()})
+                "length_um": exact.norm(), "adequate": adequate})
         );
         return Ok(());
     }
@@ -148,7 +175,10 @@ pub fn table_cmd(a: TableArgs) -> Result<()> {
     let st = Structure::parse(&ej.structure)
         .with_context(|| format!("{}: structure", a.model.display()))?;
     tcomp_geometry::guard::refuse_model(&ej.unobservable_terms, &a.model, a.allow_unobservable)?;
+    let adequate = model_adequacy(&ej, &a.model, a.accept_inadequate)?;
     let mut p = tcomp_geometry::volumetric::build(&st, ej.stroke_mm, &ej.to_errors()?, None)?;
+    p.adequate = adequate;
+    p.adequacy = ej.adequacy.clone();
     p.unobservable_terms = ej.unobservable_terms.clone();
     p.unobservable_accepted = a.allow_unobservable && !p.unobservable_terms.is_empty();
     let bytes = p.terms.len() * 16;
