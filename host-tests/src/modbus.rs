@@ -107,22 +107,26 @@ pub fn read_inputs<F: BackgroundErase>(app: &mut App<F>, addr: u16, n: u16, now:
         .collect()
 }
 
-/// Unlock with [`crate::TEST_UNLOCK_KEY`], then write `v` to holding
+/// Unlock with [`crate::keys::TEST_UNLOCK_KEY`], then write `v` to holding
 /// register `addr` (unit 1); the reply to the write.
 pub fn write_unlocked<F: BackgroundErase>(app: &mut App<F>, addr: u16, v: u16) -> Vec<u8> {
     let mut reply = Reply::new();
-    for (a, v) in [(HR_UNLOCK, crate::TEST_UNLOCK_KEY), (addr, v)] {
+    for (a, v) in [(HR_UNLOCK, crate::keys::TEST_UNLOCK_KEY), (addr, v)] {
         app.request(&write1(1, a, v), 0, &mut reply);
     }
     reply.to_vec()
 }
 
-/// Unlock with [`crate::TEST_UNLOCK_KEY`], stage `img` 100 registers a
+/// Unlock with [`crate::keys::TEST_UNLOCK_KEY`], stage `img` 100 registers a
 /// frame, write its length and send `command` (unit 1), then give the
 /// flash job one poll; the reply to the command.
 pub fn stage_and_send<F: BackgroundErase>(app: &mut App<F>, img: &[u8], command: u16) -> Vec<u8> {
     let mut reply = Reply::new();
-    app.request(&write1(1, HR_UNLOCK, crate::TEST_UNLOCK_KEY), 0, &mut reply);
+    app.request(
+        &write1(1, HR_UNLOCK, crate::keys::TEST_UNLOCK_KEY),
+        0,
+        &mut reply,
+    );
     for (i, chunk) in be_words(img).chunks(100).enumerate() {
         app.request(
             &write_n(1, HR_STAGING + (i * 100) as u16, chunk),
@@ -140,7 +144,7 @@ pub fn stage_and_send<F: BackgroundErase>(app: &mut App<F>, img: &[u8], command:
 /// commissioned (a board that has its key already keeps it).
 pub fn boot(flash: MockFlash, map: ChannelMap) -> App<MockFlash> {
     let mut app = App::new(flash, SLOT, 1, 115_200, map);
-    crate::commission(&mut app);
+    commission(&mut app);
     app
 }
 
@@ -192,4 +196,34 @@ pub fn app_on_socket<F: BackgroundErase + Send + 'static>(
     app: std::sync::Arc<std::sync::Mutex<App<F>>>,
 ) -> String {
     rtu_socket(move |req| answer(&mut app.lock().unwrap(), req))
+}
+
+/// Give a fresh board its own unlock key [`TEST_UNLOCK_KEY`] as `tcomp
+/// commission` does (factory code, register 67, command 15), and drive the
+/// flash write to its end; the board ends locked. A board that has its
+/// key already is left as it is.
+pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermocomp::app::App<F>) {
+    use thermocomp_protocol::holding::*;
+    if app.server.holding.keys.unlock.is_some() {
+        return; // commissioned already (a reboot of a commissioned board)
+    }
+    let unit = app.server.holding.unit;
+    let mut reply = heapless::Vec::<u8, { thermocomp_protocol::rtu::MAX_FRAME }>::new();
+    for (addr, v) in [
+        (HR_UNLOCK, FACTORY_UNLOCK_CODE),
+        (HR_NEW_UNLOCK_KEY, crate::keys::TEST_UNLOCK_KEY),
+        (HR_COMMAND, CMD_SET_UNLOCK_KEY),
+    ] {
+        app.request(&write1(unit, addr, v), 0, &mut reply);
+        assert_eq!(
+            reply.get(1),
+            Some(&6),
+            "commissioning write {addr}={v:#x}: {reply:02x?}"
+        );
+    }
+    while app.poll_flash() {}
+    assert_eq!(
+        app.server.holding.keys.unlock,
+        Some(crate::keys::TEST_UNLOCK_KEY)
+    );
 }

@@ -4,7 +4,7 @@
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 
-use super::SharedApp;
+use super::shared::SharedApp;
 use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::rom::SearchError;
 use crate::acquisition::temperature::TemperatureAcquisition;

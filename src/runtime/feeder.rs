@@ -4,7 +4,7 @@
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embedded_hal_async::delay::DelayNs;
 
-use super::SharedApp;
+use super::shared::SharedApp;
 use crate::hal::clock::Clock;
 use crate::hal::flash::BackgroundErase;
 use crate::hal::watchdog::Watchdog;

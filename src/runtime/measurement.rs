@@ -6,7 +6,7 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 use embedded_hal_async::delay::DelayNs;
 use thermocomp_core::{Model, StepOutput};
 
-use super::SharedApp;
+use super::shared::SharedApp;
 use crate::acquisition::probe::ProbeReading;
 use crate::acquisition::temperature::{CycleReport, TemperatureAcquisition};
 use crate::hal::flash::BackgroundErase;

@@ -1,5 +1,5 @@
 //! The board loop, written once: what every board runs on top of its
-//! drivers. A board builds its one [`App`] into a `static` before it spawns
+//! drivers. A board builds its one [`crate::app::App`] into a `static` before it spawns
 //! anything ([`SharedApp`]), then runs
 //! - the measurement loop ([`measurement_loop`]): sensor search and
 //!   configuration at boot ([`start_sensors`]), the boot report
@@ -17,16 +17,10 @@ mod boot;
 mod feeder;
 mod measurement;
 mod modbus;
+mod shared;
 
 pub use boot::{boot_report, start_sensors, BootReport, SensorStart};
 pub use feeder::{watchdog_loop, BOOT_DEADLINE_MS, FEED_CHECK_MS};
 pub use measurement::{measurement_loop, CycleDone, CycleInput, CycleSource};
 pub use modbus::modbus_loop;
-
-use crate::app::App;
-use core::cell::RefCell;
-use embassy_sync::blocking_mutex::Mutex;
-
-/// The app state as the boards share it between their tasks: built once,
-/// before the tasks start, and locked only between awaits.
-pub type SharedApp<M, F> = Mutex<M, RefCell<App<F>>>;
+pub use shared::SharedApp;

@@ -2,7 +2,7 @@
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 
-use super::SharedApp;
+use super::shared::SharedApp;
 use crate::app::LinkChange;
 use crate::fault::FaultBoard;
 use crate::hal::clock::Clock;

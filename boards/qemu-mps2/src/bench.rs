@@ -6,8 +6,10 @@ use core::fmt::Write as _;
 use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
 use thermocomp_core::{Compensator, Model, StepInput};
 
+use crate::cycles;
+use crate::exit::{exit_code, finish};
 use crate::host_files::{golden, load_model};
-use crate::{cycles, exit_code, log};
+use crate::semihost::log;
 
 #[embassy_executor::task]
 pub async fn bench(golden_path: Option<&'static str>, model_path: Option<&'static str>) {
@@ -81,7 +83,7 @@ pub async fn bench(golden_path: Option<&'static str>, model_path: Option<&'stati
         verify_insn, ok, calibration
     );
     log!("{}}}", line);
-    crate::finish(exit_code::OK)
+    finish(exit_code::OK)
 }
 
 /// Issue 30: instructions of one Ed25519 verification (what a commit with

@@ -6,7 +6,9 @@ use thermocomp_core::limits::MAX_IMAGE_BYTES;
 use thermocomp_core::Model;
 use thermocomp_protocol::trace::TraceSample;
 
-use crate::{exit_code, host_trace, log, semihost};
+use crate::exit::exit_code;
+use crate::host_trace;
+use crate::semihost::{self, log};
 
 /// Read a whole host file into `buf`; None (logged) when it cannot.
 pub fn read_host_file<'a>(path: &str, buf: &'a mut [u8]) -> Option<&'a [u8]> {
@@ -107,7 +109,7 @@ pub mod golden {
         };
         match thermocomp_core::golden::check(bytes) {
             Ok(n) => {
-                crate::log!(
+                crate::semihost::log!(
                     "golden vectors {}: {} steps reproduced bit for bit: pass",
                     path,
                     n
@@ -115,7 +117,7 @@ pub mod golden {
                 true
             }
             Err(e) => {
-                crate::log!("golden vectors {}: {:?}: FAIL", path, e);
+                crate::semihost::log!("golden vectors {}: {:?}: FAIL", path, e);
                 false
             }
         }

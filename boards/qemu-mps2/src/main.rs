@@ -30,6 +30,7 @@ mod bench;
 mod cycles;
 mod emulated_bus;
 mod executor;
+mod exit;
 mod flash;
 mod host_files;
 mod host_trace;
@@ -41,7 +42,6 @@ mod selftest;
 mod semihost;
 mod sensors;
 mod serve;
-use board_support::stack;
 mod time_driver;
 mod uart;
 
@@ -52,14 +52,8 @@ use embassy_executor::Spawner;
 use static_cell::StaticCell;
 use thermocomp::fault;
 
-/// Exit codes of the bench firmware (the host tests check them).
-pub mod exit_code {
-    pub const OK: u32 = 0;
-    pub const SELFTEST_FAILED: u32 = 1;
-    pub const BAD_COMMAND_LINE: u32 = 2;
-    pub const TRACE_ERROR: u32 = 3;
-    pub const PANIC: u32 = 101;
-}
+use exit::exit_code;
+use semihost::log;
 
 static EXECUTOR: StaticCell<executor::Executor> = StaticCell::new();
 
@@ -137,13 +131,6 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
             semihost::exit(exit_code::BAD_COMMAND_LINE)
         }
     }
-}
-
-/// The end of a one-shot mode (selftest, replay, bench): the stack's
-/// high-water mark (`scripts/size.sh` reads it), then QEMU exits with `code`.
-fn finish(code: u32) -> ! {
-    log!("stack high-water: {} B", stack::high_water());
-    semihost::exit(code)
 }
 
 /// Device interrupts: this machine has no PAC, so every IRQ lands here.

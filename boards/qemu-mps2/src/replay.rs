@@ -7,9 +7,10 @@ use thermocomp::acquisition::temperature::CycleReport;
 use thermocomp::compensation::{Compensation, PlcInputs};
 use thermocomp_core::{Model, StepOutput};
 
+use crate::exit::{exit_code, finish};
 use crate::host_files::{load_model, next_sample_or_exit, open_trace};
+use crate::semihost::log;
 use crate::sensors::Sensors;
-use crate::{exit_code, log};
 
 #[embassy_executor::task]
 pub async fn replay(path: &'static str, model_path: Option<&'static str>) {
@@ -40,7 +41,7 @@ pub async fn replay(path: &'static str, model_path: Option<&'static str>) {
         );
     }
     log!("replay done: {} samples", rows);
-    crate::finish(exit_code::OK)
+    finish(exit_code::OK)
 }
 
 /// One line per sample: time, sensors, each direction's served correction

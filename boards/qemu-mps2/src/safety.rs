@@ -165,7 +165,7 @@ unsafe extern "C" fn watchdog_nmi(frame: *const u32) -> ! {
     let pc = unsafe { read_volatile(frame.add(6)) };
     // The bus first (the UART off), then the log.
     <Bench as FaultBoard>::safe_state();
-    crate::log!(
+    crate::semihost::log!(
         "watchdog expired at pc={:#010x} (stalled: {:#x}); fault recorded, resetting",
         pc,
         STALLED.load(Ordering::Relaxed)

@@ -3,8 +3,10 @@
 use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_time::{Duration, Instant, Timer};
 
+use crate::cycles;
+use crate::exit::{exit_code, finish};
 use crate::host_files::golden;
-use crate::{cycles, exit_code, log};
+use crate::semihost::log;
 
 static TICKS_SEEN: AtomicU32 = AtomicU32::new(0);
 
@@ -60,7 +62,7 @@ pub async fn selftest(golden_path: Option<&'static str>) {
         failures += u32::from(!golden::check_file(path));
     }
     log!("selftest: {} failure(s)", failures);
-    crate::finish(if failures == 0 {
+    finish(if failures == 0 {
         exit_code::OK
     } else {
         exit_code::SELFTEST_FAILED

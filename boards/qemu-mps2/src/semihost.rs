@@ -11,17 +11,18 @@ use core::fmt::Write;
 use cortex_m_semihosting::{hio, syscall};
 
 /// Print a line on the host's stdout (the QEMU console). Never the Modbus UART.
-pub fn log(args: core::fmt::Arguments) {
+pub fn log_args(args: core::fmt::Arguments) {
     if let Ok(mut out) = hio::hstdout() {
         let _ = out.write_fmt(args);
         let _ = out.write_str("\n");
     }
 }
 
-#[macro_export]
 macro_rules! log {
-    ($($arg:tt)*) => { $crate::semihost::log(format_args!($($arg)*)) };
+    ($($arg:tt)*) => { $crate::semihost::log_args(format_args!($($arg)*)) };
 }
+/// `log!` by path (`use crate::semihost::log`), like any other item.
+pub(crate) use log;
 
 /// Stop QEMU with `code` as its process exit status (SYS_EXIT_EXTENDED with
 /// ADP_Stopped_ApplicationExit, which QEMU maps to exit(code)).

@@ -9,7 +9,8 @@ use thermocomp::runtime;
 use thermocomp_protocol::trace::TraceSample;
 
 use crate::emulated_bus::EmulatedBus;
-use crate::{exit_code, log, semihost};
+use crate::exit::exit_code;
+use crate::semihost::{self, log};
 
 pub struct Sensors {
     pub bus: EmulatedBus,

@@ -21,9 +21,11 @@ use crate::host_files::{next_sample_or_exit, open_trace, read_host_file};
 use crate::host_trace::HostTrace;
 use crate::probe::EmulatedProbe;
 use crate::replay::log_correction;
+use crate::semihost::log;
 use crate::sensors::{put_sample, Sensors};
 use crate::time_driver::Uptime;
-use crate::{flash, log, rtu_port, safety, stack};
+use crate::{flash, rtu_port, safety};
+use board_support::stack;
 use thermocomp::acquisition::probe::ProbeReading;
 
 /// The application state the serve tasks share: built in place once,

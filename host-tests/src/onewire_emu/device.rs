@@ -1,6 +1,6 @@
 //! One emulated DS18B20.
 
-use super::{MS, US};
+use super::time::{MS, US};
 use thermocomp::acquisition::ds18b20::{self, Resolution, POWER_ON_RAW};
 use thermocomp::acquisition::rom::RomCode;
 

@@ -22,6 +22,7 @@
 
 mod device;
 pub mod replay;
+mod time;
 
 pub use device::{Ds18b20, Fault};
 
@@ -29,8 +30,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use thermocomp::acquisition::bitbang::{BusyDelay, OpenDrainPin};
 
-pub const US: u64 = 1_000;
-pub const MS: u64 = 1_000_000;
+pub use time::{MS, US};
 
 /// Timing violations seen by the devices, by kind.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
