@@ -39,6 +39,9 @@ impl Run {
         // `time_s` may stand anywhere in the file; the run keeps it first
         // (the order every writer uses), the other columns in file order
         let Some(time_at) = names.iter().position(|c| c == "time_s") else {
+            if let Some(why) = foreign_separator(&names) {
+                bail!("{why}");
+            }
             bail!(
                 "header has no `time_s` column (columns: {})",
                 names.join(",")
@@ -61,8 +64,14 @@ impl Run {
                 .map(|f| std::str::from_utf8(f).unwrap_or_default())
                 .collect();
             if in_file.len() != run.columns.len() {
+                // `20,5` for 20.5 splits a value in two
+                let hint = if in_file.len() > run.columns.len() {
+                    " (decimal commas? the format writes numbers with a decimal point, 20.5, and separates fields with commas: export it so)"
+                } else {
+                    ""
+                };
                 bail!(
-                    "line {}: {} fields, header has {} columns",
+                    "line {}: {} fields, header has {} columns{hint}",
                     n,
                     in_file.len(),
                     run.columns.len()
@@ -74,8 +83,13 @@ impl Run {
                     None
                 } else {
                     let v: f64 = f.parse().map_err(|_| {
+                        let hint = if f.replacen(',', ".", 1).parse::<f64>().is_ok() {
+                            " (a decimal comma: the format writes 20.5, not 20,5; export the file with decimal points)"
+                        } else {
+                            ""
+                        };
                         anyhow::anyhow!(
-                            "line {}, column `{}`: cannot parse `{}` as a number",
+                            "line {}, column `{}`: cannot parse `{}` as a number{hint}",
                             n,
                             run.columns[c],
                             f
@@ -91,8 +105,13 @@ impl Run {
                     }
                     if let Some((lo, hi, unit)) = ranges[c] {
                         if !(lo..=hi).contains(&v) {
+                            let hint = if unit == "°C" && (250.0..=400.0).contains(&v) {
+                                " (kelvin? the format's temperatures are °C: subtract 273.15)"
+                            } else {
+                                ""
+                            };
                             bail!(
-                                "line {}, column `{}`: {f} {unit} is outside the possible {lo}..={hi} {unit}",
+                                "line {}, column `{}`: {f} {unit} is outside the possible {lo}..={hi} {unit}{hint}",
                                 n,
                                 run.columns[c],
                             );
@@ -436,6 +455,22 @@ fn read_head<R: BufRead>(
         break t.to_string();
     };
     Ok((header, header_line))
+}
+
+/// Why a header without `time_s` is not the format's: a semicolon or tab
+/// separated export (a spreadsheet in a locale with decimal commas).
+fn foreign_separator(names: &[String]) -> Option<String> {
+    let joined = names.join(",");
+    for (sep, name) in [(';', "';'"), ('\t', "a tab")] {
+        if joined.split(sep).any(|c| c.trim() == "time_s")
+            || (names.len() == 1 && joined.contains(sep))
+        {
+            return Some(format!(
+                "this file uses {name} as separator; export it as comma-separated, numbers with a decimal point (docs/formats/run-csv.md)"
+            ));
+        }
+    }
+    None
 }
 
 /// The header's column names, in file order, checked.

@@ -31,6 +31,8 @@ pub struct ExportSummary {
     pub fallbacks: usize,
     /// Sensors the image names by 1-Wire ROM code (the rest by channel).
     pub sensors_by_rom: usize,
+    /// The wiring: each model sensor and the board channel it is read on.
+    pub wiring: Vec<Wire>,
     /// The volumetric section (`--geometry`) and what its quantisation costs.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub volumetric: Option<tcomp_geometry::board::QuantisationReport>,
@@ -42,6 +44,20 @@ pub struct ExportSummary {
     /// the file then carries the 72-byte signature trailer after `bytes`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub signed_by: Option<String>,
+}
+
+/// One model sensor and where the board reads it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Wire {
+    /// The run's temperature column (unknown for the demo model).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<String>,
+    /// The board's channel, `T01` … `T20` (the run's T_ column order).
+    pub board_channel: String,
+    /// The sensor's 1-Wire ROM code when the image names it so (the board
+    /// then reads it on whatever channel it is found).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rom: Option<String>,
 }
 
 /// A volumetric section to add to the image, with its quantisation report.
@@ -172,6 +188,15 @@ fn summary(m: &Model, bytes: &[u8], r: &QuantReport) -> ExportSummary {
         samples: r.samples,
         fallbacks: m.fallbacks.len(),
         sensors_by_rom: m.sensors.iter().filter(|s| s.rom != [0; 8]).count(),
+        wiring: m
+            .sensors
+            .iter()
+            .map(|s| Wire {
+                sensor: None,
+                board_channel: format!("T{:02}", usize::from(s.channel) + 1),
+                rom: (s.rom != [0; 8]).then(|| tcomp_data::runcsv::format_rom(&s.rom)),
+            })
+            .collect(),
         volumetric: None,
         five_axis: None,
         signed_by: None,
@@ -239,6 +264,19 @@ pub fn print_summary(s: &ExportSummary, out: &Path, json: bool) {
             "  {} sensor(s) named by 1-Wire ROM code (the board reads each from its own sensor, whatever its channel)",
             s.sensors_by_rom
         );
+    }
+    if !s.wiring.is_empty() {
+        println!("  wiring (model sensor → board channel):");
+        for (i, w) in s.wiring.iter().enumerate() {
+            let name = w.sensor.clone().unwrap_or_else(|| format!("sensor {i}"));
+            match &w.rom {
+                Some(rom) => println!(
+                    "    {name} → {} (by ROM {rom}: read on whatever channel that sensor is found)",
+                    w.board_channel
+                ),
+                None => println!("    {name} → {}", w.board_channel),
+            }
+        }
     }
     for (d, dev) in s.directions.iter().zip(&s.max_deviation_um) {
         println!(

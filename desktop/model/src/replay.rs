@@ -198,6 +198,9 @@ pub struct Residual {
     /// RMS(residual) ≤ RMS(measured) about the reference: the board did not
     /// make this block worse than no compensation.
     pub never_worse: bool,
+    /// The same about the block's own mean (RMS about the mean not above
+    /// the uncompensated one: `reduction_about_mean_pct` ≥ 0).
+    pub never_worse_about_mean: bool,
 }
 
 /// Rows per status flag over the scored block.
@@ -295,6 +298,7 @@ pub fn residuals(
             uncompensated_rms_about_mean_um: m_rms0,
             reduction_about_mean_pct: reduction(r_rms0, m_rms0),
             never_worse: r_rms <= m_rms,
+            never_worse_about_mean: r_rms0 <= m_rms0 * (1.0 + 1e-12),
         });
     }
     out

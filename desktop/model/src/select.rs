@@ -340,10 +340,15 @@ pub fn print_selection(s: &Selection) {
         s.sensors.len(),
         s.directions.join(",")
     );
+    println!(
+        "score: summed |r| of the sensor's rise with each error column (r: Pearson correlation, no unit; 0 to {} over {} column(s))",
+        s.directions.len(),
+        s.directions.len()
+    );
     for (i, g) in s.clusters.iter().enumerate() {
         let members: Vec<String> = g
             .iter()
-            .map(|n| format!("{n} ({:.3})", s.scores[n]))
+            .map(|n| format!("{n} (score {:.3})", s.scores[n]))
             .collect();
         println!(
             "group {}: {}  -> {}",

@@ -27,12 +27,15 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Quantize a model through the core's quantizer and write the board's model image.
+    #[command(after_help = cli::export::EXAMPLE)]
     Export(cli::export::ExportArgs),
     /// The board's output for a run, computed by the desktop core (bit-exact
     /// with the firmware), and its error against the measured channels.
+    #[command(after_help = cli::replay::EXAMPLE)]
     Replay(cli::replay::ReplayArgs),
     /// Send a model image to a board over Modbus RTU and check it serves it.
     Upload {
+        /// The model image (`tcomp export -o`).
         image: std::path::PathBuf,
         #[command(flatten)]
         link: LinkArgs,
@@ -45,6 +48,7 @@ enum Command {
         /// now (it serves without them: fallback or held).
         #[arg(long)]
         allow_missing_sensors: bool,
+        /// Print the result as JSON.
         #[arg(long)]
         json: bool,
     },
@@ -62,10 +66,13 @@ enum Command {
     Record {
         #[command(flatten)]
         link: LinkArgs,
+        /// The run CSV to write.
         #[arg(short, long)]
         out: std::path::PathBuf,
+        /// Seconds between samples.
         #[arg(long, default_value_t = 1.0)]
         interval_s: f64,
+        /// Number of samples to record.
         #[arg(long, default_value_t = 10)]
         samples: usize,
         /// Continue an existing file (same board, same columns).
@@ -87,6 +94,7 @@ enum Command {
     /// SVG plots: temperatures, measured error vs the board's correction,
     /// residual before/after, and the sensor clusters.
     Report {
+        /// The run CSV to plot.
         run: std::path::PathBuf,
         /// Model image: adds the error and residual plots (the board's output, via replay).
         #[arg(long)]
@@ -94,33 +102,42 @@ enum Command {
         /// Add the K-means++ cluster map of `select`.
         #[arg(long)]
         select: bool,
+        /// Folder for the SVG files (created if missing).
         #[arg(short, long)]
         out: std::path::PathBuf,
+        /// Print the written files as JSON.
         #[arg(long)]
         json: bool,
     },
     /// Write golden vectors (demo model, inputs, host outputs) for the board's self-test.
     Golden {
+        /// The golden-vector file to write.
         #[arg(short, long)]
         out: std::path::PathBuf,
+        /// Compensator steps to record.
         #[arg(long, default_value_t = 2000)]
         steps: u32,
+        /// Seed of the demo model and its inputs.
         #[arg(long, default_value_t = 99)]
         seed: u64,
     },
     /// Temperature-sensitive points: K-means++ groups, correlation scores, best sensor per group.
     Select(cli::select::SelectArgs),
     /// Fit MLR and GA-BPN models per channel; validate on held-out runs or time blocks.
+    #[command(after_help = cli::fit::EXAMPLE)]
     Fit(cli::fit::FitArgs),
     /// Simulate a machine's thermal behaviour under a duty cycle into a run CSV.
     Sim(cli::sim::SimArgs),
     /// Diagnose the sim-to-real gap of measured runs against a nominal machine model.
+    #[command(after_help = cli::diagnose::EXAMPLE)]
     Diagnose(cli::diagnose::DiagnoseArgs),
     /// Geometric errors: simulate or identify the 21 errors from 14 displacement lines.
     Geometry(cli::geometry::GeometryArgs),
     /// Print a run file's summary (rows, columns, metadata).
     Info {
+        /// The run CSV.
         run: std::path::PathBuf,
+        /// Print `{"rows", "columns", "meta"}` as JSON.
         #[arg(long)]
         json: bool,
     },
@@ -135,8 +152,10 @@ struct LinkArgs {
     /// Serial port of an RS-485 adapter, e.g. /dev/ttyUSB0.
     #[arg(long)]
     serial: Option<String>,
+    /// Serial baud rate.
     #[arg(long, default_value_t = 115_200)]
     baud: u32,
+    /// The board's Modbus unit (slave) address.
     #[arg(long, default_value_t = 1)]
     unit: u8,
 }
@@ -326,6 +345,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.rows(),
                     r.columns.join(",")
                 );
+                if r.meta.is_empty() {
+                    println!("no metadata (`# key: value` lines before the header)");
+                } else {
+                    println!("metadata:");
+                }
+                for (k, v) in &r.meta {
+                    println!("  {k}: {v}");
+                }
             }
         }
     }

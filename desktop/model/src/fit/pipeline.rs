@@ -62,6 +62,9 @@ pub struct FitReport {
     pub val_segments: Vec<Segment>,
     /// Fallback models per channel and excluded sensor(s), with their figures.
     pub fallbacks: Vec<fallback::FallbackReport>,
+    /// Per channel, what `export` ships: the model, the sensors it reads,
+    /// and every temperature column it does not read, with why.
+    pub shipped: Vec<Shipped>,
     #[serde(skip)]
     pub model_file: ModelFile,
 }
@@ -108,19 +111,46 @@ pub fn candidates(
     out
 }
 
+/// One channel of what `export` ships.
+#[derive(Clone, Debug, Serialize)]
+pub struct Shipped {
+    pub channel: String,
+    /// The chosen model (`mlr`, `ga-bpn`, `none`, …).
+    pub model: String,
+    /// The temperature columns its inputs read.
+    pub sensors: Vec<String>,
+    /// Every other temperature column of the training run, with why.
+    pub left_out: Vec<LeftOut>,
+}
+
+/// A temperature column a channel's shipped model does not read.
+#[derive(Clone, Debug, Serialize)]
+pub struct LeftOut {
+    pub sensor: String,
+    pub why: String,
+}
+
 /// Read runs and fit.
 pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
     let mut runs = Vec::new();
-    let mut labels = Vec::new();
-    let mut notes = Vec::new();
     for p in train.iter().chain(validate_runs) {
-        let mut run = Run::read(p)?;
-        // The model predicts rises from the run's start (what the board serves).
-        notes.extend(run.errors_as_rises(&p.display().to_string()));
-        runs.push(run);
-        labels.push(p.display().to_string());
+        runs.push((p.display().to_string(), Run::read(p)?));
     }
-    let plan = Plan::new(runs, labels, train.len(), cfg.split_chrono)?;
+    fit_runs(runs, train.len(), cfg)
+}
+
+/// Fit runs already read (`(label, run)`, the first `n_train` train).
+pub fn fit_runs(runs: Vec<(String, Run)>, n_train: usize, cfg: &FitConfig) -> Result<FitReport> {
+    let mut notes = Vec::new();
+    let (labels, runs): (Vec<String>, Vec<Run>) = runs
+        .into_iter()
+        .map(|(label, mut run)| {
+            // The model predicts rises from the run's start (what the board serves).
+            notes.extend(run.errors_as_rises(&label));
+            (label, run)
+        })
+        .unzip();
+    let plan = Plan::new(runs, labels, n_train, cfg.split_chrono)?;
     let mut report = fit_plan(&plan, cfg)?;
     notes.append(&mut report.notes);
     report.notes = notes;
@@ -140,14 +170,30 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     // The board reads temperature channels 0..MAX_SENSORS in the run's
     // column order: sensors beyond are never candidates.
     let board_sensors = features::board_channels(first);
+    let picked = picked_sensors(first, cfg, &board_sensors)?;
     let mut notes = Vec::new();
     let lags = candidate_lags(plan, cfg, &mut notes)?;
-    let selection = select_sensors(plan, cfg, &board_sensors)?;
+    let selection = match &picked {
+        // The user's picks (`select`'s) are the candidates: no new grouping.
+        Some(_) => None,
+        None => select_sensors(plan, cfg, &board_sensors)?,
+    };
     let has_spindle = first.col("spindle_rpm").is_some();
+    let auto_sensors = match (&picked, &selection) {
+        (Some(p), _) => Some((p.clone(), p.clone())),
+        (None, Some(sel)) => Some((
+            match cfg.candidates {
+                Candidates::Selected => sel.chosen.clone(),
+                Candidates::All => sel.sensors.clone(),
+            },
+            sel.chosen.clone(),
+        )),
+        (None, None) => None,
+    };
     let (cache, static_idx) = candidate_cache(
         plan,
         cfg,
-        selection.as_ref(),
+        auto_sensors.as_ref(),
         &lags,
         has_spindle,
         &board_sensors,
@@ -175,7 +221,9 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         .into_values()
         .filter(|r| !r.channels.is_empty())
         .collect();
+    let shipped = shipped(first, cfg, selection.as_ref(), &acc.file);
     Ok(FitReport {
+        shipped,
         fallbacks,
         models,
         inputs: acc.inputs,
@@ -234,7 +282,8 @@ fn candidate_lags(plan: &Plan, cfg: &FitConfig, notes: &mut Vec<String>) -> Resu
         .saturating_sub(MAX_SENSORS);
     if beyond > 0 {
         notes.push(format!(
-            "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates"
+            "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates: {} (the board reads the run's first {MAX_SENSORS} T_ columns; put a sensor you need among them)",
+            first.temperature_columns()[MAX_SENSORS..].join(", ")
         ));
     }
     let span = training_span_s(plan);
@@ -273,25 +322,157 @@ fn select_sensors(
     Ok(Some(select::select(&slices, groups, 0)?))
 }
 
+/// `--sensors`: the user's picks, checked against the training run's
+/// temperature columns and the board's channels; `None` when not given.
+fn picked_sensors(
+    first: &Run,
+    cfg: &FitConfig,
+    board_sensors: &[String],
+) -> Result<Option<Vec<String>>> {
+    let Some(want) = &cfg.sensors else {
+        return Ok(None);
+    };
+    if want.is_empty() {
+        bail!("fit: --sensors names no sensor");
+    }
+    let all = first.temperature_columns();
+    for s in want {
+        if !all.contains(&s.as_str()) {
+            bail!(
+                "fit: --sensors: {s} is not a temperature column of the training run (its T_ columns: {})",
+                all.join(", ")
+            );
+        }
+        if !board_sensors.contains(s) {
+            bail!(
+                "fit: --sensors: {s} is beyond the board's {MAX_SENSORS} channels (the board reads the run's first {MAX_SENSORS} T_ columns)"
+            );
+        }
+    }
+    if matches!(cfg.features, FeatureChoice::List(_)) {
+        bail!("fit: --sensors chooses the candidates of `--features auto`; with a --features list, name the inputs there");
+    }
+    Ok(Some(want.clone()))
+}
+
+/// Per channel, the shipped model, its sensors and why every other
+/// temperature column of the training run is not among them.
+fn shipped(
+    first: &Run,
+    cfg: &FitConfig,
+    selection: Option<&Selection>,
+    file: &ModelFile,
+) -> Vec<Shipped> {
+    let mut out = Vec::new();
+    for (ch, model) in &file.chosen {
+        let params = match model.as_str() {
+            "none" => None,
+            "mlr-static" => file.mlr_static.iter().find(|m| m.channel == *ch),
+            _ => file.mlr.iter().find(|m| m.channel == *ch),
+        };
+        let mut sensors: Vec<String> = Vec::new();
+        for f in params.map_or(&[][..], |m| &m.features[..]) {
+            for c in f.kind.columns() {
+                if c != "spindle_rpm" && !sensors.iter().any(|s| s == c) {
+                    sensors.push(c.to_string());
+                }
+            }
+        }
+        let left_out = first
+            .temperature_columns()
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| !sensors.iter().any(|u| u == *s))
+            .map(|(i, s)| LeftOut {
+                sensor: s.to_string(),
+                why: left_out_why(i, s, model, cfg, selection),
+            })
+            .collect();
+        out.push(Shipped {
+            channel: ch.clone(),
+            model: model.clone(),
+            sensors,
+            left_out,
+        });
+    }
+    out
+}
+
+/// Why the temperature column `s` (the run's `i`-th) is not read by a
+/// channel whose shipped model is `model`.
+fn left_out_why(
+    i: usize,
+    s: &str,
+    model: &str,
+    cfg: &FitConfig,
+    selection: Option<&Selection>,
+) -> String {
+    if i >= MAX_SENSORS {
+        return format!(
+            "beyond the board's {MAX_SENSORS} channels (the board reads the run's first {MAX_SENSORS} T_ columns)"
+        );
+    }
+    if cfg
+        .sensors
+        .as_ref()
+        .is_some_and(|p| !p.iter().any(|x| x == s))
+    {
+        return "not among the picked sensors (--sensors, --sensors-from)".into();
+    }
+    if let FeatureChoice::List(kinds) = &cfg.features {
+        if !kinds.iter().any(|(k, _)| k.columns().contains(&s)) {
+            return "not in --features".into();
+        }
+    }
+    if let Some(sel) = selection {
+        if let Some(why) = sel.left_out.get(s) {
+            return format!("select left it out: {why}");
+        }
+        if cfg.candidates == Candidates::Selected && !sel.chosen.iter().any(|c| c == s) {
+            if let Some((g, best)) = sel
+                .clusters
+                .iter()
+                .zip(&sel.chosen)
+                .enumerate()
+                .find(|(_, (members, _))| members.iter().any(|m| m == s))
+                .map(|(g, (_, best))| (g, best))
+            {
+                let score = |n: &str| sel.scores.get(n).copied().unwrap_or(f64::NAN);
+                return format!(
+                    "not its group's best in select (group {}: {best}, score {:.3} against its {:.3})",
+                    g + 1,
+                    score(best),
+                    score(s)
+                );
+            }
+        }
+    }
+    match model {
+        "none" => "the channel ships no compensation (no model beat 0 by the choice margin)".into(),
+        "mlr-static" => "not an input of the chosen static MLR (unlagged rises of the selected sensors)".into(),
+        _ if matches!(cfg.features, FeatureChoice::Auto) => format!(
+            "a candidate the cross-validated forward selection did not pick for this channel (at most {} inputs: --max-inputs)",
+            cfg.max_inputs
+        ),
+        _ => "not an input of the chosen model".into(),
+    }
+}
+
 /// The candidate cache shared by all channels, and the candidates of the
-/// static MLR (unlagged rises of the selected sensors).
+/// static MLR (unlagged rises of the selected sensors). `auto_sensors`:
+/// for `auto`, the candidate sensors and the static MLR's sensors.
 fn candidate_cache(
     plan: &Plan,
     cfg: &FitConfig,
-    selection: Option<&Selection>,
+    auto_sensors: Option<&(Vec<String>, Vec<String>)>,
     lags: &[f64],
     has_spindle: bool,
     board_sensors: &[String],
 ) -> Result<(SeriesCache, Vec<usize>)> {
-    match (&cfg.features, selection) {
-        (FeatureChoice::Auto, Some(sel)) => {
-            let sensors: Vec<String> = match cfg.candidates {
-                Candidates::Selected => sel.chosen.clone(),
-                Candidates::All => sel.sensors.clone(),
-            };
-            let kinds = candidates(&sensors, lags, has_spindle);
-            let static_idx = sel
-                .chosen
+    match (&cfg.features, auto_sensors) {
+        (FeatureChoice::Auto, Some((sensors, static_sensors))) => {
+            let kinds = candidates(sensors, lags, has_spindle);
+            let static_idx = static_sensors
                 .iter()
                 .filter_map(|s| {
                     kinds
@@ -701,6 +882,7 @@ pub fn print_report(r: &FitReport) {
     if let Some(s) = &r.selection {
         println!("selected sensors (training rows): {}", s.chosen.join(","));
     }
+    print_shipped(&r.shipped);
     for i in &r.inputs {
         print!(
             "{}: inputs {} ({} train rows, {} validation rows)",
@@ -771,6 +953,35 @@ pub fn print_report(r: &FitReport) {
             }
         }
     }
+}
+
+/// What `export` will ship per channel, and every sensor left out with why.
+fn print_shipped(shipped: &[Shipped]) {
+    if shipped.is_empty() {
+        return;
+    }
+    println!("what `export` ships (the cross-validated choice; `export --use` overrides it):");
+    for c in shipped {
+        let what = match c.model.as_str() {
+            "none" => "no compensation (serves 0)",
+            "mlr" => "lagged MLR",
+            "mlr-static" => "static MLR",
+            "ga-bpn" => "GA-BPN network ensemble",
+            "hybrid" => "lagged MLR + residual networks",
+            "blend" => "blend of the MLR and the networks",
+            other => other,
+        };
+        let reads = if c.sensors.is_empty() {
+            "no sensor".to_string()
+        } else {
+            c.sensors.join(", ")
+        };
+        println!("  {}: {} ({what}), reads {reads}", c.channel, c.model);
+        for l in &c.left_out {
+            println!("    left out {}: {}", l.sensor, l.why);
+        }
+    }
+    println!();
 }
 
 /// `{"models": [{"name", "channels": {...}}], ...}` (validation figures only).

@@ -57,6 +57,9 @@ pub struct FitConfig {
     pub fallbacks: bool,
     /// ... and without each pair of model sensors.
     pub fallback_pairs: bool,
+    /// The candidate sensors of `auto`, given (`select`'s picks) instead
+    /// of chosen by a new selection on the training rows.
+    pub sensors: Option<Vec<String>>,
 }
 
 impl Default for FitConfig {
@@ -80,6 +83,7 @@ impl Default for FitConfig {
             blend: false,
             fallbacks: true,
             fallback_pairs: false,
+            sensors: None,
         }
     }
 }

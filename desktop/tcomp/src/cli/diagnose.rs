@@ -7,6 +7,11 @@ use tcomp_data::runcsv::Run;
 use tcomp_thermal::diagnose::{diagnose, render, Options};
 use tcomp_thermal::sim::Machine;
 
+/// `diagnose`'s long help: an example.
+pub const EXAMPLE: &str = "Example:
+  tcomp diagnose desktop/machines/turning-center-16.toml run1.csv run2.csv --report out/diag.md
+  tcomp diagnose fit run1.csv run2.csv --json   (no machine file; no spindle_rpm needed)";
+
 #[derive(clap::Args, Debug)]
 pub struct DiagnoseArgs {
     /// Nominal machine description (TOML), or `fit` to identify the nominal
@@ -76,12 +81,33 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
         tcomp_thermal::diagnose::fitmode::diagnose_fit(&runs, &opt)?
     } else {
         let machine = Machine::load(std::path::Path::new(&a.machine))?;
+        let no_rpm: Vec<&str> = runs
+            .iter()
+            .filter(|(_, r)| r.col("spindle_rpm").is_none())
+            .map(|(n, _)| n.as_str())
+            .collect();
+        anyhow::ensure!(
+            no_rpm.is_empty(),
+            "{}: no `spindle_rpm` column, and a machine file's heat sources are driven by the spindle speed: `tcomp diagnose fit {}` identifies a nominal model from the runs themselves (no spindle_rpm needed)",
+            no_rpm.join(", "),
+            a.runs
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
         diagnose(&machine, &runs, &opt)?
     };
     let names: Vec<String> = runs.iter().map(|r| r.0.clone()).collect();
     if let Some(p) = &a.report {
+        // As `report -o` does: the report's folder is made if missing.
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| anyhow::anyhow!("--report: creating {}: {e}", dir.display()))?;
+        }
         render::write_report(&d, &names, p)?;
     }
+
     if a.json {
         println!("{}", d.to_json());
     } else {

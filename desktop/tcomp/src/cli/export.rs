@@ -18,12 +18,19 @@ pub struct ExportArgs {
     /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, hybrid, mlr, mlr-static).
     #[arg(long, default_value = "")]
     pub r#use: String,
+    /// Largest correction the board serves per direction (µm); beyond, it
+    /// serves this and flags the row clamped.
     #[arg(long, default_value_t = 200.0)]
     pub max_correction_um: f64,
+    /// Largest change of the served correction (µm/s); faster changes are
+    /// rate limited and flagged.
     #[arg(long, default_value_t = 1.0)]
     pub max_rate_um_per_s: f64,
+    /// The image's model version (the board takes only a newer one unless
+    /// `upload --rollback`).
     #[arg(long, default_value_t = 1)]
     pub model_version: u32,
+    /// Seed of the `--demo` model's random weights.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Add the volumetric correction: the JSON of `tcomp geometry table
@@ -61,6 +68,7 @@ pub struct ExportArgs {
         allow_hyphen_values = true
     )]
     pub a_range_deg: String,
+    /// C range of the five-axis section (degrees, min,max).
     #[arg(
         long,
         default_value = "-720,720",
@@ -68,15 +76,25 @@ pub struct ExportArgs {
         allow_hyphen_values = true
     )]
     pub c_range_deg: String,
+    /// The model image to write.
     #[arg(short, long)]
     pub out: std::path::PathBuf,
     /// Sign the image with this private key file (`tcomp keygen`): a board
     /// that stores the public key commits only images it signed.
     #[arg(long)]
     pub sign: Option<std::path::PathBuf>,
+    #[command(flatten)]
+    pub accept: super::sanity::AcceptArgs,
+    /// Print the summary as JSON (`wiring`: each model sensor's board channel).
     #[arg(long)]
     pub json: bool,
 }
+
+/// `export`'s long help: an example.
+pub const EXAMPLE: &str = "Example:
+  tcomp fit warmup.csv --split-chrono 0.6,0.8 --out fit.json
+  tcomp export --model fit.json --run warmup.csv -o model.img
+  tcomp replay shift.csv model.img";
 
 pub fn main(args: ExportArgs) -> anyhow::Result<()> {
     let ExportArgs {
@@ -98,6 +116,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         c_range_deg,
         out,
         sign,
+        accept,
         json,
     } = args;
     // The adequacy verdicts (refused first; warnings once the image is written).
@@ -118,6 +137,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         .map(|p| tcomp_model::signing::read_private(&p))
         .transpose()?;
     let run_for_geometry = run.clone();
+    let mut columns: Vec<String> = Vec::new();
     let float = match (demo, model) {
         (true, _) => {
             let mut demo = thermocomp_core::float::demo_model(seed);
@@ -132,7 +152,8 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             let run =
                 run.ok_or_else(|| anyhow::anyhow!("--run <csv> gives the board's channel order"))?;
             let table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
-            let columns: Vec<String> = table
+            super::sanity::check_runs([(run.display().to_string().as_str(), &table)], &accept)?;
+            columns = table
                 .temperature_columns()
                 .iter()
                 .map(|c| c.to_string())
@@ -183,7 +204,10 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         )?),
         _ => None,
     };
-    let summary = tcomp_model::export::export_five(&float, section, five, &out, sign.as_ref())?;
+    let mut summary = tcomp_model::export::export_five(&float, section, five, &out, sign.as_ref())?;
+    for (w, s) in summary.wiring.iter_mut().zip(&float.sensors) {
+        w.sensor = columns.get(usize::from(s.channel)).cloned();
+    }
     tcomp_model::export::print_summary(&summary, &out, json);
     adequacy_warnings
         .iter()

@@ -54,15 +54,27 @@ pub struct FitArgs {
     /// Channels to fit (comma list; default all `d..._um`).
     #[arg(long)]
     pub channels: Option<String>,
+    /// The candidate sensors of `--features auto`, e.g. `T_a,T_b` (`select`'s
+    /// picks; no new selection): comma list of temperature columns.
+    #[arg(long, value_name = "T_a,T_b")]
+    pub sensors: Option<String>,
+    /// The candidate sensors from `tcomp select --json` output (its
+    /// `chosen` list); with `--sensors`, both.
+    #[arg(long, value_name = "SELECT_JSON")]
+    pub sensors_from: Option<PathBuf>,
     /// Blocked cross-validation folds over the training time for `auto` (1: last 15 % only).
     #[arg(long, default_value_t = 5)]
     pub select_folds: usize,
+    /// Hidden units of each network (1..=16).
     #[arg(long, default_value_t = 11)]
     pub hidden: usize,
+    /// Seed of the networks' genetic algorithm (the ensemble's members use seed, seed+1, …).
     #[arg(long, default_value_t = 3)]
     pub seed: u64,
+    /// Genetic algorithm: individuals per generation (at least 4).
     #[arg(long, default_value_t = 30)]
     pub population: usize,
+    /// Genetic algorithm: generations before Levenberg–Marquardt.
     #[arg(long, default_value_t = 30)]
     pub generations: usize,
     /// Maximum Levenberg–Marquardt steps.
@@ -110,9 +122,18 @@ pub struct FitArgs {
     /// Write the fitted models (MLR and networks, JSON).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub accept: super::sanity::AcceptArgs,
+    /// Print the report as JSON (`chosen`, `shipped`, `notes`, the figures).
     #[arg(long)]
     pub json: bool,
 }
+
+/// `fit`'s long help: an example.
+pub const EXAMPLE: &str = "Example:
+  tcomp select warmup.csv --json > select.json
+  tcomp fit warmup.csv --validate shift.csv --sensors-from select.json --out fit.json
+  tcomp export --model fit.json --run warmup.csv -o model.img";
 
 fn parse_list(s: &str, what: &str) -> Result<Vec<f64>> {
     s.split(',')
@@ -186,7 +207,52 @@ impl FitArgs {
         cfg.blend = self.blend;
         cfg.fallbacks = !self.no_fallbacks;
         cfg.fallback_pairs = self.fallback_pairs;
+        cfg.sensors = self.picked_sensors()?;
         Ok(cfg)
+    }
+
+    /// `--sensors` and `--sensors-from`, in that order, each once.
+    fn picked_sensors(&self) -> Result<Option<Vec<String>>> {
+        let mut picked: Vec<String> = Vec::new();
+        if let Some(s) = &self.sensors {
+            picked.extend(s.split(',').map(|t| t.trim().to_string()));
+        }
+        if let Some(p) = &self.sensors_from {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("--sensors-from: cannot read {}", p.display()))?;
+            let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+                anyhow::anyhow!(
+                    "--sensors-from {}: not JSON ({e}); write it with `tcomp select --json`",
+                    p.display()
+                )
+            })?;
+            let chosen = v["chosen"].as_array().ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--sensors-from {}: no `chosen` list: not `tcomp select --json` output",
+                    p.display()
+                )
+            })?;
+            for c in chosen {
+                let c = c.as_str().ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--sensors-from {}: `chosen` holds {c}, not a sensor name",
+                        p.display()
+                    )
+                })?;
+                picked.push(c.to_string());
+            }
+        }
+        if self.sensors.is_none() && self.sensors_from.is_none() {
+            return Ok(None);
+        }
+        picked.retain(|s| !s.is_empty());
+        let mut out: Vec<String> = Vec::new();
+        for s in picked {
+            if !out.contains(&s) {
+                out.push(s);
+            }
+        }
+        Ok(Some(out))
     }
 }
 
@@ -210,7 +276,20 @@ pub fn main(args: FitArgs) -> Result<()> {
         // Allowed, but say what happens.
         eprintln!("note: --split-chrono applies to each training run");
     }
-    let report = run::run_fit(&args.train, &args.validate, &cfg)?;
+    let mut runs = Vec::new();
+    for (i, p) in args.train.iter().chain(&args.validate).enumerate() {
+        let label = p.display().to_string();
+        let r = tcomp_data::runcsv::Run::read(p)?;
+        let (command, why) = if i < args.train.len() {
+            ("fit", "too few to fit a model and cross-validate it")
+        } else {
+            ("fit --validate", "an RMS over fewer rows says nothing")
+        };
+        super::sanity::require_rows(&label, &r, command, why)?;
+        runs.push((label, r));
+    }
+    super::sanity::check_runs(runs.iter().map(|(l, r)| (l.as_str(), r)), &args.accept)?;
+    let report = run::fit_runs(runs, args.train.len(), &cfg)?;
     if let Some(out) = &args.out {
         let text = serde_json::to_string_pretty(&report.model_file)?;
         std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;

@@ -43,6 +43,7 @@ pub struct KeygenArgs {
     /// A directory (writes tcomp-signing.key and tcomp-signing.pub) or a
     /// file (writes it and FILE.pub). Existing files are not overwritten.
     pub target: std::path::PathBuf,
+    /// Print the written files as JSON.
     #[arg(long)]
     pub json: bool,
 }
@@ -77,6 +78,7 @@ pub struct CommissionArgs {
     /// the old private key file.
     #[arg(long, requires = "signing_key")]
     pub replace_signed_by: Option<std::path::PathBuf>,
+    /// Print the board's key state as JSON.
     #[arg(long)]
     pub json: bool,
 }

@@ -12,5 +12,6 @@ pub mod geometry_smooth;
 pub mod geometry_table;
 pub mod keys;
 pub mod replay;
+pub mod sanity;
 pub mod select;
 pub mod sim;

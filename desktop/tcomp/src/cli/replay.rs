@@ -5,11 +5,14 @@ use anyhow::Context;
 
 #[derive(clap::Args)]
 pub struct ReplayArgs {
+    /// The run CSV to replay.
     pub run: std::path::PathBuf,
+    /// The model image (`tcomp export -o`).
     pub image: std::path::PathBuf,
     /// Score rows from this fraction of the run (e.g. 0.6 for the FL_THERMAL test block).
     #[arg(long, default_value_t = 0.0)]
     pub from: f64,
+    /// Score rows up to this fraction of the run.
     #[arg(long, default_value_t = 1.0)]
     pub to: f64,
     /// Lose a sensor from a time on: `T_t4@1800` (seconds of the run) or
@@ -19,9 +22,15 @@ pub struct ReplayArgs {
     /// Probe references at a gauge and operator re-zeros (issue 28).
     #[command(flatten)]
     pub reference: tcomp_model::reference_replay::ReferenceArgs,
+    /// Print the figures as JSON (`channels`, `status_rows`, `notes`).
     #[arg(long)]
     pub json: bool,
 }
+
+/// `replay`'s long help: an example.
+pub const EXAMPLE: &str = "Example:
+  tcomp replay shift.csv model.img --from 0.6
+  tcomp replay shift.csv model.img --fail-sensor T_spindle@1800 --json";
 
 pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
     let ReplayArgs {
@@ -36,7 +45,7 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
     // Run file first, then image: each refusal names its own file.
     let mut table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
     // Scored as rises from the run's start, as the board compensates.
-    let notes: Vec<String> = table
+    let mut notes: Vec<String> = table
         .errors_as_rises(&run.display().to_string())
         .into_iter()
         .collect();
@@ -58,6 +67,13 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
     );
     let res = tcomp_model::replay::residuals(&table, &rows, &model, a, b);
     let flags = tcomp_model::replay::flag_counts(&rows, a, b);
+    if flags.stale > 0 && table.col("spindle_rpm").is_none() {
+        notes.push(format!(
+            "{} row(s) are marked stale because {} has no spindle_rpm column: the board flags its inputs stale when the PLC's spindle speed is not fed, and the replay serves as the board would then (0 rpm); the corrections are computed all the same",
+            flags.stale,
+            run.display()
+        ));
+    }
     let refs = reference
         .is_active()
         .then(|| tcomp_model::reference_replay::score(&table, &rows, &model, &reference, a, b))
@@ -85,10 +101,11 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
             println!(
                 "  {}: never worse than no compensation: {}",
                 r.column,
-                if r.never_worse {
-                    "yes"
-                } else {
-                    "NO — this block is worse with the board"
+                match (r.never_worse, r.never_worse_about_mean) {
+                    (true, true) => "yes, about the run's reference and about the block's mean",
+                    (true, false) => "about the run's reference yes; about the block's own mean NO (its reduction is negative: the board adds a varying error an operator who re-zeroes would see)",
+                    (false, true) => "NO about the run's reference (this block is worse with the board); about the block's own mean yes",
+                    (false, false) => "NO — this block is worse with the board, about the reference and about its mean",
                 }
             );
         }

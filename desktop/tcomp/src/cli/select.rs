@@ -14,8 +14,10 @@ pub struct SelectArgs {
     /// Number of sensor groups m.
     #[arg(long, default_value_t = 5)]
     pub groups: usize,
+    /// Seed of the K-means++ start.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Print the selection as JSON (`chosen` is what `fit --sensors-from` reads).
     #[arg(long)]
     pub json: bool,
 }
@@ -27,6 +29,12 @@ pub fn main(args: SelectArgs) -> Result<()> {
         .iter()
         .map(|p| {
             let mut run = Run::read_with_temperatures(p)?;
+            super::sanity::require_rows(
+                &p.display().to_string(),
+                &run,
+                "select",
+                "a correlation over fewer rows says nothing",
+            )?;
             // Correlations are taken on rises from the run's start.
             if let Some(note) = run.errors_as_rises(&p.display().to_string()) {
                 eprintln!("note: {note}");
