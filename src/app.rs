@@ -6,7 +6,7 @@
 
 use embedded_storage::nor_flash::NorFlash;
 use thermocomp_core::limits::MAX_AXES;
-use thermocomp_core::{Model, StepOutput};
+use thermocomp_core::StepOutput;
 
 use crate::acquisition::channel_map::ChannelMap;
 use crate::acquisition::channel_map::CHANNEL_MAP_BYTES;
@@ -380,11 +380,19 @@ impl<F: BackgroundErase> App<F> {
         }
         let staged = self.server.holding.staged();
         let staged = staged.get(..len).unwrap_or(staged);
-        // Parsed in place (one model on the stack), checked before it is stored.
-        let mut m = Model::empty(0, 0);
-        let ok = m.parse_into(staged).is_ok() && self.store.finish(Some(staged), &[]).is_ok();
+        // The server checked the image when it took the command, and the
+        // staging area is read-only while the job runs: stored, then parsed
+        // straight into the compensator (no model on this stack; should it
+        // ever fail, the compensator holds no model and the slots still
+        // hold the old one as the newest that parses).
+        let ok = self.store.finish(Some(staged), &[]).is_ok();
         if ok {
-            self.install(Some(m));
+            let (comp, holding) = (&mut self.compensation, &self.server.holding);
+            let staged = holding.staged();
+            let staged = staged.get(..len).unwrap_or(staged);
+            comp.compensator()
+                .load_with(|m| m.parse_into(staged).is_ok());
+            self.installed();
             // A new model's terms restart; the stored ones name the old
             // model's CRC and are not loaded with this one.
             self.references.reset();
@@ -415,23 +423,32 @@ impl<F: BackgroundErase> App<F> {
     /// Store an image (factory programming, or the bench's initial model) and use it.
     #[inline(never)]
     pub fn program(&mut self, image: &[u8]) -> Result<(), u16> {
-        // Parsed in place: one model on the stack.
-        let mut model = Model::empty(0, 0);
-        model
-            .parse_into(image)
-            .map_err(|e| result::of_image_error(&e))?;
         if matches!(self.job, Some(FlashJob::Model { .. })) {
             return Err(result::COMMIT_IN_PROGRESS);
         }
+        // Parsed straight into the compensator (no model on this stack);
+        // refused or not stored: the stored model back in force.
+        let mut parsed = Ok(());
+        self.compensation.compensator().load_with(|m| {
+            parsed = m.parse_into(image);
+            parsed.is_ok()
+        });
+        if let Err(e) = parsed {
+            self.load_stored();
+            return Err(result::of_image_error(&e));
+        }
         // A new model's terms restart (stored with its CRC; a pending
         // settings write is done by this one).
+        if self.store.commit(image).is_err() {
+            self.load_stored();
+            return Err(result::STORE_FAILED);
+        }
         self.references.reset();
-        self.store.commit(image).map_err(|_| result::STORE_FAILED)?;
         if self.job.is_some() {
             self.job = None;
             self.server.holding.busy = false;
         }
-        self.install(Some(model));
+        self.installed();
         let _ = self.store_records();
         Ok(())
     }
@@ -447,11 +464,6 @@ impl<F: BackgroundErase> App<F> {
     /// No model and a fresh compensator, in place.
     fn clear_compensation(&mut self) {
         self.compensation.clear();
-    }
-
-    fn install(&mut self, model: Option<Model>) {
-        self.compensation.compensator().load(model);
-        self.installed();
     }
 
     /// After the compensator's model changed or restarted: its sensors
