@@ -11,7 +11,15 @@ use serde::Serialize;
 
 use super::net::{self, Net, NetOpts};
 use super::plan::{FitConfig, Plan};
-use super::*;
+use anyhow::Result;
+
+use super::greedy::SELECT_ROWS;
+use super::mlr::fit_mlr;
+use super::model::{
+    blend_weight, FeatureSpec, MlrParams, Model, NetEnsemble, NetParams, MODEL_NAMES,
+};
+use super::samples::{normalize_rows, ranged_specs, Samples, SeriesCache};
+use super::split::{time_block_split, Segment};
 
 /// What the network training did on one channel.
 #[derive(Clone, Debug, Default, Serialize)]

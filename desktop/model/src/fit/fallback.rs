@@ -17,8 +17,12 @@ use anyhow::Result;
 use serde::Serialize;
 
 use super::choice::{choose_model, cross_validate, CvScore, NetCandidates};
+use super::greedy::greedy_select;
+use super::mlr::{fit_mlr, metrics, Metrics};
+use super::model::{FallbackParams, FeatureSpec, Model, ModelFile};
 use super::plan::{FeatureChoice, FitConfig, Plan};
-use super::*;
+use super::samples::{ranged_specs, SeriesCache};
+use super::split::Segment;
 
 /// What `fit --json` reports per fallback.
 #[derive(Clone, Debug, Serialize)]

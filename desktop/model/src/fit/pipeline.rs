@@ -1,73 +1,37 @@
-//! The `fit` pipeline: plan the chronological / held-out split, choose the
-//! inputs, fit MLR and GA-BPN per channel, validate on held-out rows only.
+//! The `fit` pipeline: plan the chronological / held-out split, gather the
+//! candidate inputs ([`super::candidates`]), then per channel choose the
+//! inputs, fit MLR and GA-BPN, cross-validate the choice and validate on
+//! held-out rows only; the report ([`super::report`]) says what was fitted
+//! and what `export` ships ([`super::shipped`]).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use serde::Serialize;
 
+use super::candidates::candidate_set;
+pub use super::candidates::candidates;
 pub use super::choice::{
     choose_model, latest_block_rule, train_ensemble, CvScore, NetCandidates, NetInfo, NET_MODELS,
 };
-use super::choice::{cross_validate, progress_bar, train_hybrid, training_span_s};
+use super::choice::{cross_validate, progress_bar, train_hybrid};
 use super::fallback;
 use super::features;
+use super::greedy::{blocked_folds, greedy_select};
+use super::mlr::{fit_mlr, metrics, Metrics};
+use super::model::{
+    Blend, FeatureKind, FeatureSpec, Hybrid, MlrParams, Model, ModelFile, NetEnsemble, MODEL_NAMES,
+};
 pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
-use super::*;
-use crate::select::{self, Selection};
+pub use super::report::{
+    print_report, report_json, ChannelInfo, FitReport, ModelReport, RunMetrics,
+};
+use super::samples::{ranged_specs, Samples, SeriesCache};
+use super::shipped::shipped;
+pub use super::shipped::{LeftOut, Shipped};
+use super::split::Segment;
 use tcomp_data::runcsv::Run;
-use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS, MAX_SENSORS};
-
-/// Per-run figures.
-#[derive(Clone, Debug, Serialize)]
-pub struct RunMetrics {
-    pub run: String,
-    pub channel: String,
-    #[serde(flatten)]
-    pub metrics: Metrics,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct ModelReport {
-    pub name: String,
-    /// Pooled over all validation rows, per channel.
-    pub channels: BTreeMap<String, Metrics>,
-    pub per_run: Vec<RunMetrics>,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct ChannelInfo {
-    pub channel: String,
-    pub features: Vec<String>,
-    pub train_rows: usize,
-    pub val_rows: usize,
-    /// Blocked cross-validation RMS of the MLR on the chosen inputs (training rows only).
-    pub cv_rms_um: Option<f64>,
-    /// Blocked cross-validation per candidate model (training rows only): what chose it.
-    pub cv: BTreeMap<String, CvScore>,
-    pub net: Option<NetInfo>,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct FitReport {
-    pub models: Vec<ModelReport>,
-    /// Per channel, the model cross-validation chose (what `export` ships).
-    pub chosen: BTreeMap<String, String>,
-    /// What the board's limits ruled out, and how the runs were read.
-    pub notes: Vec<String>,
-    pub inputs: Vec<ChannelInfo>,
-    pub selection: Option<Selection>,
-    pub train_segments: Vec<Segment>,
-    pub val_segments: Vec<Segment>,
-    /// Fallback models per channel and excluded sensor(s), with their figures.
-    pub fallbacks: Vec<fallback::FallbackReport>,
-    /// Per channel, what `export` ships: the model, the sensors it reads,
-    /// and every temperature column it does not read, with why.
-    pub shipped: Vec<Shipped>,
-    #[serde(skip)]
-    pub model_file: ModelFile,
-}
+use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS};
 
 fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetrics>) -> Metrics {
     let pred: Vec<f64> = s.x.iter().map(|r| m.predict_raw(r)).collect();
@@ -88,46 +52,6 @@ fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetr
         }
     }
     metrics(&s.y, &pred)
-}
-
-/// Candidate inputs for `auto`.
-pub fn candidates(
-    sensors: &[String],
-    lags: &[f64],
-    with_spindle: bool,
-) -> Vec<(FeatureKind, Option<f64>)> {
-    let tau = |l: f64| if l > 0.0 { Some(l) } else { None };
-    let mut out = Vec::new();
-    for s in sensors {
-        for &l in lags {
-            out.push((FeatureKind::SensorRise(s.clone()), tau(l)));
-        }
-    }
-    if with_spindle {
-        for &l in lags {
-            out.push((FeatureKind::Spindle, tau(l)));
-        }
-    }
-    out
-}
-
-/// One channel of what `export` ships.
-#[derive(Clone, Debug, Serialize)]
-pub struct Shipped {
-    pub channel: String,
-    /// The chosen model (`mlr`, `ga-bpn`, `none`, …).
-    pub model: String,
-    /// The temperature columns its inputs read.
-    pub sensors: Vec<String>,
-    /// Every other temperature column of the training run, with why.
-    pub left_out: Vec<LeftOut>,
-}
-
-/// A temperature column a channel's shipped model does not read.
-#[derive(Clone, Debug, Serialize)]
-pub struct LeftOut {
-    pub sensor: String,
-    pub why: String,
 }
 
 /// Read runs and fit.
@@ -167,43 +91,14 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
     } else {
         blocked_folds(&plan.runs, &plan.train, cfg.select_folds)
     };
-    // The board reads temperature channels 0..MAX_SENSORS in the run's
-    // column order: sensors beyond are never candidates.
-    let board_sensors = features::board_channels(first);
-    let picked = picked_sensors(first, cfg, &board_sensors)?;
     let mut notes = Vec::new();
-    let lags = candidate_lags(plan, cfg, &mut notes)?;
-    let selection = match &picked {
-        // The user's picks (`select`'s) are the candidates: no new grouping.
-        Some(_) => None,
-        None => select_sensors(plan, cfg, &board_sensors)?,
-    };
-    let has_spindle = first.col("spindle_rpm").is_some();
-    let auto_sensors = match (&picked, &selection) {
-        (Some(p), _) => Some((p.clone(), p.clone())),
-        (None, Some(sel)) => Some((
-            match cfg.candidates {
-                Candidates::Selected => sel.chosen.clone(),
-                Candidates::All => sel.sensors.clone(),
-            },
-            sel.chosen.clone(),
-        )),
-        (None, None) => None,
-    };
-    let (cache, static_idx) = candidate_cache(
-        plan,
-        cfg,
-        auto_sensors.as_ref(),
-        &lags,
-        has_spindle,
-        &board_sensors,
-    )?;
+    let candidates = candidate_set(plan, cfg, &mut notes)?;
     let fit = ChannelFit {
         plan,
         cfg,
-        cache: &cache,
+        cache: &candidates.cache,
         folds: &folds,
-        static_idx: &static_idx,
+        static_idx: &candidates.static_idx,
         ens,
     };
     let mut acc = Fitted::new(notes);
@@ -221,6 +116,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         .into_values()
         .filter(|r| !r.channels.is_empty())
         .collect();
+    let selection = candidates.selection;
     let shipped = shipped(first, cfg, selection.as_ref(), &acc.file);
     Ok(FitReport {
         shipped,
@@ -270,237 +166,6 @@ fn checked_request(first: &Run, cfg: &FitConfig) -> Result<(Vec<String>, usize)>
         bail!("fit: --ensemble {ens} exceeds the board's {MAX_NETS} networks");
     }
     Ok((channels, ens))
-}
-
-/// The candidate lags no longer than the training span; notes what the
-/// board's channels and the span rule out.
-fn candidate_lags(plan: &Plan, cfg: &FitConfig, notes: &mut Vec<String>) -> Result<Vec<f64>> {
-    let first = &plan.runs[plan.train[0].run];
-    let beyond = first
-        .temperature_columns()
-        .len()
-        .saturating_sub(MAX_SENSORS);
-    if beyond > 0 {
-        notes.push(format!(
-            "{beyond} temperature column(s) beyond the board's {MAX_SENSORS} channels are not candidates: {} (the board reads the run's first {MAX_SENSORS} T_ columns; put a sensor you need among them)",
-            first.temperature_columns()[MAX_SENSORS..].join(", ")
-        ));
-    }
-    let span = training_span_s(plan);
-    let lags: Vec<f64> = cfg.lags.iter().copied().filter(|&l| l <= span).collect();
-    if lags.len() < cfg.lags.len() {
-        notes.push(format!(
-            "lags longer than the training span ({:.1} h) are not candidates",
-            span / 3600.0
-        ));
-    }
-    if lags.is_empty() {
-        bail!("fit: every candidate lag is longer than the training span ({span:.0} s)");
-    }
-    Ok(lags)
-}
-
-/// Sensor selection for `auto`, on training rows only, among the board's channels.
-fn select_sensors(
-    plan: &Plan,
-    cfg: &FitConfig,
-    board_sensors: &[String],
-) -> Result<Option<Selection>> {
-    if !matches!(cfg.features, FeatureChoice::Auto) {
-        return Ok(None);
-    }
-    let slices: Vec<Run> = plan
-        .train
-        .iter()
-        .map(|s| {
-            plan.runs[s.run]
-                .slice_rows(s.start, s.end)
-                .keep_temperatures(board_sensors)
-        })
-        .collect();
-    let groups = cfg.groups.min(board_sensors.len());
-    Ok(Some(select::select(&slices, groups, 0)?))
-}
-
-/// `--sensors`: the user's picks, checked against the training run's
-/// temperature columns and the board's channels; `None` when not given.
-fn picked_sensors(
-    first: &Run,
-    cfg: &FitConfig,
-    board_sensors: &[String],
-) -> Result<Option<Vec<String>>> {
-    let Some(want) = &cfg.sensors else {
-        return Ok(None);
-    };
-    if want.is_empty() {
-        bail!("fit: --sensors names no sensor");
-    }
-    let all = first.temperature_columns();
-    for s in want {
-        if !all.contains(&s.as_str()) {
-            bail!(
-                "fit: --sensors: {s} is not a temperature column of the training run (its T_ columns: {})",
-                all.join(", ")
-            );
-        }
-        if !board_sensors.contains(s) {
-            bail!(
-                "fit: --sensors: {s} is beyond the board's {MAX_SENSORS} channels (the board reads the run's first {MAX_SENSORS} T_ columns)"
-            );
-        }
-    }
-    if matches!(cfg.features, FeatureChoice::List(_)) {
-        bail!("fit: --sensors chooses the candidates of `--features auto`; with a --features list, name the inputs there");
-    }
-    Ok(Some(want.clone()))
-}
-
-/// Per channel, the shipped model, its sensors and why every other
-/// temperature column of the training run is not among them.
-fn shipped(
-    first: &Run,
-    cfg: &FitConfig,
-    selection: Option<&Selection>,
-    file: &ModelFile,
-) -> Vec<Shipped> {
-    let mut out = Vec::new();
-    for (ch, model) in &file.chosen {
-        let params = match model.as_str() {
-            "none" => None,
-            "mlr-static" => file.mlr_static.iter().find(|m| m.channel == *ch),
-            _ => file.mlr.iter().find(|m| m.channel == *ch),
-        };
-        let mut sensors: Vec<String> = Vec::new();
-        for f in params.map_or(&[][..], |m| &m.features[..]) {
-            for c in f.kind.columns() {
-                if c != "spindle_rpm" && !sensors.iter().any(|s| s == c) {
-                    sensors.push(c.to_string());
-                }
-            }
-        }
-        let left_out = first
-            .temperature_columns()
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| !sensors.iter().any(|u| u == *s))
-            .map(|(i, s)| LeftOut {
-                sensor: s.to_string(),
-                why: left_out_why(i, s, model, cfg, selection),
-            })
-            .collect();
-        out.push(Shipped {
-            channel: ch.clone(),
-            model: model.clone(),
-            sensors,
-            left_out,
-        });
-    }
-    out
-}
-
-/// Why the temperature column `s` (the run's `i`-th) is not read by a
-/// channel whose shipped model is `model`.
-fn left_out_why(
-    i: usize,
-    s: &str,
-    model: &str,
-    cfg: &FitConfig,
-    selection: Option<&Selection>,
-) -> String {
-    if i >= MAX_SENSORS {
-        return format!(
-            "beyond the board's {MAX_SENSORS} channels (the board reads the run's first {MAX_SENSORS} T_ columns)"
-        );
-    }
-    if cfg
-        .sensors
-        .as_ref()
-        .is_some_and(|p| !p.iter().any(|x| x == s))
-    {
-        return "not among the picked sensors (--sensors, --sensors-from)".into();
-    }
-    if let FeatureChoice::List(kinds) = &cfg.features {
-        if !kinds.iter().any(|(k, _)| k.columns().contains(&s)) {
-            return "not in --features".into();
-        }
-    }
-    if let Some(sel) = selection {
-        if let Some(why) = sel.left_out.get(s) {
-            return format!("select left it out: {why}");
-        }
-        if cfg.candidates == Candidates::Selected && !sel.chosen.iter().any(|c| c == s) {
-            if let Some((g, best)) = sel
-                .clusters
-                .iter()
-                .zip(&sel.chosen)
-                .enumerate()
-                .find(|(_, (members, _))| members.iter().any(|m| m == s))
-                .map(|(g, (_, best))| (g, best))
-            {
-                let score = |n: &str| sel.scores.get(n).copied().unwrap_or(f64::NAN);
-                return format!(
-                    "not its group's best in select (group {}: {best}, score {:.3} against its {:.3})",
-                    g + 1,
-                    score(best),
-                    score(s)
-                );
-            }
-        }
-    }
-    match model {
-        "none" => "the channel ships no compensation (no model beat 0 by the choice margin)".into(),
-        "mlr-static" => "not an input of the chosen static MLR (unlagged rises of the selected sensors)".into(),
-        _ if matches!(cfg.features, FeatureChoice::Auto) => format!(
-            "a candidate the cross-validated forward selection did not pick for this channel (at most {} inputs: --max-inputs)",
-            cfg.max_inputs
-        ),
-        _ => "not an input of the chosen model".into(),
-    }
-}
-
-/// The candidate cache shared by all channels, and the candidates of the
-/// static MLR (unlagged rises of the selected sensors). `auto_sensors`:
-/// for `auto`, the candidate sensors and the static MLR's sensors.
-fn candidate_cache(
-    plan: &Plan,
-    cfg: &FitConfig,
-    auto_sensors: Option<&(Vec<String>, Vec<String>)>,
-    lags: &[f64],
-    has_spindle: bool,
-    board_sensors: &[String],
-) -> Result<(SeriesCache, Vec<usize>)> {
-    match (&cfg.features, auto_sensors) {
-        (FeatureChoice::Auto, Some((sensors, static_sensors))) => {
-            let kinds = candidates(sensors, lags, has_spindle);
-            let static_idx = static_sensors
-                .iter()
-                .filter_map(|s| {
-                    kinds
-                        .iter()
-                        .position(|k| *k == (FeatureKind::SensorRise(s.clone()), None))
-                })
-                .take(MAX_NET_INPUTS)
-                .collect();
-            Ok((SeriesCache::new(&plan.runs, kinds)?, static_idx))
-        }
-        (FeatureChoice::List(kinds), _) => {
-            if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
-                bail!(
-                    "fit: --features needs 1..={MAX_NET_INPUTS} inputs, got {}",
-                    kinds.len()
-                );
-            }
-            for (k, _) in kinds {
-                for c in k.columns() {
-                    if c != "spindle_rpm" && !board_sensors.iter().any(|s| s == c) {
-                        bail!("fit: feature column {c} is not one of the board's {MAX_SENSORS} temperature channels");
-                    }
-                }
-            }
-            Ok((SeriesCache::new(&plan.runs, kinds.clone())?, vec![]))
-        }
-        (FeatureChoice::Auto, None) => bail!("internal: no selection"),
-    }
 }
 
 /// Sensor gaps: the board skips a step when any of the image's sensors is
@@ -872,119 +537,4 @@ fn static_inputs(
                 .take(budget.saturating_sub(new_inputs)),
         )
         .collect()
-}
-
-/// Plain-text report.
-pub fn print_report(r: &FitReport) {
-    for n in &r.notes {
-        println!("note: {n}");
-    }
-    if let Some(s) = &r.selection {
-        println!("selected sensors (training rows): {}", s.chosen.join(","));
-    }
-    print_shipped(&r.shipped);
-    for i in &r.inputs {
-        print!(
-            "{}: inputs {} ({} train rows, {} validation rows)",
-            i.channel,
-            i.features.join(", "),
-            i.train_rows,
-            i.val_rows
-        );
-        if let Some(cv) = i.cv_rms_um {
-            print!("; training CV RMS {cv:.2} µm");
-        }
-        if let Some(n) = &i.net {
-            print!(
-                "; GA {:.1} s, LM {} steps (best {}) {:.1} s",
-                n.ga_s, n.lm_iters, n.best_iter, n.lm_s
-            );
-        }
-        println!();
-    }
-    println!();
-    println!(
-        "{:<11} {:<10} {:>9} {:>9} {:>9} {:>9} {:>10}",
-        "model", "channel", "MAE µm", "RMS µm", "peak µm", "raw RMS", "reduction"
-    );
-    for m in &r.models {
-        for (ch, x) in &m.channels {
-            println!(
-                "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%",
-                m.name, ch, x.mae_um, x.rms_um, x.peak_um, x.raw_rms_um, x.reduction_pct
-            );
-        }
-    }
-    if !r.fallbacks.is_empty() {
-        println!("\nfallback models (degraded mode; validation rows):");
-        for f in &r.fallbacks {
-            let cv = f.cv.get(&f.model).map_or(f64::NAN, |c| c.rms_um);
-            println!(
-                "{:<10} without {:<16} {:<10} CV RMS {:>6.2} µm, RMS {:>6.2} µm, reduction {:>5.1}%  ({})",
-                f.channel,
-                f.excluded.join("+"),
-                f.model,
-                cv,
-                f.validation.rms_um,
-                f.validation.reduction_pct,
-                f.features.join(", ")
-            );
-        }
-    }
-    let runs: std::collections::BTreeSet<&str> = r
-        .models
-        .iter()
-        .flat_map(|m| m.per_run.iter().map(|p| p.run.as_str()))
-        .collect();
-    if runs.len() > 1 {
-        println!("\nper held-out run:");
-        for m in &r.models {
-            for p in &m.per_run {
-                println!(
-                    "{:<11} {:<10} {:>9.2} {:>9.2} {:>9.2} {:>9.1}%  {}",
-                    m.name,
-                    p.channel,
-                    p.metrics.mae_um,
-                    p.metrics.rms_um,
-                    p.metrics.peak_um,
-                    p.metrics.reduction_pct,
-                    p.run
-                );
-            }
-        }
-    }
-}
-
-/// What `export` will ship per channel, and every sensor left out with why.
-fn print_shipped(shipped: &[Shipped]) {
-    if shipped.is_empty() {
-        return;
-    }
-    println!("what `export` ships (the cross-validated choice; `export --use` overrides it):");
-    for c in shipped {
-        let what = match c.model.as_str() {
-            "none" => "no compensation (serves 0)",
-            "mlr" => "lagged MLR",
-            "mlr-static" => "static MLR",
-            "ga-bpn" => "GA-BPN network ensemble",
-            "hybrid" => "lagged MLR + residual networks",
-            "blend" => "blend of the MLR and the networks",
-            other => other,
-        };
-        let reads = if c.sensors.is_empty() {
-            "no sensor".to_string()
-        } else {
-            c.sensors.join(", ")
-        };
-        println!("  {}: {} ({what}), reads {reads}", c.channel, c.model);
-        for l in &c.left_out {
-            println!("    left out {}: {}", l.sensor, l.why);
-        }
-    }
-    println!();
-}
-
-/// `{"models": [{"name", "channels": {...}}], ...}` (validation figures only).
-pub fn report_json(r: &FitReport) -> serde_json::Value {
-    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
 }

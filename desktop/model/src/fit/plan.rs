@@ -2,7 +2,10 @@
 //! validation rows (`Plan`), and the fit's settings (`FitConfig`).
 
 use super::net::NetOpts;
-use super::*;
+use anyhow::{bail, Context, Result};
+
+use super::model::FeatureKind;
+use super::split::{chrono_split, time_block_split, Segment};
 use tcomp_data::runcsv::Run;
 
 /// How the inputs are chosen.
