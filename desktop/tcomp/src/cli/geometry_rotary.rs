@@ -397,7 +397,12 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         .adequacy
         .clone()
         .ok_or_else(|| anyhow::anyhow!("internal: no adequacy verdict"))?;
-    if !adq.adequate && !a.accept_inadequate {
+    // An unobservable location error is refused below with its reason.
+    let location_unobservable = id
+        .unobservable_terms
+        .iter()
+        .any(|t| tcomp_geometry::rotary::LOCATION_NAMES.contains(&t.as_str()));
+    if !adq.adequate && !a.accept_inadequate && (a.partial || !location_unobservable) {
         bail!(
             "{}",
             adq.refusal(
@@ -420,7 +425,7 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         print_identification(&id, truth.as_ref());
         super::geometry::print_adequacy(&adq);
     }
-    if !adq.adequate {
+    if !adq.adequate && a.accept_inadequate {
         eprintln!(
             "warning: the rotary model is inadequate ({}); going on (--accept-inadequate): marked \"adequate\": false, σ's inflated ×{:.1}",
             adq.failure, adq.sigma_inflation
