@@ -10,6 +10,12 @@ need_target() {
     say "installing the Rust target thumbv7em-none-eabihf (rustup target add)"
     rustup target add thumbv7em-none-eabihf || die "could not install thumbv7em-none-eabihf: run 'rustup target add thumbv7em-none-eabihf'"
   fi
+  # The firmware's linker (.cargo/config.toml): the stack at the bottom of
+  # RAM, so an overflow faults instead of corrupting RAM.
+  if ! command -v flip-link >/dev/null 2>&1; then
+    say "installing flip-link, the firmware's linker (cargo install flip-link, about 15 s)"
+    cargo install flip-link --locked --quiet || die "could not install flip-link: run 'cargo install flip-link --locked'"
+  fi
 }
 
 # need_debian CMD:PACKAGE ...  installs PACKAGE when CMD is not on PATH.

@@ -32,6 +32,10 @@ pub mod kind {
     pub const WATCHDOG: u16 = 3;
     /// Initialisation failed (detail: [`super::init_step`] code).
     pub const INIT_FAILED: u16 = 4;
+    /// The stack overflowed its region (with flip-link, into the bottom of
+    /// RAM: a fault instead of corrupting `.bss`; detail: the stack pointer
+    /// at the fault; no PC, since the exception frame could not be pushed).
+    pub const STACK_OVERFLOW: u16 = 5;
 
     /// Name as in the register map (docs/register-map.md).
     pub fn name(k: u16) -> &'static str {
@@ -41,6 +45,7 @@ pub mod kind {
             HARD_FAULT => "hard fault",
             WATCHDOG => "watchdog",
             INIT_FAILED => "init failed",
+            STACK_OVERFLOW => "stack overflow",
             _ => "unknown",
         }
     }

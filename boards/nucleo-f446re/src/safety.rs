@@ -113,11 +113,18 @@ pub fn note_watchdog_reset() {
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
 }
 
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// HardFault, called by `board_support::fault_entry` on a valid stack with
+/// the stack pointer at the fault: a frame inside the stack region gives
+/// the PC (kind HardFault, detail the CFSR); none means the stack overflowed
+/// (flip-link: into the bottom of RAM; kind stack overflow, detail the SP).
+#[no_mangle]
+unsafe extern "C" fn board_hard_fault(sp: u32) -> ! {
     // SAFETY: a read of the SCB's configurable fault status register.
     let cfsr = unsafe { (*cortex_m::peripheral::SCB::PTR).cfsr.read() };
-    fault::fault::<Nucleo>(fault::kind::HARD_FAULT, frame.pc(), cfsr)
+    match board_support::fault_entry::frame_pc(sp) {
+        Some(pc) => fault::fault::<Nucleo>(fault::kind::HARD_FAULT, pc, cfsr),
+        None => fault::fault::<Nucleo>(fault::kind::STACK_OVERFLOW, 0, sp),
+    }
 }
 
 #[panic_handler]

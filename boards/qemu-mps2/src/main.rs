@@ -34,6 +34,7 @@ mod exit;
 mod flash;
 mod host_files;
 mod host_trace;
+mod overflow;
 mod probe;
 mod replay;
 mod rtu_port;
@@ -119,6 +120,8 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                 },
             );
         }
+        // The stack-overflow check (host-tests/tests/qemu_overflow.rs).
+        "overflow" => overflow::run(),
         "bench" => match bench::bench(arg, words.next()) {
             Ok(task) => spawner.spawn(task),
             Err(_) => semihost::exit(exit_code::PANIC),
@@ -141,16 +144,26 @@ unsafe fn DefaultHandler(irqn: i16) {
     }
 }
 
-#[exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+/// HardFault, called by `board_support::fault_entry` on a valid stack with
+/// the stack pointer at the fault (a stack overflow leaves no frame: kind
+/// stack overflow, detail the SP).
+#[no_mangle]
+unsafe extern "C" fn board_hard_fault(sp: u32) -> ! {
     // SAFETY: a read of the SCB's fault status register.
     let cfsr = unsafe { (*cortex_m::peripheral::SCB::PTR).cfsr.read() };
     // The bus first (the UART off), then the log: a log over semihosting
     // takes host time while the line would be held.
     <safety::Bench as fault::FaultBoard>::safe_state();
-    log!("hard fault at pc={:#010x} cfsr={:#010x}", frame.pc(), cfsr);
+    let pc = board_support::fault_entry::frame_pc(sp);
+    match pc {
+        Some(pc) => log!("hard fault at pc={:#010x} cfsr={:#010x}", pc, cfsr),
+        None => log!("stack overflow: sp={:#010x} cfsr={:#010x}", sp, cfsr),
+    }
     if safety::FIELD_MODE.load(Ordering::Relaxed) {
-        fault::fault::<safety::Bench>(fault::kind::HARD_FAULT, frame.pc(), cfsr)
+        match pc {
+            Some(pc) => fault::fault::<safety::Bench>(fault::kind::HARD_FAULT, pc, cfsr),
+            None => fault::fault::<safety::Bench>(fault::kind::STACK_OVERFLOW, 0, sp),
+        }
     }
     semihost::exit(exit_code::PANIC)
 }

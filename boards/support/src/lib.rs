@@ -3,4 +3,5 @@
 //! memory: `src/` forbids unsafe code) nor about one board's peripherals.
 #![no_std]
 
+pub mod fault_entry;
 pub mod stack;
