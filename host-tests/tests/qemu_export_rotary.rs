@@ -1,6 +1,6 @@
 //! An identified rotary model, exported the way `tcomp export --geometry …
 //! --rotary …` does (`tcomp_model::export::export_five` with
-//! `rotary_board::rotary_section`), served by the bench board (issue 31):
+//! `rotary::board::rotary_section`), served by the bench board (issue 31):
 //! a simulated machine's 14 lines and R-test files are identified, the
 //! image written, uploaded to QEMU, and at 20 five-axis poses the served
 //! correction equals the desktop's prediction from the written file
@@ -10,11 +10,11 @@ use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
+use tcomp_geometry::rotary::board::rotary_section;
+use tcomp_geometry::rotary::check::{linear_case, CASE_STROKE};
+use tcomp_geometry::rotary::identify::{identify_rotary, RotaryOptions};
+use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
-use tcomp_geometry::rotary_board::rotary_section;
-use tcomp_geometry::rotary_check::{linear_case, CASE_STROKE};
-use tcomp_geometry::rotary_identify::{identify_rotary, RotaryOptions};
-use tcomp_geometry::rotary_sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::volumetric::build;
 use thermocomp_core::five_axis::fstatus;
 

@@ -18,13 +18,13 @@ use host_tests::qemu::{modbus_master as master, BenchBoard};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
-use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
-use tcomp_geometry::rotary_board::{add_drift_sensors, rotary_section};
-use tcomp_geometry::rotary_check::{linear_case, CASE_STROKE};
-use tcomp_geometry::rotary_identify::{identify_rotary, RotaryOptions};
-use tcomp_geometry::rotary_sim::{
+use tcomp_geometry::rotary::board::{add_drift_sensors, rotary_section};
+use tcomp_geometry::rotary::check::{linear_case, CASE_STROKE};
+use tcomp_geometry::rotary::identify::{identify_rotary, RotaryOptions};
+use tcomp_geometry::rotary::sim::{
     random_rotary, simulate, warmup_temps, CycleSetup, RPlan, RotarySizes, SENSORS,
 };
+use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
 use tcomp_geometry::volumetric::build;
 use thermocomp_core::five_axis::{fstatus, FIVE_AXIS_RTEST_LOCATION};
 use thermocomp_core::volumetric::vstatus;

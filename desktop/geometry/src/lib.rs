@@ -29,13 +29,6 @@ pub mod guard;
 pub mod identify;
 pub mod lines;
 pub mod rotary;
-pub mod rotary_bias;
-pub mod rotary_board;
-pub mod rotary_check;
-pub mod rotary_frames;
-pub mod rotary_identify;
-pub mod rotary_joint;
-pub mod rotary_sim;
 pub mod rtest;
 pub mod score;
 pub mod sim;
@@ -43,3 +36,10 @@ pub mod smooth;
 pub mod study;
 pub mod thermal;
 pub mod volumetric;
+
+// The rotary files' former paths, for the callers outside this crate that
+// still name them (desktop/model's export summary, tcomp's export and its
+// tests): the modules now live in `rotary/`.
+pub use rotary::board as rotary_board;
+pub use rotary::frames as rotary_frames;
+pub use rotary::sim as rotary_sim;

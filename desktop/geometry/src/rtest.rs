@@ -11,7 +11,7 @@ use anyhow::{bail, Context, Result};
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::rotary::rtcp_position;
+use super::rotary::model::rtcp_position;
 
 /// The machine structure the format describes (spaces and case ignored).
 pub const STRUCTURE: &str = "XYZ-A(x)-C(z) table";

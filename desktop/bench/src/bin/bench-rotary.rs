@@ -15,7 +15,7 @@
 //! scored at four held-out states of the cool-down; `--bias-states B`
 //! (with drift): the location constants re-optimised on tool-tip readings
 //! at B other cool-down states, scored beside the model without it.
-use tcomp_geometry::rotary_check::{run_case, CaseFigures, CaseOptions, LinearInput};
+use tcomp_geometry::rotary::check::{run_case, CaseFigures, CaseOptions, LinearInput};
 
 fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(|| {

@@ -15,10 +15,10 @@ use anyhow::{bail, Result};
 use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
 
-use super::rotary::{
+use super::columns::{effect, Col};
+use super::model::{
     nominal_chain, reading_sensitivity, tool_tip_error, Linear, Location, Pose, RotaryModel,
 };
-use super::rotary_identify::{effect, Col};
 use tcomp_data::rng::Rng;
 
 /// One tool-tip reading at a pose.
@@ -136,7 +136,7 @@ pub fn optimise_rotary_bias(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rotary_sim::{random_rotary, RPlan, RotarySizes};
+    use crate::rotary::sim::{random_rotary, RPlan, RotarySizes};
 
     /// The location columns at a general pose (tool point through the
     /// inverse chain) match the exact chain's change to first order.
@@ -175,8 +175,8 @@ mod tests {
     /// tool-tip error left over shrinks.
     #[test]
     fn the_bias_step_reduces_the_error_at_held_out_states() {
-        use crate::rotary_check::{grid, BIAS_H, HELD_OUT_H};
-        use crate::rotary_sim::{warmup_temps, SENSORS};
+        use crate::rotary::check::{grid, BIAS_H, HELD_OUT_H};
+        use crate::rotary::sim::{warmup_temps, SENSORS};
         let plan = RPlan::default_plan();
         let mut rng = Rng::new(9);
         let truth = random_rotary(&plan, &RotarySizes::default(), true, &mut rng);

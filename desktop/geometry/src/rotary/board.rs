@@ -1,7 +1,7 @@
 //! `tcomp export --rotary` (desktop half): an identified rotary model
 //! (`identify-rotary --model-out`, R-test convention) → the board's
-//! convention ([`super::rotary_frames::to_board`]) → image section kind 4
-//! ([`super::board5::quantize_five_axis`]), with what it costs: the
+//! convention ([`super::frames::to_board`]) → image section kind 4
+//! ([`crate::board5::quantize_five_axis`]), with what it costs: the
 //! harmonics dropped and the served rotary part against the model's f64
 //! first-order prediction over a grid of poses (and, for a model whose
 //! location errors drift, of temperature states).
@@ -11,10 +11,10 @@ use serde::Serialize;
 use thermocomp_core::five_axis::{self, fstatus, FiveAxis, MAX_FOURIER_ORDER};
 use thermocomp_core::volumetric::{vstatus, Volumetric};
 
-use super::board5::{quantize_five_axis, FiveAxisOptions};
-use super::rotary::RotaryModel;
-use super::rotary_frames::{rotary_error_machine, to_board};
-use super::volumetric::VolumetricPoly;
+use super::frames::{rotary_error_machine, to_board};
+use super::model::RotaryModel;
+use crate::board5::{quantize_five_axis, FiveAxisOptions};
+use crate::volumetric::VolumetricPoly;
 
 /// What building the five-axis section cost (export's summary and `--json`).
 #[derive(Clone, Debug, Serialize)]

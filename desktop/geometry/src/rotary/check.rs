@@ -9,20 +9,20 @@ use nalgebra::Vector3;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
-use super::check::{figures, Compared, Figures};
-use super::errors::GeometricErrors;
-use super::identify::{identify, to_reference_convention, Degrees, Identification, LineObs};
-use super::kinematics::Structure;
-use super::lines::{average_runs, plan14};
-use super::rotary::{tool_tip_error, Linear, RotaryModel, COMPONENT_NAMES, LOCATION_NAMES};
-use super::rotary_bias::{calibration_poses, optimise_rotary_bias, simulate_state};
-use super::rotary_identify::{identify_rotary, RotaryOptions};
-use super::rotary_joint::{identify_rotary_joint, LinearPrior};
-use super::rotary_sim::{
+use super::bias::{calibration_poses, optimise_rotary_bias, simulate_state};
+use super::identify::{identify_rotary, RotaryOptions};
+use super::joint::{identify_rotary_joint, LinearPrior};
+use super::model::{tool_tip_error, Linear, RotaryModel, COMPONENT_NAMES, LOCATION_NAMES};
+use super::sim::{
     axis_of, random_rotary, simulate, warmup_temps, CycleSetup, RPlan, RotarySizes, SENSORS,
 };
-use super::rtest::RTestFile;
-use super::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
+use crate::check::{figures, Compared, Figures};
+use crate::errors::GeometricErrors;
+use crate::identify::{identify, to_reference_convention, Degrees, Identification, LineObs};
+use crate::kinematics::Structure;
+use crate::lines::{average_runs, plan14};
+use crate::rtest::RTestFile;
+use crate::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
 use tcomp_data::rng::Rng;
 
 /// A machine as the check sees it.
@@ -34,7 +34,7 @@ pub struct Machine5<'a> {
 
 /// The held-out grid: 3×3×3 linear positions (20, 50, 80 % of each
 /// stroke), A every 30° over ±90°, C every 45°, two tools: 3,024 poses.
-pub fn grid(stroke: [f64; 3]) -> Vec<super::rotary::Pose> {
+pub fn grid(stroke: [f64; 3]) -> Vec<super::model::Pose> {
     let mut out = Vec::new();
     let f = [0.2, 0.5, 0.8];
     for i in f {
@@ -43,7 +43,7 @@ pub fn grid(stroke: [f64; 3]) -> Vec<super::rotary::Pose> {
                 for a in (-3..=3).map(|n| 30.0 * n as f64) {
                     for c in (0..8).map(|n| 45.0 * n as f64) {
                         for tool in [[0.0, 0.0, 100.0], [30.0, -40.0, 180.0]] {
-                            out.push(super::rotary::Pose {
+                            out.push(super::model::Pose {
                                 pos_mm: [i * stroke[0], j * stroke[1], k * stroke[2]],
                                 a_deg: a,
                                 c_deg: c,
@@ -64,7 +64,7 @@ pub fn grid(stroke: [f64; 3]) -> Vec<super::rotary::Pose> {
 pub fn compare(
     truth: &Machine5,
     model: &Machine5,
-    poses: &[super::rotary::Pose],
+    poses: &[super::model::Pose],
     temps: &BTreeMap<String, f64>,
     noise_um: f64,
     state: &str,
@@ -94,8 +94,8 @@ pub fn component_recovery(id: &RotaryModel, truth: &RotaryModel) -> BTreeMap<Str
     let mut out = BTreeMap::new();
     for name in COMPONENT_NAMES {
         let angles: Vec<f64> = match axis_of(name) {
-            super::rotary::Axis5::C => (0..72).map(|k| 5.0 * k as f64).collect(),
-            super::rotary::Axis5::A => (-22..=22).map(|k| 5.0 * k as f64).collect(),
+            super::model::Axis5::C => (0..72).map(|k| 5.0 * k as f64).collect(),
+            super::model::Axis5::A => (-22..=22).map(|k| 5.0 * k as f64).collect(),
         };
         let ev = |m: &RotaryModel, d: f64| m.components.get(name).map_or(0.0, |f| f.eval(d));
         let n = angles.len() as f64;
@@ -138,14 +138,14 @@ pub struct CaseFigures {
     /// Grid: compensated with the linear (14-line) model only (measured).
     pub grid_linear_only: Figures,
     /// With drift and bias states: the location constants re-optimised on
-    /// tool-tip readings at other states (`rotary_bias`), true and measured.
+    /// tool-tip readings at other states (`bias`), true and measured.
     pub grid_bias_true: Option<Figures>,
     pub grid_bias: Option<Figures>,
     /// With the bias step: worst location error at the held-out states
     /// (µm, µrad).
     pub worst_bias: Option<(f64, f64)>,
     /// Joint fit: what it did to the linear model.
-    pub joint: Option<super::rotary_joint::JointLinear>,
+    pub joint: Option<super::joint::JointLinear>,
 }
 
 /// How the rotary fit takes the linear axes.
@@ -156,7 +156,7 @@ pub enum LinearInput {
     Known,
     /// The 14-line model as known input (its error aliases into the rotary terms).
     Fixed,
-    /// The 14 lines and the R-test files in one fit (`rotary_joint`); the
+    /// The 14 lines and the R-test files in one fit (`joint`); the
     /// compensation then uses the corrected linear model.
     Joint,
 }
@@ -395,10 +395,7 @@ fn fit(
     lt: Linear,
     how: LinearInput,
     ro: &RotaryOptions,
-) -> Result<(
-    super::rotary_identify::RotaryIdentification,
-    GeometricErrors,
-)> {
+) -> Result<(super::identify::RotaryIdentification, GeometricErrors)> {
     let st = &lc.structure;
     Ok(match how {
         LinearInput::Known => (identify_rotary(files, Some(lt), ro)?, lc.truth.clone()),
@@ -431,7 +428,7 @@ fn bias_readings(
     end: f64,
     o: &CaseOptions,
     rng: &mut Rng,
-) -> Result<Vec<super::rotary_bias::RotaryCalibrationState>> {
+) -> Result<Vec<super::bias::RotaryCalibrationState>> {
     let poses = calibration_poses(CASE_STROKE);
     (0..o.bias_states)
         .map(|k| {

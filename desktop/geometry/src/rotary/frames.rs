@@ -1,4 +1,4 @@
-//! From the R-test convention (`rotary`: component errors in **fixed**
+//! From the R-test convention (`model`: component errors in **fixed**
 //! directions, location errors as a rotation about the actual axis line,
 //! every error zero at A = C = 0) to the board's convention (`five_axis`,
 //! image section kind 4: location errors constant in the angle, component
@@ -37,11 +37,11 @@ use nalgebra::{Point3, Vector3};
 use std::collections::BTreeMap;
 use thermocomp_core::five_axis::MAX_FOURIER_ORDER;
 
-use super::board5;
-use super::five_axis::Fourier;
-use super::rotary::{
+use super::model::{
     nominal_chain, reading_sensitivity, Axis5, Location, RotaryModel, LOCATION_NAMES,
 };
+use crate::board5;
+use crate::five_axis::Fourier;
 
 /// A trigonometric polynomial `c0 + Σ_h α_h cos hθ + β_h sin hθ` (h ≥ 1).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -172,7 +172,7 @@ fn rotate(axis: Axis5, v: &[Trig; 3], transpose: bool) -> [Trig; 3] {
     r
 }
 
-/// (axis, index in δx, δy, δz, εx, εy, εz) of each of [`super::rotary::LOCATION_NAMES`].
+/// (axis, index in δx, δy, δz, εx, εy, εz) of each of [`super::model::LOCATION_NAMES`].
 const LOC_SLOT: [(Axis5, usize); 8] = [
     (Axis5::C, 0),
     (Axis5::C, 1),
@@ -342,5 +342,5 @@ pub fn rotary_error_machine(
 }
 
 #[cfg(test)]
-#[path = "rotary_frames_tests.rs"]
+#[path = "frames_tests.rs"]
 mod tests;

@@ -128,7 +128,7 @@ fn truncated_rms_is_the_rms_of_what_is_dropped() {
 
 /// The conversion's claim: at random poses, the converted model gives the
 /// tool-tip error of the fixed-frame model, to first order, through two
-/// independent implementations (the R-test sensitivities of `rotary` for
+/// independent implementations (the R-test sensitivities of `model` for
 /// the fixed frame, the rotating-frame chain of `five_axis` for the board's).
 #[test]
 fn converted_model_gives_the_same_tool_tip_error_at_random_poses() {
@@ -244,7 +244,7 @@ fn bad_orders_and_a_sensor_twice_are_refused_in_one_line() {
 fn a_drifting_model_is_served_at_random_poses_and_temperature_states() {
     use crate::board::{quantize, BoardOptions};
     use crate::board5::FiveAxisOptions;
-    use crate::rotary_board::{add_drift_sensors, rotary_section, stated_bound};
+    use crate::rotary::board::{add_drift_sensors, rotary_section, stated_bound};
     use crate::sim::{random_errors, ErrorSizes};
     use crate::volumetric::build;
     use thermocomp_core::five_axis::{self, fstatus};

@@ -1,5 +1,5 @@
 use super::*;
-use crate::rotary_sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
+use crate::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_data::rng::Rng;
 
 fn run(plan: &RPlan, noise_um: f64, seed: u64) -> (RotaryModel, Vec<RTestFile>) {
@@ -149,8 +149,8 @@ fn drift_over_a_warm_up_is_recovered() {
     .unwrap();
     assert!(id.unobservable.is_empty(), "{:?}", id.unobservable);
     // location at a held-out state (the cool-down) against the truth
-    let temps = crate::rotary_sim::warmup_temps(6.0 * 3600.0, Some(4.5 * 3600.0));
-    let named: BTreeMap<String, f64> = crate::rotary_sim::SENSORS
+    let temps = crate::rotary::sim::warmup_temps(6.0 * 3600.0, Some(4.5 * 3600.0));
+    let named: BTreeMap<String, f64> = crate::rotary::sim::SENSORS
         .iter()
         .map(|s| s.0.to_string())
         .zip(temps)

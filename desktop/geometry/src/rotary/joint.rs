@@ -11,7 +11,7 @@
 //!
 //! (J: first-order sensitivity of the reading to the linear parameters;
 //! A_L, b_L: the lines' design and readings, each line centred for its free
-//! offset as in `identify`). This is the least-squares fit of the 14 lines
+//! offset as in `crate::identify`). This is the least-squares fit of the 14 lines
 //! and the R-test files in one problem, linearised at the 14-line solution
 //! θ̂ (second-order terms, µrad × µm, are below 1 nm). Eliminating δθ gives
 //! exactly the generalised least-squares fit of the R-test readings with
@@ -23,13 +23,14 @@
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::errors::GeometricErrors;
-use super::identify::{Identification, LineObs};
-use super::kinematics::Structure;
-use super::rotary::Linear;
-pub use super::rotary_identify::JointLinear;
-use super::rotary_identify::{design, solve, Col, RotaryIdentification, RotaryOptions};
-use super::rtest::RTestFile;
+use super::columns::{Col, RotaryOptions};
+pub use super::identify::JointLinear;
+use super::identify::{design, solve, RotaryIdentification};
+use super::model::Linear;
+use crate::errors::GeometricErrors;
+use crate::identify::{Identification, LineObs};
+use crate::kinematics::Structure;
+use crate::rtest::RTestFile;
 
 /// The linear axes as data: their structure, the 14-line identification
 /// and the lines it came from (averaged runs, as `identify` took them).
@@ -185,7 +186,7 @@ pub fn identify_rotary_joint(
 
 #[cfg(test)]
 mod tests {
-    use crate::rotary_check::{run_case, CaseFigures, CaseOptions, LinearInput};
+    use crate::rotary::check::{run_case, CaseFigures, CaseOptions, LinearInput};
 
     /// RMS of the location errors over machines, tilts scaled by 1/3 (the
     /// targets are 1 µm and 3 µrad).

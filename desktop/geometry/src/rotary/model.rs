@@ -34,9 +34,9 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::errors::GeometricErrors;
-use super::five_axis::Fourier;
-use super::kinematics::{tool_tip_error_exact, Structure};
+use crate::errors::GeometricErrors;
+use crate::five_axis::Fourier;
+use crate::kinematics::{tool_tip_error_exact, Structure};
 
 const UM_PER_MM: f64 = 1e3;
 const RAD_PER_URAD: f64 = 1e-6;
@@ -134,7 +134,7 @@ pub struct RotaryModel {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adequate: Option<bool>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub adequacy: Option<super::adequacy::Adequacy>,
+    pub adequacy: Option<crate::adequacy::Adequacy>,
 }
 
 /// A rotary axis.

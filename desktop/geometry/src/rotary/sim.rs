@@ -10,12 +10,12 @@
 
 use std::collections::BTreeMap;
 
-use super::five_axis::Fourier;
-use super::rotary::{
+use super::model::{
     rtcp_position, tool_tip_error, Axis5, Drift, Linear, Location, Pose, RotaryModel,
     COMPONENT_NAMES,
 };
-use super::rtest::{RTestFile, RTestRow, Source};
+use crate::five_axis::Fourier;
+use crate::rtest::{RTestFile, RTestRow, Source};
 use tcomp_data::rng::Rng;
 
 /// Where the turntable sits and where the nest goes.

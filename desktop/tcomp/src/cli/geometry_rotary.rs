@@ -11,12 +11,12 @@ use tcomp_geometry::check::figures;
 use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, LineFile};
+use tcomp_geometry::rotary::bias::{calibration_poses, optimise_rotary_bias, simulate_state};
+use tcomp_geometry::rotary::check::{compare, grid, linear_case, Machine5, CASE_STROKE};
+use tcomp_geometry::rotary::identify::{identify_rotary, RotaryIdentification, RotaryOptions};
+use tcomp_geometry::rotary::joint::{identify_rotary_joint, LinearPrior};
+use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rotary::{Linear, RotaryModel};
-use tcomp_geometry::rotary_bias::{calibration_poses, optimise_rotary_bias, simulate_state};
-use tcomp_geometry::rotary_check::{compare, grid, linear_case, Machine5, CASE_STROKE};
-use tcomp_geometry::rotary_identify::{identify_rotary, RotaryIdentification, RotaryOptions};
-use tcomp_geometry::rotary_joint::{identify_rotary_joint, LinearPrior};
-use tcomp_geometry::rotary_sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rtest::RTestFile;
 use tcomp_geometry::study::ErrorsJson;
 
@@ -453,7 +453,7 @@ fn recovery_json(id: &RotaryIdentification, t: &RotaryModel) -> serde_json::Valu
         .zip((0..8).map(|k| ml[k] - tl[k]))
         .collect();
     let comp: BTreeMap<String, serde_json::Value> =
-        tcomp_geometry::rotary_check::component_recovery(&id.model, t)
+        tcomp_geometry::rotary::check::component_recovery(&id.model, t)
             .into_iter()
             .map(|(k, (d, s))| (k, serde_json::json!({"rms_error": d, "true_rms": s})))
             .collect();

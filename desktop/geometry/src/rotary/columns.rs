@@ -1,0 +1,178 @@
+//! The unknowns of the rotary fit (`identify`, `joint`, `bias`): what to
+//! fit, one column per unknown (location errors, their drift, component
+//! harmonics, backward-whirl pairs, file offsets, the linear model's
+//! corrections), each column's name and the reading one unit of it
+//! produces at a pose.
+
+use nalgebra::Vector3;
+
+use super::model::{Axis5, ReadingSensitivity, LOCATION_NAMES};
+use crate::rtest::RTestFile;
+
+/// What to fit.
+#[derive(Clone, Debug)]
+pub struct RotaryOptions {
+    /// Harmonics of C's and A's component errors (0: location errors only).
+    pub order_c: usize,
+    pub order_a: usize,
+    /// Drift of each location error with these sensors (names without
+    /// `T_`; every file must have them); empty: none.
+    pub sensors: Vec<String>,
+}
+
+impl Default for RotaryOptions {
+    fn default() -> Self {
+        RotaryOptions {
+            order_c: 3,
+            order_a: 2,
+            sensors: Vec::new(),
+        }
+    }
+}
+
+/// An unknown of the fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Col {
+    Loc(usize),
+    Drift(usize, usize),
+    /// Harmonic `h` of component `k` of an axis, cos (false) or sin (true).
+    Comp(Axis5, usize, usize, bool),
+    /// First harmonic of a whirl pair (i, j): P: a_i = 1, b_j = −1; Q: b_i = 1, a_j = 1.
+    Whirl(Axis5, usize, bool),
+    Const(usize, usize),
+    /// Correction of the linear model's parameter `j` (its basis order;
+    /// joint fit with the 14 lines, `joint`).
+    Lin(usize),
+}
+
+/// (axis, index in the six fixed-frame errors) of each location error.
+const LOC_SLOT: [(Axis5, usize); 8] = [
+    (Axis5::C, 0),
+    (Axis5::C, 1),
+    (Axis5::C, 3),
+    (Axis5::C, 4),
+    (Axis5::A, 1),
+    (Axis5::A, 2),
+    (Axis5::A, 4),
+    (Axis5::A, 5),
+];
+
+impl Col {
+    pub(crate) fn name(&self, o: &RotaryOptions, files: &[RTestFile]) -> String {
+        match *self {
+            Col::Loc(j) => LOCATION_NAMES[j].to_string(),
+            Col::Drift(j, s) => format!("{}/T_{}", LOCATION_NAMES[j], o.sensors[s]),
+            Col::Comp(ax, k, h, sin) => {
+                format!("{} {}{h}", ax.names()[k], if sin { 'b' } else { 'a' })
+            }
+            Col::Whirl(ax, p, q) => {
+                let (i, j) = ax.whirl_pairs()[p];
+                format!(
+                    "{}/{} backward whirl {}",
+                    ax.names()[i],
+                    ax.names()[j],
+                    if q { 'q' } else { 'p' }
+                )
+            }
+            Col::Const(f, d) => format!("offset of {} d{}", files[f].name, ['x', 'y', 'z'][d]),
+            Col::Lin(j) => format!("linear parameter {j}"),
+        }
+    }
+    /// The error names this unknown belongs to (none for the file offsets).
+    pub(crate) fn terms(&self, o: &RotaryOptions) -> Vec<String> {
+        match *self {
+            Col::Loc(j) => vec![LOCATION_NAMES[j].to_string()],
+            Col::Drift(j, s) => vec![format!("{}/T_{}", LOCATION_NAMES[j], o.sensors[s])],
+            Col::Comp(ax, k, _, _) => vec![ax.names()[k].to_string()],
+            Col::Whirl(ax, p, _) => {
+                let (i, j) = ax.whirl_pairs()[p];
+                vec![ax.names()[i].to_string(), ax.names()[j].to_string()]
+            }
+            Col::Const(..) => vec![],
+            Col::Lin(_) => vec!["linear axes".to_string()],
+        }
+    }
+}
+
+pub(crate) fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
+    let mut cols: Vec<Col> = (0..8).map(Col::Loc).collect();
+    for s in 0..o.sensors.len() {
+        cols.extend((0..8).map(|j| Col::Drift(j, s)));
+    }
+    for (ax, order) in [(Axis5::C, o.order_c), (Axis5::A, o.order_a)] {
+        let in_pair = |k: usize| ax.whirl_pairs().iter().any(|(i, j)| *i == k || *j == k);
+        for h in 1..=order {
+            for k in 0..6 {
+                if h == 1 && in_pair(k) {
+                    continue;
+                }
+                cols.push(Col::Comp(ax, k, h, false));
+                cols.push(Col::Comp(ax, k, h, true));
+            }
+            if h == 1 {
+                for p in 0..2 {
+                    cols.push(Col::Whirl(ax, p, false));
+                    cols.push(Col::Whirl(ax, p, true));
+                }
+            }
+        }
+    }
+    for f in 0..files {
+        cols.extend((0..3).map(|d| Col::Const(f, d)));
+    }
+    cols
+}
+
+/// The reading (workpiece frame, µm) one unit of `col` produces at a pose
+/// (zero for the linear model's columns: `joint` fills those).
+pub(crate) fn effect(
+    col: Col,
+    s: &ReadingSensitivity,
+    a: f64,
+    c: f64,
+    file: usize,
+    dt: &[f64],
+) -> Vector3<f64> {
+    let side = |ax: Axis5| match ax {
+        Axis5::A => (&s.a, a),
+        Axis5::C => (&s.c, c),
+    };
+    match col {
+        Col::Loc(j) | Col::Drift(j, _) => {
+            let (ax, k) = LOC_SLOT[j];
+            let (sens, deg) = side(ax);
+            let mut u = Vector3::zeros();
+            u[k % 3] = 1.0;
+            let v = u - ax.rotation(deg) * u;
+            let base = if k < 3 { 0 } else { 3 };
+            let e: Vector3<f64> = (0..3).map(|i| sens[base + i] * v[i]).sum();
+            match col {
+                Col::Drift(_, sensor) => e * dt[sensor],
+                _ => e,
+            }
+        }
+        Col::Comp(ax, k, h, sin) => {
+            let (sens, deg) = side(ax);
+            let t = h as f64 * deg.to_radians();
+            sens[k] * if sin { t.sin() } else { t.cos() - 1.0 }
+        }
+        Col::Whirl(ax, p, q) => {
+            let (sens, deg) = side(ax);
+            let (i, j) = ax.whirl_pairs()[p];
+            let (cm, sn) = (deg.to_radians().cos() - 1.0, deg.to_radians().sin());
+            if q {
+                sens[i] * sn + sens[j] * cm
+            } else {
+                sens[i] * cm - sens[j] * sn
+            }
+        }
+        Col::Const(f, d) => {
+            let mut u = Vector3::zeros();
+            if f == file {
+                u[d] = 1.0;
+            }
+            u
+        }
+        Col::Lin(_) => Vector3::zeros(),
+    }
+}
