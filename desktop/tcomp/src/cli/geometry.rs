@@ -1,26 +1,31 @@
-//! `tcomp geometry simulate|identify|plan`.
+//! `tcomp geometry`: the subcommands and their dispatch, the arguments the
+//! three-axis commands share (volume, degrees), and simulate, plan and
+//! fit-thermal. Each other command lives in a `geometry_*` file of its own
+//! (identify's poly model in `geometry_identify`, smooth and dense in
+//! `geometry_smooth`, the rotary axes in `geometry_rotary`); none imports
+//! this file.
 
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
+use super::geometry_identify::{identify_poly_cmd, PolyRequest};
 use super::geometry_rotary::{
     check_rotary_cmd, identify_rotary_cmd, plan_rotary_cmd, sim_rotary_cmd, CheckRotaryArgs,
     IdentifyRotaryArgs, PlanRotaryArgs, SimRotaryArgs,
 };
 use super::geometry_score::{score_cmd, ScoreArgs};
-use super::geometry_smooth::{identify_smooth_cmd, stroke_from, SmoothRequest};
+use super::geometry_smooth::{identify_smooth_cmd, SmoothRequest};
 use super::geometry_table::{
     parse_triple, table_cmd, table_json, tooltip_cmd, TableArgs, TooltipArgs,
 };
 use tcomp_data::rng::Rng;
-use tcomp_geometry::errors::Term;
-use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
+use tcomp_geometry::identify::{identify, Degrees, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, plan14, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
-use tcomp_geometry::study::{recovery, volumetric_residual, ErrorsJson};
+use tcomp_geometry::study::ErrorsJson;
 
 #[derive(clap::Args, Debug)]
 pub struct GeometryArgs {
@@ -341,288 +346,32 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
+/// `--method` picks the model: poly here, smooth and dense in
+/// `geometry_smooth`.
 fn identify_cmd(a: IdentifyArgs) -> Result<()> {
     match a.method.as_str() {
-        "poly" => {}
-        "smooth" | "dense" => {
-            return identify_smooth_cmd(&SmoothRequest {
-                dense: (a.method == "dense").then_some(a.nodes),
-                files: &a.files,
-                stroke: a.stroke.as_deref(),
-                points: a.points,
-                truth: a.truth.as_deref(),
-                partial: a.partial,
-                json: a.json,
-            })
-        }
+        "poly" => identify_poly_cmd(&PolyRequest {
+            files: &a.files,
+            degrees: a.degrees.degrees()?,
+            stroke: a.stroke.as_deref(),
+            points: a.points,
+            truth: a.truth.as_deref(),
+            partial: a.partial,
+            noise_um: a.noise_um,
+            accept_inadequate: a.accept_inadequate,
+            json: a.json,
+        }),
+        "smooth" | "dense" => identify_smooth_cmd(&SmoothRequest {
+            dense: (a.method == "dense").then_some(a.nodes),
+            files: &a.files,
+            stroke: a.stroke.as_deref(),
+            points: a.points,
+            truth: a.truth.as_deref(),
+            partial: a.partial,
+            json: a.json,
+        }),
         m => bail!("--method {m:?}: poly, smooth or dense"),
     }
-    let degrees = a.degrees.degrees()?;
-    let files: Vec<LineFile> = a
-        .files
-        .iter()
-        .map(|p| LineFile::read(p))
-        .collect::<Result<_>>()?;
-    let st = tcomp_geometry::guard::common_structure(&files, &a.files)?;
-    let avg = average_runs(&files)?;
-    let states: std::collections::BTreeSet<_> =
-        avg.iter().map(|a| a.temperature_state.clone()).collect();
-    if states.len() > 1 {
-        bail!("the files come from {} temperature states; identify one state at a time (or use fit-thermal)", states.len());
-    }
-    let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
-    let stroke = stroke_from(a.stroke.as_deref(), &obs)?;
-    let id = identify(&st, &obs, degrees, stroke)?;
-    tcomp_geometry::guard::refuse_unobservable(&id, obs.len(), a.partial)?;
-    let noise = tcomp_geometry::adequacy::StatedNoise::new(a.noise_um)?;
-    // σ per reading of a run; a line whose two runs were averaged has σ/√2.
-    let line_sigma: Vec<f64> = avg
-        .iter()
-        .map(|l| match l.reversal_um {
-            Some(_) => noise.um / std::f64::consts::SQRT_2,
-            None => noise.um,
-        })
-        .collect();
-    let (adq, cov) = tcomp_geometry::identify::line_adequacy(&st, &obs, &id, &line_sigma, noise)?;
-    if !adq.adequate && !a.accept_inadequate {
-        bail!(
-            "{}",
-            adq.refusal(
-                &format!("the polynomial model of these {} lines", obs.len()),
-                "measure more lines: `tcomp geometry plan`"
-            )
-        );
-    }
-    let loo = tcomp_geometry::identify::leave_one_line_out(&st, &obs, &id)?;
-    let mut ej = ErrorsJson::from_errors(&id.errors, &st, stroke, a.points);
-    ej.unobservable_terms = id.unobservable_terms.clone();
-    let f = adq.sigma_inflation;
-    for t in Term::all() {
-        if let Some(tj) = ej.errors.get_mut(&t.name()) {
-            tj.sigma = tj
-                .positions_mm
-                .iter()
-                .map(|q| f * tcomp_geometry::identify::term_sigma(&id.basis, &cov, t, *q))
-                .collect();
-        }
-    }
-    let sq_sigma: Vec<f64> = (0..3)
-        .map(|i| f * tcomp_geometry::identify::squareness_sigma(&id.basis, &cov, i))
-        .collect();
-    ej.adequate = Some(adq.adequate);
-    ej.adequacy = Some(adq.clone());
-    let inadequate_warning = (!adq.adequate).then(|| {
-        format!(
-            "the model is inadequate ({}); going on (--accept-inadequate): marked \"adequate\": false, σ's inflated ×{:.1}",
-            adq.failure, adq.sigma_inflation
-        )
-    });
-    let truth = match &a.truth {
-        Some(p) => Some(ErrorsJson::read(p)?.to_errors()?),
-        None => None,
-    };
-    let rec = truth.as_ref().map(|t| recovery(&id.errors, t, stroke));
-    let vol = truth
-        .as_ref()
-        .map(|t| volumetric_residual(&st, &id.errors, t, stroke));
-    let reversal: BTreeMap<String, f64> = avg
-        .iter()
-        .filter_map(|a| a.reversal_um.map(|r| (a.obs.id.clone(), r)))
-        .collect();
-    if a.json {
-        let mut v = serde_json::to_value(&ej)?;
-        let o = v
-            .as_object_mut()
-            .ok_or_else(|| anyhow::anyhow!("internal: errors JSON is not an object"))?;
-        o.insert("degrees".into(), serde_json::to_value(degrees)?);
-        o.insert("lines".into(), serde_json::json!(obs.len()));
-        o.insert("readings".into(), serde_json::json!(id.readings));
-        o.insert("unknowns".into(), serde_json::json!(id.basis.columns.len()));
-        o.insert("rank".into(), serde_json::json!(id.rank));
-        o.insert(
-            "condition_number".into(),
-            if id.condition_number.is_finite() {
-                serde_json::json!(id.condition_number)
-            } else {
-                serde_json::Value::Null
-            },
-        );
-        o.insert(
-            "singular_values".into(),
-            serde_json::json!(id.singular_values),
-        );
-        o.insert(
-            "unobservable".into(),
-            serde_json::to_value(&id.unobservable)?,
-        );
-        o.insert(
-            "residual_rms_um".into(),
-            serde_json::json!(id.residual_rms_um),
-        );
-        o.insert("reversal_um".into(), serde_json::json!(reversal));
-        o.insert("leave_one_line_out".into(), serde_json::to_value(&loo)?);
-        o.insert(
-            "squareness_sigma_urad".into(),
-            serde_json::json!({"EC0Y": sq_sigma[0], "EB0Z": sq_sigma[1], "EA0Z": sq_sigma[2]}),
-        );
-        if let Some(r) = &rec {
-            let m: BTreeMap<_, _> = r
-                .iter()
-                .map(|(k, (mx, rms, pk))| {
-                    (
-                        k.clone(),
-                        serde_json::json!({"max": mx, "rms": rms, "true_peak": pk}),
-                    )
-                })
-                .collect();
-            o.insert("recovery".into(), serde_json::json!(m));
-        }
-        if let Some((b, af)) = vol {
-            o.insert(
-                "volumetric_rms_um".into(),
-                serde_json::json!({"before": b, "after": af, "reduction_pct": 100.0 * (1.0 - af / b)}),
-            );
-        }
-        println!("{v}");
-        if let Some(w) = &inadequate_warning {
-            eprintln!("warning: {w}");
-        }
-        return Ok(());
-    }
-    print_identification(&id, &obs, stroke, &st, a.points);
-    print_loo(&loo);
-    print_adequacy(&adq);
-    if !id.unobservable_terms.is_empty() {
-        println!(
-            "unobservable (not determined by these lines, values meaningless): {}",
-            id.unobservable_terms.join(", ")
-        );
-    }
-    for t in Term::all() {
-        let tj = &ej.errors[&t.name()];
-        let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
-        let rec_s = rec
-            .as_ref()
-            .map(|r| {
-                let (mx, rms, _) = r[&t.name()];
-                format!("   recovery max {mx:.2} rms {rms:.2}")
-            })
-            .unwrap_or_default();
-        let smax = tj.sigma.iter().copied().fold(0.0, f64::max);
-        println!(
-            "  {} [{:4}] {}   σ ≤ {smax:.2}{rec_s}",
-            t.name(),
-            tj.unit,
-            vals.join(" ")
-        );
-    }
-    let s = id.errors.squareness;
-    println!(
-        "  squareness [urad]: EC0Y {:.2} ± {:.2}, EB0Z {:.2} ± {:.2}, EA0Z {:.2} ± {:.2}",
-        s.c0y, sq_sigma[0], s.b0z, sq_sigma[1], s.a0z, sq_sigma[2]
-    );
-    if !reversal.is_empty() {
-        let r: Vec<String> = reversal
-            .iter()
-            .map(|(k, v)| format!("{k} {v:.2}"))
-            .collect();
-        println!(
-            "  reversal (forward − backward, µm along the line): {}",
-            r.join(", ")
-        );
-    }
-    if let Some((b, af)) = vol {
-        println!(
-            "  held-out grid: tool-point error RMS {b:.2} µm before, {af:.2} µm after ({:.1} % less)",
-            100.0 * (1.0 - af / b)
-        );
-    }
-    if let Some(w) = &inadequate_warning {
-        eprintln!("warning: {w}");
-    }
-    Ok(())
-}
-
-/// The adequacy verdict, the σ inflation and the weakly determined
-/// combinations in words (identify, identify-rotary).
-pub fn print_adequacy(adq: &tcomp_geometry::adequacy::Adequacy) {
-    println!("{}", adq.summary());
-    if !adq.weak.is_empty() {
-        println!("weakly determined combinations (relative singular value below 1e-2: their σ is over 100× the best-determined direction's):");
-        for w in &adq.weak {
-            println!(
-                "  {} (relative singular value {:.1e})",
-                w.words, w.relative_singular_value
-            );
-        }
-    }
-    println!(
-        "σ's printed are the posterior standard deviations at the stated noise × {:.2} (the measured misfit)",
-        adq.sigma_inflation
-    );
-}
-
-fn print_loo(loo: &tcomp_geometry::identify::LeaveOneLineOut) {
-    println!(
-        "leave-one-line-out prediction RMS {:.3} µm beside reading noise {:.3} µm (from the readings' 4th differences; the residual implies {:.3} µm); {} direction(s) only the left-out line sees taken from it",
-        loo.rms_um, loo.noise_um, loo.residual_noise_um, loo.null_directions
-    );
-    if let Some(w) = &loo.warning {
-        println!("WARNING: {w}");
-    }
-}
-
-fn print_identification(
-    id: &Identification,
-    obs: &[LineObs],
-    stroke: [f64; 3],
-    st: &Structure,
-    points: usize,
-) {
-    println!(
-        "{} lines ({} readings), structure {st}, strokes {:.0}×{:.0}×{:.0} mm",
-        obs.len(),
-        id.readings,
-        stroke[0],
-        stroke[1],
-        stroke[2]
-    );
-    let d = id.basis.degrees;
-    println!(
-        "model: degree {} (positioning, pitch, yaw), {} (straightness), {} (roll): {} unknowns",
-        d.main,
-        d.straightness,
-        d.roll,
-        id.basis.columns.len()
-    );
-    println!(
-        "rank {} of {}; condition number {}; residual RMS {:.3} µm",
-        id.rank,
-        id.basis.columns.len(),
-        if id.condition_number.is_finite() {
-            format!("{:.1}", id.condition_number)
-        } else {
-            "infinite".into()
-        },
-        id.residual_rms_um
-    );
-    if id.unobservable.is_empty() {
-        println!("every unknown is observable from these lines");
-    } else {
-        println!(
-            "NOT observable from these lines ({} combinations, left at zero):",
-            id.unobservable.len()
-        );
-        for u in &id.unobservable {
-            let c: Vec<String> = u
-                .combination
-                .iter()
-                .map(|(n, w)| format!("{w:+.2}·{n}"))
-                .collect();
-            println!("  {}", c.join(" "));
-        }
-    }
-    println!("error functions at {points} positions per axis:");
 }
 
 fn plan_cmd(a: PlanArgs) -> Result<()> {

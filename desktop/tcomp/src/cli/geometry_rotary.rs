@@ -6,6 +6,7 @@ use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use super::geometry_adequacy::{inadequate_warning, print_adequacy, refuse_inadequate};
 use tcomp_data::rng::Rng;
 use tcomp_geometry::check::figures;
 use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
@@ -402,14 +403,13 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         .unobservable_terms
         .iter()
         .any(|t| tcomp_geometry::rotary::LOCATION_NAMES.contains(&t.as_str()));
-    if !adq.adequate && !a.accept_inadequate && (a.partial || !location_unobservable) {
-        bail!(
-            "{}",
-            adq.refusal(
-                &format!("the rotary model of these {} R-test files", files.len()),
-                "measure more: more nests, tool lengths and sweeps (`tcomp geometry plan-rotary`), the linear axes with more lines (`tcomp geometry plan`)"
-            )
-        );
+    if a.partial || !location_unobservable {
+        refuse_inadequate(
+            &adq,
+            a.accept_inadequate,
+            &format!("the rotary model of these {} R-test files", files.len()),
+            "measure more: more nests, tool lengths and sweeps (`tcomp geometry plan-rotary`), the linear axes with more lines (`tcomp geometry plan`)",
+        )?;
     }
     let truth = a.truth.as_ref().map(|p| RotaryModel::read(p)).transpose()?;
     if let Some(p) = &a.model_out {
@@ -423,13 +423,10 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         println!("{v}");
     } else {
         print_identification(&id, truth.as_ref());
-        super::geometry::print_adequacy(&adq);
+        print_adequacy(&adq);
     }
-    if !adq.adequate && a.accept_inadequate {
-        eprintln!(
-            "warning: the rotary model is inadequate ({}); going on (--accept-inadequate): marked \"adequate\": false, σ's inflated ×{:.1}",
-            adq.failure, adq.sigma_inflation
-        );
+    if let Some(w) = inadequate_warning(&adq, "rotary model").filter(|_| a.accept_inadequate) {
+        eprintln!("warning: {w}");
     }
     let bad: Vec<&String> = id
         .unobservable_terms
