@@ -15,7 +15,8 @@
 #    references (non-causal: it knows the future of the interval);
 # and the 1 h residual split into the hour after a spindle-speed change and
 # the rest; one re-zero at 60 % scored 60-100 % against the raw error;
-# a sweep of the rule's constants.
+# a sweep of the rule's constants; hourly references averaged over six clock
+# phases, with the number of references each schedule took.
 # Usage: scripts/bench-probe-channels.sh [--json]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -49,6 +50,16 @@ for img in fl35 fl124; do
           --reference-seed "$s" "${extra[@]}" --reference-dump "$dir/$tag.csv" >"$dir/$tag.json"
       done
     done
+  done
+done
+# Hourly references at six clock phases (issue 51: the phase alone moves the
+# figures; compare schedules averaged over phases, at equal counts): seed 1,
+# clean, the first reference 0, 10, …, 50 min into the run.
+for img in fl35 fl124; do
+  for phase in 0 10min 20min 30min 40min 50min; do
+    "$tcomp" replay "$run" "$dir/$img.img" --from 0.6 --to 0.8 --json --reference-every 1h \
+      --reference-phase "$phase" --reference-seed 1 \
+      --reference-dump "$dir/phase-$img-$phase.csv" >"$dir/phase-$img-$phase.json"
   done
 done
 # Alternatives of the rule's constants (seed 1, clean), same rows: how far

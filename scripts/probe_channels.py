@@ -105,6 +105,39 @@ def sweep():
     return out
 
 
+PHASES = ("0", "10min", "20min", "30min", "40min", "50min")
+
+
+def phases(d):
+    """Per channel and block: hourly references (seed 1, clean) at six clock
+    phases: MAE per phase, their mean and spread, and the references taken
+    (whole run, in the block), so schedules compare at equal counts."""
+    out = []
+    for img, chans in IMAGES.items():
+        dumps = {p: read_csv(f"{d}/phase-{img}-{p}.csv") for p in PHASES}
+        reps = {p: json.load(open(f"{d}/phase-{img}-{p}.json"))["references"]["channels"] for p in PHASES}
+        for ch in chans:
+            for blk, (lo, hi) in BLOCKS.items():
+                maes, counts = [], []
+                for p in PHASES:
+                    dump = dumps[p]
+                    meas = [num(r[f"{ch}_measured"]) for r in dump]
+                    served = [float(r[f"{ch}_served"]) for r in dump]
+                    n = len(dump)
+                    idx = [i for i in range(int(lo * n), int(hi * n)) if meas[i] is not None]
+                    maes.append(mae((meas[i], served[i]) for i in idx))
+                    c = next(c for c in reps[p] if c["column"] == ch)
+                    counts.append(c["references"])
+                out.append({
+                    "channel": ch, "block": blk,
+                    "mae_1h_by_phase_um": [round(v, 3) for v in maes],
+                    "mae_1h_phase_mean_um": round(sum(maes) / len(maes), 3),
+                    "mae_1h_phase_min_max_um": [round(min(maes), 3), round(max(maes), 3)],
+                    "references_by_phase": counts,
+                })
+    return out
+
+
 def main():
     d, run_path, as_json = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
     run = read_csv(run_path)
@@ -169,7 +202,8 @@ def main():
                 "never_worse_than_raw": c["never_worse_than_raw"],
             })
     if as_json:
-        print(json.dumps({"seeds": list(SEEDS), "rows": rows, "rezero_60pct_scored_60_100": rezero, "sweep": sweep()}))
+        print(json.dumps({"seeds": list(SEEDS), "rows": rows, "rezero_60pct_scored_60_100": rezero,
+                          "sweep": sweep(), "hourly_over_clock_phases": phases(d)}))
         return
     print("| channel | block | model alone | 1 h | 1 h 5 %:+50 (refused) | 4 h | 4 h 5 %:+50 (refused) | floor 1 h: hold exact / interval mean | floor 4 h | 1 h: hour after a speed change (share) / elsewhere |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -191,6 +225,12 @@ def main():
             for k in ("1h+10min", "1h+30min", "4h+10min", "4h+30min")
         )
         print(f"| {r['channel']} | {r['block']} | {cells} |")
+    print()
+    print("| channel | block | hourly, mean over 6 clock phases (min – max) | references per phase (whole run) |")
+    print("|---|---|---|---|")
+    for r in phases(d):
+        lo_, hi_ = r["mae_1h_phase_min_max_um"]
+        print(f"| {r['channel']} | {r['block']} | {r['mae_1h_phase_mean_um']:.2f} ({lo_:.2f} – {hi_:.2f}) | {r['references_by_phase']} |")
     print()
     print("| channel | re-zero at 60 %, scored 60-100 %: RMS with the model / raw RMS about the re-zero | never above raw |")
     print("|---|---|---|")

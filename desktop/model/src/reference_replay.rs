@@ -38,6 +38,16 @@ pub struct ReferenceArgs {
         arg(long = "reference-every", value_name = "DURATION")
     )]
     pub every: Option<String>,
+    /// Shift the clock schedule: the first reference this long after the
+    /// run's start, then every `--reference-every` (`10min`; below the
+    /// interval). 0 (the default): the first at one interval. Clock phase
+    /// moves the figures a lot (a reference minutes before a speed change
+    /// teaches little): compare schedules over several phases.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "reference-phase", value_name = "DURATION")
+    )]
+    pub phase: Option<String>,
     /// Also simulate a reference this long after every change of the run's
     /// `spindle_rpm` (a probing cycle triggered by the operating state
     /// rather than the clock), e.g. `10min`.
@@ -255,6 +265,8 @@ pub struct ChannelReference {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ReferenceReport {
     pub every_s: Option<f64>,
+    /// The clock schedule's shift (`--reference-phase`), s.
+    pub phase_s: f64,
     pub after_change_s: Option<f64>,
     pub noise_um: f64,
     pub outliers: Option<(f64, f64)>,
@@ -304,19 +316,28 @@ pub struct SimReference {
     pub corrupted: bool,
 }
 
-/// Times (s) at which a reference is due: k·every (k ≥ 1) from the run's
-/// first time and, with `after_change`, that long after every change of
+/// Times (s) at which a reference is due: phase + k·every (k ≥ 0, after
+/// the run's first time) from the run's first time — phase 0: k·every,
+/// k ≥ 1 — and, with `after_change`, that long after every change of
 /// `spindle_rpm`; sorted, duplicates once.
-pub fn due_times(run: &Run, every_s: Option<f64>, after_change_s: Option<f64>) -> Vec<f64> {
+pub fn due_times(
+    run: &Run,
+    every_s: Option<f64>,
+    phase_s: f64,
+    after_change_s: Option<f64>,
+) -> Vec<f64> {
     let time = run.time_s();
     let (Some(&t0), Some(&t_end)) = (time.first(), time.last()) else {
         return vec![];
     };
     let mut due = vec![];
     if let Some(e) = every_s {
-        let mut k = 1u64;
-        while t0 + e * k as f64 <= t_end {
-            due.push(t0 + e * k as f64);
+        let mut k = 0u64;
+        while t0 + phase_s + e * k as f64 <= t_end {
+            let t = t0 + phase_s + e * k as f64;
+            if t > t0 {
+                due.push(t);
+            }
             k += 1;
         }
     }
@@ -466,7 +487,20 @@ pub fn score(
     if after_s.is_some() && run.col("spindle_rpm").is_none() {
         bail!("--reference-after-change: the run has no spindle_rpm column");
     }
-    let due = due_times(run, every_s, after_s);
+    let phase_s = match args.phase.as_deref().map(str::trim) {
+        None | Some("0") => 0.0,
+        Some(p) => {
+            let Some(e) = every_s else {
+                bail!("--reference-phase needs --reference-every (the clock schedule it shifts)");
+            };
+            let v = parse_duration_s(p).map_err(|e| anyhow!("--reference-phase {e}"))?;
+            if v >= e {
+                bail!("--reference-phase {p}: must be below the interval --reference-every ({e:.0} s)");
+            }
+            v
+        }
+    };
+    let due = due_times(run, every_s, phase_s, after_s);
     let refs = simulate_references(run, model, &due, args.noise_um, outliers, args.seed);
     let mut channels = vec![];
     let mut dump: Vec<(String, Vec<i32>)> = vec![];
@@ -550,6 +584,7 @@ pub fn score(
     }
     Ok(ReferenceReport {
         every_s,
+        phase_s,
         after_change_s: after_s,
         noise_um: args.noise_um,
         outliers,
@@ -606,8 +641,9 @@ impl ReferenceReport {
     pub fn print(&self) {
         match self.every_s {
             Some(e) => println!(
-                "  references every {:.0} s (probe noise σ {} µm{}, seed {}); re-zeros at {:?} ms",
+                "  references every {:.0} s from {:.0} s (probe noise σ {} µm{}, seed {}); re-zeros at {:?} ms",
                 e,
+                if self.phase_s > 0.0 { self.phase_s } else { e },
                 self.noise_um,
                 self.outliers
                     .map(|(s, o)| format!(", {:.1} % corrupted by {o:+} µm", s * 100.0))

@@ -50,6 +50,7 @@ fn setup() -> Setup {
 fn args(every: Option<&str>, outliers: Option<&str>, seed: u64) -> ReferenceArgs {
     ReferenceArgs {
         every: every.map(str::to_string),
+        phase: None,
         after_change: None,
         noise_um: 0.3,
         outliers: outliers.map(str::to_string),
@@ -164,7 +165,7 @@ fn references_after_speed_changes_follow_the_spindle() {
     for (b, c) in base.channels.iter().zip(&rep.channels) {
         assert_eq!(c.references, b.references + changes, "{}", c.column);
     }
-    let due = tcomp_model::reference_replay::due_times(&s.run, None, Some(600.0));
+    let due = tcomp_model::reference_replay::due_times(&s.run, None, 0.0, Some(600.0));
     assert_eq!(due.len(), changes);
     for t in due {
         let i = time.iter().position(|&x| x >= t).unwrap();
@@ -174,4 +175,46 @@ fn references_after_speed_changes_follow_the_spindle() {
             "no speed change 10 min before {t} s"
         );
     }
+}
+
+#[test]
+fn a_clock_phase_shifts_every_reference_and_keeps_their_count_honest() {
+    let s = setup();
+    let time = s.run.time_s();
+    let (t0, t_end) = (time[0], *time.last().unwrap());
+    let base = tcomp_model::reference_replay::due_times(&s.run, Some(3600.0), 0.0, None);
+    let shifted = tcomp_model::reference_replay::due_times(&s.run, Some(3600.0), 1200.0, None);
+    // Phase 0 is today's schedule: k·1 h, k ≥ 1.
+    assert_eq!(base[0], t0 + 3600.0);
+    // A 20 min phase: the first at 20 min, then hourly; as many as fit.
+    assert_eq!(shifted[0], t0 + 1200.0);
+    assert!(shifted
+        .windows(2)
+        .all(|w| (w[1] - w[0] - 3600.0).abs() < 1e-9));
+    assert_eq!(
+        shifted.len(),
+        ((t_end - t0 - 1200.0) / 3600.0).floor() as usize + 1
+    );
+    // The report says how many references the schedule took.
+    let mut a = args(Some("1h"), None, 1);
+    a.phase = Some("20min".into());
+    let rep = run(&s, &a);
+    assert_eq!(rep.phase_s, 1200.0);
+    let plain = run(&s, &args(Some("1h"), None, 1));
+    for (p, c) in plain.channels.iter().zip(&rep.channels) {
+        assert!(c.references >= p.references, "{}", c.column);
+        assert_ne!(
+            c.served_hash, p.served_hash,
+            "{}: the phase changes what is served",
+            c.column
+        );
+    }
+    // A phase without a clock schedule, or not below its interval: refused.
+    let mut bad = args(None, None, 1);
+    bad.phase = Some("10min".into());
+    assert!(score(&s.run, &s.rows, &s.model, &bad, s.from, s.rows.len()).is_err());
+    let mut bad = args(Some("1h"), None, 1);
+    bad.phase = Some("1h".into());
+    let e = score(&s.run, &s.rows, &s.model, &bad, s.from, s.rows.len()).unwrap_err();
+    assert!(e.to_string().contains("below the interval"), "{e}");
 }
