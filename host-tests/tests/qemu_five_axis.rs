@@ -57,6 +57,9 @@ fn poly() -> VolumetricPoly {
         max_fit_error_um: 0.0,
         unobservable_terms: Vec::new(),
         unobservable_accepted: false,
+        // A hand-made section: no identification behind it to judge.
+        adequate: None,
+        adequacy: None,
     }
 }
 
