@@ -6,7 +6,8 @@
 //!   fault during a reply never leaves the bus jammed.
 //! - Fault record: 8 words at the top of SRAM (`__fault_record`, reserved
 //!   in `board-memory.x` outside every section; SRAM keeps its contents over
-//!   a system or watchdog reset, not over a power cycle).
+//!   a system or watchdog reset, not over a power cycle), read and written
+//!   by [`board_support::fault_record`].
 //! - Reset: SCB AIRCR.SYSRESETREQ.
 //! - Watchdog: the IWDG (LSI clock), which resets without an interrupt
 //!   first: after a watchdog reset the boot code finds RCC_CSR.IWDGRSTF and
@@ -21,8 +22,6 @@ use thermocomp::fault::{self, FaultBoard, WORDS};
 use thermocomp::hal::watchdog::Watchdog;
 
 extern "C" {
-    /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
-    static mut __fault_record: [u32; WORDS];
     /// One word after the record (NOINIT): the feeder's last stall bits.
     static mut __watchdog_hint: u32;
 }
@@ -73,26 +72,11 @@ impl FaultBoard for Nucleo {
     }
 
     fn load() -> [u32; WORDS] {
-        let mut w = [0u32; WORDS];
-        // SAFETY: the reserved words are plain SRAM that only this module
-        // touches, word by word with volatile accesses.
-        unsafe {
-            let base = addr_of_mut!(__fault_record) as *const u32;
-            for (i, v) in w.iter_mut().enumerate() {
-                *v = read_volatile(base.add(i));
-            }
-        }
-        w
+        board_support::fault_record::load()
     }
 
     fn store(words: &[u32; WORDS]) {
-        // SAFETY: as in `load`.
-        unsafe {
-            let base = addr_of_mut!(__fault_record) as *mut u32;
-            for (i, v) in words.iter().enumerate() {
-                write_volatile(base.add(i), *v);
-            }
-        }
+        board_support::fault_record::store(words)
     }
 
     fn reset() -> ! {

@@ -3,7 +3,8 @@
 //!
 //! - Fault record: 8 words at the top of RAM (`__fault_record`, reserved in
 //!   `board-memory.x` outside every section, so neither cortex-m-rt's startup
-//!   nor QEMU's reload of the ELF on a system reset touches them).
+//!   nor QEMU's reload of the ELF on a system reset touches them), read and
+//!   written by [`board_support::fault_record`].
 //! - Safe state: UART0 transmitter off (the bench has no RS-485 driver-enable
 //!   pin; switching the transmitter off is the same "release the bus" step).
 //! - Reset: SCB AIRCR.SYSRESETREQ, which QEMU turns into a machine reset
@@ -15,16 +16,11 @@
 //!   watchdog, the interrupted PC, which activity stalled) and resets at once;
 //!   the second expiry stays as the backstop if the handler itself hangs.
 
-use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+use core::ptr::{read_volatile, write_volatile};
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use thermocomp::fault::{self, FaultBoard, WORDS};
 use thermocomp::hal::watchdog::Watchdog;
-
-extern "C" {
-    /// Reserved by board-memory.x (NOINIT region, `WORDS` words).
-    static mut __fault_record: [u32; WORDS];
-}
 
 pub struct Bench;
 
@@ -41,26 +37,11 @@ impl FaultBoard for Bench {
     }
 
     fn load() -> [u32; WORDS] {
-        let mut w = [0u32; WORDS];
-        // SAFETY: the reserved words are plain RAM that only this module
-        // touches, word by word with volatile accesses.
-        unsafe {
-            let base = addr_of_mut!(__fault_record) as *const u32;
-            for (i, v) in w.iter_mut().enumerate() {
-                *v = read_volatile(base.add(i));
-            }
-        }
-        w
+        board_support::fault_record::load()
     }
 
     fn store(words: &[u32; WORDS]) {
-        // SAFETY: as in `load`.
-        unsafe {
-            let base = addr_of_mut!(__fault_record) as *mut u32;
-            for (i, v) in words.iter().enumerate() {
-                write_volatile(base.add(i), *v);
-            }
-        }
+        board_support::fault_record::store(words)
     }
 
     fn reset() -> ! {

@@ -4,4 +4,5 @@
 #![no_std]
 
 pub mod fault_entry;
+pub mod fault_record;
 pub mod stack;
