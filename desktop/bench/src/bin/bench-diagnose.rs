@@ -28,7 +28,7 @@
 //! `--seed`; never tune on them. One line per case and column on stderr
 //! (wall and CPU seconds). `--threads N`: diagnose on N threads (default:
 //! every core; `--threads 1` for the one-core time).
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 use tcomp_bench::harness::{
     approx_text, run_approx_bench, run_bench, run_cross_bench, run_open_bench,
@@ -42,111 +42,102 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
-/// The command line, parsed.
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    name = "bench-diagnose",
+    about = "Blind check of `tcomp diagnose`: generated cases of known effects, scored named / honest / wrong / silent with false alarms on clean cases",
+    after_help = "Examples:\n  bench-diagnose --json                       the closed-world bench (60 cases)\n  bench-diagnose --columns all --cases 10     issue 27's columns, both worlds\n  bench-diagnose --columns fit --worlds open  `diagnose fit` on the open world"
+)]
 struct Args {
+    /// Generated cases (clean cases are added past this count).
+    #[arg(long, default_value_t = 60)]
     cases: usize,
-    seed: u64,
-    json: bool,
-    verbose: bool,
-    open_only: bool,
-    machine_only: bool,
-    closed_only: bool,
-    cross_only: bool,
-    periodic_only: bool,
-    dir: PathBuf,
-    open_machine_file: Option<PathBuf>,
-    calibrate: bool,
-    columns: Option<Vec<Column>>,
-    worlds: Vec<World>,
-    heldout: bool,
-    sigma: f64,
-    threads: Option<usize>,
+    /// First case index (to run a slice of a seed's cases).
+    #[arg(long = "first-case", default_value_t = 0)]
     first_case: usize,
+    /// Seed of the cases (development seeds; see --heldout).
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Print the figures as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// One line per case with what was named.
+    #[arg(long)]
+    verbose: bool,
+    /// The open-world `diagnose fit` column alone.
+    #[arg(long = "open-only")]
+    open_only: bool,
+    /// The open-world machine-file column alone.
+    #[arg(long = "open-machine-only")]
+    machine_only: bool,
+    /// The closed-world column alone.
+    #[arg(long = "closed-only")]
+    closed_only: bool,
+    /// The cross-model `diagnose fit` column alone.
+    #[arg(long = "cross-only")]
+    cross_only: bool,
+    /// The periodic-driver column alone (both modes).
+    #[arg(long = "periodic-only")]
+    periodic_only: bool,
+    /// Folder of the closed world's machine files.
+    #[arg(long = "machines", value_name = "DIR", default_value_os_t = desktop_dir().join("machines"))]
+    dir: PathBuf,
+    /// Machine file of the open-world machine-file column (default: the truth's own numbers).
+    #[arg(long = "machine", value_name = "FILE")]
+    open_machine_file: Option<PathBuf>,
+    /// Calibrate the machine file's design values on each case's fit rows first.
+    #[arg(long)]
+    calibrate: bool,
+    /// Issue 27's columns: `all` or a comma list of exact, design, fit.
+    #[arg(long, value_name = "LIST", value_parser = parse_columns)]
+    columns: Option<Columns>,
+    /// Worlds of the columns: a comma list of open, cross.
+    #[arg(long, value_name = "LIST", default_value = "open,cross", value_parser = parse_worlds)]
+    worlds: Worlds,
+    /// Run the held-out seeds (101, 103, 107) instead of --seed; never tune on them.
+    #[arg(long)]
+    heldout: bool,
+    /// σ of the log of the design file's error factor (the `design` column).
+    #[arg(long, default_value_t = tcomp_bench::harness::perturb::DESIGN_SIGMA)]
+    sigma: f64,
+    /// Diagnose on this many threads (default: every core; 1 for the one-core time).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+/// A list given as one comma-separated value (clap would read a `Vec`
+/// field as a repeated flag).
+#[derive(Clone)]
+struct Columns(Vec<Column>);
+#[derive(Clone)]
+struct Worlds(Vec<World>);
+
+/// `--worlds LIST`: a comma list of open, cross.
+fn parse_worlds(l: &str) -> Result<Worlds> {
+    Ok(Worlds(
+        l.split(',').map(World::parse).collect::<Result<_>>()?,
+    ))
 }
 
 fn parse_args() -> Result<Args> {
-    let mut cases = 60usize;
-    let mut first_case = 0usize;
-    let mut seed = 7u64;
-    let mut json = false;
-    let mut verbose = false;
-    let mut open_only = false;
-    let mut machine_only = false;
-    let mut closed_only = false;
-    let mut cross_only = false;
-    let mut periodic_only = false;
-    let mut dir = desktop_dir().join("machines");
-    let mut open_machine_file: Option<PathBuf> = None;
-    let mut calibrate = false;
-    let mut columns: Option<Vec<Column>> = None;
-    let mut worlds = vec![World::Open, World::Cross];
-    let mut heldout = false;
-    let mut sigma = tcomp_bench::harness::perturb::DESIGN_SIGMA;
-    let mut threads = None;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--cases" => cases = args.next().context("--cases N")?.parse().context("--cases N")?,
-            "--seed" => seed = args.next().context("--seed S")?.parse().context("--seed S")?,
-            "--machines" => dir = PathBuf::from(args.next().context("--machines DIR")?),
-            "--machine" => {
-                open_machine_file = Some(PathBuf::from(args.next().context("--machine FILE")?))
-            }
-            "--columns" => {
-                columns = Some(parse_columns(&args.next().context("--columns exact,design,fit")?)?)
-            }
-            "--worlds" => {
-                let l = args.next().context("--worlds open,cross")?;
-                worlds = l.split(',').map(World::parse).collect::<Result<_>>()?
-            }
-            "--heldout" => heldout = true,
-            "--sigma" => sigma = args.next().context("--sigma X")?.parse().context("--sigma X")?,
-            "--threads" => {
-                threads = Some(
-                    args.next()
-                        .context("--threads N")?
-                        .parse()
-                        .context("--threads N")?,
-                )
-            }
-            "--first-case" => {
-                first_case = args
-                    .next()
-                    .context("--first-case N")?
-                    .parse()
-                    .context("--first-case N")?
-            }
-            "--json" => json = true,
-            "--calibrate" => calibrate = true,
-            "--verbose" => verbose = true,
-            "--open-only" => open_only = true,
-            "--open-machine-only" => machine_only = true,
-            "--closed-only" => closed_only = true,
-            "--cross-only" => cross_only = true,
-            "--periodic-only" => periodic_only = true,
-            other => anyhow::bail!("unknown argument `{other}` (--cases N, --seed S, --json, --verbose, --open-only, --open-machine-only, --closed-only, --cross-only, --periodic-only, --machines DIR, --machine FILE, --calibrate, --columns exact,design,fit|all, --worlds open,cross, --heldout, --sigma X, --threads N, --first-case N)"),
+    Ok(<Args as clap::Parser>::try_parse().map_err(|e| {
+        // --help / --version print and exit 0; a bad flag is one line.
+        if matches!(
+            e.kind(),
+            clap::error::ErrorKind::DisplayHelp | clap::error::ErrorKind::DisplayVersion
+        ) {
+            e.exit()
         }
-    }
-    Ok(Args {
-        cases,
-        seed,
-        json,
-        verbose,
-        open_only,
-        machine_only,
-        closed_only,
-        cross_only,
-        periodic_only,
-        dir,
-        open_machine_file,
-        calibrate,
-        columns,
-        worlds,
-        heldout,
-        sigma,
-        threads,
-        first_case,
-    })
+        anyhow::anyhow!(
+            "{}",
+            e.to_string()
+                .lines()
+                .next()
+                .unwrap_or("bad arguments")
+                .trim_start_matches("error: ")
+        )
+    })?)
 }
 
 fn run() -> Result<()> {
@@ -198,8 +189,8 @@ fn run() -> Result<()> {
             vec![seed]
         };
         let acfg = ApproxConfig {
-            columns,
-            worlds,
+            columns: columns.0,
+            worlds: worlds.0,
             sigma,
             seeds,
             first_case,
@@ -282,11 +273,13 @@ fn run() -> Result<()> {
 }
 
 /// `--columns LIST`: `all` or a comma list of exact, design, fit.
-fn parse_columns(l: &str) -> Result<Vec<Column>> {
+fn parse_columns(l: &str) -> Result<Columns> {
     if l == "all" {
-        return Ok(vec![Column::Exact, Column::Design, Column::Fit]);
+        return Ok(Columns(vec![Column::Exact, Column::Design, Column::Fit]));
     }
-    l.split(',').map(Column::parse).collect()
+    Ok(Columns(
+        l.split(',').map(Column::parse).collect::<Result<_>>()?,
+    ))
 }
 
 /// Issue 27's columns (`--columns`), printed as text or JSON.
