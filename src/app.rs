@@ -5,7 +5,6 @@
 //! awaits while holding it.
 
 use embedded_storage::nor_flash::NorFlash;
-use thermocomp_core::limits::MAX_AXES;
 use thermocomp_core::StepOutput;
 
 use crate::acquisition::channel_map::ChannelMap;
@@ -13,15 +12,17 @@ use crate::acquisition::channel_map::CHANNEL_MAP_BYTES;
 use crate::acquisition::rom::RomCode;
 use crate::acquisition::temperature::TemperatureAcquisition;
 use crate::acquisition::temperature::Validity;
-use crate::compensation::{Compensation, PlcInputs};
+use crate::compensation::Compensation;
 use crate::fault::FaultRecord;
 use crate::hal::flash::BackgroundErase;
-use crate::modbus::holding::Command;
-use crate::modbus::registers::{centidegrees, Snapshot};
 use crate::modbus::Server;
 use crate::model_store::ModelStore;
-use crate::probe_reference::{References, BLOCK_LEN as REFERENCES_LEN};
+use crate::probe_reference::{ProbeSetup, References, BLOCK_LEN as REFERENCES_LEN};
+use crate::snapshot::{centidegrees, Snapshot};
+use crate::state::AppState;
+use crate::state::Command;
 
+mod access;
 mod probe;
 mod records;
 use crate::model_store::MAX_SETTINGS_BYTES;
@@ -48,14 +49,18 @@ const _: () = assert!(
         <= MAX_SETTINGS_BYTES
 );
 
-/// PLC registers older than this make the inputs "stale".
-pub const PLC_TIMEOUT_MS: u64 = 10_000;
+pub use crate::plc::PLC_TIMEOUT_MS;
 
 pub struct App<F: NorFlash> {
-    pub server: Server,
-    pub snapshot: Snapshot,
-    pub compensation: Compensation,
-    pub store: ModelStore<F>,
+    /// The Modbus codec: frames in, replies out, the unlock rule.
+    server: Server,
+    /// What masters set: settings, PLC data, probe setup, keys, the staged
+    /// image, the result code ([`AppState`]).
+    state: AppState,
+    /// What the board reports, published by each cycle.
+    snapshot: Snapshot,
+    compensation: Compensation,
+    store: ModelStore<F>,
     /// Settings, keys, the kept reference and the probe-reference terms
     /// ([`crate::settings_store`], in the flash area the board names).
     settings_store: SettingsStore,
@@ -64,14 +69,14 @@ pub struct App<F: NorFlash> {
     written: [Option<u32>; crate::settings_store::RECORDS],
     map: ChannelMap,
     /// What the watchdog feeder looks at ([`crate::watchdog`]).
-    pub progress: Progress,
+    progress: Progress,
     /// Set by the test-only command 9: the measurement loop must stop.
-    pub stall_requested: bool,
+    stall_requested: bool,
     /// The measurement loop has booted (sensors searched, channel map and
     /// fault record settled): until then Modbus frames get no answer, as
     /// from a board still booting, and the watchdog is fed unconditionally
     /// ([`crate::runtime`]).
-    pub booted: bool,
+    booted: bool,
     /// The board's settings without stored ones (command 7 goes back to them).
     defaults: Settings,
     /// The flash write in progress ([`App::poll_flash`]).
@@ -89,7 +94,7 @@ pub struct App<F: NorFlash> {
     /// Uptime of the last cycle or request (ms), for the PLC-timeout rule.
     vol_uptime_ms: u64,
     /// Probe references and re-zero ([`crate::probe_reference`]).
-    pub references: References,
+    references: References,
     /// HR_RESULT once the settings job in progress is stored (a refused
     /// probe reference says so after its count is stored).
     stored_result: Option<u16>,
@@ -138,7 +143,8 @@ impl<F: BackgroundErase> App<F> {
     #[inline(always)]
     pub fn unloaded(flash: F, slot_size: u32, unit: u8, baud: u32, map: ChannelMap) -> Self {
         App {
-            server: Server::new(unit, baud),
+            server: Server::new(),
+            state: AppState::new(unit, baud),
             snapshot: Snapshot::default(),
             compensation: Compensation::empty(),
             settings_store: SettingsStore::new(flash.settings_area()),
@@ -169,7 +175,7 @@ impl<F: BackgroundErase> App<F> {
     #[inline(never)]
     pub fn load_stored(&mut self) {
         // Parsed straight into the compensator (no model on the stack).
-        let (store, buf) = (&mut self.store, self.server.holding.scratch());
+        let (store, buf) = (&mut self.store, self.state.staging.scratch());
         self.compensation
             .compensator()
             .load_with(|m| store.load_into(buf, m));
@@ -186,7 +192,7 @@ impl<F: BackgroundErase> App<F> {
                 legacy
             }
         };
-        apply_settings(&mut self.server.holding, &stored.unwrap_or(self.defaults));
+        self.state.settings = stored.unwrap_or(self.defaults);
         self.publish_references();
         self.snapshot.reference_state = u16::from(self.kept.is_some());
         self.publish_map();
@@ -195,13 +201,7 @@ impl<F: BackgroundErase> App<F> {
 
     /// The settings in force (unit, baud, clamp and rate overrides).
     pub fn settings(&self) -> Settings {
-        let h = &self.server.holding;
-        Settings {
-            unit: h.unit,
-            baud: h.baud,
-            clamp: h.clamp,
-            rate: h.rate,
-        }
+        self.state.settings
     }
 
     /// Store what changed of the settings, keys, kept reference and probe
@@ -213,8 +213,8 @@ impl<F: BackgroundErase> App<F> {
             return;
         }
         self.job = Some(FlashJob::Settings);
-        self.server.holding.busy = true;
-        self.server.holding.result = result::COMMIT_IN_PROGRESS;
+        self.state.busy = true;
+        self.state.result = result::COMMIT_IN_PROGRESS;
     }
 
     /// The kept reference sample (commands 10, 11), if any.
@@ -227,7 +227,7 @@ impl<F: BackgroundErase> App<F> {
     fn request_reference(&mut self) {
         self.reference_pending = true;
         self.snapshot.reference_state = 2;
-        self.server.holding.result = result::REFERENCE_PENDING;
+        self.state.result = result::REFERENCE_PENDING;
     }
 
     /// Take the pending reference sample now if every model sensor reads
@@ -256,7 +256,7 @@ impl<F: BackgroundErase> App<F> {
         self.reference_pending = false;
         self.snapshot.reference_state = 1;
         self.apply_kept_reference();
-        self.server.holding.result = result::OK;
+        self.state.result = result::OK;
         self.store_settings();
     }
 
@@ -378,7 +378,7 @@ impl<F: BackgroundErase> App<F> {
         if !self.store.erase_done() {
             return true;
         }
-        let staged = self.server.holding.staged();
+        let staged = self.state.staging.staged();
         let staged = staged.get(..len).unwrap_or(staged);
         // The server checked the image when it took the command, and the
         // staging area is read-only while the job runs: stored, then parsed
@@ -387,8 +387,8 @@ impl<F: BackgroundErase> App<F> {
         // hold the old one as the newest that parses).
         let ok = self.store.finish(Some(staged), &[]).is_ok();
         if ok {
-            let (comp, holding) = (&mut self.compensation, &self.server.holding);
-            let staged = holding.staged();
+            let (comp, state) = (&mut self.compensation, &self.state);
+            let staged = state.staging.staged();
             let staged = staged.get(..len).unwrap_or(staged);
             comp.compensator()
                 .load_with(|m| m.parse_into(staged).is_ok());
@@ -404,9 +404,9 @@ impl<F: BackgroundErase> App<F> {
 
     fn end_job(&mut self, job: FlashJob, ok: bool) {
         self.job = None;
-        self.server.holding.busy = false;
+        self.state.busy = false;
         let after = self.stored_result.take().unwrap_or(result::OK);
-        let h = &mut self.server.holding;
+        let h = &mut self.state;
         match (job, ok) {
             (FlashJob::Model { .. }, true) => h.result = result::OK,
             (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
@@ -446,7 +446,7 @@ impl<F: BackgroundErase> App<F> {
         self.references.reset();
         if self.job.is_some() {
             self.job = None;
-            self.server.holding.busy = false;
+            self.state.busy = false;
         }
         self.installed();
         let _ = self.store_records();
@@ -487,7 +487,6 @@ impl<F: BackgroundErase> App<F> {
             None => (0, 0, 0, 0, 0),
         };
         self.snapshot.model_version = v;
-        self.server.holding.running_version = v;
         self.snapshot.model_crc = crc;
         self.snapshot.n_directions = register_count(nd);
         self.snapshot.n_axes = register_count(na);
@@ -508,22 +507,18 @@ impl<F: BackgroundErase> App<F> {
     /// available" (0x8000 0000) and the status says why.
     pub fn update_volumetric(&mut self, uptime_ms: u64) {
         self.vol_uptime_ms = uptime_ms;
-        let h = &self.server.holding;
-        let plc_stale = h
-            .plc_written_ms
-            .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
+        let plc = &self.state.plc;
         let cx = VolContext {
             temps: &self.vol_temps,
             held: self.vol_held,
-            plc_stale,
+            plc_stale: plc.stale(uptime_ms),
             sequence: self.snapshot.vol.sequence.wrapping_add(1),
         };
-        self.snapshot.vol = crate::volumetric::snapshot(self.compensation.model(), h, &cx);
+        self.snapshot.vol = crate::volumetric::snapshot(self.compensation.model(), plc, &cx);
     }
 
     fn apply_limits(&mut self) {
-        let h = &self.server.holding;
-        let (clamp, rate) = (h.clamp, h.rate);
+        let (clamp, rate) = (self.state.settings.clamp, self.state.settings.rate);
         // 0xFFFF: no override.
         let limit = |v: u16| {
             if v == u16::MAX {
@@ -549,17 +544,7 @@ impl<F: BackgroundErase> App<F> {
         uptime_ms: u64,
         spindle_override: Option<i32>,
     ) -> StepOutput {
-        let h = &self.server.holding;
-        let plc_stale = spindle_override.is_none()
-            && h.plc_written_ms
-                .is_none_or(|t| uptime_ms.saturating_sub(t) > PLC_TIMEOUT_MS);
-        let mut positions = [0i32; MAX_AXES];
-        positions.copy_from_slice(&h.positions);
-        let plc = PlcInputs {
-            spindle_rpm: spindle_override.unwrap_or(i32::from(h.spindle_rpm)),
-            positions,
-            stale: plc_stale,
-        };
+        let plc = self.state.plc.inputs(uptime_ms, spindle_override);
         if self.reference_pending {
             self.take_reference(acq, now_ms);
         }
@@ -627,19 +612,10 @@ impl<F: BackgroundErase> App<F> {
         uptime_ms: u64,
         reply: &mut heapless::Vec<u8, MAX_FRAME>,
     ) -> LinkChange {
-        let h = &self.server.holding;
-        let geometry = |h: &crate::modbus::holding::Holding| {
-            (
-                h.positions,
-                h.tool_length_um,
-                h.positions_written,
-                h.rotary_mdeg,
-                h.rotary_written,
-            )
-        };
-        let geometry_before = geometry(h);
-        let command = self.server.handle(frame, uptime_ms, &self.snapshot, reply);
-        if geometry(&self.server.holding) != geometry_before {
+        let geometry_before = self.state.plc.geometry();
+        let (snapshot, state) = (&self.snapshot, &mut self.state);
+        let command = self.server.handle(frame, uptime_ms, snapshot, state, reply);
+        if self.state.plc.geometry() != geometry_before {
             // New positions, tool length or angles: the volumetric correction follows
             // at once (not at the next cycle), so the PLC's next read has it.
             self.update_volumetric(uptime_ms);
@@ -653,11 +629,11 @@ impl<F: BackgroundErase> App<F> {
                     len,
                     erasing: false,
                 });
-                self.server.holding.busy = true;
-                self.server.holding.result = result::COMMIT_IN_PROGRESS;
+                self.state.busy = true;
+                self.state.result = result::COMMIT_IN_PROGRESS;
                 LinkChange::None
             }
-            Command::Rereference if self.server.holding.probe.direction.is_some() => {
+            Command::Rereference if self.state.probe.direction.is_some() => {
                 self.probe_command(command);
                 LinkChange::None
             }
@@ -679,7 +655,7 @@ impl<F: BackgroundErase> App<F> {
                 self.kept = None;
                 self.reference_pending = false;
                 self.snapshot.reference_state = 0;
-                self.server.holding.result = result::OK;
+                self.state.result = result::OK;
                 self.store_settings();
                 LinkChange::None
             }
@@ -701,7 +677,7 @@ impl<F: BackgroundErase> App<F> {
             Command::LinkChanged => {
                 self.store_settings();
                 LinkChange::Reconfigure {
-                    baud: self.server.holding.baud,
+                    baud: self.state.settings.baud,
                 }
             }
             Command::ClearFault => {
@@ -714,8 +690,8 @@ impl<F: BackgroundErase> App<F> {
                 self.kept = None;
                 self.reference_pending = false;
                 self.snapshot.reference_state = 0;
-                apply_settings(&mut self.server.holding, &self.defaults);
-                self.server.holding.probe = Default::default();
+                self.state.settings = self.defaults;
+                self.state.probe = ProbeSetup::default();
                 self.apply_limits();
                 self.store_settings();
                 LinkChange::Reconfigure {
@@ -734,14 +710,6 @@ impl<F: BackgroundErase> App<F> {
             }
         }
     }
-}
-
-/// Settings into the holding registers that carry them.
-fn apply_settings(h: &mut crate::modbus::holding::Holding, s: &Settings) {
-    h.unit = s.unit;
-    h.baud = s.baud;
-    h.clamp = s.clamp;
-    h.rate = s.rate;
 }
 
 /// A model's count (directions, axes, sensors, terms: far below 65,535) as a register.

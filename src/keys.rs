@@ -1,6 +1,6 @@
 //! The board's keys (issue 30): its own unlock key and the public key that
 //! model images must be signed with. Both are set at commissioning, stored
-//! in the settings block of the A/B slots ([`crate::settings::Keys`]), and
+//! in the settings store ([`crate::settings::StoredKeys`]), and
 //! never shown: the unlock key is in no register and no log; the public
 //! key reads back (it is no secret).
 //!
@@ -12,7 +12,7 @@
 use ed25519_compact::{PublicKey, Signature};
 use thermocomp_core::image::signed::SIGNATURE_LEN;
 use thermocomp_core::image::SignedImage;
-use thermocomp_protocol::holding::result;
+use thermocomp_protocol::holding::{result, FACTORY_UNLOCK_CODE};
 
 /// The key's length in bytes (Ed25519 public key).
 pub const PUBLIC_KEY_LEN: usize = 32;
@@ -96,6 +96,18 @@ impl Keys {
             return Err(result::BAD_SIGNATURE);
         }
         self.signing = Some(new);
+        Ok(())
+    }
+
+    /// Command 15: the staged unlock key becomes the board's own (not 0,
+    /// not the factory code).
+    pub fn set_unlock(&mut self) -> Result<(), u16> {
+        let k = self.new_unlock;
+        if k == 0 || k == FACTORY_UNLOCK_CODE {
+            return Err(result::BAD_KEY);
+        }
+        self.unlock = Some(k);
+        self.new_unlock = 0;
         Ok(())
     }
 

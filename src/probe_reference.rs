@@ -24,12 +24,38 @@ use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_core::reference::{
     remove_probe_drift, ReferenceOutcome, ReferenceParams, ReferenceState, STATE_BYTES,
 };
-use thermocomp_protocol::holding::result;
+use thermocomp_protocol::holding::{result, DEFAULT_PROBE_DIRECTION, DEFAULT_REFERENCE_SAMPLES};
 use thermocomp_protocol::registers::{
     IR_REF_ACCEPTED, IR_REF_BIAS, IR_REF_INNOVATION, IR_REF_REFUSED, IR_REF_TIME, IR_REF_ZERO,
 };
 
-use crate::modbus::holding::ProbeSetup;
+/// The probe setup (holding registers 40–45): which direction the probe
+/// measures, how it is averaged, its temperature and drift, its gauge zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeSetup {
+    /// Model direction the probe measures (`None`: references refused).
+    pub direction: Option<u8>,
+    /// ADC samples averaged per reference, 1..=1024.
+    pub samples: u16,
+    /// Bus channel of the probe's DS18B20 (`None`: no drift removed).
+    pub temp_channel: Option<u8>,
+    /// The probe's drift, nm/K.
+    pub drift_nm_per_k: i16,
+    /// Probe reading at the gauge at the machine's reference state, 0.1 µm.
+    pub gauge_zero: i32,
+}
+
+impl Default for ProbeSetup {
+    fn default() -> Self {
+        ProbeSetup {
+            direction: u8::try_from(DEFAULT_PROBE_DIRECTION).ok(),
+            samples: DEFAULT_REFERENCE_SAMPLES,
+            temp_channel: None,
+            drift_nm_per_k: 0,
+            gauge_zero: 0,
+        }
+    }
+}
 
 /// Stored block: tag, version, the setup (direction, samples, temperature
 /// channel, drift, gauge zero: 10 bytes), one state per direction.

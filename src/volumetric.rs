@@ -10,8 +10,8 @@ use thermocomp_core::volumetric::{vstatus, MAX_VOL_SENSORS};
 use thermocomp_core::Model;
 use thermocomp_protocol::registers::NOT_AVAILABLE_32;
 
-use crate::modbus::holding::Holding;
-use crate::modbus::registers::{FiveSnapshot, VolSnapshot};
+use crate::plc::PlcState;
+use crate::snapshot::{FiveSnapshot, VolSnapshot};
 
 /// What one evaluation reads besides the model and the PLC's registers.
 pub struct VolContext<'a> {
@@ -28,7 +28,7 @@ pub struct VolContext<'a> {
 /// The volumetric block for `model` (none, or no section: "no section").
 /// With a five-axis section the correction includes the rotary part and is
 /// not available until the PLC has written A and C.
-pub fn snapshot(model: Option<&Model>, h: &Holding, cx: &VolContext<'_>) -> VolSnapshot {
+pub fn snapshot(model: Option<&Model>, h: &PlcState, cx: &VolContext<'_>) -> VolSnapshot {
     let Some(v) = model.and_then(|m| m.volumetric.as_ref()) else {
         return VolSnapshot {
             sequence: cx.sequence,

@@ -96,6 +96,17 @@ pub fn blank_app() -> App<MockFlash> {
     )
 }
 
+/// FC03 of `n` holding registers from `addr` to unit 1 at `now`; the words.
+pub fn read_holding<F: BackgroundErase>(app: &mut App<F>, addr: u16, n: u16, now: u64) -> Vec<u16> {
+    let mut reply = Reply::new();
+    app.request(&read(1, 3, addr, n), now, &mut reply);
+    assert_eq!(&reply[..3], &[1, 3, 2 * n as u8], "{reply:02x?}");
+    reply[3..3 + 2 * usize::from(n)]
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect()
+}
+
 /// FC04 of `n` input registers from `addr` to unit 1 at `now`; the words.
 pub fn read_inputs<F: BackgroundErase>(app: &mut App<F>, addr: u16, n: u16, now: u64) -> Vec<u16> {
     let mut reply = Reply::new();
@@ -151,7 +162,7 @@ pub fn boot(flash: MockFlash, map: ChannelMap) -> App<MockFlash> {
 /// Power off and on: the flash keeps what it holds, and the board boots
 /// on it again with channel map `map`.
 pub fn power_cycle(app: &mut App<MockFlash>, map: ChannelMap) -> App<MockFlash> {
-    let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
+    let mut flash = std::mem::replace(app.flash_mut(), MockFlash::new(0));
     flash.power_on();
     boot(flash, map)
 }
@@ -204,10 +215,10 @@ pub fn app_on_socket<F: BackgroundErase + Send + 'static>(
 /// key already is left as it is.
 pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermocomp::app::App<F>) {
     use thermocomp_protocol::holding::*;
-    if app.server.holding.keys.unlock.is_some() {
+    if app.keys().unlock.is_some() {
         return; // commissioned already (a reboot of a commissioned board)
     }
-    let unit = app.server.holding.unit;
+    let unit = app.settings().unit;
     let mut reply = heapless::Vec::<u8, { thermocomp_protocol::rtu::MAX_FRAME }>::new();
     for (addr, v) in [
         (HR_UNLOCK, FACTORY_UNLOCK_CODE),
@@ -222,8 +233,5 @@ pub fn commission<F: thermocomp::hal::flash::BackgroundErase>(app: &mut thermoco
         );
     }
     while app.poll_flash() {}
-    assert_eq!(
-        app.server.holding.keys.unlock,
-        Some(crate::keys::TEST_UNLOCK_KEY)
-    );
+    assert_eq!(app.keys().unlock, Some(crate::keys::TEST_UNLOCK_KEY));
 }

@@ -11,19 +11,21 @@ use std::sync::{Arc, Mutex};
 use tcomp_link::board_link::{record, upload, BoardLink, Commit};
 use thermocomp::app::App;
 use thermocomp::modbus::{Server, Snapshot};
+use thermocomp::state::AppState;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::rtu::crc16;
 
 /// The board's frame handler behind a TCP socket (one client), in a thread.
 fn fake_board(answer: bool) -> String {
-    let mut server = Server::new(1, 115_200);
+    let mut server = Server::new();
+    let mut state = AppState::new(1, 115_200);
     let snap = Snapshot {
         sequence: 9,
         ..Snapshot::default()
     };
     let mut reply = Reply::new();
     rtu_socket(move |req| {
-        server.handle(req, 0, &snap, &mut reply);
+        server.handle(req, 0, &snap, &mut state, &mut reply);
         if answer {
             reply.to_vec()
         } else {
@@ -92,7 +94,7 @@ fn inspectable_board(
 }
 
 fn unlocked(board: &Arc<Mutex<SharedBoard>>) -> bool {
-    board.lock().unwrap().app.server.holding.unlocked(0)
+    board.lock().unwrap().app.unlocked(0)
 }
 
 fn demo_image_bytes(version: u32) -> Vec<u8> {
@@ -154,7 +156,7 @@ fn a_failed_upload_relocks_the_board() {
             &[6, 0, HR_COMMAND as u8, 0, CMD_LOCK as u8],
             "relock sent last"
         );
-        assert_eq!(b.app.snapshot.model_version, 0, "nothing committed");
+        assert_eq!(b.app.model_version(), 0, "nothing committed");
     }
 }
 
@@ -175,7 +177,7 @@ fn a_refused_commit_names_the_reason_and_relocks_and_rollback_commits() {
     );
     assert!(e.contains("NOT_NEWER") && e.contains("--rollback"), "{e}");
     assert!(!unlocked(&board));
-    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 5);
+    assert_eq!(board.lock().unwrap().app.model_version(), 5);
     // The rollback commits it on purpose.
     let s = upload(
         &mut link,
@@ -186,7 +188,7 @@ fn a_refused_commit_names_the_reason_and_relocks_and_rollback_commits() {
     assert_eq!(s.model_version, 2);
     assert_eq!(s.result, result::OK);
     assert!(!unlocked(&board));
-    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
+    assert_eq!(board.lock().unwrap().app.model_version(), 2);
 }
 
 #[test]
@@ -318,5 +320,5 @@ fn upload_refuses_a_board_with_an_older_register_map_or_no_test_pattern() {
         &host_tests::upload_opts(Commit::NewerOnly, true),
     )
     .unwrap();
-    assert_eq!(board.lock().unwrap().app.snapshot.model_version, 2);
+    assert_eq!(board.lock().unwrap().app.model_version(), 2);
 }

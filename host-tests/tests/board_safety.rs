@@ -205,5 +205,5 @@ fn test_only_commands_are_refused_without_the_feature() {
         assert_eq!((reply[1], reply[2]), (0x86, 3), "command {cmd}");
         assert_eq!(change, LinkChange::None);
     }
-    assert!(!app.stall_requested);
+    assert!(!app.stall_requested());
 }

@@ -5,7 +5,9 @@
 //! `five_axis::evaluate`, what it used in input registers 330–359, "not
 //! available" until the PLC has written A and C, and result codes 80–86 (87, an unknown flag bit, is the core's test).
 use host_tests::mock_flash::MockFlash;
-use host_tests::modbus::{be_words, blank_app, encode, read_inputs, s32, words, write_n, Reply};
+use host_tests::modbus::{
+    be_words, blank_app, encode, read_holding, read_inputs, s32, words, write_n, Reply,
+};
 use thermocomp::app::App;
 use thermocomp_core::five_axis::{self, fstatus, FiveAxis, FiveAxisSpec};
 use thermocomp_core::image::NONE;
@@ -126,8 +128,8 @@ fn served_correction_is_the_cores_five_axis_evaluation_at_the_plcs_pose() {
         app.request(&write_n(0, HR_ROTARY, &words(&ang)), now, &mut reply);
         assert!(reply.is_empty());
         assert_eq!(
-            app.server.holding.read(HR_ROTARY + 2, now),
-            Some(words(&ang)[2])
+            read_holding(&mut app, HR_ROTARY + 2, 1, now),
+            [words(&ang)[2]]
         );
         let w = read(&mut app, IR_VOL_CORRECTION, 20, now);
         let x = read(&mut app, IR_FIVE_ANGLES, 30, now);
@@ -287,5 +289,5 @@ fn five_axis_refusals_have_their_own_result_codes() {
     );
     app.request(&write_n(1, HR_COMMAND, &[CMD_COMMIT_MODEL]), 0, &mut reply);
     assert_eq!(reply[1], 0x90, "refused: {reply:02x?}");
-    assert_eq!(app.server.holding.result, 80);
+    assert_eq!(app.result(), 80);
 }

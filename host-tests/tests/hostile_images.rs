@@ -91,13 +91,13 @@ fn hostile_images_are_refused_with_their_own_codes_and_the_old_model_kept() {
         assert_eq!(result::of_image_error(&err), code, "{what}: {err}");
         let reply = upload(&mut app, &img);
         assert_eq!((reply[1], reply[2]), (0x86, 0x04), "{what}: exception 04");
-        assert_eq!(app.server.holding.result, code, "{what}");
-        assert!(!app.server.holding.unlocked(0), "{what}: locked");
-        assert_eq!(app.snapshot.model_version, 2, "{what}: old model kept");
+        assert_eq!(app.result(), code, "{what}");
+        assert!(!app.unlocked(0), "{what}: locked");
+        assert_eq!(app.model_version(), 2, "{what}: old model kept");
     }
     // The untouched model of the same version commits.
     assert_eq!(upload(&mut app, &encode(&mut demo(3)))[1], 6);
-    assert_eq!(app.snapshot.model_version, 3);
+    assert_eq!(app.model_version(), 3);
 }
 
 #[test]

@@ -23,7 +23,7 @@ fn input(app: &mut App<MockFlash>, addr: u16) -> u16 {
 }
 
 fn holding_result(app: &App<MockFlash>) -> u16 {
-    app.server.holding.result
+    app.result()
 }
 
 /// The demo model (six sensors by channel 0–5), version 1.
@@ -80,7 +80,7 @@ fn power_cycle(rig: &Rig, app: &mut App<MockFlash>) -> App<MockFlash> {
 }
 
 fn reference(app: &mut App<MockFlash>) -> Vec<i32> {
-    app.compensation.compensator().reference().unwrap().to_vec()
+    app.compensator().reference().unwrap().to_vec()
 }
 
 #[test]
@@ -116,7 +116,7 @@ fn a_kept_reference_survives_a_warm_reboot_and_commands_11_and_7_drop_it() {
     assert_eq!(input(&mut app, IR_REFERENCE_STATE), 1);
     rig.app_cycle(&mut app);
     assert_eq!(reference(&mut app), vec![21 * 16; 6]);
-    let warm = app.snapshot.predictions;
+    let warm = app.snapshot().predictions;
     assert_ne!(warm, [0; 6], "rises of 9 K against the kept reference");
     // Command 2 on a machine with a kept reference takes a new one and keeps it.
     command(&mut app, CMD_REREFERENCE);
@@ -158,7 +158,7 @@ fn a_kept_reference_survives_a_warm_reboot_and_commands_11_and_7_drop_it() {
     app.poll_flash();
     let app = power_cycle(&rig, &mut app);
     assert_eq!(app.kept_reference(), None);
-    assert_eq!(app.snapshot.model_version, 1, "the model stays");
+    assert_eq!(app.model_version(), 1, "the model stays");
 }
 
 #[test]
@@ -199,7 +199,7 @@ fn a_power_cut_at_every_step_of_storing_the_reference_leaves_old_or_new() {
     rig.app_cycle(&mut app);
     app.poll_flash();
     let old = app.kept_reference().unwrap();
-    let start = app.store.flash().bytes.clone();
+    let start = app.flash_mut().bytes.clone();
     // (A step the plausibility check accepts: the reading stays fresh.)
     rig.set_all(21 * 16);
     let fresh = || {
@@ -209,29 +209,26 @@ fn a_power_cut_at_every_step_of_storing_the_reference_leaves_old_or_new() {
     };
     // How many flash operations storing the new one takes.
     let mut probe = fresh();
-    let before = probe.store.flash().operations;
+    let before = probe.flash_mut().operations;
     command(&mut probe, CMD_KEEP_REFERENCE);
     rig.app_cycle(&mut probe);
     while probe.poll_flash() {}
     let new = probe.kept_reference().unwrap();
     assert_eq!(input(&mut probe, IR_REFERENCE_STATE), 1, "taken");
     assert_ne!(new, old);
-    let per_op = probe.store.flash().operations - before;
+    let per_op = probe.flash_mut().operations - before;
     assert!(per_op > 3, "{per_op}");
     let (mut n_old, mut n_new) = (0, 0);
     for cut in 0..=per_op {
         let mut app = fresh();
-        app.store.flash().budget = Some(cut);
+        app.flash_mut().budget = Some(cut);
         command(&mut app, CMD_KEEP_REFERENCE);
         rig.app_cycle(&mut app);
         while app.poll_flash() {}
         let stored_ok = holding_result(&app) == result::OK;
         assert_eq!(stored_ok, cut >= per_op, "cut at {cut}");
         let mut app = power_cycle(&rig, &mut app);
-        assert_eq!(
-            app.snapshot.model_version, 1,
-            "cut at {cut}: the model stays"
-        );
+        assert_eq!(app.model_version(), 1, "cut at {cut}: the model stays");
         match app.kept_reference() {
             Some(k) if k == old => n_old += 1,
             Some(k) if k == new => n_new += 1,

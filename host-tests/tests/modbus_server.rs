@@ -7,6 +7,7 @@ use host_tests::TEST_UNLOCK_KEY;
 use proptest::prelude::*;
 use thermocomp::modbus::registers::*;
 use thermocomp::modbus::{Action, Server, Snapshot};
+use thermocomp::state::AppState;
 use thermocomp_core::float::demo_model;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::registers::*;
@@ -14,6 +15,7 @@ use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
 struct Bench {
     server: Server,
+    state: AppState,
     snap: Snapshot,
     reply: HVec<u8, MAX_FRAME>,
     now: u64,
@@ -30,17 +32,20 @@ impl Bench {
         snap.axes[0].slope = -7;
         snap.temperatures[0] = Some(centidegrees(20 * 16 + 1));
         // A commissioned board: it has its own unlock key.
-        let mut server = Server::new(17, 115_200);
-        server.holding.keys.unlock = Some(TEST_UNLOCK_KEY);
+        let mut state = AppState::new(17, 115_200);
+        state.keys.unlock = Some(TEST_UNLOCK_KEY);
         Bench {
-            server,
+            server: Server::new(),
+            state,
             snap,
             reply: HVec::new(),
             now: 1000,
         }
     }
     fn ask(&mut self, f: &[u8]) -> (Action, Vec<u8>) {
-        let a = self.server.handle(f, self.now, &self.snap, &mut self.reply);
+        let a = self
+            .server
+            .handle(f, self.now, &self.snap, &mut self.state, &mut self.reply);
         if !self.reply.is_empty() {
             let n = self.reply.len();
             assert_eq!(
@@ -110,7 +115,8 @@ fn bad_frames_are_silent_and_the_next_good_one_is_answered() {
     );
     assert_eq!(b.words(4, 0, 2), vec![0x1234, 0x5678]);
     assert_eq!(
-        b.server.counters.crc_errors, 2,
+        b.server.counters().crc_errors,
+        2,
         "the corrupted and the truncated frame"
     );
 }
@@ -184,12 +190,12 @@ fn fc16_with_count_zero_is_exception_03_and_writes_nothing() {
         );
     }
     assert_eq!(
-        b.server.holding.plc_written_ms, None,
+        b.state.plc.written_ms, None,
         "nothing was written, so the PLC inputs stay stale"
     );
     // Broadcast: no reply, and still nothing written.
     assert!(b.ask(&write_n_raw(0, HR_POSITIONS, 0, &[])).1.is_empty());
-    assert_eq!(b.server.holding.plc_written_ms, None);
+    assert_eq!(b.state.plc.written_ms, None);
 }
 
 #[test]
@@ -204,8 +210,8 @@ fn fc16_count_of_0x8000_or_more_is_refused_without_overflow() {
         b.exception_of(&write_n_raw(17, HR_SPINDLE, 0x8001, &[0x12, 0x34])),
         0x03
     );
-    assert_eq!(b.server.holding.spindle_rpm, 0);
-    assert_eq!(b.server.holding.plc_written_ms, None);
+    assert_eq!(b.state.plc.spindle_rpm, 0);
+    assert_eq!(b.state.plc.written_ms, None);
 }
 
 #[test]
@@ -214,13 +220,13 @@ fn plc_writes_positions_and_speed_without_unlock() {
     let (a, r) = b.ask(&write_n(17, HR_SPINDLE, &[6000, 0xFFFF, 0xFC18]));
     assert_eq!(a, Action::None);
     assert_eq!(r.len(), 8, "FC16 echo reply");
-    assert_eq!(b.server.holding.spindle_rpm, 6000);
-    assert_eq!(b.server.holding.positions[0], -1000);
-    assert_eq!(b.server.holding.plc_written_ms, Some(1000));
+    assert_eq!(b.state.plc.spindle_rpm, 6000);
+    assert_eq!(b.state.plc.positions[0], -1000);
+    assert_eq!(b.state.plc.written_ms, Some(1000));
     // Broadcast write: done, no reply.
     let (_, r) = b.ask(&write1(0, HR_SPINDLE, 1200));
     assert!(r.is_empty());
-    assert_eq!(b.server.holding.spindle_rpm, 1200);
+    assert_eq!(b.state.plc.spindle_rpm, 1200);
 }
 
 #[test]
@@ -244,10 +250,10 @@ fn unlock_then_configure_and_the_lock_expires() {
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a refusal locks");
     b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert_eq!(b.ask(&write1(17, HR_BAUD, 96)).0, Action::LinkChanged);
-    assert_eq!(b.server.holding.baud, 9600);
+    assert_eq!(b.state.settings.baud, 9600);
     b.now += UNLOCK_MS;
     assert_eq!(b.exception_of(&write1(17, HR_CLAMP, 50)), 0x01, "expired");
-    assert_eq!(b.server.holding.clamp[0], 100);
+    assert_eq!(b.state.settings.clamp[0], 100);
 }
 
 #[test]
@@ -255,16 +261,16 @@ fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
     let mut b = Bench::new();
     // Unlock by broadcast: refused (every board on the bus would open at once).
     assert!(b.ask(&write1(0, HR_UNLOCK, TEST_UNLOCK_KEY)).1.is_empty());
-    assert!(!b.server.holding.unlocked(b.now), "broadcast unlocked");
+    assert!(!b.server.unlocked(b.now), "broadcast unlocked");
     assert!(b
         .ask(&write_n(0, HR_UNLOCK, &[TEST_UNLOCK_KEY]))
         .1
         .is_empty());
-    assert!(!b.server.holding.unlocked(b.now), "FC16 broadcast unlocked");
+    assert!(!b.server.unlocked(b.now), "FC16 broadcast unlocked");
     // Even while this board is unlocked by its own address, a broadcast does
     // not change its unit, baud, limits or staging area, nor run a command.
     b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
-    assert!(b.server.holding.unlocked(b.now));
+    assert!(b.server.unlocked(b.now));
     for (addr, value) in [
         (HR_UNIT, 5),
         (HR_BAUD, 96),
@@ -281,19 +287,19 @@ fn a_broadcast_never_unlocks_changes_the_link_or_runs_a_command() {
     }
     let (action, _) = b.ask(&write_n(0, HR_UNIT, &[5, 96]));
     assert_eq!(action, Action::None);
-    let h = &b.server.holding;
+    let h = &b.state.settings;
     assert_eq!((h.unit, h.baud), (17, 115_200));
     assert_eq!((h.clamp[0], h.rate[0]), (u16::MAX, u16::MAX));
     assert!(
-        h.unlocked(b.now),
+        b.server.unlocked(b.now),
         "a broadcast lock command was carried out"
     );
     assert_eq!(b.words(3, HR_STAGED_LEN, 1), vec![0]);
     assert_eq!(b.words(3, HR_STAGING, 1), vec![0]);
     // The PLC's registers still take broadcasts (one speed for every board).
     b.ask(&write_n(0, HR_SPINDLE, &[3000, 0, 7]));
-    assert_eq!(b.server.holding.spindle_rpm, 3000);
-    assert_eq!(b.server.holding.positions[0], 7);
+    assert_eq!(b.state.plc.spindle_rpm, 3000);
+    assert_eq!(b.state.plc.positions[0], 7);
 }
 
 #[test]
@@ -327,7 +333,7 @@ fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
             0x03,
             "FC16 {key:#x}"
         );
-        assert!(!b.server.holding.unlocked(b.now));
+        assert!(!b.server.unlocked(b.now));
     }
     // Even the right key waits out the hold-off after a wrong one.
     assert_eq!(
@@ -343,7 +349,7 @@ fn a_wrong_unlock_key_answers_exception_03_and_changes_nothing() {
         write1(17, HR_UNLOCK, TEST_UNLOCK_KEY)
     );
     assert_eq!(b.exception_of(&write1(17, HR_UNLOCK, 0x1111)), 0x03);
-    assert!(!b.server.holding.unlocked(b.now));
+    assert!(!b.server.unlocked(b.now));
 }
 
 /// Every refused write to this unit locks the board, whatever refused it
@@ -426,9 +432,9 @@ fn every_refused_write_locks_the_board() {
         let mut b = Bench::new();
         b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
         let req = request(&mut b);
-        assert!(b.server.holding.unlocked(b.now), "{what}: unlocked before");
+        assert!(b.server.unlocked(b.now), "{what}: unlocked before");
         assert_eq!(b.exception_of(&req), *code, "{what}");
-        assert!(!b.server.holding.unlocked(b.now), "{what}: still unlocked");
+        assert!(!b.server.unlocked(b.now), "{what}: still unlocked");
         assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "{what}");
         assert_eq!(
             b.exception_of(&write1(17, HR_CLAMP, 100)),
@@ -442,18 +448,18 @@ fn every_refused_write_locks_the_board() {
     b.ask(&write1(17, HR_UNLOCK, TEST_UNLOCK_KEY));
     assert_eq!(b.exception_of(&read(17, 3, 9000, 1)), 0x02);
     assert!(b.ask(&write1(0, HR_UNIT, 5)).1.is_empty());
-    assert!(b.server.holding.unlocked(b.now));
+    assert!(b.server.unlocked(b.now));
     // Busy (06) asks the master to send the same request again later: it
     // does not lock, so the retransmission goes through.
-    b.server.holding.busy = true;
+    b.state.busy = true;
     assert_eq!(b.exception_of(&write1(17, HR_UNIT, 5)), 0x06);
-    assert!(b.server.holding.unlocked(b.now));
-    b.server.holding.busy = false;
+    assert!(b.server.unlocked(b.now));
+    b.state.busy = false;
     assert_eq!(b.ask(&write1(17, HR_UNIT, 5)).0, Action::LinkChanged);
     // A new board (a reset) starts locked; the unlock times out.
-    assert!(!Bench::new().server.holding.unlocked(0));
+    assert!(!Bench::new().server.unlocked(0));
     b.now += UNLOCK_MS;
-    assert!(!b.server.holding.unlocked(b.now));
+    assert!(!b.server.unlocked(b.now));
 }
 
 fn upload(b: &mut Bench, image: &[u8]) {
@@ -494,7 +500,7 @@ fn model_upload_commits_only_a_valid_image() {
     let (a, r) = b.ask(&write1(17, HR_COMMAND, CMD_COMMIT_MODEL));
     assert_eq!(r.len(), 8);
     assert_eq!(a, Action::CommitModel { len: img.len() });
-    assert_eq!(b.server.holding.staged(), &img[..]);
+    assert_eq!(b.state.staging.staged(), &img[..]);
     assert_eq!(b.words(3, HR_UNLOCK, 1), vec![0], "a commit locks again");
 }
 
@@ -633,7 +639,7 @@ proptest! {
         let valid = (1..=123).contains(&count) && usize::from(count) * 2 == data.len();
         if !valid {
             prop_assert_eq!(&r[1..3], &[0x90u8, 0x03][..]);
-            prop_assert_eq!(b.server.holding.plc_written_ms, None);
+            prop_assert_eq!(b.state.plc.written_ms, None);
         }
     }
 }

@@ -33,7 +33,7 @@ fn inputs(app: &mut App<MockFlash>, addr: u16, n: u8) -> Vec<u16> {
 /// HR_RESULT after the flash job the last command started (if any).
 fn settled_result(app: &mut App<MockFlash>) -> u16 {
     while app.poll_flash() {}
-    app.server.holding.result
+    app.result()
 }
 
 struct Rig {
@@ -117,7 +117,6 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
     let mut app = boot(&rig, MockFlash::new(2 * SLOT as usize));
     app.program(&demo_image(1, 1)).unwrap();
     let max: Vec<i32> = app
-        .compensation
         .model()
         .unwrap()
         .directions
@@ -128,11 +127,11 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
     let p = ReferenceParams::DEFAULT;
     // No probe direction (the default): refused with 63, nothing learned.
     write(&mut app, HR_COMMAND, CMD_TAKE_PROBE_REFERENCE);
-    assert_eq!(app.server.holding.result, result::PROBE_REFERENCE_PENDING);
+    assert_eq!(app.result(), result::PROBE_REFERENCE_PENDING);
     let (now, out) = rig.cycle(&mut app, 0);
     app.set_probe(&ok_reading(40), Some((&rig.acq, now)));
-    assert_eq!(app.server.holding.result, result::NO_PROBE_DIRECTION);
-    assert_eq!(&app.snapshot.corrections[..n], &out.corrections[..n]);
+    assert_eq!(app.result(), result::NO_PROBE_DIRECTION);
+    assert_eq!(&app.snapshot().corrections[..n], &out.corrections[..n]);
     // Direction 0 (stored), and 64 samples per reference.
     let reply = write(&mut app, HR_PROBE_DIRECTION, 0);
     assert_eq!(reply[1], 6, "{reply:02x?}");
@@ -159,9 +158,9 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
         let before = st;
         let want = st.reference(&p, now, out.corrections[0], reading);
         app.set_probe(&ok_reading(reading), Some((&rig.acq, now)));
-        assert_eq!(app.references.state(0), Some(&st), "reference {k}");
+        assert_eq!(app.references().state(0), Some(&st), "reference {k}");
         assert_eq!(
-            &app.snapshot.corrections[..n],
+            &app.snapshot().corrections[..n],
             &predicted(&out, now, &st, &max)[..],
             "served at once, reference {k}"
         );
@@ -189,7 +188,7 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
             step += 1;
             let (now, out) = rig.cycle(&mut app, step);
             assert_eq!(
-                &app.snapshot.corrections[..n],
+                &app.snapshot().corrections[..n],
                 &predicted(&out, now, &st, &max)[..]
             );
         }
@@ -206,35 +205,36 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
 
     // A power cycle: the state is back, its last reference at the first cycle.
     let mut app = power_cycle(&rig, &mut app);
-    assert_eq!(app.server.holding.probe.direction, Some(0));
-    assert_eq!(app.server.holding.probe.samples, 64);
+    assert_eq!(app.probe_setup().direction, Some(0));
+    assert_eq!(app.probe_setup().samples, 64);
     let (now, out) = rig.cycle(&mut app, step);
     let mut rebased = st;
     rebased.last_ms = Some(now);
-    assert_eq!(app.references.state(0), Some(&rebased));
+    assert_eq!(app.references().state(0), Some(&rebased));
     assert_eq!(
-        &app.snapshot.corrections[..n],
+        &app.snapshot().corrections[..n],
         &predicted(&out, now, &rebased, &max)[..]
     );
 
     // Command 2 with a probe direction: re-zero, served 0 now, the model's
     // reference sample kept.
-    let reference_before = app.compensation.compensator().reference().unwrap().to_vec();
+    let reference_before = app.compensator().reference().unwrap().to_vec();
     write(&mut app, HR_COMMAND, CMD_REREFERENCE);
-    assert_eq!(&app.snapshot.corrections[..n], &vec![0; n][..]);
+    assert_eq!(&app.snapshot().corrections[..n], &vec![0; n][..]);
     let mut zeroed = rebased;
     zeroed.rezero(&p, now, out.corrections[0]);
     let (now, out) = rig.cycle(&mut app, step + 4);
     assert_eq!(
-        app.compensation.compensator().reference().unwrap(),
+        app.compensator().reference().unwrap(),
         &reference_before[..]
     );
     assert_eq!(
-        app.snapshot.corrections[0],
+        app.snapshot().corrections[0],
         predicted(&out, now, &zeroed, &max)[0]
     );
     assert_ne!(
-        app.snapshot.corrections[1], out.corrections[1],
+        app.snapshot().corrections[1],
+        out.corrections[1],
         "all directions re-zeroed"
     );
     assert_eq!(settled_result(&mut app), result::OK);
@@ -243,20 +243,20 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
     write(&mut app, HR_COMMAND, CMD_RESET_REFERENCE_TERMS);
     assert_eq!(settled_result(&mut app), result::OK);
     let (_, out) = rig.cycle(&mut app, step + 5);
-    assert_eq!(&app.snapshot.corrections[..n], &out.corrections[..n]);
+    assert_eq!(&app.snapshot().corrections[..n], &out.corrections[..n]);
     let mut app = power_cycle(&rig, &mut app);
-    assert_eq!(app.references.state(0), Some(&ReferenceState::new(&p)));
+    assert_eq!(app.references().state(0), Some(&ReferenceState::new(&p)));
 
     // A new model resets the terms too.
     write(&mut app, HR_COMMAND, CMD_TAKE_PROBE_REFERENCE);
     let (now, out) = rig.cycle(&mut app, step + 6);
     app.set_probe(&ok_reading(out.corrections[0] + 20), Some((&rig.acq, now)));
     assert_eq!(settled_result(&mut app), result::OK);
-    assert_eq!(app.references.state(0).unwrap().accepted, 1);
+    assert_eq!(app.references().state(0).unwrap().accepted, 1);
     app.program(&demo_image(2, 2)).unwrap();
-    assert_eq!(app.references.state(0), Some(&ReferenceState::new(&p)));
+    assert_eq!(app.references().state(0), Some(&ReferenceState::new(&p)));
     let app = power_cycle(&rig, &mut app);
-    assert_eq!(app.references.state(0), Some(&ReferenceState::new(&p)));
+    assert_eq!(app.references().state(0), Some(&ReferenceState::new(&p)));
 }
 
 #[test]
@@ -274,15 +274,15 @@ fn a_probe_that_is_not_ok_or_without_its_temperature_takes_no_reference() {
     let mut bad = ok_reading(10);
     bad.state = ProbeState::OutOfRange;
     app.set_probe(&bad, Some((&rig.acq, now)));
-    assert_eq!(app.server.holding.result, result::PROBE_NOT_READY);
+    assert_eq!(app.result(), result::PROBE_NOT_READY);
     // The probe's sensor gone: no drift correction possible, no reference.
     rig.bus.unplug(rig.device_on(5));
     write(&mut app, HR_COMMAND, CMD_TAKE_PROBE_REFERENCE);
     let (now, _) = rig.cycle(&mut app, 1);
     app.set_probe(&ok_reading(10), Some((&rig.acq, now)));
-    assert_eq!(app.server.holding.result, result::PROBE_TEMPERATURE_MISSING);
-    assert_eq!(app.references.state(0).unwrap().accepted, 0);
-    assert_eq!(app.references.state(0).unwrap().refused, 0);
+    assert_eq!(app.result(), result::PROBE_TEMPERATURE_MISSING);
+    assert_eq!(app.references().state(0).unwrap().accepted, 0);
+    assert_eq!(app.references().state(0).unwrap().refused, 0);
     // Out-of-range settings are refused with exception 03.
     let reply = write(&mut app, HR_REFERENCE_SAMPLES, 0);
     assert_eq!(reply[1], 0x86, "{reply:02x?}");
@@ -412,7 +412,7 @@ fn the_probes_own_drift_is_estimated_and_removed_to_a_tenth() {
         let r = block_on(measure(&mut adc, &cfg));
         app.set_probe(&r, Some((&rig.acq, now)));
         settled_result(&mut app);
-        let st = app.references.state(0).unwrap();
+        let st = app.references().state(0).unwrap();
         assert_eq!(st.accepted + st.refused, 1);
         let y_nm = f64::from(st.last_innovation_nm) + 100.0 * f64::from(out.corrections[0]);
         used.push((adc.temp_c, y_nm / 1000.0));
@@ -445,11 +445,11 @@ fn a_settings_store_ending_after_a_refused_probe_reference_does_not_report_ok() 
     let mut bad = ok_reading(10);
     bad.state = ProbeState::OutOfRange;
     app.set_probe(&bad, Some((&rig.acq, now)));
-    assert_eq!(app.server.holding.result, result::PROBE_NOT_READY);
-    assert_eq!(app.references.state(0).unwrap().accepted, 0);
+    assert_eq!(app.result(), result::PROBE_NOT_READY);
+    assert_eq!(app.references().state(0).unwrap().accepted, 0);
     // The settings store ends: what the PLC reads now.
     let settled = settled_result(&mut app);
-    assert_eq!(app.references.state(0).unwrap().accepted, 0);
+    assert_eq!(app.references().state(0).unwrap().accepted, 0);
     assert_ne!(
         settled,
         result::OK,

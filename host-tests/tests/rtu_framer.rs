@@ -4,6 +4,7 @@
 use heapless::Vec as HVec;
 use thermocomp::modbus::rtu_framer::{Outcome, RtuFramer, Timing};
 use thermocomp::modbus::{Server, Snapshot};
+use thermocomp::state::AppState;
 use thermocomp_protocol::holding::*;
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME};
 
@@ -171,26 +172,22 @@ fn a_request_inside_another_units_frame_is_not_a_frame() {
     assert!(!line.got.contains(&Got::Frame(inner)));
     assert!(!line.got.contains(&Got::Frame(bc)));
     // Through the server: unit 2's frame is ignored, nothing changes.
-    let mut server = Server::new(1, 115_200);
-    server.holding.keys.unlock = Some(host_tests::TEST_UNLOCK_KEY);
-    server
-        .holding
-        .write(
-            HR_UNLOCK,
-            &[host_tests::TEST_UNLOCK_KEY],
-            0,
-            thermocomp::modbus::holding::Addressing::Unit,
-        )
-        .unwrap();
+    let mut server = Server::new();
+    let mut state = AppState::new(1, 115_200);
+    state.keys.unlock = Some(host_tests::TEST_UNLOCK_KEY);
+    let snapshot = Snapshot::default();
     let mut reply: HVec<u8, MAX_FRAME> = HVec::new();
+    let unlock = host_tests::modbus::write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY);
+    server.handle(&unlock, 0, &snapshot, &mut state, &mut reply);
+    assert_eq!(reply.to_vec(), unlock, "unlocked");
     for g in &line.got {
         if let Got::Frame(f) = g {
-            server.handle(f, 1, &Snapshot::default(), &mut reply);
+            server.handle(f, 1, &snapshot, &mut state, &mut reply);
             assert!(reply.is_empty());
         }
     }
-    assert_eq!(server.holding.unit, 1);
-    assert_eq!(server.holding.spindle_rpm, 0);
+    assert_eq!(state.settings.unit, 1);
+    assert_eq!(state.plc.spindle_rpm, 0);
 }
 
 #[test]
@@ -254,11 +251,12 @@ fn a_frame_split_by_3_5_characters_is_two_fragments() {
         vec![Got::Frame(req[..4].to_vec()), Got::Frame(req[4..].to_vec())]
     );
     // Neither fragment gets an answer.
-    let mut server = Server::new(1, 115_200);
+    let mut server = Server::new();
+    let mut state = AppState::new(1, 115_200);
     let mut reply: HVec<u8, MAX_FRAME> = HVec::new();
     for g in &line.got {
         if let Got::Frame(f) = g {
-            server.handle(f, 1, &Snapshot::default(), &mut reply);
+            server.handle(f, 1, &Snapshot::default(), &mut state, &mut reply);
             assert!(reply.is_empty());
         }
     }

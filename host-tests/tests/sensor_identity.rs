@@ -301,11 +301,11 @@ fn a_swapped_sensor_is_missing_plus_new_and_the_model_never_reads_the_new_one() 
         out.status
     );
     // After a reboot (the map from flash) the same holds.
-    let mut flash = std::mem::replace(board.app.store.flash(), MockFlash::new(0));
+    let mut flash = std::mem::replace(board.app.flash_mut(), MockFlash::new(0));
     flash.power_on();
     let app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
     assert_eq!(app.channel_map(), *board.acq.map());
-    assert_eq!(app.compensation.channel_of(2), Some(2));
+    assert_eq!(app.compensation().channel_of(2), Some(2));
 }
 
 #[test]

@@ -194,7 +194,7 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     // Power cycle: the clamp the integrator tightened is still tight.
     let mut app = power_cycle(&mut app);
     assert_eq!(app.settings(), expect);
-    assert_eq!(app.snapshot.model_version, 1);
+    assert_eq!(app.model_version(), 1);
     app.request(&frame(&[9, 3, 0, HR_CLAMP as u8, 0, 6]), 0, &mut reply);
     assert_eq!(&reply[..3], &[9, 3, 12], "unit 9 answers: {reply:02x?}");
     assert_eq!(u16::from_be_bytes([reply[7], reply[8]]), 150);
@@ -214,9 +214,9 @@ fn settings_written_over_modbus_apply_at_boot_and_command_7_restores_defaults() 
     assert_eq!(app.settings(), Settings::default());
     let mut app = power_cycle(&mut app);
     assert_eq!(app.settings(), Settings::default());
-    assert_eq!(app.snapshot.model_version, 1, "the model stays");
+    assert_eq!(app.model_version(), 1, "the model stays");
     // A flash that fails: the change is in force, HR_RESULT says it is not stored.
-    app.store.flash().budget = Some(0);
+    app.flash_mut().budget = Some(0);
     app.request(
         &write1(1, HR_UNLOCK, host_tests::TEST_UNLOCK_KEY),
         0,
@@ -300,8 +300,8 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
     app.request(&write1(1, HR_STAGED_LEN, img.len() as u16), 0, &mut reply);
     app.request(&write1(1, HR_COMMAND, CMD_COMMIT_MODEL), 0, &mut reply);
     assert_eq!(reply[1], 6, "the commit is acknowledged: {reply:02x?}");
-    assert_eq!(app.server.holding.result, result::COMMIT_IN_PROGRESS);
-    assert_eq!(app.snapshot.model_version, 0, "not swapped in yet");
+    assert_eq!(app.result(), result::COMMIT_IN_PROGRESS);
+    assert_eq!(app.model_version(), 0, "not swapped in yet");
     // While it is written: reads answer, staging and settings are busy (06),
     // the PLC's registers are written as usual. (The commit locked the board.)
     app.request(
@@ -321,8 +321,8 @@ fn a_commit_is_answered_at_once_and_written_in_the_background() {
         assert!(polls < 100);
     }
     assert_eq!(polls, 4, "the erase took its time");
-    assert_eq!(app.server.holding.result, result::OK);
-    assert_eq!(app.snapshot.model_version, 3);
+    assert_eq!(app.result(), result::OK);
+    assert_eq!(app.model_version(), 3);
     app.request(&write1(1, HR_CLAMP, 5), 0, &mut reply);
     assert_eq!(reply[1], 6, "not busy any more");
 }
@@ -424,7 +424,7 @@ fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
     let mut app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
     host_tests::commission(&mut app);
     // The line is busy for the model's commit (commissioning stored the key).
-    app.store.flash().busy_looks = 3;
+    app.flash_mut().busy_looks = 3;
     let mut reply = Reply::new();
     let (_, img) = image(3);
     app.request(
@@ -441,12 +441,12 @@ fn the_erase_waits_until_the_board_says_the_line_is_quiet() {
     assert_eq!(reply[1], 6, "answered first: {reply:02x?}");
     for look in 0..3 {
         assert!(app.poll_flash(), "look {look}: still in progress");
-        assert_eq!(app.server.holding.result, result::COMMIT_IN_PROGRESS);
+        assert_eq!(app.result(), result::COMMIT_IN_PROGRESS);
     }
     assert!(
         !app.poll_flash(),
         "erased and written at the first quiet look"
     );
-    assert_eq!(app.server.holding.result, result::OK);
-    assert_eq!(app.snapshot.model_version, 3);
+    assert_eq!(app.result(), result::OK);
+    assert_eq!(app.model_version(), 3);
 }

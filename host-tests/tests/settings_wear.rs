@@ -22,7 +22,7 @@ fn boot(flash: MockFlash) -> App<MockFlash> {
 
 /// Erases of the model slots' sectors and of the store's pages so far.
 fn erases(app: &mut App<MockFlash>) -> (u64, u64) {
-    let f = app.store.flash();
+    let f = app.flash_mut();
     let at = f.settings_at() as usize / ERASE_SIZE;
     let slots: u64 = f.erase_counts[..2 * SLOT as usize / ERASE_SIZE]
         .iter()
@@ -37,7 +37,7 @@ fn erases(app: &mut App<MockFlash>) -> (u64, u64) {
 fn write_clamp(app: &mut App<MockFlash>, v: u16) -> u16 {
     write_unlocked(app, HR_CLAMP, v);
     while app.poll_flash() {}
-    app.server.holding.result
+    app.result()
 }
 
 /// A board with a model and the store filled by `n` clamp writes (1..=n).
@@ -81,24 +81,21 @@ fn settings_writes_never_erase_a_slot_and_a_power_cut_anywhere_leaves_old_or_new
     let mut wanted = vec![2u16, erasing[0], erasing[1]];
     wanted.sort_unstable();
     for &v in &wanted {
-        let image = board_after(v - 1).store.flash().bytes.clone();
+        let image = board_after(v - 1).flash_mut().bytes.clone();
         let per_op = {
             let mut probe = from_bytes(&image);
-            let ops = probe.store.flash().operations;
+            let ops = probe.flash_mut().operations;
             assert_eq!(write_clamp(&mut probe, v), result::OK);
-            probe.store.flash().operations - ops
+            probe.flash_mut().operations - ops
         };
         assert!(per_op >= 3, "write {v}: {per_op} operations");
         let (mut n_old, mut n_new) = (0, 0);
         for cut in 0..=per_op {
             let mut app = from_bytes(&image);
-            app.store.flash().budget = Some(cut);
+            app.flash_mut().budget = Some(cut);
             let stored = write_clamp(&mut app, v) == result::OK;
             let app = modbus::power_cycle(&mut app, ChannelMap::new());
-            assert_eq!(
-                app.snapshot.model_version, 1,
-                "write {v}, cut at {cut}: the model"
-            );
+            assert_eq!(app.model_version(), 1, "write {v}, cut at {cut}: the model");
             let clamp = app.settings().clamp[0];
             match clamp {
                 c if c == v => n_new += 1,
@@ -128,7 +125,7 @@ fn from_bytes(bytes: &[u8]) -> App<MockFlash> {
 /// The settings block of the old slot layout: settings, channel map, kept
 /// reference ('R'), probe references ('Q'), keys ('K').
 fn old_blob(settings: &Settings, kept: &KeptReference, keys: &StoredKeys) -> Vec<u8> {
-    let setup = thermocomp::modbus::holding::ProbeSetup {
+    let setup = thermocomp::probe_reference::ProbeSetup {
         direction: Some(2),
         samples: 64,
         temp_channel: Some(5),
@@ -182,21 +179,21 @@ fn a_board_with_settings_in_the_old_slot_layout_keeps_them_on_first_boot() {
         let check = |app: &App<MockFlash>, when: &str| {
             assert_eq!(app.settings(), settings, "{when} (garbage {garbage})");
             assert_eq!(app.kept_reference(), Some(kept), "{when}");
-            assert_eq!(app.server.holding.keys.unlock, keys.unlock, "{when}");
-            assert_eq!(app.server.holding.keys.signing, keys.signing, "{when}");
-            assert_eq!(app.server.holding.probe.direction, Some(2), "{when}");
-            assert_eq!(app.server.holding.probe.gauge_zero, 4321, "{when}");
-            assert_eq!(app.snapshot.model_version, 1, "{when}");
+            assert_eq!(app.keys().unlock, keys.unlock, "{when}");
+            assert_eq!(app.keys().signing, keys.signing, "{when}");
+            assert_eq!(app.probe_setup().direction, Some(2), "{when}");
+            assert_eq!(app.probe_setup().gauge_zero, 4321, "{when}");
+            assert_eq!(app.model_version(), 1, "{when}");
         };
         check(&app, "first boot");
-        let now: u64 = app.store.flash().erase_counts[..2 * SLOT as usize / ERASE_SIZE]
+        let now: u64 = app.flash_mut().erase_counts[..2 * SLOT as usize / ERASE_SIZE]
             .iter()
             .sum();
         assert_eq!(now, slot_erases, "migration erases no model slot");
         // A new model (its slot has no settings block) and a reboot: the
         // settings now come from the store.
         app.program(&demo_image(5, 2)).unwrap();
-        let mut flash = std::mem::replace(app.store.flash(), MockFlash::new(0));
+        let mut flash = std::mem::replace(app.flash_mut(), MockFlash::new(0));
         flash.power_on();
         let app = App::new(flash, SLOT, 1, 115_200, ChannelMap::new());
         assert_eq!(
@@ -205,8 +202,8 @@ fn a_board_with_settings_in_the_old_slot_layout_keeps_them_on_first_boot() {
             "after a new model (garbage {garbage})"
         );
         assert_eq!(app.kept_reference(), Some(kept));
-        assert_eq!(app.server.holding.keys.unlock, keys.unlock);
-        assert_eq!(app.server.holding.probe.gauge_zero, 4321);
-        assert_eq!(app.snapshot.model_version, 2);
+        assert_eq!(app.keys().unlock, keys.unlock);
+        assert_eq!(app.probe_setup().gauge_zero, 4321);
+        assert_eq!(app.model_version(), 2);
     }
 }

@@ -77,7 +77,7 @@ fn commissioned(keys: &Keys) -> (BoardLink, Arc<Mutex<App<MockFlash>>>) {
 }
 
 fn serving(board: &Arc<Mutex<App<MockFlash>>>) -> u32 {
-    board.lock().unwrap().snapshot.model_version
+    board.lock().unwrap().model_version()
 }
 
 #[test]
@@ -99,7 +99,7 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     let (e, code) = raw_commit(&mut link, &image(3));
     assert!(e.contains("exception 04"), "{e}");
     assert_eq!(code, result::UNSIGNED);
-    assert!(!board.lock().unwrap().server.holding.unlocked(0));
+    assert!(!board.lock().unwrap().unlocked(0));
     assert_eq!(serving(&board), 2);
     // Signed with another key: result 71, through tcomp and raw.
     let other = new_keys();
@@ -129,7 +129,7 @@ fn unsigned_and_wrongly_signed_images_are_refused_and_the_old_model_kept() {
     odd[n + 4] = 2;
     assert_eq!(raw_commit(&mut link, &odd).1, result::BAD_SIGNATURE);
     assert_eq!(serving(&board), 2, "the old model serves throughout");
-    assert!(!board.lock().unwrap().server.holding.unlocked(0));
+    assert!(!board.lock().unwrap().unlocked(0));
 }
 
 #[test]
@@ -148,11 +148,11 @@ fn the_right_signature_commits_and_the_keys_survive_a_reboot() {
     assert_eq!(serving(&board), 3);
     // The slot holds the image, not the trailer: a reboot serves it and
     // still holds both keys.
-    let flash = std::mem::replace(board.lock().unwrap().store.flash(), MockFlash::new(0));
+    let flash = std::mem::replace(board.lock().unwrap().flash_mut(), MockFlash::new(0));
     let rebooted = fresh_app(flash);
-    assert_eq!(rebooted.snapshot.model_version, 3);
-    assert_eq!(rebooted.server.holding.keys.signing, Some(keys.public));
-    assert_eq!(rebooted.server.holding.keys.unlock, Some(KEY));
+    assert_eq!(rebooted.model_version(), 3);
+    assert_eq!(rebooted.keys().signing, Some(keys.public));
+    assert_eq!(rebooted.keys().unlock, Some(KEY));
     let (addr, board) = board_on_socket(rebooted);
     let mut link = BoardLink::tcp(&addr, 1).unwrap();
     assert_eq!(
@@ -225,10 +225,7 @@ fn a_stored_signing_key_is_replaced_only_with_the_old_keys_signature() {
         .unwrap_err()
     );
     assert!(e.contains("BAD_SIGNATURE"), "{e}");
-    assert_eq!(
-        board.lock().unwrap().server.holding.keys.signing,
-        Some(old.public)
-    );
+    assert_eq!(board.lock().unwrap().keys().signing, Some(old.public));
     // Proven by the old key: replaced; models signed by the old key are refused.
     let proof = signing::key_change_proof(&old.private, &new.public);
     let state = commission(

@@ -3,7 +3,9 @@
 //! available" (0x8000 0000) whenever it cannot be computed, and the served
 //! value equal to the math core's evaluation at the PLC's positions.
 use host_tests::mock_flash::MockFlash;
-use host_tests::modbus::{blank_app, encode, frame, read_inputs, s32, words, write_n, Reply};
+use host_tests::modbus::{
+    blank_app, encode, frame, read_holding, read_inputs, s32, words, write_n, Reply,
+};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 use thermocomp::app::App;
@@ -129,12 +131,12 @@ fn served_correction_equals_the_core_at_the_plcs_positions() {
         assert!(want.corrections.iter().any(|&c| c != 0));
     }
     assert_eq!(
-        app.server.holding.read(HR_TOOL_LENGTH + 1, 0),
-        Some(600_000u32 as u16)
+        read_holding(&mut app, HR_TOOL_LENGTH + 1, 1, 0),
+        [600_000u32 as u16]
     );
     assert_eq!(
-        app.server.holding.read(HR_TOOL_LENGTH + 2, 0),
-        Some(0),
+        read_holding(&mut app, HR_TOOL_LENGTH + 2, 1, 0),
+        [0],
         "A (holding 36), never written"
     );
 }
@@ -217,7 +219,7 @@ fn a_section_sensor_named_by_rom_follows_the_channel_map() {
     let mut app = app();
     app.program(&image(Some(section(&[s])))).unwrap();
     assert_eq!(
-        app.compensation.vol_channel_of(0),
+        app.compensation().vol_channel_of(0),
         None,
         "not on the bus yet"
     );
@@ -225,5 +227,5 @@ fn a_section_sensor_named_by_rom_follows_the_channel_map() {
     let mut map = ChannelMap::new();
     map.set(7, Some(RomCode(rom))).unwrap();
     app.update_channel_map(map);
-    assert_eq!(app.compensation.vol_channel_of(0), Some(7));
+    assert_eq!(app.compensation().vol_channel_of(0), Some(7));
 }

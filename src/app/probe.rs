@@ -9,8 +9,8 @@ use thermocomp_protocol::registers::IR_REF_TIME;
 use super::App;
 use crate::acquisition::temperature::{TemperatureAcquisition, Validity};
 use crate::hal::flash::BackgroundErase;
-use crate::modbus::holding::Command;
 use crate::probe_reference::Taken;
+use crate::state::Command;
 
 impl<F: BackgroundErase> App<F> {
     /// Per direction the clamp in force (the model's max correction, or the
@@ -19,7 +19,7 @@ impl<F: BackgroundErase> App<F> {
         let Some(m) = self.compensation.model() else {
             return ([0; MAX_DIRECTIONS], 0);
         };
-        let clamp = &self.server.holding.clamp;
+        let clamp = &self.state.settings.clamp;
         let limits = core::array::from_fn(|d| {
             let own = m.directions.get(d).map_or(0, |dir| dir.max_correction);
             match clamp.get(d) {
@@ -50,7 +50,7 @@ impl<F: BackgroundErase> App<F> {
     /// ADC samples the next probe reading averages: `Some` while a probe
     /// reference (command 12) is pending, then that reading is the reference.
     pub fn probe_reference_samples(&self) -> Option<u16> {
-        self.references.pending_samples(&self.server.holding.probe)
+        self.references.pending_samples(&self.state.probe)
     }
 
     /// The pending probe reference with this reading (0.1 µm; `None`: the
@@ -63,14 +63,14 @@ impl<F: BackgroundErase> App<F> {
         acq: &TemperatureAcquisition,
         now_ms: u64,
     ) {
-        let setup = self.server.holding.probe;
+        let setup = self.state.probe;
         let temp = setup.temp_channel.and_then(|c| {
             let v = acq.value(usize::from(c), now_ms);
             (v.validity == Validity::Fresh).then_some(i32::from(v.raw))
         });
         match self.references.take(reading, temp, &setup) {
             Taken::NotTaken(code) => {
-                self.server.holding.result = code;
+                self.state.result = code;
                 // A settings store still running ends by writing its result:
                 // it must end on this refusal, not on 0 ("accepted").
                 if self.job.is_some() {
@@ -91,7 +91,7 @@ impl<F: BackgroundErase> App<F> {
                 if self.job.is_none() {
                     // Nothing to store (cannot happen: the counts moved).
                     self.stored_result = None;
-                    self.server.holding.result = code;
+                    self.state.result = code;
                 }
             }
         }
@@ -107,17 +107,17 @@ impl<F: BackgroundErase> App<F> {
                 // restarts from 0 now and the model keeps its reference sample.
                 self.references.rezero();
                 self.snapshot.corrections = self.references.served();
-                self.server.holding.result = result::OK;
+                self.state.result = result::OK;
                 self.store_settings();
             }
             Command::TakeProbeReference => {
                 self.references.request();
-                self.server.holding.result = result::PROBE_REFERENCE_PENDING;
+                self.state.result = result::PROBE_REFERENCE_PENDING;
             }
             Command::ResetReferenceTerms => {
                 self.references.reset();
                 self.snapshot.corrections = self.references.served();
-                self.server.holding.result = result::OK;
+                self.state.result = result::OK;
                 self.store_settings();
             }
             _ => self.store_settings(),
@@ -127,7 +127,7 @@ impl<F: BackgroundErase> App<F> {
 
     /// Input registers 300–329 from the terms as they are now.
     pub(super) fn publish_references(&mut self) {
-        let dir = self.server.holding.probe.direction;
+        let dir = self.state.probe.direction;
         for (a, r) in (IR_REF_TIME..).zip(self.snapshot.references.iter_mut()) {
             *r = self.references.register(a, dir);
         }

@@ -64,7 +64,7 @@ impl<F: BackgroundErase> App<F> {
             }
             return put(&v);
         }
-        let h = &self.server.holding;
+        let h = &self.state;
         match key_of(i) {
             key::PROBE_SETUP => put(&encode_setup(&h.probe)),
             key::KEYS => {
@@ -152,12 +152,12 @@ impl<F: BackgroundErase> App<F> {
             .fetch_record(COUNT - 4, &mut v)
             .and_then(|n| StoredKeys::decode(v.get(..n)?))
             .unwrap_or_default();
-        self.server.holding.keys = crate::modbus::keys::Keys::stored(keys.unlock, keys.signing);
+        self.state.keys = crate::keys::Keys::stored(keys.unlock, keys.signing);
         if let Some(setup) = self
             .fetch_record(COUNT - 5, &mut v)
             .and_then(|n| decode_setup(v.get(..n)?))
         {
-            self.server.holding.probe = setup;
+            self.state.probe = setup;
         }
         // The terms count only with the model they were learned on, and
         // only all together.
@@ -213,9 +213,9 @@ impl<F: BackgroundErase> App<F> {
         let tail = crate::settings::tail_records(&copy);
         self.kept = tail.kept;
         let keys = tail.keys.unwrap_or_default();
-        self.server.holding.keys = crate::modbus::keys::Keys::stored(keys.unlock, keys.signing);
+        self.state.keys = crate::keys::Keys::stored(keys.unlock, keys.signing);
         if let Some(setup) = tail.references.and_then(|r| self.references.decode(r)) {
-            self.server.holding.probe = setup;
+            self.state.probe = setup;
         }
         stored
     }

@@ -1,16 +1,19 @@
-//! Holding registers (FC03 read, FC06/FC16 write): what the PLC writes
-//! (spindle speed, axis positions), configuration and limits behind the
-//! unlock code, commands, and the model staging area.
+//! Holding registers (FC03 read, FC06/FC16 write), the codec between them
+//! and the application's [`AppState`]: what the PLC writes (spindle speed,
+//! axis positions), configuration and limits behind the unlock code,
+//! commands (decoded into a [`Command`] the application carries out), and
+//! the model staging area. The codec keeps only the unlock rule.
 //!
 //! Every write request is checked as a whole before any register changes:
 //! a refused request leaves everything as it was. The addresses, codes and
 //! numbers are the wire contract's (`thermocomp_protocol::holding`).
 
-use thermocomp_core::image::{split_signed, MAX_SIGNED_BYTES};
+use thermocomp_core::image::MAX_SIGNED_BYTES;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
-use thermocomp_core::Model;
 
-use super::keys::{Keys, PUBLIC_KEY_LEN};
+use crate::keys::{Keys, PUBLIC_KEY_LEN};
+use crate::state::AppState;
+pub use crate::state::Command;
 use thermocomp_protocol::holding::Command as WireCommand;
 use thermocomp_protocol::holding::*;
 
@@ -60,67 +63,11 @@ pub enum Addressing {
     Broadcast,
 }
 
-/// What the application must do after a write was accepted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Command {
-    None,
-    /// The staged image (this long) parsed: store it and swap it in.
-    CommitModel {
-        len: usize,
-    },
-    Rereference,
-    /// Limits changed: apply them to the compensator.
-    LimitsChanged,
-    /// Unit address or baud rate changed: apply after the reply is sent.
-    LinkChanged,
-    /// Command 6: forget the fault record.
-    ClearFault,
-    /// Command 7: back to the default settings.
-    RestoreDefaults,
-    /// Command 8 (feature `test-faults`): panic after the reply.
-    TestPanic,
-    /// Command 9 (feature `test-faults`): stall the measurement loop.
-    TestStall,
-    /// Command 10: take a reference sample and keep it.
-    KeepReference,
-    /// Command 11: forget the kept reference.
-    ForgetReference,
-    /// Command 12: take a probe reference after the next cycle.
-    TakeProbeReference,
-    /// Command 13: reset the learned reference terms.
-    ResetReferenceTerms,
-    /// Holding registers 40–45 changed: store them.
-    ProbeSetupChanged,
-    /// Commands 14–16: a key changed (in force at once): store it.
-    KeysChanged,
-}
-
-/// The probe-reference registers (40–45): which direction the probe
-/// measures, how it is averaged, its temperature and drift, its gauge zero.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ProbeSetup {
-    /// Model direction the probe measures (`None`: references refused).
-    pub direction: Option<u8>,
-    /// ADC samples averaged per reference, 1..=1024.
-    pub samples: u16,
-    /// Bus channel of the probe's DS18B20 (`None`: no drift removed).
-    pub temp_channel: Option<u8>,
-    /// The probe's drift, nm/K.
-    pub drift_nm_per_k: i16,
-    /// Probe reading at the gauge at the machine's reference state, 0.1 µm.
-    pub gauge_zero: i32,
-}
-
-impl Default for ProbeSetup {
-    fn default() -> Self {
-        ProbeSetup {
-            direction: u8::try_from(DEFAULT_PROBE_DIRECTION).ok(),
-            samples: DEFAULT_REFERENCE_SAMPLES,
-            temp_channel: None,
-            drift_nm_per_k: 0,
-            gauge_zero: 0,
-        }
-    }
+/// The time of a write and the model serving then.
+#[derive(Clone, Copy)]
+struct At {
+    now_ms: u64,
+    running_version: u32,
 }
 
 /// Registers 40 and 42: a small index or 0xFFFF ("none").
@@ -128,66 +75,30 @@ fn index_register(v: Option<u8>) -> u16 {
     v.map_or(REGISTER_NONE, u16::from)
 }
 
+/// The codec's own state: the unlock rule (the lock is the board's, not a
+/// master's). Everything the registers show or set lives in the
+/// application's [`AppState`]; a read encodes from it, a write decodes into
+/// it and returns the [`Command`] the application then carries out.
 pub struct Holding {
-    pub unit: u8,
-    pub baud: u32,
-    pub spindle_rpm: u16,
-    pub positions: [i32; MAX_AXES],
-    /// Tool length, µm (HR_TOOL_LENGTH).
-    pub tool_length_um: i32,
-    /// The PLC has written positions (or the tool length) since boot.
-    pub positions_written: bool,
-    /// Rotary axes A and C, 0.001° (HR_ROTARY), for the five-axis section.
-    pub rotary_mdeg: [i32; 2],
-    /// The PLC has written A or C since boot.
-    pub rotary_written: bool,
-    /// ms time of the PLC's last write of speed or positions.
-    pub plc_written_ms: Option<u64>,
-    pub clamp: [u16; MAX_DIRECTIONS],
-    pub rate: [u16; MAX_DIRECTIONS],
-    pub result: u16,
-    /// Holding registers 40–45.
-    pub probe: ProbeSetup,
-    /// Version of the model serving now (0: none); a commit must be newer.
-    pub running_version: u32,
-    /// A commit is being written ([`WriteError::Busy`] for what it stores).
-    pub busy: bool,
-    /// The unlock key and the signing key ([`Keys`]).
-    pub keys: Keys,
     unlocked_until_ms: Option<u64>,
     /// The unlock in force came from the factory code: commissioning only.
     commissioning: bool,
     /// A wrong key was written: no unlock before this time.
     unlock_refused_until_ms: u64,
-    staged_len: u16,
-    /// The image and its signature trailer, if any.
-    staging: [u8; MAX_SIGNED_BYTES],
+}
+
+impl Default for Holding {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl Holding {
-    pub fn new(unit: u8, baud: u32) -> Self {
+    pub fn new() -> Self {
         Holding {
-            unit,
-            baud,
-            spindle_rpm: 0,
-            positions: [0; MAX_AXES],
-            tool_length_um: 0,
-            positions_written: false,
-            rotary_mdeg: [0; 2],
-            rotary_written: false,
-            plc_written_ms: None,
-            clamp: [u16::MAX; MAX_DIRECTIONS],
-            rate: [u16::MAX; MAX_DIRECTIONS],
-            result: result::NONE,
-            probe: ProbeSetup::default(),
-            running_version: 0,
-            busy: false,
-            keys: Keys::default(),
             unlocked_until_ms: None,
             commissioning: false,
             unlock_refused_until_ms: 0,
-            staged_len: 0,
-            staging: [0; MAX_SIGNED_BYTES],
         }
     }
 
@@ -195,20 +106,8 @@ impl Holding {
         self.unlocked_until_ms.is_some_and(|t| now_ms < t)
     }
 
-    /// The staged image bytes.
-    pub fn staged(&self) -> &[u8] {
-        // A length past the buffer (refused by check()) stages all of it.
-        self.staging
-            .get(..usize::from(self.staged_len))
-            .unwrap_or(&self.staging)
-    }
-
-    /// Scratch buffer (the staging area) for reading a stored image at boot.
-    pub fn scratch(&mut self) -> &mut [u8] {
-        &mut self.staging
-    }
-
-    pub fn read(&self, addr: u16, now_ms: u64) -> Option<u16> {
+    /// Holding register `addr` of `st`, or `None` past the map.
+    pub fn read(&self, addr: u16, now_ms: u64, st: &AppState) -> Option<u16> {
         let word = |values: &[i32], base: u16, a: u16| -> Option<u16> {
             let k = a.checked_sub(base)?;
             let v = *values.get(usize::from(k / 2))? as u32;
@@ -221,45 +120,45 @@ impl Holding {
         Some(match addr {
             HR_UNLOCK => u16::from(self.unlocked(now_ms)),
             HR_COMMAND => 0,
-            HR_RESULT => self.result,
-            HR_UNIT => u16::from(self.unit),
+            HR_RESULT => st.result,
+            HR_UNIT => u16::from(st.settings.unit),
             // The baud rates the board accepts are below 6,553,600.
-            HR_BAUD => u16::try_from(self.baud / 100).unwrap_or(u16::MAX),
-            HR_SPINDLE => self.spindle_rpm,
+            HR_BAUD => u16::try_from(st.settings.baud / 100).unwrap_or(u16::MAX),
+            HR_SPINDLE => st.plc.spindle_rpm,
             a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => {
-                word(&self.positions, HR_POSITIONS, a)?
+                word(&st.plc.positions, HR_POSITIONS, a)?
             }
             a if in_block(a, HR_ROTARY, usize::from(ROTARY_REGS)).is_some() => {
-                word(&self.rotary_mdeg, HR_ROTARY, a)?
+                word(&st.plc.rotary_mdeg, HR_ROTARY, a)?
             }
-            HR_TOOL_LENGTH => (self.tool_length_um as u32 >> 16) as u16,
-            a if a == HR_TOOL_LENGTH + 1 => (self.tool_length_um as u32 & 0xFFFF) as u16,
+            HR_TOOL_LENGTH => (st.plc.tool_length_um as u32 >> 16) as u16,
+            a if a == HR_TOOL_LENGTH + 1 => (st.plc.tool_length_um as u32 & 0xFFFF) as u16,
             a if in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some() => {
-                *self.clamp.get(usize::from(a - HR_CLAMP))?
+                *st.settings.clamp.get(usize::from(a - HR_CLAMP))?
             }
             a if in_block(a, HR_RATE, MAX_DIRECTIONS).is_some() => {
-                *self.rate.get(usize::from(a - HR_RATE))?
+                *st.settings.rate.get(usize::from(a - HR_RATE))?
             }
-            HR_STAGED_LEN => self.staged_len,
-            HR_PROBE_DIRECTION => index_register(self.probe.direction),
-            HR_REFERENCE_SAMPLES => self.probe.samples,
-            HR_PROBE_TEMP_CHANNEL => index_register(self.probe.temp_channel),
-            HR_PROBE_DRIFT => self.probe.drift_nm_per_k as u16,
-            HR_GAUGE_ZERO => (self.probe.gauge_zero as u32 >> 16) as u16,
-            a if a == HR_GAUGE_ZERO + 1 => (self.probe.gauge_zero as u32 & 0xFFFF) as u16,
+            HR_STAGED_LEN => st.staging.len(),
+            HR_PROBE_DIRECTION => index_register(st.probe.direction),
+            HR_REFERENCE_SAMPLES => st.probe.samples,
+            HR_PROBE_TEMP_CHANNEL => index_register(st.probe.temp_channel),
+            HR_PROBE_DRIFT => st.probe.drift_nm_per_k as u16,
+            HR_GAUGE_ZERO => (st.probe.gauge_zero as u32 >> 16) as u16,
+            a if a == HR_GAUGE_ZERO + 1 => (st.probe.gauge_zero as u32 & 0xFFFF) as u16,
             a if in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() => {
                 let i = usize::from(a - HR_SIGNING_KEY) * 2;
-                match self.keys.staged_signing.get(i..i + 2)? {
+                match st.keys.staged_signing.get(i..i + 2)? {
                     &[high, low] => u16::from_be_bytes([high, low]),
                     _ => return None,
                 }
             }
-            HR_KEY_STATE => self.key_state(now_ms),
+            HR_KEY_STATE => self.key_state(now_ms, &st.keys),
             // The board never shows an unlock key (HR_NEW_UNLOCK_KEY included).
             a if (HR_KEY_STATE..=HR_LAST_KEYS).contains(&a) => 0,
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
-                match self.staging.get(i..i + 2)? {
+                match st.staging.area().get(i..i + 2)? {
                     &[high, low] => u16::from_be_bytes([high, low]),
                     _ => return None,
                 }
@@ -270,12 +169,12 @@ impl Holding {
     }
 
     /// HR_KEY_STATE: which keys are set (never the keys themselves).
-    fn key_state(&self, now_ms: u64) -> u16 {
+    fn key_state(&self, now_ms: u64, keys: &Keys) -> u16 {
         let mut bits = 0;
-        if self.keys.unlock.is_some() {
+        if keys.unlock.is_some() {
             bits |= KEY_STATE_UNLOCK_KEY;
         }
-        if self.keys.signing.is_some() {
+        if keys.signing.is_some() {
             bits |= KEY_STATE_SIGNING_KEY;
         }
         if self.commissioning && self.unlocked(now_ms) {
@@ -289,7 +188,9 @@ impl Holding {
         self.unlocked_until_ms = None;
     }
 
-    /// Write `values` to consecutive registers from `addr`, all or nothing.
+    /// Write `values` to consecutive registers from `addr` into `st`, all
+    /// or nothing; `running_version` is the model serving now (a commit
+    /// must be newer).
     ///
     /// A refused write addressed to this unit locks the board: whatever went
     /// wrong (a wrong key, a value out of range, a refused model), the
@@ -305,8 +206,14 @@ impl Holding {
         values: &[u16],
         now_ms: u64,
         addressing: Addressing,
+        st: &mut AppState,
+        running_version: u32,
     ) -> Result<Command, WriteError> {
-        let outcome = self.write_checked(addr, values, now_ms, addressing);
+        let at = At {
+            now_ms,
+            running_version,
+        };
+        let outcome = self.write_checked(addr, values, at, addressing, st);
         if outcome.is_err_and(|e| e != WriteError::Busy) && addressing == Addressing::Unit {
             self.lock();
             if addr == HR_UNLOCK {
@@ -322,9 +229,11 @@ impl Holding {
         &mut self,
         addr: u16,
         values: &[u16],
-        now_ms: u64,
+        at: At,
         addressing: Addressing,
+        st: &mut AppState,
     ) -> Result<Command, WriteError> {
+        let now_ms = at.now_ms;
         let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
         // An empty write changes nothing and must not count as a PLC write.
         if n == 0 {
@@ -338,14 +247,14 @@ impl Holding {
         }
         // Check every register first.
         for (a, &v) in (addr..end).zip(values) {
-            self.check(a, v, now_ms)?;
+            self.check(a, v, now_ms, st)?;
             if addressing == Addressing::Broadcast && !Self::plc_register(a) {
                 return Err(WriteError::Locked);
             }
         }
         let mut command = Command::None;
         for (a, &v) in (addr..end).zip(values) {
-            let c = self.apply(a, v, now_ms)?;
+            let c = self.apply(a, v, at, st)?;
             if c != Command::None {
                 command = c;
             }
@@ -355,13 +264,13 @@ impl Holding {
         let geometry = touches(HR_POSITIONS, POSITION_REGS) || touches(HR_TOOL_LENGTH, 2);
         let rotary = touches(HR_ROTARY, usize::from(ROTARY_REGS));
         if geometry || rotary || touches(HR_SPINDLE, 1) {
-            self.plc_written_ms = Some(now_ms);
+            st.plc.written_ms = Some(now_ms);
         }
         if geometry {
-            self.positions_written = true;
+            st.plc.positions_written = true;
         }
         if rotary {
-            self.rotary_written = true;
+            st.plc.rotary_written = true;
         }
         Ok(command)
     }
@@ -410,7 +319,7 @@ impl Holding {
         !(a == HR_UNLOCK || Self::plc_register(a))
     }
 
-    fn check(&self, a: u16, v: u16, now_ms: u64) -> Result<(), WriteError> {
+    fn check(&self, a: u16, v: u16, now_ms: u64, st: &AppState) -> Result<(), WriteError> {
         let writable = matches!(
             a,
             HR_UNLOCK | HR_COMMAND | HR_UNIT | HR_BAUD | HR_SPINDLE | HR_STAGED_LEN
@@ -435,7 +344,7 @@ impl Holding {
                 return Err(WriteError::Locked);
             }
         }
-        if self.busy && Self::stored(a, v) {
+        if st.busy && Self::stored(a, v) {
             return Err(WriteError::Busy);
         }
         let ok = match a {
@@ -443,7 +352,7 @@ impl Holding {
             // board stayed locked.
             HR_UNLOCK => {
                 now_ms >= self.unlock_refused_until_ms
-                    && v == self.keys.unlock.unwrap_or(FACTORY_UNLOCK_CODE)
+                    && v == st.keys.unlock.unwrap_or(FACTORY_UNLOCK_CODE)
             }
             HR_COMMAND => WireCommand::from_u16(v)
                 .is_some_and(|c| !c.test_only() || cfg!(feature = "test-faults")),
@@ -464,56 +373,57 @@ impl Holding {
         }
     }
 
-    fn apply(&mut self, a: u16, v: u16, now_ms: u64) -> Result<Command, WriteError> {
+    fn apply(&mut self, a: u16, v: u16, at: At, st: &mut AppState) -> Result<Command, WriteError> {
         match a {
             HR_UNLOCK => {
                 // check() let only the board's key (or, on a board without
                 // one, the factory code) through.
-                self.unlocked_until_ms = Some(now_ms + UNLOCK_MS);
-                self.commissioning = self.keys.unlock.is_none();
+                self.unlocked_until_ms = Some(at.now_ms + UNLOCK_MS);
+                self.commissioning = st.keys.unlock.is_none();
             }
-            HR_COMMAND => return self.command(v),
+            HR_COMMAND => return self.command(v, at.running_version, st),
             HR_UNIT => {
                 // check() let only 1..=247 through.
-                self.unit = u8::try_from(v).map_err(|_| WriteError::Value)?;
+                st.settings.unit = u8::try_from(v).map_err(|_| WriteError::Value)?;
                 return Ok(Command::LinkChanged);
             }
             HR_BAUD => {
-                self.baud = u32::from(v) * 100;
+                st.settings.baud = u32::from(v) * 100;
                 return Ok(Command::LinkChanged);
             }
-            HR_SPINDLE => self.spindle_rpm = v,
-            HR_STAGED_LEN => self.staged_len = v,
+            HR_SPINDLE => st.plc.spindle_rpm = v,
+            HR_STAGED_LEN => st.staging.set_len(v),
             a if in_block(a, HR_POSITIONS, POSITION_REGS).is_some() => {
                 let k = usize::from(a - HR_POSITIONS);
-                let p = self.positions.get_mut(k / 2).ok_or(WriteError::Address)?;
+                let p = st.plc.positions.get_mut(k / 2).ok_or(WriteError::Address)?;
                 set_half(p, k, v);
             }
             a if in_block(a, HR_ROTARY, usize::from(ROTARY_REGS)).is_some() => {
                 let k = usize::from(a - HR_ROTARY);
-                let p = self.rotary_mdeg.get_mut(k / 2).ok_or(WriteError::Address)?;
+                let p = st.plc.rotary_mdeg.get_mut(k / 2);
+                let p = p.ok_or(WriteError::Address)?;
                 set_half(p, k, v);
             }
             a if (HR_TOOL_LENGTH..HR_TOOL_LENGTH + 2).contains(&a) => {
-                let u = self.tool_length_um as u32;
-                self.tool_length_um = if a == HR_TOOL_LENGTH {
+                let u = st.plc.tool_length_um as u32;
+                st.plc.tool_length_um = if a == HR_TOOL_LENGTH {
                     ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
                 } else {
                     ((u & 0xFFFF_0000) | u32::from(v)) as i32
                 };
             }
             a if in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some() => {
-                let c = self.clamp.get_mut(usize::from(a - HR_CLAMP));
+                let c = st.settings.clamp.get_mut(usize::from(a - HR_CLAMP));
                 *c.ok_or(WriteError::Address)? = v;
                 return Ok(Command::LimitsChanged);
             }
             a if in_block(a, HR_RATE, MAX_DIRECTIONS).is_some() => {
-                let r = self.rate.get_mut(usize::from(a - HR_RATE));
+                let r = st.settings.rate.get_mut(usize::from(a - HR_RATE));
                 *r.ok_or(WriteError::Address)? = v;
                 return Ok(Command::LimitsChanged);
             }
             HR_PROBE_DIRECTION..=HR_PROBE_DRIFT => {
-                let p = &mut self.probe;
+                let p = &mut st.probe;
                 // check() bounded 40 and 42 to a small index or 0xFFFF.
                 match a {
                     HR_PROBE_DIRECTION => p.direction = u8::try_from(v).ok(),
@@ -524,8 +434,8 @@ impl Holding {
                 return Ok(Command::ProbeSetupChanged);
             }
             a if (HR_GAUGE_ZERO..HR_GAUGE_ZERO + 2).contains(&a) => {
-                let u = self.probe.gauge_zero as u32;
-                self.probe.gauge_zero = if a == HR_GAUGE_ZERO {
+                let u = st.probe.gauge_zero as u32;
+                st.probe.gauge_zero = if a == HR_GAUGE_ZERO {
                     ((u & 0xFFFF) | (u32::from(v) << 16)) as i32
                 } else {
                     ((u & 0xFFFF_0000) | u32::from(v)) as i32
@@ -534,16 +444,17 @@ impl Holding {
             }
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
-                let bytes = self.staging.get_mut(i..i + 2).ok_or(WriteError::Address)?;
+                let bytes = st.staging.scratch().get_mut(i..i + 2);
+                let bytes = bytes.ok_or(WriteError::Address)?;
                 bytes.copy_from_slice(&v.to_be_bytes());
             }
             a if in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() => {
                 let i = usize::from(a - HR_SIGNING_KEY) * 2;
-                let key = &mut self.keys.staged_signing;
+                let key = &mut st.keys.staged_signing;
                 let bytes = key.get_mut(i..i + 2).ok_or(WriteError::Address)?;
                 bytes.copy_from_slice(&v.to_be_bytes());
             }
-            HR_NEW_UNLOCK_KEY => self.keys.new_unlock = v,
+            HR_NEW_UNLOCK_KEY => st.keys.new_unlock = v,
             _ => return Err(WriteError::Address),
         }
         Ok(Command::None)
@@ -552,22 +463,27 @@ impl Holding {
     /// A key command: on success the key is in force and must be stored
     /// (result 23, then 0 or 22); on refusal HR_RESULT says why.
     fn key_command(
-        &mut self,
-        run: impl FnOnce(&mut Self) -> Result<(), u16>,
+        st: &mut AppState,
+        run: impl FnOnce(&mut AppState) -> Result<(), u16>,
     ) -> Result<Command, WriteError> {
-        match run(self) {
+        match run(st) {
             Ok(()) => {
-                self.result = result::OK;
+                st.result = result::OK;
                 Ok(Command::KeysChanged)
             }
             Err(code) => {
-                self.result = code;
+                st.result = code;
                 Err(WriteError::ModelRefused)
             }
         }
     }
 
-    fn command(&mut self, v: u16) -> Result<Command, WriteError> {
+    fn command(
+        &mut self,
+        v: u16,
+        running_version: u32,
+        st: &mut AppState,
+    ) -> Result<Command, WriteError> {
         // check() let only known commands through; anything else locks.
         let Some(wire) = WireCommand::from_u16(v) else {
             self.unlocked_until_ms = None;
@@ -575,44 +491,25 @@ impl Holding {
         };
         match wire {
             WireCommand::CommitModel | WireCommand::RollbackModel => {
-                let len = usize::from(self.staged_len);
-                let Some(staged) = self.staging.get(..len).filter(|s| !s.is_empty()) else {
-                    self.result = result::BAD_LENGTH;
-                    return Err(WriteError::ModelRefused);
-                };
-                // The image, then its signature trailer if it carries one.
-                // Parsed in place: one model on the stack, not a second one
-                // on the way out of the parser.
-                let mut model = Model::empty(0, 0);
-                let parsed = split_signed(staged)
-                    .and_then(|signed| model.parse_into(signed.image).map(|()| signed));
-                let signed = match parsed {
-                    Ok(ok) => ok,
-                    Err(e) => {
-                        self.result = result::of_image_error(&e);
-                        return Err(WriteError::ModelRefused);
+                let newer_only = wire == WireCommand::CommitModel;
+                match st
+                    .staging
+                    .check_commit(&st.keys, running_version, newer_only)
+                {
+                    Ok(len) => {
+                        self.unlocked_until_ms = None;
+                        st.result = result::OK;
+                        Ok(Command::CommitModel { len })
                     }
-                };
-                // With a signing key stored, only a model it signed commits.
-                if let Err(code) = self.keys.check_model(&signed) {
-                    self.result = code;
-                    return Err(WriteError::ModelRefused);
+                    Err(code) => {
+                        st.result = code;
+                        Err(WriteError::ModelRefused)
+                    }
                 }
-                let len = signed.image.len();
-                // An older or the same version only on purpose: a stale
-                // upload must not replace a newer model by accident.
-                if wire == WireCommand::CommitModel && model.model_version <= self.running_version {
-                    self.result = result::NOT_NEWER;
-                    return Err(WriteError::ModelRefused);
-                }
-                self.unlocked_until_ms = None;
-                self.result = result::OK;
-                Ok(Command::CommitModel { len })
             }
             WireCommand::Rereference => Ok(Command::Rereference),
             WireCommand::ClearStaging => {
-                self.staging.fill(0);
-                self.staged_len = 0;
+                st.staging.clear();
                 Ok(Command::None)
             }
             WireCommand::Lock => {
@@ -627,22 +524,19 @@ impl Holding {
             WireCommand::ForgetReference => Ok(Command::ForgetReference),
             WireCommand::TakeProbeReference => Ok(Command::TakeProbeReference),
             WireCommand::ResetReferenceTerms => Ok(Command::ResetReferenceTerms),
-            WireCommand::StoreSigningKey => self.key_command(|h| h.keys.store_signing()),
-            WireCommand::ReplaceSigningKey => self.key_command(|h| {
-                let proof = h.staging.get(..usize::from(h.staged_len)).unwrap_or(&[]);
-                h.keys.replace_signing(proof)
+            WireCommand::StoreSigningKey => Self::key_command(st, |st| st.keys.store_signing()),
+            WireCommand::ReplaceSigningKey => Self::key_command(st, |st| {
+                let proof = st.staging.proof();
+                st.keys.replace_signing(proof)
             }),
-            WireCommand::SetUnlockKey => self.key_command(|h| {
-                let k = h.keys.new_unlock;
-                if k == 0 || k == FACTORY_UNLOCK_CODE {
-                    return Err(result::BAD_KEY);
+            WireCommand::SetUnlockKey => {
+                let outcome = Self::key_command(st, |st| st.keys.set_unlock());
+                if outcome.is_ok() {
+                    // Open only with the new key from now on.
+                    self.unlocked_until_ms = None;
                 }
-                h.keys.unlock = Some(k);
-                h.keys.new_unlock = 0;
-                // Open only with the new key from now on.
-                h.unlocked_until_ms = None;
-                Ok(())
-            }),
+                outcome
+            }
         }
     }
 }

@@ -22,7 +22,8 @@ use rmodbus::{ErrorKind, ModbusProto};
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME, MAX_WRITE_REGISTERS};
 
 use super::holding::{Addressing, Command, Holding, WriteError};
-use super::registers::Snapshot;
+use crate::snapshot::Snapshot;
+use crate::state::AppState;
 
 /// What the application must do after handling a request.
 pub type Action = Command;
@@ -36,20 +37,40 @@ pub struct Counters {
     pub replies: u32,
 }
 
+/// The frame handler and the unlock rule; what the registers show and set
+/// is the application's ([`AppState`], [`Snapshot`]).
 pub struct Server {
-    pub holding: Holding,
-    pub counters: Counters,
+    holding: Holding,
+    counters: Counters,
+}
+
+impl Default for Server {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl Server {
-    pub fn new(unit: u8, baud: u32) -> Self {
+    pub fn new() -> Self {
         Server {
-            holding: Holding::new(unit, baud),
+            holding: Holding::new(),
             counters: Counters::default(),
         }
     }
 
-    /// Handle one received frame. `reply` is cleared and, when the request
+    /// Frames seen, CRC errors, broken frames, exceptions, replies.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Is the board unlocked at `now_ms`?
+    pub fn unlocked(&self, now_ms: u64) -> bool {
+        self.holding.unlocked(now_ms)
+    }
+
+    /// Handle one received frame: reads encode `snapshot` (input registers)
+    /// and `state` (holding registers), writes decode into `state` and
+    /// return what the application must do. `reply` is cleared and, when the request
     /// deserves an answer, filled with the complete RTU reply (CRC included).
     ///
     /// A write request to this unit (FC05, 06, 15, 16) answered with an
@@ -61,9 +82,10 @@ impl Server {
         frame: &[u8],
         now_ms: u64,
         snapshot: &Snapshot,
+        state: &mut AppState,
         reply: &mut Vec<u8, MAX_FRAME>,
     ) -> Action {
-        let action = self.dispatch(frame, now_ms, snapshot, reply);
+        let action = self.dispatch(frame, now_ms, snapshot, state, reply);
         let is_exception =
             reply.get(1).is_some_and(|f| f & 0x80 != 0) && reply.get(2) != Some(&0x06);
         let is_write = frame
@@ -80,6 +102,7 @@ impl Server {
         frame: &[u8],
         now_ms: u64,
         snapshot: &Snapshot,
+        state: &mut AppState,
         reply: &mut Vec<u8, MAX_FRAME>,
     ) -> Action {
         reply.clear();
@@ -103,7 +126,7 @@ impl Server {
             self.counters.broken += 1;
             return Action::None;
         };
-        let unit = self.holding.unit;
+        let unit = state.settings.unit;
         let addressed = address == unit || address == 0;
         if !addressed {
             return Action::None;
@@ -165,7 +188,7 @@ impl Server {
                             if input {
                                 snapshot.input_register(a)
                             } else {
-                                self.holding.read(a, now_ms)
+                                self.holding.read(a, now_ms, state)
                             }
                         })
                     }
@@ -187,17 +210,11 @@ impl Server {
                         } else {
                             Addressing::Unit
                         };
-                        match self.holding.write(w.address, &values, now_ms, addressing) {
-                            Ok(c) => {
-                                action = c;
-                                Ok(())
-                            }
-                            Err(WriteError::Address) => Err(ErrorKind::IllegalDataAddress),
-                            Err(WriteError::Value) => Err(ErrorKind::IllegalDataValue),
-                            Err(WriteError::Locked) => Err(ErrorKind::IllegalFunction),
-                            Err(WriteError::ModelRefused) => Err(ErrorKind::SlaveDeviceFailure),
-                            Err(WriteError::Busy) => Err(ErrorKind::SlaveDeviceBusy),
-                        }
+                        let version = snapshot.model_version;
+                        self.holding
+                            .write(w.address, &values, now_ms, addressing, state, version)
+                            .map(|c| action = c)
+                            .map_err(exception_of)
                     }
                     Ok(Write::Bits(_)) => Err(ErrorKind::IllegalFunction),
                     Err(e) => Err(e),
@@ -222,6 +239,17 @@ impl Server {
             mf.response.clear();
         }
         action
+    }
+}
+
+/// The Modbus exception answering a refused write.
+fn exception_of(e: WriteError) -> ErrorKind {
+    match e {
+        WriteError::Address => ErrorKind::IllegalDataAddress,
+        WriteError::Value => ErrorKind::IllegalDataValue,
+        WriteError::Locked => ErrorKind::IllegalFunction,
+        WriteError::ModelRefused => ErrorKind::SlaveDeviceFailure,
+        WriteError::Busy => ErrorKind::SlaveDeviceBusy,
     }
 }
 

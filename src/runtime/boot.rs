@@ -64,8 +64,8 @@ where
         app.set_fault_record(fault);
         BootReport {
             fault,
-            model_version: app.snapshot.model_version,
-            model_crc: app.snapshot.model_crc,
+            model_version: app.model_version(),
+            model_crc: app.model_crc(),
         }
     })
 }

@@ -41,9 +41,9 @@ where
     let progress = || -> Option<Progress> {
         shared.lock(|a| {
             let mut app = a.borrow_mut();
-            app.booted.then(|| {
+            app.booted().then(|| {
                 app.poll_flash();
-                app.progress
+                app.progress()
             })
         })
     };

@@ -88,12 +88,12 @@ where
     D: DelayNs,
     S: CycleSource<B>,
 {
-    shared.lock(|a| a.borrow_mut().booted = true);
+    shared.lock(|a| a.borrow_mut().set_booted());
     let mut cycle = 0u32;
     while let Some(input) = source.next_cycle(bus).await {
         cycle = cycle.wrapping_add(1);
         #[cfg(feature = "test-faults")]
-        if shared.lock(|a| a.borrow().stall_requested) {
+        if shared.lock(|a| a.borrow().stall_requested()) {
             // Test command 9: this loop stops making progress (the executor
             // and the Modbus task go on); the watchdog must notice.
             source.stalled();
@@ -115,7 +115,7 @@ where
                 report: &report,
                 out: &out,
                 acquisition: acq,
-                model: app.compensation.model(),
+                model: app.model(),
             });
         });
         // A pending probe reference (command 12) takes this cycle's reading

@@ -31,7 +31,7 @@ where
     loop {
         let want = shared.lock(|a| {
             let app = a.borrow();
-            app.booted.then_some(app.server.holding.baud)
+            app.booted().then_some(app.settings().baud)
         });
         if let Some(b) = want.filter(|b| applied_baud != Some(*b)) {
             port.set_baud(b);
@@ -47,8 +47,8 @@ where
         reply.clear();
         let change = shared.lock(|a| {
             let mut app = a.borrow_mut();
-            app.booted.then(|| {
-                app.progress.modbus_busy = true;
+            app.booted().then(|| {
+                app.progress_mut().modbus_busy = true;
                 app.request(request, now, &mut reply)
             })
         });
@@ -57,9 +57,10 @@ where
         }
         shared.lock(|a| {
             let mut app = a.borrow_mut();
-            if app.booted {
-                app.progress.modbus_busy = false;
-                app.progress.requests = app.progress.requests.wrapping_add(1);
+            if app.booted() {
+                let progress = app.progress_mut();
+                progress.modbus_busy = false;
+                progress.requests = progress.requests.wrapping_add(1);
             }
         });
         match change {

@@ -335,7 +335,7 @@ fn step_cycles<F: thermocomp::hal::flash::BackgroundErase>(app: &mut App<F>) -> 
     use thermocomp_core::limits::{MAX_AXES, MAX_SENSORS};
     use thermocomp_core::StepInput;
     const RUNS: u32 = 100;
-    let n = app.compensation.model()?.sensors.len();
+    let n = app.model()?.sensors.len();
     // SAFETY: enabling the cycle counter (DEMCR.TRCENA, DWT.CTRL.CYCCNTENA)
     // at boot; nothing else on this board uses the DWT.
     let mut cp = unsafe { cortex_m::Peripherals::steal() };
@@ -343,7 +343,7 @@ fn step_cycles<F: thermocomp::hal::flash::BackgroundErase>(app: &mut App<F>) -> 
     cp.DWT.enable_cycle_counter();
     let temps = [Some(400i32); MAX_SENSORS];
     let positions = [0i32; MAX_AXES];
-    let comp = app.compensation.compensator();
+    let comp = app.compensator();
     let mut now = 0u64;
     let start = cortex_m::peripheral::DWT::cycle_count();
     for _ in 0..RUNS {

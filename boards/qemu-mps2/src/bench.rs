@@ -93,7 +93,7 @@ pub async fn bench(golden_path: Option<&'static str>, model_path: Option<&'stati
 /// instruction under `-icount shift=0`) over 32 runs (±1 ms in 64 ms); the calibration loop
 /// timed the same way (1000 × 3,000 instructions) checks the method.
 /// Test vector: seed 00 01 … 1f, message byte i = (7i + 3) mod 256, signed
-/// by another implementation (Python `cryptography`); `src/modbus/keys.rs`
+/// by another implementation (Python `cryptography`); `src/keys.rs`
 /// checks it on the host too.
 fn bench_signature() -> (u64, bool, u64) {
     const RUNS: u64 = 32;
@@ -101,7 +101,7 @@ fn bench_signature() -> (u64, bool, u64) {
     let t = embassy_time::Instant::now();
     let mut ok = true;
     for _ in 0..RUNS {
-        ok &= thermocomp::modbus::keys::verify(&BENCH_PUBLIC_KEY, &message, &BENCH_SIGNATURE);
+        ok &= thermocomp::keys::verify(&BENCH_PUBLIC_KEY, &message, &BENCH_SIGNATURE);
     }
     let verify = t.elapsed().as_micros() * 1000 / RUNS;
     let t = embassy_time::Instant::now();

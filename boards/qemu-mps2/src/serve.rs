@@ -105,7 +105,7 @@ async fn measure(
         // A factory programs a blank board once: a model already in the
         // slots (an upload, or this one at an earlier boot) stays, so a
         // reset never goes back to the command line's model.
-        let stored = app.lock(|a| a.borrow().snapshot.model_version);
+        let stored = app.lock(|a| a.borrow().model_version());
         if stored == 0 {
             program(app, p);
         } else {
@@ -129,13 +129,8 @@ async fn measure(
     // The unit and baud rate in force: the stored settings, else the defaults.
     let (version, crc, unit, baud) = app.lock(|a| {
         let a = a.borrow();
-        let h = &a.server.holding;
-        (
-            a.snapshot.model_version,
-            a.snapshot.model_crc,
-            h.unit,
-            h.baud,
-        )
+        let s = a.settings();
+        (a.model_version(), a.model_crc(), s.unit, s.baud)
     });
     log!(
         "serving Modbus RTU on UART0: unit {}, {} baud, model version {} crc {:#010x}; replaying {} ({} channels), one sample per {} ms",

@@ -60,14 +60,9 @@ fn main() {
     app.program(&demo_image(7, 1)).expect("demo model stored");
     write_unlocked(&mut app, HR_PROBE_DIRECTION, 0);
     while app.poll_flash() {}
-    let settings_at = app.store.flash().settings_at();
-    let slots_before = sector_erases(app.store.flash(), 0, 2 * SLOT, SLOT);
-    let store_before = sector_erases(
-        app.store.flash(),
-        settings_at,
-        settings_at + AREA_BYTES,
-        PAGE,
-    );
+    let settings_at = app.flash_mut().settings_at();
+    let slots_before = sector_erases(app.flash_mut(), 0, 2 * SLOT, SLOT);
+    let store_before = sector_erases(app.flash_mut(), settings_at, settings_at + AREA_BYTES, PAGE);
 
     let (mut stores, mut max_pages, mut failed) = (0u64, 0u64, 0u64);
     for minute in 0..args.minutes {
@@ -81,18 +76,18 @@ fn main() {
         if minute % 60 == 59 {
             write_unlocked(&mut app, HR_CLAMP, 1000 + (minute / 60 % 2) as u16);
         }
-        let before: u64 = app.store.flash().erase_counts.iter().sum();
+        let before: u64 = app.flash_mut().erase_counts.iter().sum();
         while app.poll_flash() {}
-        let after: u64 = app.store.flash().erase_counts.iter().sum();
+        let after: u64 = app.flash_mut().erase_counts.iter().sum();
         let pages = (after - before) * ERASE_SIZE as u64 / u64::from(PAGE);
         max_pages = max_pages.max(pages);
         stores += 1;
-        if app.server.holding.result == thermocomp_protocol::holding::result::SETTINGS_NOT_STORED {
+        if app.result() == thermocomp_protocol::holding::result::SETTINGS_NOT_STORED {
             failed += 1;
         }
     }
 
-    let flash = app.store.flash();
+    let flash = app.flash_mut();
     let years = args.minutes as f64 / 525_600.0;
     let store: Vec<u64> = sector_erases(flash, settings_at, settings_at + AREA_BYTES, PAGE)
         .iter()
