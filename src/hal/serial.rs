@@ -1,6 +1,6 @@
 //! The RS-485 Modbus port as the application sees it: whole RTU frames.
 //! The board times each received byte and finds frame ends with the
-//! application's one framer ([`crate::modbus::rtu_framer`]: 3.5-character
+//! application's one framer (`modbus/rtu_framer.rs`: 3.5-character
 //! end, 1.5-character break), and drives the transceiver's driver-enable
 //! around each reply.
 
