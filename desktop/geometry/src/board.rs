@@ -255,7 +255,8 @@ pub fn quantisation_report(
 /// of coefficient rounding, the stroke rounding (≤ ½ µm of stroke moves a
 /// variable by ≤ ½/stroke, a monomial by its degree times that) and the
 /// reference rounding (≤ 1/32 K, as stored, times a per-kelvin coefficient).
-fn bound_um(poly: &VolumetricPoly, v: &Volumetric, rises: &[i32], o: &BoardOptions) -> f64 {
+/// `geometry predict` states it per pose; of `o` only `tool_max_mm` is read.
+pub fn bound_um(poly: &VolumetricPoly, v: &Volumetric, rises: &[i32], o: &BoardOptions) -> f64 {
     let core = v.error_bound_tenth_um(rises) / 10.0;
     let mut extra = [0.0f64; 3];
     for (t, q) in poly.terms.iter().zip(&v.terms) {

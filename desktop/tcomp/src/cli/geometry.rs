@@ -11,6 +11,7 @@ use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
 use super::geometry_identify::{identify_poly_cmd, PolyRequest};
+use super::geometry_predict::{predict_cmd, PredictArgs};
 use super::geometry_rotary::{
     check_rotary_cmd, identify_rotary_cmd, plan_rotary_cmd, sim_rotary_cmd, CheckRotaryArgs,
     IdentifyRotaryArgs, PlanRotaryArgs, SimRotaryArgs,
@@ -55,6 +56,10 @@ pub enum GeometryCommand {
     /// Tool-tip error at one position of a three- or five-axis machine
     /// (exact and first-order), in the workpiece frame.
     Tooltip(TooltipArgs),
+    /// The model's tool-tip error at your own poses (a CSV: x, y, z, a, c,
+    /// tool, T_…), and with --image what the board serves there (bit-exact).
+    #[command(after_help = super::geometry_predict::EXAMPLE)]
+    Predict(PredictArgs),
     /// The volumetric correction polynomial the board will evaluate
     /// (positions, tool length): its terms, size and fit to the kinematics.
     Table(TableArgs),
@@ -247,6 +252,7 @@ pub fn main(a: GeometryArgs) -> Result<()> {
         GeometryCommand::FitThermal(f) => fit_thermal_cmd(f),
         GeometryCommand::Check(c) => check_cmd(c),
         GeometryCommand::Tooltip(t) => tooltip_cmd(t),
+        GeometryCommand::Predict(p) => predict_cmd(p),
         GeometryCommand::Table(t) => table_cmd(t),
         GeometryCommand::Score(s) => score_cmd(s),
         GeometryCommand::SimRotary(s) => sim_rotary_cmd(s),
