@@ -2,7 +2,8 @@
 //! transceiver whose driver enable is PA8 (a GPIO: the F4's USART has no
 //! hardware DE). Frames are found by the application's one RTU framer
 //! ([`thermocomp::modbus::rtu_framer`]: 3.5-character end, 1.5-character
-//! break, 256-byte limit), as on the bench.
+//! break, 256-byte limit) in the receive loop both boards share
+//! ([`board_support::rtu_receive`]), as on the bench.
 //!
 //! Reception runs into a DMA ring without pause (a 1-Wire critical section
 //! cannot overrun it, and waiting for a frame's end can be cancelled without
@@ -18,12 +19,13 @@
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
+use board_support::rtu_receive::{ByteSource, RtuReceiver};
 use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
 use embassy_time::{with_deadline, Instant};
 use thermocomp::hal::serial::{Overrun, RtuPort};
-use thermocomp::modbus::rtu_framer::{Outcome, RtuFramer, Timing};
+use thermocomp::modbus::rtu_framer::Timing;
 
 /// One batch from the ring.
 const BATCH: usize = 64;
@@ -47,9 +49,14 @@ pub fn line_quiet() -> bool {
 
 pub struct Rs485Port {
     tx: UartTx<'static, Async>,
-    rx: RingBufferedUartRx<'static>,
+    rx: RingRx,
     driver_enable: Output<'static>,
-    framer: RtuFramer,
+    receiver: RtuReceiver,
+}
+
+/// The DMA ring's receiver, handing the loop one time-stamped byte at a time.
+struct RingRx {
+    ring: RingBufferedUartRx<'static>,
     /// Bytes handed over by the ring, not yet given to the framer.
     batch: [u8; BATCH],
     batch_len: usize,
@@ -67,37 +74,42 @@ impl Rs485Port {
     ) -> Self {
         Rs485Port {
             tx,
-            rx,
+            rx: RingRx {
+                ring: rx,
+                batch: [0; BATCH],
+                batch_len: 0,
+                batch_pos: 0,
+                batch_end_us: 0,
+            },
             driver_enable,
-            framer: RtuFramer::new(Timing::for_baud(baud)),
-            batch: [0; BATCH],
-            batch_len: 0,
-            batch_pos: 0,
-            batch_end_us: 0,
+            receiver: RtuReceiver::new(Timing::for_baud(baud)),
         }
     }
+}
 
-    /// The next byte and its time stamp, or `None` once the frame in
-    /// progress has reached its deadline with no byte.
-    async fn next_byte(&mut self) -> Result<Option<(u8, u64)>, Overrun> {
+impl ByteSource for RingRx {
+    async fn next_byte(
+        &mut self,
+        deadline_us: Option<u64>,
+        char_us: u64,
+    ) -> Result<Option<(u8, u64)>, Overrun> {
         if self.batch_pos >= self.batch_len {
-            let read = self.rx.read(&mut self.batch);
-            let got = match self.framer.deadline_us() {
+            let read = self.ring.read(&mut self.batch);
+            let got = match deadline_us {
                 None => Some(read.await),
                 Some(d) => with_deadline(Instant::from_micros(d), read).await.ok(),
             };
             match got {
                 None => return Ok(None),
                 Some(Ok(n)) => {
-                    let char_us = self.framer.timing().char_us;
                     self.batch_len = n.min(BATCH);
                     self.batch_pos = 0;
                     self.batch_end_us = Instant::now().as_micros().saturating_sub(char_us);
                 }
                 Some(Err(_)) => {
                     // Overrun, framing or noise error: the frame in progress
-                    // lost or garbled bytes; reception restarts at the next read.
-                    self.framer.reset();
+                    // lost or garbled bytes (the loop drops it); reception
+                    // restarts at the next read.
                     self.batch_len = 0;
                     self.batch_pos = 0;
                     return Err(Overrun);
@@ -108,42 +120,23 @@ impl Rs485Port {
             return Ok(None);
         };
         let behind = (self.batch_len - 1 - self.batch_pos) as u64;
-        let at = self
-            .batch_end_us
-            .saturating_sub(behind * self.framer.timing().char_us);
+        let at = self.batch_end_us.saturating_sub(behind * char_us);
         self.batch_pos += 1;
         Ok(Some((byte, at)))
+    }
+
+    fn now_us(&self) -> u64 {
+        Instant::now().as_micros()
+    }
+
+    fn receiving(&mut self, in_frame: bool) {
+        RECEIVING.store(in_frame, Ordering::Release);
     }
 }
 
 impl RtuPort for Rs485Port {
     async fn read_frame(&mut self, buf: &mut [u8]) -> Result<usize, Overrun> {
-        loop {
-            let outcome = match self.next_byte().await {
-                Ok(Some((byte, at))) => self.framer.push(byte, at),
-                Ok(None) => self.framer.idle(Instant::now().as_micros()),
-                Err(e) => {
-                    RECEIVING.store(false, Ordering::Release);
-                    return Err(e);
-                }
-            };
-            RECEIVING.store(self.framer.deadline_us().is_some(), Ordering::Release);
-            match outcome {
-                Some(Outcome::Frame) => {
-                    let frame = self.framer.frame();
-                    let n = frame.len();
-                    return match buf.get_mut(..n) {
-                        Some(dst) => {
-                            dst.copy_from_slice(frame);
-                            Ok(n)
-                        }
-                        None => Err(Overrun),
-                    };
-                }
-                Some(Outcome::Oversize) => return Err(Overrun),
-                Some(Outcome::Broken) | None => {}
-            }
-        }
+        self.receiver.read_frame(&mut self.rx, buf).await
     }
 
     async fn write_frame(&mut self, bytes: &[u8]) {
@@ -159,7 +152,7 @@ impl RtuPort for Rs485Port {
 
     fn set_baud(&mut self, baud: u32) {
         let _ = self.tx.set_baudrate(baud);
-        let _ = self.rx.set_baudrate(baud);
-        self.framer.set_timing(Timing::for_baud(baud));
+        let _ = self.rx.ring.set_baudrate(baud);
+        self.receiver.set_timing(Timing::for_baud(baud));
     }
 }

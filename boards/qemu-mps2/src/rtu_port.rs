@@ -1,8 +1,9 @@
 //! RTU framing on the bench board's UART0: the application's one framer
 //! ([`thermocomp::modbus::rtu_framer`], the spec's 3.5-character end and
-//! 1.5-character break) on bytes time-stamped in the receive interrupt to
-//! the SysTick count ([`crate::time_driver::now_us`]), as the field board
-//! runs it. A frame is what lies between two silences: a request inside
+//! 1.5-character break) in the receive loop both boards share
+//! ([`board_support::rtu_receive`]), on bytes time-stamped in the receive
+//! interrupt to the SysTick count ([`crate::time_driver::now_us`]), as the
+//! field board runs it. A frame is what lies between two silences: a request inside
 //! another unit's frame, or right after garbage with no silence, is not one.
 //!
 //! The timing is the host's: QEMU hands the guest a socket's bytes one per
@@ -18,9 +19,10 @@
 //! inside another unit's frame or right after garbage is still never a
 //! frame, and each reply waits 10 ms of silence (the field board: 1.75 ms).
 
+use board_support::rtu_receive::{ByteSource, RtuReceiver};
 use embassy_time::{with_timeout, Duration};
 use thermocomp::hal::serial::{Overrun, RtuPort};
-use thermocomp::modbus::rtu_framer::{Outcome, RtuFramer, Timing};
+use thermocomp::modbus::rtu_framer::Timing;
 
 use crate::time_driver::now_us;
 use crate::uart::Uart0;
@@ -42,67 +44,52 @@ fn bench_timing(baud: u32) -> Timing {
 
 pub struct QemuRtuPort {
     uart: Uart0,
-    framer: RtuFramer,
-    /// Frames discarded for a silence inside them, since boot.
-    pub broken: u32,
+    receiver: RtuReceiver,
 }
 
 impl QemuRtuPort {
     pub fn new(baud: u32) -> Self {
         QemuRtuPort {
             uart: Uart0::new(baud),
-            framer: RtuFramer::new(bench_timing(baud)),
-            broken: 0,
+            receiver: RtuReceiver::new(bench_timing(baud)),
         }
     }
+}
 
-    /// The next received byte, or `None` once the frame in progress has
-    /// reached its end (no byte before its deadline).
-    async fn next_byte(&mut self) -> Option<(u8, u64)> {
-        if let Some(b) = self.uart.try_read_byte() {
-            return Some(b);
+/// UART0's RX-interrupt queue, each byte stamped as it landed.
+impl ByteSource for Uart0 {
+    async fn next_byte(
+        &mut self,
+        deadline_us: Option<u64>,
+        _char_us: u64,
+    ) -> Result<Option<(u8, u64)>, Overrun> {
+        if let Some(b) = self.try_read_byte() {
+            return Ok(Some(b));
         }
-        let Some(deadline) = self.framer.deadline_us() else {
-            return Some(self.uart.read_byte().await);
+        let Some(deadline) = deadline_us else {
+            return Ok(Some(self.read_byte().await));
         };
         let now = now_us();
         if now < deadline {
             if let Ok(b) =
-                with_timeout(Duration::from_micros(deadline - now), self.uart.read_byte()).await
+                with_timeout(Duration::from_micros(deadline - now), self.read_byte()).await
             {
-                return Some(b);
+                return Ok(Some(b));
             }
         }
         // A byte may have landed just as the time ran out: its own time
         // stamp decides.
-        self.uart.try_read_byte()
+        Ok(self.try_read_byte())
+    }
+
+    fn now_us(&self) -> u64 {
+        now_us()
     }
 }
 
 impl RtuPort for QemuRtuPort {
     async fn read_frame(&mut self, buf: &mut [u8]) -> Result<usize, Overrun> {
-        loop {
-            let outcome = match self.next_byte().await {
-                Some((byte, at)) => self.framer.push(byte, at),
-                None => self.framer.idle(now_us()),
-            };
-            match outcome {
-                Some(Outcome::Frame) => {
-                    let frame = self.framer.frame();
-                    let n = frame.len();
-                    return match buf.get_mut(..n) {
-                        Some(dst) => {
-                            dst.copy_from_slice(frame);
-                            Ok(n)
-                        }
-                        None => Err(Overrun),
-                    };
-                }
-                Some(Outcome::Oversize) => return Err(Overrun),
-                Some(Outcome::Broken) => self.broken = self.broken.wrapping_add(1),
-                None => {}
-            }
-        }
+        self.receiver.read_frame(&mut self.uart, buf).await
     }
 
     async fn write_frame(&mut self, bytes: &[u8]) {
@@ -112,6 +99,6 @@ impl RtuPort for QemuRtuPort {
 
     fn set_baud(&mut self, baud: u32) {
         self.uart.set_baud(baud);
-        self.framer.set_timing(bench_timing(baud));
+        self.receiver.set_timing(bench_timing(baud));
     }
 }

@@ -5,4 +5,5 @@
 
 pub mod fault_entry;
 pub mod fault_record;
+pub mod rtu_receive;
 pub mod stack;
