@@ -25,6 +25,9 @@ pub enum Choice {
     Mlr,
     /// The static MLR on the selected sensors (`mlr-static`).
     MlrStatic,
+    /// Ridge regression on the lagged MLR's inputs (`ridge`): a table like
+    /// the MLR's, with its own (shrunk) coefficients.
+    Ridge,
     /// The lagged MLR plus its residual networks (`hybrid`): a table and
     /// networks of the same direction, which the board sums.
     Hybrid,
@@ -42,12 +45,13 @@ impl Choice {
             "net" | "ga-bpn" => Choice::Net,
             "mlr" => Choice::Mlr,
             "mlr-static" => Choice::MlrStatic,
+            "ridge" => Choice::Ridge,
             "hybrid" => Choice::Hybrid,
             "blend" => Choice::Blend,
             "none" => Choice::None,
             other => {
                 anyhow::bail!(
-                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static or none)"
+                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static, ridge or none)"
                 )
             }
         })
@@ -172,6 +176,7 @@ fn fitted_channels(file: &ModelFile) -> Vec<String> {
         .map(|n| n.channel.clone())
         .chain(file.mlr.iter().map(|m| m.channel.clone()))
         .chain(file.mlr_static.iter().map(|m| m.channel.clone()))
+        .chain(file.ridge.iter().map(|m| m.channel.clone()))
         .collect();
     channels.sort();
     channels.dedup();
@@ -370,6 +375,7 @@ impl FloatModelBuilder<'_> {
         };
         let mlr = match choice {
             Choice::MlrStatic => file.mlr_static.iter().find(|m| m.channel == ch),
+            Choice::Ridge => file.ridge.iter().find(|m| m.channel == ch),
             Choice::Mlr | Choice::Hybrid | Choice::Blend => {
                 file.mlr.iter().find(|m| m.channel == ch)
             }
@@ -380,7 +386,11 @@ impl FloatModelBuilder<'_> {
             self.add_nets(ch, d, choice, &members, w_nets)?;
         }
         let blend_table = choice == Choice::Blend && w_table > 0.0;
-        if matches!(choice, Choice::Mlr | Choice::MlrStatic | Choice::Hybrid) || blend_table {
+        let table = matches!(
+            choice,
+            Choice::Mlr | Choice::MlrStatic | Choice::Ridge | Choice::Hybrid
+        );
+        if table || blend_table {
             let Some(m) = mlr else {
                 anyhow::bail!("no fitted {choice:?} model for channel {ch}");
             };
@@ -523,13 +533,13 @@ impl FloatModelBuilder<'_> {
     }
 }
 
-/// Parse `dch5_um=mlr,dch3_um=ga-bpn` (`net` is an alias of `ga-bpn`).
+/// Parse `dch5_um=mlr,dch3_um=ridge` (`net` is an alias of `ga-bpn`).
 pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
     s.split(',')
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
             let (ch, k) = p.split_once('=').ok_or_else(|| {
-                anyhow::anyhow!("expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static, got {p}")
+                anyhow::anyhow!("expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static|ridge, got {p}")
             })?;
             Ok((ch.trim().to_string(), Choice::parse(k)?))
         })

@@ -18,6 +18,7 @@ use super::mlr::fit_mlr;
 use super::model::{
     blend_weight, FeatureSpec, MlrParams, Model, NetEnsemble, NetParams, MODEL_NAMES,
 };
+use super::ridge::{choose_penalty, fit_ridge, standardised_coefs};
 use super::samples::{normalize_rows, ranged_specs, Samples, SeriesCache};
 use super::split::{time_block_split, Segment};
 
@@ -151,6 +152,16 @@ pub struct CvScore {
     /// each fold is scored with the weight chosen on the other folds.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub weight: Option<f64>,
+    /// `ridge` only: the penalty the fit ships, chosen by forward-chaining
+    /// CV on all the training blocks. The figures above are nested: each
+    /// fold is scored with the penalty chosen on its own fit blocks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub penalty: Option<f64>,
+    /// Linear candidates: the coefficients of each fold's model in
+    /// standardised units (µm per standard deviation of each input on the
+    /// fold's fit rows), what the stability rule compares.
+    #[serde(skip)]
+    pub fold_coefs: Vec<Vec<f64>>,
 }
 
 /// Errors collected over folds.
@@ -185,6 +196,8 @@ impl CvAcc {
             fold_rms_um: self.folds.clone(),
             dropped: false,
             weight: None,
+            penalty: None,
+            fold_coefs: vec![],
         })
     }
 }
@@ -260,6 +273,10 @@ pub struct NetCandidates {
     /// `w·mlr + (1−w)·ga-bpn` with `w` from the out-of-fold predictions
     /// (`blend`; needs `net`, and scores the network on every fold).
     pub blend: bool,
+    /// Ridge on the lagged MLR's inputs, its penalty chosen by
+    /// forward-chaining CV on each fold's fit blocks (`ridge`; not a network:
+    /// linear, cheap, scored on every fold beside the MLR).
+    pub ridge: bool,
 }
 
 /// Blocked time cross-validation of every candidate model of one channel on
@@ -298,7 +315,7 @@ pub(crate) fn cross_validate(
         ch,
         cfg,
     };
-    let (kept, mut out, n_total) = cv.score_linear(static_idx)?;
+    let (kept, mut out, n_total) = cv.score_linear(static_idx, with.ridge)?;
     let linear_best = out.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
     // Out-of-fold network predictions per kept fold (for the blend).
     let mut net_preds: Vec<Option<Vec<f64>>> = vec![None; kept.len()];
@@ -347,16 +364,21 @@ struct KeptFold {
 }
 
 impl CvChannel<'_> {
-    /// Scores `none`, `mlr-static` (on `static_idx`) and `mlr` on every
-    /// usable fold; returns those folds, the scores and the held-out rows.
+    /// Scores `none`, `mlr-static` (on `static_idx`), `mlr` and (with
+    /// `ridge`) the ridge on every usable fold, each linear one with its
+    /// fold coefficients; returns those folds, the scores and the held-out
+    /// rows.
     fn score_linear(
         &self,
         static_idx: &[usize],
+        ridge: bool,
     ) -> Result<(Vec<KeptFold>, BTreeMap<String, CvScore>, usize)> {
         let (cache, plan, idx, ch) = (self.cache, self.plan, self.idx, self.ch);
         let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
         let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
         let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
+        let mut acc_ridge = CvAcc::default();
+        let mut coefs: BTreeMap<&str, Vec<Vec<f64>>> = BTreeMap::new();
         // No compensation: the target is the error about the run's start, so 0.
         let mut acc_none = CvAcc::default();
         let mut kept = Vec::new();
@@ -370,13 +392,33 @@ impl CvChannel<'_> {
             let m = fit_mlr(specs.clone(), &tr, ch)?;
             let p_mlr: Vec<f64> = va.x.iter().map(|r| m.predict_raw(r)).collect();
             acc_mlr.add_fold(&va.y, &p_mlr);
+            coefs
+                .entry("mlr")
+                .or_default()
+                .push(standardised_coefs(&m, &tr));
             acc_none.add_fold(&va.y, &vec![0.0; va.y.len()]);
+            // The ridge's penalty from this fold's fit blocks alone (nested).
+            let lambda = match ridge {
+                true => choose_penalty(cache, &plan.runs, fit, idx, ch)?,
+                false => None,
+            };
+            if let Some(lambda) = lambda {
+                let r = fit_ridge(specs.clone(), &tr, lambda, ch)?;
+                let p: Vec<f64> = va.x.iter().map(|x| r.predict_raw(x)).collect();
+                acc_ridge.add_fold(&va.y, &p);
+                coefs
+                    .entry("ridge")
+                    .or_default()
+                    .push(standardised_coefs(&r, &tr));
+            }
             if !static_idx.is_empty() {
                 let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
                 let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
                 let ms = fit_mlr(ranged_specs(&skinds, &trs), &trs, ch)?;
                 let p: Vec<f64> = vas.x.iter().map(|r| ms.predict_raw(r)).collect();
                 acc_static.add_fold(&vas.y, &p);
+                let c = standardised_coefs(&ms, &trs);
+                coefs.entry("mlr-static").or_default().push(c);
             }
             kept.push(KeptFold {
                 fold: f,
@@ -392,8 +434,10 @@ impl CvChannel<'_> {
             ("none", &acc_none),
             ("mlr-static", &acc_static),
             ("mlr", &acc_mlr),
+            ("ridge", &acc_ridge),
         ] {
-            if let Some(sc) = acc.score() {
+            if let Some(mut sc) = acc.score() {
+                sc.fold_coefs = coefs.remove(name).unwrap_or_default();
                 out.insert(name.to_string(), sc);
             }
         }

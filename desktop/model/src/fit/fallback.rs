@@ -57,6 +57,12 @@ pub fn model_sensors(file: &ModelFile, channel: &str) -> Vec<String> {
             .filter(|n| n.channel == channel)
             .flat_map(|n| n.features.iter())
             .collect(),
+        Some("ridge") => file
+            .ridge
+            .iter()
+            .filter(|m| m.channel == channel)
+            .flat_map(|m| m.features.iter())
+            .collect(),
         Some("mlr-static") => file
             .mlr_static
             .iter()
@@ -191,6 +197,7 @@ pub fn fit_fallbacks(
                         net: false,
                         hybrid: false,
                         blend: false,
+                        ridge: false,
                     },
                 )?
             } else {

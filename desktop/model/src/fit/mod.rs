@@ -22,9 +22,11 @@ pub mod net;
 pub mod pipeline;
 pub mod plan;
 pub mod report;
+pub mod ridge;
 pub mod samples;
 pub mod shipped;
 pub mod split;
+pub mod stability;
 
 // The fit's types, rows, linear baseline, input choice and run splits, at
 // `fit::` as before they had files of their own.

@@ -83,17 +83,33 @@ pub struct ModelFile {
     /// Per channel, models without each of its sensors (degraded mode, issue 15).
     #[serde(default)]
     pub fallbacks: Vec<FallbackParams>,
+    /// Ridge regression per channel on the lagged MLR's inputs (model name
+    /// `ridge`), its penalty chosen by forward-chaining time-blocked CV on
+    /// the training rows: a table like the MLR's, with its own coefficients.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ridge: Vec<MlrParams>,
 }
 
 /// Model names, simplest first (the order ties are broken in): `none` (no
 /// compensation: the board serves 0 about the run's reference) is the
 /// simplest of all, so a model must beat it by more than the margin to ship;
-/// the hybrid is
+/// the ridge has the MLR's form plus one fitted parameter (its penalty), so
+/// it comes after the MLR: it ships when it beats the MLR by more than the
+/// margin, or when the MLR's coefficients are unstable across the folds and
+/// the ridge is within noise of it (`stability`); the hybrid is
 /// anchored on the lagged MLR (its network only corrects the residual), so it
 /// is taken as simpler than the free network; the blend carries both the
 /// lagged MLR's table and the networks, so it comes last: it is chosen only
 /// when it beats each of its parts by more than the margin.
-pub const MODEL_NAMES: [&str; 6] = ["none", "mlr-static", "mlr", "hybrid", "ga-bpn", "blend"];
+pub const MODEL_NAMES: [&str; 7] = [
+    "none",
+    "mlr-static",
+    "mlr",
+    "ridge",
+    "hybrid",
+    "ga-bpn",
+    "blend",
+];
 
 /// `w·mlr + (1−w)·ensemble` on the same inputs (model name `blend`). The
 /// board ships it as the MLR's table with every term scaled by `w` and the

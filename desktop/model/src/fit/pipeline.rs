@@ -20,16 +20,19 @@ use super::features;
 use super::greedy::{blocked_folds, greedy_select};
 use super::mlr::{fit_mlr, metrics, Metrics};
 use super::model::{
-    Blend, FeatureKind, FeatureSpec, Hybrid, MlrParams, Model, ModelFile, NetEnsemble, MODEL_NAMES,
+    feature_name, Blend, FeatureKind, FeatureSpec, Hybrid, MlrParams, Model, ModelFile,
+    NetEnsemble, MODEL_NAMES,
 };
 pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
 pub use super::report::{
     print_report, report_json, ChannelInfo, FitReport, ModelReport, RunMetrics,
 };
+use super::ridge::{all_blocks, choose_penalty, fit_ridge};
 use super::samples::{ranged_specs, Samples, SeriesCache};
 use super::shipped::shipped;
 pub use super::shipped::{LeftOut, Shipped};
 use super::split::Segment;
+use super::stability::{assess, collinearity, stability_rule, Stability};
 use tcomp_data::runcsv::Run;
 use thermocomp_core::limits::{MAX_DIRECTIONS, MAX_INPUTS, MAX_NETS, MAX_NET_INPUTS};
 
@@ -269,9 +272,10 @@ impl ChannelFit<'_> {
             net: !cfg.skip_net,
             hybrid: !cfg.skip_net && cfg.hybrid,
             blend: !cfg.skip_net && cfg.blend,
+            ridge: cfg.ridge,
         };
         let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
-        let cv = if self.folds.len() > 1 {
+        let mut cv = if self.folds.len() > 1 {
             cross_validate(cache, plan, self.folds, &idx, &static_ok, ch, cfg, with)?
         } else {
             BTreeMap::new()
@@ -281,9 +285,13 @@ impl ChannelFit<'_> {
         let specs = ranged_specs(&kinds, &full);
         let mlr = fit_mlr(specs.clone(), &full, ch)?;
         acc.record("mlr", ch, &mlr, &val, plan);
+        if cfg.ridge {
+            self.fit_ridge(ch, &idx, &specs, (&full, &val), &mut cv, acc)?;
+        }
         if !static_ok.is_empty() {
             self.fit_static(ch, &static_ok, acc)?;
         }
+        let stability = self.stabilities(&cv, &specs, &static_ok, &full);
         let mut info = ChannelInfo {
             channel: ch.to_string(),
             features: specs.iter().map(FeatureSpec::name).collect(),
@@ -292,6 +300,8 @@ impl ChannelFit<'_> {
             cv_rms_um: cv_mse.map(f64::sqrt),
             cv: cv.clone(),
             net: None,
+            stability,
+            collinearity: None,
         };
         let rows = ChannelRows {
             ch,
@@ -305,11 +315,21 @@ impl ChannelFit<'_> {
         if with.net || with.hybrid {
             hybrid_empty = self.fit_networks(&rows, with, &cv, &mut info, acc)?;
         }
-        let chosen = self.choose(ch, &cv, hybrid_empty, acc);
+        let chosen = self.choose(ch, &cv, &info.stability, hybrid_empty, acc);
         let used_idx: &[usize] = match chosen.as_str() {
             "mlr-static" => &static_ok,
             "none" => &[],
             _ => &idx,
+        };
+        info.collinearity = match chosen.as_str() {
+            "none" => None,
+            "mlr-static" => acc.file.mlr_static.last().and_then(|m| {
+                let rows = cache
+                    .samples(&plan.runs, &plan.train, &static_ok, ch)
+                    .ok()?;
+                collinearity(&m.features, &rows)
+            }),
+            _ => collinearity(&specs, &full),
         };
         for &i in used_idx {
             if !acc.in_use.contains(&i) {
@@ -386,6 +406,65 @@ impl ChannelFit<'_> {
             }
         }
         anyhow::anyhow!("fit: channel {ch} has no values in the training or validation rows")
+    }
+
+    /// The ridge on the channel's inputs, its penalty chosen by
+    /// forward-chaining CV over all the training blocks (recorded as the
+    /// `ridge` CV score's `penalty`); none when no fold has rows enough.
+    fn fit_ridge(
+        &self,
+        ch: &str,
+        idx: &[usize],
+        specs: &[FeatureSpec],
+        (full, val): (&Samples, &Samples),
+        cv: &mut BTreeMap<String, CvScore>,
+        acc: &mut Fitted,
+    ) -> Result<()> {
+        let blocks = all_blocks(self.folds);
+        let Some(lambda) = choose_penalty(self.cache, &self.plan.runs, &blocks, idx, ch)? else {
+            cv.remove("ridge");
+            acc.notes.push(format!(
+                "{ch}: no ridge: too few training rows to choose its penalty by forward-chaining CV"
+            ));
+            return Ok(());
+        };
+        let r = fit_ridge(specs.to_vec(), full, lambda, ch)?;
+        acc.record("ridge", ch, &r, val, self.plan);
+        acc.file.ridge.push(r);
+        if let Some(sc) = cv.get_mut("ridge") {
+            sc.penalty = Some(lambda);
+        }
+        Ok(())
+    }
+
+    /// How the coefficients of each linear candidate moved across the CV
+    /// folds (`stability`), in the standard deviations of the target.
+    fn stabilities(
+        &self,
+        cv: &BTreeMap<String, CvScore>,
+        specs: &[FeatureSpec],
+        static_ok: &[usize],
+        full: &Samples,
+    ) -> BTreeMap<String, Stability> {
+        let n = full.y.len().max(1) as f64;
+        let mean = full.y.iter().sum::<f64>() / n;
+        let y_sd = (full.y.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let names: Vec<String> = specs.iter().map(FeatureSpec::name).collect();
+        let static_names: Vec<String> = static_ok
+            .iter()
+            .map(|&i| feature_name(&self.cache.kinds[i].0, self.cache.kinds[i].1))
+            .collect();
+        cv.iter()
+            .filter(|(_, sc)| !sc.fold_coefs.is_empty())
+            .map(|(name, sc)| {
+                let n = if name == "mlr-static" {
+                    &static_names
+                } else {
+                    &names
+                };
+                (name.clone(), assess(n, &sc.fold_coefs, y_sd))
+            })
+            .collect()
     }
 
     /// The static MLR on the inputs `static_ok`.
@@ -469,6 +548,7 @@ impl ChannelFit<'_> {
         &self,
         ch: &str,
         cv: &BTreeMap<String, CvScore>,
+        stab: &BTreeMap<String, Stability>,
         hybrid_empty: bool,
         acc: &mut Fitted,
     ) -> String {
@@ -479,6 +559,9 @@ impl ChannelFit<'_> {
             acc.notes.push(format!(
                 "{ch}: {name} is not admissible: RMS {r:.2} µm on the latest training block (the one fold that forecasts forward) against the linear model's {bar:.2} µm"
             ));
+        }
+        for (u, s) in stability_rule(&mut admissible, stab, margin) {
+            acc.notes.push(stability_note(ch, &u, &s, cv, stab));
         }
         for name in NET_MODELS {
             if admissible.contains_key(name) && acc.nets_left < ens {
@@ -537,4 +620,38 @@ fn static_inputs(
                 .take(budget.saturating_sub(new_inputs)),
         )
         .collect()
+}
+
+/// Why the stability rule set `u` aside in favour of `s` on channel `ch`.
+fn stability_note(
+    ch: &str,
+    u: &str,
+    s: &str,
+    cv: &BTreeMap<String, CvScore>,
+    stab: &BTreeMap<String, Stability>,
+) -> String {
+    let rms = |n: &str| cv.get(n).map_or(f64::NAN, |c| c.rms_um);
+    let why = match stab.get(u) {
+        Some(st) => {
+            let (lo, hi) = st.coef_range_um.unwrap_or((f64::NAN, f64::NAN));
+            let input = st.worst_input.as_deref().unwrap_or("?");
+            match st.worst_factor {
+                _ if st.sign_flip => format!(
+                    "the coefficient of {input} flips sign across the {} CV folds ({lo:+.2} to {hi:+.2} µm per standard deviation)",
+                    st.folds
+                ),
+                Some(f) => format!(
+                    "the coefficient of {input} changes by a factor {f:.1} across the {} CV folds ({lo:+.2} to {hi:+.2} µm per standard deviation)",
+                    st.folds
+                ),
+                None => "its coefficients are unstable across the CV folds".to_string(),
+            }
+        }
+        None => "its coefficients are unstable across the CV folds".to_string(),
+    };
+    format!(
+        "{ch}: {u} is not chosen: {why}; {s} is stabler and within noise of it (CV RMS {:.2} against {:.2} µm)",
+        rms(s),
+        rms(u)
+    )
 }

@@ -63,6 +63,8 @@ pub struct FitConfig {
     /// The candidate sensors of `auto`, given (`select`'s picks) instead
     /// of chosen by a new selection on the training rows.
     pub sensors: Option<Vec<String>>,
+    /// Fit and offer the ridge candidate (`ridge`, issue 50).
+    pub ridge: bool,
 }
 
 impl Default for FitConfig {
@@ -87,6 +89,7 @@ impl Default for FitConfig {
             fallbacks: true,
             fallback_pairs: false,
             sensors: None,
+            ridge: true,
         }
     }
 }

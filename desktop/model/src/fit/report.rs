@@ -12,6 +12,7 @@ use super::mlr::Metrics;
 use super::model::ModelFile;
 use super::shipped::{print_shipped, Shipped};
 use super::split::Segment;
+use super::stability::{Collinearity, Stability};
 use crate::select::Selection;
 
 /// Per-run figures.
@@ -42,6 +43,12 @@ pub struct ChannelInfo {
     /// Blocked cross-validation per candidate model (training rows only): what chose it.
     pub cv: BTreeMap<String, CvScore>,
     pub net: Option<NetInfo>,
+    /// Per linear candidate, how its coefficients moved across the CV folds
+    /// (the stability rule, `stability.rs`).
+    pub stability: BTreeMap<String, Stability>,
+    /// How collinear the chosen model's inputs are on the training rows
+    /// (condition number, largest variance inflation); none for `none`.
+    pub collinearity: Option<Collinearity>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -91,6 +98,7 @@ pub fn print_report(r: &FitReport) {
             );
         }
         println!();
+        print_guard(i, r.chosen.get(&i.channel).map_or("?", String::as_str));
     }
     println!();
     println!(
@@ -143,6 +151,32 @@ pub fn print_report(r: &FitReport) {
             }
         }
     }
+}
+
+/// The ridge's penalty, the chosen model's collinearity and every linear
+/// candidate the stability rule finds unstable, one line.
+fn print_guard(i: &ChannelInfo, chosen: &str) {
+    let mut parts = vec![format!("chosen {chosen}")];
+    if let Some(c) = &i.collinearity {
+        let f = |v: Option<f64>| v.map_or("∞".to_string(), |v| format!("{v:.1}"));
+        parts.push(format!(
+            "inputs' condition number {}, max VIF {} ({})",
+            f(c.condition_number),
+            f(c.max_vif),
+            c.max_vif_input.as_deref().unwrap_or("-")
+        ));
+    }
+    if let Some(l) = i.cv.get("ridge").and_then(|s| s.penalty) {
+        parts.push(format!("ridge penalty {l:.0e}"));
+    }
+    for (name, s) in i.stability.iter().filter(|(_, s)| !s.stable) {
+        let input = s.worst_input.as_deref().unwrap_or("?");
+        parts.push(match s.worst_factor {
+            Some(f) if !s.sign_flip => format!("{name} unstable ({input} ×{f:.1} across folds)"),
+            _ => format!("{name} unstable ({input} flips sign across folds)"),
+        });
+    }
+    println!("  {}", parts.join("; "));
 }
 
 /// `{"models": [{"name", "channels": {...}}], ...}` (validation figures only).

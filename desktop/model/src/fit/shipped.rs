@@ -44,6 +44,7 @@ pub(super) fn shipped(
         let params = match model.as_str() {
             "none" => None,
             "mlr-static" => file.mlr_static.iter().find(|m| m.channel == *ch),
+            "ridge" => file.ridge.iter().find(|m| m.channel == *ch),
             _ => file.mlr.iter().find(|m| m.channel == *ch),
         };
         let mut sensors: Vec<String> = Vec::new();
@@ -145,6 +146,7 @@ pub(super) fn print_shipped(shipped: &[Shipped]) {
             "none" => "no compensation (serves 0)",
             "mlr" => "lagged MLR",
             "mlr-static" => "static MLR",
+            "ridge" => "ridge regression on the lagged MLR's inputs",
             "ga-bpn" => "GA-BPN network ensemble",
             "hybrid" => "lagged MLR + residual networks",
             "blend" => "blend of the MLR and the networks",

@@ -109,6 +109,10 @@ pub struct FitArgs {
     /// training CV on ch5 for some seeds and loses on the test block).
     #[arg(long)]
     pub blend: bool,
+    /// Do not fit or offer the ridge candidate (ridge on the lagged MLR's
+    /// inputs, its penalty chosen by forward-chaining time-blocked CV).
+    #[arg(long)]
+    pub no_ridge: bool,
     /// Cross-validate every network candidate on every fold (by default one
     /// is dropped as soon as its error bound shows it cannot be chosen).
     #[arg(long)]
@@ -205,6 +209,7 @@ impl FitArgs {
         cfg.hybrid = self.hybrid;
         cfg.cv_drop = !self.full_cv;
         cfg.blend = self.blend;
+        cfg.ridge = !self.no_ridge;
         cfg.fallbacks = !self.no_fallbacks;
         cfg.fallback_pairs = self.fallback_pairs;
         cfg.sensors = self.picked_sensors()?;
