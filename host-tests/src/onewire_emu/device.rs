@@ -1,7 +1,12 @@
-//! One emulated DS18B20.
+//! One emulated DS18B20 on the pin-level line: the shared protocol model
+//! ([`ds18b20_model`], also the QEMU bench board's) with the line's timing
+//! (presence pulse, t_RDV, the write slot's sample point), parasite power
+//! and the faults a test injects laid over it.
+
+use std::ops::{Deref, DerefMut};
 
 use super::time::{MS, US};
-use thermocomp::acquisition::ds18b20::{self, Resolution, POWER_ON_RAW};
+use ds18b20_model::{Command, Ds18b20Model};
 use thermocomp::acquisition::rom::RomCode;
 
 /// Faults a test can inject into one device.
@@ -59,45 +64,12 @@ const SEARCH_CORRUPT_BIT: u8 = 13;
 /// ROM bit from which a [`Fault::SearchDropout`] device stays silent.
 const SEARCH_DROPOUT_BIT: u8 = 20;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Phase {
-    /// Deselected or idle: ignores slots until a reset.
-    Idle,
-    RomCommand {
-        byte: u8,
-        n: u8,
-    },
-    MatchRom {
-        n: u8,
-    },
-    Search {
-        bit: u8,
-        step: u8,
-    },
-    ReadRom {
-        n: u8,
-    },
-    Function {
-        byte: u8,
-        n: u8,
-    },
-    /// Sending bits of `tx` (Read Scratchpad).
-    Sending {
-        n: u8,
-    },
-    WriteScratchpad {
-        n: u8,
-    },
-    /// After Convert T: read slots return 0 while converting.
-    Converting,
-}
-
-/// A DS18B20 on the emulated line.
+/// A DS18B20 on the emulated line: the protocol model (its ROM code,
+/// temperature, EEPROM and counters read through `Deref`) and what the
+/// line adds to it.
 #[derive(Clone, Debug)]
 pub struct Ds18b20 {
-    pub rom: RomCode,
-    /// The physical temperature, 1/16 °C (what the next conversion measures).
-    pub temperature: i16,
+    model: Ds18b20Model,
     /// Scale of the conversion time (1.0 = datasheet maximum 750 ms at 12 bit;
     /// real parts are usually faster).
     pub conversion_scale_permille: u32,
@@ -110,55 +82,41 @@ pub struct Ds18b20 {
     strong_since: Option<u64>,
     /// The running conversion lost its supply.
     starved: bool,
-    register: i16,
-    th: u8,
-    tl: u8,
-    config: u8,
-    /// TH, TL, configuration in EEPROM: what a power-on reset loads into
-    /// the scratchpad (factory values 0x4B, 0x46, 12 bit).
-    pub eeprom: [u8; 3],
-    conversion: Option<(u64, i16)>,
-    phase: Phase,
-    tx: [u8; 9],
     pulldown: Option<(u64, u64)>,
-    /// Reads of the scratchpad completed (for tests).
-    pub scratchpad_reads: u64,
-    pub conversions: u64,
     /// Reset pulses seen (connected or not), for [`Fault::FlappingResets`].
     resets_seen: u64,
     /// Disconnected since the last reset ([`Fault::FlappingResets`]).
     detached: bool,
-    /// The running search sees [`SEARCH_CORRUPT_BIT`] inverted.
-    search_flip: bool,
     /// The running search loses this device at [`SEARCH_DROPOUT_BIT`].
     search_drop: bool,
+}
+
+impl Deref for Ds18b20 {
+    type Target = Ds18b20Model;
+    fn deref(&self) -> &Ds18b20Model {
+        &self.model
+    }
+}
+
+impl DerefMut for Ds18b20 {
+    fn deref_mut(&mut self) -> &mut Ds18b20Model {
+        &mut self.model
+    }
 }
 
 impl Ds18b20 {
     /// A device at power-on: register 85.0 °C, 12-bit.
     pub fn new(rom: RomCode, temperature: i16) -> Ds18b20 {
         Ds18b20 {
-            rom,
-            temperature,
+            model: Ds18b20Model::new(rom, temperature),
             conversion_scale_permille: 1000,
             fault: Fault::None,
             parasite: false,
             strong_since: None,
             starved: false,
-            register: POWER_ON_RAW,
-            th: 0x4B,
-            tl: 0x46,
-            config: 0x7F,
-            eeprom: [0x4B, 0x46, 0x7F],
-            conversion: None,
-            phase: Phase::Idle,
-            tx: [0xFF; 9],
             pulldown: None,
-            scratchpad_reads: 0,
-            conversions: 0,
             resets_seen: 0,
             detached: false,
-            search_flip: false,
             search_drop: false,
         }
     }
@@ -166,11 +124,7 @@ impl Ds18b20 {
     /// A DS18B20 ROM code (family 0x28) from a serial number, valid CRC.
     pub fn rom_for(serial: u64) -> RomCode {
         let s = serial.to_le_bytes();
-        RomCode::from_serial(ds18b20::FAMILY, [s[0], s[1], s[2], s[3], s[4], s[5]])
-    }
-
-    pub fn resolution(&self) -> Resolution {
-        Resolution::from_config(self.config)
+        Ds18b20Model::rom_for([s[0], s[1], s[2], s[3], s[4], s[5]])
     }
 
     pub fn set_fault(&mut self, fault: Fault) {
@@ -184,46 +138,21 @@ impl Ds18b20 {
     /// back at 85.0 °C, TH/TL/configuration reloaded from EEPROM, any
     /// conversion and transaction lost.
     pub fn power_on_reset(&mut self) {
-        self.register = POWER_ON_RAW;
-        let [th, tl, config] = self.eeprom;
-        self.th = th;
-        self.tl = tl;
-        self.config = config;
-        self.conversion = None;
+        self.model.power_on_reset();
         self.starved = false;
-        self.phase = Phase::Idle;
         self.pulldown = None;
     }
 
-    /// The scratchpad's TH, TL and configuration bytes.
-    pub fn scratchpad_config(&self) -> [u8; 3] {
-        [self.th, self.tl, self.config]
-    }
-
-    /// Overwrites the scratchpad's TH, TL and configuration bytes (a bit
-    /// upset the CRC cannot see: the device computes the CRC over it).
-    pub fn set_scratchpad_config(&mut self, bytes: [u8; 3]) {
-        [self.th, self.tl, self.config] = bytes;
-    }
-
-    /// The temperature register (what Read Scratchpad sends).
-    pub fn register(&self) -> i16 {
-        self.register
-    }
-
     fn settle(&mut self, now: u64) {
-        if let Some((end, value)) = self.conversion {
-            if now >= end {
-                if self.parasite && self.starved {
-                    // The supply collapsed: a full power-on reset.
-                    self.power_on_reset();
-                    return;
-                } else if self.fault != Fault::Stuck {
-                    self.register = value;
-                }
-                self.conversion = None;
-                self.starved = false;
+        if let Some(value) = self.model.take_conversion(now) {
+            if self.parasite && self.starved {
+                // The supply collapsed: a full power-on reset.
+                self.power_on_reset();
+                return;
+            } else if self.fault != Fault::Stuck {
+                self.model.set_register(value);
             }
+            self.starved = false;
         }
     }
 
@@ -231,7 +160,7 @@ impl Ds18b20 {
     pub(crate) fn on_strong_pullup(&mut self, now: u64, on: bool) {
         if on {
             self.strong_since = Some(now);
-            if let Some((end, _)) = self.conversion {
+            if let Some(end) = self.model.conversion_end() {
                 // Too late: more than 10 µs after Convert T started.
                 let start = end.saturating_sub(self.conversion_ns());
                 self.starved = now > start + 10 * US;
@@ -239,7 +168,7 @@ impl Ds18b20 {
         } else {
             self.settle(now);
             self.strong_since = None;
-            if self.conversion.is_some() {
+            if self.model.conversion_end().is_some() {
                 self.starved = true;
             }
         }
@@ -248,15 +177,6 @@ impl Ds18b20 {
     fn conversion_ns(&self) -> u64 {
         let t = u64::from(self.resolution().conversion_time_us()) * US;
         t * u64::from(self.conversion_scale_permille) / 1000
-    }
-
-    fn rom_bit(&self, i: u8) -> bool {
-        self.rom.0[usize::from(i / 8)] & (1 << (i % 8)) != 0
-    }
-
-    /// ROM bit as this device takes part in the running search.
-    fn search_bit(&self, i: u8) -> bool {
-        self.rom_bit(i) ^ (self.search_flip && i == SEARCH_CORRUPT_BIT)
     }
 
     /// Not connected to the line at `now` (it sees no edge, drives nothing).
@@ -269,43 +189,18 @@ impl Ds18b20 {
         }
     }
 
-    /// The scratchpad bit about to be sent, while sending (line events).
-    pub(crate) fn sending_bit(&self) -> Option<u8> {
-        match self.phase {
-            Phase::Sending { n } if n < 72 => Some(n),
-            _ => None,
-        }
-    }
-
-    /// The Match ROM bit about to be received (line events).
-    pub(crate) fn matching_bit(&self) -> Option<u8> {
-        match self.phase {
-            Phase::MatchRom { n } => Some(n),
-            _ => None,
-        }
-    }
-
-    /// The bit this device sends in the current slot, if it is sending.
+    /// The bit this device sends in the current slot, if it is sending: the
+    /// model's, unless a fault bends the scratchpad.
     fn tx_bit(&self, now: u64) -> Option<bool> {
-        match self.phase {
-            Phase::Search { bit, step: 0 } => Some(self.search_bit(bit)),
-            Phase::Search { bit, step: 1 } => Some(!self.search_bit(bit)),
-            Phase::ReadRom { n } => Some(self.rom_bit(n)),
-            Phase::Sending { n } => {
-                if n >= 72 || matches!(self.fault, Fault::CutRead { bits } if n >= bits) {
-                    Some(true)
-                } else if self.fault == Fault::AllZero {
-                    Some(false)
-                } else {
-                    Some(self.tx[usize::from(n / 8)] & (1 << (n % 8)) != 0)
-                }
+        if let Some(n) = self.model.sending_bit() {
+            if matches!(self.fault, Fault::CutRead { bits } if n >= bits) {
+                return Some(true);
             }
-            Phase::Converting => Some(match self.conversion {
-                Some((end, _)) => now >= end,
-                None => true,
-            }),
-            _ => None,
+            if self.fault == Fault::AllZero {
+                return Some(false);
+            }
         }
+        self.model.tx_bit(now)
     }
 
     pub(crate) fn pulls_low(&self, now: u64) -> bool {
@@ -314,7 +209,7 @@ impl Ds18b20 {
 
     pub(crate) fn on_fall(&mut self, now: u64) {
         self.settle(now);
-        if self.parasite && self.conversion.is_some() {
+        if self.parasite && self.model.conversion_end().is_some() {
             // Line pulled low mid-conversion: no supply.
             self.starved = true;
         }
@@ -322,9 +217,13 @@ impl Ds18b20 {
         if self.silent(now) {
             return;
         }
-        if matches!(self.phase, Phase::Search { bit, .. } if self.search_drop && bit >= SEARCH_DROPOUT_BIT)
+        if self.search_drop
+            && self
+                .model
+                .search_position()
+                .is_some_and(|bit| bit >= SEARCH_DROPOUT_BIT)
         {
-            self.phase = Phase::Idle;
+            self.model.go_idle();
         }
         if self.tx_bit(now) == Some(false) {
             // t_RDV: data valid for 15 µs after the falling edge.
@@ -343,128 +242,42 @@ impl Ds18b20 {
             }
         }
         if self.silent(now) {
-            self.phase = Phase::Idle;
+            self.model.go_idle();
             return false;
         }
         if low_ns >= 480 * US {
-            self.phase = Phase::RomCommand { byte: 0, n: 0 };
-            self.search_flip = false;
+            self.model.reset_pulse();
             self.search_drop = false;
             if self.fault != Fault::NoPresencePulse {
                 self.pulldown = Some((now + 30 * US, now + 150 * US));
             }
             return false;
         }
-        let sending = self.tx_bit(now).is_some();
-        if sending {
+        if self.tx_bit(now).is_some() {
             // The pull-down scheduled at the fall lasts its 15 µs.
-            self.advance_tx();
+            self.model.read_slot();
             return false;
         }
         // Receive: the device samples 30 µs after the fall.
         let ambiguous = low_ns > 15 * US && !(60 * US..=120 * US).contains(&low_ns);
         let bit = low_ns <= 30 * US;
-        if !matches!(self.phase, Phase::Idle) {
-            self.receive(bit, now);
-            return ambiguous;
+        if self.model.is_idle() {
+            return false;
         }
-        false
-    }
-
-    fn advance_tx(&mut self) {
-        self.phase = match self.phase {
-            Phase::Search { bit, step } => Phase::Search {
-                bit,
-                step: step + 1,
-            },
-            Phase::ReadRom { n } if n + 1 >= 64 => Phase::Function { byte: 0, n: 0 },
-            Phase::ReadRom { n } => Phase::ReadRom { n: n + 1 },
-            Phase::Sending { n } => {
-                if n + 1 == 72 {
-                    self.scratchpad_reads += 1;
-                }
-                Phase::Sending {
-                    n: n.saturating_add(1).min(72),
-                }
-            }
-            p => p,
-        };
-    }
-
-    fn receive(&mut self, bit: bool, now: u64) {
-        self.phase = match self.phase {
-            Phase::RomCommand { byte, n } => {
-                let byte = byte | (u8::from(bit) << n);
-                if n < 7 {
-                    Phase::RomCommand { byte, n: n + 1 }
-                } else {
-                    match byte {
-                        0x33 => Phase::ReadRom { n: 0 },
-                        0x55 => Phase::MatchRom { n: 0 },
-                        0xCC => Phase::Function { byte: 0, n: 0 },
-                        0xF0 => {
-                            self.start_search();
-                            Phase::Search { bit: 0, step: 0 }
-                        }
-                        _ => Phase::Idle,
-                    }
-                }
-            }
-            Phase::MatchRom { n } => {
-                if bit != self.rom_bit(n) {
-                    Phase::Idle
-                } else if n == 63 {
-                    Phase::Function { byte: 0, n: 0 }
-                } else {
-                    Phase::MatchRom { n: n + 1 }
-                }
-            }
-            Phase::Search { bit: b, step: 2 } => {
-                if bit != self.search_bit(b) {
-                    Phase::Idle
-                } else if b == 63 {
-                    Phase::Function { byte: 0, n: 0 }
-                } else {
-                    Phase::Search {
-                        bit: b + 1,
-                        step: 0,
-                    }
-                }
-            }
-            Phase::Function { byte, n } => {
-                let byte = byte | (u8::from(bit) << n);
-                if n < 7 {
-                    Phase::Function { byte, n: n + 1 }
-                } else {
-                    self.function(byte, now)
-                }
-            }
-            Phase::WriteScratchpad { n } => {
-                let target = match n / 8 {
-                    0 => &mut self.th,
-                    1 => &mut self.tl,
-                    _ => &mut self.config,
-                };
-                if n % 8 == 0 {
-                    *target = 0;
-                }
-                *target |= u8::from(bit) << (n % 8);
-                if n == 23 {
-                    self.config = (self.config & 0x60) | 0x1F;
-                    Phase::Idle
-                } else {
-                    Phase::WriteScratchpad { n: n + 1 }
-                }
-            }
-            p => p,
-        };
+        match self.model.write_slot(bit) {
+            Some(Command::SearchRom) => self.start_search(),
+            Some(Command::ConvertT) => self.convert(now),
+            Some(Command::ReadScratchpad) => self.bend_scratchpad(),
+            None => {}
+        }
+        ambiguous
     }
 
     /// A Search ROM begins: a pending search fault takes effect for it.
     fn start_search(&mut self) {
         match self.fault {
             Fault::SearchCorrupt(n) if n > 0 => {
-                self.search_flip = true;
+                self.model.invert_search_bit(SEARCH_CORRUPT_BIT);
                 self.fault = Fault::SearchCorrupt(n - 1);
             }
             Fault::SearchDropout(n) if n > 0 => {
@@ -475,56 +288,47 @@ impl Ds18b20 {
         }
     }
 
-    fn function(&mut self, command: u8, now: u64) -> Phase {
-        match command {
-            ds18b20::CONVERT_T => {
-                if self.fault == Fault::PowerOn {
-                    return Phase::Idle;
+    /// Convert T taken at `now`, unless a fault keeps the device from it.
+    fn convert(&mut self, now: u64) {
+        if self.fault == Fault::PowerOn {
+            return;
+        }
+        if let Fault::MissConvert(n) = self.fault {
+            self.fault = if n > 1 {
+                Fault::MissConvert(n - 1)
+            } else {
+                Fault::None
+            };
+            return;
+        }
+        let end = now + self.conversion_ns();
+        self.model.start_conversion(end);
+        // Parasite: starved unless the strong pull-up comes in time.
+        self.starved = self.parasite;
+    }
+
+    /// Read Scratchpad taken: a browning-out device sends the power-on
+    /// contents, a corrupting one flips a bit the CRC then catches.
+    fn bend_scratchpad(&mut self) {
+        if self.fault == Fault::PowerOn {
+            // Power-on contents: 50 05, then TH TL config from EEPROM.
+            let power_on = self.model.power_on_scratchpad();
+            *self.model.sending_mut() = power_on;
+        }
+        if let Fault::CorruptScratchpad(n) = self.fault {
+            if n > 0 {
+                self.model.sending_mut()[1] ^= 0x10;
+                if n != u32::MAX {
+                    self.fault = Fault::CorruptScratchpad(n - 1);
                 }
-                if let Fault::MissConvert(n) = self.fault {
-                    self.fault = if n > 1 {
-                        Fault::MissConvert(n - 1)
-                    } else {
-                        Fault::None
-                    };
-                    return Phase::Idle;
-                }
-                let res = self.resolution();
-                let t = self.conversion_ns();
-                let value = self.temperature & res.raw_mask();
-                self.conversion = Some((now + t, value));
-                // Parasite: starved unless the strong pull-up comes in time.
-                self.starved = self.parasite;
-                self.conversions += 1;
-                Phase::Converting
             }
-            ds18b20::READ_SCRATCHPAD => {
-                let res = self.resolution();
-                self.tx = ds18b20::encode(self.register, self.th, self.tl, res);
-                if self.fault == Fault::PowerOn {
-                    // Power-on contents: 50 05, then TH TL config from EEPROM.
-                    let [th, tl, config] = self.eeprom;
-                    self.tx =
-                        ds18b20::encode(POWER_ON_RAW, th, tl, Resolution::from_config(config));
-                }
-                if let Fault::CorruptScratchpad(n) = self.fault {
-                    if n > 0 {
-                        self.tx[1] ^= 0x10;
-                        if n != u32::MAX {
-                            self.fault = Fault::CorruptScratchpad(n - 1);
-                        }
-                    }
-                }
-                Phase::Sending { n: 0 }
-            }
-            ds18b20::WRITE_SCRATCHPAD => Phase::WriteScratchpad { n: 0 },
-            _ => Phase::Idle,
         }
     }
 
     /// Milliseconds left in a running conversion (for tests).
     pub fn converting_ms(&self, now_ns: u64) -> u64 {
-        self.conversion
-            .map_or(0, |(end, _)| end.saturating_sub(now_ns) / MS)
+        self.model
+            .conversion_end()
+            .map_or(0, |end| end.saturating_sub(now_ns) / MS)
     }
 }

@@ -1,6 +1,8 @@
 //! Pin-level 1-Wire emulator: an open-drain wired-AND line, a virtual clock
-//! advanced only by delays, and DS18B20 state machines that react to the
-//! master's edges with the datasheet's timing windows.
+//! advanced only by delays, and DS18B20s that react to the master's edges
+//! with the datasheet's timing windows: the protocol is the shared model
+//! (`boards/ds18b20-model`, which the QEMU board's slot-level bus runs too),
+//! the timing, parasite power and faults are [`Ds18b20`]'s.
 //!
 //! The master side is [`EmuPin`] + [`EmuDelay`]: they implement the board's
 //! `OpenDrainPin`/`BusyDelay` (so the real `BitBangBus` runs here), the async
