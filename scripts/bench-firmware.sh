@@ -7,8 +7,8 @@ cd "$(dirname "$0")/.."
 source scripts/setup.sh
 need_target >&2
 need_debian qemu-system-arm:qemu-system-arm arm-none-eabi-nm:binutils-arm-none-eabi >&2
-cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
-elf="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
+cargo build -q -p board-qemu-mps2 --profile "$FW_PROFILE" --target "$FW_TARGET" >&2
+elf="$QEMU_ELF"
 golden="${CARGO_TARGET_DIR:-target}/bench-golden.bin"
 cargo run -q -p tcomp --release -- golden -o "$golden" --steps 10 >&2
 # The FL_THERMAL model the demo serves (export's default: the fit's cross-validated choice per channel).

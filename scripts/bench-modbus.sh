@@ -11,7 +11,7 @@ need_debian qemu-system-arm:qemu-system-arm >&2
 need_python pymodbus:pymodbus >&2
 json=0; [ "${1:-}" = "--json" ] && { json=1; shift; }
 n="${1:-1000}"
-cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET" >&2
+cargo build -q -p board-qemu-mps2 --profile "$FW_PROFILE" --target "$FW_TARGET" >&2
 cargo build -q -p tcomp --release >&2
 target="${CARGO_TARGET_DIR:-target}"
 model="$target/bench-modbus-model.img"

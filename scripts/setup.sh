@@ -44,6 +44,12 @@ need_python() {
   python3 -m pip install -q "${missing[@]}" || die "could not pip install ${missing[*]}"
 }
 
+# The firmware is built with its own cargo profile (Cargo.toml
+# [profile.firmware]: fat LTO, "s"/"z", full debug info in the ELF), the host
+# tools with [profile.release]: `cargo build -p <board> --profile firmware
+# --target thumbv7em-none-eabihf` puts the ELFs in FW_DIR.
 FW_TARGET=thumbv7em-none-eabihf
-QEMU_ELF="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release/board-qemu-mps2"
-STM32_ELF="target/$FW_TARGET/release/board-nucleo-f446re"
+FW_PROFILE=firmware
+FW_DIR="${CARGO_TARGET_DIR:-target}/$FW_TARGET/$FW_PROFILE"
+QEMU_ELF="$FW_DIR/board-qemu-mps2"
+STM32_ELF="$FW_DIR/board-nucleo-f446re"

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Flash, RAM and stack use of each firmware image (release builds must exist).
+# Flash, RAM and stack use of each firmware image (firmware-profile builds
+# must exist: cargo build -p <board> --profile firmware --target thumbv7em-none-eabihf).
 # Usage: scripts/size.sh [--json] [--check]
 # Each image is checked against its budget (PASS/FAIL; --check exits 1 on a
 # FAIL): flash (.text + .data) against the flash budget, and RAM as static
@@ -20,7 +21,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 need_debian arm-none-eabi-size:binutils-arm-none-eabi >&2
-dir="${CARGO_TARGET_DIR:-target}/$FW_TARGET/release"
+dir="$FW_DIR"
 json=0; check=0
 for a in "$@"; do
   case "$a" in
@@ -64,7 +65,7 @@ out="{"; first=1; failed=0
 for entry in "${boards[@]}"; do
   read -r name flash_budget ram_budget <<<"$entry"
   elf="$dir/$name"
-  [ -f "$elf" ] || die "$elf not built: cargo build -p $name --release --target $FW_TARGET"
+  [ -f "$elf" ] || die "$elf not built: cargo build -p $name --profile $FW_PROFILE --target $FW_TARGET"
   read -r text data bss _ < <(arm-none-eabi-size "$elf" | tail -n 1)
   flash=$((text + data)); ram=$((data + bss))
   stack_est=$(python3 scripts/stack-estimate.py "$elf" | sed -n 's/.*"stack_estimate_bytes": \([0-9]*\).*/\1/p')

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// The bench firmware ELF: `$THERMOCOMP_QEMU_ELF`, else the release build in
-/// the workspace's target directory (`scripts/test.sh` builds it first).
+/// The bench firmware ELF: `$THERMOCOMP_QEMU_ELF`, else the `firmware`-profile
+/// build in the workspace's target directory (`scripts/test.sh` builds it first).
 pub fn firmware_elf() -> PathBuf {
     if let Some(p) = std::env::var_os("THERMOCOMP_QEMU_ELF") {
         return PathBuf::from(p);
@@ -14,7 +14,7 @@ pub fn firmware_elf() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| workspace_root().join("target"));
-    target.join("thumbv7em-none-eabihf/release/board-qemu-mps2")
+    target.join("thumbv7em-none-eabihf/firmware/board-qemu-mps2")
 }
 
 pub fn workspace_root() -> PathBuf {
@@ -34,7 +34,7 @@ fn spawn_qemu(serial: &str, qemu_options: &[&str], args: &[&str]) -> std::proces
     let elf = firmware_elf();
     assert!(
         elf.exists(),
-        "bench firmware {} not built: run scripts/test.sh (or cargo build -p board-qemu-mps2 --release --target thumbv7em-none-eabihf)",
+        "bench firmware {} not built: run scripts/test.sh (or cargo build -p board-qemu-mps2 --profile firmware --target thumbv7em-none-eabihf)",
         elf.display()
     );
     Command::new("qemu-system-arm")

@@ -14,8 +14,8 @@
 //! and the instructions of one evaluation counted on the QEMU bench
 //! firmware (`bench` mode, `-icount shift=0`, the method of
 //! `scripts/bench-firmware.sh`). `--firmware <elf>` names the firmware
-//! (default `target/thumbv7em-none-eabihf/release/board-qemu-mps2`; build it
-//! with `cargo build -p board-qemu-mps2 --release --target
+//! (default `target/thumbv7em-none-eabihf/firmware/board-qemu-mps2`; build it
+//! with `cargo build -p board-qemu-mps2 --profile firmware --target
 //! thumbv7em-none-eabihf`); `--board-only` skips the identification.
 use std::collections::BTreeMap;
 use tcomp_data::rng::Rng;
@@ -34,7 +34,7 @@ fn count_on_board(
 ) -> Result<f64, String> {
     if !elf.exists() {
         return Err(format!(
-            "no QEMU firmware at {} (cargo build -p board-qemu-mps2 --release --target thumbv7em-none-eabihf)",
+            "no QEMU firmware at {} (cargo build -p board-qemu-mps2 --profile firmware --target thumbv7em-none-eabihf)",
             elf.display()
         ));
     }
@@ -328,7 +328,7 @@ fn standard(args: &[String], json: bool) -> anyhow::Result<()> {
             std::path::Path::new(
                 &std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()),
             )
-            .join("thumbv7em-none-eabihf/release/board-qemu-mps2")
+            .join("thumbv7em-none-eabihf/firmware/board-qemu-mps2")
         });
     let seeds: u64 = args
         .iter()
