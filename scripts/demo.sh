@@ -14,9 +14,11 @@ trace="${1:-demo/trace.csv}"
 [ -f "$trace" ] || die "demo trace $trace is missing"
 target="${CARGO_TARGET_DIR:-target}"
 
-say "building the bench firmware for QEMU (release, $FW_TARGET) and the desktop tool tcomp"
-cargo build -q -p board-qemu-mps2 --release --target "$FW_TARGET"
-cargo build -q -p tcomp --release
+# Cargo prints each crate as it compiles it: the long step on a fresh machine.
+say "building the bench firmware for QEMU (profile $FW_PROFILE, $FW_TARGET; about 1 min on a fresh 2-core machine, seconds once built)"
+cargo build -p board-qemu-mps2 --profile "$FW_PROFILE" --target "$FW_TARGET"
+say "building the desktop tool tcomp (release; about 4 CPU-minutes: 4-10 min on a fresh 2-core machine depending on its load, seconds once built)"
+cargo build -p tcomp --release
 tcomp="$target/release/tcomp"
 
 model="${2:-}"
@@ -36,7 +38,7 @@ split_row=$(awk -v n="$rows" -v f="$heldout" 'BEGIN{printf "%d", n*f}')
 split_t=$(grep -v '^#' "$trace" | tail -n +2 | sed -n "$((split_row + 1))p" | cut -d, -f1)
 
 log="$target/demo-board.log"
-say "booting the firmware in qemu-system-arm (mps2-an386): Modbus RTU on a pty, the emulated DS18B20s replaying $trace ($rows samples 15 s apart, one every $pace ms); rows from $(awk -v t="$split_t" 'BEGIN{printf "%.1f h", t/3600}') on were never seen by the fit"
+say "running the demo (about 2.5 min): booting the firmware in qemu-system-arm (mps2-an386): Modbus RTU on a pty, the emulated DS18B20s replaying $trace ($rows samples 15 s apart, one every $pace ms); rows from $(awk -v t="$split_t" 'BEGIN{printf "%.1f h", t/3600}') on were never seen by the fit"
 qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic -monitor none \
   -semihosting-config enable=on,target=native -serial pty \
   -kernel "$QEMU_ELF" -append "serve $trace $model $pace" >"$log" 2>&1 &
