@@ -1,7 +1,7 @@
 //! Real board: the compensator on a NUCLEO-F446RE (STM32F446RE, Cortex-M4F).
 //! Pin map and wiring: boards/nucleo-f446re/README.md.
 //!
-//! `cargo flash` (alias in .cargo/config.toml) builds in release, flashes over
+//! `cargo flash` (alias in .cargo/config.toml) builds with the firmware profile, flashes over
 //! the on-board ST-LINK with probe-rs and shows the defmt log.
 #![no_std]
 #![no_main]
