@@ -151,10 +151,10 @@ fn three_axis_predict_agrees_with_tooltip_and_the_image_with_the_core() {
             r["bound_um"].as_f64().unwrap(),
         );
         assert!(bound > 0.05 && bound < 0.06, "{r}");
-        for k in 0..3 {
+        for d in diff {
             // At µm-exact inputs the difference is the served minus the desktop as printed.
-            assert!(diff[k].abs() <= bound, "{r}");
-            worst = worst.max(diff[k].abs());
+            assert!(d.abs() <= bound, "{r}");
+            worst = worst.max(d.abs());
         }
         assert_eq!(r["within_bound"], true);
     }
@@ -401,8 +401,10 @@ fn a_drifting_model_needs_its_temperature() {
         ..Default::default()
     };
     m.location.xoc_um = 5.0;
-    let mut per_k = tcomp_geometry::rotary::Location::default();
-    per_k.xoc_um = 1.5;
+    let per_k = tcomp_geometry::rotary::Location {
+        xoc_um: 1.5,
+        ..Default::default()
+    };
     m.drift.push(tcomp_geometry::rotary::Drift {
         sensor: "ctable".into(),
         reference_c: 20.0,

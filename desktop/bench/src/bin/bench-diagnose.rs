@@ -121,7 +121,7 @@ fn parse_worlds(l: &str) -> Result<Worlds> {
 }
 
 fn parse_args() -> Result<Args> {
-    Ok(<Args as clap::Parser>::try_parse().map_err(|e| {
+    <Args as clap::Parser>::try_parse().map_err(|e| {
         // --help / --version print and exit 0; a bad flag is one line.
         if matches!(
             e.kind(),
@@ -137,7 +137,7 @@ fn parse_args() -> Result<Args> {
                 .unwrap_or("bad arguments")
                 .trim_start_matches("error: ")
         )
-    })?)
+    })
 }
 
 fn run() -> Result<()> {
