@@ -129,9 +129,6 @@ struct Scored {
     /// (`None`: the nominal).
     fit: ModelFit,
     before: Option<ModelFit>,
-    /// A sensor lag that clears every margin but whose signature is not
-    /// the sensor's own (`lag_specific`): listed untestable, not claimed.
-    unspecific: bool,
 }
 
 /// A candidate's fit against its reference (the nominal or its own).
@@ -286,13 +283,6 @@ fn claim(
     (claimed, beats_nominal)
 }
 
-/// Whether a candidate is specific to its name: a sensor lag only when
-/// the sensor's own reading shows the lag (`lag_specific::signature`,
-/// computed where the body map supports it); every other effect is.
-fn specific(c: &Candidate) -> bool {
-    c.name != "sensor_lag" || c.evidence["own_reading"]["specific"].as_bool() == Some(true)
-}
-
 /// The candidate's own evidence with its scores added.
 fn scored_evidence(
     p: &Problem,
@@ -348,8 +338,7 @@ fn score(
             json!((!z.is_nan()).then(|| r4(z.min(1e9)))),
         );
     }
-    let (fits, beats_nominal) = claim(p, &c, has_reference, nominal, &ms, min);
-    let claimed = fits && specific(&c);
+    let (claimed, beats_nominal) = claim(p, &c, has_reference, nominal, &ms, min);
     let evidence = scored_evidence(p, &c, has_reference, nominal, &ms, beats_nominal);
     Scored {
         finding: Finding {
@@ -367,7 +356,6 @@ fn score(
         gain,
         fit: c.fit,
         before: reference,
-        unspecific: fits && !claimed,
     }
 }
 
@@ -723,10 +711,6 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     rank(&mut scored);
     let mut untestable = untestable(&p, &lag_reach, speed_kept, ambient_kept);
     untestable.extend(speed_law_inconclusive(&scored));
-    let unspecific = scored.iter().filter(|s| s.unspecific);
-    untestable.extend(super::lag_specific::untestable(
-        unspecific.map(|s| &s.finding),
-    ));
     let mut findings = claimed_findings(&scored);
     let selected = scored.iter().find(|s| s.claimed).map(|s| {
         selected_gaps(
@@ -816,7 +800,6 @@ mod tests {
             gain: m_b - m_a,
             fit: ModelFit { outs: Vec::new() },
             before: None,
-            unspecific: false,
         }
     }
 

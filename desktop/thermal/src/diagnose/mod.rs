@@ -18,7 +18,6 @@ pub mod ident;
 mod ident_fit;
 mod judge;
 pub mod lag;
-pub mod lag_specific;
 pub mod open_effects;
 mod optim;
 pub mod periodic;
