@@ -10,6 +10,7 @@ pub mod design_heat;
 pub mod design_mimic;
 mod drift_family;
 pub mod effect_fit;
+mod fit_nominal;
 mod fit_untestable;
 pub mod fitmode;
 pub mod freedom;
