@@ -698,7 +698,7 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         })
         .map(|(i, t)| format!("{} ×{:.2}", ks[i].name, t.exp()))
         .collect();
-    let r4 = super::stats::r4;
+    let r4 = crate::diagnose::signal::r4;
     let json = json!({
         "method": "each uncertain design value (capacity, loss to ambient, link and jacket conductance per element; heat gain per heated node (sources, bearings and motor loss on it, its bearings' viscous term f0 a gain of its own; per driver when one node carries heat); displacement length per term) scaled by exp(θ), θ fitted on the fit rows by Gauss–Newton on the diagnosis criterion plus a Gaussian prior",
         "bounds": "each design value within its tolerance (machine file [tolerance], default ±25 %): factor 1 − tol … 1 + tol; prior one σ = half the tolerance (ln)",

@@ -7,7 +7,9 @@ use serde_json::{json, Value};
 
 use super::ident::{ModelFit, Problem, Structure};
 use super::series;
-use super::stats::{ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView};
+use crate::diagnose::signal::{
+    ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView,
+};
 
 /// Residual evidence of "no effect": per-channel held-out RMS against the
 /// noise level and a Ljung–Box whiteness test on the held-out residual.

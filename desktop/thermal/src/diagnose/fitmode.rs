@@ -14,8 +14,8 @@ use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use super::reach;
 use super::series;
-use super::stats::r4;
 use super::types::{Diagnosis, Finding, Options, SelectedGaps};
+use crate::diagnose::signal::r4;
 use tcomp_data::runcsv::Run;
 
 /// A candidate scored against its reference fit (the nominal, or for

@@ -2,7 +2,7 @@
 //! removes is significant against the measured noise.
 
 use super::prep::Prepared;
-use super::stats::mean_finite;
+use crate::diagnose::signal::mean_finite;
 
 /// Residuals: run → channel → row.
 type Residuals = [Vec<Vec<f64>>];

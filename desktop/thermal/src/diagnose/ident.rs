@@ -25,8 +25,8 @@
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use super::lag::lag;
 use super::series::Dataset;
+use crate::diagnose::signal::lag;
 
 /// Candidate time constants [s] (2 min … 5.3 h).
 pub const TAU_GRID: [f64; 8] = [120.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0, 9600.0, 19200.0];

@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use super::ident::{Columns, Extra, ModelFit, OutFit, Problem, Structure, RIDGE};
-use super::lag::lag_signal;
+use crate::diagnose::signal::lag_signal;
 use tcomp_data::linalg::{ridge, ridge_multi};
 
 impl Problem<'_> {

@@ -7,9 +7,9 @@ use serde_json::{json, Value};
 use super::effect_fit::{self, Evaluator, FitResult, Stats};
 use super::freedom;
 use super::prep::Kind;
-use super::stats::{corr, first_order, r4, rms_of};
 use super::types::{Finding, Options};
 use super::{design_heat, design_mimic, gate};
+use crate::diagnose::signal::{corr, first_order, r4, rms_of};
 use crate::sim::Effect;
 
 /// Evidence: signature correlation (nominal residual vs the effect's change

@@ -18,7 +18,6 @@ pub mod gate;
 pub mod ident;
 mod ident_fit;
 mod judge;
-pub mod lag;
 pub mod open_effects;
 mod optim;
 pub mod periodic;
@@ -31,8 +30,9 @@ use release::{merge_releases, CalNull};
 pub mod render;
 pub mod sensor_step;
 pub mod series;
+mod signal;
+pub use signal::{lag, stats};
 pub mod speed_law;
-pub mod stats;
 mod types;
 
 use anyhow::{bail, Result};
@@ -43,8 +43,8 @@ use effect_fit::{par_map, Evaluator, FitResult};
 use judge::Judge;
 use prep::{prepare, Kind, Prepared};
 pub use render::report_md;
-pub use stats::phases;
-use stats::ResidualView;
+pub use signal::phases;
+use signal::ResidualView;
 use tcomp_data::runcsv::Run;
 use types::with_role;
 pub use types::{Diagnosis, Finding, Options};
@@ -67,7 +67,7 @@ fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
             });
         }
     }
-    stats::where_json(&views)
+    signal::where_json(&views)
 }
 
 /// Prepare runs and choose the fit/held-out split: with one run the last

@@ -29,7 +29,7 @@ pub use super::speed_law::{
     runs_of_different_speeds, speed_levels, speed_nonlinearity, speed_nonlinearity_against_nominal,
     MIN_SPEED_LEVELS, PALMGREN_EXPONENT, STEEP_EXPONENTS,
 };
-use super::stats::r4;
+use crate::diagnose::signal::r4;
 use tcomp_data::linalg::RidgeFactor;
 
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag:
@@ -88,12 +88,12 @@ fn lagged_body_maps(
                 .map(|i| {
                     let mut x = rise(&p.meas[r][i]);
                     if let Some((_, t)) = injected.filter(|j| j.0 == i) {
-                        x = super::lag::lag_signal(&x, run.dt, t);
+                        x = crate::diagnose::signal::lag_signal(&x, run.dt, t);
                     }
                     if own == Some(i) {
                         x
                     } else {
-                        super::lag::lag_signal(&x, run.dt, tau)
+                        crate::diagnose::signal::lag_signal(&x, run.dt, tau)
                     }
                 })
                 .collect()
@@ -109,7 +109,7 @@ fn lagged_body_maps(
                 .iter()
                 .enumerate()
                 .map(|(r, run)| {
-                    let y = super::lag::lag_signal(&held(&p.meas[r][o]), run.dt, tau);
+                    let y = crate::diagnose::signal::lag_signal(&held(&p.meas[r][o]), run.dt, tau);
                     y.iter()
                         .zip(&p.meas[r][o])
                         .map(|(a, m)| if m.is_finite() { *a } else { f64::NAN })

@@ -12,8 +12,8 @@ use super::effect_fit::Evaluator;
 use super::ident::{ModelFit, Problem, Structure};
 use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
 use super::prep::Kind;
-use super::stats::r4;
 use super::types::Finding;
+use crate::diagnose::signal::r4;
 
 /// Smallest amplitude claimed, in noise units of the channel (amplitude
 /// of the fundamental, so a swing of ± that many noise σ). A line is found

@@ -169,15 +169,17 @@ pub fn prepare(m: &Machine, run: &Run, name: &str, max_rows: usize) -> Result<Pr
     };
     let moving = channels
         .iter()
-        .filter(|c| matches!(c.kind, Kind::Temp(_)) && super::stats::moves(&raw_of(&c.name)))
+        .filter(|c| {
+            matches!(c.kind, Kind::Temp(_)) && crate::diagnose::signal::moves(&raw_of(&c.name))
+        })
         .count();
     for ch in channels.iter_mut() {
         let raw = raw_of(&ch.name);
         let temp = matches!(ch.kind, Kind::Temp(_));
         let unit = if temp { "°C" } else { "µm" };
         // a still channel is stuck only if some other temperature moves
-        let others_move = moving > usize::from(temp && super::stats::moves(&raw));
-        if let Some(why) = super::stats::unusable_channel(&raw, unit, others_move) {
+        let others_move = moving > usize::from(temp && crate::diagnose::signal::moves(&raw));
+        if let Some(why) = crate::diagnose::signal::unusable_channel(&raw, unit, others_move) {
             missing.push(format!(
                 "{} {why} of run {name}: left out of that run",
                 ch.name

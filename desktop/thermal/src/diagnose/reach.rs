@@ -12,9 +12,9 @@ use nalgebra::DMatrix;
 use serde_json::{json, Value};
 
 use super::ident::{Problem, Structure, RIDGE};
-use super::lag::lag;
 use super::speed_law::STEEP_EXPONENTS;
-use super::stats::r4;
+use crate::diagnose::signal::lag;
+use crate::diagnose::signal::r4;
 use tcomp_data::linalg::ridge_multi;
 
 /// Held-out RMS share of a steeper speed law's signature that the nominal

@@ -18,8 +18,8 @@ use super::freedom::Freedom;
 use super::gate;
 use super::judge::Judge;
 use super::prep::Prepared;
-use super::stats::r4;
 use super::types::{with_role, Finding};
+use crate::diagnose::signal::r4;
 use crate::sim::machine::tolerance::GROUPS;
 use crate::sim::Machine;
 

@@ -6,7 +6,7 @@ use serde_json::json;
 
 use super::candidate::{with_outputs, Candidate};
 use super::ident::{ModelFit, Problem, Structure};
-use super::stats::r4;
+use crate::diagnose::signal::r4;
 
 /// Smallest step claimed, in noise units and in °C (1/16 °C: one DS18B20 count).
 pub const STEP_MIN_NOISE: f64 = 5.0;
@@ -27,7 +27,7 @@ const STEP_OVER_CHANGE_JUMPS: f64 = 3.0;
 const JUMP_W: usize = 3;
 
 fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
-    super::stats::mean_finite(e[a..b].iter().copied())
+    crate::diagnose::signal::mean_finite(e[a..b].iter().copied())
 }
 
 /// How long after a run's first spindle start the nominal's misfit of the

@@ -340,7 +340,7 @@ fn leave_out_unusable(
         let moving = r
             .sensors
             .iter()
-            .filter(|s| super::stats::moves(&s.values))
+            .filter(|s| crate::diagnose::signal::moves(&s.values))
             .count();
         let temps = r.sensors.iter().map(|s| (s, "°C", true));
         for (sig, unit, temp) in temps.chain(r.disps.iter().map(|s| (s, "µm", false))) {
@@ -348,8 +348,11 @@ fn leave_out_unusable(
                 continue;
             }
             // a still channel is stuck only if some other temperature moves
-            let others_move = moving > usize::from(temp && super::stats::moves(&sig.values));
-            if let Some(why) = super::stats::unusable_channel(&sig.values, unit, others_move) {
+            let others_move =
+                moving > usize::from(temp && crate::diagnose::signal::moves(&sig.values));
+            if let Some(why) =
+                crate::diagnose::signal::unusable_channel(&sig.values, unit, others_move)
+            {
                 sparse.push((sig.name.clone(), r.name.clone(), why));
             }
         }

@@ -6,7 +6,7 @@ use serde_json::json;
 
 use super::candidate::Candidate;
 use super::ident::{ModelFit, Problem, Structure};
-use super::stats::r4;
+use crate::diagnose::signal::r4;
 
 /// Distinct speed levels (2 % of the maximum apart) held for ≥ 5 % of the rows.
 pub fn speed_levels(p: &Problem) -> Vec<f64> {
@@ -89,7 +89,7 @@ fn steep_columns(
         let u: Vec<f64> = rpm.iter().map(|n| (n.abs() / n_max).powf(pw)).collect();
         modes
             .iter()
-            .map(|&tau| super::lag::lag(&u, run.dt, tau, 0.0))
+            .map(|&tau| crate::diagnose::signal::lag(&u, run.dt, tau, 0.0))
             .collect()
     }
 }
