@@ -17,7 +17,7 @@ use anyhow::Result;
 use serde_json::{json, Value};
 
 use super::effect_fit::Evaluator;
-use super::prep::Prepared;
+use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;
 use tcomp_data::stats::block_means;
 

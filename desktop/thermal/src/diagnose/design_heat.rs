@@ -14,7 +14,7 @@
 //! the question.) A heat effect where the design has no heat, or larger
 //! than that share, is judged as before.
 
-use super::prep::Prepared;
+use crate::diagnose::runs::Prepared;
 use crate::sim::machine::tolerance;
 use crate::sim::{Effect, Machine};
 

@@ -5,7 +5,7 @@ use anyhow::Result;
 use nalgebra::DVector;
 
 use super::optim::{brent_in_cell, nelder_mead};
-use super::prep::{Kind, Prepared};
+use crate::diagnose::runs::{Kind, Prepared};
 use crate::sim::{apply_sensor_effects, simulate, Effect, Machine, SimOut};
 
 /// Per (run, channel) sums on the fit rows and the held-out rows.

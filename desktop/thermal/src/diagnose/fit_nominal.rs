@@ -6,7 +6,7 @@
 use serde_json::{json, Value};
 
 use super::ident::{ModelFit, Problem, Structure};
-use super::series;
+use crate::diagnose::runs::{BLOCKS, HELD_BLOCKS};
 use crate::diagnose::signal::{
     ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView,
 };
@@ -89,7 +89,7 @@ pub fn nominal_json(p: &Problem, st: &Structure, fit: &ModelFit) -> Value {
         "held_out_rms_c": c.map(|g| r4(g.0)),
         "held_out_rms_um": um.map(|g| r4(g.0)),
         "held_out_peak_um": um.map(|g| r4(g.1)),
-        "split": format!("each run in {} time blocks, blocks {:?} held out", series::BLOCKS, series::HELD_BLOCKS),
+        "split": format!("each run in {} time blocks, blocks {:?} held out", BLOCKS, HELD_BLOCKS),
     })
 }
 

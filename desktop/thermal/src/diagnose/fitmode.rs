@@ -13,7 +13,6 @@ use super::gate;
 use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use super::reach;
-use super::series;
 use super::types::{Diagnosis, Finding, Options, SelectedGaps};
 use crate::diagnose::signal::r4;
 use tcomp_data::runcsv::Run;
@@ -572,7 +571,7 @@ fn untestable_rule() -> String {
 /// Diagnose runs without a machine file.
 pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
-    let ds = series::load(runs, opt.max_rows.min(1500))?;
+    let ds = crate::diagnose::runs::load(runs, opt.max_rows.min(1500))?;
     let p = Problem::new(&ds);
     let (st, fit) = p.identify();
     if let Some(o) = fit.outs.iter().position(|f| f.failed) {

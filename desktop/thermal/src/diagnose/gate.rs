@@ -1,7 +1,7 @@
 //! The noise gate: an effect is claimed only when the held-out gap it
 //! removes is significant against the measured noise.
 
-use super::prep::Prepared;
+use crate::diagnose::runs::Prepared;
 use crate::diagnose::signal::mean_finite;
 
 /// Residuals: run → channel → row.
@@ -177,11 +177,9 @@ pub fn step_jump_share(
             if run.as_ref().is_some_and(|r| *r != p.name) {
                 continue;
             }
-            let Some(ci) = p
-                .channels
-                .iter()
-                .position(|c| c.name == *sensor && matches!(c.kind, super::prep::Kind::Temp(_)))
-            else {
+            let Some(ci) = p.channels.iter().position(|c| {
+                c.name == *sensor && matches!(c.kind, crate::diagnose::runs::Kind::Temp(_))
+            }) else {
                 continue;
             };
             let Some(k0) = (0..p.rows()).find(|&k| p.inputs.time(k) >= *at_s) else {
@@ -279,9 +277,9 @@ mod tests {
                 coolant: vec![0.0; n],
                 ambient: vec![20.0; n],
             },
-            channels: vec![super::super::prep::Channel {
+            channels: vec![crate::diagnose::runs::Channel {
                 name: "T1".into(),
-                kind: super::super::prep::Kind::Temp(0),
+                kind: crate::diagnose::runs::Kind::Temp(0),
                 meas: vec![0.0; n],
                 s: 0.02,
             }],

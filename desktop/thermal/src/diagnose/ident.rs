@@ -25,7 +25,7 @@
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use super::series::Dataset;
+use crate::diagnose::runs::Dataset;
 use crate::diagnose::signal::lag;
 
 /// Candidate time constants [s] (2 min … 5.3 h).
@@ -611,7 +611,7 @@ mod tests {
                 .collect();
             run.push_column(name, col(v)).unwrap();
         }
-        let ds = crate::diagnose::series::load(&[("syn".into(), run)], 1500).unwrap();
+        let ds = crate::diagnose::runs::load(&[("syn".into(), run)], 1500).unwrap();
         let p = Problem::new(&ds);
         let (st, fit) = p.identify();
         assert!(

@@ -332,7 +332,7 @@ mod tests {
             .unwrap();
         run.push_column("T_a", col((0..n).map(|k| 20.0 + k as f64 * 0.1).collect()))
             .unwrap();
-        let ds = crate::diagnose::series::load(&[("tiny".into(), run)], 1500).unwrap();
+        let ds = crate::diagnose::runs::load(&[("tiny".into(), run)], 1500).unwrap();
         let p = Problem::new(&ds);
         // Far more modes than the few fit rows can carry.
         let st = Structure {

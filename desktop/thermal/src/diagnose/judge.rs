@@ -6,9 +6,9 @@ use serde_json::{json, Value};
 
 use super::effect_fit::{self, Evaluator, FitResult, Stats};
 use super::freedom;
-use super::prep::Kind;
 use super::types::{Finding, Options};
 use super::{design_heat, design_mimic, gate};
+use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::{corr, first_order, r4, rms_of};
 use crate::sim::Effect;
 

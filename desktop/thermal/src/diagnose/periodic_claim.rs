@@ -11,8 +11,8 @@ use serde_json::{json, Value};
 use super::effect_fit::Evaluator;
 use super::ident::{ModelFit, Problem, Structure};
 use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
-use super::prep::Kind;
 use super::types::Finding;
+use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::r4;
 
 /// Smallest amplitude claimed, in noise units of the channel (amplitude
@@ -421,8 +421,8 @@ pub fn fit(
         let runs = &p.ds.runs;
         let inputs = Scan {
             chans: [
-                |r: &super::series::RunData| r.rpm.clone(),
-                |r: &super::series::RunData| r.feed.clone(),
+                |r: &crate::diagnose::runs::RunData| r.rpm.clone(),
+                |r: &crate::diagnose::runs::RunData| r.feed.clone(),
             ]
             .iter()
             .filter(|get| runs.iter().all(|r| get(r).is_some()))

@@ -4,7 +4,7 @@
 //! residual of the fit rows.
 
 use super::effect_fit::{ActiveSet, Cand, Evaluator};
-use super::prep::{Kind, Prepared};
+use crate::diagnose::runs::{Kind, Prepared};
 use crate::sim::{Effect, ALL_EFFECT_NAMES};
 
 /// Candidates applicable to this machine and these runs; the sensor

@@ -251,7 +251,7 @@ mod tests {
     }
 
     fn kept(levels: &[f64]) -> f64 {
-        let ds = crate::diagnose::series::load(&runs(levels, 3), 1500).unwrap();
+        let ds = crate::diagnose::runs::load(&runs(levels, 3), 1500).unwrap();
         let p = Problem::new(&ds);
         let (st, _) = p.identify();
         speed_law_kept(&p, &st).unwrap().0
@@ -288,7 +288,7 @@ mod tests {
                 (format!("run{r}"), run)
             })
             .collect();
-        let ds = crate::diagnose::series::load(&runs, 1500).unwrap();
+        let ds = crate::diagnose::runs::load(&runs, 1500).unwrap();
         let p = Problem::new(&ds);
         let (st, _) = p.identify();
         ambient_drift_kept(&p, &st).unwrap().0

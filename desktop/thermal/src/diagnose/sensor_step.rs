@@ -39,7 +39,7 @@ const AFTER_FIRST_START_S: f64 = 2.5 * super::ident::TAU_GRID[0];
 
 /// Rows at least `JUMP_W + 1` rows away from any change of an input, and
 /// `AFTER_FIRST_START_S` after the run's first spindle start.
-fn quiet_rows(run: &super::series::RunData) -> Vec<bool> {
+fn quiet_rows(run: &crate::diagnose::runs::RunData) -> Vec<bool> {
     let n = run.rows();
     let mut quiet = vec![true; n];
     for inp in [&run.rpm, &run.feed, &run.coolant].into_iter().flatten() {
@@ -159,7 +159,7 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
         // fit rows after the step: within one block's worth, the nominal's
         // slow modes can absorb it there (the held-out rows then decide)
         let fit_rows_after = (start..run.rows()).filter(|&k| !run.held[k]).count();
-        let few_fit_rows_after = fit_rows_after * super::series::BLOCKS <= run.rows();
+        let few_fit_rows_after = fit_rows_after * crate::diagnose::runs::BLOCKS <= run.rows();
         let fit = with_outputs(nom, vec![(o, of)]);
         out.push(Candidate {
             name: "sensor_offset",
@@ -193,7 +193,7 @@ mod tests {
                 }
             })
             .collect();
-        let run = super::super::series::RunData {
+        let run = crate::diagnose::runs::RunData {
             name: "r".into(),
             dt: 10.0,
             decimation: 1,

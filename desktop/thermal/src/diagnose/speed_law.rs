@@ -76,7 +76,7 @@ pub const STEEP_EXPONENTS: [f64; 3] = [2.5, 3.0, 4.0];
 /// The steeper heat's extra columns of run `r`: `(n/n_max)^pw` through each
 /// mode's lag (none for a run without `spindle_rpm`).
 fn steep_columns(
-    ds: &super::series::Dataset,
+    ds: &crate::diagnose::runs::Dataset,
     n_max: f64,
     pw: f64,
     modes: Vec<f64>,
