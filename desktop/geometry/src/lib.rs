@@ -28,6 +28,7 @@ pub mod five_axis;
 pub mod guard;
 pub mod identify;
 pub mod lines;
+pub mod plan;
 pub mod predict;
 pub mod rotary;
 pub mod rtest;
