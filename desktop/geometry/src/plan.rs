@@ -512,7 +512,8 @@ impl GridLine {
         let nz: Vec<usize> = (0..3).filter(|k| d[*k] != 0).collect();
         let ax = ['X', 'Y', 'Z'];
         let at = |k: usize| {
-            ["0", "half", "full"][self.from[k] as usize].to_string() + " " + &ax[k].to_string()
+            let v = ["0", "½ stroke", "stroke"][self.from[k] as usize];
+            format!("{} = {v}", ['x', 'y', 'z'][k])
         };
         match nz.len() {
             1 => {

@@ -11,6 +11,7 @@ use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
 use super::geometry_identify::{identify_poly_cmd, PolyRequest};
+use super::geometry_plan::{criterion, line_json, line_words, plan_lines, print_criterion};
 use super::geometry_predict::{predict_cmd, PredictArgs};
 use super::geometry_rotary::{
     check_rotary_cmd, identify_rotary_cmd, plan_rotary_cmd, sim_rotary_cmd, CheckRotaryArgs,
@@ -24,7 +25,7 @@ use super::geometry_table::{
 use tcomp_data::rng::Rng;
 use tcomp_geometry::identify::{identify, Degrees, LineObs};
 use tcomp_geometry::kinematics::Structure;
-use tcomp_geometry::lines::{average_runs, plan14, LineFile};
+use tcomp_geometry::lines::{average_runs, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
 use tcomp_geometry::study::ErrorsJson;
 
@@ -36,14 +37,17 @@ pub struct GeometryArgs {
 
 #[derive(clap::Subcommand, Debug)]
 pub enum GeometryCommand {
-    /// Write the 14 line files (forward and backward runs) of a machine with
-    /// random smooth errors (or the errors of --errors), and its errors as JSON.
+    /// Write the line files of a plan (forward and backward runs; --plan 14
+    /// or rich) of a machine with random smooth errors (or the errors of
+    /// --errors), and its errors as JSON.
     #[command(alias = "sim")]
     Simulate(SimulateArgs),
     /// Identify the 21 errors from line files; prints the error functions,
     /// the conditioning and what the lines cannot see.
     Identify(IdentifyArgs),
-    /// Print the 14-line plan for a working volume and its conditioning.
+    /// Print a line plan (--plan 14 or rich) for a working volume, its
+    /// conditioning and the stated criterion (worst-term posterior σ, null
+    /// directions).
     Plan(PlanArgs),
     /// Temperature dependence: per error coefficient a linear function of
     /// sensor temperatures, fitted from lines at several temperature states;
@@ -154,6 +158,10 @@ pub struct SimulateArgs {
     pub degrees: DegreeArgs,
     #[arg(long, default_value = "XY/Z")]
     pub structure: String,
+    /// Which lines: `14` (today's plan) or `rich` (the recommended 28 lines
+    /// that pin the machine down; `geometry plan --plan rich`).
+    #[arg(long, default_value = "14")]
+    pub plan: String,
     /// Errors to simulate (JSON as written by simulate or identify) instead of random ones.
     #[arg(long)]
     pub errors: Option<PathBuf>,
@@ -179,7 +187,8 @@ pub struct SimulateArgs {
     /// T_column, T_bed) and files are named S1_L01_forward.csv ….
     #[arg(long, default_value_t = 0)]
     pub states: usize,
-    /// Output directory (created): L01_forward.csv … L14_backward.csv, errors.json.
+    /// Output directory (created): L01_forward.csv … L14_backward.csv (…
+    /// L28 with --plan rich), errors.json.
     #[arg(short, long)]
     pub out: PathBuf,
 }
@@ -232,6 +241,13 @@ pub struct PlanArgs {
     pub degrees: DegreeArgs,
     #[arg(long, default_value = "XY/Z")]
     pub structure: String,
+    /// Which lines: `14` (today's plan) or `rich` (the recommended 28
+    /// displacement-only lines, no null direction).
+    #[arg(long, default_value = "14")]
+    pub plan: String,
+    /// Noise of one reading of one run [µm] the criterion is computed for.
+    #[arg(long, default_value_t = 0.5)]
+    pub noise_um: f64,
     #[arg(long)]
     pub json: bool,
 }
@@ -297,8 +313,8 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         reversal_um,
         targets: a.targets,
     };
+    let plan = plan_lines(&a.plan, stroke, a.volume.tool, a.volume.side)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let plan = plan14(stroke, a.volume.tool, a.volume.side);
     if a.states > 0 {
         let machine = tcomp_geometry::sim::ThermalMachine::random(
             stroke,
@@ -344,7 +360,9 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     std::fs::write(&path, serde_json::to_string_pretty(&ej)?)
         .with_context(|| format!("writing {}", path.display()))?;
     println!(
-        "wrote {n} line files and errors.json to {} (noise {} µm, seed {})",
+        "wrote {n} line files (plan {}, {} lines) and errors.json to {} (noise {} µm, seed {})",
+        a.plan,
+        plan.len(),
         a.out.display(),
         a.noise_um,
         a.seed
@@ -384,7 +402,8 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
     let stroke = stroke_of(&a.volume)?;
     let st = Structure::parse(&a.structure).context("--structure")?;
     let degrees = a.degrees.degrees()?;
-    let plan = plan14(stroke, a.volume.tool, a.volume.side);
+    let plan = plan_lines(&a.plan, stroke, a.volume.tool, a.volume.side)?;
+    let crit = criterion(&st, stroke, &plan, a.noise_um)?;
     let obs: Vec<LineObs> = plan
         .iter()
         .map(|l| LineObs {
@@ -403,37 +422,17 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
         .collect();
     let id = identify(&st, &obs, degrees, stroke)?;
     if a.json {
-        let lines: Vec<_> = plan
-            .iter()
-            .map(|l| {
-                serde_json::json!({"line": l.id, "start_mm": l.start_mm, "direction": l.direction,
-                    "length_mm": l.length_mm, "tool_offset_mm": l.tool_offset_mm, "purpose": l.purpose})
-            })
-            .collect();
+        let lines: Vec<_> = plan.iter().map(line_json).collect();
         println!(
             "{}",
             serde_json::json!({"lines": lines, "unknowns": id.basis.columns.len(), "rank": id.rank,
                 "condition_number": if id.condition_number.is_finite() { serde_json::json!(id.condition_number) } else { serde_json::Value::Null },
-                "unobservable": id.unobservable})
+                "unobservable": id.unobservable, "plan": a.plan, "criterion": crit})
         );
         return Ok(());
     }
     for l in &plan {
-        let e = [0, 1, 2].map(|k| l.start_mm[k] + l.length_mm * l.direction[k]);
-        println!(
-            "{}  ({:.0},{:.0},{:.0}) → ({:.0},{:.0},{:.0})  reflector ({:.0},{:.0},{:.0})  {}",
-            l.id,
-            l.start_mm[0],
-            l.start_mm[1],
-            l.start_mm[2],
-            e[0],
-            e[1],
-            e[2],
-            l.tool_offset_mm[0],
-            l.tool_offset_mm[1],
-            l.tool_offset_mm[2],
-            l.purpose
-        );
+        println!("{}", line_words(l));
     }
     println!(
         "{} unknowns, rank {}, condition number {}",
@@ -453,6 +452,7 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
             .collect();
         println!("  not observable: {}", c.join(" "));
     }
+    print_criterion(&a.plan, &crit);
     Ok(())
 }
 

@@ -8,6 +8,7 @@ pub mod geometry;
 pub mod geometry_adequacy;
 pub mod geometry_check;
 pub mod geometry_identify;
+pub mod geometry_plan;
 pub mod geometry_predict;
 pub mod geometry_rotary;
 pub mod geometry_score;
