@@ -3,7 +3,7 @@
 
 use serde_json::Value;
 
-use super::ident::{ModelFit, OutFit};
+use crate::diagnose::ident::{ModelFit, OutFit};
 
 /// A fitted candidate against the nominal.
 #[derive(Clone, Debug)]

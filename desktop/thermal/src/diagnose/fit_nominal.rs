@@ -5,7 +5,7 @@
 
 use serde_json::{json, Value};
 
-use super::ident::{ModelFit, Problem, Structure};
+use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::runs::{BLOCKS, HELD_BLOCKS};
 use crate::diagnose::signal::{
     ljung_box, phases, phases_from_temperatures, r4, where_json, ResidualView,

@@ -2,9 +2,9 @@
 //! nominal absorbs by construction and those the runs cannot reach
 //! (computed per case in `reach.rs` and `open_effects`).
 
-use super::ident::Problem;
 use super::open_effects::{self, LAG_MIN_FIT_REL};
 use super::reach;
+use crate::diagnose::ident::Problem;
 
 /// Effects an identified nominal absorbs (or the data cannot show), with why.
 pub fn untestable(

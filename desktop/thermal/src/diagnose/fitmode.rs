@@ -10,10 +10,10 @@ use serde_json::{json, Value};
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
 use super::gate;
-use super::ident::{ModelFit, Problem, Structure};
 use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use super::reach;
 use super::types::{Diagnosis, Finding, Options, SelectedGaps};
+use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
 use tcomp_data::runcsv::Run;
 

@@ -16,7 +16,6 @@ pub mod fitmode;
 pub mod freedom;
 pub mod gate;
 pub mod ident;
-mod ident_fit;
 mod judge;
 pub mod open_effects;
 mod optim;

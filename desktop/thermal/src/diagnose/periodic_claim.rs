@@ -9,9 +9,9 @@
 use serde_json::{json, Value};
 
 use super::effect_fit::Evaluator;
-use super::ident::{ModelFit, Problem, Structure};
 use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
 use super::types::Finding;
+use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::r4;
 

@@ -11,8 +11,8 @@
 use nalgebra::DMatrix;
 use serde_json::{json, Value};
 
-use super::ident::{Problem, Structure, RIDGE};
 use super::speed_law::STEEP_EXPONENTS;
+use crate::diagnose::ident::{Problem, Structure, RIDGE};
 use crate::diagnose::signal::lag;
 use crate::diagnose::signal::r4;
 use tcomp_data::linalg::ridge_multi;

@@ -5,7 +5,7 @@
 use serde_json::json;
 
 use super::candidate::{with_outputs, Candidate};
-use super::ident::{ModelFit, Problem, Structure};
+use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
 
 /// Smallest step claimed, in noise units and in °C (1/16 °C: one DS18B20 count).
@@ -35,7 +35,7 @@ fn window_mean(e: &[f64], a: usize, b: usize) -> f64 {
 /// constant of its grid (on the first simulator's turning centre a heated
 /// sensor read as a 0.18 °C step 100 s after the start). Other input
 /// changes keep `JUMP_W + 1` rows: a longer window there hid real steps.
-const AFTER_FIRST_START_S: f64 = 2.5 * super::ident::TAU_GRID[0];
+const AFTER_FIRST_START_S: f64 = 2.5 * crate::diagnose::ident::TAU_GRID[0];
 
 /// Rows at least `JUMP_W + 1` rows away from any change of an input, and
 /// `AFTER_FIRST_START_S` after the run's first spindle start.

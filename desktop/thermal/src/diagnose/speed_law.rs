@@ -5,7 +5,7 @@
 use serde_json::json;
 
 use super::candidate::Candidate;
-use super::ident::{ModelFit, Problem, Structure};
+use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
 
 /// Distinct speed levels (2 % of the maximum apart) held for ≥ 5 % of the rows.
@@ -244,7 +244,7 @@ pub fn speed_nonlinearity_against_nominal(
         evidence: json!({
             "speed_levels_rpm": speed_levels(p).iter().map(|v| v.round()).collect::<Vec<_>>(),
             "driver": format!("extra spindle heat c·(n/n_max)^{pw} (of {:?} by fit-row BIC) through the nominal's modes", STEEP_EXPONENTS),
-            "reference": format!("the nominal: motor heat ∝ n and friction heat ∝ n^{} (chosen by BIC of {:?})", st.exponent, super::ident::EXPONENTS),
+            "reference": format!("the nominal: motor heat ∝ n and friction heat ∝ n^{} (chosen by BIC of {:?})", st.exponent, crate::diagnose::ident::EXPONENTS),
             "against_nominal": true,
             "strongest_sensor": strongest.map(|(o, _)| p.outputs[o].name.clone()),
             "steady_rise_c": strongest.map(|(_, g)| r4(g)),

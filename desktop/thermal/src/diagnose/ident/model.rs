@@ -20,7 +20,7 @@
 //! components of the other sensors (their rises, direct and through the
 //! same lags), each displacement from those of all sensors.
 //!
-//! The least squares of one structure are in `ident_fit`.
+//! The least squares of one structure are in `least_squares.rs`.
 
 use nalgebra::DMatrix;
 use rayon::prelude::*;

@@ -7,7 +7,7 @@
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
-use super::ident::{Columns, Extra, ModelFit, OutFit, Problem, Structure, RIDGE};
+use super::model::{Columns, Extra, ModelFit, OutFit, Problem, Structure, RIDGE};
 use crate::diagnose::signal::lag_signal;
 use tcomp_data::linalg::{ridge, ridge_multi};
 
@@ -314,7 +314,7 @@ impl Problem<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::ident::TAU_GRID;
+    use super::super::model::TAU_GRID;
     use super::*;
     use tcomp_data::runcsv::Run;
 
