@@ -28,8 +28,14 @@ DIR/truth.json with every function tabulated at 401 positions (and its
 squareness), in the JSON shape of `tcomp geometry identify --json` minus
 the polynomial (the truth is not a polynomial).
 
+With --plan FILE the lines are those of FILE instead (a JSON list of
+{"line", "start_mm", "end_mm", "tool_offset_mm"}, e.g. what
+`tcomp geometry plan --plan rich --json` prints under "lines"); the machine
+is the same for the same seed, and the held-out lines are drawn from a
+stream of their own, so two plans are scored on the same held-out lines.
+
 usage: geometry_rich_gen.py --seed N [--noise-um S] [--scale-ppm P]
-                            [--wave 1|0] --out DIR
+                            [--wave 1|0] [--plan FILE] --out DIR
 """
 
 import argparse
@@ -195,14 +201,19 @@ def main():
     ap.add_argument("--noise-um", type=float, default=0.5)
     ap.add_argument("--scale-ppm", type=float, default=0.5)
     ap.add_argument("--wave", type=int, default=1)
+    ap.add_argument("--plan")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     rng = random.Random(7919 * a.seed + 17)
     terms, sq = random_machine(rng, a.wave != 0)
     os.makedirs(os.path.join(a.out, "heldout"), exist_ok=True)
-    for line, f0, f1, offset in PLAN:
-        start = [f0[k] * STROKE[k] for k in range(3)]
-        end = [f1[k] * STROKE[k] for k in range(3)]
+    if a.plan:
+        with open(a.plan) as f:
+            plan = [(l["line"], l["start_mm"], l["end_mm"], l["tool_offset_mm"]) for l in json.load(f)]
+    else:
+        plan = [(line, [f0[k] * STROKE[k] for k in range(3)], [f1[k] * STROKE[k] for k in range(3)],
+                 offset) for line, f0, f1, offset in PLAN]
+    for line, start, end, offset in plan:
         d0 = [end[k] - start[k] for k in range(3)]
         n0 = math.sqrt(sum(x * x for x in d0))
         beam = tilt([x / n0 for x in d0], rng, 200e-6)
@@ -214,6 +225,8 @@ def main():
         for run, rows in zip(("forward", "backward"), runs):
             write_line(os.path.join(a.out, "%s_%s.csv" % (line, run)), line, start, d,
                        offset, run, rows)
+    if a.plan:
+        rng = random.Random(7919 * a.seed + 29)
     for i in range(HELDOUT):
         while True:
             p0 = [rng.uniform(0, STROKE[k]) for k in range(3)]
