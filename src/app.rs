@@ -19,8 +19,11 @@ use crate::modbus::Server;
 use crate::model_store::ModelStore;
 use crate::probe_reference::{ProbeSetup, References, BLOCK_LEN as REFERENCES_LEN};
 use crate::snapshot::{centidegrees, Snapshot};
+use crate::staging::ParseCandidate;
 use crate::state::AppState;
 use crate::state::Command;
+use thermocomp_core::compensator::Compensator;
+use thermocomp_core::image::ImageError;
 
 mod access;
 mod probe;
@@ -614,7 +617,15 @@ impl<F: BackgroundErase> App<F> {
     ) -> LinkChange {
         let geometry_before = self.state.plc.geometry();
         let (snapshot, state) = (&self.snapshot, &mut self.state);
-        let command = self.server.handle(frame, uptime_ms, snapshot, state, reply);
+        // A commit check parses the candidate in the compensator's model
+        // and puts the model in force back from its slot.
+        let mut lend = LendModel {
+            compensator: self.compensation.compensator(),
+            store: &self.store,
+        };
+        let command = self
+            .server
+            .handle_lending(frame, uptime_ms, snapshot, state, reply, &mut lend);
         if self.state.plc.geometry() != geometry_before {
             // New positions, tool length or angles: the volumetric correction follows
             // at once (not at the next cycle), so the PLC's next read has it.
@@ -715,4 +726,24 @@ impl<F: BackgroundErase> App<F> {
 /// A model's count (directions, axes, sensors, terms: far below 65,535) as a register.
 fn register_count(n: usize) -> u16 {
     u16::try_from(n).unwrap_or(u16::MAX)
+}
+
+/// The commit check's [`ParseCandidate`] on a board: the candidate is
+/// parsed in the compensator's own model storage, and the model in force
+/// is parsed back from its slot where the flash maps it
+/// ([`Compensator::check_with`], [`ModelStore::reparse_active`]): no second
+/// model (≈ 17 KB) on the Modbus task's stack.
+struct LendModel<'a, F: BackgroundErase> {
+    compensator: &'a mut Compensator,
+    store: &'a ModelStore<F>,
+}
+
+impl<F: BackgroundErase> ParseCandidate for LendModel<'_, F> {
+    fn parse_candidate(&mut self, image: &[u8]) -> Result<u32, ImageError> {
+        let store = self.store;
+        self.compensator.check_with(
+            |m| m.parse_into(image).map(|()| m.model_version),
+            |m| store.reparse_active(m),
+        )
+    }
 }

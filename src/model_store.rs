@@ -373,6 +373,22 @@ impl<F: NorFlash> ModelStore<F> {
 }
 
 impl<F: BackgroundErase> ModelStore<F> {
+    /// Parse the active slot's image, read where the flash maps it, into
+    /// `model`: `true` when it is the image the slot's header names (its
+    /// CRC-32) and parses. No scratch buffer: the commit check uses this to
+    /// put the model in force back after lending its storage to a
+    /// candidate ([`thermocomp_core::compensator::Compensator::check_with`]).
+    pub fn reparse_active(&self, model: &mut Model) -> bool {
+        let (len, crc) = self.active_image;
+        let Some((s, _)) = self.active.filter(|_| len != 0) else {
+            return false;
+        };
+        let Some(image) = self.flash.mapped(self.slot_base(s) + HEADER, len) else {
+            return false;
+        };
+        crc32(image) == crc && model.parse_into(image).is_ok()
+    }
+
     /// First half of a commit: start erasing the inactive slot (the active
     /// one keeps serving; a power cut now leaves it as it was).
     pub fn begin(&mut self) -> Result<(), StoreError> {

@@ -2,11 +2,30 @@
 //! master uploads piece by piece, its length, and the check a commit makes
 //! before anything is stored.
 
-use thermocomp_core::image::{split_signed, MAX_SIGNED_BYTES};
+use thermocomp_core::image::{split_signed, ImageError, MAX_SIGNED_BYTES};
 use thermocomp_core::Model;
 use thermocomp_protocol::holding::result;
 
 use crate::keys::Keys;
+
+/// Where a commit check parses the candidate image: the model's version,
+/// or why it is refused. The application lends its compensator's model
+/// storage (and puts the model in force back), so a board keeps no second
+/// model on the Modbus task's stack; [`ParseOnStack`] parses into a model
+/// of its own (host tools and tests).
+pub trait ParseCandidate {
+    fn parse_candidate(&mut self, image: &[u8]) -> Result<u32, ImageError>;
+}
+
+/// [`ParseCandidate`] into a model on the caller's stack (≈ 17 KB: host
+/// only, never on a board).
+pub struct ParseOnStack;
+
+impl ParseCandidate for ParseOnStack {
+    fn parse_candidate(&mut self, image: &[u8]) -> Result<u32, ImageError> {
+        Model::parse(image).map(|m| m.model_version)
+    }
+}
 
 pub struct Staging {
     /// The image and its signature trailer, if any.
@@ -22,6 +41,8 @@ impl Default for Staging {
 }
 
 impl Staging {
+    // Inlined: the 8 KB area is written where it is kept (see AppState::new).
+    #[inline(always)]
     pub fn new() -> Self {
         Staging {
             bytes: [0; MAX_SIGNED_BYTES],
@@ -78,30 +99,33 @@ impl Staging {
     /// May the staged image commit (command 3, or 17 with `newer_only`
     /// false)? It must parse, carry a signature by the stored signing key
     /// when there is one, and, with `newer_only`, be newer than
-    /// `running_version`. `Ok`: the image's length (without its trailer);
+    /// `running_version`. `parser` parses the image (see
+    /// [`ParseCandidate`]). `Ok`: the image's length (without its trailer);
     /// `Err`: the result code.
     pub fn check_commit(
         &self,
         keys: &Keys,
         running_version: u32,
         newer_only: bool,
+        parser: &mut impl ParseCandidate,
     ) -> Result<usize, u16> {
         let len = usize::from(self.len);
         let Some(staged) = self.bytes.get(..len).filter(|s| !s.is_empty()) else {
             return Err(result::BAD_LENGTH);
         };
         // The image, then its signature trailer if it carries one.
-        // Parsed in place: one model on the stack, not a second one
-        // on the way out of the parser.
-        let mut model = Model::empty(0, 0);
-        let signed = split_signed(staged)
-            .and_then(|signed| model.parse_into(signed.image).map(|()| signed))
+        let (signed, model_version) = split_signed(staged)
+            .and_then(|signed| {
+                parser
+                    .parse_candidate(signed.image)
+                    .map(|version| (signed, version))
+            })
             .map_err(|e| result::of_image_error(&e))?;
         // With a signing key stored, only a model it signed commits.
         keys.check_model(&signed)?;
         // An older or the same version only on purpose: a stale
         // upload must not replace a newer model by accident.
-        if newer_only && model.model_version <= running_version {
+        if newer_only && model_version <= running_version {
             return Err(result::NOT_NEWER);
         }
         Ok(signed.image.len())

@@ -31,6 +31,9 @@ pub struct AppState {
 
 impl AppState {
     /// Fresh state with the unit address and baud rate `unit`, `baud`.
+    // Inlined (as `Staging::new`), so that the board's app is written in its
+    // static, not built on the stack and copied (`scripts/size.sh`).
+    #[inline(always)]
     pub fn new(unit: u8, baud: u32) -> Self {
         AppState {
             settings: Settings {

@@ -167,4 +167,10 @@ impl thermocomp::hal::flash::BackgroundErase for MockFlash {
     fn settings_area(&self) -> std::ops::Range<u32> {
         self.settings_at()..self.settings_at() + thermocomp::settings_store::AREA_BYTES
     }
+
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]> {
+        let from = usize::try_from(from).ok()?;
+        self.bytes
+            .get(from..from.checked_add(usize::try_from(len).ok()?)?)
+    }
 }

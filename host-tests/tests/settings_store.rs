@@ -267,6 +267,9 @@ impl thermocomp::hal::flash::BackgroundErase for SlowErase {
     fn settings_area(&self) -> std::ops::Range<u32> {
         thermocomp::hal::flash::BackgroundErase::settings_area(&self.inner)
     }
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]> {
+        thermocomp::hal::flash::BackgroundErase::mapped(&self.inner, from, len)
+    }
     fn start_erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         self.left = self.steps;
         self.inner.erase(from, to)
@@ -405,6 +408,9 @@ impl embedded_storage::nor_flash::NorFlash for BusyLine {
 impl thermocomp::hal::flash::BackgroundErase for BusyLine {
     fn settings_area(&self) -> std::ops::Range<u32> {
         thermocomp::hal::flash::BackgroundErase::settings_area(&self.inner)
+    }
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]> {
+        thermocomp::hal::flash::BackgroundErase::mapped(&self.inner, from, len)
     }
     fn ready_to_erase(&mut self) -> bool {
         if self.busy_looks == 0 {

@@ -171,6 +171,28 @@ impl Compensator {
         self.restart();
     }
 
+    /// Lend this compensator's model storage to `check` (e.g. parse a
+    /// candidate image there to validate it, so that a board keeps no
+    /// second model on its stack), then put the model in force back with
+    /// `restore`, which must refill the very same model (e.g. re-parse the
+    /// image it came from; its CRC is compared). Features, filters, the
+    /// reference and the served correction are untouched. A restore that
+    /// fails or gives another model leaves no model in force, as
+    /// [`Compensator::load`] with none.
+    pub fn check_with<R>(
+        &mut self,
+        check: impl FnOnce(&mut Model) -> R,
+        restore: impl FnOnce(&mut Model) -> bool,
+    ) -> R {
+        let crc = self.model.crc;
+        let outcome = check(&mut self.model);
+        if self.loaded && !(restore(&mut self.model) && self.model.crc == crc) {
+            self.loaded = false;
+            self.restart();
+        }
+        outcome
+    }
+
     /// As [`Compensator::load`] with the model held now (reference and
     /// filters restart).
     pub fn restart(&mut self) {

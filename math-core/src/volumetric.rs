@@ -187,6 +187,9 @@ impl Volumetric {
 
     /// An empty, unchecked section for the image parser to fill in place
     /// (then [`Volumetric::check_in_place`]; never used unchecked).
+    // Inlined, so that `Option::insert` writes it in the model's own
+    // section, not on the parser's stack first (5 KB).
+    #[inline(always)]
     pub(crate) fn blank() -> Self {
         Volumetric {
             slots: [0; 3],

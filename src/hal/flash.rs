@@ -17,6 +17,14 @@ pub trait BackgroundErase: NorFlash {
     /// apart from the model slots at `[0, 2 · slot size)`.
     fn settings_area(&self) -> core::ops::Range<u32>;
 
+    /// `len` bytes at `from` as the CPU reads them where the flash is
+    /// memory-mapped (`None`: the range is outside this flash). The commit
+    /// check lends the compensator's model to the candidate image and puts
+    /// the model in force back by parsing its slot's image from here, so
+    /// that neither a second model nor a second image buffer is needed
+    /// ([`crate::model_store::ModelStore::reparse_active`]).
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]>;
+
     /// Start erasing `[from, to)`; may return before the erase is done.
     fn start_erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         self.erase(from, to)

@@ -12,6 +12,7 @@ use thermocomp_core::image::MAX_SIGNED_BYTES;
 use thermocomp_core::limits::{MAX_AXES, MAX_DIRECTIONS};
 
 use crate::keys::{Keys, PUBLIC_KEY_LEN};
+use crate::staging::ParseCandidate;
 use crate::state::AppState;
 pub use crate::state::Command;
 use thermocomp_protocol::holding::Command as WireCommand;
@@ -63,11 +64,11 @@ pub enum Addressing {
     Broadcast,
 }
 
-/// The time of a write and the model serving then.
+/// The time of a write and the model serving then (a commit must be newer).
 #[derive(Clone, Copy)]
-struct At {
-    now_ms: u64,
-    running_version: u32,
+pub struct At {
+    pub now_ms: u64,
+    pub running_version: u32,
 }
 
 /// Registers 40 and 42: a small index or 0xFFFF ("none").
@@ -189,8 +190,7 @@ impl Holding {
     }
 
     /// Write `values` to consecutive registers from `addr` into `st`, all
-    /// or nothing; `running_version` is the model serving now (a commit
-    /// must be newer).
+    /// or nothing, at `at`; a commit's candidate is parsed by `parser`.
     ///
     /// A refused write addressed to this unit locks the board: whatever went
     /// wrong (a wrong key, a value out of range, a refused model), the
@@ -204,16 +204,13 @@ impl Holding {
         &mut self,
         addr: u16,
         values: &[u16],
-        now_ms: u64,
+        at: At,
         addressing: Addressing,
         st: &mut AppState,
-        running_version: u32,
+        parser: &mut impl ParseCandidate,
     ) -> Result<Command, WriteError> {
-        let at = At {
-            now_ms,
-            running_version,
-        };
-        let outcome = self.write_checked(addr, values, at, addressing, st);
+        let now_ms = at.now_ms;
+        let outcome = self.write_checked(addr, values, at, addressing, st, parser);
         if outcome.is_err_and(|e| e != WriteError::Busy) && addressing == Addressing::Unit {
             self.lock();
             if addr == HR_UNLOCK {
@@ -232,6 +229,7 @@ impl Holding {
         at: At,
         addressing: Addressing,
         st: &mut AppState,
+        parser: &mut impl ParseCandidate,
     ) -> Result<Command, WriteError> {
         let now_ms = at.now_ms;
         let n = u16::try_from(values.len()).map_err(|_| WriteError::Value)?;
@@ -254,7 +252,7 @@ impl Holding {
         }
         let mut command = Command::None;
         for (a, &v) in (addr..end).zip(values) {
-            let c = self.apply(a, v, at, st)?;
+            let c = self.apply(a, v, at, st, parser)?;
             if c != Command::None {
                 command = c;
             }
@@ -373,7 +371,14 @@ impl Holding {
         }
     }
 
-    fn apply(&mut self, a: u16, v: u16, at: At, st: &mut AppState) -> Result<Command, WriteError> {
+    fn apply(
+        &mut self,
+        a: u16,
+        v: u16,
+        at: At,
+        st: &mut AppState,
+        parser: &mut impl ParseCandidate,
+    ) -> Result<Command, WriteError> {
         match a {
             HR_UNLOCK => {
                 // check() let only the board's key (or, on a board without
@@ -381,7 +386,7 @@ impl Holding {
                 self.unlocked_until_ms = Some(at.now_ms + UNLOCK_MS);
                 self.commissioning = st.keys.unlock.is_none();
             }
-            HR_COMMAND => return self.command(v, at.running_version, st),
+            HR_COMMAND => return self.command(v, at.running_version, st, parser),
             HR_UNIT => {
                 // check() let only 1..=247 through.
                 st.settings.unit = u8::try_from(v).map_err(|_| WriteError::Value)?;
@@ -483,6 +488,7 @@ impl Holding {
         v: u16,
         running_version: u32,
         st: &mut AppState,
+        parser: &mut impl ParseCandidate,
     ) -> Result<Command, WriteError> {
         // check() let only known commands through; anything else locks.
         let Some(wire) = WireCommand::from_u16(v) else {
@@ -494,7 +500,7 @@ impl Holding {
                 let newer_only = wire == WireCommand::CommitModel;
                 match st
                     .staging
-                    .check_commit(&st.keys, running_version, newer_only)
+                    .check_commit(&st.keys, running_version, newer_only, parser)
                 {
                     Ok(len) => {
                         self.unlocked_until_ms = None;

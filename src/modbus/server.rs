@@ -21,8 +21,9 @@ use rmodbus::{ErrorKind, ModbusProto};
 
 use thermocomp_protocol::rtu::{crc16, MAX_FRAME, MAX_WRITE_REGISTERS};
 
-use super::holding::{Addressing, Command, Holding, WriteError};
+use super::holding::{Addressing, At, Command, Holding, WriteError};
 use crate::snapshot::Snapshot;
+use crate::staging::{ParseCandidate, ParseOnStack};
 use crate::state::AppState;
 
 /// What the application must do after handling a request.
@@ -85,7 +86,22 @@ impl Server {
         state: &mut AppState,
         reply: &mut Vec<u8, MAX_FRAME>,
     ) -> Action {
-        let action = self.dispatch(frame, now_ms, snapshot, state, reply);
+        self.handle_lending(frame, now_ms, snapshot, state, reply, &mut ParseOnStack)
+    }
+
+    /// [`Server::handle`] with the commit check parsing candidates through
+    /// `parser` (the application lends its compensator's model: no second
+    /// model on the Modbus task's stack).
+    pub fn handle_lending(
+        &mut self,
+        frame: &[u8],
+        now_ms: u64,
+        snapshot: &Snapshot,
+        state: &mut AppState,
+        reply: &mut Vec<u8, MAX_FRAME>,
+        parser: &mut impl ParseCandidate,
+    ) -> Action {
+        let action = self.dispatch(frame, now_ms, snapshot, state, reply, parser);
         let is_exception =
             reply.get(1).is_some_and(|f| f & 0x80 != 0) && reply.get(2) != Some(&0x06);
         let is_write = frame
@@ -104,6 +120,7 @@ impl Server {
         snapshot: &Snapshot,
         state: &mut AppState,
         reply: &mut Vec<u8, MAX_FRAME>,
+        parser: &mut impl ParseCandidate,
     ) -> Action {
         reply.clear();
         self.counters.frames = self.counters.frames.wrapping_add(1);
@@ -210,9 +227,12 @@ impl Server {
                         } else {
                             Addressing::Unit
                         };
-                        let version = snapshot.model_version;
+                        let at = At {
+                            now_ms,
+                            running_version: snapshot.model_version,
+                        };
                         self.holding
-                            .write(w.address, &values, now_ms, addressing, state, version)
+                            .write(w.address, &values, at, addressing, state, parser)
                             .map(|c| action = c)
                             .map_err(exception_of)
                     }

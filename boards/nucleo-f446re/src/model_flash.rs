@@ -87,6 +87,18 @@ impl thermocomp::hal::flash::BackgroundErase for SlotFlash {
     fn settings_area(&self) -> core::ops::Range<u32> {
         SETTINGS_AT..SETTINGS_END
     }
+    /// The F446's flash is memory-mapped (read-only) at `FLASH_BASE`, as
+    /// embassy-stm32's own `blocking_read` reads it.
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]> {
+        let len = usize::try_from(len).ok()?;
+        let at = address(from, len)?;
+        let start = embassy_stm32::flash::FLASH_BASE.checked_add(usize::try_from(at).ok()?)?;
+        // SAFETY: `address` keeps `[at, at + len)` inside the slots or the
+        // store's sectors, which are mapped flash for the program's whole
+        // life. The slice borrows `self`, so no erase or program through
+        // this adapter (`&mut self`) can change those bytes while it lives.
+        Some(unsafe { core::slice::from_raw_parts(start as *const u8, len) })
+    }
     fn ready_to_erase(&mut self) -> bool {
         crate::rtu_port::line_quiet()
     }

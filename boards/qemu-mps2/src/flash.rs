@@ -133,6 +133,12 @@ impl thermocomp::hal::flash::BackgroundErase for RamNor {
         SETTINGS_AT as u32..TOTAL_BYTES as u32
     }
 
+    fn mapped(&self, from: u32, len: u32) -> Option<&[u8]> {
+        let from = usize::try_from(from).ok()?;
+        self.mem
+            .get(from..from.checked_add(usize::try_from(len).ok()?)?)
+    }
+
     fn start_erase(&mut self, from: u32, to: u32) -> Result<(), RamNorError> {
         self.erase(from, to)?;
         let ms = SLOT_ERASE_MS * u64::from(to - from) / u64::from(SLOT_SIZE);
