@@ -99,7 +99,7 @@ fn legendre(j: usize, x: f64) -> f64 {
 /// Basis function j of a term at u = q / stroke: P̃_j(u) − P̃_j(0), and for
 /// straightness minus its end-point line (the basis of `smooth`).
 fn basis(straightness: bool, j: usize, u: f64) -> f64 {
-    let at0 = if j % 2 == 0 { 1.0 } else { -1.0 };
+    let at0 = if j.is_multiple_of(2) { 1.0 } else { -1.0 };
     let v = legendre(j, 2.0 * u - 1.0) - at0;
     if straightness {
         v - u * (1.0 - at0)
