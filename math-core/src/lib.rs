@@ -23,6 +23,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod ask;
 pub mod compensator;
 pub mod crc;
 pub mod eval;
