@@ -16,7 +16,7 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
-use super::effect_fit::Evaluator;
+use crate::diagnose::effects::Evaluator;
 use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;
 use tcomp_data::stats::block_means;
@@ -617,7 +617,7 @@ pub fn calibrate(m: &Machine, full: &[Prepared], threads: usize) -> Result<Calib
         let (base, w) = eval(&cur, ps, stride, None)?;
         // Jacobian of the weighted residual by forward differences
         let cols: Vec<Result<Vec<f64>>> =
-            super::effect_fit::par_map(&(0..nk).collect::<Vec<_>>(), threads, |&i| {
+            crate::diagnose::effects::par_map(&(0..nk).collect::<Vec<_>>(), threads, |&i| {
                 let mut t = theta.clone();
                 t[i] += h;
                 let (e, _) = eval(&apply(m, &ks, &t), ps, stride, Some(&w))?;

@@ -2,8 +2,8 @@
 //! nominal absorbs by construction and those the runs cannot reach
 //! (computed per case in `reach.rs` and `open_effects`).
 
-use super::open_effects::{self, LAG_MIN_FIT_REL};
 use super::reach;
+use crate::diagnose::effects::open_effects::{self, LAG_MIN_FIT_REL};
 use crate::diagnose::ident::Problem;
 
 /// Effects an identified nominal absorbs (or the data cannot show), with why.

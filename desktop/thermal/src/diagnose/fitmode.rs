@@ -10,9 +10,9 @@ use serde_json::{json, Value};
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
 use super::gate;
-use super::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use super::reach;
 use super::types::{Diagnosis, Finding, Options, SelectedGaps};
+use crate::diagnose::effects::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
 use tcomp_data::runcsv::Run;
@@ -608,7 +608,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     let sel_fit = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
     let mut tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    super::periodic_claim::fit(
+    crate::diagnose::effects::periodic_claim::fit(
         &p,
         &st,
         &fit,
@@ -657,7 +657,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         },
         no_effect: no_effect_evidence(&p, &fit),
         selected_gaps: selected,
-        ranking_rule: fit_ranking_rule(opt) + &super::periodic_claim::rule() + &untestable_rule(),
+        ranking_rule: fit_ranking_rule(opt)
+            + &crate::diagnose::effects::periodic_claim::rule()
+            + &untestable_rule(),
     })
 }
 

@@ -48,7 +48,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::boxqp::{box_qp_exact, box_qp_exact_inv_from};
 use super::calibrate::{apply, Knob};
-use super::effect_fit::{par_map, ActiveSet, Evaluator, FitResult, Projection};
+use crate::diagnose::effects::{par_map, ActiveSet, Evaluator, FitResult, Projection};
 use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;
 use channel_basis::ChannelBasis;

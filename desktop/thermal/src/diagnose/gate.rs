@@ -121,7 +121,7 @@ pub fn z_of(d: &[f64]) -> f64 {
 /// itself, not only by the margins: a small partner (a low-exponent bearing
 /// heat, a slow drift) otherwise soaks up what is left of a design error.
 pub fn beats_in_noise(
-    ev: &super::effect_fit::Evaluator,
+    ev: &crate::diagnose::effects::Evaluator,
     base: &[crate::sim::Effect],
     more: &[crate::sim::Effect],
 ) -> anyhow::Result<bool> {

@@ -4,10 +4,10 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
-use super::effect_fit::{self, Evaluator, FitResult, Stats};
 use super::freedom;
 use super::types::{Finding, Options};
 use super::{design_heat, design_mimic, gate};
+use crate::diagnose::effects::{params_of, Evaluator, FitResult, Stats};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::{corr, first_order, r4, rms_of};
 use crate::sim::Effect;
@@ -272,7 +272,7 @@ impl Judge<'_> {
             return Ok(true);
         };
         let opt = self.opt;
-        let k_partner = effect_fit::params_of(last.kind).len() + last.located();
+        let k_partner = params_of(last.kind).len() + last.located();
         let n_base = fr.effects.len() - 1;
         let st = self.ev.stats(&fr.effects[..n_base])?;
         let dbic_base = st.j_fit() - self.j0 + (fr.k - k_partner) as f64 * self.lnn;

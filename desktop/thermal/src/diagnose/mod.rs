@@ -5,11 +5,9 @@
 
 pub mod boxqp;
 pub mod calibrate;
-pub mod candidate;
 pub mod design_heat;
 pub mod design_mimic;
-mod drift_family;
-pub mod effect_fit;
+mod effects;
 mod fit_nominal;
 mod fit_untestable;
 pub mod fitmode;
@@ -17,28 +15,21 @@ pub mod freedom;
 pub mod gate;
 pub mod ident;
 mod judge;
-pub mod open_effects;
-mod optim;
-pub mod periodic;
-pub mod periodic_claim;
-mod placement;
 pub mod reach;
 mod release;
 use release::{merge_releases, CalNull};
 pub mod render;
 mod runs;
-pub mod sensor_step;
 pub use runs::series;
 mod signal;
 pub use signal::{lag, stats};
-pub mod speed_law;
 mod types;
 
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
 
 use crate::sim::Machine;
-use effect_fit::{par_map, Evaluator, FitResult};
+use effects::{fit_added, par_map, params_of, Evaluator, FitResult, Projection};
 use judge::Judge;
 pub use render::report_md;
 use runs::{prepare, Kind, Prepared};
@@ -249,10 +240,8 @@ fn diagnose_core(
     cal: Option<CalNull>,
 ) -> Result<Diagnosis> {
     let t0 = std::time::Instant::now();
-    let ev = Evaluator::new(m, ps)?.with_freedom(
-        cal.as_ref()
-            .map(|c| c.freedom as &dyn effect_fit::Projection),
-    );
+    let ev =
+        Evaluator::new(m, ps)?.with_freedom(cal.as_ref().map(|c| c.freedom as &dyn Projection));
     let (raw0, res0) = ev.raw_and_residuals(&[])?;
     let st0 = ev.stats_of(&res0);
     let judge = Judge {
@@ -267,11 +256,11 @@ fn diagnose_core(
         freedom: cal.as_ref().map(|c| c.freedom),
     };
     let where_ = where_analysis(ps, &res0);
-    let cands = placement::candidates(&ev, &res0, &opt.only);
+    let cands = effects::placement::candidates(&ev, &res0, &opt.only);
     let mut sims = 1usize;
     let singles: Vec<FitResult> = par_map(&cands, opt.threads, |c| {
-        let d = effect_fit::params_of(c.kind).len();
-        drift_family::fit_alone(&ev, c, opt.budget + 15 * d)
+        let d = params_of(c.kind).len();
+        effects::fit_alone(&ev, c, opt.budget + 15 * d)
     });
     sims += singles.iter().map(|f| f.evals).sum::<usize>();
     freedom::print_evals("single", &singles);
@@ -302,7 +291,7 @@ fn diagnose_core(
     let pair_fits: Vec<FitResult> = par_map(&pairs, opt.threads, |&(a, b)| {
         let fa = &tried[a].1;
         let fb = &tried[b].1;
-        effect_fit::fit_added(
+        fit_added(
             &ev,
             fa,
             &fb.cands[0],
@@ -318,7 +307,7 @@ fn diagnose_core(
     }
     let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    periodic_claim::machine(&ev, &res0, &mut findings, &mut tried, &opt.only);
+    effects::periodic_claim::machine(&ev, &res0, &mut findings, &mut tried, &opt.only);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
@@ -336,7 +325,7 @@ fn diagnose_core(
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,
-        ranking_rule: RANKING_RULE.to_string() + &periodic_claim::rule(),
+        ranking_rule: RANKING_RULE.to_string() + &effects::periodic_claim::rule(),
     })
 }
 
@@ -370,7 +359,7 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
         }
     };
     d.untestable
-        .extend(placement::untestable(m, &ps, &opt.only));
+        .extend(effects::placement::untestable(m, &ps, &opt.only));
     d.seconds = t0.elapsed().as_secs_f64();
     Ok(d)
 }

@@ -11,7 +11,7 @@
 use nalgebra::DMatrix;
 use serde_json::{json, Value};
 
-use super::speed_law::STEEP_EXPONENTS;
+use crate::diagnose::effects::STEEP_EXPONENTS;
 use crate::diagnose::ident::{Problem, Structure, RIDGE};
 use crate::diagnose::signal::lag;
 use crate::diagnose::signal::r4;

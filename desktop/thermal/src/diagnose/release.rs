@@ -12,12 +12,12 @@ use serde_json::json;
 
 use super::calibrate;
 use super::calibrate::{apply, design_value, Knob};
-use super::effect_fit::{j_fit_of_raws, ActiveSet, Evaluator, Projection};
 use super::freedom;
 use super::freedom::Freedom;
 use super::gate;
 use super::judge::Judge;
 use super::types::{with_role, Finding};
+use crate::diagnose::effects::{j_fit_of_raws, ActiveSet, Evaluator, Projection};
 use crate::diagnose::runs::Prepared;
 use crate::diagnose::signal::r4;
 use crate::sim::machine::tolerance::GROUPS;
@@ -109,7 +109,7 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
 }
 
 /// Fit criterion, stats and residuals of one released machine.
-type Judged = (f64, super::effect_fit::Stats, Vec<Vec<Vec<f64>>>);
+type Judged = (f64, crate::diagnose::effects::Stats, Vec<Vec<Vec<f64>>>);
 
 /// The fit criterion of machines with the freedom: the release's line
 /// search needs nothing else, and `j_fit_of_raws` has it from the
@@ -134,7 +134,7 @@ pub(crate) struct Null<'a> {
     pub knobs: &'a [Knob],
     pub freedom: &'a Freedom,
     pub res0: &'a [Vec<Vec<f64>>],
-    pub st0: &'a super::effect_fit::Stats,
+    pub st0: &'a crate::diagnose::effects::Stats,
     pub j0: f64,
     pub m0: f64,
     pub lnn: f64,

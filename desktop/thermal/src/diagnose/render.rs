@@ -10,6 +10,7 @@ use serde_json::Value;
 
 use super::types::Diagnosis;
 pub use super::types::SelectedGaps;
+use crate::diagnose::effects::periodic_claim;
 
 fn f2(x: f64) -> String {
     if x.is_finite() {
@@ -108,7 +109,7 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
         );
     }
     // periodic drivers (periodic_claim.rs)
-    s.push_str(&super::periodic_claim::report_md(&d.tried));
+    s.push_str(&periodic_claim::report_md(&d.tried));
     let _ = writeln!(s, "\n## Where the gap lies (nominal model, all rows)\n");
     let w = &d.where_;
     for (title, key, unit) in [

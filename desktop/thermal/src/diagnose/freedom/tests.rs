@@ -3,7 +3,7 @@
 //! machine file 12–15 % off its truth.
 use super::*;
 use crate::diagnose::calibrate::calibrate;
-use crate::diagnose::effect_fit::Stats;
+use crate::diagnose::effects::Stats;
 use crate::diagnose::{prepare_all, Options};
 use crate::sim::{sim_run, Duty, Effect, SimOptions};
 use std::path::PathBuf;
@@ -70,7 +70,7 @@ fn compressed_freedom_matches_the_full_one() {
         ks.len()
     );
     assert_eq!(full.compression(), (ks.len(), 1));
-    let ev = crate::diagnose::effect_fit::Evaluator::new(&cal.machine, &ps).unwrap();
+    let ev = crate::diagnose::effects::Evaluator::new(&cal.machine, &ps).unwrap();
     // the calibrated null, the ball-screw explained, and a wrong effect
     let trials = [
         vec![],
@@ -179,7 +179,7 @@ fn b_transpose_r_from_the_nominal_s_matches_it_from_scratch_and_reads_only_what_
     let (design, ps) = setup();
     let cal = calibrate(&design, &ps, 2).unwrap();
     let fr = Freedom::new(&design, &cal.knobs, &cal.theta, &ps, 2).unwrap();
-    let ev = crate::diagnose::effect_fit::Evaluator::new(&cal.machine, &ps).unwrap();
+    let ev = crate::diagnose::effects::Evaluator::new(&cal.machine, &ps).unwrap();
     let r0 = ev.residuals(&[]).unwrap();
     // one channel of the second run changed after row 700 (a step), and
     // every channel changed (a thermal effect)

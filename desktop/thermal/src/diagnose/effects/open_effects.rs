@@ -23,10 +23,10 @@
 use serde_json::json;
 
 pub use super::candidate::Candidate;
-pub use super::sensor_step::{sensor_steps, STEP_MIN_C, STEP_MIN_MISFIT, STEP_MIN_NOISE};
+pub use super::sensor_step::sensor_steps;
 pub use super::speed_law::{
     runs_of_different_speeds, speed_levels, speed_nonlinearity, speed_nonlinearity_against_nominal,
-    MIN_SPEED_LEVELS, PALMGREN_EXPONENT, STEEP_EXPONENTS,
+    MIN_SPEED_LEVELS, STEEP_EXPONENTS,
 };
 use crate::diagnose::ident::{ModelFit, OutFit, Problem, Structure};
 use crate::diagnose::signal::r4;

@@ -355,6 +355,9 @@ pub(crate) fn j_fit_of_raws(
 /// One fitted parameter: physical bounds, log or linear mapping from u ∈ [0, 1].
 #[derive(Clone, Copy, Debug)]
 pub struct Param {
+    // Read by nobody since `effect_fit` left the public API (issue 48):
+    // kept, moves only.
+    #[allow(dead_code)]
     pub name: &'static str,
     pub lo: f64,
     pub hi: f64,

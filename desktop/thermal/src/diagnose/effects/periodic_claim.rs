@@ -10,10 +10,10 @@ use serde_json::{json, Value};
 
 use super::effect_fit::Evaluator;
 use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
-use super::types::Finding;
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::r4;
+use crate::diagnose::types::Finding;
 
 /// Smallest amplitude claimed, in noise units of the channel (amplitude
 /// of the fundamental, so a swing of ± that many noise σ). A line is found

@@ -338,6 +338,9 @@ fn prepare(scan: &Scan, diff: bool) -> Prepared {
 
 /// The searched frequency band [Hz] (None: the runs are too short or too
 /// coarse for any period of the range).
+// No caller: public API while `periodic` was `diagnose::periodic`; kept
+// (moves only, issue 48) until someone decides to drop it.
+#[allow(dead_code)]
 pub fn band(scan: &Scan) -> Option<(f64, f64)> {
     let pr = prepare(scan, true);
     band_of(&pr)
