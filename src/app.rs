@@ -22,6 +22,7 @@ use crate::snapshot::{centidegrees, Snapshot};
 use crate::staging::ParseCandidate;
 use crate::state::AppState;
 use crate::state::Command;
+use thermocomp_core::ask::AskParams;
 use thermocomp_core::compensator::Compensator;
 use thermocomp_core::image::ImageError;
 
@@ -111,6 +112,11 @@ enum FlashJob {
     Model { len: usize, erasing: bool },
     /// Store the records that changed in the settings store.
     Settings,
+    /// The same, for the board's own sake (a reference request raised):
+    /// HR_RESULT and the busy flag are left alone, so a master's last
+    /// command keeps its answer. A master's store meanwhile turns it into
+    /// [`FlashJob::Settings`].
+    Quiet,
 }
 
 /// What the board must do after a request (after sending the reply).
@@ -212,12 +218,22 @@ impl<F: BackgroundErase> App<F> {
     /// model-slot erase); a flash failure leaves them applied until the
     /// next reboot and says so in HR_RESULT ([`result::SETTINGS_NOT_STORED`]).
     fn store_settings(&mut self) {
-        if self.job.is_some() || !self.records_dirty() {
+        let quiet = matches!(self.job, Some(FlashJob::Quiet));
+        if (self.job.is_some() && !quiet) || !self.records_dirty() {
             return;
         }
         self.job = Some(FlashJob::Settings);
         self.state.busy = true;
         self.state.result = result::COMMIT_IN_PROGRESS;
+    }
+
+    /// Store the records that changed for the board's own sake
+    /// ([`FlashJob::Quiet`]); nothing when a store is already running (it
+    /// writes every record that differs when it runs).
+    fn store_quietly(&mut self) {
+        if self.job.is_none() && self.records_dirty() {
+            self.job = Some(FlashJob::Quiet);
+        }
     }
 
     /// The kept reference sample (commands 10, 11), if any.
@@ -407,6 +423,11 @@ impl<F: BackgroundErase> App<F> {
 
     fn end_job(&mut self, job: FlashJob, ok: bool) {
         self.job = None;
+        if job == FlashJob::Quiet {
+            // A failed quiet store is retried by the next store (its
+            // records still differ from what the store holds).
+            return;
+        }
         self.state.busy = false;
         let after = self.stored_result.take().unwrap_or(result::OK);
         let h = &mut self.state;
@@ -415,6 +436,7 @@ impl<F: BackgroundErase> App<F> {
             (FlashJob::Model { .. }, false) => h.result = result::STORE_FAILED,
             (FlashJob::Settings, true) => h.result = after,
             (FlashJob::Settings, false) => h.result = result::SETTINGS_NOT_STORED,
+            (FlashJob::Quiet, _) => {}
         }
     }
 
@@ -568,6 +590,7 @@ impl<F: BackgroundErase> App<F> {
         s.corrections = self
             .references
             .serve(&out.corrections, limits, n_dir, now_ms);
+        self.ask_after_cycle(now_ms, (!plc.stale).then_some(plc.spindle_rpm));
         self.publish_references();
         let s = &mut self.snapshot;
         s.predictions = out.predicted;
@@ -703,13 +726,14 @@ impl<F: BackgroundErase> App<F> {
                 self.snapshot.reference_state = 0;
                 self.state.settings = self.defaults;
                 self.state.probe = ProbeSetup::default();
+                self.state.ask = AskParams::default();
                 self.apply_limits();
                 self.store_settings();
                 LinkChange::Reconfigure {
                     baud: self.defaults.baud,
                 }
             }
-            Command::KeysChanged => {
+            Command::KeysChanged | Command::AskChanged => {
                 // In force at once; stored like the settings (23, then 0 or 22).
                 self.store_settings();
                 LinkChange::None

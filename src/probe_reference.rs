@@ -20,6 +20,7 @@
 //! (the time the board was off is not counted; the terms resume as they
 //! were stored).
 
+use thermocomp_core::ask::{AskParams, AskReason, AskState, ASK_STATE_BYTES};
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_core::reference::{
     remove_probe_drift, ReferenceOutcome, ReferenceParams, ReferenceState, STATE_BYTES,
@@ -82,6 +83,16 @@ pub struct References {
     limit: [i32; MAX_DIRECTIONS],
     n: usize,
     now_ms: Option<u64>,
+    /// When to ask for a reference ([`thermocomp_core::ask`]).
+    ask: AskState,
+    /// The rule's state as stored, as of its last event (a request raised,
+    /// a reference accepted): the ask record holds this, so that it changes
+    /// only then and not at every cycle.
+    ask_saved: [u8; ASK_STATE_BYTES],
+    /// The rule has not run since boot: its first cycle starts it (from
+    /// `ask_saved` when the store held one, else afresh).
+    ask_fresh: bool,
+    ask_loaded: bool,
 }
 
 impl Default for References {
@@ -111,7 +122,57 @@ impl References {
             limit: [0; MAX_DIRECTIONS],
             n: 0,
             now_ms: None,
+            ask: AskState::new(0),
+            ask_saved: AskState::new(0).to_bytes(0),
+            ask_fresh: true,
+            ask_loaded: false,
         }
+    }
+
+    /// One look of the reference-request rule at `now_ms` with the spindle
+    /// at `rpm`: `true` when it raised a request (store the state then).
+    pub fn ask_step(&mut self, params: &AskParams, now_ms: u64, rpm: Option<i32>) -> bool {
+        if self.ask_fresh {
+            let stored = self
+                .ask_loaded
+                .then(|| AskState::restore(&self.ask_saved, now_ms));
+            self.ask = stored.flatten().unwrap_or(AskState::new(now_ms));
+            self.ask_fresh = false;
+        }
+        let raised = self.ask.step(params, now_ms, rpm);
+        if raised {
+            self.ask_saved = self.ask.to_bytes(now_ms);
+        }
+        raised
+    }
+
+    /// A reference was accepted at `now_ms`: the request clears and the
+    /// schedule starts again from here.
+    pub fn ask_referenced(&mut self, now_ms: u64) {
+        self.ask.referenced(now_ms);
+        self.ask_saved = self.ask.to_bytes(now_ms);
+    }
+
+    /// Why a reference is wanted now.
+    pub fn wanted(&self) -> AskReason {
+        self.ask.wanted()
+    }
+
+    /// The rule's state as the store keeps it.
+    pub fn ask_saved(&self) -> &[u8; ASK_STATE_BYTES] {
+        &self.ask_saved
+    }
+
+    /// A stored state, taken up at the first cycle (`false`: not of this
+    /// length; nothing changes).
+    pub fn load_ask(&mut self, b: &[u8]) -> bool {
+        let Ok(b) = <[u8; ASK_STATE_BYTES]>::try_from(b) else {
+            return false;
+        };
+        self.ask_saved = b;
+        self.ask_loaded = true;
+        self.ask_fresh = true;
+        true
     }
 
     /// Command 13 or a new model: every direction's terms and re-zero

@@ -49,13 +49,17 @@ pub mod key {
     pub const PROBE_SETUP: u8 = 5;
     /// The old slots' settings were copied here (migration done): `[1]`.
     pub const MIGRATED: u8 = 6;
+    /// When to ask for a probe reference: holding registers 46–48 (u16 LE
+    /// each), then the rule's state (`thermocomp_core::ask`, 16 bytes).
+    pub const ASK: u8 = 7;
     /// Probe-reference terms of direction `d`: `TERMS + d`, 6 keys.
     pub const TERMS: u8 = 16;
 }
 
-/// Records the application keeps: the terms of each direction, the probe
-/// setup, the keys, the kept reference, the channel map and the settings.
-pub const RECORDS: usize = thermocomp_core::limits::MAX_DIRECTIONS + 5;
+/// Records the application keeps: the terms of each direction, when to ask
+/// for a reference, the probe setup, the keys, the kept reference, the
+/// channel map and the settings.
+pub const RECORDS: usize = thermocomp_core::limits::MAX_DIRECTIONS + 6;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -28,6 +28,8 @@ pub struct Snapshot {
     /// Probe reading, 0.1 µm, and its state code.
     pub probe: i32,
     pub probe_state: u16,
+    /// Input register 23: why a probe reference is wanted (0: nothing).
+    pub reference_wanted: u16,
     pub corrections: [i32; MAX_DIRECTIONS],
     pub predictions: [i32; MAX_DIRECTIONS],
     pub axes: [AxisPair; MAX_AXES],
@@ -128,6 +130,7 @@ impl Default for Snapshot {
             n_sensors: 0,
             probe: 0,
             probe_state: 0,
+            reference_wanted: 0,
             corrections: [0; MAX_DIRECTIONS],
             predictions: [0; MAX_DIRECTIONS],
             axes: [AxisPair::default(); MAX_AXES],

@@ -5,6 +5,8 @@
 //! decodes holding-register writes into these and encodes reads from
 //! them; nothing here knows a register.
 
+use thermocomp_core::ask::AskParams;
+
 use crate::keys::Keys;
 use crate::plc::PlcState;
 use crate::probe_reference::ProbeSetup;
@@ -19,6 +21,8 @@ pub struct AppState {
     pub plc: PlcState,
     /// Which direction the probe measures, and how.
     pub probe: ProbeSetup,
+    /// When the board asks for a probe reference (all 0: never).
+    pub ask: AskParams,
     /// The unlock key and the signing key ([`Keys`]).
     pub keys: Keys,
     /// The model staging area.
@@ -43,6 +47,7 @@ impl AppState {
             },
             plc: PlcState::default(),
             probe: ProbeSetup::default(),
+            ask: AskParams::default(),
             keys: Keys::default(),
             staging: Staging::new(),
             result: result::NONE,
@@ -82,6 +87,8 @@ pub enum Command {
     ResetReferenceTerms,
     /// Holding registers 40–45 changed: store them.
     ProbeSetupChanged,
+    /// Holding registers 46–48 (when to ask for a reference) changed: store them.
+    AskChanged,
     /// Commands 14–16: a key changed (in force at once): store it.
     KeysChanged,
 }

@@ -201,7 +201,10 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
 
     let (board, port) = BenchBoard::serve_tcp(&trace, &img, &["50"]);
     let mut link = BoardLink::tcp(&format!("127.0.0.1:{port}"), 1).unwrap();
-    assert_eq!(link.read_inputs(IR_MAP_VERSION, 1).unwrap(), vec![3]);
+    assert_eq!(
+        link.read_inputs(IR_MAP_VERSION, 1).unwrap(),
+        vec![thermocomp_protocol::registers::MAP_VERSION]
+    );
     // No probe direction yet: command 12 is answered 63, nothing learned.
     command(&mut link, CMD_TAKE_PROBE_REFERENCE);
     assert_eq!(final_result(&mut link, &board), result::NO_PROBE_DIRECTION);

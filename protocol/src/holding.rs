@@ -51,7 +51,17 @@ pub const DEFAULT_PROBE_DIRECTION: u16 = REGISTER_NONE;
 pub const DEFAULT_REFERENCE_SAMPLES: u16 = 256;
 /// "None" for holding registers 40 and 42.
 pub const REGISTER_NONE: u16 = 0xFFFF;
-/// Last register of the plain block (33 and 46–49 reserved, read 0).
+/// When the board asks for a probe reference (issue 51; unlock; stored
+/// with the settings; 0 switches a part off, all three 0: the board never
+/// asks, as before these registers existed): ask this many seconds after a
+/// spindle-speed change (46), when this many seconds have passed since the
+/// last accepted reference (47); a speed change is a move of at least this
+/// many rpm of holding register 5 (48). Input register 330 says what is
+/// wanted (`thermocomp_core::ask`).
+pub const HR_ASK_SETTLE: u16 = 46;
+pub const HR_ASK_INTERVAL: u16 = 47;
+pub const HR_ASK_SPEED_STEP: u16 = 48;
+/// Last register of the plain block (33 and 49 reserved, read 0).
 pub const HR_LAST_PLAIN: u16 = 49;
 /// Model staging area: 2 bytes per register (first byte in the high half).
 /// It holds the largest image and its signature trailer

@@ -8,8 +8,9 @@
 /// blocks the board serves. 2 added input registers 150–299, status bits 8–9,
 /// holding registers 34–35 and commands 6–11 to version 1; 3 added input
 /// registers 300–329, holding registers 40–45 and commands 12–13 (probe
-/// references, issue 28; docs/register-map.md).
-pub const MAP_VERSION: u16 = 3;
+/// references, issue 28; docs/register-map.md); 4 added input register 23
+/// and holding registers 46–48 (the board asks for references, issue 51).
+pub const MAP_VERSION: u16 = 4;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;
@@ -28,6 +29,12 @@ pub const IR_N_AXES: u16 = 17;
 pub const IR_N_SENSORS: u16 = 18;
 pub const IR_PROBE: u16 = 20;
 pub const IR_PROBE_STATE: u16 = 22;
+/// A probe reference is wanted (map version 4, issue 51; holding registers
+/// 46–48 set the rule): 0 nothing, 1 the settling time after a
+/// spindle-speed change has passed, 2 the longest interval since the last
+/// reference has passed. Raised until a reference is accepted (a refused
+/// one leaves it raised): the PLC probes (command 12) while it is not 0.
+pub const IR_REF_WANTED: u16 = 23;
 /// Served correction per direction, int32 0.1 µm, 2 registers each.
 pub const IR_CORRECTIONS: u16 = 30;
 /// Model prediction before clamp/rate limit, int32 0.1 µm, 2 registers each.

@@ -1,6 +1,6 @@
 //! The application's side of probe references (issue 28): the probe
 //! reading after a cycle, commands 2 (with a probe direction), 12 and 13,
-//! holding registers 40–45, input registers 300–329.
+//! holding registers 40–48, input registers 23 and 300–329.
 
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_protocol::holding::result;
@@ -85,6 +85,9 @@ impl<F: BackgroundErase> App<F> {
                         result::REFERENCE_REFUSED
                     }
                 };
+                if code == result::OK {
+                    self.references.ask_referenced(now_ms);
+                }
                 self.stored_result = Some(code);
                 self.publish_references();
                 self.store_settings();
@@ -125,8 +128,21 @@ impl<F: BackgroundErase> App<F> {
         self.publish_references();
     }
 
-    /// Input registers 300–329 from the terms as they are now.
+    /// The rule that asks for a reference, after a cycle at `now_ms` with
+    /// the spindle at `rpm` ([`thermocomp_core::ask`]; holding registers
+    /// 46–48). It runs only with a probe direction set (holding register
+    /// 40). A request raised is stored at once, quietly, so that a reset
+    /// keeps it; input register 23 shows it.
+    pub(super) fn ask_after_cycle(&mut self, now_ms: u64, rpm: Option<i32>) {
+        let ask = self.state.ask;
+        if self.state.probe.direction.is_some() && self.references.ask_step(&ask, now_ms, rpm) {
+            self.store_quietly();
+        }
+    }
+
+    /// Input registers 23 and 300–329 from the terms as they are now.
     pub(super) fn publish_references(&mut self) {
+        self.snapshot.reference_wanted = self.references.wanted() as u16;
         let dir = self.state.probe.direction;
         for (a, r) in (IR_REF_TIME..).zip(self.snapshot.references.iter_mut()) {
             *r = self.references.register(a, dir);

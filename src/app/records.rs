@@ -7,6 +7,7 @@
 //! updated from the old layout reads its old slot's settings block once and
 //! copies it here: [`App::migrate`]).
 
+use thermocomp_core::ask::{AskParams, ASK_STATE_BYTES};
 use thermocomp_core::image::crc32;
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_core::reference::{ReferenceState, STATE_BYTES};
@@ -18,14 +19,18 @@ use crate::probe_reference::{decode_setup, encode_setup};
 use crate::settings::{KeptReference, Settings, StoredKeys, ENCODED_LEN as SETTINGS_LEN};
 use crate::settings_store::{key, SettingsStoreError, MAX_VALUE, RECORDS};
 
-/// Records in write order: the terms of each direction, the probe setup,
-/// the keys, the kept reference, the channel map, and the settings last.
+/// Records in write order: the terms of each direction, when to ask for a
+/// reference, the probe setup, the keys, the kept reference, the channel
+/// map, and the settings last.
 const COUNT: usize = RECORDS;
 /// A terms record: the CRC-32 of the model image they were learned on,
 /// then the core's state bytes.
 const TERMS_LEN: usize = 4 + STATE_BYTES;
 /// "None" for the optional records (kept reference, keys).
 const NONE: [u8; 1] = [0];
+
+/// The ask record: holding registers 46–48, then the rule's state.
+const ASK_LEN: usize = 6 + ASK_STATE_BYTES;
 
 const _: () = assert!(TERMS_LEN <= MAX_VALUE && CHANNEL_MAP_BYTES <= MAX_VALUE);
 
@@ -36,10 +41,11 @@ fn key_of(i: usize) -> u8 {
         #[allow(clippy::cast_possible_truncation, reason = "i < MAX_DIRECTIONS")]
         i if i < MAX_DIRECTIONS => key::TERMS + i as u8,
         i => match i - MAX_DIRECTIONS {
-            0 => key::PROBE_SETUP,
-            1 => key::KEYS,
-            2 => key::KEPT,
-            3 => key::CHANNEL_MAP,
+            0 => key::ASK,
+            1 => key::PROBE_SETUP,
+            2 => key::KEYS,
+            3 => key::KEPT,
+            4 => key::CHANNEL_MAP,
             _ => key::SETTINGS,
         },
     }
@@ -66,6 +72,20 @@ impl<F: BackgroundErase> App<F> {
         }
         let h = &self.state;
         match key_of(i) {
+            key::ASK => {
+                let mut v = [0u8; ASK_LEN];
+                let (params, state) = v.split_at_mut(6);
+                let p = h.ask;
+                for (c, w) in
+                    params
+                        .chunks_exact_mut(2)
+                        .zip([p.settle_s, p.max_interval_s, p.speed_step_rpm])
+                {
+                    c.copy_from_slice(&w.to_le_bytes());
+                }
+                state.copy_from_slice(self.references.ask_saved());
+                put(&v)
+            }
             key::PROBE_SETUP => put(&encode_setup(&h.probe)),
             key::KEYS => {
                 let keys = StoredKeys {
@@ -159,6 +179,9 @@ impl<F: BackgroundErase> App<F> {
         {
             self.state.probe = setup;
         }
+        if let Some(n) = self.fetch_record(MAX_DIRECTIONS, &mut v) {
+            self.load_ask(v.get(..n).unwrap_or(&[]));
+        }
         // The terms count only with the model they were learned on, and
         // only all together.
         let model = self.store.active_crc().to_le_bytes();
@@ -231,5 +254,24 @@ impl<F: BackgroundErase> App<F> {
             self.written = [None; COUNT];
             let _ = self.store_records();
         }
+    }
+}
+
+impl<F: BackgroundErase> App<F> {
+    /// The ask record back: holding registers 46–48 and the rule's state
+    /// (taken up at the first cycle). Another length: nothing changes.
+    fn load_ask(&mut self, b: &[u8]) {
+        let Some((params, state)) = b.split_first_chunk::<6>() else {
+            return;
+        };
+        if state.len() != ASK_STATE_BYTES || !self.references.load_ask(state) {
+            return;
+        }
+        let [s0, s1, i0, i1, r0, r1] = *params;
+        self.state.ask = AskParams {
+            settle_s: u16::from_le_bytes([s0, s1]),
+            max_interval_s: u16::from_le_bytes([i0, i1]),
+            speed_step_rpm: u16::from_le_bytes([r0, r1]),
+        };
     }
 }

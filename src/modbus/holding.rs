@@ -147,6 +147,9 @@ impl Holding {
             HR_PROBE_DRIFT => st.probe.drift_nm_per_k as u16,
             HR_GAUGE_ZERO => (st.probe.gauge_zero as u32 >> 16) as u16,
             a if a == HR_GAUGE_ZERO + 1 => (st.probe.gauge_zero as u32 & 0xFFFF) as u16,
+            HR_ASK_SETTLE => st.ask.settle_s,
+            HR_ASK_INTERVAL => st.ask.max_interval_s,
+            HR_ASK_SPEED_STEP => st.ask.speed_step_rpm,
             a if in_block(a, HR_SIGNING_KEY, PUBLIC_KEY_LEN / 2).is_some() => {
                 let i = usize::from(a - HR_SIGNING_KEY) * 2;
                 match st.keys.staged_signing.get(i..i + 2)? {
@@ -304,7 +307,7 @@ impl Holding {
             || Self::key_register(a)
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
-            || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
+            || (HR_PROBE_DIRECTION..=HR_ASK_SPEED_STEP).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
     }
 
@@ -324,7 +327,7 @@ impl Holding {
         ) || Self::plc_register(a)
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
-            || (HR_PROBE_DIRECTION..=HR_GAUGE_ZERO + 1).contains(&a)
+            || (HR_PROBE_DIRECTION..=HR_ASK_SPEED_STEP).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
             || Self::key_register(a);
         if !writable {
@@ -446,6 +449,15 @@ impl Holding {
                     ((u & 0xFFFF_0000) | u32::from(v)) as i32
                 };
                 return Ok(Command::ProbeSetupChanged);
+            }
+            HR_ASK_SETTLE..=HR_ASK_SPEED_STEP => {
+                let p = &mut st.ask;
+                match a {
+                    HR_ASK_SETTLE => p.settle_s = v,
+                    HR_ASK_INTERVAL => p.max_interval_s = v,
+                    _ => p.speed_step_rpm = v,
+                }
+                return Ok(Command::AskChanged);
             }
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;

@@ -108,6 +108,8 @@ impl Snapshot {
             w
         } else if addr == IR_PROBE_STATE {
             self.probe_state
+        } else if addr == IR_REF_WANTED {
+            self.reference_wanted
         } else if let Some(k) = in_block(IR_CORRECTIONS, 2 * MAX_DIRECTIONS) {
             block_word(&self.corrections, k).unwrap_or(0)
         } else if let Some(k) = in_block(IR_PREDICTIONS, 2 * MAX_DIRECTIONS) {
