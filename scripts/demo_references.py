@@ -8,7 +8,9 @@ board (its own unlock key), names the direction the probe measures
 (holding register 40), then, while the trace runs, reads the served
 corrections (input registers 3-53, one request: one consistent snapshot)
 as often as it can and writes command 12 ("take a probe reference") once
-per `--every-s` of trace time. It prints each reference as the board
+per `--every-s` of trace time, or, with `--when-asked`, only while the
+board asks for one (input register 23, by the rule holding registers 46-48
+set: issue 51). It prints each reference as the board
 reports it (input registers 300-311) and the served error against the
 measured displacement of the trace (`--column`), without and with
 references, from the snapshots it read.
@@ -22,7 +24,8 @@ of both figures (and counted).
   demo_references.py trace demo/trace.csv probe.csv --column dch3_um [--noise-um 0.3] [--seed 28]
       [--chip FROM_H:HOURS:UM]
   demo_references.py run --pty /dev/pts/N --trace probe.csv --column dch3_um
-      [--direction 0] [--every-s 3600] [--split-s T] [--json OUT]
+      [--direction 0] [--every-s 3600 | --when-asked 900:4200:500 [--retry-s 600]]
+      [--split-s T] [--json OUT]
 """
 import argparse
 import csv
@@ -38,11 +41,13 @@ import time
 # Protocol addresses (protocol/src/holding.rs, registers.rs).
 HR_UNLOCK, HR_COMMAND, HR_RESULT = 0, 1, 2
 HR_PROBE_DIRECTION, HR_REFERENCE_SAMPLES = 40, 41
+HR_ASK_SETTLE, HR_ASK_INTERVAL, HR_ASK_SPEED_STEP = 46, 47, 48
 HR_KEY_STATE, HR_NEW_UNLOCK_KEY = 66, 67
 FACTORY_UNLOCK_CODE = 0xA5C3
 CMD_TAKE_PROBE_REFERENCE, CMD_RESET_REFERENCE_TERMS, CMD_SET_UNLOCK_KEY = 12, 13, 15
 IR_STATUS, IR_SAMPLE_TIME, IR_CORRECTIONS, IR_PREDICTIONS = 3, 10, 30, 42
-IR_PROBE, IR_REF = 20, 300
+IR_PROBE, IR_REF_WANTED, IR_REF = 20, 23, 300
+WANTED_NAMES = {1: "speed change", 2: "interval"}
 OK, COMMIT_IN_PROGRESS, PROBE_REFERENCE_PENDING, REFERENCE_REFUSED = 0, 23, 60, 61
 RESULT_NAMES = {0: "accepted", 61: "refused", 62: "probe not ready",
                 63: "no probe direction", 64: "probe temperature missing"}
@@ -147,7 +152,8 @@ def measured_column(trace, column):
 
 
 def snapshot(master, d):
-    """(status, sample time s, served, model prediction) of direction d (µm), one request."""
+    """(status, sample time s, served, model prediction) of direction d (µm) and
+    input register 23 (a reference wanted, and why), one request."""
     w = master.read_inputs(SNAPSHOT_FIRST, SNAPSHOT_COUNT)
     if w is None:
         return None
@@ -155,7 +161,7 @@ def snapshot(master, d):
     t = (w[at(IR_SAMPLE_TIME)] << 16) | w[at(IR_SAMPLE_TIME) + 1]
     served = i32(w[at(IR_CORRECTIONS) + 2 * d], w[at(IR_CORRECTIONS) + 2 * d + 1]) / 10
     model = i32(w[at(IR_PREDICTIONS) + 2 * d], w[at(IR_PREDICTIONS) + 2 * d + 1]) / 10
-    return w[at(IR_STATUS)], t, served, model
+    return w[at(IR_STATUS)], t, served, model, w[at(IR_REF_WANTED)]
 
 
 def take_reference(master, key, d, between=None):
@@ -178,9 +184,9 @@ def figures(samples, measured, split_s):
         parts["held-out"] = lambda t: t >= split_s
     out = {}
     for name, keep in parts.items():
-        rows = [(measured[t], s, m) for (st, t, s, m) in samples
+        rows = [(measured[t], s, m) for (st, t, s, m, _) in samples
                 if keep(t) and t in measured and not st & NOT_PLAIN]
-        left_out = sum(1 for (st, t, _, _) in samples if keep(t) and st & NOT_PLAIN)
+        left_out = sum(1 for (st, t, *_) in samples if keep(t) and st & NOT_PLAIN)
         n = max(len(rows), 1)
         err = lambda f: ([abs(f(r)) for r in rows], [f(r) ** 2 for r in rows])  # noqa: E731
         (a_w, q_w), (a_m, q_m) = err(lambda r: r[0] - r[1]), err(lambda r: r[0] - r[2])
@@ -240,8 +246,15 @@ def run(master, args):
     key = commission(master)
     if not write_unlocked(master, key, HR_PROBE_DIRECTION, d) or wait_result(master) != OK:
         sys.exit("error: the board refused holding register 40 (probe direction)")
+    asked = None
+    if args.when_asked:
+        asked = [int(x) for x in args.when_asked.split(":")]
+        for reg, v in zip((HR_ASK_SETTLE, HR_ASK_INTERVAL, HR_ASK_SPEED_STEP), asked):
+            if not write_unlocked(master, key, reg, v) or wait_result(master) != OK:
+                sys.exit(f"error: the board refused holding register {reg} (when to ask)")
     poller, refs = Poller(master, d, args.quiet_s), []
     next_ref, end_s = args.every_s, max(measured)
+    retry_at = 0
     print("each reference as the board reports it: when the PLC asked (trace time), when the board"
           " took it (IR 300-301), the innovation (IR 302-303: probe reading - model - bias, um),"
           " the outcome (HR 2), the bias term b after it (IR 306 + direction, um), accepted/refused"
@@ -251,20 +264,33 @@ def run(master, args):
         s = poller.poll()
         if s is not None and s[1] >= end_s:
             break  # the trace's last row: the board keeps serving it
-        if s is None or s[1] < next_ref:
+        if s is None:
             continue
         t = s[1]
+        if asked is not None:
+            # The PLC probes only when the board asks (input register 23);
+            # after a refusal it waits --retry-s of trace time.
+            if s[4] == 0 or t < retry_at:
+                continue
+        elif t < next_ref:
+            continue
         ref = take_reference(master, key, d, between=poller.poll)
         ref["asked_at_s"] = t
+        if asked is not None:
+            ref["wanted"] = WANTED_NAMES.get(s[4], str(s[4]))
+            if ref["result"] != OK:
+                retry_at = t + args.retry_s
         refs.append(ref)
         if "time_s" in ref:
             taken = "-" if ref["result"] != OK else f"{ref['time_s'] / 3600:8.2f} h"
             print(f"{t / 3600:8.2f} h {taken:>10} {ref['innovation_um']:10.1f} {ref['outcome']:>9}"
-                  f" {ref['bias_um']:7.1f} {ref['accepted']:>3}/{ref['refused']:<3}")
+                  f" {ref['bias_um']:7.1f} {ref['accepted']:>3}/{ref['refused']:<3}"
+                  + (f"  (asked: {ref['wanted']})" if "wanted" in ref else ""))
         else:
             print(f"{t / 3600:8.2f} h  {ref['outcome']}")
         next_ref = (t // args.every_s + 1) * args.every_s
-    return {"direction": d, "column": args.column, "every_s": args.every_s,
+    return {"direction": d, "column": args.column,
+            "every_s": None if asked else args.every_s, "when_asked": asked,
             "split_s": args.split_s, "references": refs,
             "figures": figures(list(poller.samples.values()), measured, args.split_s)}
 
@@ -297,7 +323,12 @@ def main():
     ap.add_argument("--trace", required=True)
     ap.add_argument("--column", required=True, help="measured displacement the probe direction serves")
     ap.add_argument("--direction", type=int, default=0)
-    ap.add_argument("--every-s", type=int, default=3600)
+    ap.add_argument("--every-s", type=int, default=3600, help="probe once per this much trace time")
+    ap.add_argument("--when-asked", metavar="SETTLE_S:INTERVAL_S:STEP_RPM",
+                    help="instead of --every-s: set holding registers 46-48 and probe only while"
+                         " input register 23 says a reference is wanted")
+    ap.add_argument("--retry-s", type=int, default=600,
+                    help="with --when-asked: after a refused reference wait this much trace time")
     ap.add_argument("--split-s", type=int, default=None, help="held-out part from this trace time")
     ap.add_argument("--quiet-s", type=float, default=2.5, help="stop when the sample time stands still this long")
     ap.add_argument("--json", help="write the report here")

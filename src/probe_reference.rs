@@ -148,8 +148,8 @@ impl References {
 
     /// A reference was accepted at `now_ms`: the request clears and the
     /// schedule starts again from here.
-    pub fn ask_referenced(&mut self, now_ms: u64) {
-        self.ask.referenced(now_ms);
+    pub fn ask_referenced(&mut self, params: &AskParams, now_ms: u64) {
+        self.ask.referenced(params, now_ms);
         self.ask_saved = self.ask.to_bytes(now_ms);
     }
 

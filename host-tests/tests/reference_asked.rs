@@ -128,7 +128,7 @@ fn the_board_asks_when_the_rule_says_and_only_an_accepted_reference_clears_it() 
             let code = reference(&mut app, &rig, t, offset);
             if refused_once {
                 assert_eq!(code, result::OK);
-                rule.referenced(t);
+                rule.referenced(&p, t);
                 taken += 1;
             } else {
                 assert_eq!(code, result::REFERENCE_REFUSED);

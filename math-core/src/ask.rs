@@ -11,9 +11,10 @@
 //! - *speed change*: the spindle speed moves by at least
 //!   `speed_step_rpm` from the speed held at the last change (or at the
 //!   first reading); the change time is noted (a later change within the
-//!   settling time moves it). `settle_s` after the last change, with no
-//!   accepted reference since the change, a reference is wanted (reason
-//!   [`AskReason::SpeedChange`]);
+//!   settling time moves it). `settle_s` after the last change a reference
+//!   is wanted (reason [`AskReason::SpeedChange`]), unless one was accepted
+//!   after the settling time had passed (a reference taken during the
+//!   transient does not answer for the settled state);
 //! - *interval*: `max_interval_s` after the last accepted reference (or
 //!   after the schedule started), a reference is wanted (reason
 //!   [`AskReason::Interval`]);
@@ -161,11 +162,19 @@ impl AskState {
         reason != AskReason::None
     }
 
-    /// An accepted reference at `now_ms`: the request is cleared and the
-    /// interval and any pending speed change start again from here.
-    pub fn referenced(&mut self, now_ms: u64) {
-        self.last_reference_ms = clock(now_ms);
-        self.change_ms = None;
+    /// An accepted reference at `now_ms` under `p`: the request is cleared
+    /// and the interval starts again from here; a speed change counts as
+    /// answered only once its settling time has passed.
+    pub fn referenced(&mut self, p: &AskParams, now_ms: u64) {
+        let now_ms = clock(now_ms);
+        self.last_reference_ms = now_ms;
+        let settle = u64::from(p.settle_s) * 1000;
+        if self
+            .change_ms
+            .is_some_and(|t| now_ms.saturating_sub(t) >= settle)
+        {
+            self.change_ms = None;
+        }
         self.wanted = AskReason::None;
     }
 
@@ -229,7 +238,7 @@ mod tests {
         // Raised once; stays raised until a reference is accepted.
         assert!(!s.step(&P, 17 * MIN, Some(3000)));
         assert_eq!(s.wanted(), AskReason::SpeedChange);
-        s.referenced(18 * MIN);
+        s.referenced(&P, 18 * MIN);
         assert_eq!(s.wanted(), AskReason::None);
         assert!(!s.step(&P, 40 * MIN, Some(3000)));
     }
@@ -252,9 +261,25 @@ mod tests {
         assert!(!s.step(&P, 69 * MIN, Some(1000)));
         assert!(s.step(&P, 70 * MIN, Some(1000)));
         assert_eq!(s.wanted(), AskReason::Interval);
-        s.referenced(72 * MIN);
+        s.referenced(&P, 72 * MIN);
         assert!(!s.step(&P, 141 * MIN, Some(1000)));
         assert!(s.step(&P, 142 * MIN, Some(1000)));
+    }
+
+    #[test]
+    fn a_reference_within_the_settling_time_leaves_the_change_to_be_asked() {
+        let mut s = AskState::new(0);
+        s.step(&P, 0, Some(1000));
+        s.step(&P, 60 * MIN, Some(3000)); // a change at 60 min...
+        assert!(s.step(&P, 70 * MIN, Some(3000))); // ...and the interval due
+        assert_eq!(s.wanted(), AskReason::Interval);
+        s.referenced(&P, 71 * MIN); // within the change's settling time
+        assert!(s.step(&P, 75 * MIN, Some(3000)));
+        assert_eq!(s.wanted(), AskReason::SpeedChange);
+        s.referenced(&P, 76 * MIN);
+        assert!(!s.step(&P, 140 * MIN, Some(3000)));
+        assert!(s.step(&P, 146 * MIN, Some(3000)));
+        assert_eq!(s.wanted(), AskReason::Interval);
     }
 
     #[test]

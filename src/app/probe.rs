@@ -86,7 +86,8 @@ impl<F: BackgroundErase> App<F> {
                     }
                 };
                 if code == result::OK {
-                    self.references.ask_referenced(now_ms);
+                    let ask = self.state.ask;
+                    self.references.ask_referenced(&ask, now_ms);
                 }
                 self.stored_result = Some(code);
                 self.publish_references();
