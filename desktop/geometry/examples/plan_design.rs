@@ -7,7 +7,8 @@
 //! `cargo run -p tcomp-geometry --release --example plan_design [-- ADD]`
 
 use tcomp_geometry::lines::plan14;
-use tcomp_geometry::plan::{design, evaluate, null_directions, pool, rich_lines, CLASS_DEGREE};
+use tcomp_geometry::plan::{evaluate, null_directions, pool, rich_lines, CLASS_DEGREE};
+use tcomp_geometry::plan_design::design;
 use tcomp_geometry::Structure;
 
 fn main() {

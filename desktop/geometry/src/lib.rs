@@ -29,6 +29,7 @@ pub mod guard;
 pub mod identify;
 pub mod lines;
 pub mod plan;
+pub mod plan_design;
 pub mod predict;
 pub mod rotary;
 pub mod rtest;

@@ -30,7 +30,7 @@
 //!   line's zero free) and the fewest of the plan's lines, in
 //!   order, that have none.
 //!
-//! [`design`] picks lines from a candidate pool ([`pool`]: today's 14, face
+//! [`crate::plan_design::design`] picks lines from a candidate pool ([`pool`]: today's 14, face
 //! lines between half-stroke grid points with slopes unlike the corner
 //! diagonals and shifted parallel in their plane, body lines of such
 //! slopes, axis-parallel lines at other grid positions, each with six
@@ -76,7 +76,7 @@ pub const MAX_LINES: usize = 28;
 
 /// One unknown of the class.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Col {
+pub(crate) enum Col {
     Term { term: Term, j: usize },
     Squareness(usize),
 }
@@ -136,7 +136,7 @@ fn prior_sd(c: &Col) -> f64 {
 
 /// A line's rows for the class, each column centred (the line's free zero
 /// removed), and its laser-scale column (µm per ppm), centred.
-fn line_rows(
+pub(crate) fn line_rows(
     st: &Structure,
     stroke: [f64; 3],
     cols: &[Col],
@@ -171,7 +171,7 @@ fn line_rows(
 
 /// The line's information in whitened form B (BᵀB), its zero and laser
 /// scale integrated out: BᵀB = Ãᵀ(σ²I + s²ããᵀ)⁻¹Ã on the centred rows.
-fn whitened(a: &DMatrix<f64>, sc: &DVector<f64>, sigma: f64) -> DMatrix<f64> {
+pub(crate) fn whitened(a: &DMatrix<f64>, sc: &DVector<f64>, sigma: f64) -> DMatrix<f64> {
     let s2 = SCALE_PPM * SCALE_PPM;
     let n2 = sc.norm_squared();
     let mut b = a / sigma;
@@ -218,17 +218,17 @@ pub struct Criterion {
 }
 
 /// The stated class and the evaluation points of every error.
-struct Setup {
-    cols: Vec<Col>,
+pub(crate) struct Setup {
+    pub(crate) cols: Vec<Col>,
     /// n × m: column q is the linear functional "error e at position u".
-    phi: DMatrix<f64>,
+    pub(crate) phi: DMatrix<f64>,
     /// Per evaluation point: (error index 0‥20, angular).
-    which: Vec<(usize, bool)>,
-    names: Vec<(String, bool)>,
-    prior_precision: DVector<f64>,
+    pub(crate) which: Vec<(usize, bool)>,
+    pub(crate) names: Vec<(String, bool)>,
+    pub(crate) prior_precision: DVector<f64>,
 }
 
-fn setup(degree: usize) -> Setup {
+pub(crate) fn setup(degree: usize) -> Setup {
     let cols = columns(degree);
     let mut names = Vec::new();
     let mut evals: Vec<Vec<(usize, f64)>> = Vec::new();
@@ -278,7 +278,7 @@ fn setup(degree: usize) -> Setup {
 }
 
 /// Per error: the largest variance over its evaluation points.
-fn worst_variances(s: &Setup, var: &[f64]) -> Vec<f64> {
+pub(crate) fn worst_variances(s: &Setup, var: &[f64]) -> Vec<f64> {
     let mut w = vec![0.0f64; s.names.len()];
     for (q, (e, _)) in s.which.iter().enumerate() {
         w[*e] = w[*e].max(var[q]);
@@ -288,7 +288,7 @@ fn worst_variances(s: &Setup, var: &[f64]) -> Vec<f64> {
 
 /// The design objective from per-error worst variances: the worst σ in
 /// units of the tolerance, plus a hundredth of the mean (ties).
-fn objective(s: &Setup, worst_var: &[f64]) -> f64 {
+pub(crate) fn objective(s: &Setup, worst_var: &[f64]) -> f64 {
     let r: Vec<f64> = worst_var
         .iter()
         .zip(&s.names)
@@ -299,11 +299,11 @@ fn objective(s: &Setup, worst_var: &[f64]) -> f64 {
 }
 
 /// Noise of a line's (two-run averaged) reading [µm].
-fn reading_sigma(noise_um: f64) -> f64 {
+pub(crate) fn reading_sigma(noise_um: f64) -> f64 {
     (noise_um / 2f64.sqrt()).max(1e-6)
 }
 
-fn posterior_cov(s: &Setup, bs: &[DMatrix<f64>]) -> DMatrix<f64> {
+pub(crate) fn posterior_cov(s: &Setup, bs: &[DMatrix<f64>]) -> DMatrix<f64> {
     let n = s.cols.len();
     let mut m = DMatrix::from_diagonal(&s.prior_precision);
     for b in bs {
@@ -314,7 +314,7 @@ fn posterior_cov(s: &Setup, bs: &[DMatrix<f64>]) -> DMatrix<f64> {
         .unwrap_or_else(|| DMatrix::identity(n, n))
 }
 
-fn variances(s: &Setup, c: &DMatrix<f64>) -> Vec<f64> {
+pub(crate) fn variances(s: &Setup, c: &DMatrix<f64>) -> Vec<f64> {
     let cp = c * &s.phi;
     (0..s.phi.ncols())
         .map(|q| s.phi.column(q).dot(&cp.column(q)))
@@ -621,108 +621,6 @@ pub fn plan14_grid() -> Vec<GridLine> {
         g([2, 0, 2], [2, 2, 2], Long),
         g([0, 0, 0], [0, 0, 2], PlusXY),
     ]
-}
-
-/// Greedy addition, then exchange, of `add` lines from `pool` to the fixed
-/// `base` lines, on the stated criterion at `noise_um`. Returns the chosen
-/// pool indices in the order they were added and the objective after each
-/// addition (worst σ in tolerance units + a hundredth of the mean).
-pub fn design(
-    st: &Structure,
-    stroke: [f64; 3],
-    base: &[LineSpec],
-    pool: &[LineSpec],
-    add: usize,
-    noise_um: f64,
-) -> (Vec<usize>, Vec<f64>) {
-    let s = setup(CLASS_DEGREE);
-    let sigma = reading_sigma(noise_um);
-    let white = |l: &LineSpec| {
-        let (a, sc) = line_rows(st, stroke, &s.cols, l);
-        whitened(&a, &sc, sigma)
-    };
-    let base_b: Vec<DMatrix<f64>> = base.iter().map(white).collect();
-    let cand: Vec<DMatrix<f64>> = pool.iter().map(white).collect();
-    let mut c = posterior_cov(&s, &base_b);
-    // The objective with candidate b added to the posterior c (Woodbury).
-    let with = |c: &DMatrix<f64>,
-                v0: &[f64],
-                b: &DMatrix<f64>|
-     -> Option<(f64, DMatrix<f64>, DMatrix<f64>)> {
-        let bc = b * c;
-        let k = DMatrix::identity(b.nrows(), b.nrows()) + &bc * b.transpose();
-        let kc = k.cholesky()?;
-        let g = &bc * &s.phi;
-        let kg = kc.solve(&g);
-        let var: Vec<f64> = (0..g.ncols())
-            .map(|q| v0[q] - g.column(q).dot(&kg.column(q)))
-            .collect();
-        Some((objective(&s, &worst_variances(&s, &var)), bc, kc.inverse()))
-    };
-    let update = |c: &DMatrix<f64>, bc: &DMatrix<f64>, kinv: &DMatrix<f64>| -> DMatrix<f64> {
-        c - bc.transpose() * kinv * bc
-    };
-    let mut chosen: Vec<usize> = Vec::new();
-    let mut trace = Vec::new();
-    for _ in 0..add {
-        let v0 = variances(&s, &c);
-        let mut best: Option<(f64, usize, DMatrix<f64>, DMatrix<f64>)> = None;
-        for (i, b) in cand.iter().enumerate() {
-            if chosen.contains(&i) {
-                continue;
-            }
-            if let Some((j, bc, kinv)) = with(&c, &v0, b) {
-                if best.as_ref().is_none_or(|x| j < x.0) {
-                    best = Some((j, i, bc, kinv));
-                }
-            }
-        }
-        let Some((j, i, bc, kinv)) = best else { break };
-        c = update(&c, &bc, &kinv);
-        chosen.push(i);
-        trace.push(j);
-    }
-    // Exchange: replace an added line by a better candidate while one is found.
-    for _pass in 0..3 {
-        let mut improved = false;
-        for slot in 0..chosen.len() {
-            let v_now = objective(&s, &worst_variances(&s, &variances(&s, &c)));
-            // Remove the slot's line: (M − BᵀB)⁻¹ = C + CBᵀ(I − BCBᵀ)⁻¹BC.
-            let b = &cand[chosen[slot]];
-            let bc = b * &c;
-            let k = DMatrix::identity(b.nrows(), b.nrows()) - &bc * b.transpose();
-            let Some(kinv) = k.try_inverse() else {
-                continue;
-            };
-            let c_minus = &c + bc.transpose() * kinv * &bc;
-            let v0 = variances(&s, &c_minus);
-            let mut best: Option<(f64, usize, DMatrix<f64>, DMatrix<f64>)> = None;
-            for (i, b) in cand.iter().enumerate() {
-                if chosen.contains(&i) {
-                    continue;
-                }
-                if let Some((j, bc, kinv)) = with(&c_minus, &v0, b) {
-                    if best.as_ref().is_none_or(|x| j < x.0) {
-                        best = Some((j, i, bc, kinv));
-                    }
-                }
-            }
-            if let Some((j, i, bc, kinv)) = best {
-                if j < v_now - 1e-9 {
-                    c = update(&c_minus, &bc, &kinv);
-                    chosen[slot] = i;
-                    improved = true;
-                }
-            }
-        }
-        if !improved {
-            break;
-        }
-    }
-    if let Some(last) = trace.last_mut() {
-        *last = objective(&s, &worst_variances(&s, &variances(&s, &c)));
-    }
-    (chosen, trace)
 }
 
 /// The 14 lines `design` added to today's 14 from [`pool`] for the default
