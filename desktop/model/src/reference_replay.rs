@@ -27,73 +27,39 @@ use crate::replay::ReplayRow;
 use tcomp_data::rng::Rng;
 use tcomp_data::runcsv::Run;
 
-/// Command-line flags of `tcomp replay` for references and re-zeros.
+/// The references and re-zeros `tcomp replay` simulates, as its flags give
+/// them (text as typed; parsed here).
 #[derive(Debug, Clone, Default)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct ReferenceArgs {
     /// Simulate a probe reference at the gauge every this long (`1h`,
     /// `30min`, `900s`, `900`), from the run's start.
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-every", value_name = "DURATION")
-    )]
     pub every: Option<String>,
     /// Shift the clock schedule: the first reference this long after the
     /// run's start, then every `--reference-every` (`10min`; below the
     /// interval). 0 (the default): the first at one interval. Clock phase
     /// moves the figures a lot (a reference minutes before a speed change
     /// teaches little): compare schedules over several phases.
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-phase", value_name = "DURATION")
-    )]
     pub phase: Option<String>,
     /// Also simulate a reference this long after every change of the run's
     /// `spindle_rpm` (a probing cycle triggered by the operating state
     /// rather than the clock), e.g. `10min`.
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-after-change", value_name = "DURATION")
-    )]
     pub after_change: Option<String>,
     /// σ of the simulated probe noise, µm (also the rule's σ_r unless
     /// `--reference-param sigma_ref_um=` says otherwise).
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-noise-um", default_value_t = 0.3)
-    )]
     pub noise_um: f64,
     /// Corrupt a share of the references: `5%:50` = 5 % of them +50 µm.
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-outliers", value_name = "SHARE%:UM")
-    )]
     pub outliers: Option<String>,
     /// Seed of the simulated noise and outliers.
-    #[cfg_attr(feature = "cli", arg(long = "reference-seed", default_value_t = 1))]
     pub seed: u64,
     /// Operator re-zero (touch-off) at this time: seconds of the run or a
     /// percentage of its rows (`60%`); repeatable.
-    #[cfg_attr(
-        feature = "cli",
-        arg(
-            long = "reference-at",
-            visible_alias = "rezero-at",
-            value_name = "TIME"
-        )
-    )]
     pub rezero_at: Vec<String>,
     /// A parameter of the update rule, NAME=VALUE: sigma_ref_um,
     /// sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k,
     /// gate_abs_um, max_step_um, max_bias_um, max_rate_um_h; repeatable.
-    #[cfg_attr(
-        feature = "cli",
-        arg(long = "reference-param", value_name = "NAME=VALUE")
-    )]
     pub params: Vec<String>,
     /// Write every row (time, per direction: measured, model, served with
     /// references) to this CSV.
-    #[cfg_attr(feature = "cli", arg(long = "reference-dump", value_name = "CSV"))]
     pub dump: Option<std::path::PathBuf>,
 }
 

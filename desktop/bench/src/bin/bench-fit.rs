@@ -18,10 +18,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use indicatif::ProgressBar;
 use tcomp_data::runcsv::Run;
 use tcomp_model::fit::net::NetOpts;
-use tcomp_model::fit::pipeline::{fit_plan, train_ensemble, FitConfig, NetInfo, Plan};
+use tcomp_model::fit::pipeline::{
+    fit_plan, fit_plan_with, train_ensemble, FitConfig, NetInfo, Plan, Progress, Silent,
+};
 use tcomp_model::fit::*;
 
 const PUBLISHED: [(&str, f64); 2] = [("dch3_um", 3.70), ("dch5_um", 4.28)];
@@ -113,62 +114,45 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
-/// The command line, read as each figure group needs it (a bad number is
-/// reported when its group comes).
-struct Args(Vec<String>);
-
-impl Args {
-    fn flag(&self, name: &str) -> bool {
-        self.0.iter().any(|a| a == name)
-    }
-
-    fn opt(&self, name: &str) -> Option<String> {
-        self.0
-            .iter()
-            .position(|a| a == name)
-            .and_then(|i| self.0.get(i + 1))
-            .cloned()
-    }
-
-    fn number(&self, name: &str, default: usize) -> Result<usize> {
-        Ok(self
-            .opt(name)
-            .map(|s| s.parse())
-            .transpose()
-            .context(name.to_string())?
-            .unwrap_or(default))
-    }
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    name = "bench-fit",
+    about = "Benchmarks of `tcomp fit` on FL_THERMAL: test MAE against the published figures, seed spread, the 500,000-row fit time, GA + LM against scikit-learn"
+)]
+struct Args {
+    /// Print the figures as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Skip the scikit-learn comparison (scripts/bench-sklearn.py).
+    #[arg(long = "no-sklearn")]
+    no_sklearn: bool,
+    /// The FL_THERMAL run CSV (default: shared/data/caiviac-fl-thermal/run.csv).
+    #[arg(long, value_name = "CSV", default_value_os_t = default_data(), hide_default_value = true)]
+    data: PathBuf,
+    /// Networks per ensemble in the FL_THERMAL fit.
+    #[arg(long, value_name = "N", default_value_t = NetOpts::default().ensemble)]
+    ensemble: usize,
+    /// Refits of the seed spread (ensemble base seeds 1, 5, 9, ...; 0 skips it).
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    seeds: usize,
+    /// Rows of the fit-time case (FL_THERMAL interpolated; 0 skips it).
+    #[arg(long = "big-rows", value_name = "N", default_value_t = 500_000)]
+    big_rows: usize,
+    /// Write the fit-time case's run CSV to this file.
+    #[arg(long = "write-big", value_name = "FILE")]
+    write_big: Option<String>,
 }
 
 fn run() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    tcomp_data::cli_error::check_args(
-        &args,
-        &["--json", "--no-sklearn"],
-        &[
-            "--data",
-            "--ensemble",
-            "--seeds",
-            "--big-rows",
-            "--write-big",
-        ],
-    )?;
-    let args = Args(args);
-    let json = args.flag("--json");
-    let no_sklearn = args.flag("--no-sklearn");
-    let data = args
-        .opt("--data")
-        .map(PathBuf::from)
-        .unwrap_or_else(default_data);
-    let ensemble = args.number("--ensemble", NetOpts::default().ensemble)?;
-    let run = Run::read(&data).with_context(|| "FL_THERMAL data (give --data <run.csv>)")?;
+    let args: Args = tcomp_bench::cli::parse()?;
+    let json = args.json;
+    let run = Run::read(&args.data).with_context(|| "FL_THERMAL data (give --data <run.csv>)")?;
 
-    let fl = fit_fl_thermal(&run, ensemble, json)?;
-    let n_seeds = args.number("--seeds", 5)?;
-    let seeds_out = seed_spread(&fl.plan, &fl.cfg, n_seeds, json)?;
-    let big_rows = args.number("--big-rows", 500_000)?;
-    let big = big_fit(&run, &fl.cfg, big_rows, args.opt("--write-big"), json)?;
-    let t4 = timing_4h(&run, no_sklearn)?;
+    let fl = fit_fl_thermal(&run, args.ensemble, json)?;
+    let seeds_out = seed_spread(&fl.plan, &fl.cfg, args.seeds, json)?;
+    let big = big_fit(&run, &fl.cfg, args.big_rows, args.write_big, json)?;
+    let t4 = timing_4h(&run, args.no_sklearn)?;
     let out = serde_json::json!({"fl_thermal": fl.table, "fl_thermal_fit_s": fl.secs, "fl_thermal_fit_cpu_s": fl.cpu,
         "seed_spread": seeds_out, "big_fit": big, "timing_4h_1hz": t4.json()});
     if json {
@@ -216,10 +200,12 @@ fn fit_fl_thermal(run: &Run, ensemble: usize, json: bool) -> Result<FlThermal> {
             ensemble,
             ..NetOpts::default()
         },
-        progress: !json,
         ..FitConfig::default()
     };
-    let rep = fit_plan(&plan, &cfg)?;
+    // The bar on the terminal, unless the output is JSON.
+    let bar = tcomp_bench::progress::Bar::default();
+    let progress: &dyn Progress = if json { &Silent } else { &bar };
+    let rep = fit_plan_with(&plan, &cfg, progress)?;
     let secs = t_a.elapsed().as_secs_f64();
     let cpu = cpu_s().zip(ca).map(|(b, a)| b - a);
     let mae = |model: &str, ch: &str| {
@@ -274,7 +260,6 @@ fn seed_spread(
                 seed,
                 ..cfg.net.clone()
             },
-            progress: false,
             ..cfg.clone()
         };
         let r = fit_plan(plan, &c)?;
@@ -337,11 +322,7 @@ fn big_fit(
     let t_c = Instant::now();
     let c0 = cpu_s();
     let planb = Plan::new(vec![rb], vec!["fl-big".into()], 1, Some((0.6, 0.8)))?;
-    let c = FitConfig {
-        progress: false,
-        ..cfg.clone()
-    };
-    let r = fit_plan(&planb, &c)?;
+    let r = fit_plan(&planb, cfg)?;
     let secs = t_c.elapsed().as_secs_f64();
     let cpu = cpu_s().zip(c0).map(|(b, a)| b - a);
     let big = serde_json::json!({"rows": n, "fit_s": secs, "fit_cpu_s": cpu, "target_s": 30.0,
@@ -388,15 +369,7 @@ fn timing_4h(run: &Run, no_sklearn: bool) -> Result<Timing4h> {
     let specs = ranged_specs(&kinds, &full);
     let opts = NetOpts::default();
     let t_b = Instant::now();
-    let (members, infos) = train_ensemble(
-        &specs,
-        ch,
-        &inner,
-        &block,
-        &full,
-        &opts,
-        &ProgressBar::hidden(),
-    );
+    let (members, infos) = train_ensemble(&specs, ch, &inner, &block, &full, &opts, &Silent);
     let ours_s = t_b.elapsed().as_secs_f64();
     let info = infos.into_iter().next().unwrap_or_default();
     let np = NetEnsemble {

@@ -6,11 +6,11 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 use super::net::{self, Net, NetOpts};
 use super::plan::{FitConfig, Plan};
+use super::progress::{Progress, Silent};
 use anyhow::Result;
 
 use super::greedy::SELECT_ROWS;
@@ -33,18 +33,6 @@ pub struct NetInfo {
     pub lm_s: f64,
 }
 
-pub(crate) fn progress_bar(show: bool, len: u64, msg: String) -> ProgressBar {
-    if !show {
-        return ProgressBar::hidden();
-    }
-    let pb = ProgressBar::new(len);
-    if let Ok(style) = ProgressStyle::with_template("{msg:>18} [{bar:40}] {pos}/{len} {elapsed}") {
-        pb.set_style(style.progress_chars("=> "));
-    }
-    pb.set_message(msg);
-    pb
-}
-
 /// Train one channel's network: GA on the fit part, LM with early stopping on
 /// the time block, then (optionally) LM on all training rows for the best
 /// number of steps from the same GA start. Inputs are raw; `specs` carry the
@@ -56,7 +44,7 @@ fn train_gabpn_once(
     block: &Samples,
     full: &Samples,
     opts: &NetOpts,
-    pb: &ProgressBar,
+    progress: &dyn Progress,
 ) -> (NetParams, NetInfo) {
     let n = full.y.len().max(1) as f64;
     let mean = full.y.iter().sum::<f64>() / n;
@@ -74,7 +62,7 @@ fn train_gabpn_once(
     let (xf, yf) = prep(full);
     let mut info = NetInfo::default();
     let t0 = Instant::now();
-    let (ga_net, hist) = net::ga_search(&xi, &yi, opts, pb);
+    let (ga_net, hist) = net::ga_search(&xi, &yi, opts, progress);
     info.ga_best_mse_norm = hist.last().copied().unwrap_or(f64::NAN);
     info.ga_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -83,11 +71,11 @@ fn train_gabpn_once(
     } else {
         Some((xb.as_slice(), yb.as_slice()))
     };
-    let es = net::train_lm(&ga_net, &xi, &yi, val, opts.lm_iters, opts, pb);
+    let es = net::train_lm(&ga_net, &xi, &yi, val, opts.lm_iters, opts, progress);
     info.best_iter = es.best_iter;
     info.es_val_mse_norm = es.val_mse;
     let final_net: Net = if opts.refit_full && val.is_some() {
-        let r = net::train_lm(&ga_net, &xf, &yf, None, es.best_iter.max(1), opts, pb);
+        let r = net::train_lm(&ga_net, &xf, &yf, None, es.best_iter.max(1), opts, progress);
         info.lm_iters = es.iters + r.iters;
         r.net
     } else {
@@ -117,7 +105,7 @@ pub fn train_ensemble(
     block: &Samples,
     full: &Samples,
     opts: &NetOpts,
-    pb: &ProgressBar,
+    progress: &dyn Progress,
 ) -> (Vec<NetParams>, Vec<NetInfo>) {
     use rayon::prelude::*;
     let inner = inner.strided(opts.max_rows);
@@ -130,7 +118,7 @@ pub fn train_ensemble(
                 seed: opts.seed.wrapping_add(k as u64),
                 ..opts.clone()
             };
-            train_gabpn_once(specs, channel, &inner, &block, &full, &o, pb)
+            train_gabpn_once(specs, channel, &inner, &block, &full, &o, progress)
         })
         .unzip()
 }
@@ -233,7 +221,7 @@ pub(crate) fn train_hybrid(
     block: &Samples,
     full: &Samples,
     opts: &NetOpts,
-    pb: &ProgressBar,
+    progress: &dyn Progress,
 ) -> Vec<NetParams> {
     let rb = residual_samples(mlr, block);
     let (members, _) = train_ensemble(
@@ -243,7 +231,7 @@ pub(crate) fn train_hybrid(
         &rb,
         &residual_samples(mlr, full),
         opts,
-        pb,
+        progress,
     );
     if rb.y.is_empty() {
         return members;
@@ -492,13 +480,7 @@ impl CvChannel<'_> {
         let va = &k.held_out;
         Ok(if name == "ga-bpn" {
             let (members, _) = train_ensemble(
-                &k.specs,
-                self.ch,
-                &inner_s,
-                &block_s,
-                &full_s,
-                &cfg.net,
-                &ProgressBar::hidden(),
+                &k.specs, self.ch, &inner_s, &block_s, &full_s, &cfg.net, &Silent,
             );
             let ens = NetEnsemble {
                 members: members.iter().collect(),
@@ -506,13 +488,7 @@ impl CvChannel<'_> {
             va.x.iter().map(|r| ens.predict_raw(r)).collect()
         } else {
             let members = train_hybrid(
-                &k.mlr,
-                &k.specs,
-                &inner_s,
-                &block_s,
-                &full_s,
-                &cfg.net,
-                &ProgressBar::hidden(),
+                &k.mlr, &k.specs, &inner_s, &block_s, &full_s, &cfg.net, &Silent,
             );
             let ens = NetEnsemble {
                 members: members.iter().collect(),

@@ -21,6 +21,7 @@ pub mod model;
 pub mod net;
 pub mod pipeline;
 pub mod plan;
+pub mod progress;
 pub mod report;
 pub mod ridge;
 pub mod samples;

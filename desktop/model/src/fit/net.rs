@@ -4,9 +4,9 @@
 //! genome), then Levenberg–Marquardt refines all weights on the full batch
 //! with early stopping on a time-block validation set.
 
-use indicatif::ProgressBar;
 use rayon::prelude::*;
 
+use super::progress::Progress;
 use tcomp_data::linalg::{least_squares, solve_spd};
 use tcomp_data::rng::Rng;
 
@@ -307,7 +307,12 @@ fn fitness(net: &mut Net, d: &GaRows) -> f64 {
 
 /// Genetic search of the hidden-layer weights. Returns the best network
 /// (output layer least-squares fitted) and its fitness history.
-pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) -> (Net, Vec<f64>) {
+pub fn ga_search(
+    x: &[Vec<f64>],
+    y: &[f64],
+    opts: &NetOpts,
+    progress: &dyn Progress,
+) -> (Net, Vec<f64>) {
     let n_in = x.first().map_or(0, Vec::len);
     let nh = opts.hidden;
     let genes = nh * (n_in + 1);
@@ -366,7 +371,7 @@ pub fn ga_search(x: &[Vec<f64>], y: &[f64], opts: &NetOpts, pb: &ProgressBar) ->
             .par_iter_mut()
             .for_each(|(n, f)| *f = fitness(n, &rows));
         pop = next;
-        pb.inc(1);
+        progress.step();
     }
     pop.sort_by(|a, b| a.1.total_cmp(&b.1));
     history.push(pop[0].1);
@@ -455,7 +460,7 @@ pub fn train_lm(
     val: Option<(&[Vec<f64>], &[f64])>,
     max_iters: usize,
     opts: &NetOpts,
-    pb: &ProgressBar,
+    progress: &dyn Progress,
 ) -> LmResult {
     let mut net = start.clone();
     let p = net.theta.len();
@@ -499,7 +504,7 @@ pub fn train_lm(
                 net = cand;
                 lambda = (lambda / 3.0).max(1e-12);
                 accepted += 1;
-                pb.inc(1);
+                progress.step();
                 stall = if (e0 - e1) < 1e-10 * e0.max(1e-300) {
                     stall + 1
                 } else {

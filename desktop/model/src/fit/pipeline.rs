@@ -14,7 +14,7 @@ pub use super::candidates::candidates;
 pub use super::choice::{
     choose_model, latest_block_rule, train_ensemble, CvScore, NetCandidates, NetInfo, NET_MODELS,
 };
-use super::choice::{cross_validate, progress_bar, train_hybrid};
+use super::choice::{cross_validate, train_hybrid};
 use super::fallback;
 use super::features;
 use super::greedy::{blocked_folds, greedy_select};
@@ -24,6 +24,7 @@ use super::model::{
     NetEnsemble, MODEL_NAMES,
 };
 pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
+pub use super::progress::{Progress, Silent};
 pub use super::report::{
     print_report, report_json, ChannelInfo, FitReport, ModelReport, RunMetrics,
 };
@@ -57,17 +58,28 @@ fn validate<M: Model>(m: &M, s: &Samples, plan: &Plan, per_run: &mut Vec<RunMetr
     metrics(&s.y, &pred)
 }
 
-/// Read runs and fit.
-pub fn run_fit(train: &[PathBuf], validate_runs: &[PathBuf], cfg: &FitConfig) -> Result<FitReport> {
+/// Read runs and fit, telling `progress` how far the fit is.
+pub fn run_fit(
+    train: &[PathBuf],
+    validate_runs: &[PathBuf],
+    cfg: &FitConfig,
+    progress: &dyn Progress,
+) -> Result<FitReport> {
     let mut runs = Vec::new();
     for p in train.iter().chain(validate_runs) {
         runs.push((p.display().to_string(), Run::read(p)?));
     }
-    fit_runs(runs, train.len(), cfg)
+    fit_runs(runs, train.len(), cfg, progress)
 }
 
-/// Fit runs already read (`(label, run)`, the first `n_train` train).
-pub fn fit_runs(runs: Vec<(String, Run)>, n_train: usize, cfg: &FitConfig) -> Result<FitReport> {
+/// Fit runs already read (`(label, run)`, the first `n_train` train),
+/// telling `progress` how far the fit is.
+pub fn fit_runs(
+    runs: Vec<(String, Run)>,
+    n_train: usize,
+    cfg: &FitConfig,
+    progress: &dyn Progress,
+) -> Result<FitReport> {
     let mut notes = Vec::new();
     let (labels, runs): (Vec<String>, Vec<Run>) = runs
         .into_iter()
@@ -78,14 +90,19 @@ pub fn fit_runs(runs: Vec<(String, Run)>, n_train: usize, cfg: &FitConfig) -> Re
         })
         .unzip();
     let plan = Plan::new(runs, labels, n_train, cfg.split_chrono)?;
-    let mut report = fit_plan(&plan, cfg)?;
+    let mut report = fit_plan_with(&plan, cfg, progress)?;
     notes.append(&mut report.notes);
     report.notes = notes;
     Ok(report)
 }
 
-/// Fit on a planned split.
+/// Fit on a planned split, silently.
 pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
+    fit_plan_with(plan, cfg, &Silent)
+}
+
+/// Fit on a planned split, telling `progress` each stage and step.
+pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> Result<FitReport> {
     let first = &plan.runs[plan.train[0].run];
     let (channels, ens) = checked_request(first, cfg)?;
     let folds = if cfg.select_folds <= 1 {
@@ -103,6 +120,7 @@ pub fn fit_plan(plan: &Plan, cfg: &FitConfig) -> Result<FitReport> {
         folds: &folds,
         static_idx: &candidates.static_idx,
         ens,
+        progress,
     };
     let mut acc = Fitted::new(notes);
     for ch in &channels {
@@ -195,6 +213,8 @@ struct ChannelFit<'a> {
     static_idx: &'a [usize],
     /// Networks per ensemble.
     ens: usize,
+    /// Where the stages and training steps are reported.
+    progress: &'a dyn Progress,
 }
 
 /// What the fit has gathered so far, and the board resources the fitted
@@ -274,13 +294,13 @@ impl ChannelFit<'_> {
             blend: !cfg.skip_net && cfg.blend,
             ridge: cfg.ridge,
         };
-        let pb = progress_bar(cfg.progress, 1, format!("cross-validating {ch}"));
+        self.progress.begin(&format!("cross-validating {ch}"));
         let mut cv = if self.folds.len() > 1 {
             cross_validate(cache, plan, self.folds, &idx, &static_ok, ch, cfg, with)?
         } else {
             BTreeMap::new()
         };
-        pb.finish_and_clear();
+        self.progress.end();
 
         let specs = ranged_specs(&kinds, &full);
         let mlr = fit_mlr(specs.clone(), &full, ch)?;
@@ -381,10 +401,10 @@ impl ChannelFit<'_> {
             static_idx: self.static_idx,
             cfg: self.cfg,
         };
-        let pb = progress_bar(self.cfg.progress, 1, "fallback models".into());
+        self.progress.begin("fallback models");
         let (params, reps) =
             fallback::fit_fallbacks(&ctx, &acc.file, channels, &mut acc.in_use, &mut acc.notes)?;
-        pb.finish_and_clear();
+        self.progress.end();
         acc.file.fallbacks = params;
         Ok(reps)
     }
@@ -495,10 +515,17 @@ impl ChannelFit<'_> {
         let block_s = cache.samples_capped(&plan.runs, &block, c.idx, ch, cfg.net.max_rows)?;
         let full_s = c.full.strided(cfg.net.max_rows);
         if with.net {
-            let pb = progress_bar(cfg.progress, 1, format!("GA-BPN {ch}"));
-            let (members, infos) =
-                train_ensemble(c.specs, ch, &inner_s, &block_s, &full_s, &cfg.net, &pb);
-            pb.finish_and_clear();
+            self.progress.begin(&format!("GA-BPN {ch}"));
+            let (members, infos) = train_ensemble(
+                c.specs,
+                ch,
+                &inner_s,
+                &block_s,
+                &full_s,
+                &cfg.net,
+                self.progress,
+            );
+            self.progress.end();
             let ens = NetEnsemble {
                 members: members.iter().collect(),
             };
@@ -519,9 +546,17 @@ impl ChannelFit<'_> {
         }
         let mut hybrid_empty = false;
         if with.hybrid {
-            let pb = progress_bar(cfg.progress, 1, format!("hybrid {ch}"));
-            let members = train_hybrid(c.mlr, c.specs, &inner_s, &block_s, &full_s, &cfg.net, &pb);
-            pb.finish_and_clear();
+            self.progress.begin(&format!("hybrid {ch}"));
+            let members = train_hybrid(
+                c.mlr,
+                c.specs,
+                &inner_s,
+                &block_s,
+                &full_s,
+                &cfg.net,
+                self.progress,
+            );
+            self.progress.end();
             if members.is_empty() {
                 acc.notes.push(format!(
                     "{ch}: the hybrid's residual networks did not lower the residual on the early-stopping block: the hybrid is the MLR alone"

@@ -44,7 +44,6 @@ pub struct FitConfig {
     /// Time blocks for the blocked cross-validation of `auto` (1 = the
     /// early-stopping block only).
     pub select_folds: usize,
-    pub progress: bool,
     pub skip_net: bool,
     /// A simpler model is chosen when its CV RMS is within this fraction of the best.
     pub choice_margin: f64,
@@ -80,7 +79,6 @@ impl Default for FitConfig {
             net: NetOpts::default(),
             es_frac: 0.15,
             select_folds: 5,
-            progress: false,
             skip_net: false,
             choice_margin: 0.02,
             hybrid: false,

@@ -204,7 +204,6 @@ impl FitArgs {
             );
         }
         cfg.choice_margin = self.choice_margin;
-        cfg.progress = !self.json;
         cfg.skip_net = self.mlr_only;
         cfg.hybrid = self.hybrid;
         cfg.cv_drop = !self.full_cv;
@@ -294,7 +293,10 @@ pub fn main(args: FitArgs) -> Result<()> {
         runs.push((label, r));
     }
     super::sanity::check_runs(runs.iter().map(|(l, r)| (l.as_str(), r)), &args.accept)?;
-    let report = run::fit_runs(runs, args.train.len(), &cfg)?;
+    // The bar on the terminal, unless the output is JSON.
+    let bar = super::progress::Bar::default();
+    let progress: &dyn run::Progress = if args.json { &run::Silent } else { &bar };
+    let report = run::fit_runs(runs, args.train.len(), &cfg, progress)?;
     if let Some(out) = &args.out {
         let text = serde_json::to_string_pretty(&report.model_file)?;
         std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;

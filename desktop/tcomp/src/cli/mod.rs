@@ -15,6 +15,7 @@ pub mod geometry_score;
 pub mod geometry_smooth;
 pub mod geometry_table;
 pub mod keys;
+pub mod progress;
 pub mod replay;
 pub mod sanity;
 pub mod select;

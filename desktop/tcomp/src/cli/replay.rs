@@ -2,6 +2,7 @@
 //! core, and its error against the measured channels.
 
 use anyhow::Context;
+use tcomp_model::reference_replay::ReferenceArgs;
 
 #[derive(clap::Args)]
 pub struct ReplayArgs {
@@ -21,10 +22,75 @@ pub struct ReplayArgs {
     pub fail_sensor: Vec<String>,
     /// Probe references at a gauge and operator re-zeros (issue 28).
     #[command(flatten)]
-    pub reference: tcomp_model::reference_replay::ReferenceArgs,
+    pub reference: ReferenceFlags,
     /// Print the figures as JSON (`channels`, `status_rows`, `notes`).
     #[arg(long)]
     pub json: bool,
+}
+
+/// `tcomp replay`'s flags for references and re-zeros; the library takes
+/// them as [`ReferenceArgs`].
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReferenceFlags {
+    /// Simulate a probe reference at the gauge every this long (`1h`,
+    /// `30min`, `900s`, `900`), from the run's start.
+    #[arg(long = "reference-every", value_name = "DURATION")]
+    pub every: Option<String>,
+    /// Shift the clock schedule: the first reference this long after the
+    /// run's start, then every `--reference-every` (`10min`; below the
+    /// interval). 0 (the default): the first at one interval. Clock phase
+    /// moves the figures a lot (a reference minutes before a speed change
+    /// teaches little): compare schedules over several phases.
+    #[arg(long = "reference-phase", value_name = "DURATION")]
+    pub phase: Option<String>,
+    /// Also simulate a reference this long after every change of the run's
+    /// `spindle_rpm` (a probing cycle triggered by the operating state
+    /// rather than the clock), e.g. `10min`.
+    #[arg(long = "reference-after-change", value_name = "DURATION")]
+    pub after_change: Option<String>,
+    /// σ of the simulated probe noise, µm (also the rule's σ_r unless
+    /// `--reference-param sigma_ref_um=` says otherwise).
+    #[arg(long = "reference-noise-um", default_value_t = 0.3)]
+    pub noise_um: f64,
+    /// Corrupt a share of the references: `5%:50` = 5 % of them +50 µm.
+    #[arg(long = "reference-outliers", value_name = "SHARE%:UM")]
+    pub outliers: Option<String>,
+    /// Seed of the simulated noise and outliers.
+    #[arg(long = "reference-seed", default_value_t = 1)]
+    pub seed: u64,
+    /// Operator re-zero (touch-off) at this time: seconds of the run or a
+    /// percentage of its rows (`60%`); repeatable.
+    #[arg(
+        long = "reference-at",
+        visible_alias = "rezero-at",
+        value_name = "TIME"
+    )]
+    pub rezero_at: Vec<String>,
+    /// A parameter of the update rule, NAME=VALUE: sigma_ref_um,
+    /// sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k,
+    /// gate_abs_um, max_step_um, max_bias_um, max_rate_um_h; repeatable.
+    #[arg(long = "reference-param", value_name = "NAME=VALUE")]
+    pub params: Vec<String>,
+    /// Write every row (time, per direction: measured, model, served with
+    /// references) to this CSV.
+    #[arg(long = "reference-dump", value_name = "CSV")]
+    pub dump: Option<std::path::PathBuf>,
+}
+
+impl From<ReferenceFlags> for ReferenceArgs {
+    fn from(f: ReferenceFlags) -> ReferenceArgs {
+        ReferenceArgs {
+            every: f.every,
+            phase: f.phase,
+            after_change: f.after_change,
+            noise_um: f.noise_um,
+            outliers: f.outliers,
+            seed: f.seed,
+            rezero_at: f.rezero_at,
+            params: f.params,
+            dump: f.dump,
+        }
+    }
 }
 
 /// `replay`'s long help: an example.
@@ -42,6 +108,7 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
         reference,
         json,
     } = args;
+    let reference = ReferenceArgs::from(reference);
     // Run file first, then image: each refusal names its own file.
     let mut table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
     // Scored as rises from the run's start, as the board compensates.
