@@ -1,6 +1,10 @@
 //! Chooses 14 lines from a pool (segments between points of a 3×3×3 grid in
 //! the working volume, three reflector offsets) by greedy + exchange
 //! D-optimal design on the identification's design matrix.
+//!
+//! `cargo run -p tcomp-bench --release --example geo_plan_search -- [DEG]
+//! [all|search] [RESTARTS]` (straightness and roll degrees and the lines
+//! kept from `plan14` also from the environment: `SD`, `RD`, `FIXED`).
 use nalgebra::DMatrix;
 use tcomp_geometry::identify::Basis;
 use tcomp_geometry::lines::LineSpec;
@@ -45,21 +49,41 @@ fn score(blocks: &[&DMatrix<f64>], n: usize) -> (usize, f64) {
     (nz.len(), nz.iter().map(|e| e.ln()).sum())
 }
 
+/// The command line (clap: `--help` lists every argument).
+#[derive(clap::Parser)]
+#[command(
+    name = "geo_plan_search",
+    about = "Chooses 14 lines from a pool by greedy + exchange D-optimal design on the identification's design matrix"
+)]
+struct Args {
+    /// Degree of the main error terms.
+    #[arg(default_value_t = 3)]
+    deg: usize,
+    /// `all`: only the rank of the whole pool; any other word (e.g. `search`): the search.
+    mode: Option<String>,
+    /// Restarts of the search (each after the first from a random extra line).
+    #[arg(default_value_t = 1)]
+    restarts: usize,
+    /// Degree of the straightness terms.
+    #[arg(long = "straightness-degree", env = "SD", default_value_t = 2)]
+    sd: usize,
+    /// Degree of the roll terms.
+    #[arg(long = "roll-degree", env = "RD", default_value_t = 2)]
+    rd: usize,
+    /// Lines of `plan14` always kept (its first N).
+    #[arg(long, env = "FIXED", default_value_t = 9)]
+    fixed: usize,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let deg: usize = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(3);
-    let sd: usize = std::env::var("SD")
-        .ok()
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(2);
-    let rd: usize = std::env::var("RD")
-        .ok()
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(2);
-    let fixed: usize = std::env::var("FIXED")
-        .ok()
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(9);
+    let args = match tcomp_bench::cli::parse::<Args>() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::exit(1)
+        }
+    };
+    let (deg, sd, rd, fixed) = (args.deg, args.sd, args.rd, args.fixed);
     let degs = tcomp_geometry::identify::Degrees {
         main: deg,
         straightness: sd,
@@ -110,7 +134,7 @@ fn main() {
     }
     let blocks: Vec<DMatrix<f64>> = pool.iter().map(|l| info(&block(&b, &st, l), n)).collect();
     eprintln!("pool {} lines, {} unknowns", pool.len(), n);
-    if args.get(2).map(|s| s == "all").unwrap_or(false) {
+    if args.mode.as_deref() == Some("all") {
         let obs: Vec<tcomp_geometry::identify::LineObs> = pool
             .iter()
             .map(|l| tcomp_geometry::identify::LineObs {
@@ -134,7 +158,7 @@ fn main() {
         }
         return;
     }
-    let restarts: usize = args.get(3).map(|s| s.parse().unwrap()).unwrap_or(1);
+    let restarts = args.restarts;
     let mut best_overall: (Vec<usize>, (usize, f64)) = (Vec::new(), (0, f64::NEG_INFINITY));
     let mut rng = tcomp_data::rng::Rng::new(3);
     for restart in 0..restarts {

@@ -23,6 +23,7 @@ fn benchmarks_refuse_bad_arguments_with_one_line_too() {
         env!("CARGO_BIN_EXE_bench-diagnose"),
         env!("CARGO_BIN_EXE_bench-fit"),
         env!("CARGO_BIN_EXE_bench-geometry"),
+        env!("CARGO_BIN_EXE_bench-rotary"),
         env!("CARGO_BIN_EXE_bench-sim"),
     ] {
         // a value that cannot be parsed: every benchmark reads its options first
@@ -40,6 +41,67 @@ fn benchmarks_refuse_bad_arguments_with_one_line_too() {
                 && !line.contains("Stack backtrace"),
             "{exe}: not one error line:\n{stderr}"
         );
+    }
+}
+
+/// `--help` prints a line for every flag the scripts and BENCHMARKS.md
+/// give each benchmark (clap), and exits 0.
+#[test]
+fn every_benchmark_lists_its_flags_under_help() {
+    let dir = tempfile::tempdir().unwrap();
+    let benches: [(&str, &[&str]); 4] = [
+        (
+            env!("CARGO_BIN_EXE_bench-fit"),
+            &[
+                "--json",
+                "--no-sklearn",
+                "--data",
+                "--ensemble",
+                "--seeds",
+                "--big-rows",
+                "--write-big",
+            ],
+        ),
+        (
+            env!("CARGO_BIN_EXE_bench-geometry"),
+            &[
+                "--json",
+                "--seeds",
+                "--board-only",
+                "--firmware",
+                "--rich",
+                "--method",
+                "--first-seed",
+                "--no-wave",
+            ],
+        ),
+        (
+            env!("CARGO_BIN_EXE_bench-rotary"),
+            &[
+                "--json",
+                "--seeds",
+                "--first-seed",
+                "--noise-um",
+                "--thermal-cycles",
+                "--bias-states",
+                "--linear",
+            ],
+        ),
+        (env!("CARGO_BIN_EXE_bench-sim"), &["--json", "--repeat"]),
+    ];
+    for (exe, flags) in benches {
+        let out = program(exe, dir.path(), &["--help"]);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{exe} --help failed: {stdout}");
+        for flag in flags {
+            let line = stdout
+                .lines()
+                .find(|l| l.trim_start().starts_with(&format!("{flag} ")));
+            assert!(
+                line.is_some_and(|l| l.len() > flag.len() + 10),
+                "{exe} --help: no line of text for {flag}:\n{stdout}"
+            );
+        }
     }
 }
 

@@ -18,7 +18,9 @@
 //! with `cargo build -p board-qemu-mps2 --profile firmware --target
 //! thumbv7em-none-eabihf`); `--board-only` skips the identification.
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use tcomp_data::rng::Rng;
+use tcomp_geometry::bench_rich::Method;
 use tcomp_geometry::identify::{identify, Degrees, LineObs};
 use tcomp_geometry::lines::{average_runs, plan14, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
@@ -259,19 +261,50 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
-/// `--rich [--method poly|smooth] [--seeds N] [--first-seed S] [--no-wave]`:
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    name = "bench-geometry",
+    about = "Identification accuracy of the 14-line method against reading noise, and the volumetric section on the board (quantisation, instructions per evaluation under QEMU)"
+)]
+struct Args {
+    /// Print the figures as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Random machines per noise level (with --rich: machines, seeds S…S+N−1).
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    seeds: u64,
+    /// Only the board's figures: skip the identification.
+    #[arg(long = "board-only")]
+    board_only: bool,
+    /// The QEMU bench firmware that counts the instructions (default: $CARGO_TARGET_DIR or target, then thumbv7em-none-eabihf/firmware/board-qemu-mps2).
+    #[arg(long, value_name = "ELF")]
+    firmware: Option<PathBuf>,
+    /// Machines richer than the model (issue 29: desktop/tcomp/tests/data/geometry_rich_gen.py), σ = 0 and 0.5 µm.
+    #[arg(long)]
+    rich: bool,
+    /// With --rich: the identifier scored (poly, smooth or dense).
+    #[arg(long, value_name = "METHOD", default_value = "smooth", value_parser = parse_method)]
+    method: Method,
+    /// With --rich: the first machine's seed S.
+    #[arg(long = "first-seed", value_name = "S", default_value_t = 1)]
+    first_seed: u64,
+    /// With --rich: machines without the waves of 0.5–1.5 strokes.
+    #[arg(long = "no-wave")]
+    no_wave: bool,
+}
+
+/// `--method`: poly, smooth or dense.
+fn parse_method(s: &str) -> Result<Method, String> {
+    Method::parse(s).map_err(|_| "poly, smooth or dense".to_string())
+}
+
+/// `--rich [--method poly|smooth|dense] [--seeds N] [--first-seed S] [--no-wave]`:
 /// machines of `desktop/tcomp/tests/data/geometry_rich_gen.py` (issue 29), σ = 0 and 0.5 µm.
-fn rich(args: &[String], json: bool) -> anyhow::Result<()> {
-    use tcomp_geometry::bench_rich::{run, Method};
-    let val = |k: &str| {
-        args.iter()
-            .position(|a| a == k)
-            .and_then(|i| args.get(i + 1))
-    };
-    let method = Method::parse(val("--method").map_or("smooth", |s| s.as_str()))?;
-    let seeds: u64 = val("--seeds").map_or(Ok(10), |s| s.parse())?;
-    let first: u64 = val("--first-seed").map_or(Ok(1), |s| s.parse())?;
-    let wave = !args.iter().any(|a| a == "--no-wave");
+fn rich(args: &Args) -> anyhow::Result<()> {
+    use tcomp_geometry::bench_rich::run;
+    let (method, seeds, first, json) = (args.method, args.seeds, args.first_seed, args.json);
+    let wave = !args.no_wave;
     let t0 = std::time::Instant::now();
     let v = run(seeds, first, &[0.0, 0.5], wave, method)?;
     if json {
@@ -302,42 +335,21 @@ fn rich(args: &[String], json: bool) -> anyhow::Result<()> {
 }
 
 fn run() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    tcomp_data::cli_error::check_args(
-        &args,
-        &["--json", "--board-only", "--rich", "--no-wave"],
-        &["--firmware", "--seeds", "--method", "--first-seed"],
-    )?;
-    let json = args.iter().any(|a| a == "--json");
-    if args.iter().any(|a| a == "--rich") {
-        return rich(&args, json);
+    let args: Args = tcomp_bench::cli::parse()?;
+    if args.rich {
+        return rich(&args);
     }
-    standard(&args, json)
+    standard(&args)
 }
 
 /// The identification on simulated machines of the model's own class and
 /// the board's figures (the bench without `--rich`).
-fn standard(args: &[String], json: bool) -> anyhow::Result<()> {
-    let board_only = args.iter().any(|a| a == "--board-only");
-    let elf: std::path::PathBuf = args
-        .iter()
-        .position(|a| a == "--firmware")
-        .and_then(|i| args.get(i + 1))
-        .map(Into::into)
-        .unwrap_or_else(|| {
-            std::path::Path::new(
-                &std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()),
-            )
+fn standard(args: &Args) -> anyhow::Result<()> {
+    let (board_only, seeds, json) = (args.board_only, args.seeds, args.json);
+    let elf: PathBuf = args.firmware.clone().unwrap_or_else(|| {
+        std::path::Path::new(&std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
             .join("thumbv7em-none-eabihf/firmware/board-qemu-mps2")
-        });
-    let seeds: u64 = args
-        .iter()
-        .position(|a| a == "--seeds")
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse())
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--seeds: {e}"))?
-        .unwrap_or(10);
+    });
     let stroke = [800.0, 500.0, 400.0];
     let st = Structure::parse("XY/Z")?;
     let plan = plan14(stroke, 100.0, 100.0);

@@ -17,51 +17,72 @@
 //! at B other cool-down states, scored beside the model without it.
 use tcomp_geometry::rotary::check::{run_case, CaseFigures, CaseOptions, LinearInput};
 
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    name = "bench-rotary",
+    about = "The five-axis chain of issue 31 on random machines: location and component errors identified from R-test files, the tool-tip error over a held-out grid before and after"
+)]
+struct Args {
+    /// Print the figures as one JSON object (summary and cases).
+    #[arg(long)]
+    json: bool,
+    /// Random machines (seeds S…S+N−1).
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    seeds: u64,
+    /// The first machine's seed S (7001 for the unseen set).
+    #[arg(long = "first-seed", value_name = "S", default_value_t = 1001)]
+    first_seed: u64,
+    /// σ of every reading, µm.
+    #[arg(
+        long = "noise-um",
+        value_name = "UM",
+        default_value_t = 0.5,
+        value_parser = non_negative,
+        allow_hyphen_values = true
+    )]
+    noise_um: f64,
+    /// Drift of the location errors with three sensors over K warm-up cycles, scored at four held-out cool-down states (0: static).
+    #[arg(long = "thermal-cycles", value_name = "K", default_value_t = 0)]
+    thermal_cycles: usize,
+    /// With drift: the location constants re-optimised on tool-tip readings at B other cool-down states.
+    #[arg(long = "bias-states", value_name = "B", default_value_t = 0)]
+    bias_states: usize,
+    /// The linear errors: fitted with the R-test files in one problem, the 14-line model as known input, or the true ones.
+    #[arg(long, value_enum, default_value_t = Linear::Joint)]
+    linear: Linear,
+}
+
+/// `--linear`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Linear {
+    Joint,
+    Fixed,
+    Known,
+}
+
+/// A number ≥ 0 (finite).
+fn non_negative(s: &str) -> Result<f64, String> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && *v >= 0.0)
+        .ok_or_else(|| "a number ≥ 0".to_string())
+}
+
 fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(|| {
-        let args: Vec<String> = std::env::args().skip(1).collect();
-        tcomp_data::cli_error::check_args(
-            &args,
-            &["--json"],
-            &[
-                "--seeds",
-                "--first-seed",
-                "--noise-um",
-                "--thermal-cycles",
-                "--bias-states",
-                "--linear",
-            ],
-        )?;
-        let val = |k: &str, d: f64| -> anyhow::Result<f64> {
-            match args.iter().position(|a| a == k) {
-                Some(i) => args
-                    .get(i + 1)
-                    .and_then(|v| v.parse().ok())
-                    .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-                    .ok_or_else(|| anyhow::anyhow!("{k} needs a number ≥ 0")),
-                None => Ok(d),
-            }
-        };
-        let linear = match args.iter().position(|a| a == "--linear") {
-            None => LinearInput::Joint,
-            Some(i) => match args.get(i + 1).map(String::as_str) {
-                Some("joint") => LinearInput::Joint,
-                Some("fixed") => LinearInput::Fixed,
-                Some("known") => LinearInput::Known,
-                _ => anyhow::bail!("--linear: joint, fixed or known"),
-            },
-        };
-        let (seeds, first) = (
-            val("--seeds", 10.0)? as u64,
-            val("--first-seed", 1001.0)? as u64,
-        );
+        let args: Args = tcomp_bench::cli::parse()?;
+        let (seeds, first, json) = (args.seeds, args.first_seed, args.json);
         let o = CaseOptions {
-            noise_um: val("--noise-um", 0.5)?,
-            thermal_cycles: val("--thermal-cycles", 0.0)? as usize,
-            linear,
-            bias_states: val("--bias-states", 0.0)? as usize,
+            noise_um: args.noise_um,
+            thermal_cycles: args.thermal_cycles,
+            linear: match args.linear {
+                Linear::Joint => LinearInput::Joint,
+                Linear::Fixed => LinearInput::Fixed,
+                Linear::Known => LinearInput::Known,
+            },
+            bias_states: args.bias_states,
         };
-        let json = args.iter().any(|a| a == "--json");
         let mut cases = Vec::new();
         for seed in first..first + seeds {
             let c = run_case(seed, &o)?;

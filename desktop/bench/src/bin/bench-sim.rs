@@ -1,6 +1,6 @@
 //! Time to simulate 8 h of machine time at 1 s steps (target < 1 s).
 //! `bench-sim [--json] [--repeat N]`
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 use tcomp_thermal::sim::{simulate, Duty, Effect, Machine};
 
@@ -8,23 +8,23 @@ fn main() -> std::process::ExitCode {
     tcomp_data::cli_error::run_main(run)
 }
 
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    name = "bench-sim",
+    about = "Time to simulate 8 h of machine time at 1 s steps on both machines, nominal and with every effect (target < 1 s)"
+)]
+struct Args {
+    /// Print the figures as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// Runs per case; the fastest counts.
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    repeat: usize,
+}
+
 fn run() -> Result<()> {
-    let mut json = false;
-    let mut repeat = 5usize;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--json" => json = true,
-            "--repeat" => {
-                repeat = args
-                    .next()
-                    .context("--repeat N")?
-                    .parse()
-                    .context("--repeat N")?
-            }
-            other => anyhow::bail!("unknown argument `{other}` (--json, --repeat N)"),
-        }
-    }
+    let Args { json, repeat } = tcomp_bench::cli::parse()?;
     let base = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let duty = Duty::load(&base.join("../duty/warmup-steps.toml"))?;
     let mut results = Vec::new();
