@@ -1,6 +1,7 @@
 //! Test doubles for the board application: they implement the same narrow
 //! hardware traits the boards implement, so the real application code runs here.
 
+pub mod cli;
 pub mod keys;
 pub mod mock_flash;
 pub mod modbus;

@@ -11,7 +11,6 @@
 
 use std::time::Instant;
 
-use clap::Parser;
 use host_tests::mock_flash::{MockFlash, ERASE_SIZE};
 use host_tests::modbus::{self, demo_image, write_unlocked, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, MS};
@@ -20,7 +19,7 @@ use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisi
 use thermocomp::settings_store::{AREA_BYTES, PAGE, PAGES};
 use thermocomp_protocol::holding::{HR_CLAMP, HR_COMMAND, HR_PROBE_DIRECTION};
 
-#[derive(Parser)]
+#[derive(clap::Parser)]
 #[command(about = "Flash wear of the settings store and the model slots over one simulated year")]
 struct Args {
     /// Print the figures as JSON.
@@ -44,7 +43,7 @@ fn sector_erases(flash: &MockFlash, from: u32, to: u32, size: u32) -> Vec<u64> {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args: Args = host_tests::cli::parse_or_exit();
     let started = Instant::now();
     // One acquisition cycle on six emulated DS18B20s: the values the
     // application's cycles read (they age; the compensator still steps).

@@ -11,6 +11,17 @@ use host_tests::onewire_emu::{block_on, bus_with_sensors, master, Bus, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
 
+/// The command line (clap: `--help` lists every flag).
+#[derive(clap::Parser)]
+#[command(
+    about = "Bus time of one acquisition cycle of 20 DS18B20s at 12 bit on the pin-level emulator, against the 750 ms conversion floor"
+)]
+struct Args {
+    /// Print the figures as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
 const SENSORS: usize = 20;
 const FLOOR_MS: f64 = 750.0;
 const TARGET_MS: f64 = 1000.0;
@@ -84,7 +95,7 @@ fn crate_cycle() -> f64 {
 }
 
 fn main() {
-    let json = std::env::args().any(|a| a == "--json");
+    let Args { json } = host_tests::cli::parse_or_exit();
     let worst = board_cycle(1000);
     let typical = board_cycle(800);
     let crates = crate_cycle();
