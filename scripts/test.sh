@@ -24,6 +24,9 @@ cargo machete || die "cargo machete found unused dependencies (above): remove th
 
 say "building the bench firmware for QEMU (profile $FW_PROFILE, $FW_TARGET; about 1 min on a fresh 2-core machine, seconds once built)"
 cargo build -p board-qemu-mps2 --profile "$FW_PROFILE" --target "$FW_TARGET"
+say "building the NUCLEO firmware and checking both boards' flash, RAM and stack budgets (scripts/size.sh --check; about 1 min)"
+cargo build -p board-nucleo-f446re --profile "$FW_PROFILE" --target "$FW_TARGET"
+scripts/size.sh --check
 
 # Host crates only (workspace default-members; boards build for the chip).
 say "building every host crate's tests (test profile; the long step on a fresh machine: several minutes on 2 cores, cargo prints each crate; seconds once built)"
