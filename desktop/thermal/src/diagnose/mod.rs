@@ -3,41 +3,41 @@
 //! phase, frequency band), fit each candidate effect on the fit part and
 //! rank by the held-out gap reduction, guarded by BIC and a held-out margin.
 
-pub mod boxqp;
-pub mod calibrate;
-pub mod design_heat;
-pub mod design_mimic;
+// The rooms, each behind its face, leaves first (a room imports only the
+// faces of rooms before it): signal (lag filters, residual statistics),
+// runs (measured runs into what each mode fits on), ident (the nominal
+// `diagnose fit` identifies), effects (candidate effects of both modes and
+// their fits), calibration (the machine-file null and its freedom), verdict
+// (noise gate, judge, releases, the report), fit_mode (`diagnose fit`).
+// types: settings, findings, the diagnosis (a leaf every room reads).
+mod calibration;
 mod effects;
-mod fit_nominal;
-mod fit_untestable;
-pub mod fitmode;
-pub mod freedom;
-pub mod gate;
+mod fit_mode;
 pub mod ident;
-mod judge;
-pub mod reach;
-mod release;
-use release::{merge_releases, CalNull};
-pub mod render;
 mod runs;
-pub use runs::series;
 mod signal;
-pub use signal::{lag, stats};
 mod types;
+mod verdict;
+
+pub use calibration::{calibrate, design_heat, design_mimic};
+pub use fit_mode::{fitmode, reach};
+pub use runs::series;
+pub use signal::{lag, stats};
+pub use verdict::render;
 
 use anyhow::{bail, Result};
 use serde_json::{json, Value};
 
 use crate::sim::Machine;
 use effects::{fit_added, par_map, params_of, Evaluator, FitResult, Projection};
-use judge::Judge;
-pub use render::report_md;
 use runs::{prepare, Kind, Prepared};
 pub use signal::phases;
 use signal::ResidualView;
 use tcomp_data::runcsv::Run;
 use types::with_role;
 pub use types::{Diagnosis, Finding, Options};
+pub use verdict::report_md;
+use verdict::{merge_releases, CalNull, Judge};
 
 /// Where the nominal model's gap lies (all rows of all runs).
 fn where_analysis(ps: &[Prepared], res: &[Vec<Vec<f64>>]) -> Value {
@@ -174,7 +174,7 @@ fn best_pair(
             && ref_m - f.m_after >= opt.min_abs
             && best.as_ref().is_none_or(|bp| f.m_after < bp.0.m_after)
             && judge.partner_earns_its_place(fr, &f)?
-            && gate::beats_in_noise(judge.ev, &tried[a].1.effects, &fr.effects)?
+            && verdict::beats_in_noise(judge.ev, &tried[a].1.effects, &fr.effects)?
         {
             best = Some((f, a, b));
         }
@@ -263,7 +263,7 @@ fn diagnose_core(
         effects::fit_alone(&ev, c, opt.budget + 15 * d)
     });
     sims += singles.iter().map(|f| f.evals).sum::<usize>();
-    freedom::print_evals("single", &singles);
+    calibration::print_evals("single", &singles);
     let (tried, ok_idx) = judge_singles(&judge, &singles)?;
     // heat effects the margins would claim but the design's own heat
     // tolerance covers: untestable, with the reason
@@ -278,7 +278,7 @@ fn diagnose_core(
     // a step the fit rows show but no held-out stretch follows
     for (f, _) in &tried {
         if f.dbic <= -opt.min_dbic && judge.jumps(f) {
-            if let Some(u) = gate::late_step(ps, &f.effects) {
+            if let Some(u) = verdict::late_step(ps, &f.effects) {
                 if !untestable.iter().any(|x| x.0 == u.0) {
                     untestable.push(u);
                 }
@@ -299,7 +299,7 @@ fn diagnose_core(
         )
     });
     sims += pair_fits.iter().map(|f| f.evals).sum::<usize>();
-    freedom::print_evals("pair", &pair_fits);
+    calibration::print_evals("pair", &pair_fits);
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
     let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
     if let Some(c) = &cal {
@@ -340,7 +340,7 @@ pub fn diagnose(m: &Machine, runs: &[(String, Run)], opt: &Options) -> Result<Di
         .transpose()?;
     let mut d = match &cal {
         Some(c) if !c.knobs.is_empty() => {
-            let fr = freedom::Freedom::new(m, &c.knobs, &c.theta, &ps, opt.threads)?;
+            let fr = calibration::Freedom::new(m, &c.knobs, &c.theta, &ps, opt.threads)?;
             let null = CalNull {
                 design: m,
                 knobs: &c.knobs,

@@ -204,8 +204,7 @@ pub(crate) fn fit_alone(ev: &Evaluator, c: &Cand, budget: usize) -> FitResult {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::calibrate::calibrate;
-    use crate::diagnose::freedom::{tests::setup, Freedom};
+    use crate::diagnose::calibration::{calibrate, setup, Freedom};
 
     #[test]
     fn the_family_gives_each_trial_as_its_simulation_does() {

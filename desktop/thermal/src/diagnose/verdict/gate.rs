@@ -256,7 +256,7 @@ pub fn late_step(ps: &[Prepared], effects: &[crate::sim::Effect]) -> Option<(Str
 /// beside it is the calibration freedom's re-fit to the corrected readings
 /// (the null had bent a design value to follow the fault), so the µm gate
 /// does not judge it.
-pub(super) fn sensor_only(f: &super::types::Finding) -> bool {
+pub(super) fn sensor_only(f: &crate::diagnose::types::Finding) -> bool {
     !f.effects.is_empty() && f.effects.iter().all(|e| e.is_sensor_only())
 }
 

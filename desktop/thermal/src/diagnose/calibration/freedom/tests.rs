@@ -1,8 +1,8 @@
 //! The compressed freedom (kept directions, coarser time grid, fit-row
 //! SSE without the held-out rows) against the full one, on a
 //! machine file 12–15 % off its truth.
+use super::super::calibrate::calibrate;
 use super::*;
-use crate::diagnose::calibrate::calibrate;
 use crate::diagnose::effects::Stats;
 use crate::diagnose::{prepare_all, Options};
 use crate::sim::{sim_run, Duty, Effect, SimOptions};

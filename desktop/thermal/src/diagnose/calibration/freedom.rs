@@ -410,6 +410,8 @@ impl Freedom {
     }
 
     /// Directions of the design values kept and rows between knots.
+    /// (Read by the tests only since `freedom` left the public API.)
+    #[cfg_attr(not(test), allow(dead_code))]
     pub fn compression(&self) -> (usize, usize) {
         (self.v.ncols(), self.knots.f)
     }

@@ -10,16 +10,13 @@
 use anyhow::Result;
 use serde_json::json;
 
-use super::calibrate;
-use super::calibrate::{apply, design_value, Knob};
-use super::freedom;
-use super::freedom::Freedom;
 use super::gate;
 use super::judge::Judge;
-use super::types::{with_role, Finding};
+use crate::diagnose::calibration::{apply, design_value, Freedom, Knob};
 use crate::diagnose::effects::{j_fit_of_raws, ActiveSet, Evaluator, Projection};
 use crate::diagnose::runs::Prepared;
 use crate::diagnose::signal::r4;
+use crate::diagnose::types::{with_role, Finding};
 use crate::sim::machine::tolerance::GROUPS;
 use crate::sim::Machine;
 
@@ -300,10 +297,10 @@ pub(crate) fn release_findings(n: &Null, ps: &[Prepared]) -> Result<(Vec<Tried>,
 }
 
 /// The calibrated null: the design file, its knobs and the freedom.
-pub(super) struct CalNull<'a> {
-    pub(super) design: &'a Machine,
-    pub(super) knobs: &'a [calibrate::Knob],
-    pub(super) freedom: &'a freedom::Freedom,
+pub(crate) struct CalNull<'a> {
+    pub(crate) design: &'a Machine,
+    pub(crate) knobs: &'a [Knob],
+    pub(crate) freedom: &'a Freedom,
 }
 
 /// The effects that still add to the released null `t` (each applied to
@@ -460,7 +457,7 @@ fn choose(rel: &[Shape], told_apart: impl Fn(usize, usize) -> bool) -> Choice {
 /// Beside a selected effect it must also beat that effect by the same
 /// test. Effects that add nothing on top of the best release inside every
 /// tolerance are listed untestable ([`keep_adding`]).
-pub(super) fn merge_releases(
+pub(crate) fn merge_releases(
     judge: &Judge,
     cal: &CalNull,
     m: &Machine,

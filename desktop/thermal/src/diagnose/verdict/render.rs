@@ -8,9 +8,9 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use serde_json::Value;
 
-use super::types::Diagnosis;
-pub use super::types::SelectedGaps;
 use crate::diagnose::effects::periodic_claim;
+use crate::diagnose::types::Diagnosis;
+pub use crate::diagnose::types::SelectedGaps;
 
 fn f2(x: f64) -> String {
     if x.is_finite() {

@@ -4,12 +4,13 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
-use super::freedom;
-use super::types::{Finding, Options};
-use super::{design_heat, design_mimic, gate};
+use super::gate;
+use crate::diagnose::calibration::Freedom;
+use crate::diagnose::calibration::{design_heat, design_mimic};
 use crate::diagnose::effects::{params_of, Evaluator, FitResult, Stats};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::{corr, first_order, r4, rms_of};
+use crate::diagnose::types::{Finding, Options};
 use crate::sim::Effect;
 
 /// Evidence: signature correlation (nominal residual vs the effect's change
@@ -164,29 +165,29 @@ fn evidence(
 }
 
 /// The nominal's fit and the margins every candidate is judged by.
-pub(super) struct Judge<'a> {
-    pub(super) ev: &'a Evaluator<'a>,
-    pub(super) res0: &'a [Vec<Vec<f64>>],
+pub(crate) struct Judge<'a> {
+    pub(crate) ev: &'a Evaluator<'a>,
+    pub(crate) res0: &'a [Vec<Vec<f64>>],
     /// The nominal's residuals before the freedom (where an effect acts).
-    pub(super) raw0: Vec<Vec<Vec<f64>>>,
-    pub(super) st0: Stats,
+    pub(crate) raw0: Vec<Vec<Vec<f64>>>,
+    pub(crate) st0: Stats,
     /// The nominal's fit criterion on the fit rows.
-    pub(super) j0: f64,
+    pub(crate) j0: f64,
     /// The nominal's held-out gap (noise units).
-    pub(super) m0: f64,
+    pub(crate) m0: f64,
     /// BIC's penalty per parameter: ln of the fit rows.
-    pub(super) lnn: f64,
-    pub(super) opt: &'a Options,
+    pub(crate) lnn: f64,
+    pub(crate) opt: &'a Options,
     /// The calibration's freedom (None: the file taken as exact).
-    pub(super) freedom: Option<&'a freedom::Freedom>,
+    pub(crate) freedom: Option<&'a Freedom>,
 }
 
 impl Judge<'_> {
-    pub(super) fn dbic(&self, fr: &FitResult) -> f64 {
+    pub(crate) fn dbic(&self, fr: &FitResult) -> f64 {
         fr.j - self.j0 + fr.k as f64 * self.lnn
     }
 
-    pub(super) fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
+    pub(crate) fn finding(&self, fr: &FitResult, dbic: f64) -> Result<(Finding, Stats)> {
         let (raw1, res1) = self.ev.raw_and_residuals(&fr.effects)?;
         let st = self.ev.stats_of(&res1);
         let st0 = &self.st0;
@@ -229,7 +230,7 @@ impl Judge<'_> {
     /// Why a finding's effect cannot be told from design errors within
     /// tolerance: a node's heat (`design_heat.rs`), the film coefficients
     /// or levers (`design_mimic.rs`); only against a calibrated file.
-    pub(super) fn barred(&self, f: &Finding) -> Option<String> {
+    pub(crate) fn barred(&self, f: &Finding) -> Option<String> {
         self.freedom?;
         f.effects.iter().find_map(|e| {
             design_heat::within_tolerance(self.ev.m, self.ev.runs, e)
@@ -241,16 +242,16 @@ impl Judge<'_> {
     // 2 %, below what an RMS over the held-out rows can resolve)
     // and never a step inside a run that is no jump of the residual at
     // its onset (`gate::step_jump_share`)
-    pub(super) fn supported(&self, f: &Finding, m_ref: f64) -> bool {
+    pub(crate) fn supported(&self, f: &Finding, m_ref: f64) -> bool {
         self.margins(f, m_ref) && self.barred(f).is_none() && self.jumps(f)
     }
 
-    pub(super) fn jumps(&self, f: &Finding) -> bool {
+    pub(crate) fn jumps(&self, f: &Finding) -> bool {
         gate::step_jump_share(self.ev.runs, self.res0, &f.effects)
             .is_none_or(|j| j >= gate::JUMP_SHARE_MIN)
     }
 
-    pub(super) fn margins(&self, f: &Finding, m_ref: f64) -> bool {
+    pub(crate) fn margins(&self, f: &Finding, m_ref: f64) -> bool {
         let opt = self.opt;
         f.dbic <= -opt.min_dbic
             && (gate::sensor_only(f)
@@ -267,7 +268,7 @@ impl Judge<'_> {
     // the added effect must itself earn the margins: the pair's own fit
     // without it (its base effect at the pair's parameters) is the
     // reference, so a joint polish of the base alone never names a pair
-    pub(super) fn partner_earns_its_place(&self, fr: &FitResult, f: &Finding) -> Result<bool> {
+    pub(crate) fn partner_earns_its_place(&self, fr: &FitResult, f: &Finding) -> Result<bool> {
         let Some(last) = fr.cands.last() else {
             return Ok(true);
         };

@@ -9,12 +9,12 @@ use serde_json::{json, Value};
 
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
-use super::gate;
 use super::reach;
-use super::types::{Diagnosis, Finding, Options, SelectedGaps};
 use crate::diagnose::effects::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
+use crate::diagnose::types::{Diagnosis, Finding, Options, SelectedGaps};
+use crate::diagnose::verdict;
 use tcomp_data::runcsv::Run;
 
 /// A candidate scored against its reference fit (the nominal, or for
@@ -261,14 +261,14 @@ fn score(
 /// z of the held-out reduction of the gap against the measured noise, as
 /// the machine-file gate (`gate::held_out_z`): per held-out block (a
 /// contiguous held-out stretch of a run, cut into pieces of at most
-/// `gate::BLOCK_S`) where the effect changes an affected output,
+/// `verdict::BLOCK_S`) where the effect changes an affected output,
 /// d = ln((M₀ + 1)/(M₁ + 1)), M the block's mean squared residual in noise
 /// units over the affected outputs; z = mean(d) / (sd(d) / √blocks). NaN
 /// with fewer than two blocks.
 fn held_out_z(p: &Problem, before: &ModelFit, after: &ModelFit, affected: &[usize]) -> f64 {
     let mut d = Vec::new();
     for (r, run) in p.ds.runs.iter().enumerate() {
-        let max = ((gate::BLOCK_S / run.dt).floor() as usize).max(1);
+        let max = ((verdict::BLOCK_S / run.dt).floor() as usize).max(1);
         let mut k = 0;
         while k < run.rows() {
             if !run.held[k] {
@@ -309,7 +309,7 @@ fn held_out_z(p: &Problem, before: &ModelFit, after: &ModelFit, affected: &[usiz
             }
         }
     }
-    gate::z_of(&d)
+    verdict::z_of(&d)
 }
 
 /// Held-out RMS by channel and by phase before and after an effect.
@@ -553,8 +553,8 @@ fn fit_ranking_rule(opt: &Options) -> String {
         FIT_MIN_REL * 100.0,
         SENSOR_MIN_REL * 100.0,
         FIT_MIN_ABS,
-        gate::BLOCK_S,
-        gate::Z_MIN
+        verdict::BLOCK_S,
+        verdict::Z_MIN
     ) + &format!("; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most {claim:.0} % of the held-out gap it is scored on (between {claim:.0} % and {inconclusive:.0} %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form", claim = SPEED_CLAIM_REL * 100.0, inconclusive = (1.0 - FIT_MIN_REL) * 100.0)
 }
 

@@ -1,0 +1,14 @@
+//! The verdict room: what is claimed and how it is reported. `gate` is the
+//! noise gate, `judge` the margins every candidate of the machine-file mode
+//! is judged by, `release` the design values the data push beyond their
+//! tolerance (judged alike), `render` the markdown report and its plots.
+
+mod gate;
+mod judge;
+mod release;
+pub mod render;
+
+pub(crate) use gate::{beats_in_noise, late_step, z_of, BLOCK_S, Z_MIN};
+pub(crate) use judge::Judge;
+pub(crate) use release::{merge_releases, CalNull};
+pub use render::report_md;
