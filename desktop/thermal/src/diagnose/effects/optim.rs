@@ -12,6 +12,18 @@ pub(crate) fn nelder_mead<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     step: f64,
     max_evals: usize,
 ) -> (Vec<f64>, f64, usize) {
+    // Hand-written although argmin (a dependency, used for Brent below) has a
+    // NelderMead: argmin's evaluates one point per `cost` call, is unbounded
+    // and stops on the spread of the simplex's values only. Here (1) the
+    // start's simplex and a shrink's d points go to `f` as one batch (one
+    // pass of the freedom over B̃ for all of them), (2) every trial point is
+    // clamped to [0, 1]^d, (3) the budget is counted in evaluations
+    // (`max_evals`, a shrink costs d), not iterations, and (4) it stops when
+    // the values agree to 1e-6 (relative) AND the simplex is narrower than
+    // 1e-4 in u. The sequence of trial points (reflection −1, expansion −2,
+    // contraction ±0.5, shrink ½ towards the best) fixes every fitted
+    // parameter and so every verdict bit for bit: the tests and the benches'
+    // figures assert those, so a switch would be a behaviour change.
     let d = x0.len();
     let clamp = |x: &mut Vec<f64>| x.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
     let mut pts: Vec<Vec<f64>> = vec![x0.to_vec()];
