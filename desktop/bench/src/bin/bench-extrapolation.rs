@@ -235,7 +235,7 @@ fn scenario_duty(scenario: &str, seed: u64, ambient: f64) -> Result<(Duty, Strin
     let speeds = {
         let mut s = [2000.0, 4000.0, 6000.0];
         s.rotate_left((seed % 3) as usize);
-        if seed % 2 == 0 {
+        if seed.is_multiple_of(2) {
             s.swap(1, 2);
         }
         s
