@@ -12,6 +12,17 @@
 //! compensator (they are added after it), so running the core's update over
 //! the replay rows in time order is the board's loop exactly.
 //!
+//! **When the board asks** (`--reference-when-asked`, issue 51): the
+//! schedule is the board's own rule ([`thermocomp_core::ask`], the very
+//! code): per direction, an [`AskState`] looks at every row's time and the
+//! run's `spindle_rpm` (what the PLC writes; a run without the column
+//! gives the interval rule only); a request raised at a row is probed by
+//! the simulated PLC at the next row with a measured value (latency: one
+//! sample, the PLC polls between two cycles); only an accepted reference
+//! clears it, so after a refused one the next row probes again. Each
+//! direction is replayed as if it were the probe's direction (holding
+//! register 40), with its own request state.
+//!
 //! Simulated readings: the run's measured error channel at that row (as a
 //! rise from the run's start, the model's frame) plus seeded Gaussian noise,
 //! rounded to 0.1 µm; a share of them corrupted by a fixed offset (a chip on
@@ -20,6 +31,7 @@
 //! corrupted readings.
 
 use anyhow::{anyhow, bail, Result};
+use thermocomp_core::ask::{AskParams, AskReason, AskState};
 use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceState};
 use thermocomp_core::Model;
 
@@ -61,13 +73,53 @@ pub struct ReferenceArgs {
     /// Write every row (time, per direction: measured, model, served with
     /// references) to this CSV.
     pub dump: Option<std::path::PathBuf>,
+    /// Probe when the board asks, by its rule with these parameters
+    /// (`--reference-when-asked`; [`ask_params`] reads the flags). Not
+    /// with a clock schedule.
+    pub when_asked: Option<AskParams>,
 }
 
 impl ReferenceArgs {
     /// Any reference or re-zero asked for.
     pub fn is_active(&self) -> bool {
-        self.every.is_some() || self.after_change.is_some() || !self.rezero_at.is_empty()
+        self.every.is_some()
+            || self.after_change.is_some()
+            || self.when_asked.is_some()
+            || !self.rezero_at.is_empty()
     }
+}
+
+/// The board's asking rule from `--ask-settle`, `--ask-interval` (durations,
+/// `0` switches that part off) and `--ask-speed-step` (rpm); each not given
+/// is [`AskParams::SUGGESTED`]'s.
+pub fn ask_params(
+    settle: Option<&str>,
+    interval: Option<&str>,
+    speed_step_rpm: Option<u16>,
+) -> Result<AskParams> {
+    let secs = |flag: &str, v: Option<&str>, default: u16| -> Result<u16> {
+        let Some(v) = v.map(str::trim) else {
+            return Ok(default);
+        };
+        if v.trim_end_matches(['s', 'h'])
+            .trim_end_matches("min")
+            .trim()
+            == "0"
+        {
+            return Ok(0);
+        }
+        let s = parse_duration_s(v).map_err(|e| anyhow!("{flag} {e}"))?;
+        if s.round() > f64::from(u16::MAX) || s.round() < 1.0 {
+            bail!("{flag} {v}: between 1 s and 18 h (65535 s), or 0 (off)");
+        }
+        Ok(s.round() as u16)
+    };
+    let d = AskParams::SUGGESTED;
+    Ok(AskParams {
+        settle_s: secs("--ask-settle", settle, d.settle_s)?,
+        max_interval_s: secs("--ask-interval", interval, d.max_interval_s)?,
+        speed_step_rpm: speed_step_rpm.unwrap_or(d.speed_step_rpm),
+    })
 }
 
 /// Parse a duration: `1h`, `4h`, `30min`, `90s`, `900` (seconds).
@@ -217,6 +269,12 @@ pub struct ChannelReference {
     pub corrupted_refused: usize,
     /// Clean references refused by the gate.
     pub clean_refused: usize,
+    /// When the board asks: the requests it raised, by reason (a refused
+    /// reference leaves a request raised: one request, several readings).
+    pub asked_speed_change: usize,
+    pub asked_interval: usize,
+    /// Every reference taken, in time order (`references` of them).
+    pub taken: Vec<TakenReference>,
     /// RMS with references ≤ RMS of the model alone.
     pub never_worse_than_model: bool,
     /// RMS with references ≤ RMS of the raw error.
@@ -227,6 +285,36 @@ pub struct ChannelReference {
     pub served_hash: String,
 }
 
+/// One reference taken (the `taken` list of `--json`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TakenReference {
+    /// The row's time (s) and index.
+    pub time_s: f64,
+    pub row: usize,
+    /// The gate accepted it.
+    pub accepted: bool,
+    /// A simulated chip on the gauge.
+    pub corrupted: bool,
+    /// When the board asks: why (`speed_change`, `interval`) and when it
+    /// raised the request (s).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub asked_s: Option<f64>,
+}
+
+/// `--reference-when-asked` in `--json`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct WhenAskedJson {
+    pub settle_s: u16,
+    pub max_interval_s: u16,
+    pub speed_step_rpm: u16,
+    /// Rows from the request to the probe: the next sample.
+    pub latency_rows: usize,
+    /// The run has `spindle_rpm` (else: the interval rule only).
+    pub spindle_rpm: bool,
+}
+
 /// What `--json` reports under `"references"`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ReferenceReport {
@@ -234,6 +322,8 @@ pub struct ReferenceReport {
     /// The clock schedule's shift (`--reference-phase`), s.
     pub phase_s: f64,
     pub after_change_s: Option<f64>,
+    /// The board's asking rule, when it asks (`--reference-when-asked`).
+    pub when_asked: Option<WhenAskedJson>,
     pub noise_um: f64,
     pub outliers: Option<(f64, f64)>,
     pub seed: u64,
@@ -371,6 +461,95 @@ pub fn simulate_references(
     out
 }
 
+/// A reference the board asked for: the reading, why it was asked and
+/// when (ms, the run's clock).
+#[derive(Debug, Clone, Copy)]
+pub struct AskedReference {
+    pub sim: SimReference,
+    pub reason: AskReason,
+    pub asked_ms: u64,
+}
+
+/// The references of direction `d` when the board asks
+/// ([`thermocomp_core::ask`]): the rule looks at every row (time, the
+/// run's `spindle_rpm`); the simulated PLC probes at the next row with a
+/// measured value (one sample of latency); the reference rule decides
+/// ([`ReferenceState::reference`], as in [`serve_direction`], re-zeros
+/// included) and only an accepted reading clears the request. Returns the
+/// readings and the number of requests raised per reason (speed change,
+/// interval). Noise and corruption: streams of their own per direction
+/// from `seed` (direction 0 draws as the clock schedule's first direction).
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_when_asked(
+    run: &Run,
+    rows: &[ReplayRow],
+    model: &Model,
+    d: usize,
+    ask: &AskParams,
+    params: &ReferenceParams,
+    reading: (f64, Option<(f64, f64)>, u64),
+    rezero_rows: &[usize],
+) -> (Vec<AskedReference>, [usize; 2]) {
+    let (noise_um, outliers, seed) = reading;
+    let mut out = vec![];
+    let mut asked = [0usize; 2];
+    let column = format!("d{}_um", model.direction_name(d));
+    let (Some(measured), Some(first)) = (run.col(&column), rows.first()) else {
+        return (out, asked);
+    };
+    let rpm = run.col("spindle_rpm");
+    let mix = (d as u64).wrapping_mul(0xA24B_AED4_963E_E407);
+    let mut noise = Rng::new(seed ^ mix);
+    let mut corrupt = Rng::new(seed ^ 0x9E37_79B9_7F4A_7C15 ^ mix);
+    let (share, off) = outliers.unwrap_or((0.0, 0.0));
+    let mut state = AskState::new(first.time_ms);
+    let mut st = ReferenceState::new(params);
+    let mut asked_ms = first.time_ms;
+    for (i, r) in rows.iter().enumerate() {
+        let m = r.out.corrections[d];
+        // The PLC saw the request between the last cycle and this one.
+        if state.wanted() != AskReason::None {
+            if let Some(Some(y)) = measured.get(i) {
+                let bad = corrupt.uniform() < share;
+                let v = y + noise.normal() * noise_um + if bad { off } else { 0.0 };
+                let reading = (v * 10.0)
+                    .round()
+                    .clamp(f64::from(i32::MIN), f64::from(i32::MAX))
+                    as i32;
+                let o = st.reference(params, r.time_ms, m, reading);
+                out.push(AskedReference {
+                    sim: SimReference {
+                        row: i,
+                        reading,
+                        corrupted: bad,
+                    },
+                    reason: state.wanted(),
+                    asked_ms,
+                });
+                if matches!(o, ReferenceOutcome::Accepted { .. }) {
+                    state.referenced(ask, r.time_ms);
+                }
+            }
+        }
+        if rezero_rows.contains(&i) {
+            st.rezero(params, r.time_ms, m);
+        }
+        let speed = rpm
+            .and_then(|c| c.get(i).copied().flatten())
+            .filter(|v| v.is_finite())
+            .map(|v| v.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32);
+        if state.step(ask, r.time_ms, speed) {
+            asked_ms = r.time_ms;
+            match state.wanted() {
+                AskReason::SpeedChange => asked[0] += 1,
+                AskReason::Interval => asked[1] += 1,
+                AskReason::None => {}
+            }
+        }
+    }
+    (out, asked)
+}
+
 /// The board's loop for one direction: served correction per row (0.1 µm)
 /// with the given references and re-zero rows, and the final state.
 pub fn serve_direction(
@@ -466,10 +645,42 @@ pub fn score(
             v
         }
     };
-    let due = due_times(run, every_s, phase_s, after_s);
-    let refs = simulate_references(run, model, &due, args.noise_um, outliers, args.seed);
+    if args.when_asked.is_some() && (every_s.is_some() || after_s.is_some()) {
+        bail!("--reference-when-asked: the board's schedule, not with --reference-every or --reference-after-change");
+    }
+    let dirs = model.directions.len();
+    // Per direction: the readings; when the board asks, why and when each
+    // was asked, and the requests raised per reason.
+    let (refs, why, asked) = match &args.when_asked {
+        None => {
+            let due = due_times(run, every_s, phase_s, after_s);
+            let refs = simulate_references(run, model, &due, args.noise_um, outliers, args.seed);
+            (refs, vec![vec![]; dirs], vec![[0usize; 2]; dirs])
+        }
+        Some(ask) => {
+            let mut refs = Vec::with_capacity(dirs);
+            let mut why = Vec::with_capacity(dirs);
+            let mut asked = Vec::with_capacity(dirs);
+            for d in 0..dirs {
+                let (r, a) = simulate_when_asked(
+                    run,
+                    rows,
+                    model,
+                    d,
+                    ask,
+                    &params,
+                    (args.noise_um, outliers, args.seed),
+                    &rezero_rows,
+                );
+                refs.push(r.iter().map(|r| r.sim).collect::<Vec<_>>());
+                why.push(r.iter().map(|r| (r.reason, r.asked_ms)).collect::<Vec<_>>());
+                asked.push(a);
+            }
+            (refs, why, asked)
+        }
+    };
     let mut channels = vec![];
-    let mut dump: Vec<(String, Vec<i32>)> = vec![];
+    let mut dump: Vec<DumpColumn> = vec![];
     for (d, dir) in model.directions.iter().enumerate() {
         let column = format!("d{}_um", model.direction_name(d));
         let Some(measured) = run.col(&column) else {
@@ -495,8 +706,20 @@ pub fn score(
             r_with.push(e - f64::from(with[i]) / 10.0);
             r_without.push(e - f64::from(without[i]) / 10.0);
         }
+        let accepted_flags: Vec<bool> = outcomes
+            .iter()
+            .map(|o| matches!(o, ReferenceOutcome::Accepted { .. }))
+            .collect();
         if args.dump.is_some() {
-            dump.push((column.clone(), with.clone()));
+            dump.push(DumpColumn {
+                column: column.clone(),
+                served: with.clone(),
+                refs: refs[d]
+                    .iter()
+                    .zip(&accepted_flags)
+                    .map(|(r, &a)| (r.row, r.reading, a))
+                    .collect(),
+            });
         }
         if raw.is_empty() {
             continue;
@@ -504,9 +727,26 @@ pub fn score(
         let (mae, rms, peak) = stats(&r_with);
         let (mae0, rms0, _) = stats(&r_without);
         let (raw_mae, raw_rms, _) = stats(&raw);
-        let refused_flags: Vec<bool> = outcomes
+        let refused_flags: Vec<bool> = accepted_flags.iter().map(|a| !a).collect();
+        let taken = refs[d]
             .iter()
-            .map(|o| matches!(o, ReferenceOutcome::Refused { .. }))
+            .zip(&accepted_flags)
+            .enumerate()
+            .map(|(k, (r, &accepted))| {
+                let why = why[d].get(k);
+                TakenReference {
+                    time_s: rows[r.row].time_ms as f64 / 1000.0,
+                    row: r.row,
+                    accepted,
+                    corrupted: r.corrupted,
+                    reason: why.map(|(w, _)| match w {
+                        AskReason::SpeedChange => "speed_change",
+                        AskReason::Interval => "interval",
+                        AskReason::None => "none",
+                    }),
+                    asked_s: why.map(|(_, t)| *t as f64 / 1000.0),
+                }
+            })
             .collect();
         let corrupted = refs[d].iter().filter(|r| r.corrupted).count();
         let corrupted_refused = refs[d]
@@ -539,6 +779,9 @@ pub fn score(
             corrupted,
             corrupted_refused,
             clean_refused,
+            asked_speed_change: asked[d][0],
+            asked_interval: asked[d][1],
+            taken,
             never_worse_than_model: rms <= rms0,
             never_worse_than_raw: rms <= raw_rms,
             final_state: st.to_bytes().iter().map(|b| format!("{b:02x}")).collect(),
@@ -552,6 +795,13 @@ pub fn score(
         every_s,
         phase_s,
         after_change_s: after_s,
+        when_asked: args.when_asked.map(|a| WhenAskedJson {
+            settle_s: a.settle_s,
+            max_interval_s: a.max_interval_s,
+            speed_step_rpm: a.speed_step_rpm,
+            latency_rows: 1,
+            spindle_rpm: run.col("spindle_rpm").is_some(),
+        }),
         noise_um: args.noise_um,
         outliers,
         seed: args.seed,
@@ -561,30 +811,44 @@ pub fn score(
     })
 }
 
+/// One direction of `--reference-dump`: served values, and the references
+/// (row, reading in 0.1 µm, accepted).
+struct DumpColumn {
+    column: String,
+    served: Vec<i32>,
+    refs: Vec<(usize, i32, bool)>,
+}
+
+/// Per direction: measured, model, served (µm), and at the rows of a
+/// reference the reading (µm) and whether it was accepted (1/0).
 fn write_dump(
     path: &std::path::Path,
     run: &Run,
     rows: &[ReplayRow],
     model: &Model,
-    served: &[(String, Vec<i32>)],
+    served: &[DumpColumn],
 ) -> Result<()> {
     use std::fmt::Write as _;
     let mut text = String::from("time_s");
-    for (c, _) in served {
-        let _ = write!(text, ",{c}_measured,{c}_model,{c}_served");
+    for DumpColumn { column: c, .. } in served {
+        let _ = write!(
+            text,
+            ",{c}_measured,{c}_model,{c}_served,{c}_reference,{c}_accepted"
+        );
     }
     text.push('\n');
     let cols: Vec<(usize, &[Option<f64>])> = served
         .iter()
-        .filter_map(|(c, _)| {
+        .filter_map(|s| {
             let d = (0..model.directions.len())
-                .find(|&d| format!("d{}_um", model.direction_name(d)) == *c)?;
-            Some((d, run.col(c)?))
+                .find(|&d| format!("d{}_um", model.direction_name(d)) == s.column)?;
+            Some((d, run.col(&s.column)?))
         })
         .collect();
+    let mut next = vec![0usize; served.len()];
     for (i, r) in rows.iter().enumerate() {
         let _ = write!(text, "{}", r.time_ms as f64 / 1000.0);
-        for ((d, m), (_, s)) in cols.iter().zip(served) {
+        for (k, ((d, m), s)) in cols.iter().zip(served).enumerate() {
             let m = m
                 .get(i)
                 .copied()
@@ -594,8 +858,20 @@ fn write_dump(
                 text,
                 ",{m},{},{}",
                 f64::from(r.out.corrections[*d]) / 10.0,
-                f64::from(s[i]) / 10.0
+                f64::from(s.served[i]) / 10.0
             );
+            match s.refs.get(next[k]) {
+                Some(&(row, reading, accepted)) if row == i => {
+                    next[k] += 1;
+                    let _ = write!(
+                        text,
+                        ",{},{}",
+                        f64::from(reading) / 10.0,
+                        u8::from(accepted)
+                    );
+                }
+                _ => text.push_str(",,"),
+            }
         }
         text.push('\n');
     }
@@ -617,7 +893,35 @@ impl ReferenceReport {
                 self.seed,
                 self.rezero_ms
             ),
-            None => println!("  no references; re-zeros at {:?} ms", self.rezero_ms),
+            None => match &self.when_asked {
+                Some(a) => {
+                    let part = |s: u16, what: &str| {
+                        if s == 0 {
+                            format!("never {what}")
+                        } else if s.is_multiple_of(60) {
+                            format!("{} min {what}", s / 60)
+                        } else {
+                            format!("{s} s {what}")
+                        }
+                    };
+                    println!(
+                        "  references when the board asks: {} of ≥ {} rpm, {} (the PLC probes at the next sample; probe noise σ {} µm{}, seed {}); re-zeros at {:?} ms",
+                        part(a.settle_s, "after a spindle-speed change"),
+                        a.speed_step_rpm,
+                        part(a.max_interval_s, "since the last accepted reference at most"),
+                        self.noise_um,
+                        self.outliers
+                            .map(|(s, o)| format!(", {:.1} % corrupted by {o:+} µm", s * 100.0))
+                            .unwrap_or_default(),
+                        self.seed,
+                        self.rezero_ms
+                    );
+                    if !a.spindle_rpm {
+                        println!("  the run has no spindle_rpm column: the board asks by the interval rule only");
+                    }
+                }
+                None => println!("  no references; re-zeros at {:?} ms", self.rezero_ms),
+            },
         }
         if let Some(a) = self.after_change_s {
             println!("  and a reference {a:.0} s after every change of spindle speed");
@@ -631,6 +935,15 @@ impl ReferenceReport {
                 "  {}: {} references ({} in the block), {} accepted, {} refused ({} of {} corrupted refused, {} clean refused)",
                 c.column, c.references, c.references_in_block, c.accepted, c.refused, c.corrupted_refused, c.corrupted, c.clean_refused
             );
+            if self.when_asked.is_some() {
+                println!(
+                    "  {}: the board asked {} times ({} after a speed change, {} at the interval)",
+                    c.column,
+                    c.asked_speed_change + c.asked_interval,
+                    c.asked_speed_change,
+                    c.asked_interval
+                );
+            }
         }
     }
 }

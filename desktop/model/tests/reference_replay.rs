@@ -58,6 +58,7 @@ fn args(every: Option<&str>, outliers: Option<&str>, seed: u64) -> ReferenceArgs
         rezero_at: vec![],
         params: vec![],
         dump: None,
+        when_asked: None,
     }
 }
 

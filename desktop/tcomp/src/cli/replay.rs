@@ -75,11 +75,48 @@ pub struct ReferenceFlags {
     /// references) to this CSV.
     #[arg(long = "reference-dump", value_name = "CSV")]
     pub dump: Option<std::path::PathBuf>,
+    /// Probe when the board asks (issue 51), by the board's own rule
+    /// (math core `ask`, bit for bit): a set time after a spindle-speed
+    /// change (the run's `spindle_rpm`; without it the interval rule only)
+    /// and whenever the longest interval has passed since the last accepted
+    /// reference. The simulated PLC probes at the next sample; a refused
+    /// reading leaves the request raised. Not with a clock schedule.
+    #[arg(
+        long = "reference-when-asked",
+        conflicts_with_all = ["every", "phase", "after_change"]
+    )]
+    pub when_asked: bool,
+    /// The board asks this long after a spindle-speed change (default
+    /// 15min; 0: never for a change).
+    #[arg(long = "ask-settle", value_name = "DURATION", requires = "when_asked")]
+    pub ask_settle: Option<String>,
+    /// The board asks when this long has passed since the last accepted
+    /// reference (default 70min; 0: never).
+    #[arg(
+        long = "ask-interval",
+        value_name = "DURATION",
+        requires = "when_asked"
+    )]
+    pub ask_interval: Option<String>,
+    /// A spindle-speed change is a move of at least this, rpm (default 500).
+    #[arg(long = "ask-speed-step", value_name = "RPM", requires = "when_asked")]
+    pub ask_speed_step: Option<u16>,
 }
 
-impl From<ReferenceFlags> for ReferenceArgs {
-    fn from(f: ReferenceFlags) -> ReferenceArgs {
-        ReferenceArgs {
+impl TryFrom<ReferenceFlags> for ReferenceArgs {
+    type Error = anyhow::Error;
+    fn try_from(f: ReferenceFlags) -> anyhow::Result<ReferenceArgs> {
+        let when_asked = f
+            .when_asked
+            .then(|| {
+                tcomp_model::reference_replay::ask_params(
+                    f.ask_settle.as_deref(),
+                    f.ask_interval.as_deref(),
+                    f.ask_speed_step,
+                )
+            })
+            .transpose()?;
+        Ok(ReferenceArgs {
             every: f.every,
             phase: f.phase,
             after_change: f.after_change,
@@ -89,14 +126,16 @@ impl From<ReferenceFlags> for ReferenceArgs {
             rezero_at: f.rezero_at,
             params: f.params,
             dump: f.dump,
-        }
+            when_asked,
+        })
     }
 }
 
 /// `replay`'s long help: an example.
 pub const EXAMPLE: &str = "Example:
   tcomp replay shift.csv model.img --from 0.6
-  tcomp replay shift.csv model.img --fail-sensor T_spindle@1800 --json";
+  tcomp replay shift.csv model.img --fail-sensor T_spindle@1800 --json
+  tcomp replay shift.csv model.img --from 0.6 --to 0.8 --reference-when-asked";
 
 pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
     let ReplayArgs {
@@ -108,7 +147,7 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
         reference,
         json,
     } = args;
-    let reference = ReferenceArgs::from(reference);
+    let reference = ReferenceArgs::try_from(reference)?;
     // Run file first, then image: each refusal names its own file.
     let mut table = tcomp_data::runcsv::Run::read_with_temperatures(&run)?;
     // Scored as rises from the run's start, as the board compensates.
