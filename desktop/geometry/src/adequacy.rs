@@ -39,6 +39,8 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use crate::unit_svd::{complete_basis, unit_svd};
+
 /// Documented default reading noise [µm], one reading of one run (the
 /// laser interferometer of the line plans, the R-test's sensors): used when
 /// the user gives no `--noise-um`, and said so.
@@ -179,19 +181,7 @@ struct Tsvd {
 
 fn tsvd(a: &DMatrix<f64>, tol: f64) -> Result<Tsvd> {
     let (m, n) = a.shape();
-    let norms: Vec<f64> = (0..n)
-        .map(|j| a.column(j).norm())
-        .map(|v| if v > 0.0 { v } else { 1.0 })
-        .collect();
-    let mut an = a.clone();
-    for j in 0..n {
-        an.column_mut(j).scale_mut(1.0 / norms[j]);
-    }
-    let svd = an.svd(true, true);
-    let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        bail!("internal: SVD without U or Vᵀ");
-    };
-    let sv = &svd.singular_values;
+    let (norms, u, vt, sv) = unit_svd(a)?;
     let smax = sv.iter().copied().fold(0.0, f64::max);
     let mut keep = Vec::new();
     let mut null_unit: Vec<DVector<f64>> = Vec::new();
@@ -208,19 +198,7 @@ fn tsvd(a: &DMatrix<f64>, tol: f64) -> Result<Tsvd> {
     if m < n {
         let mut basis: Vec<DVector<f64>> = keep.iter().map(|k| k.0.clone()).collect();
         basis.extend(null_unit.iter().cloned());
-        for k in 0..n {
-            let mut v = DVector::zeros(n);
-            v[k] = 1.0;
-            for q in &basis {
-                let d = q.dot(&v);
-                v -= q * d;
-            }
-            if v.norm() > 1e-6 {
-                v /= v.norm();
-                basis.push(v.clone());
-                null_unit.push(v);
-            }
-        }
+        null_unit.extend(complete_basis(&mut basis, n));
     }
     let null = null_unit
         .into_iter()

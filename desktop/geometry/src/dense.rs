@@ -17,15 +17,16 @@
 //! errors it leaves undetermined (`unobservable`).
 
 use anyhow::{bail, Result};
-use nalgebra::{Cholesky, DMatrix, DVector, Dyn, Vector3};
+use nalgebra::{DMatrix, DVector};
 
-use super::errors::{GeometricErrors, Poly, Term, SQUARENESS_NAMES};
+use super::errors::{GeometricErrors, Poly, Term};
 use super::identify::LineObs;
-use super::kinematics::{sensitivity, Structure};
-use super::smooth::{
-    basis_monomials, Hyper, SmoothFit, DETERMINED_UM, DETERMINED_URAD, SCALE_PRIOR_PPM,
+use super::kinematics::Structure;
+use super::prior_solve::{
+    normal_equations, observability, solve, Normal, Prior, Search, Unknown, SCALE_PRIOR_PPM,
     SQUARENESS_PRIOR_URAD,
 };
+use super::smooth::{basis_monomials, SmoothFit};
 
 /// Nodes per error function (both ends included).
 pub const DEFAULT_NODES: usize = 21;
@@ -44,15 +45,26 @@ enum DCol {
     Scale(usize),
 }
 
+impl Unknown for DCol {
+    fn squareness(&self) -> Option<usize> {
+        match self {
+            DCol::Squareness(i) => Some(*i),
+            _ => None,
+        }
+    }
+    fn scale(&self) -> Option<usize> {
+        match self {
+            DCol::Scale(i) => Some(*i),
+            _ => None,
+        }
+    }
+}
+
 struct Design {
     cols: Vec<DCol>,
     terms: Vec<Term>,
     nodes: usize,
-    g: DMatrix<f64>,
-    b: DVector<f64>,
-    yy: f64,
-    per_line: Vec<(DMatrix<f64>, DVector<f64>, f64, usize)>,
-    m: usize,
+    ne: Normal,
 }
 
 fn hat(nodes: usize, k: usize, u: f64) -> f64 {
@@ -73,63 +85,24 @@ fn design(st: &Structure, lines: &[LineObs], nodes: usize, stroke: [f64; 3]) -> 
     }
     cols.extend((0..3).map(DCol::Squareness));
     cols.extend((0..lines.len()).map(DCol::Scale));
-    let n = cols.len();
-    let mut g = DMatrix::zeros(n, n);
-    let mut b = DVector::zeros(n);
-    let (mut yy, mut m) = (0.0, 0);
-    let mut per_line = Vec::new();
-    for (li, l) in lines.iter().enumerate() {
-        let d = Vector3::from(l.direction);
-        let p0 = l.points.first().map(|p| p.pos_mm).unwrap_or([0.0; 3]);
-        let k = l.points.len();
-        let mut a = DMatrix::zeros(k, n);
-        let mut y = DVector::zeros(k);
-        for (r, p) in l.points.iter().enumerate() {
-            let s = sensitivity(st, p.pos_mm, l.tool_offset_mm);
-            let along = d.dot(&(Vector3::from(p.pos_mm) - Vector3::from(p0)));
-            for (ci, c) in cols.iter().enumerate() {
-                a[(r, ci)] = match *c {
-                    DCol::Node { t, k } => {
-                        let term = terms[t];
-                        let ax = term.axis.index();
-                        let w = hat(nodes, k, p.pos_mm[ax] / stroke[ax]);
-                        if w == 0.0 {
-                            0.0
-                        } else {
-                            d.dot(&s.terms[ax][term.component.index()]) * w
-                        }
-                    }
-                    DCol::Squareness(i) => d.dot(&s.squareness[i]),
-                    DCol::Scale(i) if i == li => along * 1e-3,
-                    DCol::Scale(_) => 0.0,
-                };
+    let ne = normal_equations(st, lines, &cols, |ci, pos, s, d| match cols[ci] {
+        DCol::Node { t, k } => {
+            let term = terms[t];
+            let ax = term.axis.index();
+            let w = hat(nodes, k, pos[ax] / stroke[ax]);
+            if w == 0.0 {
+                0.0
+            } else {
+                d.dot(&s.terms[ax][term.component.index()]) * w
             }
-            y[r] = p.disp_um;
         }
-        for ci in 0..n {
-            let mean = a.column(ci).mean();
-            a.column_mut(ci).add_scalar_mut(-mean);
-        }
-        let mean = y.mean();
-        y.add_scalar_mut(-mean);
-        let gl = a.transpose() * &a;
-        let bl = a.transpose() * &y;
-        let yl = y.norm_squared();
-        g += &gl;
-        b += &bl;
-        yy += yl;
-        m += k;
-        per_line.push((gl, bl, yl, k));
-    }
+        _ => 0.0,
+    });
     Design {
         cols,
         terms,
         nodes,
-        g,
-        b,
-        yy,
-        per_line,
-        m,
+        ne,
     }
 }
 
@@ -183,7 +156,7 @@ fn group(term: Term) -> usize {
 
 /// The prior precision (block diagonal) and the log-determinant of the
 /// prior covariance.
-fn prior(d: &Design, v: &V) -> Option<(DMatrix<f64>, f64)> {
+fn prior(d: &Design, v: &V) -> Option<Prior> {
     let ell = v[4].exp();
     let one = node_prior(d.nodes, ell, false)?;
     let two = node_prior(d.nodes, ell, true)?;
@@ -214,60 +187,7 @@ fn prior(d: &Design, v: &V) -> Option<(DMatrix<f64>, f64)> {
             }
         }
     }
-    Some((p, logdet))
-}
-
-/// −2 ln evidence (without constants), the posterior Cholesky and the
-/// prior precision.
-fn evidence(d: &Design, v: &V, lines: usize) -> Option<(f64, Cholesky<f64, Dyn>, DMatrix<f64>)> {
-    let s2 = (2.0 * v[0]).exp();
-    let (p, logdet_p) = prior(d, v)?;
-    let mm = &d.g / s2 + &p;
-    let ch = mm.cholesky()?;
-    let logdet_m: f64 = 2.0 * ch.l().diagonal().iter().map(|x| x.ln()).sum::<f64>();
-    let bs = &d.b / s2;
-    let x = ch.solve(&bs);
-    let quad = (d.yy - bs.dot(&x) * s2) / s2;
-    let dof = (d.m - lines) as f64;
-    Some((dof * s2.ln() + logdet_p + logdet_m + quad, ch, p))
-}
-
-/// Coordinate search of the evidence from a neutral start.
-fn search(d: &Design, lines: usize) -> V {
-    let f = |v: &V| evidence(d, v, lines).map_or(f64::INFINITY, |r| r.0);
-    let mut v: V = [0.5f64.ln(), 10f64.ln(), 3f64.ln(), 10f64.ln(), 0.3f64.ln()];
-    let lo: V = [
-        0.002f64.ln(),
-        0.01f64.ln(),
-        0.01f64.ln(),
-        0.01f64.ln(),
-        0.05f64.ln(),
-    ];
-    let hi: V = [20f64.ln(), 1e3f64.ln(), 1e3f64.ln(), 1e3f64.ln(), 3f64.ln()];
-    let mut best = f(&v);
-    let mut step = [1.0; 5];
-    for _ in 0..200 {
-        let mut moved = false;
-        for k in 0..5 {
-            for dir in [1.0, -1.0] {
-                let mut w = v;
-                w[k] = (w[k] + dir * step[k]).clamp(lo[k], hi[k]);
-                let fw = f(&w);
-                if fw < best - 1e-9 {
-                    best = fw;
-                    v = w;
-                    moved = true;
-                }
-            }
-        }
-        if !moved {
-            step.iter_mut().for_each(|s| *s *= 0.5);
-            if step[0] < 0.01 {
-                break;
-            }
-        }
-    }
-    v
+    Some(Prior::Precision(p, logdet))
 }
 
 /// Identify with per-target values and the evidence-chosen roughness prior.
@@ -284,76 +204,29 @@ pub fn identify_dense(
         bail!("at least 4 nodes per error function, got {nodes}");
     }
     let d = design(st, lines, nodes, stroke);
-    let nl = lines.len();
-    let v = search(&d, nl);
-    let (_, ch, p) = evidence(&d, &v, nl)
-        .ok_or_else(|| anyhow::anyhow!("internal: the posterior is not positive definite"))?;
-    let s2 = (2.0 * v[0]).exp();
-    let x = ch.solve(&(&d.b / s2));
-    let cov = ch.inverse();
-    let effective_parameters = (&cov * &d.g / s2).trace();
-    let resid_ss = d.yy - 2.0 * d.b.dot(&x) + x.dot(&(&d.g * &x));
-    let residual_rms_um = (resid_ss.max(0.0) / d.m as f64).sqrt();
-    let (loo_rms_um, loo_per_line_um) = leave_one_line_out(&d, &p, s2, lines);
-    let (errors, fit_um) = to_errors(&d, x.as_slice(), stroke);
-    let (posterior_sd, unobservable_terms) = observability(&d, &cov);
-    let line_scale_ppm = d
-        .cols
-        .iter()
-        .zip(x.iter())
-        .filter_map(|(c, v)| match c {
-            DCol::Scale(i) => Some((lines[*i].id.clone(), *v)),
-            _ => None,
-        })
-        .collect();
-    let noise_um = v[0].exp();
-    let warning = super::smooth::loo_warning(loo_rms_um, noise_um);
-    Ok(SmoothFit {
-        errors,
-        basis: format!(
-            "values at {nodes} nodes, Matérn 5/2 prior; carried as degree {OUTPUT_DEGREE} (fit {fit_um:.3} µm)"
-        ),
-        degree: nodes,
-        unknowns: d.cols.len(),
-        readings: d.m,
-        lines: nl,
-        effective_parameters,
-        hyper: Hyper {
-            noise_um,
-            positioning_um: v[1].exp(),
-            straightness_um: v[2].exp(),
-            angular_urad: v[3].exp(),
-            decay: None,
-            length_scale_strokes: Some(v[4].exp()),
-        },
-        residual_rms_um,
-        loo_rms_um,
-        loo_per_line_um,
-        line_scale_ppm,
-        posterior_sd,
-        unobservable_terms,
-        warning,
-    })
-}
-
-/// Each line predicted from the posterior of the others [µm]: RMS over all
-/// readings, and per line.
-fn leave_one_line_out(
-    d: &Design,
-    p: &DMatrix<f64>,
-    s2: f64,
-    lines: &[LineObs],
-) -> (f64, Vec<(String, f64)>) {
-    let (mut ss_all, mut per) = (0.0, Vec::new());
-    for (li, (gl, bl, yl, k)) in d.per_line.iter().enumerate() {
-        let mm = (&d.g - gl) / s2 + p;
-        let Some(c) = mm.cholesky() else { continue };
-        let xl = c.solve(&((&d.b - bl) / s2));
-        let ss = (yl - 2.0 * bl.dot(&xl) + xl.dot(&(gl * &xl))).max(0.0);
-        ss_all += ss;
-        per.push((lines[li].id.clone(), (ss / *k as f64).sqrt()));
-    }
-    ((ss_all / d.m as f64).sqrt(), per)
+    // Coordinate search from a neutral start.
+    let start = Search {
+        start: [0.5f64.ln(), 10f64.ln(), 3f64.ln(), 10f64.ln(), 0.3f64.ln()],
+        lo: [
+            0.002f64.ln(),
+            0.01f64.ln(),
+            0.01f64.ln(),
+            0.01f64.ln(),
+            0.05f64.ln(),
+        ],
+        hi: [20f64.ln(), 1e3f64.ln(), 1e3f64.ln(), 1e3f64.ln(), 3f64.ln()],
+        step: [1.0; 5],
+    };
+    let solved = solve(&d.ne, &d.cols, lines, |v| prior(&d, v), &start)?;
+    let (errors, fit_um) = to_errors(&d, solved.x.as_slice(), stroke);
+    let obs = observability(&d.cols, &solved.cov, |t, _| node_sd(&d, &solved.cov, t));
+    let ell = solved.v[4].exp();
+    let basis = format!(
+        "values at {nodes} nodes, Matérn 5/2 prior; carried as degree {OUTPUT_DEGREE} (fit {fit_um:.3} µm)"
+    );
+    let mut fit = solved.fit(errors, basis, nodes, obs);
+    fit.hyper.length_scale_strokes = Some(ell);
+    Ok(fit)
 }
 
 /// Node values of every term (zeros included), indexed like `d.terms`.
@@ -412,38 +285,15 @@ fn to_errors(d: &Design, x: &[f64], stroke: [f64; 3]) -> (GeometricErrors, f64) 
     (e, worst)
 }
 
-/// Posterior standard deviation of each error, RMS over its nodes, and the
-/// errors whose two standard deviations exceed the stated tolerance.
-fn observability(d: &Design, cov: &DMatrix<f64>) -> (Vec<(String, f64)>, Vec<String>) {
-    let (mut sd, mut bad) = (Vec::new(), Vec::new());
-    for (t, term) in d.terms.iter().enumerate() {
-        let var: f64 = d
-            .cols
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| matches!(c, DCol::Node { t: tt, .. } if *tt == t))
-            .map(|(i, _)| cov[(i, i)])
-            .sum();
-        let s = (var / d.nodes as f64).max(0.0).sqrt();
-        let tol = if term.component.is_angular() {
-            DETERMINED_URAD
-        } else {
-            DETERMINED_UM
-        };
-        if 2.0 * s > tol {
-            bad.push(term.name());
-        }
-        sd.push((term.name(), s));
-    }
-    for (i, c) in d.cols.iter().enumerate() {
-        if let DCol::Squareness(k) = c {
-            let s = cov[(i, i)].sqrt();
-            if 2.0 * s > DETERMINED_URAD {
-                bad.push(SQUARENESS_NAMES[*k].to_string());
-            }
-            sd.push((SQUARENESS_NAMES[*k].to_string(), s));
-        }
-    }
-    bad.sort();
-    (sd, bad)
+/// Posterior standard deviation of error `t` (index into `d.terms`), RMS
+/// over its nodes.
+fn node_sd(d: &Design, cov: &DMatrix<f64>, t: usize) -> f64 {
+    let var: f64 = d
+        .cols
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| matches!(c, DCol::Node { t: tt, .. } if *tt == t))
+        .map(|(i, _)| cov[(i, i)])
+        .sum();
+    (var / d.nodes as f64).max(0.0).sqrt()
 }

@@ -21,6 +21,7 @@ use serde::Serialize;
 
 use super::errors::{GeometricErrors, Poly, Squareness, Term, SQUARENESS_NAMES};
 use super::kinematics::{sensitivity, Structure};
+use super::unit_svd::{complete_basis, unit_svd};
 
 /// Relative singular-value threshold (of the design matrix with unit-norm
 /// columns) below which a direction counts as not observable. The full
@@ -270,35 +271,19 @@ pub fn identify(
     let a = DMatrix::from_fn(m, n, |i, j| rows[i][j]);
     let b = DVector::from_vec(rhs);
     // Unit-norm columns: the singular values then compare like with like.
-    let norms: Vec<f64> = (0..n)
-        .map(|j| a.column(j).norm())
-        .map(|v| if v > 0.0 { v } else { 1.0 })
-        .collect();
-    let mut an = a.clone();
-    for j in 0..n {
-        an.column_mut(j).scale_mut(1.0 / norms[j]);
-    }
-    let svd = an.clone().svd(true, true);
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&i, &j| svd.singular_values[j].total_cmp(&svd.singular_values[i]));
-    let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
+    let (norms, u, vt, singular_values) = unit_svd(&a)?;
+    let mut order: Vec<usize> = (0..singular_values.len()).collect();
+    order.sort_by(|&i, &j| singular_values[j].total_cmp(&singular_values[i]));
+    let sv: Vec<f64> = order.iter().map(|&i| singular_values[i]).collect();
     // A design with fewer readings than unknowns has n − m null directions
     // that the thin SVD does not list.
     let smax = sv.first().copied().unwrap_or(0.0);
     let tol = RANK_TOL * smax;
     let rank = sv.iter().filter(|s| **s > tol).count();
-    let (u, vt) = (
-        svd.u
-            .as_ref()
-            .ok_or_else(|| anyhow::anyhow!("internal: SVD without U"))?,
-        svd.v_t
-            .as_ref()
-            .ok_or_else(|| anyhow::anyhow!("internal: SVD without Vᵀ"))?,
-    );
     // Truncated-SVD (minimum-norm) solution: unobservable directions stay 0.
     let mut xn = DVector::zeros(n);
     for &i in &order {
-        let s = svd.singular_values[i];
+        let s = singular_values[i];
         if s > tol {
             let coef = u.column(i).dot(&b) / s;
             xn += vt.row(i).transpose() * coef;
@@ -327,30 +312,19 @@ pub fn identify(
     };
     let mut null_vectors: Vec<(DVector<f64>, f64)> = order
         .iter()
-        .filter(|&&i| svd.singular_values[i] <= tol)
-        .map(|&i| (vt.row(i).transpose(), svd.singular_values[i]))
+        .filter(|&&i| singular_values[i] <= tol)
+        .map(|&i| (vt.row(i).transpose(), singular_values[i]))
         .collect();
     if m < n {
         // Complete the basis of the row space with Gram–Schmidt on unit vectors.
         let mut basis_vecs: Vec<DVector<f64>> = order
             .iter()
-            .filter(|&&i| svd.singular_values[i] > tol)
+            .filter(|&&i| singular_values[i] > tol)
             .map(|&i| vt.row(i).transpose())
             .collect();
         basis_vecs.extend(null_vectors.iter().map(|(v, _)| v.clone()));
-        for k in 0..n {
-            let mut v = DVector::zeros(n);
-            v[k] = 1.0;
-            for q in &basis_vecs {
-                let d = q.dot(&v);
-                v -= q * d;
-            }
-            if v.norm() > 1e-6 {
-                v /= v.norm();
-                basis_vecs.push(v.clone());
-                null_vectors.push((v, 0.0));
-            }
-        }
+        let added = complete_basis(&mut basis_vecs, n);
+        null_vectors.extend(added.into_iter().map(|v| (v, 0.0)));
     }
     let mut unobservable_terms = std::collections::BTreeSet::new();
     let null_space: Vec<Vec<f64>> = null_vectors

@@ -31,6 +31,7 @@ pub mod lines;
 pub mod plan;
 pub mod plan_design;
 pub mod predict;
+mod prior_solve;
 pub mod rotary;
 pub mod rtest;
 pub mod score;
@@ -38,6 +39,7 @@ pub mod sim;
 pub mod smooth;
 pub mod study;
 pub mod thermal;
+mod unit_svd;
 pub mod volumetric;
 
 // The rotary files' former paths, for the callers outside this crate that

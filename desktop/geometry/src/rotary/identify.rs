@@ -26,6 +26,7 @@ pub use super::unobservable::Unobservable;
 use super::unobservable::{describe_null, nest_spread, null_directions};
 use crate::kinematics::tool_tip_error_exact;
 use crate::rtest::RTestFile;
+use crate::unit_svd::unit_svd;
 
 /// Relative singular value (unit-norm columns) below which a direction is
 /// not observable: a condition number above 10⁴ is refused. The default
@@ -357,19 +358,7 @@ fn least_squares(
     sigma_r: f64,
 ) -> Result<Solution> {
     let (m, n) = a.shape();
-    let norms: Vec<f64> = (0..n)
-        .map(|j| a.column(j).norm())
-        .map(|v| if v > 0.0 { v } else { 1.0 })
-        .collect();
-    let mut an = a.clone();
-    for j in 0..n {
-        an.column_mut(j).scale_mut(1.0 / norms[j]);
-    }
-    let svd = an.svd(true, true);
-    let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        bail!("internal: SVD without U or Vᵀ");
-    };
-    let sv = &svd.singular_values;
+    let (norms, u, vt, sv) = unit_svd(a)?;
     let smax = sv.max();
     if !(smax > 0.0) {
         bail!("the files carry no information on the rotary errors (every column is zero)");
@@ -393,7 +382,7 @@ fn least_squares(
             sigma0 * var.sqrt() / norms[j]
         })
         .collect();
-    let null = null_directions(sv.as_slice(), vt, tol, m, n);
+    let null = null_directions(sv.as_slice(), &vt, tol, m, n);
     let condition_number = (rank == n).then(|| {
         smax / sv
             .iter()

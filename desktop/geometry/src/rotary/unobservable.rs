@@ -10,6 +10,7 @@ use std::collections::BTreeSet;
 use super::columns::{Col, RotaryOptions};
 use crate::identify::NULL_WEIGHT;
 use crate::rtest::RTestFile;
+use crate::unit_svd::complete_basis;
 
 /// One direction the files cannot see: its error names and why.
 #[derive(Clone, Debug, Serialize)]
@@ -63,19 +64,7 @@ pub(crate) fn null_directions(
         .collect();
     if m < n {
         let mut basis: Vec<DVector<f64>> = (0..sv.len()).map(|i| vt.row(i).transpose()).collect();
-        for k in 0..n {
-            let mut v = DVector::zeros(n);
-            v[k] = 1.0;
-            for q in &basis {
-                let d = q.dot(&v);
-                v -= q * d;
-            }
-            if v.norm() > 1e-6 {
-                v /= v.norm();
-                basis.push(v.clone());
-                null.push((v, 0.0));
-            }
-        }
+        null.extend(complete_basis(&mut basis, n).into_iter().map(|v| (v, 0.0)));
     }
     null
 }
