@@ -4,12 +4,12 @@
 //! misfit), and the report: as JSON (the errors JSON with the fit's
 //! figures beside it) or in words. `geometry.rs` parses the arguments.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::geometry_adequacy::{inadequate_warning, print_adequacy, refuse_inadequate};
-use super::geometry_smooth::stroke_from;
+use super::geometry_smooth::{read_one_state, recovery_json, recovery_text, stroke_from};
 use tcomp_geometry::adequacy::{Adequacy, StatedNoise};
 use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::{
@@ -17,7 +17,7 @@ use tcomp_geometry::identify::{
     Identification, LeaveOneLineOut, LineObs,
 };
 use tcomp_geometry::kinematics::Structure;
-use tcomp_geometry::lines::{average_runs, Averaged, LineFile};
+use tcomp_geometry::lines::Averaged;
 use tcomp_geometry::study::{recovery, volumetric_residual, ErrorsJson};
 
 /// `identify --method poly` as given.
@@ -35,7 +35,7 @@ pub struct PolyRequest<'a> {
 }
 
 pub fn identify_poly_cmd(r: &PolyRequest) -> Result<()> {
-    let (st, avg) = read_one_state(r.files)?;
+    let (st, avg) = read_one_state(r.files, " (or use fit-thermal)")?;
     let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
     let stroke = stroke_from(r.stroke, &obs)?;
     let id = identify(&st, &obs, r.degrees, stroke)?;
@@ -79,22 +79,6 @@ pub fn identify_poly_cmd(r: &PolyRequest) -> Result<()> {
         eprintln!("warning: {w}");
     }
     Ok(())
-}
-
-/// The line files, forward/backward runs averaged, of one temperature state.
-fn read_one_state(paths: &[PathBuf]) -> Result<(Structure, Vec<Averaged>)> {
-    let files: Vec<LineFile> = paths
-        .iter()
-        .map(|p| LineFile::read(p))
-        .collect::<Result<_>>()?;
-    let st = tcomp_geometry::guard::common_structure(&files, paths)?;
-    let avg = average_runs(&files)?;
-    let states: std::collections::BTreeSet<_> =
-        avg.iter().map(|a| a.temperature_state.clone()).collect();
-    if states.len() > 1 {
-        bail!("the files come from {} temperature states; identify one state at a time (or use fit-thermal)", states.len());
-    }
-    Ok((st, avg))
 }
 
 /// The stated adequacy test's verdict and the σ's it gives.
@@ -212,16 +196,7 @@ impl Report {
             serde_json::json!({"EC0Y": sq[0], "EB0Z": sq[1], "EA0Z": sq[2]}),
         );
         if let Some(r) = &self.recovery {
-            let m: BTreeMap<_, _> = r
-                .iter()
-                .map(|(k, (mx, rms, pk))| {
-                    (
-                        k.clone(),
-                        serde_json::json!({"max": mx, "rms": rms, "true_peak": pk}),
-                    )
-                })
-                .collect();
-            o.insert("recovery".into(), serde_json::json!(m));
+            o.insert("recovery".into(), recovery_json(r));
         }
         if let Some((b, af)) = self.volumetric {
             o.insert(
@@ -253,14 +228,7 @@ impl Report {
         for t in Term::all() {
             let tj = &self.stated.errors.errors[&t.name()];
             let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
-            let rec_s = self
-                .recovery
-                .as_ref()
-                .map(|r| {
-                    let (mx, rms, _) = r[&t.name()];
-                    format!("   recovery max {mx:.2} rms {rms:.2}")
-                })
-                .unwrap_or_default();
+            let rec_s = recovery_text(self.recovery.as_ref(), t);
             let smax = tj.sigma.iter().copied().fold(0.0, f64::max);
             println!(
                 "  {} [{:4}] {}   σ ≤ {smax:.2}{rec_s}",

@@ -2,7 +2,9 @@
 //! of `smooth.rs` from line files, with its report (effective number of
 //! parameters, noise found, leave-one-line-out error beside the fit
 //! residual, per-line scale) and the same refusal as the polynomial model
-//! when errors are not determined (`--partial` writes them marked).
+//! when errors are not determined (`--partial` writes them marked). Also
+//! what both identify methods read and report alike: the strokes, the line
+//! files of one temperature state, the recovery against `--truth`.
 
 use anyhow::{bail, Result};
 use std::collections::BTreeMap;
@@ -13,7 +15,8 @@ use super::geometry_table::parse_triple;
 use tcomp_geometry::dense::identify_dense;
 use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::LineObs;
-use tcomp_geometry::lines::{average_runs, LineFile};
+use tcomp_geometry::kinematics::Structure;
+use tcomp_geometry::lines::{average_runs, Averaged, LineFile};
 use tcomp_geometry::smooth::{
     identify_smooth, SmoothFit, DEFAULT_DEGREE, DETERMINED_UM, DETERMINED_URAD,
 };
@@ -53,22 +56,51 @@ pub fn stroke_from(stroke: Option<&str>, obs: &[LineObs]) -> Result<[f64; 3]> {
     Ok(stroke)
 }
 
-pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
-    let files: Vec<LineFile> = a
-        .files
+/// The line files, forward/backward runs averaged, of one temperature
+/// state; `hint` ends the refusal of several states.
+pub fn read_one_state(paths: &[PathBuf], hint: &str) -> Result<(Structure, Vec<Averaged>)> {
+    let files: Vec<LineFile> = paths
         .iter()
         .map(|p| LineFile::read(p))
         .collect::<Result<_>>()?;
-    let st = tcomp_geometry::guard::common_structure(&files, a.files)?;
+    let st = tcomp_geometry::guard::common_structure(&files, paths)?;
     let avg = average_runs(&files)?;
     let states: std::collections::BTreeSet<_> =
         avg.iter().map(|a| a.temperature_state.clone()).collect();
     if states.len() > 1 {
         bail!(
-            "the files come from {} temperature states; identify one state at a time",
+            "the files come from {} temperature states; identify one state at a time{hint}",
             states.len()
         );
     }
+    Ok((st, avg))
+}
+
+/// Per term (max, RMS, true peak) of the recovery error, as JSON.
+pub fn recovery_json(r: &BTreeMap<String, (f64, f64, f64)>) -> serde_json::Value {
+    let m: BTreeMap<_, _> = r
+        .iter()
+        .map(|(k, (mx, rms, pk))| {
+            (
+                k.clone(),
+                serde_json::json!({"max": mx, "rms": rms, "true_peak": pk}),
+            )
+        })
+        .collect();
+    serde_json::json!(m)
+}
+
+/// A term's recovery error in words (empty without `--truth`).
+pub fn recovery_text(r: Option<&BTreeMap<String, (f64, f64, f64)>>, t: Term) -> String {
+    r.map(|r| {
+        let (mx, rms, _) = r[&t.name()];
+        format!("   recovery max {mx:.2} rms {rms:.2}")
+    })
+    .unwrap_or_default()
+}
+
+pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
+    let (st, avg) = read_one_state(a.files, "")?;
     let obs: Vec<LineObs> = avg.iter().map(|a| a.obs.clone()).collect();
     let stroke = stroke_from(a.stroke, &obs)?;
     let fit = match a.dense {
@@ -101,16 +133,7 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
         o.insert("lines".into(), serde_json::json!(obs.len()));
         o.insert("identification".into(), serde_json::to_value(&fit)?);
         if let Some(r) = &rec {
-            let m: BTreeMap<_, _> = r
-                .iter()
-                .map(|(k, (mx, rms, pk))| {
-                    (
-                        k.clone(),
-                        serde_json::json!({"max": mx, "rms": rms, "true_peak": pk}),
-                    )
-                })
-                .collect();
-            o.insert("recovery".into(), serde_json::json!(m));
+            o.insert("recovery".into(), recovery_json(r));
         }
         println!("{v}");
         if let Some(w) = &fit.warning {
@@ -122,13 +145,7 @@ pub fn identify_smooth_cmd(a: &SmoothRequest) -> Result<()> {
     for t in Term::all() {
         let tj = &ej.errors[&t.name()];
         let vals: Vec<String> = tj.values.iter().map(|v| format!("{v:7.2}")).collect();
-        let rec_s = rec
-            .as_ref()
-            .map(|r| {
-                let (mx, rms, _) = r[&t.name()];
-                format!("   recovery max {mx:.2} rms {rms:.2}")
-            })
-            .unwrap_or_default();
+        let rec_s = recovery_text(rec.as_ref(), t);
         println!("  {} [{:4}] {}{rec_s}", t.name(), tj.unit, vals.join(" "));
     }
     let s = fit.errors.squareness;
