@@ -7,7 +7,6 @@
 //! (`board5::predict5`) bit for bit and removes most of the true error.
 
 use host_tests::qemu::{modbus_master as master, BenchBoard};
-use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
 use tcomp_geometry::rotary::board::rotary_section;
@@ -16,6 +15,7 @@ use tcomp_geometry::rotary::identify::{identify_rotary, RotaryOptions};
 use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
 use tcomp_geometry::volumetric::build;
+use tcomp_numerics::rng::Rng;
 use thermocomp_core::five_axis::fstatus;
 
 #[test]

@@ -15,7 +15,6 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use host_tests::qemu::{modbus_master as master, BenchBoard};
-use tcomp_data::rng::Rng;
 use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
 use tcomp_geometry::board5::{predict5, FiveAxisOptions};
 use tcomp_geometry::rotary::board::{add_drift_sensors, rotary_section};
@@ -26,6 +25,7 @@ use tcomp_geometry::rotary::sim::{
 };
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
 use tcomp_geometry::volumetric::build;
+use tcomp_numerics::rng::Rng;
 use thermocomp_core::five_axis::{fstatus, FIVE_AXIS_RTEST_LOCATION};
 use thermocomp_core::volumetric::vstatus;
 

@@ -190,7 +190,11 @@ fn by_default_or_without_a_probe_direction_the_board_never_asks() {
         let mut t = 0;
         while t < 10 * 60 * MIN {
             t += 30_000;
-            let rpm = if (t / (7 * MIN)).is_multiple_of(2) { 800 } else { 4000 };
+            let rpm = if (t / (7 * MIN)).is_multiple_of(2) {
+                800
+            } else {
+                4000
+            };
             cycle(&mut app, &rig, t, rpm);
             assert_eq!(
                 wanted(&mut app),

@@ -160,7 +160,7 @@ fn main() {
     }
     let restarts = args.restarts;
     let mut best_overall: (Vec<usize>, (usize, f64)) = (Vec::new(), (0, f64::NEG_INFINITY));
-    let mut rng = tcomp_data::rng::Rng::new(3);
+    let mut rng = tcomp_numerics::rng::Rng::new(3);
     for restart in 0..restarts {
         let mut chosen: Vec<usize> = (0..fixed).collect();
         if restart > 0 {

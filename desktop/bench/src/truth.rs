@@ -9,8 +9,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use tcomp_data::rng::Rng;
 use tcomp_data::runcsv::Run;
+use tcomp_numerics::rng::Rng;
 
 /// Segments of the spindle housing bar (nose first) and of the column bar
 /// (bottom first).

@@ -520,13 +520,13 @@ mod tests {
     /// a parabola well above the noise, it fails both ways.
     #[test]
     fn a_line_holds_a_line_and_not_a_parabola() {
-        let mut rng = tcomp_data::rng::Rng::new(3);
+        let mut rng = tcomp_numerics::rng::Rng::new(3);
         let m = 200;
         let a = DMatrix::from_fn(m, 2, |i, j| if j == 0 { 1.0 } else { i as f64 / m as f64 });
         let groups: Vec<Vec<usize>> = (0..10).map(|g| (g * 20..g * 20 + 20).collect()).collect();
         let labels = vec!["c".to_string(), "s".to_string()];
         let noise = StatedNoise::new(Some(1.0)).unwrap();
-        let run = |curv: f64, rng: &mut tcomp_data::rng::Rng| {
+        let run = |curv: f64, rng: &mut tcomp_numerics::rng::Rng| {
             let b = DVector::from_fn(m, |i, _| {
                 let u = i as f64 / m as f64;
                 1.0 + 2.0 * u + curv * (u - 0.5).powi(2) + rng.normal()

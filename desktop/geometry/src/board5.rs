@@ -316,7 +316,7 @@ mod tests {
     use crate::sim::{random_errors, ErrorSizes};
     use crate::volumetric::build;
     use nalgebra::{Rotation3, Vector3};
-    use tcomp_data::rng::Rng;
+    use tcomp_numerics::rng::Rng;
 
     fn random_turntable(rng: &mut Rng) -> Turntable {
         let mut r = |s: f64| rng.range(-s, s);

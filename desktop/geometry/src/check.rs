@@ -19,7 +19,7 @@ use super::errors::GeometricErrors;
 use super::five_axis::{tool_tip_error_exact5, RotaryPos, Turntable};
 use super::identify::to_reference_convention;
 use super::kinematics::Structure;
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 /// One compared point.
 #[derive(Clone, Debug)]

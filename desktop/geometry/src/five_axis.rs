@@ -369,7 +369,7 @@ pub fn tool_tip_error_linear5(
 mod tests {
     use super::*;
     use crate::sim::{random_errors, ErrorSizes};
-    use tcomp_data::rng::Rng;
+    use tcomp_numerics::rng::Rng;
 
     fn random_turntable(rng: &mut Rng) -> Turntable {
         let mut r = |s: f64| rng.range(-s, s);

@@ -11,7 +11,7 @@ use super::errors::{GeometricErrors, Poly, Squareness, Term};
 use super::identify::Degrees;
 use super::kinematics::{tool_tip_error_exact, Structure};
 use super::lines::{LineFile, LineSpec, Run};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 /// Sizes of the random machine's errors (peak over the stroke).
 #[derive(Clone, Copy, Debug)]

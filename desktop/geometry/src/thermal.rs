@@ -241,7 +241,7 @@ pub fn optimise_bias(
     if rows.is_empty() {
         bail!("bias optimisation: no tool-tip measurements");
     }
-    let delta = tcomp_data::linalg::least_squares(&rows, &y, false, 0.0)?;
+    let delta = tcomp_numerics::linalg::least_squares(&rows, &y, false, 0.0)?;
     let mut out = model.clone();
     for (b, d) in out.base.iter_mut().zip(&delta) {
         *b += d;

@@ -147,7 +147,7 @@ fn fit_part(
     }
     let mut out = vec![[0.0; 3]; mons.len()];
     for (k, y) in ys.iter().enumerate() {
-        let c = tcomp_data::linalg::least_squares(&rows, y, false, 0.0)?;
+        let c = tcomp_numerics::linalg::least_squares(&rows, y, false, 0.0)?;
         for (o, v) in out.iter_mut().zip(c) {
             o[k] = v;
         }
@@ -245,7 +245,7 @@ pub fn build(
 mod tests {
     use super::*;
     use crate::sim::{random_errors, ErrorSizes};
-    use tcomp_data::rng::Rng;
+    use tcomp_numerics::rng::Rng;
 
     #[test]
     fn the_polynomial_reproduces_the_first_order_kinematics() {

@@ -36,8 +36,8 @@ use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceSta
 use thermocomp_core::Model;
 
 use crate::replay::ReplayRow;
-use tcomp_data::rng::Rng;
 use tcomp_data::runcsv::Run;
+use tcomp_numerics::rng::Rng;
 
 /// The references and re-zeros `tcomp replay` simulates, as its flags give
 /// them (text as typed; parsed here).

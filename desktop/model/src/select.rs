@@ -8,9 +8,9 @@ use std::collections::BTreeMap;
 use anyhow::{bail, Result};
 use serde::Serialize;
 
-use tcomp_data::rng::Rng;
 use tcomp_data::runcsv::Run;
-use tcomp_data::stats::pearson;
+use tcomp_numerics::rng::Rng;
+use tcomp_numerics::stats::pearson;
 
 fn dist2(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()

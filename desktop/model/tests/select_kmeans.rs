@@ -1,8 +1,8 @@
 //! K-means++ grouping and sensor choice on clearly clustered synthetic series.
 
 use tcomp_data::runcsv::Run;
-use tcomp_data::stats::pearson;
 use tcomp_model::select::{kmeans_pp, select};
+use tcomp_numerics::stats::pearson;
 
 fn clustered_run() -> Run {
     let n = 600;

@@ -489,7 +489,7 @@ fn a_long_lag_on_the_motor_sensor_is_named_not_its_neighbour() {
 /// a light duty (0.15–0.55 of the maximum speed) and a heavy one
 /// (0.5–1.0), speeds changing every 10–60 min, 4 h each.
 fn two_speed_band_runs(effects: &[TruthEffect], seed: u64) -> Vec<(String, Run)> {
-    let mut g = tcomp_data::rng::Rng::paired(seed);
+    let mut g = tcomp_numerics::rng::Rng::paired(seed);
     [(0.15, 0.55), (0.5, 1.0)]
         .iter()
         .enumerate()

@@ -10,12 +10,12 @@ mod common;
 use common::{ok, refused};
 use std::path::Path;
 
-use tcomp_data::rng::Rng;
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose, RotaryModel};
 use tcomp_geometry::rotary_frames::rotary_error_machine;
 use tcomp_geometry::study::ErrorsJson;
 use tcomp_geometry::GeometricErrors;
+use tcomp_numerics::rng::Rng;
 use thermocomp_core::five_axis::{self, fstatus};
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::vstatus;

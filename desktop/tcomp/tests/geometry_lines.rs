@@ -1,12 +1,12 @@
 //! Displacement-line files, the 14-line plan, and identification recovery.
 use std::path::Path;
 use std::process::Command;
-use tcomp_data::rng::Rng;
 use tcomp_geometry::identify::{identify, Degrees, LineObs, Observation};
 use tcomp_geometry::lines::{average_runs, plan14, LineFile, Run};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
 use tcomp_geometry::study::{recovery, volumetric_residual};
 use tcomp_geometry::{Structure, Term};
+use tcomp_numerics::rng::Rng;
 
 const STROKE: [f64; 3] = [800.0, 500.0, 400.0];
 

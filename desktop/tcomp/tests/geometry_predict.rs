@@ -241,7 +241,7 @@ fn five_axis_predict_is_the_model_s_chain_and_the_image_the_core_s() {
     let m = RotaryModel::read(&d.join("rotary.json")).unwrap();
     let s = lin.stroke_mm;
     let mut csv = String::from("x,y,z,a,c,tool\n");
-    let mut rng = tcomp_data::rng::Rng::new(7);
+    let mut rng = tcomp_numerics::rng::Rng::new(7);
     for i in 0..20 {
         let p: [f64; 3] =
             std::array::from_fn(|k| (rng.range(0.05, 0.95) * s[k] * 1e3).round() / 1e3);

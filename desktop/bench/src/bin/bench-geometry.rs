@@ -19,13 +19,13 @@
 //! thumbv7em-none-eabihf`); `--board-only` skips the identification.
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use tcomp_data::rng::Rng;
 use tcomp_geometry::bench_rich::Method;
 use tcomp_geometry::identify::{identify, Degrees, LineObs};
 use tcomp_geometry::lines::{average_runs, plan14, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
 use tcomp_geometry::study::{recovery, volumetric_residual};
 use tcomp_geometry::{Structure, Term};
+use tcomp_numerics::rng::Rng;
 
 /// Instructions (×100) of one volumetric evaluation of `image` on the
 /// bench firmware, or why it could not be measured.

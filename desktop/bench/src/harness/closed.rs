@@ -4,7 +4,7 @@
 use anyhow::Result;
 use serde_json::{json, Value};
 
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 use tcomp_thermal::diagnose::{diagnose, Options};
 use tcomp_thermal::sim::{sim_run, Effect, Machine, SimOptions, EFFECT_NAMES};
 

@@ -1,7 +1,7 @@
 //! Drawing the closed-world cases: random duties and effects of the first
 //! simulator, and the benchmark's configuration.
 
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 use tcomp_thermal::sim::{Duty, Effect, Machine};
 
 /// A random 8 h (or `hours`) duty: segments of 10–60 min.

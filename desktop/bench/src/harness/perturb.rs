@@ -3,7 +3,7 @@
 //! from a seed so each benchmark case's file is reproducible.
 
 use anyhow::Result;
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 use tcomp_thermal::sim::machine::MachineSpec;
 use tcomp_thermal::sim::Machine;
 

@@ -19,7 +19,7 @@ use super::columns::{effect, Col};
 use super::model::{
     nominal_chain, reading_sensitivity, tool_tip_error, Linear, Location, Pose, RotaryModel,
 };
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 /// One tool-tip reading at a pose.
 #[derive(Clone, Debug)]
@@ -123,7 +123,7 @@ pub fn optimise_rotary_bias(
     if rows.is_empty() {
         bail!("rotary bias optimisation: no tool-tip readings");
     }
-    let delta = tcomp_data::linalg::least_squares(&rows, &y, false, 0.0)?;
+    let delta = tcomp_numerics::linalg::least_squares(&rows, &y, false, 0.0)?;
     let mut l = model.location.to_array();
     for (v, d) in l.iter_mut().zip(&delta) {
         *v += d;

@@ -23,7 +23,7 @@ use crate::kinematics::Structure;
 use crate::lines::{average_runs, plan14};
 use crate::rtest::RTestFile;
 use crate::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 /// A machine as the check sees it.
 #[derive(Clone, Copy)]

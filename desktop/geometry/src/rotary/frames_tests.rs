@@ -5,7 +5,7 @@ use crate::five_axis::{
 use crate::kinematics::Structure;
 use crate::rotary::{tool_tip_error, Drift, Pose, COMPONENT_NAMES};
 use crate::GeometricErrors;
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 fn eval(t: &Trig, deg: f64) -> f64 {
     let x = deg.to_radians();

@@ -1,6 +1,6 @@
 use super::*;
 use crate::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 fn run(plan: &RPlan, noise_um: f64, seed: u64) -> (RotaryModel, Vec<RTestFile>) {
     let mut rng = Rng::new(seed);

@@ -16,7 +16,7 @@ use super::model::{
 };
 use crate::five_axis::Fourier;
 use crate::rtest::{RTestFile, RTestRow, Source};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 /// Where the turntable sits and where the nest goes.
 #[derive(Clone, Debug, PartialEq)]

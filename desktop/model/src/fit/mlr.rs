@@ -10,7 +10,7 @@ use super::samples::{normalize_rows, Samples};
 /// Least-squares MLR on normalized inputs.
 pub fn fit_mlr(specs: Vec<FeatureSpec>, train: &Samples, channel: &str) -> Result<MlrParams> {
     let xn = normalize_rows(&specs, &train.x);
-    let c = tcomp_data::linalg::least_squares(&xn, &train.y, true, 1e-9 * train.y.len() as f64)
+    let c = tcomp_numerics::linalg::least_squares(&xn, &train.y, true, 1e-9 * train.y.len() as f64)
         .with_context(|| format!("channel {channel}: linear fit"))?;
     Ok(MlrParams {
         features: specs,

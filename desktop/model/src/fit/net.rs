@@ -7,8 +7,8 @@
 use rayon::prelude::*;
 
 use super::progress::Progress;
-use tcomp_data::linalg::{least_squares, solve_spd};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::linalg::{least_squares, solve_spd};
+use tcomp_numerics::rng::Rng;
 
 /// Bound on |W1| and |b1| (the fixed-point core's range).
 pub const W1_BOUND: f64 = 1999.0;

@@ -22,12 +22,12 @@ use super::geometry_smooth::{identify_smooth_cmd, SmoothRequest};
 use super::geometry_table::{
     parse_triple, table_cmd, table_json, tooltip_cmd, TableArgs, TooltipArgs,
 };
-use tcomp_data::rng::Rng;
 use tcomp_geometry::identify::{identify, Degrees, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
 use tcomp_geometry::study::ErrorsJson;
+use tcomp_numerics::rng::Rng;
 
 #[derive(clap::Args, Debug)]
 pub struct GeometryArgs {

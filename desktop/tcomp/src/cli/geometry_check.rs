@@ -5,13 +5,13 @@ use anyhow::{bail, Result};
 
 use std::path::PathBuf;
 
-use tcomp_data::rng::Rng;
 use tcomp_geometry::check::{
     compare, figures, plot, thermal_sim, Compared, Figures, Grid, MachineErrors,
 };
 use tcomp_geometry::five_axis::Turntable;
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::study::ErrorsJson;
+use tcomp_numerics::rng::Rng;
 
 #[derive(clap::Args, Debug)]
 pub struct CheckArgs {

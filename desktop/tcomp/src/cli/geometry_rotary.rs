@@ -7,7 +7,6 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_adequacy::{inadequate_warning, print_adequacy, refuse_inadequate};
-use tcomp_data::rng::Rng;
 use tcomp_geometry::check::figures;
 use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
 use tcomp_geometry::kinematics::Structure;
@@ -20,6 +19,7 @@ use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, Ro
 use tcomp_geometry::rotary::{Linear, RotaryModel};
 use tcomp_geometry::rtest::RTestFile;
 use tcomp_geometry::study::ErrorsJson;
+use tcomp_numerics::rng::Rng;
 
 #[derive(clap::Args, Debug)]
 pub struct SimRotaryArgs {

@@ -10,10 +10,10 @@
 use super::{ok, Path, Written};
 use std::collections::BTreeMap;
 
-use tcomp_data::rng::Rng;
 use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Pose};
 use tcomp_geometry::rotary_frames::rotary_error_machine;
 use tcomp_geometry::rotary_sim::warmup_temps;
+use tcomp_numerics::rng::Rng;
 use thermocomp_core::five_axis::{self, fstatus, FIVE_AXIS_RTEST_LOCATION};
 use thermocomp_core::image::Model;
 use thermocomp_core::volumetric::vstatus;

@@ -13,7 +13,7 @@ pub mod machine;
 mod modal;
 
 use anyhow::{bail, Result};
-use tcomp_data::rng::Rng;
+use tcomp_numerics::rng::Rng;
 
 pub use duty::{Duty, Inputs};
 pub use effects::{Effect, ALL_EFFECT_NAMES, EFFECT_NAMES};
@@ -22,7 +22,7 @@ pub use machine::{Machine, Probe};
 use modal::Modes;
 use nalgebra::{DMatrix, DVector};
 use std::rc::Rc;
-use tcomp_data::linalg::solve;
+use tcomp_numerics::linalg::solve;
 
 /// Noise-free simulator output at the output samples.
 #[derive(Clone, Debug)]

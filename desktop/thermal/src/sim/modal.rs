@@ -239,8 +239,8 @@ pub(super) fn cached(spec: &Spec) -> Result<Rc<Modes>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tcomp_data::linalg::discretize;
-    use tcomp_data::rng::Rng;
+    use tcomp_numerics::linalg::discretize;
+    use tcomp_numerics::rng::Rng;
 
     /// The modal step is the matrix exponential's `x ← Φx + Ψb`
     /// (b = C⁻¹F) on a random network, over several steps and a change of

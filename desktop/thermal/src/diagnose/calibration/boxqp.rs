@@ -2,7 +2,7 @@
 //! the freedom left to candidates both solve one).
 
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
-use tcomp_data::linalg::dot;
+use tcomp_numerics::linalg::dot;
 
 /// min ½ xᵀAx − bᵀx subject to lo ≤ x ≤ hi by projected Gauss–Seidel
 /// from `x0` (clamped), and the sweeps it took: the fallback of
@@ -321,7 +321,7 @@ mod tests {
 
     /// A random SPD problem with a few strongly coupled directions.
     fn problem(n: usize, seed: u64) -> (DMatrix<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
-        let mut g = tcomp_data::rng::Rng::paired(seed);
+        let mut g = tcomp_numerics::rng::Rng::paired(seed);
         let m = DMatrix::from_fn(n + 3, n, |_, _| g.uniform() - 0.5);
         let mut a = m.transpose() * m;
         for i in 0..n {

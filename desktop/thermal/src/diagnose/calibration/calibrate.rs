@@ -19,7 +19,7 @@ use serde_json::{json, Value};
 use crate::diagnose::effects::Evaluator;
 use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;
-use tcomp_data::stats::block_means;
+use tcomp_numerics::stats::block_means;
 
 /// Above this many element parameters, elements of a kind share one factor.
 const MAX_KNOBS: usize = 160;

@@ -53,7 +53,7 @@ use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;
 use channel_basis::ChannelBasis;
 use knots::Knots;
-use tcomp_data::linalg::{dot, dot_many, leading_eigenvectors};
+use tcomp_numerics::linalg::{dot, dot_many, leading_eigenvectors};
 pub(crate) use timing::timing;
 
 /// The linearised, bounded calibration freedom on the full grid.

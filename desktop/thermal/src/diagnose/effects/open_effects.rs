@@ -30,7 +30,7 @@ pub use super::speed_law::{
 };
 use crate::diagnose::ident::{ModelFit, OutFit, Problem, Structure};
 use crate::diagnose::signal::r4;
-use tcomp_data::linalg::RidgeFactor;
+use tcomp_numerics::linalg::RidgeFactor;
 
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag:
 /// above the largest seen on clean runs (0.19 on the open-world benchmark's
@@ -578,7 +578,7 @@ pub fn ambient_drift(p: &Problem, st: &Structure, nom: &ModelFit) -> Option<Cand
             }
         });
         let yv = nalgebra::DVector::from_vec(y);
-        let c = tcomp_data::linalg::ridge(&x, &yv, 1e-6)?;
+        let c = tcomp_numerics::linalg::ridge(&x, &yv, 1e-6)?;
         shapes.push(
             run.time
                 .iter()

@@ -578,7 +578,7 @@ pub fn waveform(
             let xr: Vec<Vec<f64>> = rows.iter().map(|&k| row(k)).collect();
             let x = DMatrix::from_fn(rows.len(), p, |i, j| xr[i][j]);
             let y = nalgebra::DVector::from_fn(rows.len(), |i, _| e[rows[i]]);
-            tcomp_data::linalg::ridge(&x, &y, 1e-9)
+            tcomp_numerics::linalg::ridge(&x, &y, 1e-9)
         } else {
             None
         };
@@ -617,7 +617,7 @@ mod tests {
     }
 
     fn noise(seed: u64, n: usize) -> Vec<f64> {
-        let mut g = tcomp_data::rng::Rng::paired(seed);
+        let mut g = tcomp_numerics::rng::Rng::paired(seed);
         (0..n).map(|_| g.normal()).collect()
     }
 

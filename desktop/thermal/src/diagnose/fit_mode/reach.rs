@@ -15,7 +15,7 @@ use crate::diagnose::effects::STEEP_EXPONENTS;
 use crate::diagnose::ident::{Problem, Structure, RIDGE};
 use crate::diagnose::signal::lag;
 use crate::diagnose::signal::r4;
-use tcomp_data::linalg::ridge_multi;
+use tcomp_numerics::linalg::ridge_multi;
 
 /// Held-out RMS share of a steeper speed law's signature that the nominal
 /// must leave for the runs to test it. Below it (the nominal's own n and
@@ -215,7 +215,7 @@ mod tests {
     /// rpm, rest between), sensors driven by n and n^1.5 through 600 s and
     /// 4800 s, white noise.
     fn runs(levels: &[f64], seed: u64) -> Vec<(String, Run)> {
-        let mut g = tcomp_data::rng::Rng::paired(seed);
+        let mut g = tcomp_numerics::rng::Rng::paired(seed);
         let dt = 30.0;
         let n = 960;
         (0..2)
@@ -260,7 +260,7 @@ mod tests {
     /// Two 8 h runs as `runs`, with a `T_ambient` column `amb(t)` (plus
     /// its sensor's noise) that both sensors follow through 2400 s.
     fn ambient_kept(amb: &dyn Fn(f64) -> f64) -> f64 {
-        let mut g = tcomp_data::rng::Rng::paired(5);
+        let mut g = tcomp_numerics::rng::Rng::paired(5);
         let dt = 30.0;
         let runs: Vec<(String, Run)> = (0..2)
             .map(|r| {

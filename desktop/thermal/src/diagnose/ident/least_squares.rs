@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::model::{Columns, Extra, ModelFit, OutFit, Problem, Structure, RIDGE};
 use crate::diagnose::signal::lag_signal;
-use tcomp_data::linalg::{ridge, ridge_multi};
+use tcomp_numerics::linalg::{ridge, ridge_multi};
 
 impl Problem<'_> {
     /// Fit every output for a structure, with optional extra columns and a

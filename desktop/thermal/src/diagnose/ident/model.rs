@@ -590,7 +590,7 @@ mod tests {
     /// order and leave noise-level held-out residuals.
     #[test]
     fn identifies_a_two_mode_network_to_noise_level() {
-        let mut g = tcomp_data::rng::Rng::paired(9);
+        let mut g = tcomp_numerics::rng::Rng::paired(9);
         let dt = 30.0;
         let n = 960; // 8 h
         let rpm: Vec<f64> = (0..n)

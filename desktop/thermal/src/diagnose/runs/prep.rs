@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 
 use crate::sim::{Duty, Inputs, Machine};
 use tcomp_data::runcsv::Run;
-use tcomp_data::stats::block_means;
+use tcomp_numerics::stats::block_means;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Kind {

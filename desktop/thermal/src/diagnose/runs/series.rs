@@ -10,7 +10,7 @@
 use anyhow::{bail, Result};
 
 use tcomp_data::runcsv::{is_temperature_column, Run};
-use tcomp_data::stats::block_means;
+use tcomp_numerics::stats::block_means;
 
 /// The reserved column of the ambient temperature (an input, never a node).
 pub const AMBIENT_COLUMN: &str = "T_ambient";

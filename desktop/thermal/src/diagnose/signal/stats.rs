@@ -3,14 +3,14 @@
 
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
-pub use tcomp_data::stats::mean_finite;
+pub use tcomp_numerics::stats::mean_finite;
 
 /// Pearson correlation over rows where both are finite (the crate's one
 /// Pearson, `select::pearson`).
 pub fn corr(a: &[f64], b: &[f64]) -> f64 {
     let o =
         |v: &[f64]| -> Vec<Option<f64>> { v.iter().map(|x| x.is_finite().then_some(*x)).collect() };
-    tcomp_data::stats::pearson(&o(a), &o(b))
+    tcomp_numerics::stats::pearson(&o(a), &o(b))
 }
 
 /// Centered moving average with window `w` rows (NaN-aware).
@@ -375,7 +375,7 @@ mod tests {
 
     #[test]
     fn ljung_box_tells_white_noise_from_a_slow_wave() {
-        let mut g = tcomp_data::rng::Rng::paired(3);
+        let mut g = tcomp_numerics::rng::Rng::paired(3);
         let white: Vec<f64> = (0..800).map(|_| g.normal()).collect();
         let (_, _, p) = ljung_box(&white, 10, 1).unwrap();
         assert!(p > 0.01, "white noise rejected, p = {p}");

@@ -13,7 +13,7 @@
 //! criterion stays an exact sum of squares of one consistent B̃.
 
 use nalgebra::DMatrix;
-use tcomp_data::linalg::leading_eigenvectors;
+use tcomp_numerics::linalg::leading_eigenvectors;
 
 /// One channel's fit knots in its own directions.
 pub(crate) struct ChannelBasis {
