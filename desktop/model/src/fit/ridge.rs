@@ -95,7 +95,7 @@ impl Standardised {
             // A constant input (sd 0) has a zero row: its coefficient is 0.
             a[j * p + j] += lambda.max(1e-12) + if self.sd[j] > 0.0 { 0.0 } else { 1.0 };
         }
-        let beta = tcomp_data::linalg::solve_spd(&a, &self.zy, p)
+        let beta = tcomp_numerics::linalg::solve_spd(&a, &self.zy, p)
             .with_context(|| format!("channel {channel}: ridge fit"))?;
         let coef: Vec<f64> = beta
             .iter()
