@@ -16,7 +16,10 @@
 # and the 1 h residual split into the hour after a spindle-speed change and
 # the rest; one re-zero at 60 % scored 60-100 % against the raw error;
 # a sweep of the rule's constants; hourly references averaged over six clock
-# phases, with the number of references each schedule took.
+# phases, with the number of references each schedule took; on ch3/ch5,
+# references when the board asks (`--reference-when-asked`) against no
+# references, hourly (six phases) and the clock schedule at the same count
+# (six phases), each with its count (issue 51).
 # Usage: scripts/bench-probe-channels.sh [--json]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -60,6 +63,26 @@ for img in fl35 fl124; do
     "$tcomp" replay "$run" "$dir/$img.img" --from 0.6 --to 0.8 --json --reference-every 1h \
       --reference-phase "$phase" --reference-seed 1 \
       --reference-dump "$dir/phase-$img-$phase.csv" >"$dir/phase-$img-$phase.json"
+  done
+done
+# References when the board asks (issue 51 item 3: `--reference-when-asked`,
+# the math core's rule with its suggested parameters, the PLC probing at the
+# next sample), ch3/ch5, whole run dumped and scored per block from the dump;
+# clean (seed 1) and with 5 % of the readings +50 um. Then the clock schedule
+# at the same count per block and channel (interval = block length / the
+# references the board asked for in it), at six phases: schedules compared at
+# equal counts.
+img=fl35
+"$tcomp" replay "$run" "$dir/$img.img" --from 0.6 --to 0.8 --json --reference-when-asked \
+  --reference-seed 1 --reference-dump "$dir/asked-$img.csv" >"$dir/asked-$img.json"
+"$tcomp" replay "$run" "$dir/$img.img" --from 0.6 --to 0.8 --json --reference-when-asked \
+  --reference-seed 1 --reference-outliers 5%:50 --reference-dump "$dir/asked-$img-5__50.csv" >"$dir/asked-$img-5__50.json"
+python3 scripts/probe_channels.py --equal-count "$dir" | while read -r tag every; do
+  for k in 0 1 2 3 4 5; do
+    phase=$(python3 -c "print('0' if $k == 0 else '%.3fs' % ($every * $k / 6))")
+    "$tcomp" replay "$run" "$dir/$img.img" --from 0.6 --to 0.8 --json --reference-every "${every}s" \
+      --reference-phase "$phase" --reference-seed 1 \
+      --reference-dump "$dir/eq-$tag-$k.csv" >"$dir/eq-$tag-$k.json"
   done
 done
 # Alternatives of the rule's constants (seed 1, clean), same rows: how far

@@ -4,6 +4,8 @@ block of FL_THERMAL, the board's served correction with probe references
 information floors of a reference schedule. Standard library only.
 
 Usage: probe_channels.py DIR RUN JSON(0|1)
+       probe_channels.py --equal-count DIR   (per channel and block: the clock
+       interval at the count the board asked for, for the script's replays)
 """
 import csv
 import json
@@ -138,7 +140,94 @@ def phases(d):
     return out
 
 
+ASKED = ("dch3_um", "dch5_um")  # the fl35 image's channels
+BLOCK_TAG = {"test 60-80 %": "60_80", "rest 80-100 %": "80_100"}
+
+
+def block_rows(dump, lo, hi):
+    n = len(dump)
+    return range(int(lo * n), int(hi * n))
+
+
+def scored(dump, ch, lo, hi):
+    """MAE of the served correction in the block and the references taken
+    in it (rows with a reading in the dump's `_reference` column)."""
+    meas = [num(r[f"{ch}_measured"]) for r in dump]
+    served = [float(r[f"{ch}_served"]) for r in dump]
+    rows = block_rows(dump, lo, hi)
+    idx = [i for i in rows if meas[i] is not None]
+    refs = sum(1 for i in rows if dump[i].get(f"{ch}_reference", "") != "")
+    return mae((meas[i], served[i]) for i in idx), refs
+
+
+def equal_count(d):
+    """Per channel and block: the clock interval (s) giving the block as many
+    references as the board asked for in it (block length / count)."""
+    dump = read_csv(f"{d}/asked-fl35.csv")
+    time_s = [float(r["time_s"]) for r in dump]
+    for ch in ASKED:
+        for blk, (lo, hi) in BLOCKS.items():
+            rows = block_rows(dump, lo, hi)
+            _, n = scored(dump, ch, lo, hi)
+            length = time_s[min(rows.stop, len(dump) - 1)] - time_s[rows.start]
+            print(f"{ch}-{BLOCK_TAG[blk]} {length / max(n, 1):.3f}")
+
+
+def when_asked(d):
+    """Per channel and block: no references, hourly (six phases), when the
+    board asks (clean; 5 %:+50), and the clock schedule at the board's count
+    (six phases): MAE and references in the block each."""
+    out = []
+    asked = read_csv(f"{d}/asked-fl35.csv")
+    asked_bad = read_csv(f"{d}/asked-fl35-5__50.csv")
+    rep = json.load(open(f"{d}/asked-fl35.json"))["references"]
+    rep_bad = json.load(open(f"{d}/asked-fl35-5__50.json"))["references"]["channels"]
+    hourly = {p: read_csv(f"{d}/phase-fl35-{p}.csv") for p in PHASES}
+    for ch in ASKED:
+        c = next(c for c in rep["channels"] if c["column"] == ch)
+        cb = next(c for c in rep_bad if c["column"] == ch)
+        for blk, (lo, hi) in BLOCKS.items():
+            meas = [num(r[f"{ch}_measured"]) for r in asked]
+            model = [float(r[f"{ch}_model"]) for r in asked]
+            idx = [i for i in block_rows(asked, lo, hi) if meas[i] is not None]
+            none = mae((meas[i], model[i]) for i in idx)
+            a_mae, a_n = scored(asked, ch, lo, hi)
+            b_mae, b_n = scored(asked_bad, ch, lo, hi)
+            h = [scored(hourly[p], ch, lo, hi) for p in PHASES]
+            tag = f"{ch}-{BLOCK_TAG[blk]}"
+            eq = [scored(read_csv(f"{d}/eq-{tag}-{k}.csv"), ch, lo, hi) for k in range(6)]
+            every = json.load(open(f"{d}/eq-{tag}-0.json"))["references"]["every_s"]
+            h_mae = sum(v for v, _ in h) / 6
+            h_n = sum(n for _, n in h) / 6
+            e_mae = sum(v for v, _ in eq) / 6
+            target = {"dch3_um": 1.2, "dch5_um": 0.8}[ch]
+            out.append({
+                "channel": ch, "block": blk,
+                "none_mae_um": round(none, 3), "none_references": 0,
+                "hourly_phase_mean_mae_um": round(h_mae, 3),
+                "hourly_references_by_phase": [n for _, n in h],
+                "hourly_references_phase_mean": round(h_n, 2),
+                "asked_mae_um": round(a_mae, 3), "asked_references": a_n,
+                "asked_5pct_50um_mae_um": round(b_mae, 3), "asked_5pct_50um_references": b_n,
+                "asked_5pct_50um_corrupted_refused_whole_run": f"{cb['corrupted_refused']}/{cb['corrupted']}",
+                "asked_requests_whole_run": {"speed_change": c["asked_speed_change"], "interval": c["asked_interval"]},
+                "asked_references_whole_run": c["references"],
+                "equal_count_every_s": round(every, 1),
+                "equal_count_phase_mean_mae_um": round(e_mae, 3),
+                "equal_count_mae_by_phase_um": [round(v, 3) for v, _ in eq],
+                "equal_count_references_by_phase": [n for _, n in eq],
+                "target_asked_mae_um": target,
+                "asked_meets_target": a_mae <= target,
+                "asked_no_more_references_than_hourly": a_n <= h_n,
+                "never_worse_than_none": all(v <= none for v in (a_mae, b_mae, h_mae, e_mae)),
+            })
+    return out, rep["when_asked"]
+
+
 def main():
+    if sys.argv[1] == "--equal-count":
+        equal_count(sys.argv[2])
+        return
     d, run_path, as_json = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
     run = read_csv(run_path)
     rpm = [num(r["spindle_rpm"]) for r in run]
@@ -202,8 +291,10 @@ def main():
                 "never_worse_than_raw": c["never_worse_than_raw"],
             })
     if as_json:
+        asked, rule = when_asked(d)
         print(json.dumps({"seeds": list(SEEDS), "rows": rows, "rezero_60pct_scored_60_100": rezero,
-                          "sweep": sweep(), "hourly_over_clock_phases": phases(d)}))
+                          "sweep": sweep(), "hourly_over_clock_phases": phases(d),
+                          "when_asked": {"rule": rule, "rows": asked}}))
         return
     print("| channel | block | model alone | 1 h | 1 h 5 %:+50 (refused) | 4 h | 4 h 5 %:+50 (refused) | floor 1 h: hold exact / interval mean | floor 4 h | 1 h: hour after a speed change (share) / elsewhere |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -231,6 +322,20 @@ def main():
     for r in phases(d):
         lo_, hi_ = r["mae_1h_phase_min_max_um"]
         print(f"| {r['channel']} | {r['block']} | {r['mae_1h_phase_mean_um']:.2f} ({lo_:.2f} – {hi_:.2f}) | {r['references_by_phase']} |")
+    print()
+    asked, rule = when_asked(d)
+    print(f"When the board asks ({rule['settle_s'] // 60} min after a change of >= {rule['speed_step_rpm']} rpm, "
+          f"at most {rule['max_interval_s'] // 60} min apart, the PLC probing at the next sample); MAE um (references in the block):")
+    print()
+    print("| channel | block | none | hourly, 6 phases | when asked | when asked, 5 %:+50 (refused) | clock at the same count, 6 phases (interval) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in asked:
+        print(
+            f"| {r['channel']} | {r['block']} | {r['none_mae_um']:.2f} (0) | {r['hourly_phase_mean_mae_um']:.2f} ({r['hourly_references_phase_mean']:.1f}) | "
+            f"{r['asked_mae_um']:.2f} ({r['asked_references']}) | {r['asked_5pct_50um_mae_um']:.2f} ({r['asked_5pct_50um_references']}; "
+            f"{r['asked_5pct_50um_corrupted_refused_whole_run']}) | {r['equal_count_phase_mean_mae_um']:.2f} "
+            f"({sum(r['equal_count_references_by_phase']) / 6:.1f}; {r['equal_count_every_s'] / 60:.0f} min) |"
+        )
     print()
     print("| channel | re-zero at 60 %, scored 60-100 %: RMS with the model / raw RMS about the re-zero | never above raw |")
     print("|---|---|---|")
