@@ -143,7 +143,15 @@ pub fn main(a: DiagnoseArgs) -> Result<()> {
 
 /// The ranked findings, effects and design values alike, one line each.
 fn print_findings(d: &tcomp_thermal::diagnose::Diagnosis) {
-    if d.findings.is_empty() {
+    if !d.ambiguous.is_empty() {
+        println!(
+            "ambiguous: the held-out data cannot separate {} (nothing is named as the cause)",
+            d.ambiguous.join(", ")
+        );
+        for s in &d.separate_by {
+            println!("  to separate {s}");
+        }
+    } else if d.findings.is_empty() {
         println!("no candidate effect is supported by the data");
     }
     for (i, f) in d.findings.iter().enumerate() {

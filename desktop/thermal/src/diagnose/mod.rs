@@ -325,6 +325,8 @@ fn diagnose_core(
         nominal: json!({"kind": "machine description", "name": m.spec.name}),
         no_effect: Value::Null,
         selected_gaps: None,
+        ambiguous: Vec::new(),
+        separate_by: Vec::new(),
         ranking_rule: RANKING_RULE.to_string() + &effects::periodic_claim::rule(),
     })
 }

@@ -143,12 +143,21 @@ pub struct Diagnosis {
     /// Held-out RMS by channel and by phase, before and after the selected
     /// effect (for the report's plots).
     pub selected_gaps: Option<SelectedGaps>,
+    /// The explanations of different classes the held-out data cannot
+    /// separate, ranked (at most 3; empty when one is named): then
+    /// `findings` is empty, nothing is named as the cause.
+    pub ambiguous: Vec<String>,
+    /// Per pair (the first of `ambiguous` and each other), the measurement
+    /// that would separate them.
+    pub separate_by: Vec<String>,
 }
 
 impl Diagnosis {
     pub fn to_json(&self) -> Value {
         json!({
             "effects": self.findings.iter().map(Finding::to_json).collect::<Vec<_>>(),
+            "ambiguous": self.ambiguous,
+            "separate_by": self.separate_by,
             "where": self.where_,
             "gap_before_um": self.nominal_gap_um.map(|g| g.0),
             "gap_before_c": self.nominal_gap_c.map(|g| g.0),

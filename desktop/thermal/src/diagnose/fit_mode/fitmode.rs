@@ -28,6 +28,9 @@ struct Scored {
     /// (`None`: the nominal).
     fit: ModelFit,
     before: Option<ModelFit>,
+    /// The gate's d per held-out block against its reference (`held_out_d`):
+    /// what the ambiguity test compares between candidates.
+    blocks_d: Vec<Option<f64>>,
 }
 
 /// A candidate's fit against its reference (the nominal or its own).
@@ -230,7 +233,8 @@ fn score(
     let ms = measure(p, &c, before);
     let gain = held_out_gain(p, &c, before, nominal);
     let has_reference = reference.is_some();
-    let z = held_out_z(p, before, &c.fit, &c.affected);
+    let blocks_d = held_out_d(p, before, &c.fit, &c.affected);
+    let z = verdict::z_of(&blocks_d.iter().flatten().copied().collect::<Vec<_>>());
     if let Some(o) = c.evidence.as_object_mut() {
         o.insert(
             "held_out_z".into(),
@@ -255,17 +259,25 @@ fn score(
         gain,
         fit: c.fit,
         before: reference,
+        blocks_d,
     }
 }
 
-/// z of the held-out reduction of the gap against the measured noise, as
-/// the machine-file gate (`gate::held_out_z`): per held-out block (a
-/// contiguous held-out stretch of a run, cut into pieces of at most
-/// `verdict::BLOCK_S`) where the effect changes an affected output,
+/// The z of the held-out reduction of the gap against the measured noise,
+/// as the machine-file gate (`gate::held_out_z`), reads these: per held-out
+/// block (a contiguous held-out stretch of a run, cut into pieces of at
+/// most `verdict::BLOCK_S`) where the effect changes an affected output,
 /// d = ln((M₀ + 1)/(M₁ + 1)), M the block's mean squared residual in noise
-/// units over the affected outputs; z = mean(d) / (sd(d) / √blocks). NaN
-/// with fewer than two blocks.
-fn held_out_z(p: &Problem, before: &ModelFit, after: &ModelFit, affected: &[usize]) -> f64 {
+/// units over the affected outputs; z = mean(d) / (sd(d) / √blocks) (NaN
+/// with fewer than two blocks). One entry per held-out block of the runs
+/// (the same blocks for every candidate, in the same order): None where the
+/// effect changes no affected output.
+fn held_out_d(
+    p: &Problem,
+    before: &ModelFit,
+    after: &ModelFit,
+    affected: &[usize],
+) -> Vec<Option<f64>> {
     let mut d = Vec::new();
     for (r, run) in p.ds.runs.iter().enumerate() {
         let max = ((verdict::BLOCK_S / run.dt).floor() as usize).max(1);
@@ -302,14 +314,15 @@ fn held_out_z(p: &Problem, before: &ModelFit, after: &ModelFit, affected: &[usiz
                         }
                     }
                 }
-                if n > 0 && touched {
-                    d.push(((s0 / n as f64 + 1.0) / (s1 / n as f64 + 1.0)).ln());
-                }
+                d.push(
+                    (n > 0 && touched)
+                        .then(|| ((s0 / n as f64 + 1.0) / (s1 / n as f64 + 1.0)).ln()),
+                );
                 s = e;
             }
         }
     }
-    verdict::z_of(&d)
+    d
 }
 
 /// Held-out RMS by channel and by phase before and after an effect.
@@ -546,6 +559,20 @@ fn claimed_findings(scored: &[Scored]) -> Vec<Finding> {
     findings
 }
 
+/// The claimed candidates the held-out data cannot separate from the
+/// selected one (`verdict::ambiguity`): empty when it is named.
+fn ambiguous_names(scored: &[Scored]) -> Vec<String> {
+    let claimed: Vec<&Scored> = scored.iter().filter(|s| s.claimed).collect();
+    let ranked: Vec<(&str, &[Option<f64>])> = claimed
+        .iter()
+        .map(|s| (s.finding.name.as_str(), &s.blocks_d[..]))
+        .collect();
+    verdict::ambiguity::ambiguous_set(&ranked)
+        .into_iter()
+        .map(|i| claimed[i].finding.name.clone())
+        .collect()
+}
+
 fn fit_ranking_rule(opt: &Options) -> String {
     format!(
         "each effect is fitted jointly with the nominal on the fit blocks and scored on the held-out blocks; it is claimed when BIC improves by ≥ {} (a sensor step with at most one block of fit rows after it, where slow modes absorb a constant: or its held-out gap halves), the held-out gap of the outputs it changes shrinks by ≥ {:.0} % (a sensor step or lag: ≥ {:.0} %) and ≥ {} noise variance, and neither the µm nor the °C held-out gap grows (so nothing is claimed on a held-out gap at or under one noise unit); the machine-file gate's z (over the held-out blocks ≤ {:.0} s where the effect changes an output, d = ln((M₀ + 1)/(M₁ + 1)) with M the block's mean squared residual in noise units, z = mean(d)/(sd(d)/√blocks); {} is its 1 % line) is reported as `held_out_z`, not required: a speed law's gain sits in the few high-speed blocks; claimed effects are ranked by the held-out shrink summed over the outputs they change (noise units); sensor lags, each scored against the body map lagged by its own tau, rank as one family by their best shrink and within it by the relative fit-row shrink of the body map (claimed at ≥ 25 % of it and ≥ 10 % in every run; a tau at the long end of the grid is a lower bound)",
@@ -555,7 +582,7 @@ fn fit_ranking_rule(opt: &Options) -> String {
         FIT_MIN_ABS,
         verdict::BLOCK_S,
         verdict::Z_MIN
-    ) + &format!("; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most {claim:.0} % of the held-out gap it is scored on (between {claim:.0} % and {inconclusive:.0} %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form", claim = SPEED_CLAIM_REL * 100.0, inconclusive = (1.0 - FIT_MIN_REL) * 100.0)
+    ) + &format!("; a steeper speed law (bearing_nonlinear, runs of different mean speed only) is scored against a reference identified with motor heat ∝ n, Palmgren bearing heat ∝ n^(5/3) and inputs switched with the spindle, must add heat, and must clear the same margins against the nominal on the outputs it changes (its BIC may be replaced by halving the nominal's held-out gap); it ranks by the smaller of the two shrinks. It is also scored against the nominal itself (the steeper heat through the nominal's modes); in either form it is claimed only when it leaves at most {claim:.0} % of the held-out gap it is scored on (between {claim:.0} % and {inconclusive:.0} %, adding heat, it is listed untestable: the runs show heat steeper in speed but cannot tell a steeper law from the nominal's own misfit), and reported once, in the better-ranked form; {ambiguity}", ambiguity = verdict::ambiguity::RULE, claim = SPEED_CLAIM_REL * 100.0, inconclusive = (1.0 - FIT_MIN_REL) * 100.0)
 }
 
 /// How the computed `untestable` entries are decided (for `ranking_rule`).
@@ -606,6 +633,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         )
     });
     let sel_fit = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
+    let ambiguous = ambiguous_names(&scored);
     let mut tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
     // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
     crate::diagnose::effects::periodic_claim::fit(
@@ -617,6 +645,17 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         &mut tried,
         &opt.only,
     );
+    // a periodic line the selected effect leaves is named first by its own
+    // test; otherwise an ambiguous answer names nothing (the claimed
+    // candidates stay among `tried`)
+    let ambiguous = if findings.first().is_some_and(|f| f.name == "periodic") {
+        Vec::new()
+    } else {
+        ambiguous
+    };
+    if !ambiguous.is_empty() {
+        findings.clear();
+    }
     let mut notes = ds.notes.clone();
     notes.push(format!(
         "nominal identified on {} run(s), {} rows, fit and held-out blocks in every run",
@@ -656,7 +695,9 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             n
         },
         no_effect: no_effect_evidence(&p, &fit),
-        selected_gaps: selected,
+        selected_gaps: if ambiguous.is_empty() { selected } else { None },
+        separate_by: verdict::ambiguity::separating_sentences(&ambiguous),
+        ambiguous,
         ranking_rule: fit_ranking_rule(opt)
             + &crate::diagnose::effects::periodic_claim::rule()
             + &untestable_rule(),
@@ -665,7 +706,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
 
 #[cfg(test)]
 mod tests {
-    use super::{speed_law_inconclusive, Scored};
+    use super::{ambiguous_names, speed_law_inconclusive, Scored};
     use crate::diagnose::ident::ModelFit;
     use crate::diagnose::Finding;
     use serde_json::json;
@@ -687,6 +728,7 @@ mod tests {
             gain: m_b - m_a,
             fit: ModelFit { outs: Vec::new() },
             before: None,
+            blocks_d: Vec::new(),
         }
     }
 
@@ -709,5 +751,44 @@ mod tests {
         // fitted as cooling (on its bound)
         let cooling = law(false, 10.0, 5.0, &["extra heat c at its bound 0"]);
         assert!(speed_law_inconclusive(&[cooling]).is_none());
+    }
+
+    fn claimed(name: &str, blocks: Vec<Option<f64>>) -> Scored {
+        let mut s = law(true, 10.0, 4.0, &[]);
+        s.finding.name = name.into();
+        s.blocks_d = blocks;
+        s
+    }
+
+    #[test]
+    fn two_claimed_classes_within_noise_name_nothing_and_one_clearly_ahead_is_named() {
+        let ripple = |m: f64, ph: usize| -> Vec<Option<f64>> {
+            (0..30)
+                .map(|k| {
+                    Some(
+                        m + if (k + ph).is_multiple_of(2) {
+                            0.3
+                        } else {
+                            -0.3
+                        },
+                    )
+                })
+                .collect()
+        };
+        let close = [
+            claimed("sensor_lag", ripple(0.5, 0)),
+            claimed("sensor_lag", ripple(0.45, 0)),
+            claimed("coolant", ripple(0.48, 1)),
+        ];
+        assert_eq!(ambiguous_names(&close), vec!["sensor_lag", "coolant"]);
+        let apart = [
+            claimed("sensor_lag", vec![Some(0.9); 30]),
+            claimed("coolant", vec![Some(0.1); 30]),
+        ];
+        assert!(ambiguous_names(&apart).is_empty());
+        // an unclaimed rival is no explanation
+        let mut rival = claimed("coolant", ripple(0.5, 1));
+        rival.claimed = false;
+        assert!(ambiguous_names(&[claimed("sensor_lag", ripple(0.5, 0)), rival]).is_empty());
     }
 }

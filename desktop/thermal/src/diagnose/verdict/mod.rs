@@ -1,8 +1,11 @@
 //! The verdict room: what is claimed and how it is reported. `gate` is the
 //! noise gate, `judge` the margins every candidate of the machine-file mode
 //! is judged by, `release` the design values the data push beyond their
-//! tolerance (judged alike), `render` the markdown report and its plots.
+//! tolerance (judged alike), `ambiguity` when the gate cannot separate the
+//! best explanation from another class, `render` the markdown report and
+//! its plots.
 
+pub mod ambiguity;
 mod gate;
 mod judge;
 mod release;

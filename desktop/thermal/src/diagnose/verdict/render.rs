@@ -20,6 +20,44 @@ fn f2(x: f64) -> String {
     }
 }
 
+/// The report's paragraph on an ambiguous answer: the explanations the
+/// held-out data cannot separate and the measurement that would.
+fn ambiguous_md(d: &Diagnosis) -> String {
+    let mut s = format!(
+        "**Ambiguous: the held-out data cannot separate {}** (ranked; the first explains the most, but not significantly more than the others): nothing is named as the cause. A measurement that would separate them:\n\n",
+        d.ambiguous
+            .iter()
+            .map(|n| format!("`{n}`"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for m in &d.separate_by {
+        s += &format!("- {m}\n");
+    }
+    s + "\n"
+}
+
+/// The report's paragraph when nothing is named: an ambiguous answer, or
+/// no supported effect and the evidence for "no effect".
+fn nothing_named_md(d: &Diagnosis) -> String {
+    if !d.ambiguous.is_empty() {
+        return ambiguous_md(d);
+    }
+    let mut s =
+        "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n\n"
+            .to_string();
+    if let Some(o) = d.no_effect.as_object() {
+        s += &format!(
+            "Evidence for \"no effect\": worst held-out RMS / noise {}, white residuals in {} of {} channels ({}).\n\n",
+            o.get("worst_rms_over_noise").unwrap_or(&Value::Null),
+            o.get("white_channels").unwrap_or(&Value::Null),
+            o.get("tested_channels").unwrap_or(&Value::Null),
+            o.get("rule").and_then(Value::as_str).unwrap_or("")
+        );
+    }
+    s
+}
+
 /// Markdown report.
 pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
     use std::fmt::Write;
@@ -51,20 +89,7 @@ pub fn report_md(d: &Diagnosis, run_names: &[String]) -> String {
     let _ = writeln!(s, "## Which effect\n");
     let _ = writeln!(s, "Ranking rule: {}\n", d.ranking_rule);
     if d.findings.is_empty() {
-        let _ = writeln!(
-            s,
-            "**No candidate effect is supported by the data** (BIC and held-out margin guards).\n"
-        );
-        if let Some(o) = d.no_effect.as_object() {
-            let _ = writeln!(
-                s,
-                "Evidence for \"no effect\": worst held-out RMS / noise {}, white residuals in {} of {} channels ({}).\n",
-                o.get("worst_rms_over_noise").unwrap_or(&Value::Null),
-                o.get("white_channels").unwrap_or(&Value::Null),
-                o.get("tested_channels").unwrap_or(&Value::Null),
-                o.get("rule").and_then(Value::as_str).unwrap_or("")
-            );
-        }
+        s.push_str(&nothing_named_md(d));
     } else {
         let _ = writeln!(s, "| rank | effect | params | held-out gap µm before → after | °C before → after | ΔBIC | signature r | driver r |");
         let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
