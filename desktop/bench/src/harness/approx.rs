@@ -18,8 +18,8 @@ use super::file_truth::{is_parameter_finding, judge_finding, FileVerdict};
 use super::open::open_cases;
 use super::perturb::{design_seed, perturb_machine};
 use super::score::{
-    count_findings, score_clean, score_effect, truth_of_open, truth_of_sim, DrawnFile, Outcome,
-    Truth,
+    ambiguous_of, count_findings, effects_of, score_clean, score_effect, truth_of_open,
+    truth_of_sim, DrawnFile, Outcome, Truth,
 };
 use super::tally::mean;
 
@@ -107,6 +107,9 @@ pub struct ApproxConfig {
 struct Tally {
     /// kind → [named, honest, wrong, silent]
     per: BTreeMap<String, [usize; 4]>,
+    /// Effect cases answered "ambiguous": the true effect among them
+    /// (counted honest above), not (counted wrong).
+    ambiguous: [usize; 2],
     clean: usize,
     /// Clean cases with an effect named or a finding not true of the file.
     false_alarms: usize,
@@ -155,6 +158,9 @@ impl Tally {
             "named_rate": rate(tot[0]),
             "named_or_honest_rate": rate(tot[0] + tot[1]),
             "wrong_rate": rate(tot[2]),
+            "ambiguous": self.ambiguous[0] + self.ambiguous[1],
+            "ambiguous_with_truth": self.ambiguous[0],
+            "ambiguous_without_truth": self.ambiguous[1],
             "clean_cases": self.clean,
             "false_alarms": self.false_alarms,
             "clean_with_effect_named": self.clean_effects,
@@ -334,6 +340,9 @@ fn run_seed(
                     (Some(truth), Some(kind)) => {
                         let o = score_effect(&dj, truth);
                         t.add_effect(kind, o);
+                        if !ambiguous_of(&dj).is_empty() && effects_of(&dj).is_empty() {
+                            t.ambiguous[(o != Outcome::Honest) as usize] += 1;
+                        }
                         let fc = count_findings(&dj, Some(truth), file);
                         t.effect_findings[0] += fc.names_effect;
                         t.effect_findings[1] += fc.true_of_file;
@@ -370,14 +379,15 @@ fn run_seed(
                         g
                     })
                     .collect();
+                let amb = ambiguous_of(&dj);
                 if verdict != "named" && verdict != "clean ok" {
                     t.misses.push(json!({
                         "seed": cfg.seed, "case": ci, "verdict": verdict,
-                        "truth": case.describe, "got": got,
+                        "truth": case.describe, "got": got, "ambiguous": amb,
                     }));
                 }
                 eprintln!(
-                    "{} seed {} case {ci:3} {:17} {:10} {:.2} s (cpu {:.2} s)  truth {}  got {}",
+                    "{} seed {} case {ci:3} {:17} {:10} {:.2} s (cpu {:.2} s)  truth {}  got {}{}",
                     w.key(),
                     cfg.seed,
                     col.key(),
@@ -385,7 +395,12 @@ fn run_seed(
                     secs,
                     cpu,
                     case.describe,
-                    Value::from(got)
+                    Value::from(got),
+                    if amb.is_empty() {
+                        String::new()
+                    } else {
+                        format!("  ambiguous {amb:?}")
+                    }
                 );
             }
         }
@@ -419,6 +434,8 @@ pub fn run_approx_bench(
                     e[i] += v[i];
                 }
             }
+            p.ambiguous[0] += t.ambiguous[0];
+            p.ambiguous[1] += t.ambiguous[1];
             p.clean += t.clean;
             p.false_alarms += t.false_alarms;
             p.clean_effects += t.clean_effects;
@@ -440,7 +457,7 @@ pub fn run_approx_bench(
         "heldout_seeds": HELDOUT_SEEDS,
         "heldout": acfg.seeds == HELDOUT_SEEDS,
         "cases_per_seed": cfg.cases,
-        "scoring": "parameter findings (effects entries whose evidence kind is 'design value outside its tolerance') are told from effects. named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable; wrong: something else named; silent: nothing named or listed. A parameter finding is true of the drawn design file (harness/file_truth.rs) when the correction the file needs on the design numbers it names (truth / design: 1/factor drawn, the geometric mean over a group or multi-number parameter) lies outside the tolerance the diagnosis used and its fitted/design factor is on the same side of 1; with the exact file no finding is true. Clean: false alarm = an effect named or a finding not true of the file; true file findings counted apart. Effect cases: findings counted as naming the effect's physics, true of the file, or neither",
+        "scoring": "parameter findings (effects entries whose evidence kind is 'design value outside its tolerance') are told from effects. named: top effect right (sensor effects: right sensor), or no effect named and the first parameter finding's physics matches (harness/score.rs KIND_RULES); honest: nothing named and the truth listed under untestable, or an ambiguous answer (nothing named, `ambiguous` listing the explanations the data cannot separate) that contains the truth (ambiguous without it: wrong; on a clean case: a false alarm); wrong: something else named; silent: nothing named or listed. A parameter finding is true of the drawn design file (harness/file_truth.rs) when the correction the file needs on the design numbers it names (truth / design: 1/factor drawn, the geometric mean over a group or multi-number parameter) lies outside the tolerance the diagnosis used and its fitted/design factor is on the same side of 1; with the exact file no finding is true. Clean: false alarm = an effect named or a finding not true of the file; true file findings counted apart. Effect cases: findings counted as naming the effect's physics, true of the file, or neither",
         "columns": table_json(&pooled),
         "per_seed": per_seed,
     }))
@@ -463,17 +480,17 @@ fn table_json(t: &BTreeMap<(&'static str, &'static str), Tally>) -> Value {
 /// The text table of `run_approx_bench`'s result.
 pub fn approx_text(v: &Value) -> String {
     let mut s = format!(
-        "issue 27 columns, seeds {}, σ(log) {}: effect cases named / honest / wrong / silent; clean false alarms; s per case\n",
+        "issue 27 columns, seeds {}, σ(log) {}: effect cases named / honest / wrong / silent (ambig: answered ambiguous, in honest when the truth is among them, else in wrong); clean false alarms; s per case\n",
         v["seeds"], v["sigma_log"]
     );
-    s += "world        column             effect  named  honest  wrong  silent  named%  n+h%  wrong%  clean  false-alarms  true-file-findings  false-findings  s/case(mean/max)\n";
+    s += "world        column             effect  named  honest  wrong  silent  ambig  named%  n+h%  wrong%  clean  false-alarms  true-file-findings  false-findings  s/case(mean/max)\n";
     if let Some(ws) = v["columns"].as_object() {
         for (w, cols) in ws {
             for (c, t) in cols.as_object().into_iter().flatten() {
                 let f = |k: &str| t[k].as_f64().unwrap_or(f64::NAN);
                 s += &format!(
-                    "{w:12} {c:18} {:6} {:6} {:7} {:6} {:7} {:6.1} {:5.1} {:7.1} {:6} {:13} {:19} {:15} {:.2}/{:.2}\n",
-                    t["effect_cases"], t["named"], t["honest"], t["wrong"], t["silent"],
+                    "{w:12} {c:18} {:6} {:6} {:7} {:6} {:7} {:6} {:6.1} {:5.1} {:7.1} {:6} {:13} {:19} {:15} {:.2}/{:.2}\n",
+                    t["effect_cases"], t["named"], t["honest"], t["wrong"], t["silent"], t["ambiguous"],
                     100.0 * f("named_rate"), 100.0 * f("named_or_honest_rate"), 100.0 * f("wrong_rate"),
                     t["clean_cases"], t["false_alarms"], t["clean_true_file_findings"], t["clean_false_findings"],
                     f("mean_seconds_per_case"), f("max_seconds_per_case"),

@@ -3,7 +3,9 @@
 //! the first parameter finding names the effect's physics while no effect
 //! is named), *honest* (nothing named, and the true effect is listed under
 //! `untestable`), *wrong* (something else named), *silent* (nothing named,
-//! nothing listed). Works on the JSON: parameter findings (design values
+//! nothing listed); an ambiguous answer (`ambiguous`, nothing named) is
+//! honest when it contains the true effect, wrong otherwise (issue 52).
+//! Works on the JSON: parameter findings (design values
 //! that had to leave their tolerance) are the `effects` entries whose
 //! evidence says so, or a `findings` list; each is judged against the drawn
 //! design file by `file_truth.rs`.
@@ -312,8 +314,41 @@ pub fn untestable_covers(entry: &str, truth: &Truth) -> bool {
     true
 }
 
+/// The explanations an ambiguous answer lists (`ambiguous`, issue 52):
+/// empty when the diagnosis names a cause or says nothing.
+pub fn ambiguous_of(d: &Value) -> Vec<String> {
+    list(d, "ambiguous")
+        .iter()
+        .filter_map(|v| v.as_str().map(str::to_string))
+        .collect()
+}
+
+/// An ambiguous answer (nothing named, `ambiguous` non-empty) scored on an
+/// effect case: honest when it contains the true effect (an entry's head
+/// word among the kind's effect names; the sensor is not checked, the
+/// entries are classes), wrong otherwise. None for any other answer.
+pub fn score_ambiguous(d: &Value, truth: &Truth) -> Option<Outcome> {
+    let names = ambiguous_of(d);
+    if names.is_empty() || !effects_of(d).is_empty() {
+        return None;
+    }
+    let r = rule(&truth.kind);
+    let holds = names.iter().any(|n| {
+        let head = n.split([' ', '(']).next().unwrap_or("");
+        r.is_some_and(|r| r.effect_names.contains(&head))
+    });
+    Some(if holds {
+        Outcome::Honest
+    } else {
+        Outcome::Wrong
+    })
+}
+
 /// Score an effect case.
 pub fn score_effect(d: &Value, truth: &Truth) -> Outcome {
+    if let Some(o) = score_ambiguous(d, truth) {
+        return o;
+    }
     let effects = effects_of(d);
     let findings = findings_of(d);
     let r = rule(&truth.kind);
@@ -348,7 +383,9 @@ pub fn score_effect(d: &Value, truth: &Truth) -> Outcome {
 /// Score a clean case given the file the diagnosis had (`None`: the exact
 /// file, or no file).
 pub fn score_clean(d: &Value, file: Option<DrawnFile>) -> CleanOutcome {
-    let effect = !effects_of(d).is_empty();
+    // an ambiguous answer says an effect is there: on a clean case it is
+    // counted as one named
+    let effect = !effects_of(d).is_empty() || !ambiguous_of(d).is_empty();
     let findings = findings_of(d);
     let true_findings = findings.iter().filter(|f| true_of(f, file)).count();
     let false_findings = findings.len() - true_findings;
