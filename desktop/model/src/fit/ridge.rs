@@ -112,6 +112,26 @@ impl Standardised {
     }
 }
 
+impl Standardised {
+    /// The statistics of the inputs `cols` alone (positions in `specs`):
+    /// each input's normalisation and standardisation do not depend on the
+    /// others, so a subset's system is the sub-matrix of the whole one.
+    pub fn sub(&self, cols: &[usize]) -> Standardised {
+        let p = self.specs.len();
+        Standardised {
+            specs: cols.iter().map(|&j| self.specs[j].clone()).collect(),
+            mean: cols.iter().map(|&j| self.mean[j]).collect(),
+            sd: cols.iter().map(|&j| self.sd[j]).collect(),
+            gram: cols
+                .iter()
+                .flat_map(|&a| cols.iter().map(move |&b| self.gram[a * p + b]))
+                .collect(),
+            zy: cols.iter().map(|&j| self.zy[j]).collect(),
+            y_mean: self.y_mean,
+        }
+    }
+}
+
 /// Ridge with penalty `lambda` on the rows `train`.
 pub fn fit_ridge(
     specs: Vec<FeatureSpec>,
@@ -216,6 +236,128 @@ pub fn choose_penalty(
         }
     }
     Ok(Some(PENALTIES[best]))
+}
+
+/// The forward-chaining folds of `blocks` ([`forward_folds`]) on the
+/// inputs `idx`, each as its fit rows' statistics and its held-out rows
+/// (normalised by the fit rows' ranges): what choosing a penalty on any
+/// subset of `idx` needs, without gathering rows again per subset.
+pub struct ForwardCv {
+    folds: Vec<(Standardised, Vec<Vec<f64>>, Vec<f64>)>,
+}
+
+impl ForwardCv {
+    /// The folds with rows enough to fit every input of `idx` (as
+    /// [`choose_penalty`] skips the others).
+    pub fn new(
+        cache: &SeriesCache,
+        runs: &[Run],
+        blocks: &[Segment],
+        idx: &[usize],
+        channel: &str,
+    ) -> Result<ForwardCv> {
+        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+        let mut folds = Vec::new();
+        for (fit, val) in forward_folds(blocks) {
+            let tr = cache.samples_capped(runs, &fit, idx, channel, SELECT_ROWS)?;
+            let va = cache.samples_capped(runs, &val, idx, channel, SELECT_ROWS)?;
+            if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
+                continue;
+            }
+            let st = Standardised::new(ranged_specs(&kinds, &tr), &tr);
+            let xn = normalize_rows(&st.specs, &va.x);
+            folds.push((st, xn, va.y));
+        }
+        Ok(ForwardCv { folds })
+    }
+
+    /// No fold had rows enough.
+    pub fn is_empty(&self) -> bool {
+        self.folds.is_empty()
+    }
+
+    /// The ridge on the inputs `cols` (positions in `idx`): the penalty of
+    /// [`PENALTIES`] with the lowest pooled held-out squared error (ties:
+    /// the larger penalty, as [`choose_penalty`]) and that error; `None`
+    /// without folds.
+    pub fn best(&self, cols: &[usize], channel: &str) -> Result<Option<(f64, f64)>> {
+        if self.folds.is_empty() {
+            return Ok(None);
+        }
+        let mut sse = [0.0; PENALTIES.len()];
+        for (st, xn, y) in &self.folds {
+            let sub = st.sub(cols);
+            for (k, &lambda) in PENALTIES.iter().enumerate() {
+                let m = sub.solve(lambda, channel)?;
+                sse[k] += xn
+                    .iter()
+                    .zip(y)
+                    .map(|(r, y)| {
+                        let p = m.c0
+                            + cols
+                                .iter()
+                                .zip(&m.coef)
+                                .map(|(&j, c)| c * r[j])
+                                .sum::<f64>();
+                        (y - p).powi(2)
+                    })
+                    .sum::<f64>();
+            }
+        }
+        let mut best = PENALTIES.len() - 1;
+        for k in (0..PENALTIES.len()).rev() {
+            if sse[k] < sse[best] {
+                best = k;
+            }
+        }
+        Ok(Some((PENALTIES[best], sse[best])))
+    }
+
+    /// Backward elimination to at most `max_removable` of the inputs
+    /// `removable` marks (the others always kept): while too many are
+    /// left, drop the one whose removal leaves the lowest forward-chaining
+    /// CV error (each subset at its own best penalty; ties: the later
+    /// input). Returns the kept positions, in order; `None` without folds.
+    pub fn eliminate(
+        &self,
+        removable: &[bool],
+        max_removable: usize,
+        channel: &str,
+    ) -> Result<Option<Vec<usize>>> {
+        if self.folds.is_empty() {
+            return Ok(None);
+        }
+        let mut kept: Vec<usize> = (0..removable.len()).collect();
+        while kept.iter().filter(|&&j| removable[j]).count() > max_removable {
+            let mut drop: Option<(usize, f64)> = None;
+            for (pos, &j) in kept.iter().enumerate() {
+                if !removable[j] {
+                    continue;
+                }
+                let rest: Vec<usize> = kept
+                    .iter()
+                    .enumerate()
+                    .filter(|(q, _)| *q != pos)
+                    .map(|(_, &c)| c)
+                    .collect();
+                let e = match rest.is_empty() {
+                    // Nothing left: the target's mean alone.
+                    true => f64::INFINITY,
+                    false => self.best(&rest, channel)?.map_or(f64::INFINITY, |b| b.1),
+                };
+                if drop.is_none_or(|(_, d)| e <= d) {
+                    drop = Some((pos, e));
+                }
+            }
+            match drop {
+                Some((pos, _)) => {
+                    kept.remove(pos);
+                }
+                None => break,
+            }
+        }
+        Ok(Some(kept))
+    }
 }
 
 /// Every block of the training rows the folds cut (each fold validates on
