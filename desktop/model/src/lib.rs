@@ -12,6 +12,7 @@ pub mod export;
 pub mod fit;
 pub mod plots;
 pub mod probe_drift;
+pub mod reference_args;
 pub mod reference_replay;
 pub mod replay;
 pub mod select;

@@ -35,214 +35,13 @@ use thermocomp_core::ask::{AskParams, AskReason, AskState};
 use thermocomp_core::reference::{ReferenceOutcome, ReferenceParams, ReferenceState};
 use thermocomp_core::Model;
 
+use crate::reference_args::parse_time_ms;
+pub use crate::reference_args::{
+    ask_params, parse_duration_s, parse_outliers, parse_params, ReferenceArgs,
+};
 use crate::replay::ReplayRow;
 use tcomp_data::runcsv::Run;
 use tcomp_numerics::rng::Rng;
-
-/// The references and re-zeros `tcomp replay` simulates, as its flags give
-/// them (text as typed; parsed here).
-#[derive(Debug, Clone, Default)]
-pub struct ReferenceArgs {
-    /// Simulate a probe reference at the gauge every this long (`1h`,
-    /// `30min`, `900s`, `900`), from the run's start.
-    pub every: Option<String>,
-    /// Shift the clock schedule: the first reference this long after the
-    /// run's start, then every `--reference-every` (`10min`; below the
-    /// interval). 0 (the default): the first at one interval. Clock phase
-    /// moves the figures a lot (a reference minutes before a speed change
-    /// teaches little): compare schedules over several phases.
-    pub phase: Option<String>,
-    /// Also simulate a reference this long after every change of the run's
-    /// `spindle_rpm` (a probing cycle triggered by the operating state
-    /// rather than the clock), e.g. `10min`.
-    pub after_change: Option<String>,
-    /// σ of the simulated probe noise, µm (also the rule's σ_r unless
-    /// `--reference-param sigma_ref_um=` says otherwise).
-    pub noise_um: f64,
-    /// Corrupt a share of the references: `5%:50` = 5 % of them +50 µm.
-    pub outliers: Option<String>,
-    /// Seed of the simulated noise and outliers.
-    pub seed: u64,
-    /// Operator re-zero (touch-off) at this time: seconds of the run or a
-    /// percentage of its rows (`60%`); repeatable.
-    pub rezero_at: Vec<String>,
-    /// A parameter of the update rule, NAME=VALUE: sigma_ref_um,
-    /// sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k,
-    /// gate_abs_um, max_step_um, max_bias_um, max_rate_um_h; repeatable.
-    pub params: Vec<String>,
-    /// Write every row (time, per direction: measured, model, served with
-    /// references) to this CSV.
-    pub dump: Option<std::path::PathBuf>,
-    /// Probe when the board asks, by its rule with these parameters
-    /// (`--reference-when-asked`; [`ask_params`] reads the flags). Not
-    /// with a clock schedule.
-    pub when_asked: Option<AskParams>,
-}
-
-impl ReferenceArgs {
-    /// Any reference or re-zero asked for.
-    pub fn is_active(&self) -> bool {
-        self.every.is_some()
-            || self.after_change.is_some()
-            || self.when_asked.is_some()
-            || !self.rezero_at.is_empty()
-    }
-}
-
-/// The board's asking rule from `--ask-settle`, `--ask-interval` (durations,
-/// `0` switches that part off) and `--ask-speed-step` (rpm); each not given
-/// is [`AskParams::SUGGESTED`]'s.
-pub fn ask_params(
-    settle: Option<&str>,
-    interval: Option<&str>,
-    speed_step_rpm: Option<u16>,
-) -> Result<AskParams> {
-    let secs = |flag: &str, v: Option<&str>, default: u16| -> Result<u16> {
-        let Some(v) = v.map(str::trim) else {
-            return Ok(default);
-        };
-        if v.trim_end_matches(['s', 'h'])
-            .trim_end_matches("min")
-            .trim()
-            == "0"
-        {
-            return Ok(0);
-        }
-        let s = parse_duration_s(v).map_err(|e| anyhow!("{flag} {e}"))?;
-        if s.round() > f64::from(u16::MAX) || s.round() < 1.0 {
-            bail!("{flag} {v}: between 1 s and 18 h (65535 s), or 0 (off)");
-        }
-        Ok(s.round() as u16)
-    };
-    let d = AskParams::SUGGESTED;
-    Ok(AskParams {
-        settle_s: secs("--ask-settle", settle, d.settle_s)?,
-        max_interval_s: secs("--ask-interval", interval, d.max_interval_s)?,
-        speed_step_rpm: speed_step_rpm.unwrap_or(d.speed_step_rpm),
-    })
-}
-
-/// Parse a duration: `1h`, `4h`, `30min`, `90s`, `900` (seconds).
-pub fn parse_duration_s(text: &str) -> Result<f64> {
-    let t = text.trim();
-    let (num, scale) = if let Some(v) = t.strip_suffix("min") {
-        (v, 60.0)
-    } else if let Some(v) = t.strip_suffix('h') {
-        (v, 3600.0)
-    } else if let Some(v) = t.strip_suffix("ms") {
-        (v, 0.001)
-    } else if let Some(v) = t.strip_suffix('s') {
-        (v, 1.0)
-    } else {
-        (t, 1.0)
-    };
-    let v: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| anyhow!("{text}: expected a duration such as 1h, 30min, 900s"))?;
-    if !(v > 0.0 && v.is_finite()) {
-        bail!("{text}: a duration must be above 0");
-    }
-    Ok(v * scale)
-}
-
-fn um_to_nm(v: f64, name: &str) -> Result<u32> {
-    if !(v >= 0.0 && v * 1000.0 <= f64::from(u32::MAX)) {
-        bail!("--reference-param {name}: {v} out of range");
-    }
-    Ok((v * 1000.0).round() as u32)
-}
-
-fn hours_to_s(v: f64, name: &str) -> Result<u32> {
-    if !(v > 0.0 && v * 3600.0 <= f64::from(u32::MAX)) {
-        bail!("--reference-param {name}: {v} out of range");
-    }
-    Ok((v * 3600.0).round().max(1.0) as u32)
-}
-
-/// The rule's parameters: the core's defaults, σ_r from the simulated
-/// noise, then each `NAME=VALUE`.
-pub fn parse_params(args: &ReferenceArgs) -> Result<ReferenceParams> {
-    let mut p = ReferenceParams::DEFAULT;
-    p.sigma_ref_nm = um_to_nm(args.noise_um, "reference-noise-um")?;
-    for spec in &args.params {
-        let (name, value) = spec
-            .split_once('=')
-            .ok_or_else(|| anyhow!("--reference-param {spec}: expected NAME=VALUE"))?;
-        let (name, value) = (name.trim(), value.trim());
-        let v: f64 = value
-            .parse()
-            .map_err(|_| anyhow!("--reference-param {spec}: {value} is not a number"))?;
-        match name {
-            "sigma_ref_um" => p.sigma_ref_nm = um_to_nm(v, name)?,
-            "sigma_bias_um" => p.sigma_bias_nm = um_to_nm(v, name)?,
-            "tau_bias_h" => p.tau_bias_s = hours_to_s(v, name)?,
-            "sigma_rate_um_h" => p.sigma_rate_nm_h = um_to_nm(v, name)?,
-            "tau_rate_h" => p.tau_rate_s = hours_to_s(v, name)?,
-            "gate_k" => {
-                if !(0.0..=6000.0).contains(&v) {
-                    bail!("--reference-param {spec}: gate_k out of range 0-6000");
-                }
-                p.gate_k_x10 = (v * 10.0).round() as u16
-            }
-            "gate_abs_um" => p.gate_abs_nm = um_to_nm(v, name)?,
-            "max_step_um" => p.max_step_nm = um_to_nm(v, name)?,
-            "max_bias_um" => p.max_bias_nm = um_to_nm(v, name)?,
-            "max_rate_um_h" => p.max_rate_nm_h = um_to_nm(v, name)?,
-            _ => bail!(
-                "--reference-param {spec}: unknown parameter {name} (sigma_ref_um, sigma_bias_um, tau_bias_h, sigma_rate_um_h, tau_rate_h, gate_k, gate_abs_um, max_step_um, max_bias_um, max_rate_um_h)"
-            ),
-        }
-    }
-    Ok(p.sanitised())
-}
-
-/// `5%:50` → (0.05, 50.0).
-pub fn parse_outliers(spec: &str) -> Result<(f64, f64)> {
-    let (share, um) = spec
-        .split_once(':')
-        .ok_or_else(|| anyhow!("--reference-outliers {spec}: expected SHARE%:UM, e.g. 5%:50"))?;
-    let share: f64 = share
-        .trim()
-        .trim_end_matches('%')
-        .parse()
-        .map_err(|_| anyhow!("--reference-outliers {spec}: bad share"))?;
-    let um: f64 = um
-        .trim()
-        .parse()
-        .map_err(|_| anyhow!("--reference-outliers {spec}: bad offset"))?;
-    if !(0.0..=100.0).contains(&share) || !um.is_finite() {
-        bail!("--reference-outliers {spec}: share 0-100 %, a finite offset");
-    }
-    Ok((share / 100.0, um))
-}
-
-/// A time of the run: seconds or a percentage of its rows (as `--fail-sensor`).
-fn parse_time_ms(spec: &str, time_s: &[f64]) -> Result<u64> {
-    let at = spec.trim();
-    if let Some(p) = at.strip_suffix('%') {
-        let p: f64 = p
-            .trim()
-            .parse()
-            .map_err(|_| anyhow!("--reference-at {spec}: not a percentage"))?;
-        if !(0.0..=100.0).contains(&p) {
-            bail!("--reference-at {spec}: percentage outside 0-100");
-        }
-        let row = ((p / 100.0) * time_s.len() as f64) as usize;
-        Ok(time_s
-            .get(row)
-            .map_or(u64::MAX, |s| (s * 1000.0).round() as u64))
-    } else {
-        let s = parse_duration_s(at).or_else(|e| {
-            if at.trim_end_matches('s').trim().parse::<f64>() == Ok(0.0) {
-                Ok(0.0)
-            } else {
-                Err(e)
-            }
-        })?;
-        Ok((s * 1000.0).round() as u64)
-    }
-}
 
 /// One direction's figures over the scored block.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -681,112 +480,23 @@ pub fn score(
     };
     let mut channels = vec![];
     let mut dump: Vec<DumpColumn> = vec![];
+    let scoring = Scoring {
+        rows,
+        params: &params,
+        rezero_rows: &rezero_rows,
+        block: (from, to),
+    };
     for (d, dir) in model.directions.iter().enumerate() {
         let column = format!("d{}_um", model.direction_name(d));
         let Some(measured) = run.col(&column) else {
             continue;
         };
-        let (with, st, outcomes) =
-            serve_direction(rows, d, dir.max_correction, &params, &refs[d], &rezero_rows);
-        let (without, _, _) =
-            serve_direction(rows, d, dir.max_correction, &params, &[], &rezero_rows);
-        // The measured error in the operator's frame: about the last re-zero.
-        let mut zero = 0.0;
-        let (mut r_with, mut r_without, mut raw) = (vec![], vec![], vec![]);
-        for (i, m) in measured.iter().enumerate().take(rows.len()) {
-            if rezero_rows.contains(&i) {
-                zero = m.unwrap_or(zero);
-            }
-            let Some(m) = m else { continue };
-            if i < from || i >= to {
-                continue;
-            }
-            let e = m - zero;
-            raw.push(e);
-            r_with.push(e - f64::from(with[i]) / 10.0);
-            r_without.push(e - f64::from(without[i]) / 10.0);
+        let dumped = args.dump.is_some().then_some(&mut dump);
+        let planned = (&refs[d][..], &why[d][..], asked[d]);
+        if let Some(c) = scoring.channel(d, dir.max_correction, column, &measured, planned, dumped)
+        {
+            channels.push(c);
         }
-        let accepted_flags: Vec<bool> = outcomes
-            .iter()
-            .map(|o| matches!(o, ReferenceOutcome::Accepted { .. }))
-            .collect();
-        if args.dump.is_some() {
-            dump.push(DumpColumn {
-                column: column.clone(),
-                served: with.clone(),
-                refs: refs[d]
-                    .iter()
-                    .zip(&accepted_flags)
-                    .map(|(r, &a)| (r.row, r.reading, a))
-                    .collect(),
-            });
-        }
-        if raw.is_empty() {
-            continue;
-        }
-        let (mae, rms, peak) = stats(&r_with);
-        let (mae0, rms0, _) = stats(&r_without);
-        let (raw_mae, raw_rms, _) = stats(&raw);
-        let refused_flags: Vec<bool> = accepted_flags.iter().map(|a| !a).collect();
-        let taken = refs[d]
-            .iter()
-            .zip(&accepted_flags)
-            .enumerate()
-            .map(|(k, (r, &accepted))| {
-                let why = why[d].get(k);
-                TakenReference {
-                    time_s: rows[r.row].time_ms as f64 / 1000.0,
-                    row: r.row,
-                    accepted,
-                    corrupted: r.corrupted,
-                    reason: why.map(|(w, _)| match w {
-                        AskReason::SpeedChange => "speed_change",
-                        AskReason::Interval => "interval",
-                        AskReason::None => "none",
-                    }),
-                    asked_s: why.map(|(_, t)| *t as f64 / 1000.0),
-                }
-            })
-            .collect();
-        let corrupted = refs[d].iter().filter(|r| r.corrupted).count();
-        let corrupted_refused = refs[d]
-            .iter()
-            .zip(&refused_flags)
-            .filter(|(r, &f)| r.corrupted && f)
-            .count();
-        let clean_refused = refs[d]
-            .iter()
-            .zip(&refused_flags)
-            .filter(|(r, &f)| !r.corrupted && f)
-            .count();
-        channels.push(ChannelReference {
-            column,
-            rows: raw.len(),
-            mae_um: mae,
-            rms_um: rms,
-            peak_um: peak,
-            mae_without_um: mae0,
-            rms_without_um: rms0,
-            raw_mae_um: raw_mae,
-            raw_rms_um: raw_rms,
-            references: refs[d].len(),
-            references_in_block: refs[d]
-                .iter()
-                .filter(|r| r.row >= from && r.row < to)
-                .count(),
-            accepted: usize::from(st.accepted),
-            refused: usize::from(st.refused),
-            corrupted,
-            corrupted_refused,
-            clean_refused,
-            asked_speed_change: asked[d][0],
-            asked_interval: asked[d][1],
-            taken,
-            never_worse_than_model: rms <= rms0,
-            never_worse_than_raw: rms <= raw_rms,
-            final_state: st.to_bytes().iter().map(|b| format!("{b:02x}")).collect(),
-            served_hash: format!("{:016x}", fnv(&with)),
-        });
     }
     if let Some(path) = &args.dump {
         write_dump(path, run, rows, model, &dump)?;
@@ -809,6 +519,132 @@ pub fn score(
         params: ParamsJson::from(&params),
         channels,
     })
+}
+
+/// What scoring a direction needs beside its own readings: the replay rows,
+/// the rule's parameters, the re-zero rows and the scored block.
+struct Scoring<'a> {
+    rows: &'a [ReplayRow],
+    params: &'a ReferenceParams,
+    rezero_rows: &'a [usize],
+    block: (usize, usize),
+}
+
+impl Scoring<'_> {
+    /// Direction `d`'s figures against its measured `column`, with its
+    /// readings, why each was asked and the requests per reason (`planned`);
+    /// its served values go to `dump` when asked. `None`: no measured row
+    /// in the block.
+    fn channel(
+        &self,
+        d: usize,
+        max_correction: i32,
+        column: String,
+        measured: &[Option<f64>],
+        planned: (&[SimReference], &[(AskReason, u64)], [usize; 2]),
+        dump: Option<&mut Vec<DumpColumn>>,
+    ) -> Option<ChannelReference> {
+        let (rows, params, rezero_rows) = (self.rows, self.params, self.rezero_rows);
+        let (from, to) = self.block;
+        let (refs, why, asked) = planned;
+        let (with, st, outcomes) =
+            serve_direction(rows, d, max_correction, params, refs, rezero_rows);
+        let (without, _, _) = serve_direction(rows, d, max_correction, params, &[], rezero_rows);
+        // The measured error in the operator's frame: about the last re-zero.
+        let mut zero = 0.0;
+        let (mut r_with, mut r_without, mut raw) = (vec![], vec![], vec![]);
+        for (i, m) in measured.iter().enumerate().take(rows.len()) {
+            if rezero_rows.contains(&i) {
+                zero = m.unwrap_or(zero);
+            }
+            let Some(m) = m else { continue };
+            if i < from || i >= to {
+                continue;
+            }
+            let e = m - zero;
+            raw.push(e);
+            r_with.push(e - f64::from(with[i]) / 10.0);
+            r_without.push(e - f64::from(without[i]) / 10.0);
+        }
+        let accepted_flags: Vec<bool> = outcomes
+            .iter()
+            .map(|o| matches!(o, ReferenceOutcome::Accepted { .. }))
+            .collect();
+        if let Some(dump) = dump {
+            dump.push(DumpColumn {
+                column: column.clone(),
+                served: with.clone(),
+                refs: refs
+                    .iter()
+                    .zip(&accepted_flags)
+                    .map(|(r, &a)| (r.row, r.reading, a))
+                    .collect(),
+            });
+        }
+        if raw.is_empty() {
+            return None;
+        }
+        let (mae, rms, peak) = stats(&r_with);
+        let (mae0, rms0, _) = stats(&r_without);
+        let (raw_mae, raw_rms, _) = stats(&raw);
+        let refused_flags: Vec<bool> = accepted_flags.iter().map(|a| !a).collect();
+        let taken = refs
+            .iter()
+            .zip(&accepted_flags)
+            .enumerate()
+            .map(|(k, (r, &accepted))| {
+                let why = why.get(k);
+                TakenReference {
+                    time_s: rows[r.row].time_ms as f64 / 1000.0,
+                    row: r.row,
+                    accepted,
+                    corrupted: r.corrupted,
+                    reason: why.map(|(w, _)| match w {
+                        AskReason::SpeedChange => "speed_change",
+                        AskReason::Interval => "interval",
+                        AskReason::None => "none",
+                    }),
+                    asked_s: why.map(|(_, t)| *t as f64 / 1000.0),
+                }
+            })
+            .collect();
+        let corrupted = refs.iter().filter(|r| r.corrupted).count();
+        let corrupted_refused = refs
+            .iter()
+            .zip(&refused_flags)
+            .filter(|(r, &f)| r.corrupted && f)
+            .count();
+        let clean_refused = refs
+            .iter()
+            .zip(&refused_flags)
+            .filter(|(r, &f)| !r.corrupted && f)
+            .count();
+        Some(ChannelReference {
+            column,
+            rows: raw.len(),
+            mae_um: mae,
+            rms_um: rms,
+            peak_um: peak,
+            mae_without_um: mae0,
+            rms_without_um: rms0,
+            raw_mae_um: raw_mae,
+            raw_rms_um: raw_rms,
+            references: refs.len(),
+            references_in_block: refs.iter().filter(|r| r.row >= from && r.row < to).count(),
+            accepted: usize::from(st.accepted),
+            refused: usize::from(st.refused),
+            corrupted,
+            corrupted_refused,
+            clean_refused,
+            asked_speed_change: asked[0],
+            asked_interval: asked[1],
+            taken,
+            never_worse_than_model: rms <= rms0,
+            never_worse_than_raw: rms <= raw_rms,
+            final_state: st.to_bytes().iter().map(|b| format!("{b:02x}")).collect(),
+            served_hash: format!("{:016x}", fnv(&with)),
+        })
+    }
 }
 
 /// One direction of `--reference-dump`: served values, and the references
