@@ -503,7 +503,6 @@ fn shipped_specs(report: &FitReport, ch: &str, chosen: &str) -> Vec<FeatureSpec>
     let specs = match chosen {
         "mlr-static" => find(&f.mlr_static),
         "ridge" => find(&f.ridge),
-        "ridge-all" => find(&f.ridge_all),
         "ga-bpn" => f
             .nets
             .iter()
