@@ -28,9 +28,6 @@ pub enum Choice {
     /// Ridge regression on the lagged MLR's inputs (`ridge`): a table like
     /// the MLR's, with its own (shrunk) coefficients.
     Ridge,
-    /// Ridge on every candidate sensor's unlagged rise and the spindle
-    /// speed (`ridge-all`, "ridge (all inputs)"): a table like the MLR's.
-    RidgeAll,
     /// The lagged MLR plus its residual networks (`hybrid`): a table and
     /// networks of the same direction, which the board sums.
     Hybrid,
@@ -49,13 +46,12 @@ impl Choice {
             "mlr" => Choice::Mlr,
             "mlr-static" => Choice::MlrStatic,
             "ridge" => Choice::Ridge,
-            "ridge-all" => Choice::RidgeAll,
             "hybrid" => Choice::Hybrid,
             "blend" => Choice::Blend,
             "none" => Choice::None,
             other => {
                 anyhow::bail!(
-                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static, ridge, ridge-all or none)"
+                    "unknown model `{other}` (ga-bpn, blend, hybrid, mlr, mlr-static, ridge or none)"
                 )
             }
         })
@@ -181,7 +177,6 @@ fn fitted_channels(file: &ModelFile) -> Vec<String> {
         .chain(file.mlr.iter().map(|m| m.channel.clone()))
         .chain(file.mlr_static.iter().map(|m| m.channel.clone()))
         .chain(file.ridge.iter().map(|m| m.channel.clone()))
-        .chain(file.ridge_all.iter().map(|m| m.channel.clone()))
         .collect();
     channels.sort();
     channels.dedup();
@@ -381,7 +376,6 @@ impl FloatModelBuilder<'_> {
         let mlr = match choice {
             Choice::MlrStatic => file.mlr_static.iter().find(|m| m.channel == ch),
             Choice::Ridge => file.ridge.iter().find(|m| m.channel == ch),
-            Choice::RidgeAll => file.ridge_all.iter().find(|m| m.channel == ch),
             Choice::Mlr | Choice::Hybrid | Choice::Blend => {
                 file.mlr.iter().find(|m| m.channel == ch)
             }
@@ -394,7 +388,7 @@ impl FloatModelBuilder<'_> {
         let blend_table = choice == Choice::Blend && w_table > 0.0;
         let table = matches!(
             choice,
-            Choice::Mlr | Choice::MlrStatic | Choice::Ridge | Choice::RidgeAll | Choice::Hybrid
+            Choice::Mlr | Choice::MlrStatic | Choice::Ridge | Choice::Hybrid
         );
         if table || blend_table {
             let Some(m) = mlr else {
@@ -539,15 +533,13 @@ impl FloatModelBuilder<'_> {
     }
 }
 
-/// Parse `dch5_um=mlr,dch3_um=ridge-all` (`net` is an alias of `ga-bpn`).
+/// Parse `dch5_um=mlr,dch3_um=ridge` (`net` is an alias of `ga-bpn`).
 pub fn parse_choices(s: &str) -> Result<Vec<(String, Choice)>> {
     s.split(',')
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
             let (ch, k) = p.split_once('=').ok_or_else(|| {
-                anyhow::anyhow!(
-                    "expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static|ridge|ridge-all, got {p}"
-                )
+                anyhow::anyhow!("expected CHANNEL=ga-bpn|hybrid|mlr|mlr-static|ridge, got {p}")
             })?;
             Ok((ch.trim().to_string(), Choice::parse(k)?))
         })

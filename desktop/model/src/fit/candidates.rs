@@ -1,10 +1,7 @@
 //! The candidate inputs every channel of a fit chooses among: the sensors
 //! (the user's picks from `--sensors`, else `select`'s on the training rows,
 //! always within the board's channels), the lags no longer than the
-//! training span, and the cache of their series over the runs. The cache
-//! also holds the inputs of the ridge on all inputs (`ridge-all`: every
-//! candidate sensor's unlagged rise and the spindle speed) after the
-//! forward selection's candidates, which it does not see.
+//! training span, and the cache of their series over the runs.
 
 use anyhow::{bail, Result};
 
@@ -46,23 +43,6 @@ pub(super) struct CandidateSet {
     pub static_idx: Vec<usize>,
     /// `select`'s grouping on the training rows (`auto` without `--sensors`).
     pub selection: Option<Selection>,
-    /// The forward selection's candidates are `cache.kinds[..pool]` (the
-    /// ones after are only the ridge on all inputs').
-    pub pool: usize,
-    /// Inputs of the ridge on all inputs (`auto` only): the unlagged rise of
-    /// every candidate sensor (the `--sensors` picks, else every board
-    /// channel) and the spindle speed, indices into `cache.kinds`.
-    pub all_idx: Vec<usize>,
-}
-
-impl CandidateSet {
-    /// The forward selection's candidates alone (indices as in `cache`).
-    pub fn pool_cache(&self) -> SeriesCache {
-        SeriesCache {
-            kinds: self.cache.kinds[..self.pool].to_vec(),
-            series: self.cache.series[..self.pool].to_vec(),
-        }
-    }
 }
 
 /// The candidates of the fit on `plan`; notes what the board's channels and
@@ -95,31 +75,18 @@ pub(super) fn candidate_set(
         )),
         (None, None) => None,
     };
-    // The ridge on all inputs: the picks, else every board channel select
-    // did not leave out (a dead or flat sensor).
-    let all_sensors: Vec<String> = match (&picked, &selection) {
-        (Some(p), _) => p.clone(),
-        (None, Some(sel)) => board_sensors
-            .iter()
-            .filter(|s| !sel.left_out.contains_key(*s))
-            .cloned()
-            .collect(),
-        (None, None) => board_sensors.clone(),
-    };
-    let (cache, static_idx, pool, all_idx) = candidate_cache(
+    let (cache, static_idx) = candidate_cache(
         plan,
         cfg,
         auto_sensors.as_ref(),
-        (&lags, has_spindle),
+        &lags,
+        has_spindle,
         &board_sensors,
-        &all_sensors,
     )?;
     Ok(CandidateSet {
         cache,
         static_idx,
         selection,
-        pool,
-        all_idx,
     })
 }
 
@@ -206,23 +173,20 @@ fn picked_sensors(
     Ok(Some(want.clone()))
 }
 
-/// The candidate cache shared by all channels, the candidates of the
-/// static MLR (unlagged rises of the selected sensors), how many of the
-/// cache's inputs the forward selection sees, and the inputs of the ridge
-/// on all inputs (unlagged rises of `all_sensors` and the spindle speed;
-/// none for a `--features` list). `auto_sensors`: for `auto`, the
-/// candidate sensors and the static MLR's sensors.
+/// The candidate cache shared by all channels, and the candidates of the
+/// static MLR (unlagged rises of the selected sensors). `auto_sensors`:
+/// for `auto`, the candidate sensors and the static MLR's sensors.
 fn candidate_cache(
     plan: &Plan,
     cfg: &FitConfig,
     auto_sensors: Option<&(Vec<String>, Vec<String>)>,
-    (lags, has_spindle): (&[f64], bool),
+    lags: &[f64],
+    has_spindle: bool,
     board_sensors: &[String],
-    all_sensors: &[String],
-) -> Result<(SeriesCache, Vec<usize>, usize, Vec<usize>)> {
+) -> Result<(SeriesCache, Vec<usize>)> {
     match (&cfg.features, auto_sensors) {
         (FeatureChoice::Auto, Some((sensors, static_sensors))) => {
-            let mut kinds = candidates(sensors, lags, has_spindle);
+            let kinds = candidates(sensors, lags, has_spindle);
             let static_idx = static_sensors
                 .iter()
                 .filter_map(|s| {
@@ -232,22 +196,7 @@ fn candidate_cache(
                 })
                 .take(MAX_NET_INPUTS)
                 .collect();
-            let pool = kinds.len();
-            let mut all_idx = Vec::new();
-            if cfg.ridge_all {
-                for k in candidates(all_sensors, &[0.0], has_spindle) {
-                    let i = match kinds.iter().position(|c| *c == k) {
-                        Some(i) => i,
-                        None => {
-                            kinds.push(k);
-                            kinds.len() - 1
-                        }
-                    };
-                    all_idx.push(i);
-                }
-            }
-            let cache = SeriesCache::new(&plan.runs, kinds)?;
-            Ok((cache, static_idx, pool, all_idx))
+            Ok((SeriesCache::new(&plan.runs, kinds)?, static_idx))
         }
         (FeatureChoice::List(kinds), _) => {
             if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
@@ -263,9 +212,7 @@ fn candidate_cache(
                     }
                 }
             }
-            let cache = SeriesCache::new(&plan.runs, kinds.clone())?;
-            let pool = cache.kinds.len();
-            Ok((cache, vec![], pool, vec![]))
+            Ok((SeriesCache::new(&plan.runs, kinds.clone())?, vec![]))
         }
         (FeatureChoice::Auto, None) => bail!("internal: no selection"),
     }

@@ -267,13 +267,6 @@ pub struct NetCandidates {
     pub ridge: bool,
 }
 
-/// The ridge on all inputs (`ridge-all`) of one channel: its inputs
-/// (indices into the cache); empty: not offered.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct RidgeAll<'a> {
-    pub idx: &'a [usize],
-}
-
 /// Blocked time cross-validation of every candidate model of one channel on
 /// the training rows: each fold refits the model on the other blocks and
 /// scores it on its own block. Validation rows are never touched.
@@ -301,7 +294,6 @@ pub(crate) fn cross_validate(
     ch: &str,
     cfg: &FitConfig,
     with: NetCandidates,
-    ridge_all: RidgeAll,
 ) -> Result<BTreeMap<String, CvScore>> {
     let cv = CvChannel {
         cache,
@@ -311,7 +303,7 @@ pub(crate) fn cross_validate(
         ch,
         cfg,
     };
-    let (kept, mut out, n_total) = cv.score_linear(static_idx, with.ridge, ridge_all)?;
+    let (kept, mut out, n_total) = cv.score_linear(static_idx, with.ridge)?;
     let linear_best = out.values().map(|s| s.rms_um).fold(f64::INFINITY, f64::min);
     // Out-of-fold network predictions per kept fold (for the blend).
     let mut net_preds: Vec<Option<Vec<f64>>> = vec![None; kept.len()];
@@ -360,22 +352,20 @@ struct KeptFold {
 }
 
 impl CvChannel<'_> {
-    /// Scores `none`, `mlr-static` (on `static_idx`), `mlr`, (with
-    /// `ridge`) the ridge and (with inputs in `ridge_all`) the ridge on all
-    /// inputs on every usable fold, each linear one with its fold
-    /// coefficients; returns those folds, the scores and the held-out rows.
+    /// Scores `none`, `mlr-static` (on `static_idx`), `mlr` and (with
+    /// `ridge`) the ridge on every usable fold, each linear one with its
+    /// fold coefficients; returns those folds, the scores and the held-out
+    /// rows.
     fn score_linear(
         &self,
         static_idx: &[usize],
         ridge: bool,
-        ridge_all: RidgeAll,
     ) -> Result<(Vec<KeptFold>, BTreeMap<String, CvScore>, usize)> {
         let (cache, plan, idx, ch) = (self.cache, self.plan, self.idx, self.ch);
         let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
         let skinds: Vec<_> = static_idx.iter().map(|&i| cache.kinds[i].clone()).collect();
         let (mut acc_static, mut acc_mlr) = (CvAcc::default(), CvAcc::default());
         let mut acc_ridge = CvAcc::default();
-        let mut acc_all = CvAcc::default();
         let mut coefs: BTreeMap<&str, Vec<Vec<f64>>> = BTreeMap::new();
         // No compensation: the target is the error about the run's start, so 0.
         let mut acc_none = CvAcc::default();
@@ -409,11 +399,6 @@ impl CvChannel<'_> {
                     .or_default()
                     .push(standardised_coefs(&r, &tr));
             }
-            if !ridge_all.idx.is_empty() {
-                if let Some(c) = self.ridge_all_fold(ridge_all.idx, fit, val, &mut acc_all)? {
-                    coefs.entry("ridge-all").or_default().push(c);
-                }
-            }
             if !static_idx.is_empty() {
                 let trs = cache.samples_capped(&plan.runs, fit, static_idx, ch, SELECT_ROWS)?;
                 let vas = cache.samples_capped(&plan.runs, val, static_idx, ch, SELECT_ROWS)?;
@@ -438,7 +423,6 @@ impl CvChannel<'_> {
             ("mlr-static", &acc_static),
             ("mlr", &acc_mlr),
             ("ridge", &acc_ridge),
-            ("ridge-all", &acc_all),
         ] {
             if let Some(mut sc) = acc.score() {
                 sc.fold_coefs = coefs.remove(name).unwrap_or_default();
@@ -446,33 +430,6 @@ impl CvChannel<'_> {
             }
         }
         Ok((kept, out, acc_mlr.n))
-    }
-
-    /// The ridge on all inputs `idx` on one fold: its penalty from the
-    /// fold's fit blocks alone (nested), fitted on them, scored into `acc`
-    /// on the held-out blocks; returns its standardised coefficients, or
-    /// None when the fold has too few rows for it.
-    fn ridge_all_fold(
-        &self,
-        idx: &[usize],
-        fit: &[Segment],
-        val: &[Segment],
-        acc: &mut CvAcc,
-    ) -> Result<Option<Vec<f64>>> {
-        let (cache, plan, ch) = (self.cache, self.plan, self.ch);
-        let tr = cache.samples_capped(&plan.runs, fit, idx, ch, SELECT_ROWS)?;
-        let va = cache.samples_capped(&plan.runs, val, idx, ch, SELECT_ROWS)?;
-        if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
-            return Ok(None);
-        }
-        let Some(lambda) = choose_penalty(cache, &plan.runs, fit, idx, ch)? else {
-            return Ok(None);
-        };
-        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-        let r = fit_ridge(ranged_specs(&kinds, &tr), &tr, lambda, ch)?;
-        let p: Vec<f64> = va.x.iter().map(|x| r.predict_raw(x)).collect();
-        acc.add_fold(&va.y, &p);
-        Ok(Some(standardised_coefs(&r, &tr)))
     }
 
     /// Scores the network candidate `name` (`ga-bpn` or `hybrid`) fold by

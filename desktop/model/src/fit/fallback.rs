@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use anyhow::Result;
 use serde::Serialize;
 
-use super::choice::{choose_model, cross_validate, CvScore, NetCandidates, RidgeAll};
+use super::choice::{choose_model, cross_validate, CvScore, NetCandidates};
 use super::greedy::greedy_select;
 use super::mlr::{fit_mlr, metrics, Metrics};
 use super::model::{FallbackParams, FeatureSpec, Model, ModelFile};
@@ -59,12 +59,6 @@ pub fn model_sensors(file: &ModelFile, channel: &str) -> Vec<String> {
             .collect(),
         Some("ridge") => file
             .ridge
-            .iter()
-            .filter(|m| m.channel == channel)
-            .flat_map(|m| m.features.iter())
-            .collect(),
-        Some("ridge-all") => file
-            .ridge_all
             .iter()
             .filter(|m| m.channel == channel)
             .flat_map(|m| m.features.iter())
@@ -205,7 +199,6 @@ pub fn fit_fallbacks(
                         blend: false,
                         ridge: false,
                     },
-                    RidgeAll::default(),
                 )?
             } else {
                 BTreeMap::new()

@@ -277,7 +277,6 @@ pub fn chosen_kinds(file: &ModelFile) -> Vec<(FeatureKind, Option<f64>)> {
             "mlr" => inputs(&file.mlr, ch).collect(),
             "mlr-static" => inputs(&file.mlr_static, ch).collect(),
             "ridge" => inputs(&file.ridge, ch).collect(),
-            "ridge-all" => inputs(&file.ridge_all, ch).collect(),
             "ga-bpn" => inputs(&file.nets, ch).collect(),
             "none" => vec![],
             // Any other model (e.g. a table plus networks): every input the channel has.

@@ -88,28 +88,6 @@ pub struct ModelFile {
     /// the training rows: a table like the MLR's, with its own coefficients.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ridge: Vec<MlrParams>,
-    /// Ridge regression per channel on every candidate sensor's unlagged
-    /// rise and the spindle speed (model name `ridge-all`, "ridge (all
-    /// inputs)"): no lags, no input selection while the inputs fit the
-    /// board's; beyond them the subset with the best forward-chaining CV.
-    /// Its penalty is chosen as the `ridge`'s; a table like the MLR's.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub ridge_all: Vec<MlrParams>,
-}
-
-impl ModelFile {
-    /// The linear table model `name` fitted for `channel` (`mlr`,
-    /// `mlr-static`, `ridge` or `ridge-all`; None for any other name).
-    pub fn linear(&self, name: &str, channel: &str) -> Option<&MlrParams> {
-        let models = match name {
-            "mlr" => &self.mlr,
-            "mlr-static" => &self.mlr_static,
-            "ridge" => &self.ridge,
-            "ridge-all" => &self.ridge_all,
-            _ => return None,
-        };
-        models.iter().find(|m| m.channel == channel)
-    }
 }
 
 /// Model names, simplest first (the order ties are broken in): `none` (no
@@ -123,12 +101,11 @@ impl ModelFile {
 /// is taken as simpler than the free network; the blend carries both the
 /// lagged MLR's table and the networks, so it comes last: it is chosen only
 /// when it beats each of its parts by more than the margin.
-pub const MODEL_NAMES: [&str; 8] = [
+pub const MODEL_NAMES: [&str; 7] = [
     "none",
     "mlr-static",
     "mlr",
     "ridge",
-    "ridge-all",
     "hybrid",
     "ga-bpn",
     "blend",

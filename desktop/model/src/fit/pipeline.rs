@@ -14,7 +14,7 @@ pub use super::candidates::candidates;
 pub use super::choice::{
     choose_model, latest_block_rule, train_ensemble, CvScore, NetCandidates, NetInfo, NET_MODELS,
 };
-use super::choice::{cross_validate, train_hybrid, RidgeAll};
+use super::choice::{cross_validate, train_hybrid};
 use super::fallback;
 use super::features;
 use super::greedy::{blocked_folds, greedy_select};
@@ -26,9 +26,9 @@ use super::model::{
 pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
 pub use super::progress::{Progress, Silent};
 pub use super::report::{
-    print_report, report_json, ChannelInfo, FitReport, ModelReport, RidgeAllInfo, RunMetrics,
+    print_report, report_json, ChannelInfo, FitReport, ModelReport, RunMetrics,
 };
-use super::ridge::{all_blocks, choose_penalty, fit_ridge, ForwardCv};
+use super::ridge::{all_blocks, choose_penalty, fit_ridge};
 use super::samples::{ranged_specs, Samples, SeriesCache};
 use super::shipped::shipped;
 pub use super::shipped::{LeftOut, Shipped};
@@ -113,13 +113,10 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
     };
     let mut notes = Vec::new();
     let candidates = candidate_set(plan, cfg, &mut notes)?;
-    let pool = candidates.pool_cache();
     let fit = ChannelFit {
         plan,
         cfg,
         cache: &candidates.cache,
-        pool: &pool,
-        all_idx: &candidates.all_idx,
         folds: &folds,
         static_idx: &candidates.static_idx,
         ens,
@@ -210,12 +207,7 @@ fn note_image_gaps(plan: &Plan, file: &ModelFile, notes: &mut Vec<String>) -> Re
 struct ChannelFit<'a> {
     plan: &'a Plan,
     cfg: &'a FitConfig,
-    /// Every candidate input's series.
     cache: &'a SeriesCache,
-    /// The forward selection's candidates (the first inputs of `cache`).
-    pool: &'a SeriesCache,
-    /// Inputs of the ridge on all inputs, before the board's limit.
-    all_idx: &'a [usize],
     folds: &'a [(Vec<Segment>, Vec<Segment>)],
     /// Candidates of the static MLR (unlagged rises of the selected sensors).
     static_idx: &'a [usize],
@@ -296,8 +288,6 @@ impl ChannelFit<'_> {
             return Err(self.no_rows_error(ch, &kinds));
         }
         let static_ok = static_inputs(self.static_idx, &acc.in_use, &idx, budget);
-        let all = self.ridge_all_inputs(ch, &acc.in_use, budget, &mut acc.notes)?;
-        let all_idx: Vec<usize> = all.as_ref().map_or(vec![], |a| a.0.clone());
         let with = NetCandidates {
             net: !cfg.skip_net,
             hybrid: !cfg.skip_net && cfg.hybrid,
@@ -306,10 +296,7 @@ impl ChannelFit<'_> {
         };
         self.progress.begin(&format!("cross-validating {ch}"));
         let mut cv = if self.folds.len() > 1 {
-            let ridge_all = RidgeAll { idx: &all_idx };
-            cross_validate(
-                cache, plan, self.folds, &idx, &static_ok, ch, cfg, with, ridge_all,
-            )?
+            cross_validate(cache, plan, self.folds, &idx, &static_ok, ch, cfg, with)?
         } else {
             BTreeMap::new()
         };
@@ -321,19 +308,10 @@ impl ChannelFit<'_> {
         if cfg.ridge {
             self.fit_ridge(ch, &idx, &specs, (&full, &val), &mut cv, acc)?;
         }
-        let mut ridge_all = None;
-        if let Some((all_idx, info)) = &all {
-            if let Some(lambda) = self.fit_ridge_all(ch, all_idx, &mut cv, acc)? {
-                ridge_all = Some(RidgeAllInfo {
-                    penalty: Some(lambda),
-                    ..info.clone()
-                });
-            }
-        }
         if !static_ok.is_empty() {
             self.fit_static(ch, &static_ok, acc)?;
         }
-        let stability = self.stabilities(&cv, &specs, &static_ok, &all_idx, &full);
+        let stability = self.stabilities(&cv, &specs, &static_ok, &full);
         let mut info = ChannelInfo {
             channel: ch.to_string(),
             features: specs.iter().map(FeatureSpec::name).collect(),
@@ -344,7 +322,6 @@ impl ChannelFit<'_> {
             net: None,
             stability,
             collinearity: None,
-            ridge_all,
         };
         let rows = ChannelRows {
             ch,
@@ -361,7 +338,6 @@ impl ChannelFit<'_> {
         let chosen = self.choose(ch, &cv, &info.stability, hybrid_empty, acc);
         let used_idx: &[usize] = match chosen.as_str() {
             "mlr-static" => &static_ok,
-            "ridge-all" => &all_idx,
             "none" => &[],
             _ => &idx,
         };
@@ -371,10 +347,6 @@ impl ChannelFit<'_> {
                 let rows = cache
                     .samples(&plan.runs, &plan.train, &static_ok, ch)
                     .ok()?;
-                collinearity(&m.features, &rows)
-            }),
-            "ridge-all" => acc.file.ridge_all.last().and_then(|m| {
-                let rows = cache.samples(&plan.runs, &plan.train, &all_idx, ch).ok()?;
                 collinearity(&m.features, &rows)
             }),
             _ => collinearity(&specs, &full),
@@ -402,7 +374,7 @@ impl ChannelFit<'_> {
         Ok(match cfg.features {
             FeatureChoice::Auto => {
                 let (i, e) = greedy_select(
-                    self.pool,
+                    self.cache,
                     &self.plan.runs,
                     self.folds,
                     ch,
@@ -423,7 +395,7 @@ impl ChannelFit<'_> {
         acc: &mut Fitted,
     ) -> Result<Vec<fallback::FallbackReport>> {
         let ctx = fallback::Context {
-            cache: self.pool,
+            cache: self.cache,
             plan: self.plan,
             folds: self.folds,
             static_idx: self.static_idx,
@@ -485,104 +457,6 @@ impl ChannelFit<'_> {
         Ok(())
     }
 
-    /// The ridge on all inputs of channel `ch` and what the report says of
-    /// it: every input of `all_idx` when the board can still take the ones
-    /// not in use (`budget`); else backward elimination, by the
-    /// forward-chaining CV over the training blocks, of the inputs not in
-    /// use until the rest fit (noted). None when not offered.
-    fn ridge_all_inputs(
-        &self,
-        ch: &str,
-        in_use: &[usize],
-        budget: usize,
-        notes: &mut Vec<String>,
-    ) -> Result<Option<(Vec<usize>, RidgeAllInfo)>> {
-        let all = self.all_idx;
-        if all.is_empty() || self.folds.len() < 2 {
-            return Ok(None);
-        }
-        let name = |i: usize| feature_name(&self.cache.kinds[i].0, self.cache.kinds[i].1);
-        let removable: Vec<bool> = all.iter().map(|i| !in_use.contains(i)).collect();
-        let new = removable.iter().filter(|r| **r).count();
-        let kept: Vec<usize> = if new <= budget {
-            (0..all.len()).collect()
-        } else {
-            let blocks = all_blocks(self.folds);
-            let fcv = ForwardCv::new(self.cache, &self.plan.runs, &blocks, all, ch)?;
-            match fcv.eliminate(&removable, budget, ch)? {
-                Some(k) => k,
-                None => {
-                    notes.push(format!(
-                        "{ch}: no ridge on all inputs: its {} inputs exceed the board's {MAX_INPUTS} ({budget} free) and too few training rows to choose a subset by forward-chaining CV",
-                        all.len()
-                    ));
-                    return Ok(None);
-                }
-            }
-        };
-        let idx: Vec<usize> = kept.iter().map(|&j| all[j]).collect();
-        let dropped: Vec<String> = (0..all.len())
-            .filter(|j| !kept.contains(j))
-            .map(|j| name(all[j]))
-            .collect();
-        if idx.is_empty() {
-            notes.push(format!(
-                "{ch}: no ridge on all inputs: the board's {MAX_INPUTS} inputs are taken"
-            ));
-            return Ok(None);
-        }
-        if !dropped.is_empty() {
-            notes.push(format!(
-                "{ch}: ridge-all (ridge on all inputs) reads {} of its {} inputs: the board takes {MAX_INPUTS} inputs, {budget} still free; the subset with the best forward-chaining CV on the training rows (backward elimination) leaves out {}",
-                idx.len(),
-                all.len(),
-                dropped.join(", ")
-            ));
-        }
-        let info = RidgeAllInfo {
-            inputs: idx.iter().map(|&i| name(i)).collect(),
-            candidates: all.len(),
-            dropped,
-            penalty: None,
-        };
-        Ok(Some((idx, info)))
-    }
-
-    /// The ridge on all inputs `idx`, its penalty chosen by forward-chaining
-    /// CV over all the training blocks (recorded as the `ridge-all` CV
-    /// score's `penalty`); returns the penalty, None when not fitted.
-    fn fit_ridge_all(
-        &self,
-        ch: &str,
-        idx: &[usize],
-        cv: &mut BTreeMap<String, CvScore>,
-        acc: &mut Fitted,
-    ) -> Result<Option<f64>> {
-        let (plan, cache) = (self.plan, self.cache);
-        let blocks = all_blocks(self.folds);
-        let full = cache.samples(&plan.runs, &plan.train, idx, ch)?;
-        let val = cache.samples(&plan.runs, &plan.val, idx, ch)?;
-        let lambda = match full.y.is_empty() || val.y.is_empty() {
-            true => None,
-            false => choose_penalty(cache, &plan.runs, &blocks, idx, ch)?,
-        };
-        let Some(lambda) = lambda else {
-            cv.remove("ridge-all");
-            acc.notes.push(format!(
-                "{ch}: no ridge on all inputs: too few rows with every input to choose its penalty by forward-chaining CV"
-            ));
-            return Ok(None);
-        };
-        let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-        let r = fit_ridge(ranged_specs(&kinds, &full), &full, lambda, ch)?;
-        acc.record("ridge-all", ch, &r, &val, plan);
-        acc.file.ridge_all.push(r);
-        if let Some(sc) = cv.get_mut("ridge-all") {
-            sc.penalty = Some(lambda);
-        }
-        Ok(Some(lambda))
-    }
-
     /// How the coefficients of each linear candidate moved across the CV
     /// folds (`stability`), in the standard deviations of the target.
     fn stabilities(
@@ -590,26 +464,23 @@ impl ChannelFit<'_> {
         cv: &BTreeMap<String, CvScore>,
         specs: &[FeatureSpec],
         static_ok: &[usize],
-        all_idx: &[usize],
         full: &Samples,
     ) -> BTreeMap<String, Stability> {
         let n = full.y.len().max(1) as f64;
         let mean = full.y.iter().sum::<f64>() / n;
         let y_sd = (full.y.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n).sqrt();
         let names: Vec<String> = specs.iter().map(FeatureSpec::name).collect();
-        let names_of = |idx: &[usize]| -> Vec<String> {
-            idx.iter()
-                .map(|&i| feature_name(&self.cache.kinds[i].0, self.cache.kinds[i].1))
-                .collect()
-        };
-        let (static_names, all_names) = (names_of(static_ok), names_of(all_idx));
+        let static_names: Vec<String> = static_ok
+            .iter()
+            .map(|&i| feature_name(&self.cache.kinds[i].0, self.cache.kinds[i].1))
+            .collect();
         cv.iter()
             .filter(|(_, sc)| !sc.fold_coefs.is_empty())
             .map(|(name, sc)| {
-                let n = match name.as_str() {
-                    "mlr-static" => &static_names,
-                    "ridge-all" => &all_names,
-                    _ => &names,
+                let n = if name == "mlr-static" {
+                    &static_names
+                } else {
+                    &names
                 };
                 (name.clone(), assess(n, &sc.fold_coefs, y_sd))
             })

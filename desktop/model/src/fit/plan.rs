@@ -64,10 +64,6 @@ pub struct FitConfig {
     pub sensors: Option<Vec<String>>,
     /// Fit and offer the ridge candidate (`ridge`, issue 50).
     pub ridge: bool,
-    /// Fit and offer the ridge on all inputs (`ridge-all`: every candidate
-    /// sensor's unlagged rise and the spindle speed, within the board's
-    /// inputs; issue 50).
-    pub ridge_all: bool,
 }
 
 impl Default for FitConfig {
@@ -92,7 +88,6 @@ impl Default for FitConfig {
             fallback_pairs: false,
             sensors: None,
             ridge: true,
-            ridge_all: true,
         }
     }
 }

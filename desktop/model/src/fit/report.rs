@@ -49,25 +49,6 @@ pub struct ChannelInfo {
     /// How collinear the chosen model's inputs are on the training rows
     /// (condition number, largest variance inflation); none for `none`.
     pub collinearity: Option<Collinearity>,
-    /// The ridge on all inputs (`ridge-all`), when offered.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub ridge_all: Option<RidgeAllInfo>,
-}
-
-/// The ridge on all inputs of one channel (`ridge-all`, "ridge (all
-/// inputs)"): what it reads and what the board's input limit left out.
-#[derive(Clone, Debug, Serialize)]
-pub struct RidgeAllInfo {
-    /// The inputs it reads.
-    pub inputs: Vec<String>,
-    /// Its candidate inputs: every candidate sensor's unlagged rise and the
-    /// spindle speed.
-    pub candidates: usize,
-    /// Candidates left out so that its inputs fit the board's (the subset
-    /// with the best forward-chaining CV); empty: none.
-    pub dropped: Vec<String>,
-    /// Its penalty (also the `ridge-all` CV score's).
-    pub penalty: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -175,10 +156,7 @@ pub fn print_report(r: &FitReport) {
 /// The ridge's penalty, the chosen model's collinearity and every linear
 /// candidate the stability rule finds unstable, one line.
 fn print_guard(i: &ChannelInfo, chosen: &str) {
-    let mut parts = vec![match chosen {
-        "ridge-all" => "chosen ridge-all (ridge on all inputs)".to_string(),
-        _ => format!("chosen {chosen}"),
-    }];
+    let mut parts = vec![format!("chosen {chosen}")];
     if let Some(c) = &i.collinearity {
         let f = |v: Option<f64>| v.map_or("∞".to_string(), |v| format!("{v:.1}"));
         parts.push(format!(
@@ -190,15 +168,6 @@ fn print_guard(i: &ChannelInfo, chosen: &str) {
     }
     if let Some(l) = i.cv.get("ridge").and_then(|s| s.penalty) {
         parts.push(format!("ridge penalty {l:.0e}"));
-    }
-    if let Some(a) = &i.ridge_all {
-        let l = i.cv.get("ridge-all").and_then(|s| s.penalty);
-        parts.push(format!(
-            "ridge-all (ridge on all inputs) reads {} of {} inputs{}",
-            a.inputs.len(),
-            a.candidates,
-            l.map_or(String::new(), |l| format!(", penalty {l:.0e}"))
-        ));
     }
     for (name, s) in i.stability.iter().filter(|(_, s)| !s.stable) {
         let input = s.worst_input.as_deref().unwrap_or("?");

@@ -45,7 +45,6 @@ pub(super) fn shipped(
             "none" => None,
             "mlr-static" => file.mlr_static.iter().find(|m| m.channel == *ch),
             "ridge" => file.ridge.iter().find(|m| m.channel == *ch),
-            "ridge-all" => file.ridge_all.iter().find(|m| m.channel == *ch),
             _ => file.mlr.iter().find(|m| m.channel == *ch),
         };
         let mut sensors: Vec<String> = Vec::new();
@@ -106,9 +105,7 @@ fn left_out_why(
         if let Some(why) = sel.left_out.get(s) {
             return format!("select left it out: {why}");
         }
-        // The ridge on all inputs reads every sensor select kept.
-        let grouped = model != "ridge-all" && cfg.candidates == Candidates::Selected;
-        if grouped && !sel.chosen.iter().any(|c| c == s) {
+        if cfg.candidates == Candidates::Selected && !sel.chosen.iter().any(|c| c == s) {
             if let Some((g, best)) = sel
                 .clusters
                 .iter()
@@ -130,7 +127,6 @@ fn left_out_why(
     match model {
         "none" => "the channel ships no compensation (no model beat 0 by the choice margin)".into(),
         "mlr-static" => "not an input of the chosen static MLR (unlagged rises of the selected sensors)".into(),
-        "ridge-all" => "dropped from the ridge on all inputs so that its inputs fit the board's (the subset with the best forward-chaining CV on the training rows)".into(),
         _ if matches!(cfg.features, FeatureChoice::Auto) => format!(
             "a candidate the cross-validated forward selection did not pick for this channel (at most {} inputs: --max-inputs)",
             cfg.max_inputs
@@ -151,7 +147,6 @@ pub(super) fn print_shipped(shipped: &[Shipped]) {
             "mlr" => "lagged MLR",
             "mlr-static" => "static MLR",
             "ridge" => "ridge regression on the lagged MLR's inputs",
-            "ridge-all" => "ridge (all inputs): every sensor's unlagged rise and the spindle speed",
             "ga-bpn" => "GA-BPN network ensemble",
             "hybrid" => "lagged MLR + residual networks",
             "blend" => "blend of the MLR and the networks",

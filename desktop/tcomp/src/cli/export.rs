@@ -15,7 +15,7 @@ pub struct ExportArgs {
     #[arg(long, requires = "model")]
     pub run: Option<std::path::PathBuf>,
     /// Per-channel override of the fit's cross-validated choice, e.g.
-    /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, hybrid, mlr, mlr-static, ridge, ridge-all).
+    /// `dch3_um=ga-bpn,dch5_um=mlr` (ga-bpn alias net, hybrid, mlr, mlr-static, ridge).
     #[arg(long, default_value = "")]
     pub r#use: String,
     /// Largest correction the board serves per direction (µm); beyond, it

@@ -113,12 +113,6 @@ pub struct FitArgs {
     /// inputs, its penalty chosen by forward-chaining time-blocked CV).
     #[arg(long)]
     pub no_ridge: bool,
-    /// Do not fit or offer the ridge on all inputs (`ridge-all`: every
-    /// candidate sensor's unlagged rise and the spindle speed, no input
-    /// selection while they fit the board's inputs; its penalty chosen as
-    /// the ridge's).
-    #[arg(long)]
-    pub no_ridge_all: bool,
     /// Cross-validate every network candidate on every fold (by default one
     /// is dropped as soon as its error bound shows it cannot be chosen).
     #[arg(long)]
@@ -215,7 +209,6 @@ impl FitArgs {
         cfg.cv_drop = !self.full_cv;
         cfg.blend = self.blend;
         cfg.ridge = !self.no_ridge;
-        cfg.ridge_all = !self.no_ridge_all;
         cfg.fallbacks = !self.no_fallbacks;
         cfg.fallback_pairs = self.fallback_pairs;
         cfg.sensors = self.picked_sensors()?;
