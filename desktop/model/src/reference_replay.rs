@@ -493,8 +493,7 @@ pub fn score(
         };
         let dumped = args.dump.is_some().then_some(&mut dump);
         let planned = (&refs[d][..], &why[d][..], asked[d]);
-        if let Some(c) = scoring.channel(d, dir.max_correction, column, &measured, planned, dumped)
-        {
+        if let Some(c) = scoring.channel(d, dir.max_correction, column, measured, planned, dumped) {
             channels.push(c);
         }
     }
