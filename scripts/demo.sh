@@ -94,13 +94,17 @@ wait "$qemu" 2>/dev/null || true
 
 # Probe references (issue 28): the same model and trace, the bench board's
 # emulated eddy-current probe reading at the gauge what the trace measured.
-every="${DEMO_REFERENCE_EVERY_S:-3600}"
+# The board asks for references (issue 51): settle s : interval s : speed
+# step rpm, holding registers 46-48 (AskParams::SUGGESTED).
+ask="${DEMO_ASK:-900:4200:500}"
+IFS=: read -r ask_settle ask_interval ask_step <<<"$ask"
 desk="$target/demo-references-desktop.json"
-"$tcomp" replay "$trace" "$model" --from "$heldout" --to 1.0 --reference-every "${every}s" --json >"$desk"
+"$tcomp" replay "$trace" "$model" --from "$heldout" --to 1.0 --reference-when-asked \
+  --ask-settle "${ask_settle}s" --ask-interval "${ask_interval}s" --ask-speed-step "$ask_step" --json >"$desk"
 column=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["references"]["channels"][0]["column"])' "$desk")
 probe_trace="$target/demo-probe-trace.csv"
 python3 scripts/demo_references.py trace "$trace" "$probe_trace" --column "$column" --noise-um 0.3 --seed 28 --chip 20:1:50
-say "probe references over Modbus: the board boots again on the same model; its emulated probe reads at the gauge the trace's measured $column + 0.3 um noise (seeded), with a chip on the gauge (+50 um) from 20 h to 21 h. mbpoll plays the PLC: it commissions the fresh board (its own unlock key), writes holding register 40 = 0 (the probe measures direction 0, $column), then command 12 (take a probe reference) once per $((every / 60)) min of trace time, and reads input registers 3-53 (served correction, model prediction) as often as it can"
+say "probe references over Modbus: the board boots again on the same model; its emulated probe reads at the gauge the trace's measured $column + 0.3 um noise (seeded), with a chip on the gauge (+50 um) from 20 h to 21 h. mbpoll plays the PLC: it commissions the fresh board (its own unlock key), writes holding register 40 = 0 (the probe measures direction 0, $column), and holding registers 46-48 = $ask (the board asks for a reference $((ask_settle / 60)) min after a spindle-speed change of $ask_step rpm or more, and when $((ask_interval / 60)) min have passed since the last one), then writes command 12 (take a probe reference) only while input register 23 says the board asks (after a refusal it waits 10 min of trace time), and reads input registers 3-53 (served correction, model prediction) as often as it can"
 log2="$target/demo-board-references.log"
 qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic -monitor none \
   -semihosting-config enable=on,target=native -serial pty \
@@ -110,12 +114,13 @@ for _ in $(seq 100); do grep -aq "serving Modbus RTU" "$log2" && break; sleep 0.
 grep -aq "serving Modbus RTU" "$log2" || { cat "$log2"; die "the bench board did not start"; }
 pty=$(grep -ao '/dev/pts/[0-9]*' "$log2" | head -n 1)
 python3 scripts/demo_references.py run --pty "$pty" --trace "$probe_trace" --column "$column" \
-  --direction 0 --every-s "$every" --split-s "$split_t" --json "$target/demo-references.json"
+  --direction 0 --when-asked "$ask" --split-s "$split_t" --json "$target/demo-references.json"
 python3 - "$desk" <<'PY'
 import json, sys
 c = json.load(open(sys.argv[1]))["references"]["channels"][0]
-print(f"  the desktop's replay of the same rule (tcomp replay --reference-every, references at exact hours,"
-      f" its own simulated 0.3 um noise, no chip), {c['column']} over the held-out part, every row:"
+print(f"  the desktop's replay of the same rules (tcomp replay --reference-when-asked: the board's own ask rule,"
+      f" the PLC probing at the next sample, its own simulated 0.3 um noise, no chip; {c['references']} references),"
+      f" {c['column']} over the held-out part, every row:"
       f" MAE {c['mae_without_um']:.2f} -> {c['mae_um']:.2f} um, RMS {c['rms_without_um']:.2f} -> {c['rms_um']:.2f} um")
 PY
 say "done: the corrections above are what a PLC reads; the register map is in docs/register-map.md, references in README.md (Probe references)"
