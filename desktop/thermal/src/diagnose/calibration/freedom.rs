@@ -47,7 +47,7 @@ use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 
 use super::boxqp::{box_qp_exact, box_qp_exact_inv_from};
-use super::calibrate::{apply, Knob};
+use super::knobs::{apply, Knob};
 use crate::diagnose::effects::{par_map, ActiveSet, Evaluator, FitResult, Projection};
 use crate::diagnose::runs::Prepared;
 use crate::sim::Machine;

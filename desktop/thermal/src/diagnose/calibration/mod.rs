@@ -9,9 +9,10 @@ pub mod calibrate;
 pub mod design_heat;
 pub mod design_mimic;
 mod freedom;
+mod knobs;
 
 pub use calibrate::calibrate;
-pub(crate) use calibrate::{apply, design_value, Knob};
 #[cfg(test)]
 pub(crate) use freedom::tests::setup;
 pub(crate) use freedom::{print_evals, Freedom};
+pub(crate) use knobs::{apply, design_value, Knob};
