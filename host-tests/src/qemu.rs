@@ -299,3 +299,21 @@ pub fn export_demo(seed: u64, version: u32, path: &Path) -> Vec<u8> {
     tcomp_model::export::export(&fm, path).unwrap();
     std::fs::read(path).unwrap()
 }
+
+/// Six demo-model sensor readings (°C) for trace row `i`, comma-led: a slow
+/// warm-up of 0.002 K per row times the channel number (the probe-reference
+/// QEMU tests' synthetic runs).
+pub fn demo_temps(i: u32) -> String {
+    (0..6)
+        .map(|c| format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.002))
+        .collect()
+}
+
+/// `scripts/demo_references.py` (the README demo's PLC side) with `args`.
+pub fn demo_references_script(args: &[&str]) -> std::process::Output {
+    Command::new("python3")
+        .arg(workspace_root().join("scripts/demo_references.py"))
+        .args(args)
+        .output()
+        .expect("python3")
+}

@@ -6,29 +6,15 @@
 //! gauge for one hour. The script must commission the board, take hourly
 //! references, see the chip refused, and report the error without
 //! references as exactly the model's 3 µm and with them clearly below.
-use std::process::Command;
-
-use host_tests::qemu::{export_demo, one_board, workspace_root, BenchBoard};
+use host_tests::qemu::{
+    demo_references_script as script, demo_temps as temps, export_demo, one_board, BenchBoard,
+};
 use serde_json::Value;
 
 const ROWS: u32 = 1500;
 const ROW_S: u32 = 15;
 /// The model's error the references must learn, µm.
 const ERROR_UM: f64 = 3.0;
-
-fn temps(i: u32) -> String {
-    (0..6)
-        .map(|c| format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.002))
-        .collect()
-}
-
-fn script(args: &[&str]) -> std::process::Output {
-    Command::new("python3")
-        .arg(workspace_root().join("scripts/demo_references.py"))
-        .args(args)
-        .output()
-        .expect("python3")
-}
 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and mbpoll: scripts/test.sh"]

@@ -7,9 +7,9 @@
 //! speed-change request comes the settling time after a change, the gap
 //! between references never exceeds the interval by more than the PLC's
 //! polling delay, and the served error falls well below the model's own.
-use std::process::Command;
-
-use host_tests::qemu::{export_demo, one_board, workspace_root, BenchBoard};
+use host_tests::qemu::{
+    demo_references_script as script, demo_temps as temps, export_demo, one_board, BenchBoard,
+};
 use serde_json::Value;
 
 const ROWS: u32 = 1500;
@@ -27,20 +27,6 @@ fn rpm(t: f64) -> u32 {
         t if t < CHANGES_S[1] => 6000,
         _ => 2000,
     }
-}
-
-fn temps(i: u32) -> String {
-    (0..6)
-        .map(|c| format!(",{:.4}", 20.0 + f64::from(i * (c + 1)) * 0.002))
-        .collect()
-}
-
-fn script(args: &[&str]) -> std::process::Output {
-    Command::new("python3")
-        .arg(workspace_root().join("scripts/demo_references.py"))
-        .args(args)
-        .output()
-        .expect("python3")
 }
 
 #[test]
