@@ -16,7 +16,17 @@
 //! 4. **Training envelope**: every input and position is held at the edge of
 //!    the range seen in training (no extrapolation past it);
 //!    `OUT_OF_ENVELOPE` says so. The model's output at the edge is the last
-//!    value it was trained to produce, so it cannot run away.
+//!    value it was trained to produce, so it cannot run away. Per direction
+//!    the image's envelope policy (section kind 5, format v3; older images:
+//!    hold, margin 0) says what happens when an input of the model serving
+//!    it lies beyond its range by more than the policy's margin (raw
+//!    units): the step counts for that direction
+//!    ([`Compensator::envelope_steps`], saturating at `u32::MAX`;
+//!    [`StepOutput::envelope`]) and sets `OUT_OF_ENVELOPE`; under `hold`
+//!    the input stays held at the edge, under `fallback` the sensors it
+//!    reads count as faulted for that direction, which is then served by
+//!    its first fallback (image order) that reads none of them nor an
+//!    invalid sensor, as in rule 6 (`DEGRADED`); none: held at the edge.
 //! 5. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
@@ -88,6 +98,9 @@ pub struct StepOutput {
     /// Per direction, the model serving it: 0 main, k fallback k (1-based,
     /// image order), [`ACTIVE_NONE`] held or no model.
     pub active: [u8; MAX_DIRECTIONS],
+    /// Bit d: an input of the model serving direction d was beyond its
+    /// envelope by more than the direction's margin (rule 4).
+    pub envelope: u8,
 }
 
 pub struct Compensator {
@@ -104,6 +117,9 @@ pub struct Compensator {
     limit_override: [(i32, i32); MAX_DIRECTIONS],
     /// Per direction, bit i: the main model reads input i.
     main_mask: [u16; MAX_DIRECTIONS],
+    /// Per direction, the steps served beyond the envelope (rule 4) since
+    /// the model was loaded, saturating.
+    envelope_steps: [u32; MAX_DIRECTIONS],
 }
 
 impl Default for Compensator {
@@ -132,6 +148,7 @@ impl Compensator {
             last_eval: Evaluation::default(),
             limit_override: [(i32::MAX, i32::MAX); MAX_DIRECTIONS],
             main_mask: [0; MAX_DIRECTIONS],
+            envelope_steps: [0; MAX_DIRECTIONS],
         }
     }
 
@@ -145,6 +162,14 @@ impl Compensator {
         self.last_eval = Evaluation::default();
         self.limit_override = [(i32::MAX, i32::MAX); MAX_DIRECTIONS];
         self.main_mask = [0; MAX_DIRECTIONS];
+        self.envelope_steps = [0; MAX_DIRECTIONS];
+    }
+
+    /// Per direction, the steps served with an input beyond the envelope
+    /// by more than the direction's margin (rule 4) since the model in
+    /// force was loaded or restarted; saturating at `u32::MAX`.
+    pub fn envelope_steps(&self) -> [u32; MAX_DIRECTIONS] {
+        self.envelope_steps
     }
 
     pub fn model(&self) -> Option<&Model> {
@@ -197,6 +222,7 @@ impl Compensator {
     /// filters restart).
     pub fn restart(&mut self) {
         self.main_mask = [0; MAX_DIRECTIONS];
+        self.envelope_steps = [0; MAX_DIRECTIONS];
         if self.loaded {
             for (d, mask) in self.main_mask.iter_mut().enumerate() {
                 *mask = self.model.main_input_mask(d);
@@ -261,12 +287,7 @@ impl Compensator {
                 *act = if mask & !valid == 0 {
                     0
                 } else {
-                    model
-                        .fallbacks
-                        .iter()
-                        .position(|f| usize::from(f.direction) == d && f.input_mask & !valid == 0)
-                        .and_then(|k| u8::try_from(k + 1).ok())
-                        .unwrap_or(ACTIVE_NONE)
+                    first_fallback(model, d, valid).unwrap_or(ACTIVE_NONE)
                 };
                 servable |= *act != ACTIVE_NONE;
             }
@@ -295,6 +316,13 @@ impl Compensator {
             input.spindle_rpm,
             valid,
         ));
+        envelope_rule(
+            model,
+            (&self.main_mask, &mut self.envelope_steps),
+            features,
+            valid,
+            &mut out,
+        );
         let reference_ms = self.features.reference_ms().unwrap_or(input.now_ms);
         let positions = input.positions;
         let mut eval = model.evaluate(features, positions);
@@ -378,5 +406,58 @@ impl Compensator {
             *a = ACTIVE_NONE;
         }
         out
+    }
+}
+
+/// The first fallback (1-based, image order) of direction `d` whose inputs
+/// are all in `ok` (bit i: input i may be read).
+fn first_fallback(model: &Model, d: usize, ok: u16) -> Option<u8> {
+    model
+        .fallbacks
+        .iter()
+        .position(|f| usize::from(f.direction) == d && f.input_mask & !ok == 0)
+        .and_then(|k| u8::try_from(k + 1).ok())
+}
+
+/// Rule 4's envelope policy for every served direction: count the step and
+/// flag it when an input of the model serving the direction is beyond its
+/// range by more than the margin; under `fallback`, a direction served by
+/// its main model switches to its first fallback that reads none of the
+/// sensors beyond (nor an invalid one).
+fn envelope_rule(
+    model: &Model,
+    (main_mask, counts): (&[u16; MAX_DIRECTIONS], &mut [u32; MAX_DIRECTIONS]),
+    features: &[i32],
+    valid: u16,
+    out: &mut StepOutput,
+) {
+    let policies = model.envelope.unwrap_or_default();
+    let per_direction = out.active.iter_mut().zip(main_mask).zip(counts.iter_mut());
+    for (d, (((act, &main), count), policy)) in per_direction
+        .zip(&policies)
+        .enumerate()
+        .take(model.directions.len())
+    {
+        let reads = match *act {
+            0 => main,
+            ACTIVE_NONE => continue,
+            k => model
+                .fallbacks
+                .get(usize::from(k) - 1)
+                .map_or(0, |f| f.input_mask),
+        };
+        let beyond = model.beyond_mask(features, policy.margin) & reads;
+        if beyond == 0 {
+            continue;
+        }
+        *count = count.saturating_add(1);
+        out.envelope |= 1 << d;
+        out.status |= status::OUT_OF_ENVELOPE;
+        if policy.fallback && *act == 0 {
+            let ok = valid & !model.sensor_closure(beyond);
+            if let Some(k) = first_fallback(model, d, ok) {
+                *act = k;
+            }
+        }
     }
 }

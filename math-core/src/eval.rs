@@ -2,8 +2,8 @@
 //! one set of feature values. Stateless; the [`crate::compensator`] keeps the
 //! state (reference, filters, limits) around it.
 
-use crate::fixed::{mul_q24, round_shift, sigmoid_q17, ONE_Q24};
-use crate::image::{Model, Net, Table, NONE};
+use crate::fixed::{mul_q24, round_shift, sigmoid_q17, FEATURE_FRAC_BITS, ONE_Q24};
+use crate::image::{InputKind, Model, Net, Table, NONE};
 use crate::limits::*;
 
 /// The model's raw outputs before limits.
@@ -135,6 +135,47 @@ impl Model {
             pair.ref_pos = axis.ref_pos;
         }
         e
+    }
+
+    /// Bit i: input i's feature (Q8 of its raw unit) lies outside its
+    /// training range by more than `margin` raw units (the envelope policy,
+    /// [`crate::image::EnvelopePolicy`]).
+    pub fn beyond_mask(&self, features_q8: &[i32], margin: u16) -> u16 {
+        let m = i64::from(margin) << FEATURE_FRAC_BITS;
+        let mut mask = 0u16;
+        for (i, (&v, span)) in features_q8
+            .iter()
+            .zip(&self.input_span)
+            .enumerate()
+            .take(self.inputs.len())
+        {
+            let v = i64::from(v);
+            if v < i64::from(span.lo) - m || v > i64::from(span.hi) + m {
+                mask |= 1 << i;
+            }
+        }
+        mask
+    }
+
+    /// `mask` and every input that reads a sensor an input of `mask` reads:
+    /// the inputs a fault of those sensors would make invalid.
+    pub fn sensor_closure(&self, mask: u16) -> u16 {
+        let sensors_of = |kind: InputKind| -> u32 {
+            let bit = |s: u8| 1u32.checked_shl(u32::from(s)).unwrap_or(0);
+            match kind {
+                InputKind::SensorRise { a } => bit(a),
+                InputKind::SensorDiff { a, b } => bit(a) | bit(b),
+                InputKind::Spindle => 0,
+            }
+        };
+        let inputs = self.inputs.iter().take(16).enumerate();
+        let faulted = inputs
+            .clone()
+            .filter(|(i, _)| mask & (1 << i) != 0)
+            .fold(0u32, |s, (_, inp)| s | sensors_of(inp.kind));
+        inputs
+            .filter(|(_, inp)| sensors_of(inp.kind) & faulted != 0)
+            .fold(mask, |m, (i, _)| m | (1 << i))
     }
 
     /// Fallback `k`'s correction (0.1 µm), rounded once as the main model's.

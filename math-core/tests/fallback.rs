@@ -86,7 +86,7 @@ fn without_fallbacks_the_encoder_writes_v1_with_them_v2() {
     assert_eq!(u16::from_le_bytes([b[4], b[5]]), 1);
     let (mut m, _) = with_fallbacks().quantize().unwrap();
     let b2 = encode(&mut m);
-    assert_eq!(u16::from_le_bytes([b2[4], b2[5]]), FORMAT_VERSION);
+    assert_eq!(u16::from_le_bytes([b2[4], b2[5]]), SECTIONS_VERSION);
     // Section header 8 B, fallback count 4 B, per fallback 4 B + 8 B per term.
     assert_eq!(b2.len(), b.len() + 8 + 4 + 3 * 4 + 8 * (4 + 2 + 2));
     let back = Model::parse(&b2).unwrap();

@@ -3,8 +3,9 @@
 
 use super::error::EncodeError;
 use super::format::{
-    crc32, CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
-    SECTION_VOLUMETRIC, UNITS_V1,
+    crc32, CRC_LEN, ENVELOPE_FALLBACK, ENVELOPE_HOLD, FORMAT_VERSION, HEADER_LEN, MAGIC,
+    SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC,
+    UNITS_V1,
 };
 use super::model::Model;
 use super::types::{InputKind, Term};
@@ -18,10 +19,16 @@ impl Model {
         let fallbacks = self.fallbacks_payload_len().map_or(0, |n| 4 + n);
         let volumetric = self.volumetric.as_ref().map_or(0, |v| 4 + v.encoded_len());
         let five_axis = self.five_axis.as_ref().map_or(0, |f| 4 + f.encoded_len());
-        if fallbacks + volumetric + five_axis == 0 {
+        let envelope = self.envelope_payload_len().map_or(0, |n| 4 + n);
+        if fallbacks + volumetric + five_axis + envelope == 0 {
             return 0;
         }
-        4 + fallbacks + volumetric + five_axis
+        4 + fallbacks + volumetric + five_axis + envelope
+    }
+
+    /// Section kind 5: 4 B, then 4 B per direction.
+    fn envelope_payload_len(&self) -> Option<usize> {
+        self.envelope.map(|_| 4 + 4 * self.directions.len())
     }
 
     fn fallbacks_payload_len(&self) -> Option<usize> {
@@ -75,8 +82,11 @@ impl Model {
 
     fn write_header(&self, w: &mut Writer<'_>, len: usize) {
         w.put(&MAGIC);
-        let version: u16 = if self.sections_len() > 0 {
+        // The oldest version that holds the model (format.rs).
+        let version: u16 = if self.envelope.is_some() {
             FORMAT_VERSION
+        } else if self.sections_len() > 0 {
+            SECTIONS_VERSION
         } else {
             1
         };
@@ -169,7 +179,8 @@ impl Model {
         if self.sections_len() > 0 {
             let n = u8::from(!self.fallbacks.is_empty())
                 + u8::from(self.volumetric.is_some())
-                + u8::from(self.five_axis.is_some());
+                + u8::from(self.five_axis.is_some())
+                + u8::from(self.envelope.is_some());
             w.put(&[n, 0, 0, 0]);
         }
         if let Some(payload) = self.fallbacks_payload_len() {
@@ -188,6 +199,20 @@ impl Model {
         }
         if let Some(f) = &self.five_axis {
             write_five_axis(w, f);
+        }
+        if let (Some(payload), Some(policies)) = (self.envelope_payload_len(), &self.envelope) {
+            w.put(&[SECTION_ENVELOPE, 0]);
+            w.put(&len_u16(payload).to_le_bytes());
+            w.put(&[count_u8(&self.directions), 0, 0, 0]);
+            for p in policies.iter().take(self.directions.len()) {
+                let code = if p.fallback {
+                    ENVELOPE_FALLBACK
+                } else {
+                    ENVELOPE_HOLD
+                };
+                w.put(&[code, 0]);
+                w.put(&p.margin.to_le_bytes());
+            }
         }
     }
 }

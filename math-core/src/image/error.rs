@@ -224,7 +224,7 @@ impl core::fmt::Display for ImageError {
             ImageError::BadMagic => write!(f, "not a model image (it does not start with TCMI)"),
             ImageError::UnsupportedVersion(v) => write!(
                 f,
-                "image format version {v} not supported (this build reads 1 and {FORMAT_VERSION})"
+                "image format version {v} not supported (this build reads 1 to {FORMAT_VERSION})"
             ),
             ImageError::UnsupportedUnits(u) => write!(
                 f,

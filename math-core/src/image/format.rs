@@ -6,8 +6,14 @@
 pub use crate::crc::{crc32, crc8_maxim as rom_crc8};
 
 pub const MAGIC: [u8; 4] = *b"TCMI";
-/// The newest format this build reads and writes (it also reads version 1).
-pub const FORMAT_VERSION: u16 = 2;
+/// The newest format this build reads and writes (it also reads versions 1
+/// and 2). The encoder writes the oldest version that holds the model: 1
+/// without sections, [`SECTIONS_VERSION`] with sections, 3 only with the
+/// envelope policy (section kind 5), so a build that reads 1 and 2 refuses
+/// such an image by its version check, before anything else.
+pub const FORMAT_VERSION: u16 = 3;
+/// The format that added the sections (kinds 1, 3, 4).
+pub const SECTIONS_VERSION: u16 = 2;
 /// Section kind: fallback models (degraded-mode compensation).
 pub const SECTION_FALLBACKS: u8 = 1;
 /// Section kind: volumetric correction (issue 14, [`crate::volumetric`]).
@@ -15,6 +21,13 @@ pub const SECTION_VOLUMETRIC: u8 = 3;
 /// Section kind: the five-axis part of the volumetric correction (issue 31,
 /// [`crate::five_axis`]); needs a kind-3 section.
 pub const SECTION_FIVE_AXIS: u8 = 4;
+/// Section kind: the envelope policy per direction (issue 50, format v3 only).
+pub const SECTION_ENVELOPE: u8 = 5;
+/// Envelope policy codes (section kind 5): hold every input at the edge of
+/// its training range, or serve the direction from its fallback without an
+/// input beyond the margin.
+pub const ENVELOPE_HOLD: u8 = 0;
+pub const ENVELOPE_FALLBACK: u8 = 1;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.

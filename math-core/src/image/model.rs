@@ -2,7 +2,9 @@
 //! compensator and the desktop ask of it.
 
 use super::error::{push, ImageError};
-use super::types::{name_str, Axis, Direction, Fallback, InputSpec, Net, SensorRef, Table, Term};
+use super::types::{
+    name_str, Axis, Direction, EnvelopePolicy, Fallback, InputSpec, Net, SensorRef, Table, Term,
+};
 use crate::five_axis::FiveAxis;
 use crate::fixed::Span;
 use crate::limits::*;
@@ -32,6 +34,9 @@ pub struct Model {
     pub volumetric: Option<Volumetric>,
     /// The five-axis part of the volumetric correction (section kind 4), if any.
     pub five_axis: Option<FiveAxis>,
+    /// The envelope policy per direction (section kind 5, format v3); `None`
+    /// in older images: every direction holds, margin 0.
+    pub envelope: Option<[EnvelopePolicy; MAX_DIRECTIONS]>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
     pub(crate) input_span: [Span; MAX_INPUTS],
@@ -64,6 +69,7 @@ impl Model {
             fallback_terms: Vec::new(),
             volumetric: None,
             five_axis: None,
+            envelope: None,
             input_span: [Span::default(); MAX_INPUTS],
             axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
@@ -87,6 +93,7 @@ impl Model {
         self.fallback_terms.clear();
         self.volumetric = None;
         self.five_axis = None;
+        self.envelope = None;
         self.input_span = [Span::default(); MAX_INPUTS];
         self.axis_span = [Span::default(); MAX_AXES];
         self.axis_ref_q24 = [0; MAX_AXES];

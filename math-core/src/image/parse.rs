@@ -7,7 +7,7 @@
 use super::error::{push, ImageError};
 use super::format::{
     crc32, rom_crc8, CRC_LEN, FLAG_FIXED_REFERENCE, FORMAT_VERSION, HEADER_LEN, MAGIC, NONE,
-    UNITS_V1,
+    SECTIONS_VERSION, UNITS_V1,
 };
 use super::model::Model;
 use super::reader::Reader;
@@ -64,8 +64,8 @@ impl Model {
         read_inputs(&mut r, m, n.inputs)?;
         read_nets(&mut r, m, n.nets)?;
         read_tables(&mut r, m, n.tables)?;
-        if env.version >= 2 {
-            parse_sections(&mut r, m)?;
+        if env.version >= SECTIONS_VERSION {
+            parse_sections(&mut r, m, env.version)?;
         }
         if !r.is_at_end() {
             return Err(ImageError::LengthMismatch);
@@ -95,7 +95,7 @@ fn check_envelope(bytes: &[u8]) -> Result<Envelope<'_>, ImageError> {
         return Err(ImageError::BadMagic);
     }
     let version = r.u16()?;
-    if version != 1 && version != FORMAT_VERSION {
+    if version == 0 || version > FORMAT_VERSION {
         return Err(ImageError::UnsupportedVersion(version));
     }
     let flags = r.u16()?;

@@ -1,20 +1,30 @@
 //! The typed sections after the tables (format v2): the section list, and
-//! one reader per kind (1: fallback models, 3: volumetric correction).
+//! one reader per kind (1: fallback models, 3: volumetric correction, 4:
+//! five-axis part, 5: envelope policy, format v3 only).
 
 use super::error::{push, ImageError};
-use super::format::{NONE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC};
+use super::format::{
+    ENVELOPE_FALLBACK, ENVELOPE_HOLD, NONE, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
+    SECTION_VOLUMETRIC,
+};
 use super::model::Model;
 use super::reader::Reader;
 use super::terms::{read_terms, TermRule};
-use super::types::{InputKind, SensorRef};
+use super::types::{EnvelopePolicy, InputKind, SensorRef};
 use crate::five_axis::{FiveAxis, FiveAxisSpec, MAX_FOURIER_ORDER};
 use crate::limits::{MAX_FALLBACKS, MAX_SECTIONS, MAX_TERMS, MAX_VOL_SENSORS, MAX_VOL_TERMS};
 use crate::volumetric::{VolSensor, VolTerm, Volumetric};
 use heapless::Vec;
 
 /// The v2 sections after the tables (see the module docs): each kind at
-/// most once, each payload read exactly to its declared length.
-pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+/// most once, each payload read exactly to its declared length. Kind 5
+/// only in a version-3 image: in a version-2 one it is unknown, as it is to
+/// a build that reads only versions 1 and 2.
+pub(super) fn parse_sections(
+    r: &mut Reader<'_>,
+    m: &mut Model,
+    version: u16,
+) -> Result<(), ImageError> {
     let n = r.count("sections", MAX_SECTIONS)?;
     let _pad = r.array::<3>()?;
     let mut seen = 0u32;
@@ -23,7 +33,9 @@ pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), Im
         let len = usize::from(r.u16()?);
         let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
-        if ![SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind) {
+        let known = [SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind)
+            || (kind == SECTION_ENVELOPE && version >= 3);
+        if !known {
             return Err(ImageError::UnknownSection { kind });
         }
         if seen & bit != 0 {
@@ -33,6 +45,7 @@ pub(super) fn parse_sections(r: &mut Reader<'_>, m: &mut Model) -> Result<(), Im
         let parsed = match kind {
             SECTION_VOLUMETRIC => parse_volumetric(&mut payload, m),
             SECTION_FIVE_AXIS => parse_five_axis(&mut payload, m),
+            SECTION_ENVELOPE => parse_envelope(&mut payload, m),
             _ => parse_fallbacks(&mut payload, m),
         };
         parsed.map_err(|e| match e {
@@ -195,6 +208,38 @@ fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> 
         }
     }
     m.five_axis = Some(FiveAxis::new(&s)?);
+    Ok(())
+}
+
+/// Section kind 5: the envelope policy, one 4-byte entry per direction
+/// (policy u8, 0, margin u16 raw units).
+fn parse_envelope(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let [n, pad @ ..] = r.array::<4>()?;
+    if usize::from(n) != m.directions.len() {
+        return Err(ImageError::BadValue {
+            what: "envelope policy count (one per direction)",
+        });
+    }
+    let mut policies = [EnvelopePolicy::default(); crate::limits::MAX_DIRECTIONS];
+    for p in policies.iter_mut().take(usize::from(n)) {
+        let [policy, pad2] = r.array()?;
+        p.margin = r.u16()?;
+        p.fallback = match policy {
+            ENVELOPE_HOLD => false,
+            ENVELOPE_FALLBACK => true,
+            _ => {
+                return Err(ImageError::BadValue {
+                    what: "envelope policy",
+                })
+            }
+        };
+        if pad != [0; 3] || pad2 != 0 {
+            return Err(ImageError::BadValue {
+                what: "envelope section padding",
+            });
+        }
+    }
+    m.envelope = Some(policies);
     Ok(())
 }
 

@@ -95,6 +95,22 @@ pub struct Fallback {
     pub input_mask: u16,
 }
 
+/// What a direction serves when an input its model reads leaves the
+/// training envelope (section kind 5, format v3; images without it: hold,
+/// margin 0, the rule before the section existed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EnvelopePolicy {
+    /// `false`: every input held at the edge of its range (hold). `true`:
+    /// an input beyond its range by more than `margin` is treated as a
+    /// faulted sensor: the direction is served by its first fallback without
+    /// the sensors that input reads (held as before when there is none).
+    pub fallback: bool,
+    /// Raw units of each input (1/16 °C for temperatures, rpm for the
+    /// spindle speed) an input may leave its range by before it counts as
+    /// beyond the envelope.
+    pub margin: u16,
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Table {
     pub direction: u8,
