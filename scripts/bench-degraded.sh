@@ -43,12 +43,12 @@ run=../shared/data/caiviac-fl-thermal/run.csv
 bench_case "$dir/fl-fit-report.json" "$dir/fl.img" "$run" 0.6 0.8 60% fl
 cases="fl"
 if [ "$fl_only" = 0 ]; then
-  m=desktop/machines/turning-center-16.toml
+  m=examples/machines/turning-center-16.toml
   sim() { "$tcomp" sim "$m" --duty "$1" --seed "$2" --sample-period 10 -o "$dir/$3.csv" >&2; }
-  sim desktop/duty/warmup-steps.toml 1 train1
-  sim desktop/duty/production-mixed.toml 2 train2
-  sim desktop/duty/heldout-varied.toml 11 heldout1
-  sim desktop/duty/production-mixed.toml 12 heldout2
+  sim examples/duty/warmup-steps.toml 1 train1
+  sim examples/duty/production-mixed.toml 2 train2
+  sim examples/duty/heldout-varied.toml 11 heldout1
+  sim examples/duty/production-mixed.toml 12 heldout2
   "$tcomp" fit "$dir/train1.csv" "$dir/train2.csv" --validate "$dir/heldout1.csv" "$dir/heldout2.csv" --out "$dir/sim-fit.json" --json >"$dir/sim-fit-report.json"
   "$tcomp" export --model "$dir/sim-fit.json" --run "$dir/train1.csv" -o "$dir/sim.img" --json >"$dir/sim-export.json"
   bench_case "$dir/sim-fit-report.json" "$dir/sim.img" "$dir/heldout1.csv" 0 1 0 heldout1

@@ -14,12 +14,12 @@ cargo build -q -p tcomp --release >&2
 target="${CARGO_TARGET_DIR:-target}"
 tcomp="$target/release/tcomp"
 dir="$target/bench-sim-fit"; mkdir -p "$dir"
-m=desktop/machines/turning-center-16.toml
+m=examples/machines/turning-center-16.toml
 sim() { "$tcomp" sim "$m" --duty "$1" --seed "$2" --sample-period 10 -o "$dir/$3.csv" >&2; }
-sim desktop/duty/warmup-steps.toml 1 train1
-sim desktop/duty/production-mixed.toml 2 train2
-sim desktop/duty/heldout-varied.toml 11 heldout1
-sim desktop/duty/production-mixed.toml 12 heldout2
+sim examples/duty/warmup-steps.toml 1 train1
+sim examples/duty/production-mixed.toml 2 train2
+sim examples/duty/heldout-varied.toml 11 heldout1
+sim examples/duty/production-mixed.toml 12 heldout2
 fit_json=$("$tcomp" fit "$dir/train1.csv" "$dir/train2.csv" --validate "$dir/heldout1.csv" "$dir/heldout2.csv" --out "$dir/fit.json" --json)
 "$tcomp" export --model "$dir/fit.json" --run "$dir/train1.csv" -o "$dir/model.img" >&2
 board1=$("$tcomp" replay "$dir/heldout1.csv" "$dir/model.img" --json)

@@ -265,7 +265,7 @@ fn a_clean_case_alarms_on_an_effect_or_a_finding_untrue_of_the_file() {
 
 fn truth_machine() -> Machine {
     let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../machines/vertical-mc-truth.toml");
+        .join("../../examples/machines/vertical-mc-truth.toml");
     Machine::load(&p).unwrap()
 }
 
@@ -319,7 +319,7 @@ fn the_design_perturbation_changes_every_number_by_a_seeded_lognormal_factor() {
 
 #[test]
 fn the_cross_model_machines_are_perturbed_too() {
-    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../machines");
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/machines");
     for f in ["turning-center-16.toml", "five-axis-20.toml"] {
         let m = Machine::load(&dir.join(f)).unwrap();
         let before = design_numbers(&m.spec);

@@ -1,5 +1,5 @@
 //! Diagnosis WITH a machine file on the open world: the effect-free design
-//! file of the separate truth model (`machines/vertical-mc-truth.toml`,
+//! file of the separate truth model (`examples/machines/vertical-mc-truth.toml`,
 //! `diagnose/truth.rs`), the machine-format parts it needs (feed-driven
 //! sources, a chiller-held coolant circuit switched with the spindle, the
 //! `chiller` effect) and one-line errors for them.
@@ -10,7 +10,7 @@ use tcomp_thermal::sim::{simulate, Duty, Effect, Inputs, Machine};
 
 fn design() -> Machine {
     let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../machines/vertical-mc-truth.toml");
+        .join("../../examples/machines/vertical-mc-truth.toml");
     Machine::load(&p).unwrap()
 }
 
@@ -151,7 +151,7 @@ fn feed_sources_and_the_spindle_switched_jacket_act_as_written() {
 fn machine_format_errors_are_one_line() {
     let text = std::fs::read_to_string(
         std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../machines/vertical-mc-truth.toml"),
+            .join("../../examples/machines/vertical-mc-truth.toml"),
     )
     .unwrap();
     let cases = [
@@ -311,7 +311,7 @@ fn diagnoses_speed_dependent_bearing_heat_at_the_nose_and_nothing_on_a_clean_cas
 
 fn design_error() -> Machine {
     let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../machines/vertical-mc-design-error.toml");
+        .join("../../examples/machines/vertical-mc-design-error.toml");
     Machine::load(&p).unwrap()
 }
 

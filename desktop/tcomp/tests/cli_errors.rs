@@ -143,7 +143,7 @@ fn trace_parser_errors_are_messages_naming_file_line_and_column() {
 
 /// A file under `desktop/`.
 fn repo_file(rel: &str) -> String {
-    format!("{}/../{rel}", env!("CARGO_MANIFEST_DIR"))
+    format!("{}/../../{rel}", env!("CARGO_MANIFEST_DIR"))
 }
 
 /// Every subcommand that reads runs refuses a header-only file and a run
@@ -162,8 +162,8 @@ fn runs_without_data_or_temperatures_are_refused_everywhere() {
         no_temps.push_str(&format!("{},3000,{}\n", k * 10, 0.1 * k as f64));
     }
     write(dir.path(), "notemp.csv", &no_temps);
-    let fit_json = repo_file("../demo/fl-thermal-fit.json");
-    let machine = repo_file("machines/turning-center-16.toml");
+    let fit_json = repo_file("demo/fl-thermal-fit.json");
+    let machine = repo_file("examples/machines/turning-center-16.toml");
     let commands = |run: &'static str| -> Vec<Vec<String>> {
         [
             vec!["select", run],
@@ -226,8 +226,8 @@ fn impossible_cells_are_refused_by_every_subcommand() {
         f[4] = value;
         f.join(",")
     };
-    let fit_json = repo_file("../demo/fl-thermal-fit.json");
-    let machine = repo_file("machines/turning-center-16.toml");
+    let fit_json = repo_file("demo/fl-thermal-fit.json");
+    let machine = repo_file("examples/machines/turning-center-16.toml");
     let original = lines[4].clone();
     for (value, why) in [
         ("1e300", "outside"),
@@ -266,14 +266,15 @@ fn impossible_cells_are_refused_by_every_subcommand() {
 
 /// The shipped machine with the first occurrence of `from` replaced by `to`.
 fn machine_with(dir: &Path, name: &str, from: &str, to: &str) -> String {
-    let text = std::fs::read_to_string(repo_file("machines/turning-center-16.toml")).unwrap();
+    let text =
+        std::fs::read_to_string(repo_file("examples/machines/turning-center-16.toml")).unwrap();
     assert!(text.contains(from), "{from}");
     write(dir, name, &text.replacen(from, to, 1));
     name.to_string()
 }
 
 fn duty_with(dir: &Path, name: &str, from: &str, to: &str) -> String {
-    let text = std::fs::read_to_string(repo_file("duty/warmup-steps.toml")).unwrap();
+    let text = std::fs::read_to_string(repo_file("examples/duty/warmup-steps.toml")).unwrap();
     assert!(text.contains(from), "{from}");
     write(dir, name, &text.replacen(from, to, 1));
     name.to_string()
@@ -286,9 +287,9 @@ fn duty_with(dir: &Path, name: &str, from: &str, to: &str) -> String {
 fn sim_and_diagnose_refuse_impossible_machines_duties_and_options() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let machine = repo_file("machines/turning-center-16.toml");
-    let duty = repo_file("duty/warmup-steps.toml");
-    let short = repo_file("duty/short-steps.csv");
+    let machine = repo_file("examples/machines/turning-center-16.toml");
+    let duty = repo_file("examples/duty/warmup-steps.toml");
+    let short = repo_file("examples/duty/short-steps.csv");
     let out = tcomp(d, &["sim", &machine, "--duty", &short, "-o", "run.csv"]);
     assert!(out.status.success(), "{out:?}");
 

@@ -5,16 +5,16 @@ use tcomp_thermal::diagnose::{diagnose, phases, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
 /// `desktop/`, where the machine and duty files are.
-fn base() -> std::path::PathBuf {
-    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+fn examples() -> std::path::PathBuf {
+    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"))
 }
 
 fn turning() -> Machine {
-    Machine::load(&base().join("machines/turning-center-16.toml")).unwrap()
+    Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap()
 }
 
 fn run_with(m: &Machine, effects: Vec<Effect>, seed: u64) -> Run {
-    let duty = Duty::load(&base().join("duty/production-mixed.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/production-mixed.toml")).unwrap();
     sim_run(
         m,
         &duty,
@@ -158,7 +158,7 @@ fn cli_sim_then_diagnose_json() {
         ])
         .args(["--effect", "bending=k_um_per_k:2.5", "--seed", "3", "-o"])
         .arg(&csv)
-        .current_dir(base())
+        .current_dir(examples())
         .status()
         .unwrap();
     assert!(st.success());
@@ -171,7 +171,7 @@ fn cli_sim_then_diagnose_json() {
         ])
         .arg(dir.path().join("r.md"))
         .arg(&csv)
-        .current_dir(base())
+        .current_dir(examples())
         .output()
         .unwrap();
     assert!(
@@ -195,7 +195,7 @@ fn cli_sim_then_diagnose_json() {
             "-o",
         ])
         .arg(&csv)
-        .current_dir(base())
+        .current_dir(examples())
         .output()
         .unwrap();
     assert!(!out.status.success());

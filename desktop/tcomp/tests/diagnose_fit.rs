@@ -663,7 +663,7 @@ fn a_steeper_speed_law_the_fit_rows_cannot_tell_is_named_by_its_held_out_rows() 
 /// Cases of the cross-model benchmark column (the first simulator's
 /// machines, which `diagnose fit` was never tuned on), seed 11.
 fn cross_case(i: usize) -> tcomp_bench::harness::CrossCase {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../machines");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/machines");
     let machines = [
         tcomp_thermal::sim::Machine::load(&dir.join("turning-center-16.toml")).unwrap(),
         tcomp_thermal::sim::Machine::load(&dir.join("five-axis-20.toml")).unwrap(),

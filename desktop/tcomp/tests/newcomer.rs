@@ -505,7 +505,7 @@ fn diagnose_info_and_help_guide_a_newcomer() {
         },
     );
     let machine = format!(
-        "{}/../machines/turning-center-16.toml",
+        "{}/../../examples/machines/turning-center-16.toml",
         env!("CARGO_MANIFEST_DIR")
     );
     refused(

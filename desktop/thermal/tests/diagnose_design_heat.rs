@@ -11,13 +11,13 @@ use tcomp_thermal::diagnose::design_heat::within_tolerance;
 use tcomp_thermal::diagnose::{diagnose, prepare_all, Diagnosis, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
-fn desktop() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+fn examples() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples")
 }
 
 /// Two 4 h runs (mixed duty) of `m` with `effects`, sampled at 10 s.
 fn runs(m: &Machine, effects: &[Effect], seed: u64) -> Vec<(String, tcomp_data::runcsv::Run)> {
-    let duty = Duty::load(&desktop().join("duty/production-mixed.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/production-mixed.toml")).unwrap();
     (0..2)
         .map(|i| {
             let r = sim_run(
@@ -60,7 +60,7 @@ fn claimed(d: &Diagnosis) -> Vec<String> {
 
 #[test]
 fn bearing_heat_inside_the_design_tolerance_is_untestable_not_claimed() {
-    let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
+    let truth = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let design = design_of(&truth);
     let ps = prepare_all(&design, &runs(&truth, &[], 57), &Options::default()).unwrap();
     let bnl = |k_w: f64, p: f64, node: Option<&str>| Effect::BearingNonlinear {
@@ -101,7 +101,7 @@ fn bearing_heat_inside_the_design_tolerance_is_untestable_not_claimed() {
 
 #[test]
 fn real_extra_bearing_heat_is_still_named_against_that_design() {
-    let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
+    let truth = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let design = design_of(&truth);
     let extra = Effect::BearingNonlinear {
         k_w: 90.0,
@@ -130,7 +130,7 @@ fn the_calibration_moves_each_bearing_s_heat_on_its_own() {
     // friction ratio must come part of the way back to the truth's (with
     // one gain per driver it stays the design's exactly; the rest is shared
     // with the links and films near the bearings, under the prior)
-    let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
+    let truth = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let design = design_of(&truth);
     let ps = prepare_all(&design, &runs(&truth, &[], 71), &Options::default()).unwrap();
     let cal = tcomp_thermal::diagnose::calibrate::calibrate(&design, &ps, 1).unwrap();

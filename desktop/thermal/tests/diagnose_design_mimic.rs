@@ -8,7 +8,8 @@ use tcomp_thermal::sim::machine::spec::TermSpec;
 use tcomp_thermal::sim::{Effect, Machine};
 
 fn turning_center() -> Machine {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../machines/turning-center-16.toml");
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/machines/turning-center-16.toml");
     Machine::load(&p).unwrap()
 }
 

@@ -89,13 +89,13 @@ fn unknown_tolerance_key_is_refused() {
     one_line_error("conductance = 0.2", "`conductance`: unknown parameter");
 }
 
-fn desktop() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+fn examples() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples")
 }
 
 /// Two 4 h runs (light and full duty) of a machine, sampled at 10 s.
 fn runs(m: &Machine, seed: u64) -> Vec<(String, tcomp_data::runcsv::Run)> {
-    let duty = Duty::load(&desktop().join("duty/production-mixed.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/production-mixed.toml")).unwrap();
     (0..2)
         .map(|i| {
             let r = sim_run(
@@ -134,7 +134,7 @@ fn design_off(truth: &Machine) -> Machine {
 
 #[test]
 fn clean_runs_with_a_design_15_percent_off_name_nothing() {
-    let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
+    let truth = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let rs = runs(&truth, 31);
     let d = diagnose(&design_off(&truth), &rs, &Options::default()).unwrap();
     let named: Vec<&str> = d.findings.iter().map(|f| f.name.as_str()).collect();
@@ -143,7 +143,7 @@ fn clean_runs_with_a_design_15_percent_off_name_nothing() {
 
 #[test]
 fn film_coefficients_far_off_are_a_convection_finding() {
-    let design = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
+    let design = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let mut truth = design.clone();
     truth.g_amb.iter_mut().for_each(|g| *g *= 1.9);
     let rs = runs(&truth, 41);

@@ -6,20 +6,20 @@ use tcomp_data::runcsv::Run;
 use tcomp_thermal::diagnose::{diagnose, fitmode::diagnose_fit, Diagnosis, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
-fn desktop() -> std::path::PathBuf {
-    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+fn examples() -> std::path::PathBuf {
+    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"))
 }
 
 /// Two clean 4 h runs of the truth machine's design (coolant tank sensor
 /// `T_T9`), 10 s rows, different duties and noise seeds.
 fn runs() -> (Machine, Vec<(String, Run)>) {
-    let m = Machine::load(&desktop().join("machines/vertical-mc-truth.toml")).unwrap();
+    let m = Machine::load(&examples().join("machines/vertical-mc-truth.toml")).unwrap();
     let mut out = Vec::new();
     for (i, duty) in ["production-mixed.toml", "heldout-varied.toml"]
         .iter()
         .enumerate()
     {
-        let d = Duty::load(&desktop().join("duty").join(duty)).unwrap();
+        let d = Duty::load(&examples().join("duty").join(duty)).unwrap();
         let run = sim_run(
             &m,
             &d,

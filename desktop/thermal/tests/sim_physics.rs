@@ -45,8 +45,8 @@ bending = { a = "a", b = "b", direction = "x" }
 "#;
 
 /// `desktop/`, where the machine and duty files are.
-fn machines_dir() -> std::path::PathBuf {
-    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+fn examples() -> std::path::PathBuf {
+    std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples"))
 }
 
 fn constant(rpm: f64, dt: f64, n: usize, ambient: f64) -> Inputs {
@@ -124,8 +124,8 @@ fn palmgren_bearing_heat() {
 
 #[test]
 fn seeded_runs_are_deterministic_and_quantised() {
-    let m = Machine::load(&machines_dir().join("machines/turning-center-16.toml")).unwrap();
-    let duty = Duty::load(&machines_dir().join("duty/warmup-steps.toml")).unwrap();
+    let m = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/warmup-steps.toml")).unwrap();
     let opt = |seed| SimOptions {
         effects: vec![],
         seed,
@@ -230,7 +230,7 @@ fn each_effect_changes_the_output_in_its_documented_direction() {
 
 #[test]
 fn bearing_nonlinear_heats_the_bearings() {
-    let m = Machine::load(&machines_dir().join("machines/turning-center-16.toml")).unwrap();
+    let m = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let inp = constant(9000.0, 10.0, 360 * 3, 20.0);
     let a = simulate(&m, &inp, &[], 1).unwrap();
     let b = simulate(
@@ -258,7 +258,7 @@ fn bearing_nonlinear_heats_the_bearings() {
 #[test]
 fn rod_conducts_from_the_hot_bearing() {
     // spindle nose (rod:0, T12) heats before the rod's middle (rod:5, T13) in the turning center
-    let m = Machine::load(&machines_dir().join("machines/turning-center-16.toml")).unwrap();
+    let m = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
     let inp = constant(6000.0, 10.0, 360, 20.0);
     let a = simulate(&m, &inp, &[], 1).unwrap();
     let k = 60; // 10 min
@@ -273,8 +273,8 @@ fn rod_conducts_from_the_hot_bearing() {
 #[test]
 fn step_size_does_not_change_the_answer() {
     // exact ZOH discretisation: 1 s and 30 s steps agree at common times
-    let m = Machine::load(&machines_dir().join("machines/five-axis-20.toml")).unwrap();
-    let duty = Duty::load(&machines_dir().join("duty/warmup-steps.toml")).unwrap();
+    let m = Machine::load(&examples().join("machines/five-axis-20.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/warmup-steps.toml")).unwrap();
     let i1 = duty.inputs(1.0, Some(4.0 * 3600.0), 20.0);
     let i30 = duty.inputs(30.0, Some(4.0 * 3600.0), 20.0);
     let a = simulate(&m, &i1, &[], 30).unwrap();

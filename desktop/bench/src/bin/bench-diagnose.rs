@@ -12,8 +12,8 @@
 //! simulator (`tcomp_thermal::sim`), which the fit mode was never tuned on.
 //!
 //! `--machine FILE`: the machine file of the open-world machine-file column
-//! (default `machines/vertical-mc-truth.toml`, the truth's own numbers;
-//! `machines/vertical-mc-design-error.toml` is the same design off by
+//! (default `examples/machines/vertical-mc-truth.toml`, the truth's own numbers;
+//! `examples/machines/vertical-mc-design-error.toml` is the same design off by
 //! ±10–20 %). The column takes the file as exact (as `tcomp diagnose`
 //! does by default); `--calibrate` calibrates its design values on each
 //! case's fit rows first (`tcomp diagnose --calibrate`).
@@ -81,7 +81,7 @@ struct Args {
     #[arg(long = "periodic-only")]
     periodic_only: bool,
     /// Folder of the closed world's machine files.
-    #[arg(long = "machines", value_name = "DIR", default_value_os_t = desktop_dir().join("machines"))]
+    #[arg(long = "machines", value_name = "DIR", default_value_os_t = examples_dir().join("machines"))]
     dir: PathBuf,
     /// Machine file of the open-world machine-file column (default: the truth's own numbers).
     #[arg(long = "machine", value_name = "FILE")]
@@ -303,7 +303,7 @@ fn run_columns(
 /// Time of a full diagnosis (all candidates) of one 8 h run sampled at 1 s,
 /// and the effect it names first.
 fn full_diagnosis_8h_1s(m: &Machine, threads: usize) -> Result<(f64, Option<String>)> {
-    let duty = Duty::load(&desktop_dir().join("duty/production-mixed.toml"))?;
+    let duty = Duty::load(&examples_dir().join("duty/production-mixed.toml"))?;
     let run = sim_run(
         m,
         &duty,
@@ -372,8 +372,9 @@ fn print_text(
     }
 }
 
-/// `desktop/`, where the machine and duty files are (beside the crates).
-fn desktop_dir() -> PathBuf {
+/// `examples/` at the repository root, where the machine and duty files are.
+fn examples_dir() -> PathBuf {
     let bench = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    bench.parent().map_or(bench.clone(), |d| d.to_path_buf())
+    let root = bench.ancestors().nth(2).unwrap_or(&bench);
+    root.join("examples")
 }

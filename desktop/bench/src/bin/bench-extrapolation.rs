@@ -190,7 +190,7 @@ fn real_cases(args: &Args) -> Result<Vec<Value>> {
 /// (b) Simulated runs whose served part leaves the training envelope.
 fn sim_cases(args: &Args) -> Result<Vec<Value>> {
     let base = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let machine = Machine::load(&base.join("../machines/turning-center-16.toml"))?;
+    let machine = Machine::load(&base.join("../../examples/machines/turning-center-16.toml"))?;
     let mut out = Vec::new();
     for scenario in args.scenarios.split(',').map(str::trim) {
         if scenario.is_empty() {

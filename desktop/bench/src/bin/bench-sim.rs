@@ -26,10 +26,10 @@ struct Args {
 fn run() -> Result<()> {
     let Args { json, repeat } = tcomp_bench::cli::parse()?;
     let base = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let duty = Duty::load(&base.join("../duty/warmup-steps.toml"))?;
+    let duty = Duty::load(&base.join("../../examples/duty/warmup-steps.toml"))?;
     let mut results = Vec::new();
     for name in ["turning-center-16", "five-axis-20"] {
-        let m = Machine::load(&base.join(format!("../machines/{name}.toml")))?;
+        let m = Machine::load(&base.join(format!("../../examples/machines/{name}.toml")))?;
         let inp = duty.inputs(1.0, Some(8.0 * 3600.0), m.spec.ambient_c);
         // nominal, and with every thermal effect switched on (coolant matrices, drift, lag ...)
         for (label, effects) in [

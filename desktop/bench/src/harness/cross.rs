@@ -142,7 +142,7 @@ pub fn cross_cases(machines: &[Machine], cfg: &BenchConfig) -> Result<Vec<CrossC
 
 /// Cross-model check of `diagnose fit`: blind cases from the project's
 /// first simulator (`tcomp_thermal::sim`, lumped networks of other machines:
-/// `machines/turning-center-16.toml`, `five-axis-20.toml`), which the fit
+/// `examples/machines/turning-center-16.toml`, `five-axis-20.toml`), which the fit
 /// mode was never tuned on. Two runs per case (light and heavy duty) as in
 /// `run_open_bench`, written as measured data sets are (no `coolant_on`).
 pub fn run_cross_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {

@@ -245,7 +245,7 @@ pub fn names_truth(
 
 /// Open-world blind check of `tcomp diagnose` WITH an effect-free machine
 /// file written from the truth machine's design
-/// (`desktop/machines/vertical-mc-truth.toml`): the same cases as
+/// (`examples/machines/vertical-mc-truth.toml`): the same cases as
 /// `run_open_bench` (two runs per case, no `coolant_on` column).
 pub fn run_open_machine_bench(m: &Machine, cfg: &BenchConfig) -> Result<Value> {
     use crate::truth::TruthEffect;

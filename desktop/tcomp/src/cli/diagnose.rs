@@ -9,7 +9,7 @@ use tcomp_thermal::sim::Machine;
 
 /// `diagnose`'s long help: an example.
 pub const EXAMPLE: &str = "Example:
-  tcomp diagnose desktop/machines/turning-center-16.toml run1.csv run2.csv --report out/diag.md
+  tcomp diagnose examples/machines/turning-center-16.toml run1.csv run2.csv --report out/diag.md
   tcomp diagnose fit run1.csv run2.csv --json   (no machine file; no spindle_rpm needed)";
 
 #[derive(clap::Args, Debug)]

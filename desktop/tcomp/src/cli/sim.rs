@@ -7,7 +7,7 @@ use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
-    /// Machine description (TOML, see desktop/machines/README.md).
+    /// Machine description (TOML, see examples/machines/README.md).
     pub machine: PathBuf,
     /// Duty cycle: TOML segment list or CSV (time_s, spindle_rpm, feed_activity, coolant_on, ambient_c).
     #[arg(long)]

@@ -1,5 +1,5 @@
 //! Duty cycles: piecewise-constant spindle speed, axis activity, coolant and
-//! ambient. From a TOML segment list (`desktop/duty/*.toml`) or a CSV with
+//! ambient. From a TOML segment list (`examples/duty/*.toml`) or a CSV with
 //! `time_s` and any of `spindle_rpm|rpm`, `feed_activity|feed`,
 //! `coolant_on|coolant`, `ambient_c|T_ambient` (a run CSV is a valid duty).
 

@@ -98,7 +98,7 @@ fn num(kv: &[(String, String)], key: &str, default: Option<f64>, spec: &str) -> 
 }
 
 /// What a user may ask of an effect parameter on the command line: finite
-/// and of a physically possible size (listed in desktop/machines/README.md).
+/// and of a physically possible size (listed in examples/machines/README.md).
 fn param_range(effect: &str, key: &str) -> (f64, f64, &'static str) {
     match (effect, key) {
         ("convection", "h") => (0.0, 1e3, "W/(m²·K)"),

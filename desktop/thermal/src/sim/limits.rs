@@ -1,5 +1,5 @@
 //! What a machine description, a duty cycle and the `sim` options may ask
-//! for (documented in `desktop/machines/README.md`, "Limits"). Every size
+//! for (documented in `examples/machines/README.md`, "Limits"). Every size
 //! that sets an allocation is bounded, so a typo such as `segments = 100000`
 //! is refused in one line instead of asking for tens of gigabytes, and every
 //! physical quantity must be a finite number of the right sign and a

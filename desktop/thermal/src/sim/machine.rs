@@ -1,4 +1,4 @@
-//! Machine descriptions (TOML, documented in `desktop/machines/README.md`)
+//! Machine descriptions (TOML, documented in `examples/machines/README.md`)
 //! and their compilation into a lumped thermal network.
 
 use anyhow::{anyhow, bail, Context, Result};

@@ -1,14 +1,16 @@
 #!/bin/sh
-# Regenerates the small runs of tests/diagnose_fit.rs (run from desktop/):
+# Regenerates the small runs of desktop/tcomp/tests/diagnose_fit.rs (run
+# from anywhere; paths are taken from the repository root):
 # simulated with `tcomp sim`, then written the way measured data sets are:
 # sensors renamed T01..T16 -> T_T0..T_T15, a T_ambient column (the machine's
 # constant 20 degC nominal ambient), no coolant_on column; the
 # norpm run also lacks spindle_rpm and feed_activity.
 set -e
-out=tests/data/diagnose-fit
-tcomp=${TCOMP:-../target/debug/tcomp}
+cd "$(dirname "$0")/../../../../.."
+out=desktop/tcomp/tests/data/diagnose-fit
+tcomp=${TCOMP:-target/debug/tcomp}
 sim() { # duty seed name
-  $tcomp sim machines/turning-center-16.toml --duty "duty/$1" --hours 4 \
+  $tcomp sim examples/machines/turning-center-16.toml --duty "examples/duty/$1" --hours 4 \
     --sample-period 60 --seed "$2" -o "$out/$3.sim.csv"
 }
 # keep `#` metadata; rename and drop columns by header name

@@ -282,7 +282,7 @@ mod tests {
     /// The first simulator's turning centre with these tolerances.
     fn turning_center(tolerances: &[(&str, f64)]) -> Machine {
         let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../machines/turning-center-16.toml");
+            .join("../../examples/machines/turning-center-16.toml");
         let mut spec = Machine::load(&p).unwrap().spec;
         for &(k, t) in tolerances {
             spec.tolerance.insert(k.into(), t);

@@ -374,7 +374,7 @@ impl MachineSpec {
     /// Every number of a hand-written description must be finite, of the
     /// right sign and of a magnitude a machine tool can have; the bounds are
     /// generous (a 2000 t casting, a 1 MW spindle) and listed in
-    /// `desktop/machines/README.md`. Errors name the key and the range.
+    /// `examples/machines/README.md`. Errors name the key and the range.
     pub fn validate(&self) -> Result<()> {
         use limits::{positive, within};
         let (t_lo, t_hi) = tcomp_data::runcsv::TEMPERATURE_RANGE_C;

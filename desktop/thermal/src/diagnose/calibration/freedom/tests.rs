@@ -8,14 +8,14 @@ use crate::diagnose::{prepare_all, Options};
 use crate::sim::{sim_run, Duty, Effect, SimOptions};
 use std::path::PathBuf;
 
-fn desktop() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+fn examples() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples")
 }
 
 /// Two 4 h runs of the truth with a ball-screw heat the design lacks.
 pub(crate) fn setup() -> (Machine, Vec<Prepared>) {
-    let truth = Machine::load(&desktop().join("machines/turning-center-16.toml")).unwrap();
-    let duty = Duty::load(&desktop().join("duty/production-mixed.toml")).unwrap();
+    let truth = Machine::load(&examples().join("machines/turning-center-16.toml")).unwrap();
+    let duty = Duty::load(&examples().join("duty/production-mixed.toml")).unwrap();
     let runs: Vec<_> = (0..2)
         .map(|i| {
             let o = SimOptions {
