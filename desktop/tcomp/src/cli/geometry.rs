@@ -10,7 +10,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
-use super::geometry_identify::{identify_poly_cmd, PolyRequest};
+use super::geometry_identify::{
+    combination_text, condition_json, condition_text, identify_poly_cmd, PolyRequest,
+};
 use super::geometry_plan::{criterion, line_json, line_words, plan_lines, print_criterion};
 use super::geometry_predict::{predict_cmd, PredictArgs};
 use super::geometry_rotary::{
@@ -426,7 +428,7 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
         println!(
             "{}",
             serde_json::json!({"lines": lines, "unknowns": id.basis.columns.len(), "rank": id.rank,
-                "condition_number": if id.condition_number.is_finite() { serde_json::json!(id.condition_number) } else { serde_json::Value::Null },
+                "condition_number": condition_json(id.condition_number),
                 "unobservable": id.unobservable, "plan": a.plan, "criterion": crit})
         );
         return Ok(());
@@ -438,19 +440,10 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
         "{} unknowns, rank {}, condition number {}",
         id.basis.columns.len(),
         id.rank,
-        if id.condition_number.is_finite() {
-            format!("{:.1}", id.condition_number)
-        } else {
-            "infinite".into()
-        }
+        condition_text(id.condition_number)
     );
     for u in &id.unobservable {
-        let c: Vec<String> = u
-            .combination
-            .iter()
-            .map(|(n, w)| format!("{w:+.2}·{n}"))
-            .collect();
-        println!("  not observable: {}", c.join(" "));
+        println!("  not observable: {}", combination_text(&u.combination));
     }
     print_criterion(&a.plan, &crit);
     Ok(())

@@ -168,11 +168,7 @@ impl Report {
         o.insert("rank".into(), serde_json::json!(id.rank));
         o.insert(
             "condition_number".into(),
-            if id.condition_number.is_finite() {
-                serde_json::json!(id.condition_number)
-            } else {
-                serde_json::Value::Null
-            },
+            condition_json(id.condition_number),
         );
         o.insert(
             "singular_values".into(),
@@ -299,11 +295,7 @@ fn print_identification(
         "rank {} of {}; condition number {}; residual RMS {:.3} µm",
         id.rank,
         id.basis.columns.len(),
-        if id.condition_number.is_finite() {
-            format!("{:.1}", id.condition_number)
-        } else {
-            "infinite".into()
-        },
+        condition_text(id.condition_number),
         id.residual_rms_um
     );
     if id.unobservable.is_empty() {
@@ -314,13 +306,51 @@ fn print_identification(
             id.unobservable.len()
         );
         for u in &id.unobservable {
-            let c: Vec<String> = u
-                .combination
-                .iter()
-                .map(|(n, w)| format!("{w:+.2}·{n}"))
-                .collect();
-            println!("  {}", c.join(" "));
+            println!("  {}", combination_text(&u.combination));
         }
     }
     println!("error functions at {points} positions per axis:");
+}
+
+/// A condition number as printed: one decimal, or "infinite" when the lines
+/// leave some combination of the unknowns unseen.
+pub fn condition_text(c: f64) -> String {
+    if c.is_finite() {
+        format!("{c:.1}")
+    } else {
+        "infinite".into()
+    }
+}
+
+/// A condition number in JSON: the number, or null when infinite.
+pub fn condition_json(c: f64) -> serde_json::Value {
+    if c.is_finite() {
+        serde_json::json!(c)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+/// A combination the lines cannot see, as `+0.71·EXX -0.71·EYY`.
+pub fn combination_text(combination: &[(String, f64)]) -> String {
+    let c: Vec<String> = combination
+        .iter()
+        .map(|(n, w)| format!("{w:+.2}·{n}"))
+        .collect();
+    c.join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unseen_combination_reads_infinite_in_words_and_null_in_json() {
+        assert_eq!(condition_text(381.21), "381.2");
+        assert_eq!(condition_text(f64::INFINITY), "infinite");
+        assert_eq!(condition_json(381.25), serde_json::json!(381.25));
+        assert_eq!(condition_json(f64::INFINITY), serde_json::Value::Null);
+        let c = [("EXX".to_string(), 0.6), ("EYY".to_string(), -0.8)];
+        assert_eq!(combination_text(&c), "+0.60·EXX -0.80·EYY");
+    }
 }
