@@ -597,6 +597,7 @@ impl<F: BackgroundErase> App<F> {
         s.axes = out.axes;
         s.map_missing = 0;
         s.active = out.active;
+        s.envelope_steps = self.compensation.compensator().envelope_steps();
         let channels = s.temperatures.iter_mut().zip(s.states.iter_mut());
         for (c, (temperature, state)) in channels.enumerate() {
             let v = acq.value(c, now_ms);

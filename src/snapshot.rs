@@ -56,6 +56,8 @@ pub struct Snapshot {
     pub vol: VolSnapshot,
     /// Probe references (input registers 300–329), as the app published them.
     pub references: [u16; REFERENCE_REGS],
+    /// Per direction, steps served beyond the training envelope (360–371).
+    pub envelope_steps: [u32; MAX_DIRECTIONS],
 }
 
 /// Registers of the probe-reference block (300–329).
@@ -146,6 +148,7 @@ impl Default for Snapshot {
             reference_state: 0,
             vol: VolSnapshot::default(),
             references: [0; REFERENCE_REGS],
+            envelope_steps: [0; MAX_DIRECTIONS],
         }
     }
 }

@@ -76,9 +76,9 @@ fn without_a_section_the_block_says_not_available() {
     let w = read_block(&mut app, 10);
     not_available(&w);
     assert_eq!(w[6], vstatus::NO_SECTION);
-    // The map ends after the five-axis block (330–359), past the
-    // volumetric, identity and probe-reference ones.
-    assert_eq!(IR_LAST, 359);
+    // The map ends after the envelope block (360–371), past the
+    // volumetric, identity, probe-reference and five-axis ones.
+    assert_eq!(IR_LAST, 371);
     let [a, b] = (IR_LAST + 1).to_be_bytes();
     app.request(&frame(&[1, 4, a, b, 0, 1]), 10, &mut reply);
     assert_eq!(&reply[1..3], &[0x84, 2], "{reply:02x?}");

@@ -9,8 +9,10 @@
 /// holding registers 34–35 and commands 6–11 to version 1; 3 added input
 /// registers 300–329, holding registers 40–45 and commands 12–13 (probe
 /// references, issue 28; docs/register-map.md); 4 added input register 23
-/// and holding registers 46–48 (the board asks for references, issue 51).
-pub const MAP_VERSION: u16 = 4;
+/// and holding registers 46–48 (the board asks for references, issue 51);
+/// 5 added input registers 360–371 (steps beyond the training envelope,
+/// issue 50).
+pub const MAP_VERSION: u16 = 5;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;
@@ -53,9 +55,16 @@ pub const IR_ACTIVE_MODEL: u16 = 150;
 pub const IR_DEGRADED_DIRECTIONS: u16 = 156;
 /// Bit d: direction d has no usable model (held).
 pub const IR_HELD_DIRECTIONS: u16 = 157;
-/// Last input register: the end of the five-axis block (158–159, 169,
+/// Last input register: the end of the envelope block (158–159, 169,
 /// 174–179, 196–199, 293–299 and 344–359 reserved, read 0).
-pub const IR_LAST: u16 = IR_FIVE_LAST;
+pub const IR_LAST: u16 = IR_ENVELOPE_LAST;
+/// Per direction, the model steps served with an input beyond its training
+/// envelope by more than the image's margin (map version 5, issue 50;
+/// `thermocomp_core::Compensator::envelope_steps`): u32, 2 registers each,
+/// 360–371, since the model was loaded or the board booted; saturating.
+pub const IR_ENVELOPE_STEPS: u16 = 360;
+/// Last register of the envelope block.
+pub const IR_ENVELOPE_LAST: u16 = 371;
 
 /// "Not available" for 32-bit measurements: reads 0x8000, 0x0000 (i32::MIN).
 pub const NOT_AVAILABLE_32: i32 = i32::MIN;

@@ -66,8 +66,9 @@ impl Snapshot {
         if (IR_FIVE_FIRST..=IR_FIVE_LAST).contains(&addr) {
             return Some(self.five_register(addr));
         }
-        if addr > IR_LAST {
-            return None;
+        if let Some(k) = addr.checked_sub(IR_ENVELOPE_STEPS) {
+            let k = usize::from(k);
+            return self.envelope_steps.get(k / 2).map(|&v| half(v, k));
         }
         // The offset of `addr` in the block at `base` of `n` registers.
         let in_block = |base: u16, n: usize| {
