@@ -29,7 +29,7 @@ pub use super::speed_law::{
     MIN_SPEED_LEVELS, STEEP_EXPONENTS,
 };
 use crate::diagnose::ident::{ModelFit, OutFit, Problem, Structure};
-use crate::diagnose::signal::r4;
+use crate::diagnose::signal::{held, held_rise, r4};
 use tcomp_numerics::linalg::RidgeFactor;
 
 /// Relative fit-row shrink of the lagged body map to claim a sensor lag:
@@ -39,19 +39,6 @@ pub const LAG_MIN_FIT_REL: f64 = 0.25;
 /// ... and in every run at least half of that: a lag is the sensor's and
 /// shows in every run, heat that differs between runs does not.
 pub const LAG_MIN_RUN_REL: f64 = 0.1;
-
-/// Values with gaps held from the last finite value (the first one before it).
-fn held(v: &[f64]) -> Vec<f64> {
-    let mut last = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
-    v.iter()
-        .map(|&x| {
-            if x.is_finite() {
-                last = x;
-            }
-            last
-        })
-        .collect()
-}
 
 /// The body map of each displacement of `outs` seen through a lag of `tau`: the
 /// displacement is a static linear map of the true node temperatures, so
@@ -74,11 +61,6 @@ fn lagged_body_maps(
     let ds = p.ds;
     let ns = ds.sensors.len();
     let nr = ds.runs.len();
-    let rise = |v: &[f64]| -> Vec<f64> {
-        let h = held(v);
-        let z = h.first().copied().unwrap_or(0.0);
-        h.iter().map(|x| x - z).collect()
-    };
     let cols: Vec<Vec<Vec<f64>>> = ds
         .runs
         .iter()
@@ -86,7 +68,7 @@ fn lagged_body_maps(
         .map(|(r, run)| {
             (0..ns)
                 .map(|i| {
-                    let mut x = rise(&p.meas[r][i]);
+                    let mut x = held_rise(&p.meas[r][i]);
                     if let Some((_, t)) = injected.filter(|j| j.0 == i) {
                         x = crate::diagnose::signal::lag_signal(&x, run.dt, t);
                     }

@@ -26,7 +26,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::diagnose::runs::Dataset;
-use crate::diagnose::signal::lag;
+use crate::diagnose::signal::{held_rise, lag};
 
 /// Candidate time constants [s] (2 min … 5.3 h).
 pub const TAU_GRID: [f64; 8] = [120.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0, 9600.0, 19200.0];
@@ -173,19 +173,6 @@ impl ModelFit {
             v.iter().sum::<f64>() / v.len() as f64
         }
     }
-}
-
-fn hold_nan(v: &[f64]) -> Vec<f64> {
-    let first = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
-    let mut last = first;
-    v.iter()
-        .map(|&x| {
-            if x.is_finite() {
-                last = x;
-            }
-            last
-        })
-        .collect()
 }
 
 /// The identification problem: dataset, outputs and the driving signals.
@@ -346,13 +333,7 @@ impl<'a> Problem<'a> {
     /// Sensor rises (from each run's first valid value, gaps held).
     fn rises(&self, r: usize) -> Vec<Vec<f64>> {
         let ns = self.ds.sensors.len();
-        (0..ns)
-            .map(|i| {
-                let v = hold_nan(&self.meas[r][i]);
-                let z = v.first().copied().unwrap_or(0.0);
-                v.iter().map(|x| x - z).collect()
-            })
-            .collect()
+        (0..ns).map(|i| held_rise(&self.meas[r][i])).collect()
     }
 
     /// (run, row) of every fit row (not held out) of every run.

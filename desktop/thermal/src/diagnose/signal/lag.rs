@@ -28,3 +28,24 @@ pub fn lag_signal(u: &[f64], dt: f64, tau: f64) -> Vec<f64> {
         })
         .collect()
 }
+
+/// Values with gaps held from the last finite value (the first finite one
+/// before it; 0 when there is none): a series the filters can read.
+pub fn held(v: &[f64]) -> Vec<f64> {
+    let mut last = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
+    v.iter()
+        .map(|&x| {
+            if x.is_finite() {
+                last = x;
+            }
+            last
+        })
+        .collect()
+}
+
+/// A sensor's rise from its first valid value, gaps held.
+pub fn held_rise(v: &[f64]) -> Vec<f64> {
+    let h = held(v);
+    let z = h.first().copied().unwrap_or(0.0);
+    h.iter().map(|x| x - z).collect()
+}

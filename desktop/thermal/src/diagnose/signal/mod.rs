@@ -6,7 +6,7 @@
 pub mod lag;
 pub mod stats;
 
-pub use lag::{lag, lag_signal};
+pub use lag::{held, held_rise, lag, lag_signal};
 pub use stats::{
     corr, first_order, ljung_box, mean_finite, moves, phases, phases_from_temperatures, r4, rms_of,
     unusable_channel, where_json, ResidualView,
