@@ -108,38 +108,34 @@ fn node_name(m: &Machine, i: usize) -> String {
     m.names.get(i).cloned().unwrap_or_else(|| format!("#{i}"))
 }
 
+/// One knob per node of `nodes` (element) and one for them all (grouped).
+fn per_node_knobs(
+    m: &Machine,
+    sets: &mut KnobSets,
+    nodes: Vec<usize>,
+    key: &str,
+    group: &'static str,
+    target: fn(Vec<usize>) -> Target,
+) {
+    for &i in &nodes {
+        let n = node_name(m, i);
+        let name = format!("{key} {n}");
+        sets.element
+            .push(Knob::new(name, target(vec![i]), group, Some(n)));
+    }
+    let name = format!("{key} (all nodes)");
+    sets.grouped
+        .push(Knob::new(name, target(nodes), group, None));
+}
+
 /// Capacities and losses: per lumped node; rod slices share one each.
 fn add_node_knobs(m: &Machine, sets: &mut KnobSets) {
     let n_lumped = m.spec.nodes.len();
     let rod: Vec<usize> = (n_lumped..m.n).collect();
     let lumped_c: Vec<usize> = (0..n_lumped).filter(|&i| m.c[i] > 0.0).collect();
     let lumped_g: Vec<usize> = (0..n_lumped).filter(|&i| m.g_amb[i] > 0.0).collect();
-    for &i in &lumped_c {
-        let n = node_name(m, i);
-        let t = Target::Capacity(vec![i]);
-        sets.element
-            .push(Knob::new(format!("c_j_per_k {n}"), t, "capacity", Some(n)));
-    }
-    let t = Target::Capacity(lumped_c);
-    sets.grouped.push(Knob::new(
-        "c_j_per_k (all nodes)".into(),
-        t,
-        "capacity",
-        None,
-    ));
-    for &i in &lumped_g {
-        let n = node_name(m, i);
-        let t = Target::Loss(vec![i]);
-        sets.element
-            .push(Knob::new(format!("g_amb_w_per_k {n}"), t, "film", Some(n)));
-    }
-    let t = Target::Loss(lumped_g);
-    sets.grouped.push(Knob::new(
-        "g_amb_w_per_k (all nodes)".into(),
-        t,
-        "film",
-        None,
-    ));
+    per_node_knobs(m, sets, lumped_c, "c_j_per_k", "capacity", Target::Capacity);
+    per_node_knobs(m, sets, lumped_g, "g_amb_w_per_k", "film", Target::Loss);
     if !rod.is_empty() {
         let t = Target::Capacity(rod.clone());
         let rod_name = Some("rod".to_string());

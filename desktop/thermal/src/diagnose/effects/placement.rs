@@ -7,16 +7,20 @@ use super::effect_fit::{ActiveSet, Cand, Evaluator};
 use crate::diagnose::runs::{Kind, Prepared};
 use crate::sim::{Effect, ALL_EFFECT_NAMES};
 
+/// Whether the runs have a displacement channel, and a temperature one.
+fn channel_kinds(ps: &[Prepared]) -> (bool, bool) {
+    let has = |kind: fn(&Kind) -> bool| ps.iter().any(|p| p.channels.iter().any(|c| kind(&c.kind)));
+    (
+        has(|k| matches!(k, Kind::Disp(_))),
+        has(|k| matches!(k, Kind::Temp(_))),
+    )
+}
+
 /// Candidates applicable to this machine and these runs; the sensor
 /// effects are placed where the nominal residual is (fit rows only).
 pub fn candidates(ev: &Evaluator, res0: &[Vec<Vec<f64>>], only: &[String]) -> Vec<Cand> {
     let (m, ps) = (ev.m, ev.runs);
-    let has_disp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
-    let has_temp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
+    let (has_disp, has_temp) = channel_kinds(ps);
     let flows = ps
         .iter()
         .any(|p| (0..p.rows()).any(|k| m.coolant_flows(p.inputs.rpm[k], p.inputs.coolant[k])));
@@ -342,12 +346,7 @@ pub fn untestable(
     ps: &[Prepared],
     only: &[String],
 ) -> Vec<(String, String)> {
-    let has_disp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Disp(_))));
-    let has_temp = ps
-        .iter()
-        .any(|p| p.channels.iter().any(|c| matches!(c.kind, Kind::Temp(_))));
+    let (has_disp, has_temp) = channel_kinds(ps);
     let coolant_on = ps.iter().any(|p| p.inputs.coolant.iter().any(|c| *c > 0.5));
     let flows = ps
         .iter()
