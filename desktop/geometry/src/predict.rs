@@ -168,7 +168,9 @@ impl DesktopModel {
             .collect::<Result<_>>()?;
         let loc = m.location_at(&temps)?;
         let tip = [p.pos_mm[0], p.pos_mm[1], p.pos_mm[2] + p.tool_mm];
-        let rot = rotary_error_machine(m, &loc, tip, p.a_deg, p.c_deg);
+        // with an identified spindle, its tilt's offset at this tool
+        // relative to the model's reference tool (rotary::Spindle)
+        let rot = rotary_error_machine(m, &loc, tip, p.a_deg, p.c_deg) + spindle_share(m, tool);
         let machine = linear + rot;
         let r0 = nominal_chain(m.pivot_a_mm, m.offset_c_mm, p.a_deg, p.c_deg).rotation;
         let pose = Pose {
@@ -348,8 +350,16 @@ pub fn linear_bound_um(poly: &VolumetricPoly, v: &Volumetric, b: &BoardInputs, f
     bound_um(poly, v, &rises, &o) + fit_um
 }
 
+/// The spindle tilt's tool offset [µm, machine frame] at tool `tool_mm`
+/// relative to the model's reference tool: the desktop adds it, the board
+/// (no tool length in its rotary section) does not serve it.
+fn spindle_share(m: &RotaryModel, tool_mm: [f64; 3]) -> Vector3<f64> {
+    m.spindle.map_or(Vector3::zeros(), |s| s.offset_um(tool_mm))
+}
+
 /// The stated bound (µm) on |served rotary part − the model's f64| at pose
-/// `p` (board inputs): [`stated_bound`] at this pose's arm and temperatures.
+/// `p` (board inputs): [`stated_bound`] at this pose's arm and temperatures,
+/// plus the spindle tilt's share the board does not serve ([`spindle_share`]).
 pub fn rotary_bound_um(m: &RotaryModel, f: &FiveAxis, p: &PoseIn) -> f64 {
     let tip = [p.pos_mm[0], p.pos_mm[1], p.pos_mm[2] + p.tool_mm];
     let arm = (0..3)
@@ -363,7 +373,7 @@ pub fn rotary_bound_um(m: &RotaryModel, f: &FiveAxis, p: &PoseIn) -> f64 {
             (t.unwrap_or(d.reference_c) - d.reference_c).abs()
         })
         .fold(0.0f64, f64::max);
-    stated_bound(f, arm, dt_max)
+    stated_bound(f, arm, dt_max) + spindle_share(m, [0.0, 0.0, p.tool_mm]).norm()
 }
 
 /// Whether the image's section kind 3 is `poly` quantised (same strokes

@@ -1,12 +1,13 @@
 //! The unknowns of the rotary fit (`identify`, `joint`, `bias`): what to
 //! fit, one column per unknown (location errors, their drift, component
-//! harmonics, backward-whirl pairs, file offsets, the linear model's
-//! corrections), each column's name and the reading one unit of it
-//! produces at a pose.
+//! harmonics, backward-whirl pairs, the spindle's direction, file offsets,
+//! the linear model's corrections), each column's name and the reading one
+//! unit of it produces at a pose.
 
 use nalgebra::Vector3;
+use serde::Serialize;
 
-use super::model::{Axis5, ReadingSensitivity, LOCATION_NAMES};
+use super::model::{spindle_offset_um, Axis5, ReadingSensitivity, LOCATION_NAMES};
 use crate::rtest::RTestFile;
 
 /// What to fit.
@@ -30,6 +31,15 @@ impl Default for RotaryOptions {
     }
 }
 
+/// One unknown's value with its standard uncertainty; `None` when not observable (as `identify` reports it).
+#[derive(Clone, Debug, Serialize)]
+pub struct TermValue {
+    pub name: String,
+    pub unit: String,
+    pub value: Option<f64>,
+    pub sigma: Option<f64>,
+}
+
 /// An unknown of the fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Col {
@@ -43,6 +53,29 @@ pub(crate) enum Col {
     /// Correction of the linear model's parameter `j` (its basis order;
     /// joint fit with the 14 lines, `joint`).
     Lin(usize),
+    /// The spindle's tilt about x (0) or y (1) relative to the lines'
+    /// frame [µrad]: only with several tool lengths ([`tools`]).
+    Spindle(usize),
+}
+
+/// Names of the spindle's two angles, in [`Col::Spindle`] order.
+pub const SPINDLE_NAMES: [&str; 2] = ["spindle about x", "spindle about y"];
+
+/// Tools closer than this [mm] count as one (as nest positions do).
+const SAME_TOOL_MM: f64 = 0.5;
+
+/// The distinct tool vectors of the files. With one, a spindle tilt is a
+/// constant tool offset that the location errors absorb exactly (`model`'s
+/// `Spindle`): its two angles are not identifiable and get no column.
+pub(crate) fn tools(files: &[RTestFile]) -> Vec<[f64; 3]> {
+    let mut out: Vec<[f64; 3]> = Vec::new();
+    for f in files {
+        let same = |t: &[f64; 3]| (0..3).all(|k| (t[k] - f.tool_mm[k]).abs() < SAME_TOOL_MM);
+        if !out.iter().any(same) {
+            out.push(f.tool_mm);
+        }
+    }
+    out
 }
 
 /// (axis, index in the six fixed-frame errors) of each location error.
@@ -76,6 +109,7 @@ impl Col {
             }
             Col::Const(f, d) => format!("offset of {} d{}", files[f].name, ['x', 'y', 'z'][d]),
             Col::Lin(j) => format!("linear parameter {j}"),
+            Col::Spindle(k) => SPINDLE_NAMES[k].to_string(),
         }
     }
     /// The error names this unknown belongs to (none for the file offsets).
@@ -90,12 +124,16 @@ impl Col {
             }
             Col::Const(..) => vec![],
             Col::Lin(_) => vec!["linear axes".to_string()],
+            Col::Spindle(k) => vec![SPINDLE_NAMES[k].to_string()],
         }
     }
 }
 
-pub(crate) fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
+pub(crate) fn columns(o: &RotaryOptions, files: &[RTestFile]) -> Vec<Col> {
     let mut cols: Vec<Col> = (0..8).map(Col::Loc).collect();
+    if tools(files).len() > 1 {
+        cols.extend((0..2).map(Col::Spindle));
+    }
     for s in 0..o.sensors.len() {
         cols.extend((0..8).map(|j| Col::Drift(j, s)));
     }
@@ -117,14 +155,24 @@ pub(crate) fn columns(o: &RotaryOptions, files: usize) -> Vec<Col> {
             }
         }
     }
-    for f in 0..files {
+    for f in 0..files.len() {
         cols.extend((0..3).map(|d| Col::Const(f, d)));
     }
     cols
 }
 
+/// The reading (workpiece frame, µm) one µrad of spindle tilt `k` produces
+/// with tool `tool_mm`: the tool offset `ε × t` turned into the workpiece
+/// frame (its constant part goes into the file's offsets).
+pub(crate) fn spindle_effect(k: usize, s: &ReadingSensitivity, tool_mm: [f64; 3]) -> Vector3<f64> {
+    let mut eps = [0.0; 2];
+    eps[k] = 1.0;
+    s.lin_rot * spindle_offset_um(eps, Vector3::from(tool_mm))
+}
+
 /// The reading (workpiece frame, µm) one unit of `col` produces at a pose
-/// (zero for the linear model's columns: `joint` fills those).
+/// (zero for the linear model's columns, `joint` fills those, and for the
+/// spindle's, [`spindle_effect`]: they need the file's tool).
 pub(crate) fn effect(
     col: Col,
     s: &ReadingSensitivity,
@@ -173,6 +221,6 @@ pub(crate) fn effect(
             }
             u
         }
-        Col::Lin(_) => Vector3::zeros(),
+        Col::Lin(_) | Col::Spindle(_) => Vector3::zeros(),
     }
 }

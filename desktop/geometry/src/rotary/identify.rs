@@ -16,12 +16,14 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 
-pub use super::columns::RotaryOptions;
-use super::columns::{columns, effect, Col};
+pub use super::columns::{RotaryOptions, TermValue};
+use super::columns::{columns, effect, spindle_effect, Col, SPINDLE_NAMES};
 use super::model::{
-    reading_sensitivity, Drift, Linear, Location, ReadingSensitivity, RotaryModel, LOCATION_NAMES,
-    LOCATION_UNITS,
+    reading_sensitivity, Drift, Linear, Location, ReadingSensitivity, RotaryModel, Spindle,
+    LOCATION_NAMES, LOCATION_UNITS,
 };
+use super::spindle::mean_tool;
+pub use super::spindle::SpindleReport;
 pub use super::unobservable::Unobservable;
 use super::unobservable::{describe_null, nest_spread, null_directions};
 use crate::kinematics::tool_tip_error_exact;
@@ -59,14 +61,6 @@ pub struct JointLinear {
     pub line_readings: usize,
 }
 
-/// One value with its standard uncertainty; `None` when not observable.
-#[derive(Clone, Debug, Serialize)]
-pub struct TermValue {
-    pub name: String,
-    pub unit: String,
-    pub value: Option<f64>,
-    pub sigma: Option<f64>,
-}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct RotaryIdentification {
@@ -84,6 +78,9 @@ pub struct RotaryIdentification {
     pub unobservable: Vec<Unobservable>,
     /// Names (`XOC`, `EZC`, `XOC/T_ctable` …) in an unobservable direction.
     pub unobservable_terms: Vec<String>,
+    /// The spindle's direction relative to the lines' frame: identified
+    /// (several tool lengths) or undetermined (one), with the reason.
+    pub spindle: SpindleReport,
     /// Joint fit with the lines (`joint`): what it did to the linear model.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub linear: Option<JointLinear>,
@@ -152,7 +149,7 @@ impl RotaryIdentification {
         };
         let r = crate::adequacy::assess(&p, noise)?;
         let f = r.adequacy.sigma_inflation;
-        let (mut il, mut id, mut ic) = (0, 0, 0);
+        let (mut il, mut id, mut ic, mut is) = (0, 0, 0, 0);
         for (j, col) in d.cols.iter().enumerate() {
             let tv = match col {
                 Col::Loc(_) => {
@@ -166,6 +163,10 @@ impl RotaryIdentification {
                 Col::Comp(..) | Col::Whirl(..) => {
                     ic += 1;
                     self.components.get_mut(ic - 1)
+                }
+                Col::Spindle(_) => {
+                    is += 1;
+                    self.spindle.angles.get_mut(is - 1)
                 }
                 _ => None,
             };
@@ -252,7 +253,7 @@ pub(crate) fn design(
                 / n_rows as f64
         })
         .collect();
-    let cols = columns(o, files.len());
+    let cols = columns(o, files);
     let n = cols.len();
     let m = 3 * n_rows;
     let mut a = DMatrix::<f64>::zeros(m, n);
@@ -269,7 +270,10 @@ pub(crate) fn design(
                 s.lin_rot * tool_tip_error_exact(l.structure, l.errors, r.pos_mm, f.tool_mm)
             });
             for (j, col) in cols.iter().enumerate() {
-                let e = effect(*col, &s, r.a_deg, r.c_deg, fi, &dt);
+                let e = match *col {
+                    Col::Spindle(k) => spindle_effect(k, &s, f.tool_mm),
+                    _ => effect(*col, &s, r.a_deg, r.c_deg, fi, &dt),
+                };
                 for d in 0..3 {
                     a[(i + d, j)] = e[d];
                 }
@@ -312,7 +316,9 @@ pub(crate) fn solve(
     let mut v = values(files, o, cols, reference, &sol, &unobs_cols);
     v.model.unobservable = unobs_terms.iter().cloned().collect();
     let design = stored_design(files, o, cols, a, b, rtest_rows, sigma_r);
+    let spindle = SpindleReport::new(files, v.spindle, &unobs_terms);
     Ok(RotaryIdentification {
+        spindle,
         adequacy: None,
         adequate: None,
         design: Some(design),
@@ -408,6 +414,8 @@ struct Values {
     components: Vec<TermValue>,
     /// Joint fit: the linear model's parameter corrections.
     linear_delta: Vec<f64>,
+    /// The spindle's two angles (when the files have several tools).
+    spindle: Vec<TermValue>,
 }
 
 /// The model (every column's value, whirl pairs split into their two
@@ -433,6 +441,7 @@ fn values(
     let mut drift = vec![[0.0; 8]; o.sensors.len()];
     let (mut location, mut drift_v, mut comps) = (Vec::new(), Vec::new(), Vec::new());
     let mut linear_delta = Vec::new();
+    let (mut eps, mut spindle) = ([0.0; 2], Vec::new());
     for (j, col) in cols.iter().enumerate() {
         let tv = |name: String, unit: &str| TermValue {
             name,
@@ -472,9 +481,24 @@ fn values(
             }
             Col::Const(..) => {}
             Col::Lin(_) => linear_delta.push(x[j]),
+            Col::Spindle(k) => {
+                eps[k] = x[j];
+                spindle.push(tv(SPINDLE_NAMES[k].to_string(), "µrad"));
+            }
         }
     }
     model.location = Location::from_array(loc);
+    if spindle.len() == 2 && spindle.iter().all(|t| t.value.is_some()) {
+        // the model holds the location errors as they appear at the files'
+        // mean tool, the spindle's tilt relative to it (model::Spindle)
+        let s = Spindle {
+            about_x_urad: eps[0],
+            about_y_urad: eps[1],
+            reference_tool_mm: mean_tool(files),
+        };
+        model.location = s.move_location(&model.location, [0.0; 3], s.reference_tool_mm);
+        model.spindle = Some(s);
+    }
     model.drift = (o.sensors.iter().zip(reference).zip(&drift))
         .map(|((s, r), d)| Drift {
             sensor: s.clone(),
@@ -488,6 +512,7 @@ fn values(
         drift: drift_v,
         components: comps,
         linear_delta,
+        spindle,
     }
 }
 

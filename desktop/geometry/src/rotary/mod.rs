@@ -9,6 +9,8 @@
 //!   known input (`identify_tests`: its tests); `columns`: the fit's
 //!   unknowns and what each does to a reading; `unobservable`: what the
 //!   files cannot see, and why;
+//! * `spindle`: the spindle's direction from several tool lengths, or
+//!   why it is undetermined (`spindle_tests`);
 //! * `joint`: the same fit with the 14 lines as data;
 //! * `bias`: the location constants re-optimised on tool-tip readings;
 //! * `check`: the five-axis check over a held-out grid, and the whole
@@ -28,10 +30,11 @@ pub mod identify;
 pub mod joint;
 pub mod model;
 pub mod sim;
+pub mod spindle;
 mod unobservable;
 
 pub use model::{
-    nominal_chain, reading_sensitivity, rtcp_position, tool_tip_error, Axis5, Drift, Linear,
-    Location, Pose, ReadingSensitivity, RotaryModel, COMPONENT_NAMES, LOCATION_NAMES,
-    LOCATION_UNITS,
+    location_shift_of_offset, nominal_chain, reading_sensitivity, rtcp_position, spindle_offset_um,
+    tool_tip_error, Axis5, Drift, Linear, Location, Pose, ReadingSensitivity, RotaryModel, Spindle,
+    COMPONENT_NAMES, LOCATION_NAMES, LOCATION_UNITS,
 };

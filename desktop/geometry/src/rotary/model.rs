@@ -94,7 +94,7 @@ impl Location {
             coa_urad: v[7],
         }
     }
-    fn add_scaled(&self, o: &Location, f: f64) -> Location {
+    pub fn add_scaled(&self, o: &Location, f: f64) -> Location {
         let (a, b) = (self.to_array(), o.to_array());
         Location::from_array(std::array::from_fn(|i| a[i] + f * b[i]))
     }
@@ -135,6 +135,66 @@ pub struct RotaryModel {
     pub adequate: Option<bool>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adequacy: Option<crate::adequacy::Adequacy>,
+    /// The spindle's direction relative to the linear axes' frame (issue
+    /// 49 item 3), when R-test files with several tool lengths determined
+    /// it; absent: not determined (with one tool length it is absorbed
+    /// into `location`, which is then the apparent one at that tool).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spindle: Option<Spindle>,
+}
+
+/// The spindle axis's direction relative to the frame the linear axes
+/// (the lines) define: right-handed tilts about x and y, the tool vector
+/// `t` becoming `Rx(about_x)·Ry(about_y)·t`, i.e. the tool point moving by
+/// `ε × t` with `ε = (about_x, about_y, 0)` in the machine frame.
+///
+/// A constant tool offset `d` is exactly the location shift `XOC, YOC,
+/// YOA, ZOA −= d` (the whole table moved by −d: `T(−d)·W·T(d)`) up to a
+/// constant reading. So the model's `location` is the location errors as
+/// they appear at `reference_tool_mm` (what the board serves: it has no
+/// tool length for the rotary section), and the chain adds only
+/// `ε × (t − reference_tool_mm)`; the constant `ε × reference_tool_mm`,
+/// the same at every pose, is left out (no R-test or line sees it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Spindle {
+    pub about_x_urad: f64,
+    pub about_y_urad: f64,
+    /// The tool at which `location` holds [mm]; zero: the true location
+    /// errors relative to the lines' frame.
+    pub reference_tool_mm: [f64; 3],
+}
+
+impl Spindle {
+    /// Tool-point offset [µm, machine frame] of tool `t` [mm] relative to
+    /// the reference tool.
+    pub fn offset_um(&self, tool_mm: [f64; 3]) -> Vector3<f64> {
+        let t = Vector3::from(tool_mm) - Vector3::from(self.reference_tool_mm);
+        spindle_offset_um([self.about_x_urad, self.about_y_urad], t)
+    }
+    /// Location errors `loc` as they appear at tool `from_mm`, moved to
+    /// how they appear at tool `to_mm`.
+    pub fn move_location(&self, loc: &Location, from_mm: [f64; 3], to_mm: [f64; 3]) -> Location {
+        let t = Vector3::from(to_mm) - Vector3::from(from_mm);
+        let d = spindle_offset_um([self.about_x_urad, self.about_y_urad], t);
+        loc.add_scaled(&location_shift_of_offset(d), 1.0)
+    }
+}
+
+/// `ε × t` [µm] for tilts `eps` [µrad] about x and y and a tool `t` [mm].
+pub fn spindle_offset_um(eps: [f64; 2], t: Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(eps[0], eps[1], 0.0).cross(&t) * (RAD_PER_URAD * UM_PER_MM)
+}
+
+/// The location errors that a constant tool offset `d` [µm, machine
+/// frame] reads as (`Spindle`'s doc): `XOC, YOC, YOA, ZOA` shifted by −d.
+pub fn location_shift_of_offset(d: Vector3<f64>) -> Location {
+    Location {
+        xoc_um: -d.x,
+        yoc_um: -d.y,
+        yoa_um: -d.y,
+        zoa_um: -d.z,
+        ..Default::default()
+    }
 }
 
 /// A rotary axis.
@@ -220,6 +280,16 @@ impl RotaryModel {
             l = l.add_scaled(&d.per_kelvin, t - d.reference_c);
         }
         Ok(l)
+    }
+
+    /// Location errors `loc` (the model's, at some temperature state) as
+    /// they appear at tool `tool_mm`: without a spindle as given, with one
+    /// moved from its reference tool (zero tool: relative to the lines' frame).
+    pub fn location_for_tool(&self, loc: &Location, tool_mm: [f64; 3]) -> Location {
+        match self.spindle {
+            None => *loc,
+            Some(s) => s.move_location(loc, s.reference_tool_mm, tool_mm),
+        }
     }
 
     /// Component errors of `axis` at `deg`: [δx, δy, δz µm, εa, εb, εc µrad].
@@ -365,7 +435,9 @@ pub struct Pose {
 
 /// Tool-tip error in the workpiece frame [µm], exact rigid-body form:
 /// actual minus nominal tool point relative to the workpiece, with the
-/// location errors `loc` (the model's at some temperature state).
+/// location errors `loc` (the model's at some temperature state) and the
+/// spindle's tilt, when the model has one, as a tool offset in the
+/// machine frame relative to its reference tool ([`Spindle`]).
 pub fn tool_tip_error(
     m: &RotaryModel,
     loc: &Location,
@@ -380,7 +452,9 @@ pub fn tool_tip_error(
     let p0 = Vector3::from(p.pos_mm) + Vector3::from(p.tool_mm);
     let e_lin = lin.map_or(Vector3::zeros(), |l| {
         tool_tip_error_exact(l.structure, l.errors, p.pos_mm, p.tool_mm)
-    });
+    }) + m
+        .spindle
+        .map_or(Vector3::zeros(), |s| s.offset_um(p.tool_mm));
     let actual = w.inverse() * Point3::from(p0 + e_lin / UM_PER_MM);
     let nominal = w0.inverse() * Point3::from(p0);
     (actual - nominal) * UM_PER_MM

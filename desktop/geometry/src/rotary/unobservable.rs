@@ -139,6 +139,9 @@ fn reason(
             "{nests} nest position(s), {span} not collinear: with error motions modelled, fewer than three non-collinear nest positions cannot separate XOC, YOC, AOC, BOC from EZC/ECC"
         );
     }
+    if terms.iter().any(|t| t.starts_with("spindle")) {
+        return "the files' tool lengths do not separate the spindle's direction from the location errors (use tool lengths further apart)".into();
+    }
     if terms.iter().any(|t| t.contains("/T_")) {
         return "the sensors' temperatures move together (or not at all) in these files: their drift coefficients cannot be told apart".into();
     }

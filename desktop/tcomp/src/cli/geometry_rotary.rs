@@ -40,6 +40,28 @@ pub struct SimRotaryArgs {
     /// Give the machine random linear errors too and write their 14 lines.
     #[arg(long)]
     pub lines: bool,
+    /// Tilt the spindle relative to the linear axes' frame: about x and y
+    /// [µrad], e.g. 20,-15 (the R-test files see it only through their
+    /// tool lengths).
+    #[arg(long, value_name = "X,Y", allow_hyphen_values = true)]
+    pub spindle_tilt_urad: Option<String>,
+    /// Measure every nest with each of these tool lengths [mm] instead of
+    /// the plan's one tool per nest, e.g. 100,200.
+    #[arg(long, value_name = "L,…")]
+    pub tools_mm: Option<String>,
+}
+
+/// `a,b,…` as finite numbers (`what` names the flag in the error).
+fn numbers(s: &str, what: &str) -> Result<Vec<f64>> {
+    s.split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| anyhow::anyhow!("{what}: `{}` is not a number", v.trim()))
+        })
+        .collect()
 }
 
 #[derive(clap::Args, Debug)]
@@ -140,7 +162,27 @@ pub fn sim_rotary_cmd(a: SimRotaryArgs) -> Result<()> {
         bail!("--noise-um must be ≥ 0");
     }
     let mut rng = Rng::new(a.seed);
-    let plan = RPlan::default_plan();
+    let mut plan = RPlan::default_plan();
+    if let Some(t) = a.tools_mm.as_deref() {
+        let tools = numbers(t, "--tools-mm")?;
+        if tools.iter().any(|l| *l < 0.0) {
+            bail!("--tools-mm: tool lengths must be ≥ 0 mm");
+        }
+        let nests: Vec<[f64; 3]> = plan.nests.iter().map(|(n, _)| *n).collect();
+        plan.nests = (nests.iter())
+            .flat_map(|n| tools.iter().map(move |l| (*n, [0.0, 0.0, *l])))
+            .collect();
+    }
+    let tilt = match a
+        .spindle_tilt_urad
+        .as_deref()
+        .map(|t| numbers(t, "--spindle-tilt-urad"))
+    {
+        None => None,
+        Some(Ok(v)) if v.len() == 2 => Some(v),
+        Some(Ok(_)) => bail!("--spindle-tilt-urad: two angles, about x and y (µrad), e.g. 20,-15"),
+        Some(Err(e)) => return Err(e),
+    };
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let lin = if a.lines {
         let (st, truth, _) = linear_case(CASE_STROKE, a.noise_um, &mut rng)?;
@@ -162,12 +204,17 @@ pub fn sim_rotary_cmd(a: SimRotaryArgs) -> Result<()> {
     } else {
         None
     };
-    let truth = random_rotary(
+    let mut truth = random_rotary(
         &plan,
         &RotarySizes::default(),
         a.thermal_cycles > 0,
         &mut rng,
     );
+    truth.spindle = tilt.map(|v| tcomp_geometry::rotary::Spindle {
+        about_x_urad: v[0],
+        about_y_urad: v[1],
+        reference_tool_mm: [0.0; 3],
+    });
     let setup = CycleSetup {
         noise_um: a.noise_um,
         thermal_cycles: a.thermal_cycles,
@@ -443,7 +490,11 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
 }
 
 fn recovery_json(id: &RotaryIdentification, t: &RotaryModel) -> serde_json::Value {
-    let (tl, ml) = (t.location.to_array(), id.model.location.to_array());
+    // both relative to the lines' frame, or both apparent at the one tool
+    let tl = truth_location(id, t);
+    let ml = (id.model)
+        .location_for_tool(&id.model.location, [0.0; 3])
+        .to_array();
     let loc: BTreeMap<&str, f64> = tcomp_geometry::rotary::LOCATION_NAMES
         .iter()
         .copied()
@@ -454,7 +505,32 @@ fn recovery_json(id: &RotaryIdentification, t: &RotaryModel) -> serde_json::Valu
             .into_iter()
             .map(|(k, (d, s))| (k, serde_json::json!({"rms_error": d, "true_rms": s})))
             .collect();
-    serde_json::json!({"location_error": loc, "components": comp})
+    let mut v = serde_json::json!({"location_error": loc, "components": comp});
+    if let (Some(o), Some(e)) = (v.as_object_mut(), spindle_recovery(id, t)) {
+        o.insert("spindle_error_urad".into(), serde_json::json!(e));
+    }
+    v
+}
+
+/// The true location errors as the identification reports them: relative
+/// to the lines' frame, or, with the spindle undetermined, as they appear
+/// at the files' one tool.
+fn truth_location(id: &RotaryIdentification, t: &RotaryModel) -> [f64; 8] {
+    let tool = match (&id.model.spindle, id.spindle.tools_mm.as_slice()) {
+        (None, [one]) => *one,
+        _ => [0.0; 3],
+    };
+    t.location_for_tool(&t.location, tool).to_array()
+}
+
+/// Identified minus true spindle angles [µrad] (a truth without a spindle: zero tilt).
+fn spindle_recovery(id: &RotaryIdentification, t: &RotaryModel) -> Option<[f64; 2]> {
+    let s = id.model.spindle?;
+    let ts = t.spindle.unwrap_or_default();
+    Some([
+        s.about_x_urad - ts.about_x_urad,
+        s.about_y_urad - ts.about_y_urad,
+    ])
 }
 
 fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) {
@@ -469,8 +545,16 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
             j.linear_unknowns, j.line_readings, j.joint_condition_number.unwrap_or(f64::INFINITY), j.sigma_lines_um, j.sigma_rtest_um, j.change_at_rtest_rms_um, j.line_residual_rms_um_before, j.line_residual_rms_um
         );
     }
-    let tl = truth.map(|t| t.location.to_array());
-    println!("  location errors (± 1σ):");
+    let tl = truth.map(|t| truth_location(id, t));
+    print_spindle(id, truth);
+    println!(
+        "  location errors (± 1σ){}:",
+        if id.model.spindle.is_some() {
+            ", relative to the lines' frame"
+        } else {
+            ""
+        }
+    );
     for (k, t) in id.location.iter().enumerate() {
         let rec = tl
             .map(|v| format!("   truth {:8.3}", v[k]))
@@ -495,6 +579,30 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
             (Some(v), Some(s)) => println!("    {:32} {v:8.3} ± {s:.3} {}", t.name, t.unit),
             _ => println!("    {:32} unobservable", t.name),
         }
+    }
+}
+
+/// The spindle's direction, or why it is undetermined.
+fn print_spindle(id: &RotaryIdentification, truth: Option<&RotaryModel>) {
+    let s = &id.spindle;
+    match s.status.as_str() {
+        "identified" => {
+            let ts = truth.map(|t| t.spindle.unwrap_or_default());
+            println!(
+                "  spindle direction relative to the lines' frame (± 1σ; {} tools):",
+                s.tools_mm.len()
+            );
+            for (k, t) in s.angles.iter().enumerate() {
+                let rec = ts
+                    .map(|ts| format!("   truth {:8.3}", [ts.about_x_urad, ts.about_y_urad][k]))
+                    .unwrap_or_default();
+                if let (Some(v), Some(sg)) = (t.value, t.sigma) {
+                    println!("    {} {v:9.3} ± {sg:.3} {}{rec}", t.name, t.unit);
+                }
+            }
+            println!("    {}", s.why);
+        }
+        _ => println!("  spindle direction {}: {}", s.status, s.why),
     }
 }
 
