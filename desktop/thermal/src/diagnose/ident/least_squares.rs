@@ -111,18 +111,7 @@ impl Problem<'_> {
             let xa = DMatrix::from_fn(run.rows(), p, |k, j| value(r, k, j));
             let pred = xa * &coef;
             for (o, f) in outs.iter_mut().enumerate() {
-                let mut res = Vec::with_capacity(run.rows());
-                for k in 0..run.rows() {
-                    let m = self.meas[r][o][k];
-                    if !m.is_finite() {
-                        res.push(f64::NAN);
-                        continue;
-                    }
-                    let e = m - pred[(k, o)];
-                    f.add_residual(e, run.held[k]);
-                    res.push(e);
-                }
-                f.resid.push(res);
+                f.push_run(&self.meas[r][o], &run.held, |k| pred[(k, o)]);
             }
         }
         Some((ModelFit { outs }, coef))
@@ -294,19 +283,9 @@ impl Problem<'_> {
             .map(|j| coef[n_shared + n_own_all + j])
             .collect();
         for (r, run) in self.ds.runs.iter().enumerate() {
-            let mut res = Vec::with_capacity(run.rows());
-            for k in 0..run.rows() {
-                let m = self.meas[r][o][k];
-                if !m.is_finite() {
-                    res.push(f64::NAN);
-                    continue;
-                }
-                let pred: f64 = (0..p).map(|j| coef[j] * value(r, k, j)).sum();
-                let e = m - pred;
-                fit.add_residual(e, run.held[k]);
-                res.push(e);
-            }
-            fit.resid.push(res);
+            fit.push_run(&self.meas[r][o], &run.held, |k| {
+                (0..p).map(|j| coef[j] * value(r, k, j)).sum()
+            });
         }
         (fit, Some(coef))
     }

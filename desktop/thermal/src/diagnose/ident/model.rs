@@ -118,6 +118,25 @@ impl OutFit {
             self.n_fit += 1;
         }
     }
+
+    /// Book one run's residuals, measurement − `pred(row)` (asked only
+    /// where the measurement is finite; a gap stays NaN), and keep them.
+    pub fn push_run(&mut self, meas: &[f64], held: &[bool], pred: impl Fn(usize) -> f64) {
+        let res = meas
+            .iter()
+            .zip(held)
+            .enumerate()
+            .map(|(k, (&m, &h))| {
+                if !m.is_finite() {
+                    return f64::NAN;
+                }
+                let e = m - pred(k);
+                self.add_residual(e, h);
+                e
+            })
+            .collect();
+        self.resid.push(res);
+    }
 }
 
 impl ModelFit {
