@@ -65,6 +65,23 @@ pub fn export_five(
     out: &Path,
     sign: Option<&ed25519_compact::SecretKey>,
 ) -> Result<ExportSummary> {
+    export_enveloped(model, (geometry, five), None, out, sign)
+}
+
+/// Per direction, the image's envelope policy (section kind 5, format v3).
+pub type EnvelopeSection =
+    [thermocomp_core::image::EnvelopePolicy; thermocomp_core::limits::MAX_DIRECTIONS];
+
+/// [`export_five`] with the envelope policy section when `envelope` is
+/// given (`tcomp export` from a fit file with envelope evidence,
+/// [`crate::envelope::policies`]).
+pub fn export_enveloped(
+    model: &FloatModel,
+    (geometry, five): (Option<GeometrySection>, Option<FiveAxisSection>),
+    envelope: Option<EnvelopeSection>,
+    out: &Path,
+    sign: Option<&ed25519_compact::SecretKey>,
+) -> Result<ExportSummary> {
     if five.is_some() && geometry.is_none() {
         anyhow::bail!("a five-axis section needs the volumetric section (--geometry)");
     }
@@ -72,6 +89,7 @@ pub fn export_five(
         let (mut fixed, report) = m.quantize().map_err(|e| anyhow::anyhow!("{e}"))?;
         fixed.volumetric = geometry.as_ref().map(|(v, _)| v.clone());
         fixed.five_axis = five.as_ref().map(|(f, _)| f.clone());
+        fixed.envelope = envelope;
         Ok((fixed, report))
     };
     let (mut fixed, mut report) = quantize(model)?;

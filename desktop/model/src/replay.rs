@@ -201,6 +201,16 @@ pub struct Residual {
     /// The same about the block's own mean (RMS about the mean not above
     /// the uncompensated one: `reduction_about_mean_pct` ≥ 0).
     pub never_worse_about_mean: bool,
+    /// Rows at which an input of the model serving this direction was
+    /// beyond its training envelope by more than the image's margin (the
+    /// core's `StepOutput::envelope` bit, as the board counts it in input
+    /// registers 360–371), and their share of the scored rows.
+    pub out_of_envelope_rows: usize,
+    pub out_of_envelope_share: f64,
+    /// MAE (µm, about the run's reference) over those rows; `None` without any.
+    pub out_of_envelope_mae_um: Option<f64>,
+    /// MAE over the other scored rows; `None` without any.
+    pub in_envelope_mae_um: Option<f64>,
 }
 
 /// Rows per status flag over the scored block.
@@ -274,16 +284,27 @@ pub fn residuals(
         let Some(measured) = run.col(&column) else {
             continue;
         };
-        let (mut meas, mut res) = (vec![], vec![]);
+        let (mut meas, mut res, mut outside) = (vec![], vec![], vec![]);
         for (row, m) in rows.iter().zip(measured).take(to).skip(from) {
             let Some(m) = m else { continue };
             meas.push(*m);
             res.push(m - f64::from(row.out.corrections[d]) / 10.0);
+            outside.push(row.out.envelope & (1 << d) != 0);
         }
         if meas.is_empty() {
             continue;
         }
         let n = meas.len() as f64;
+        let mae_where = |want: bool| {
+            let v: Vec<f64> = res
+                .iter()
+                .zip(&outside)
+                .filter(|(_, &o)| o == want)
+                .map(|(r, _)| r.abs())
+                .collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+        };
+        let n_out = outside.iter().filter(|&&o| o).count();
         let (r_rms, m_rms) = (rms(&res), rms(&meas));
         let (r_rms0, m_rms0) = (rms(&demeaned(&res)), rms(&demeaned(&meas)));
         out.push(Residual {
@@ -299,6 +320,10 @@ pub fn residuals(
             reduction_about_mean_pct: reduction(r_rms0, m_rms0),
             never_worse: r_rms <= m_rms,
             never_worse_about_mean: r_rms0 <= m_rms0 * (1.0 + 1e-12),
+            out_of_envelope_rows: n_out,
+            out_of_envelope_share: n_out as f64 / n,
+            out_of_envelope_mae_um: mae_where(true),
+            in_envelope_mae_um: mae_where(false),
         });
     }
     out

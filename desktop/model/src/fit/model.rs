@@ -88,6 +88,10 @@ pub struct ModelFile {
     /// the training rows: a table like the MLR's, with its own coefficients.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ridge: Vec<MlrParams>,
+    /// Per channel, the envelope policy's evidence (issue 50 item 3,
+    /// [`crate::envelope`]): what `export` writes in the image's policy section.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub envelope: std::collections::BTreeMap<String, crate::envelope::EnvelopeEvidence>,
 }
 
 /// Model names, simplest first (the order ties are broken in): `none` (no

@@ -138,6 +138,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         .transpose()?;
     let run_for_geometry = run.clone();
     let mut columns: Vec<String> = Vec::new();
+    let mut envelope = None;
     let float = match (demo, model) {
         (true, _) => {
             let mut demo = thermocomp_core::float::demo_model(seed);
@@ -170,6 +171,10 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             };
             let mut float = tcomp_model::export::float_model_from_fit(&file, &columns, &opts)?;
             tcomp_model::export::name_sensors_by_rom(&mut float, &columns, &roms)?;
+            // The envelope policy per direction from the fit's evidence: which and why.
+            let (policy, lines) = tcomp_model::envelope::policies(&file, &float);
+            lines.iter().for_each(|l| eprintln!("{l}"));
+            envelope = policy;
             float
         }
         (false, None) => {
@@ -204,7 +209,13 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         )?),
         _ => None,
     };
-    let mut summary = tcomp_model::export::export_five(&float, section, five, &out, sign.as_ref())?;
+    let mut summary = tcomp_model::export::export_enveloped(
+        &float,
+        (section, five),
+        envelope,
+        &out,
+        sign.as_ref(),
+    )?;
     for (w, s) in summary.wiring.iter_mut().zip(&float.sensors) {
         w.sensor = columns.get(usize::from(s.channel)).cloned();
     }

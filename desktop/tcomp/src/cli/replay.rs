@@ -204,6 +204,15 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
                 "  {}: about the block's own mean (an operator who re-zeroes): RMS {:.2} µm (uncompensated {:.2}), reduction {:.1} %",
                 r.column, r.rms_about_mean_um, r.uncompensated_rms_about_mean_um, r.reduction_about_mean_pct
             );
+            let mae = |v: Option<f64>| v.map_or("-".to_string(), |m| format!("{m:.2} µm"));
+            println!(
+                "  {}: beyond the training envelope (an input of the serving model past its range by more than the image's margin): {} rows ({:.1} %), MAE there {}; inside: MAE {}",
+                r.column,
+                r.out_of_envelope_rows,
+                100.0 * r.out_of_envelope_share,
+                mae(r.out_of_envelope_mae_um),
+                mae(r.in_envelope_mae_um)
+            );
             println!(
                 "  {}: never worse than no compensation: {}",
                 r.column,

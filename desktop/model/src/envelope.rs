@@ -1,0 +1,305 @@
+//! The envelope policy's evidence (issue 50 item 3): per channel, whether
+//! the board should serve from the fallback without an input that has left
+//! its training range (`fallback`) or hold that input at the range's edge
+//! (`hold`, the rule before the policy existed).
+//!
+//! The evidence comes from the training rows alone, forward in time: the
+//! training rows are cut into the fit's time blocks, and each of the later
+//! forward-chaining folds ([`crate::fit::ridge::forward_folds`]: fit on the
+//! blocks before, validate on the next) refits the channel's chosen inputs
+//! and each of its fallbacks (least squares on the fold's fit rows, their
+//! ranges the fold's envelope). On the validation rows whose inputs leave
+//! the fit rows' range by more than [`DEFAULT_MARGIN_RAW`], it compares the
+//! absolute error of holding those inputs at the edge with the board's
+//! fallback choice there (the first fallback in the board's priority order
+//! that reads none of the sensors beyond; none: held as well). `fallback`
+//! when that error is lower, `hold` otherwise or when no fold leaves the
+//! range. The chosen model is refitted as a linear model on its own inputs
+//! (exact for `mlr` and `mlr-static`; for `ridge`, networks and blends a
+//! linear stand-in on the same inputs: the folds judge extrapolation, not
+//! the fit).
+
+use std::collections::BTreeMap;
+
+use anyhow::Result;
+use serde::{Deserialize, Serialize};
+use tcomp_data::runcsv::Run;
+use thermocomp_core::float::FloatModel;
+use thermocomp_core::image::EnvelopePolicy;
+use thermocomp_core::limits::MAX_DIRECTIONS;
+
+use crate::fit::model::{FallbackParams, FeatureKind, FeatureSpec, MlrParams, Model, ModelFile};
+use crate::fit::ridge::{all_blocks, forward_folds};
+use crate::fit::{blocked_folds, fit_mlr, ranged_specs, Segment, SeriesCache};
+
+/// The margin the fit judges and `tcomp export` writes, raw units of each
+/// input: 8/16 °C = 0.5 K for temperatures (8 rpm for the spindle speed).
+pub const DEFAULT_MARGIN_RAW: u16 = 8;
+/// Time blocks the training rows are cut into (the fit's default).
+const BLOCKS: usize = 5;
+
+/// One channel's evidence, as `tcomp fit --out` stores it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvelopeEvidence {
+    /// `hold` or `fallback`.
+    pub policy: String,
+    /// Margin judged, raw units (1/16 °C, rpm).
+    pub margin_raw: u16,
+    /// Forward folds examined, and those with validation rows beyond.
+    pub folds: usize,
+    pub folds_beyond: usize,
+    /// Validation rows of those folds, and the ones beyond the margin.
+    pub rows: usize,
+    pub rows_beyond: usize,
+    /// On the rows beyond: MAE holding the inputs at the edge, and serving
+    /// the board's fallback choice (µm).
+    pub hold_mae_um: Option<f64>,
+    pub fallback_mae_um: Option<f64>,
+    /// Rows beyond where some fallback could serve.
+    pub rows_with_fallback: usize,
+}
+
+impl EnvelopeEvidence {
+    /// One line: which policy and why.
+    pub fn why(&self) -> String {
+        let k = self.margin_raw;
+        match (self.hold_mae_um, self.fallback_mae_um) {
+            (Some(h), Some(f)) => format!(
+                "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one)",
+                self.policy, self.rows_beyond, self.rows, self.folds_beyond, self.rows_with_fallback
+            ),
+            _ => format!(
+                "{}: no training row of the {} forward fold(s) leaves the earlier blocks' range by > {k}/16 K",
+                self.policy, self.folds
+            ),
+        }
+    }
+}
+
+/// The chosen model's inputs for `ch` (none for `none`).
+fn chosen_features<'a>(file: &'a ModelFile, ch: &str) -> Option<&'a [FeatureSpec]> {
+    let pick = |v: &'a [MlrParams]| v.iter().find(|m| m.channel == ch);
+    let feats = match file.chosen.get(ch).map(String::as_str) {
+        Some("none") => return None,
+        Some("mlr-static") => &pick(&file.mlr_static)?.features,
+        Some("ridge") => &pick(&file.ridge)?.features,
+        Some("ga-bpn") => &file.nets.iter().find(|n| n.channel == ch)?.features,
+        _ => &pick(&file.mlr)?.features,
+    };
+    Some(feats)
+}
+
+/// The channel's fallbacks in the board's priority order (lowest CV RMS
+/// first, singles before pairs: `export`'s order).
+fn fallbacks_of<'a>(file: &'a ModelFile, ch: &str) -> Vec<&'a FallbackParams> {
+    let mut v: Vec<&FallbackParams> = file.fallbacks.iter().filter(|f| f.channel == ch).collect();
+    v.sort_by(|a, b| {
+        let key = |f: &FallbackParams| (f.cv_rms_um.unwrap_or(f64::INFINITY), f.excluded.len());
+        let (ka, kb) = (key(a), key(b));
+        ka.0.total_cmp(&kb.0).then(ka.1.cmp(&kb.1))
+    });
+    v
+}
+
+type Kind = (FeatureKind, Option<f64>);
+
+fn kind_of(f: &FeatureSpec) -> Kind {
+    (f.kind.clone(), f.tau_s)
+}
+
+/// The margin in an input's unit (°C or rpm).
+fn margin_in(kind: &FeatureKind, margin_raw: u16) -> f64 {
+    match kind {
+        FeatureKind::Spindle => f64::from(margin_raw),
+        _ => f64::from(margin_raw) / 16.0,
+    }
+}
+
+/// Evidence per fitted channel. `runs` are the fit's runs (errors as
+/// rises, as the fit read them), `train` its training segments.
+pub fn evidence(
+    runs: &[Run],
+    train: &[Segment],
+    file: &ModelFile,
+    margin_raw: u16,
+) -> Result<BTreeMap<String, EnvelopeEvidence>> {
+    let blocks = all_blocks(&blocked_folds(runs, train, BLOCKS));
+    let folds = forward_folds(&blocks);
+    let mut out = BTreeMap::new();
+    for ch in file.chosen.keys() {
+        let Some(main) = chosen_features(file, ch) else {
+            continue;
+        };
+        let fbs = fallbacks_of(file, ch);
+        let mut kinds: Vec<Kind> = main.iter().map(kind_of).collect();
+        for f in fbs.iter().flat_map(|f| &f.params.features) {
+            if !kinds.contains(&kind_of(f)) {
+                kinds.push(kind_of(f));
+            }
+        }
+        let cache = SeriesCache::new(runs, kinds.clone())?;
+        let idx_of = |fs: &[FeatureSpec]| -> Vec<usize> {
+            fs.iter()
+                .filter_map(|f| kinds.iter().position(|k| *k == kind_of(f)))
+                .collect()
+        };
+        let main_idx = idx_of(main);
+        let fb_idx: Vec<Vec<usize>> = fbs.iter().map(|f| idx_of(&f.params.features)).collect();
+        let mut ev = Tally::default();
+        for (fit, val) in &folds {
+            ev.fold(
+                &cache,
+                runs,
+                (fit, val),
+                ch,
+                (&main_idx, &fb_idx),
+                margin_raw,
+            )?;
+        }
+        out.insert(ch.clone(), ev.finish(folds.len(), margin_raw));
+    }
+    Ok(out)
+}
+
+#[derive(Default)]
+struct Tally {
+    folds_beyond: usize,
+    rows: usize,
+    rows_beyond: usize,
+    rows_with_fallback: usize,
+    hold: f64,
+    fallback: f64,
+}
+
+impl Tally {
+    /// One forward fold: refit on `fit`, score the rows of `val` beyond.
+    fn fold(
+        &mut self,
+        cache: &SeriesCache,
+        runs: &[Run],
+        (fit, val): (&[Segment], &[Segment]),
+        ch: &str,
+        (main_idx, fb_idx): (&[usize], &[Vec<usize>]),
+        margin_raw: u16,
+    ) -> Result<()> {
+        let refit = |idx: &[usize]| -> Result<Option<MlrParams>> {
+            let tr = cache.samples(runs, fit, idx, ch)?;
+            if tr.y.len() < 2 * idx.len() + 2 {
+                return Ok(None);
+            }
+            let kinds: Vec<Kind> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
+            fit_mlr(ranged_specs(&kinds, &tr), &tr, ch).map(Some)
+        };
+        let Some(main) = refit(main_idx)? else {
+            return Ok(());
+        };
+        let fbs: Vec<Option<MlrParams>> = fb_idx.iter().map(|i| refit(i)).collect::<Result<_>>()?;
+        let va = cache.samples(runs, val, main_idx, ch)?;
+        let mut any = false;
+        for (x, (&y, &(run, r))) in va.x.iter().zip(va.y.iter().zip(&va.rows)) {
+            self.rows += 1;
+            let beyond: Vec<&FeatureSpec> = main
+                .features
+                .iter()
+                .zip(x)
+                .filter(|(f, &v)| {
+                    let m = margin_in(&f.kind, margin_raw);
+                    v < f.min - m || v > f.max + m
+                })
+                .map(|(f, _)| f)
+                .collect();
+            if beyond.is_empty() {
+                continue;
+            }
+            any = true;
+            self.rows_beyond += 1;
+            let hold = (y - main.predict_raw(x)).abs();
+            self.hold += hold;
+            // As the board: the sensors beyond count as faulted; a spindle
+            // input beyond rules out that input itself.
+            let affected = |f: &FeatureSpec| {
+                beyond.iter().any(|b| {
+                    (b.kind == FeatureKind::Spindle && kind_of(b) == kind_of(f))
+                        || b.kind
+                            .columns()
+                            .iter()
+                            .any(|c| *c != "spindle_rpm" && f.kind.columns().contains(c))
+                })
+            };
+            let served = fbs.iter().zip(fb_idx).find_map(|(m, idx)| {
+                let m = m.as_ref()?;
+                if m.features.iter().any(affected) {
+                    return None;
+                }
+                let xf: Option<Vec<f64>> = idx
+                    .iter()
+                    .map(|&i| Some(cache.series[i][run][r]).filter(|v| v.is_finite()))
+                    .collect();
+                Some((y - m.predict_raw(&xf?)).abs())
+            });
+            if served.is_some() {
+                self.rows_with_fallback += 1;
+            }
+            self.fallback += served.unwrap_or(hold);
+        }
+        self.folds_beyond += usize::from(any);
+        Ok(())
+    }
+
+    fn finish(self, folds: usize, margin_raw: u16) -> EnvelopeEvidence {
+        let n = self.rows_beyond as f64;
+        let mae = |s: f64| (self.rows_beyond > 0).then(|| s / n);
+        let (hold, fallback) = (mae(self.hold), mae(self.fallback));
+        let better = matches!((hold, fallback), (Some(h), Some(f)) if f < h);
+        EnvelopeEvidence {
+            policy: if better { "fallback" } else { "hold" }.into(),
+            margin_raw,
+            folds,
+            folds_beyond: self.folds_beyond,
+            rows: self.rows,
+            rows_beyond: self.rows_beyond,
+            hold_mae_um: hold,
+            fallback_mae_um: fallback,
+            rows_with_fallback: self.rows_with_fallback,
+        }
+    }
+}
+
+/// The image's policy per direction from a fit file's evidence, and a line
+/// per direction saying which and why; `None` (no section: every direction
+/// holds, margin 0, as before) when the fit file carries no evidence.
+pub fn policies(
+    file: &ModelFile,
+    float: &FloatModel,
+) -> (Option<[EnvelopePolicy; MAX_DIRECTIONS]>, Vec<String>) {
+    if file.envelope.is_empty() {
+        return (
+            None,
+            vec!["envelope: the fit file has no envelope evidence (fitted before issue 50): every direction holds its inputs at the edge, no policy section".into()],
+        );
+    }
+    let mut out = [EnvelopePolicy::default(); MAX_DIRECTIONS];
+    let mut lines = Vec::new();
+    for (p, d) in out.iter_mut().zip(&float.directions) {
+        let ch = format!("d{}_um", d.name);
+        match file.envelope.get(&ch) {
+            Some(ev) => {
+                *p = EnvelopePolicy {
+                    fallback: ev.policy == "fallback",
+                    margin: ev.margin_raw,
+                };
+                lines.push(format!("envelope {ch}: {}", ev.why()));
+            }
+            None => {
+                *p = EnvelopePolicy {
+                    fallback: false,
+                    margin: DEFAULT_MARGIN_RAW,
+                };
+                lines.push(format!(
+                    "envelope {ch}: hold (no evidence for this channel)"
+                ));
+            }
+        }
+    }
+    (Some(out), lines)
+}
