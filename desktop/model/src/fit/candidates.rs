@@ -43,6 +43,10 @@ pub(super) struct CandidateSet {
     pub static_idx: Vec<usize>,
     /// `select`'s grouping on the training rows (`auto` without `--sensors`).
     pub selection: Option<Selection>,
+    /// The greedy selection's candidates are `cache.kinds[..greedy]` (the
+    /// lags of `FitConfig::lags`); after them, the other lags of
+    /// `FitConfig::lag_grid` a chosen input's lag may move to (`lags.rs`).
+    pub greedy: usize,
 }
 
 /// The candidates of the fit on `plan`; notes what the board's channels and
@@ -57,7 +61,7 @@ pub(super) fn candidate_set(
     // column order: sensors beyond are never candidates.
     let board_sensors = features::board_channels(first);
     let picked = picked_sensors(first, cfg, &board_sensors)?;
-    let lags = candidate_lags(plan, cfg, notes)?;
+    let (lags, grid) = candidate_lags(plan, cfg, notes)?;
     let selection = match &picked {
         // The user's picks (`select`'s) are the candidates: no new grouping.
         Some(_) => None,
@@ -75,11 +79,11 @@ pub(super) fn candidate_set(
         )),
         (None, None) => None,
     };
-    let (cache, static_idx) = candidate_cache(
+    let (cache, static_idx, greedy) = candidate_cache(
         plan,
         cfg,
         auto_sensors.as_ref(),
-        &lags,
+        (&lags, &grid),
         has_spindle,
         &board_sensors,
     )?;
@@ -87,12 +91,18 @@ pub(super) fn candidate_set(
         cache,
         static_idx,
         selection,
+        greedy,
     })
 }
 
-/// The candidate lags no longer than the training span; notes what the
-/// board's channels and the span rule out.
-fn candidate_lags(plan: &Plan, cfg: &FitConfig, notes: &mut Vec<String>) -> Result<Vec<f64>> {
+/// The greedy selection's candidate lags and the lag grid's other lags,
+/// each no longer than the training span; notes what the board's channels
+/// and the span rule out.
+fn candidate_lags(
+    plan: &Plan,
+    cfg: &FitConfig,
+    notes: &mut Vec<String>,
+) -> Result<(Vec<f64>, Vec<f64>)> {
     let first = &plan.runs[plan.train[0].run];
     let beyond = first
         .temperature_columns()
@@ -115,7 +125,13 @@ fn candidate_lags(plan: &Plan, cfg: &FitConfig, notes: &mut Vec<String>) -> Resu
     if lags.is_empty() {
         bail!("fit: every candidate lag is longer than the training span ({span:.0} s)");
     }
-    Ok(lags)
+    let mut grid: Vec<f64> = Vec::new();
+    for &l in &cfg.lag_grid {
+        if l <= span && !lags.contains(&l) && !grid.contains(&l) {
+            grid.push(l);
+        }
+    }
+    Ok((lags, grid))
 }
 
 /// Sensor selection for `auto`, on training rows only, among the board's channels.
@@ -173,20 +189,24 @@ fn picked_sensors(
     Ok(Some(want.clone()))
 }
 
-/// The candidate cache shared by all channels, and the candidates of the
-/// static MLR (unlagged rises of the selected sensors). `auto_sensors`:
-/// for `auto`, the candidate sensors and the static MLR's sensors.
+/// The candidate cache shared by all channels, the candidates of the
+/// static MLR (unlagged rises of the selected sensors) and how many of the
+/// first candidates the greedy selection chooses among. `auto_sensors`:
+/// for `auto`, the candidate sensors and the static MLR's sensors; `lags`:
+/// the greedy selection's lags and the lag grid's others.
 fn candidate_cache(
     plan: &Plan,
     cfg: &FitConfig,
     auto_sensors: Option<&(Vec<String>, Vec<String>)>,
-    lags: &[f64],
+    (lags, grid): (&[f64], &[f64]),
     has_spindle: bool,
     board_sensors: &[String],
-) -> Result<(SeriesCache, Vec<usize>)> {
+) -> Result<(SeriesCache, Vec<usize>, usize)> {
     match (&cfg.features, auto_sensors) {
         (FeatureChoice::Auto, Some((sensors, static_sensors))) => {
-            let kinds = candidates(sensors, lags, has_spindle);
+            let mut kinds = candidates(sensors, lags, has_spindle);
+            let greedy = kinds.len();
+            kinds.extend(candidates(sensors, grid, has_spindle));
             let static_idx = static_sensors
                 .iter()
                 .filter_map(|s| {
@@ -196,7 +216,7 @@ fn candidate_cache(
                 })
                 .take(MAX_NET_INPUTS)
                 .collect();
-            Ok((SeriesCache::new(&plan.runs, kinds)?, static_idx))
+            Ok((SeriesCache::new(&plan.runs, kinds)?, static_idx, greedy))
         }
         (FeatureChoice::List(kinds), _) => {
             if kinds.is_empty() || kinds.len() > MAX_NET_INPUTS {
@@ -212,7 +232,11 @@ fn candidate_cache(
                     }
                 }
             }
-            Ok((SeriesCache::new(&plan.runs, kinds.clone())?, vec![]))
+            Ok((
+                SeriesCache::new(&plan.runs, kinds.clone())?,
+                vec![],
+                kinds.len(),
+            ))
         }
         (FeatureChoice::Auto, None) => bail!("internal: no selection"),
     }

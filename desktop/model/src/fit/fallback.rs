@@ -18,6 +18,7 @@ use serde::Serialize;
 
 use super::choice::{choose_model, cross_validate, CvScore, NetCandidates};
 use super::greedy::greedy_select;
+use super::lags::choose_lags;
 use super::mlr::{fit_mlr, metrics, Metrics};
 use super::model::{FallbackParams, FeatureSpec, Model, ModelFile};
 use super::plan::{FeatureChoice, FitConfig, Plan};
@@ -45,6 +46,9 @@ pub struct Context<'a> {
     /// Candidates of the static MLR (unlagged rises of the selected sensors).
     pub static_idx: &'a [usize],
     pub cfg: &'a FitConfig,
+    /// The greedy selection's candidates are the cache's first `greedy`;
+    /// the others are the lag grid's (`lags.rs`).
+    pub greedy: usize,
 }
 
 /// Sensor columns a fitted channel's chosen model reads.
@@ -148,16 +152,9 @@ pub fn fit_fallbacks(
             let budget = MAX_INPUTS.saturating_sub(in_use.len());
             let idx = match &ctx.cfg.features {
                 FeatureChoice::Auto => {
-                    match greedy_select(
-                        &sub,
-                        &ctx.plan.runs,
-                        ctx.folds,
-                        ch,
-                        ctx.cfg.max_inputs,
-                        &sub_in_use,
-                        budget,
-                    ) {
-                        Ok((i, _)) => i,
+                    let n_greedy = allowed.iter().filter(|&&i| i < ctx.greedy).count();
+                    match fallback_inputs(ctx, &sub, ch, &sub_in_use, budget, n_greedy) {
+                        Ok(i) => i,
                         Err(e) => {
                             notes.push(format!(
                                 "{ch}: no fallback without {}: {e:#}",
@@ -245,4 +242,32 @@ pub fn fit_fallbacks(
         }
     }
     Ok((params, reports))
+}
+
+/// A fallback's inputs among the candidates `sub`: the greedy selection
+/// among its first `n_greedy`, then (with a lag grid) each input's lag by
+/// forward-chaining CV, as the main model's.
+fn fallback_inputs(
+    ctx: &Context,
+    sub: &SeriesCache,
+    ch: &str,
+    in_use: &[usize],
+    budget: usize,
+    n_greedy: usize,
+) -> Result<Vec<usize>> {
+    let (runs, folds, cfg) = (&ctx.plan.runs, ctx.folds, ctx.cfg);
+    let (i, _) = greedy_select(
+        sub,
+        runs,
+        folds,
+        ch,
+        cfg.max_inputs,
+        in_use,
+        budget,
+        n_greedy,
+    )?;
+    if cfg.lag_grid.is_empty() {
+        return Ok(i);
+    }
+    Ok(choose_lags(sub, runs, folds, ch, &i, in_use, budget)?.0)
 }

@@ -69,13 +69,26 @@ fn mlr_block_sse(
     idx: &[usize],
     channel: &str,
 ) -> Result<(f64, usize)> {
+    mlr_block_sse_cols(cache, tr, va, idx, idx, channel)
+}
+
+/// As [`mlr_block_sse`], with the rows' columns of candidates `idx` at
+/// positions `cols`.
+fn mlr_block_sse_cols(
+    cache: &SeriesCache,
+    tr: &Samples,
+    va: &Samples,
+    idx: &[usize],
+    cols: &[usize],
+    channel: &str,
+) -> Result<(f64, usize)> {
     if tr.y.is_empty() || va.y.is_empty() {
         return Ok((0.0, 0));
     }
     let pick = |s: &Samples| Samples {
         x: s.x
             .iter()
-            .map(|r| idx.iter().map(|&i| r[i]).collect())
+            .map(|r| cols.iter().map(|&i| r[i]).collect())
             .collect(),
         y: s.y.clone(),
         rows: vec![],
@@ -98,7 +111,10 @@ fn mlr_block_sse(
 /// indices and their cross-validated mean squared error (µm²).
 ///
 /// `in_use` are candidates other channels already put on the board (free to
-/// share); any other candidate costs one of `new_budget` board inputs.
+/// share); any other candidate costs one of `new_budget` board inputs. Only
+/// the first `n_candidates` of the cache are candidates (the others are the
+/// lag grid's, which [`super::lags::choose_lags`] moves a chosen input to).
+#[allow(clippy::too_many_arguments)]
 pub fn greedy_select(
     cache: &SeriesCache,
     runs: &[Run],
@@ -107,10 +123,12 @@ pub fn greedy_select(
     max_inputs: usize,
     in_use: &[usize],
     new_budget: usize,
+    n_candidates: usize,
 ) -> Result<(Vec<usize>, f64)> {
     // Each fold's rows, gathered once with every candidate (the rows do not
     // depend on the inputs).
-    let all: Vec<usize> = (0..cache.kinds.len()).collect();
+    let n_candidates = n_candidates.min(cache.kinds.len());
+    let all: Vec<usize> = (0..n_candidates).collect();
     let gathered = folds
         .iter()
         .map(|(fit, val)| {
@@ -125,7 +143,7 @@ pub fn greedy_select(
     while chosen.len() < max_inputs {
         let mut round_best: Option<(usize, f64)> = None;
         let new_used = chosen.iter().filter(|c| !in_use.contains(c)).count();
-        for c in 0..cache.kinds.len() {
+        for c in 0..n_candidates {
             if chosen.contains(&c) || (!in_use.contains(&c) && new_used >= new_budget) {
                 continue;
             }
@@ -160,4 +178,28 @@ pub fn greedy_select(
         );
     }
     Ok((chosen, best_err))
+}
+
+/// The MLR's blocked-CV mean squared error (µm²) on candidates `idx` over
+/// `folds` (what [`greedy_select`] reports for its choice).
+pub fn blocked_mse(
+    cache: &SeriesCache,
+    runs: &[Run],
+    folds: &[(Vec<Segment>, Vec<Segment>)],
+    channel: &str,
+    idx: &[usize],
+) -> Result<f64> {
+    let (mut sse, mut n) = (0.0, 0usize);
+    for (fit, val) in folds {
+        let tr = cache.samples_capped(runs, fit, idx, channel, SELECT_ROWS)?;
+        let va = cache.samples_capped(runs, val, idx, channel, SELECT_ROWS)?;
+        let pos: Vec<usize> = (0..idx.len()).collect();
+        let (s, k) = mlr_block_sse_cols(cache, &tr, &va, idx, &pos, channel)?;
+        sse += s;
+        n += k;
+    }
+    if n == 0 {
+        bail!("channel {channel}: no rows with a value to cross-validate on");
+    }
+    Ok(sse / n as f64)
 }

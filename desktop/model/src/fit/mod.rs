@@ -16,6 +16,7 @@ pub mod choice;
 pub mod fallback;
 pub mod features;
 pub mod greedy;
+pub mod lags;
 pub mod mlr;
 pub mod model;
 pub mod net;

@@ -17,7 +17,8 @@ pub use super::choice::{
 use super::choice::{cross_validate, train_hybrid};
 use super::fallback;
 use super::features;
-use super::greedy::{blocked_folds, greedy_select};
+use super::greedy::{blocked_folds, blocked_mse, greedy_select};
+use super::lags::{choose_lags, lag_note};
 use super::mlr::{fit_mlr, metrics, Metrics};
 use super::model::{
     feature_name, Blend, FeatureKind, FeatureSpec, Hybrid, MlrParams, Model, ModelFile,
@@ -119,6 +120,7 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         cache: &candidates.cache,
         folds: &folds,
         static_idx: &candidates.static_idx,
+        greedy: candidates.greedy,
         ens,
         progress,
     };
@@ -211,6 +213,9 @@ struct ChannelFit<'a> {
     folds: &'a [(Vec<Segment>, Vec<Segment>)],
     /// Candidates of the static MLR (unlagged rises of the selected sensors).
     static_idx: &'a [usize],
+    /// The greedy selection's candidates: the cache's first (`lags.rs`
+    /// moves a chosen input's lag to the others).
+    greedy: usize,
     /// Networks per ensemble.
     ens: usize,
     /// Where the stages and training steps are reported.
@@ -280,7 +285,7 @@ impl ChannelFit<'_> {
             bail!("fit: training run has no column `{ch}`");
         }
         let budget = MAX_INPUTS.saturating_sub(acc.in_use.len());
-        let (idx, cv_mse) = self.channel_inputs(ch, &acc.in_use, budget)?;
+        let (idx, cv_mse) = self.channel_inputs(ch, &acc.in_use, budget, &mut acc.notes)?;
         let kinds: Vec<_> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
         let full = cache.samples(&plan.runs, &plan.train, &idx, ch)?;
         let val = cache.samples(&plan.runs, &plan.val, &idx, ch)?;
@@ -363,26 +368,40 @@ impl ChannelFit<'_> {
     }
 
     /// The channel's inputs (indices into the cache) and, for `auto`, the
-    /// cross-validated MSE that chose them.
+    /// cross-validated MSE that chose them (the greedy selection's blocked
+    /// CV; after the lag choice moved a lag, that CV of the final inputs).
     fn channel_inputs(
         &self,
         ch: &str,
         in_use: &[usize],
         budget: usize,
+        notes: &mut Vec<String>,
     ) -> Result<(Vec<usize>, Option<f64>)> {
         let cfg = self.cfg;
         Ok(match cfg.features {
             FeatureChoice::Auto => {
+                let (runs, folds) = (&self.plan.runs, self.folds);
                 let (i, e) = greedy_select(
                     self.cache,
-                    &self.plan.runs,
-                    self.folds,
+                    runs,
+                    folds,
                     ch,
                     cfg.max_inputs,
                     in_use,
                     budget,
+                    self.greedy,
                 )?;
-                (i, Some(e))
+                let (i, moves) = match cfg.lag_grid.is_empty() {
+                    true => (i, vec![]),
+                    false => choose_lags(self.cache, runs, folds, ch, &i, in_use, budget)?,
+                };
+                if moves.is_empty() {
+                    (i, Some(e))
+                } else {
+                    notes.push(lag_note(ch, self.cache, &moves));
+                    let e = blocked_mse(self.cache, runs, folds, ch, &i)?;
+                    (i, Some(e))
+                }
             }
             FeatureChoice::List(_) => ((0..self.cache.kinds.len()).collect(), None),
         })
@@ -400,6 +419,7 @@ impl ChannelFit<'_> {
             folds: self.folds,
             static_idx: self.static_idx,
             cfg: self.cfg,
+            greedy: self.greedy,
         };
         self.progress.begin("fallback models");
         let (params, reps) =

@@ -31,8 +31,13 @@ pub enum Candidates {
 pub struct FitConfig {
     pub split_chrono: Option<(f64, f64)>,
     pub features: FeatureChoice,
-    /// Candidate lags for `auto`, seconds (0 = no lag).
+    /// Candidate lags of `auto`'s greedy input selection, seconds (0 = no lag).
     pub lags: Vec<f64>,
+    /// The lags each chosen input's lag may then move to, chosen per input
+    /// by forward-chaining CV on the training rows (`lags.rs`; empty, the
+    /// default: the greedy selection's lags stay; `lags::LAG_GRID` is the
+    /// geometric grid `--lag-grid geometric` asks for).
+    pub lag_grid: Vec<f64>,
     pub max_inputs: usize,
     pub candidates: Candidates,
     pub groups: usize,
@@ -72,6 +77,7 @@ impl Default for FitConfig {
             split_chrono: None,
             features: FeatureChoice::Auto,
             lags: vec![0.0, 1800.0, 3600.0, 7200.0, 10800.0, 21600.0],
+            lag_grid: vec![],
             max_inputs: 5,
             candidates: Candidates::Selected,
             groups: 5,
