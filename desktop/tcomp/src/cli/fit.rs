@@ -42,6 +42,11 @@ pub struct FitArgs {
     /// Candidate lags for `auto`, seconds (0 = no lag).
     #[arg(long, default_value = "0,1800,3600,7200,10800,21600")]
     pub lags: String,
+    /// Also choose each chosen input's lag by forward-chaining CV on the
+    /// training rows among these lags, seconds: `geometric` (0, 225 s · 2^k
+    /// up to 8 h) or a comma list; off by default.
+    #[arg(long, value_name = "LAGS")]
+    pub lag_grid: Option<String>,
     /// `auto` candidates: `selected` (sensors chosen by `select`) or `all`.
     #[arg(long, default_value = "selected")]
     pub candidates: String,
@@ -174,6 +179,17 @@ impl FitArgs {
         if cfg.lags.is_empty() || cfg.lags.iter().any(|l| *l < 0.0) {
             bail!("--lags: give one or more lags ≥ 0 s");
         }
+        cfg.lag_grid = match self.lag_grid.as_deref().map(str::trim) {
+            None => vec![],
+            Some("geometric") => tcomp_model::fit::lags::LAG_GRID.to_vec(),
+            Some(l) => {
+                let v = parse_list(l, "--lag-grid")?;
+                if v.is_empty() || v.iter().any(|l| *l < 0.0) {
+                    bail!("--lag-grid: give `geometric` or one or more lags ≥ 0 s");
+                }
+                v
+            }
+        };
         cfg.candidates = match self.candidates.as_str() {
             "selected" => Candidates::Selected,
             "all" => Candidates::All,
