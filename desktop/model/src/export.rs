@@ -5,9 +5,11 @@
 //! The fit's parameters become the board's float model in
 //! [`float_model`]; what an export produced is reported by [`summary`].
 
+pub mod envelope_policy;
 pub mod float_model;
 pub mod summary;
 
+pub use envelope_policy::policies;
 pub use float_model::*;
 pub use summary::{print_summary, ExportSummary, Wire};
 
@@ -74,7 +76,7 @@ pub type EnvelopeSection =
 
 /// [`export_five`] with the envelope policy section when `envelope` is
 /// given (`tcomp export` from a fit file with envelope evidence,
-/// [`crate::envelope::policies`]).
+/// [`envelope_policy::policies`]).
 pub fn export_enveloped(
     model: &FloatModel,
     (geometry, five): (Option<GeometrySection>, Option<FiveAxisSection>),

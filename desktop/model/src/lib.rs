@@ -8,7 +8,6 @@
 // the numeric kernels index several arrays with one loop variable.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
-pub mod envelope;
 pub mod export;
 pub mod fit;
 pub mod plots;

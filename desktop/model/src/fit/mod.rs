@@ -13,6 +13,7 @@
 
 pub mod candidates;
 pub mod choice;
+pub mod envelope;
 pub mod fallback;
 pub mod features;
 pub mod greedy;

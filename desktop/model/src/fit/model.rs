@@ -89,9 +89,9 @@ pub struct ModelFile {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ridge: Vec<MlrParams>,
     /// Per channel, the envelope policy's evidence (issue 50 item 3,
-    /// [`crate::envelope`]): what `export` writes in the image's policy section.
+    /// [`super::envelope`]): what `export` writes in the image's policy section.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
-    pub envelope: std::collections::BTreeMap<String, crate::envelope::EnvelopeEvidence>,
+    pub envelope: std::collections::BTreeMap<String, EnvelopeEvidence>,
 }
 
 /// Model names, simplest first (the order ties are broken in): `none` (no
@@ -344,4 +344,42 @@ pub struct FallbackParams {
     /// board's priority among fallbacks whose sensors are valid (lowest first).
     #[serde(default)]
     pub cv_rms_um: Option<f64>,
+}
+
+/// One channel's evidence, as `tcomp fit --out` stores it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvelopeEvidence {
+    /// `hold` or `fallback`.
+    pub policy: String,
+    /// Margin judged, raw units (1/16 °C, rpm).
+    pub margin_raw: u16,
+    /// Forward folds examined, and those with validation rows beyond.
+    pub folds: usize,
+    pub folds_beyond: usize,
+    /// Validation rows of those folds, and the ones beyond the margin.
+    pub rows: usize,
+    pub rows_beyond: usize,
+    /// On the rows beyond: MAE holding the inputs at the edge, and serving
+    /// the board's fallback choice (µm).
+    pub hold_mae_um: Option<f64>,
+    pub fallback_mae_um: Option<f64>,
+    /// Rows beyond where some fallback could serve.
+    pub rows_with_fallback: usize,
+}
+
+impl EnvelopeEvidence {
+    /// One line: which policy and why.
+    pub fn why(&self) -> String {
+        let k = self.margin_raw;
+        match (self.hold_mae_um, self.fallback_mae_um) {
+            (Some(h), Some(f)) => format!(
+                "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one)",
+                self.policy, self.rows_beyond, self.rows, self.folds_beyond, self.rows_with_fallback
+            ),
+            _ => format!(
+                "{}: no training row of the {} forward fold(s) leaves the earlier blocks' range by > {k}/16 K",
+                self.policy, self.folds
+            ),
+        }
+    }
 }

@@ -15,6 +15,7 @@ pub use super::choice::{
     choose_model, latest_block_rule, train_ensemble, CvScore, NetCandidates, NetInfo, NET_MODELS,
 };
 use super::choice::{cross_validate, train_hybrid};
+use super::envelope;
 use super::fallback;
 use super::features;
 use super::greedy::{blocked_folds, blocked_mse, greedy_select};
@@ -139,6 +140,14 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         .into_values()
         .filter(|r| !r.channels.is_empty())
         .collect();
+    // The envelope policy's evidence (issue 50 item 3), on the training
+    // rows' forward folds: what `export` writes in the image.
+    acc.file.envelope = envelope::evidence(
+        &plan.runs,
+        &plan.train,
+        &acc.file,
+        envelope::DEFAULT_MARGIN_RAW,
+    )?;
     let selection = candidates.selection;
     let shipped = shipped(first, cfg, selection.as_ref(), &acc.file);
     Ok(FitReport {

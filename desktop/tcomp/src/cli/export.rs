@@ -172,7 +172,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             let mut float = tcomp_model::export::float_model_from_fit(&file, &columns, &opts)?;
             tcomp_model::export::name_sensors_by_rom(&mut float, &columns, &roms)?;
             // The envelope policy per direction from the fit's evidence: which and why.
-            let (policy, lines) = tcomp_model::envelope::policies(&file, &float);
+            let (policy, lines) = tcomp_model::export::policies(&file, &float);
             lines.iter().for_each(|l| eprintln!("{l}"));
             envelope = policy;
             float

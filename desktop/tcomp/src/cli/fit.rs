@@ -322,9 +322,16 @@ pub fn main(args: FitArgs) -> Result<()> {
         if let (Some(d), Some(o)) = (&drift, v.as_object_mut()) {
             o.insert("probe_drift".into(), serde_json::to_value(d)?);
         }
+        if let Some(o) = v.as_object_mut() {
+            let ev = serde_json::to_value(&report.model_file.envelope)?;
+            o.insert("envelope".into(), ev);
+        }
         println!("{v}");
     } else {
         run::print_report(&report);
+        for (ch, ev) in &report.model_file.envelope {
+            println!("envelope {ch}: {}", ev.why());
+        }
         if let Some(d) = &drift {
             d.print();
         }

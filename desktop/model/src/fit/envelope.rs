@@ -5,7 +5,7 @@
 //!
 //! The evidence comes from the training rows alone, forward in time: the
 //! training rows are cut into the fit's time blocks, and each of the later
-//! forward-chaining folds ([`crate::fit::ridge::forward_folds`]: fit on the
+//! forward-chaining folds ([`super::ridge::forward_folds`]: fit on the
 //! blocks before, validate on the next) refits the channel's chosen inputs
 //! and each of its fallbacks (least squares on the fold's fit rows, their
 //! ranges the fold's envelope). On the validation rows whose inputs leave
@@ -22,59 +22,22 @@
 use std::collections::BTreeMap;
 
 use anyhow::Result;
-use serde::{Deserialize, Serialize};
 use tcomp_data::runcsv::Run;
-use thermocomp_core::float::FloatModel;
-use thermocomp_core::image::EnvelopePolicy;
-use thermocomp_core::limits::MAX_DIRECTIONS;
 
-use crate::fit::model::{FallbackParams, FeatureKind, FeatureSpec, MlrParams, Model, ModelFile};
-use crate::fit::ridge::{all_blocks, forward_folds};
-use crate::fit::{blocked_folds, fit_mlr, ranged_specs, Segment, SeriesCache};
+use super::greedy::blocked_folds;
+use super::mlr::fit_mlr;
+use super::model::{
+    EnvelopeEvidence, FallbackParams, FeatureKind, FeatureSpec, MlrParams, Model, ModelFile,
+};
+use super::ridge::{all_blocks, forward_folds};
+use super::samples::{ranged_specs, SeriesCache};
+use super::split::Segment;
 
 /// The margin the fit judges and `tcomp export` writes, raw units of each
 /// input: 8/16 °C = 0.5 K for temperatures (8 rpm for the spindle speed).
 pub const DEFAULT_MARGIN_RAW: u16 = 8;
 /// Time blocks the training rows are cut into (the fit's default).
 const BLOCKS: usize = 5;
-
-/// One channel's evidence, as `tcomp fit --out` stores it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EnvelopeEvidence {
-    /// `hold` or `fallback`.
-    pub policy: String,
-    /// Margin judged, raw units (1/16 °C, rpm).
-    pub margin_raw: u16,
-    /// Forward folds examined, and those with validation rows beyond.
-    pub folds: usize,
-    pub folds_beyond: usize,
-    /// Validation rows of those folds, and the ones beyond the margin.
-    pub rows: usize,
-    pub rows_beyond: usize,
-    /// On the rows beyond: MAE holding the inputs at the edge, and serving
-    /// the board's fallback choice (µm).
-    pub hold_mae_um: Option<f64>,
-    pub fallback_mae_um: Option<f64>,
-    /// Rows beyond where some fallback could serve.
-    pub rows_with_fallback: usize,
-}
-
-impl EnvelopeEvidence {
-    /// One line: which policy and why.
-    pub fn why(&self) -> String {
-        let k = self.margin_raw;
-        match (self.hold_mae_um, self.fallback_mae_um) {
-            (Some(h), Some(f)) => format!(
-                "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one)",
-                self.policy, self.rows_beyond, self.rows, self.folds_beyond, self.rows_with_fallback
-            ),
-            _ => format!(
-                "{}: no training row of the {} forward fold(s) leaves the earlier blocks' range by > {k}/16 K",
-                self.policy, self.folds
-            ),
-        }
-    }
-}
 
 /// The chosen model's inputs for `ch` (none for `none`).
 fn chosen_features<'a>(file: &'a ModelFile, ch: &str) -> Option<&'a [FeatureSpec]> {
@@ -263,43 +226,4 @@ impl Tally {
             rows_with_fallback: self.rows_with_fallback,
         }
     }
-}
-
-/// The image's policy per direction from a fit file's evidence, and a line
-/// per direction saying which and why; `None` (no section: every direction
-/// holds, margin 0, as before) when the fit file carries no evidence.
-pub fn policies(
-    file: &ModelFile,
-    float: &FloatModel,
-) -> (Option<[EnvelopePolicy; MAX_DIRECTIONS]>, Vec<String>) {
-    if file.envelope.is_empty() {
-        return (
-            None,
-            vec!["envelope: the fit file has no envelope evidence (fitted before issue 50): every direction holds its inputs at the edge, no policy section".into()],
-        );
-    }
-    let mut out = [EnvelopePolicy::default(); MAX_DIRECTIONS];
-    let mut lines = Vec::new();
-    for (p, d) in out.iter_mut().zip(&float.directions) {
-        let ch = format!("d{}_um", d.name);
-        match file.envelope.get(&ch) {
-            Some(ev) => {
-                *p = EnvelopePolicy {
-                    fallback: ev.policy == "fallback",
-                    margin: ev.margin_raw,
-                };
-                lines.push(format!("envelope {ch}: {}", ev.why()));
-            }
-            None => {
-                *p = EnvelopePolicy {
-                    fallback: false,
-                    margin: DEFAULT_MARGIN_RAW,
-                };
-                lines.push(format!(
-                    "envelope {ch}: hold (no evidence for this channel)"
-                ));
-            }
-        }
-    }
-    (Some(out), lines)
 }
