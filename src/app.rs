@@ -36,7 +36,7 @@ use crate::volumetric::VolContext;
 use crate::watchdog::Progress;
 use thermocomp_core::limits::MAX_SENSORS;
 use thermocomp_core::volumetric::MAX_VOL_SENSORS;
-use thermocomp_protocol::holding::result;
+use thermocomp_protocol::holding::{result, rule};
 use thermocomp_protocol::rtu::MAX_FRAME;
 use thermocomp_protocol::states::ChannelState;
 use thermocomp_protocol::MAX_CHANNELS;
@@ -700,7 +700,8 @@ impl<F: BackgroundErase> App<F> {
             }
             Command::TakeProbeReference
             | Command::ResetReferenceTerms
-            | Command::ProbeSetupChanged => {
+            | Command::ProbeSetupChanged
+            | Command::RuleChanged => {
                 self.probe_command(command);
                 LinkChange::None
             }
@@ -728,6 +729,8 @@ impl<F: BackgroundErase> App<F> {
                 self.state.settings = self.defaults;
                 self.state.probe = ProbeSetup::default();
                 self.state.ask = AskParams::default();
+                self.state.rule = [rule::DEFAULT; rule::N];
+                self.rule_in_force();
                 self.apply_limits();
                 self.store_settings();
                 LinkChange::Reconfigure {

@@ -69,9 +69,10 @@ const VERSION: u8 = 1;
 const NONE_U8: u8 = 0xFF;
 
 pub struct References {
-    /// The rule's parameters (the core's defaults, tuned on FL_THERMAL's
-    /// last 20 %; BENCHMARKS.md "Closing the loop with the probe").
-    pub params: ReferenceParams,
+    /// The rule's parameters (holding registers 90–99; by default the
+    /// core's, tuned on FL_THERMAL's last 20 %: BENCHMARKS.md "Closing the
+    /// loop with the probe"); set by [`References::set_params`].
+    params: ReferenceParams,
     states: [ReferenceState; MAX_DIRECTIONS],
     /// Command 12 accepted: take the reference with the next probe reading.
     pending: bool,
@@ -173,6 +174,20 @@ impl References {
         self.ask_loaded = true;
         self.ask_fresh = true;
         true
+    }
+
+    /// The rule's parameters from now on (holding registers 90–99). A
+    /// direction without an accepted reference yet starts from these
+    /// parameters' prior, as a fresh state would; the others go on from
+    /// what they learned.
+    pub fn set_params(&mut self, params: ReferenceParams) {
+        self.params = params;
+        let prior = ReferenceState::new(&params).p;
+        for st in &mut self.states {
+            if st.last_ms.is_none() {
+                st.p = prior;
+            }
+        }
     }
 
     /// Command 13 or a new model: every direction's terms and re-zero

@@ -52,14 +52,17 @@ pub mod key {
     /// When to ask for a probe reference: holding registers 46–48 (u16 LE
     /// each), then the rule's state (`thermocomp_core::ask`, 16 bytes).
     pub const ASK: u8 = 7;
+    /// The probe-reference rule's parameters: holding registers 90–99 as
+    /// written (u16 LE each, 0xFFFF: the firmware's default).
+    pub const RULE: u8 = 8;
     /// Probe-reference terms of direction `d`: `TERMS + d`, 6 keys.
     pub const TERMS: u8 = 16;
 }
 
 /// Records the application keeps: the terms of each direction, when to ask
-/// for a reference, the probe setup, the keys, the kept reference, the
-/// channel map and the settings.
-pub const RECORDS: usize = thermocomp_core::limits::MAX_DIRECTIONS + 6;
+/// for a reference, the rule's parameters, the probe setup, the keys, the
+/// kept reference, the channel map and the settings.
+pub const RECORDS: usize = thermocomp_core::limits::MAX_DIRECTIONS + 7;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -6,6 +6,7 @@
 //! them; nothing here knows a register.
 
 use thermocomp_core::ask::AskParams;
+use thermocomp_protocol::holding::rule;
 
 use crate::keys::Keys;
 use crate::plc::PlcState;
@@ -23,6 +24,9 @@ pub struct AppState {
     pub probe: ProbeSetup,
     /// When the board asks for a probe reference (all 0: never).
     pub ask: AskParams,
+    /// The probe-reference rule's parameters as written (holding registers
+    /// 90–99; `rule::DEFAULT`: the firmware's default).
+    pub rule: [u16; rule::N],
     /// The unlock key and the signing key ([`Keys`]).
     pub keys: Keys,
     /// The model staging area.
@@ -48,6 +52,7 @@ impl AppState {
             plc: PlcState::default(),
             probe: ProbeSetup::default(),
             ask: AskParams::default(),
+            rule: [rule::DEFAULT; rule::N],
             keys: Keys::default(),
             staging: Staging::new(),
             result: result::NONE,
@@ -89,6 +94,9 @@ pub enum Command {
     ProbeSetupChanged,
     /// Holding registers 46–48 (when to ask for a reference) changed: store them.
     AskChanged,
+    /// Holding registers 90–99 (the probe-reference rule) changed: in
+    /// force at once, then stored.
+    RuleChanged,
     /// Commands 14–16: a key changed (in force at once): store it.
     KeysChanged,
 }

@@ -56,7 +56,7 @@ pub const REGISTER_NONE: u16 = 0xFFFF;
 /// asks, as before these registers existed): ask this many seconds after a
 /// spindle-speed change (46), when this many seconds have passed since the
 /// last accepted reference (47); a speed change is a move of at least this
-/// many rpm of holding register 5 (48). Input register 330 says what is
+/// many rpm of holding register 5 (48). Input register 23 says what is
 /// wanted (`thermocomp_core::ask`).
 pub const HR_ASK_SETTLE: u16 = 46;
 pub const HR_ASK_INTERVAL: u16 = 47;
@@ -95,6 +95,141 @@ pub const KEY_STATE_COMMISSIONING: u16 = 1 << 2;
 pub const HR_NEW_UNLOCK_KEY: u16 = 67;
 /// Last register of the key block (68–89 reserved, read 0).
 pub const HR_LAST_KEYS: u16 = 89;
+
+// --- The probe-reference rule's parameters (issue 51 item 5), registers 90–99.
+/// The parameters of the probe-reference rule
+/// (`thermocomp_core::reference::ReferenceParams`, one register per field
+/// in its order, in the units of [`rule::UNIT`]; unlock; stored):
+/// σ_r, σ_b (0.01 µm), τ_b (min), σ_s (0.01 µm/h), τ_s (min), gate k (0.1),
+/// gate |ν| (0.01 µm), largest step (0.01 µm), bias bound (0.01 µm), rate
+/// bound (0.01 µm/h). [`rule::DEFAULT`] written: the firmware's default;
+/// a read gives the value in force.
+pub const HR_RULE: u16 = 90;
+/// Registers of the rule block.
+#[allow(clippy::cast_possible_truncation, reason = "10 parameters")]
+pub const RULE_REGS: u16 = rule::N as u16;
+/// Last register below the staging area.
+pub const HR_LAST_RULE: u16 = HR_RULE + RULE_REGS - 1;
+
+/// The probe-reference rule's registers (90–99) and the core's parameters.
+pub mod rule {
+    use thermocomp_core::reference::{ReferenceParams, MAX_SIGMA_NM, MAX_TAU_S, MAX_TERM_NM};
+
+    /// Parameters (registers), in `ReferenceParams`' field order.
+    pub const N: usize = 10;
+    /// Written to a register: the firmware's default for that parameter.
+    pub const DEFAULT: u16 = 0xFFFF;
+    /// One register unit in the core's unit: nm (σ_r, σ_b, gate, step,
+    /// bias bound), nm/h (σ_s, rate bound), s (τ_b, τ_s), tenths (gate k).
+    pub const UNIT: [u32; N] = [10, 10, 60, 10, 60, 1, 10, 10, 10, 10];
+    /// Smallest value a register takes (a time constant of 0 is refused).
+    pub const MIN: [u16; N] = [0, 0, 1, 0, 1, 0, 0, 0, 0, 0];
+    /// Largest value a register takes (gate k: 6000, as `tcomp replay
+    /// --reference-param gate_k` allows); beyond, exception 03.
+    pub const MAX: [u16; N] = [
+        65534, 65534, 65534, 65534, 65534, 60000, 65534, 65534, 65534, 65534,
+    ];
+
+    /// The core's fields as numbers, in register order.
+    pub const fn fields(p: &ReferenceParams) -> [u32; N] {
+        [
+            p.sigma_ref_nm,
+            p.sigma_bias_nm,
+            p.tau_bias_s,
+            p.sigma_rate_nm_h,
+            p.tau_rate_s,
+            p.gate_k_x10 as u32,
+            p.gate_abs_nm,
+            p.max_step_nm,
+            p.max_bias_nm,
+            p.max_rate_nm_h,
+        ]
+    }
+
+    /// The registers' values of the firmware's defaults.
+    #[allow(
+        clippy::cast_possible_truncation,
+        clippy::indexing_slicing,
+        reason = "checked below; const evaluation: an index out of range fails the build"
+    )]
+    pub const DEFAULTS: [u16; N] = {
+        let f = fields(&ReferenceParams::DEFAULT);
+        let mut out = [0u16; N];
+        let mut i = 0;
+        while i < N {
+            // Each default is a whole number of register units, in range.
+            assert!(f[i].is_multiple_of(UNIT[i]) && f[i] / UNIT[i] <= MAX[i] as u32);
+            assert!(f[i] / UNIT[i] >= MIN[i] as u32);
+            out[i] = (f[i] / UNIT[i]) as u16;
+            i += 1;
+        }
+        out
+    };
+
+    // Every value a register takes is inside the core's own bounds
+    // (`ReferenceParams::sanitised` changes nothing): no silent clamping.
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "const evaluation: an index out of range fails the build"
+    )]
+    const _: () = {
+        let top = fields(&ReferenceParams {
+            sigma_ref_nm: MAX_SIGMA_NM,
+            sigma_bias_nm: MAX_SIGMA_NM,
+            tau_bias_s: MAX_TAU_S,
+            sigma_rate_nm_h: MAX_SIGMA_NM,
+            tau_rate_s: MAX_TAU_S,
+            gate_k_x10: u16::MAX,
+            gate_abs_nm: MAX_TERM_NM as u32,
+            max_step_nm: MAX_TERM_NM as u32,
+            max_bias_nm: MAX_TERM_NM as u32,
+            max_rate_nm_h: MAX_TERM_NM as u32,
+        });
+        let mut i = 0;
+        while i < N {
+            // The core's lower bound: 1 s for the time constants, else 0.
+            let low = if i == 2 || i == 4 { 1 } else { 0 };
+            assert!(MAX[i] as u32 * UNIT[i] <= top[i] && MIN[i] as u32 * UNIT[i] >= low);
+            i += 1;
+        }
+    };
+
+    /// Whether register `i` of the block takes `v`.
+    pub fn valid(i: usize, v: u16) -> bool {
+        v == DEFAULT
+            || matches!((MIN.get(i), MAX.get(i)), (Some(&lo), Some(&hi)) if lo <= v && v <= hi)
+    }
+
+    /// Register `i`'s value in force (what a read gives): the value
+    /// written, or the default's for [`DEFAULT`] (or a value out of range).
+    pub fn in_force(regs: &[u16; N], i: usize) -> u16 {
+        match regs.get(i) {
+            Some(&v) if v != DEFAULT && valid(i, v) => v,
+            _ => DEFAULTS.get(i).copied().unwrap_or(0),
+        }
+    }
+
+    /// The core's parameters from the registers as written.
+    pub fn decode(regs: &[u16; N]) -> ReferenceParams {
+        let f: [u32; N] = core::array::from_fn(|i| {
+            u32::from(in_force(regs, i)) * UNIT.get(i).copied().unwrap_or(1)
+        });
+        let [sigma_ref_nm, sigma_bias_nm, tau_bias_s, sigma_rate_nm_h, tau_rate_s, k, gate_abs_nm, max_step_nm, max_bias_nm, max_rate_nm_h] =
+            f;
+        ReferenceParams {
+            sigma_ref_nm,
+            sigma_bias_nm,
+            tau_bias_s,
+            sigma_rate_nm_h,
+            tau_rate_s,
+            gate_k_x10: u16::try_from(k).unwrap_or(u16::MAX),
+            gate_abs_nm,
+            max_step_nm,
+            max_bias_nm,
+            max_rate_nm_h,
+        }
+    }
+}
 
 /// The factory unlock code: on a board without its own unlock key it opens
 /// commissioning (setting that key) and nothing else; once the board has
@@ -442,5 +577,48 @@ mod tests {
             result::of_image_error(&ImageError::BadMagic),
             result::BAD_MAGIC
         );
+    }
+
+    #[test]
+    fn rule_registers_round_trip_and_stay_inside_the_core_bounds() {
+        use thermocomp_core::reference::ReferenceParams;
+        let defaults = [rule::DEFAULT; rule::N];
+        assert_eq!(rule::decode(&defaults), ReferenceParams::DEFAULT);
+        assert_eq!(
+            rule::DEFAULTS,
+            [30, 300, 240, 200, 120, 40, 3000, 2000, 5000, 2000]
+        );
+        let set = [50, 250, 90, 0, 30, 35, 0, 1500, 4000, 65534];
+        let p = rule::decode(&set);
+        assert_eq!(
+            p,
+            ReferenceParams {
+                sigma_ref_nm: 500,
+                sigma_bias_nm: 2_500,
+                tau_bias_s: 5_400,
+                sigma_rate_nm_h: 0,
+                tau_rate_s: 1_800,
+                gate_k_x10: 35,
+                gate_abs_nm: 0,
+                max_step_nm: 15_000,
+                max_bias_nm: 40_000,
+                max_rate_nm_h: 655_340,
+            }
+        );
+        for (i, (&v, &d)) in set.iter().zip(&rule::DEFAULTS).enumerate() {
+            assert_eq!(rule::in_force(&set, i), v);
+            assert_eq!(rule::in_force(&defaults, i), d);
+        }
+        // The extremes a register takes are what the core uses, unclamped.
+        for regs in [rule::MIN, rule::MAX] {
+            assert!(regs.iter().enumerate().all(|(i, &v)| rule::valid(i, v)));
+            assert_eq!(rule::decode(&regs).sanitised(), rule::decode(&regs));
+        }
+        assert!(
+            !rule::valid(2, 0) && !rule::valid(4, 0),
+            "a time constant of 0"
+        );
+        assert!(!rule::valid(5, 60_001) && rule::valid(5, rule::DEFAULT));
+        assert!(!rule::valid(rule::N, 1));
     }
 }

@@ -11,8 +11,9 @@
 /// references, issue 28; docs/register-map.md); 4 added input register 23
 /// and holding registers 46–48 (the board asks for references, issue 51);
 /// 5 added input registers 360–371 (steps beyond the training envelope,
-/// issue 50).
-pub const MAP_VERSION: u16 = 5;
+/// issue 50); 6 added holding registers 90–99 (the probe-reference rule's
+/// parameters, issue 51 item 5).
+pub const MAP_VERSION: u16 = 6;
 pub const TEST_PATTERN: u32 = 0x1234_5678;
 /// "Not available" for 16-bit measurements.
 pub const NOT_AVAILABLE: u16 = 0x8000;

@@ -1,6 +1,6 @@
 //! The application's side of probe references (issue 28): the probe
 //! reading after a cycle, commands 2 (with a probe direction), 12 and 13,
-//! holding registers 40–48, input registers 23 and 300–329.
+//! holding registers 40–48 and 90–99, input registers 23 and 300–329.
 
 use thermocomp_core::limits::MAX_DIRECTIONS;
 use thermocomp_protocol::holding::result;
@@ -102,7 +102,7 @@ impl<F: BackgroundErase> App<F> {
     }
 
     /// Commands 2 (a machine with a probe direction), 12 and 13, and a
-    /// write of holding registers 40–45.
+    /// write of holding registers 40–45 or 90–99.
     pub(super) fn probe_command(&mut self, command: Command) {
         match command {
             Command::Rereference => {
@@ -124,6 +124,10 @@ impl<F: BackgroundErase> App<F> {
                 self.state.result = result::OK;
                 self.store_settings();
             }
+            Command::RuleChanged => {
+                self.rule_in_force();
+                self.store_settings();
+            }
             _ => self.store_settings(),
         }
         self.publish_references();
@@ -139,6 +143,14 @@ impl<F: BackgroundErase> App<F> {
         if self.state.probe.direction.is_some() && self.references.ask_step(&ask, now_ms, rpm) {
             self.store_quietly();
         }
+    }
+
+    /// The rule's parameters as holding registers 90–99 say, in force at
+    /// once: the served corrections follow ([`crate::probe_reference::References::set_params`]).
+    pub(super) fn rule_in_force(&mut self) {
+        let params = thermocomp_protocol::holding::rule::decode(&self.state.rule);
+        self.references.set_params(params);
+        self.snapshot.corrections = self.references.served();
     }
 
     /// Input registers 23 and 300–329 from the terms as they are now.

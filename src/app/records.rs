@@ -18,10 +18,11 @@ use crate::hal::flash::BackgroundErase;
 use crate::probe_reference::{decode_setup, encode_setup};
 use crate::settings::{KeptReference, Settings, StoredKeys, ENCODED_LEN as SETTINGS_LEN};
 use crate::settings_store::{key, SettingsStoreError, MAX_VALUE, RECORDS};
+use thermocomp_protocol::holding::rule;
 
 /// Records in write order: the terms of each direction, when to ask for a
-/// reference, the probe setup, the keys, the kept reference, the channel
-/// map, and the settings last.
+/// reference, the rule's parameters, the probe setup, the keys, the kept
+/// reference, the channel map, and the settings last.
 const COUNT: usize = RECORDS;
 /// A terms record: the CRC-32 of the model image they were learned on,
 /// then the core's state bytes.
@@ -42,10 +43,11 @@ fn key_of(i: usize) -> u8 {
         i if i < MAX_DIRECTIONS => key::TERMS + i as u8,
         i => match i - MAX_DIRECTIONS {
             0 => key::ASK,
-            1 => key::PROBE_SETUP,
-            2 => key::KEYS,
-            3 => key::KEPT,
-            4 => key::CHANNEL_MAP,
+            1 => key::RULE,
+            2 => key::PROBE_SETUP,
+            3 => key::KEYS,
+            4 => key::KEPT,
+            5 => key::CHANNEL_MAP,
             _ => key::SETTINGS,
         },
     }
@@ -84,6 +86,13 @@ impl<F: BackgroundErase> App<F> {
                     c.copy_from_slice(&w.to_le_bytes());
                 }
                 state.copy_from_slice(self.references.ask_saved());
+                put(&v)
+            }
+            key::RULE => {
+                let mut v = [0u8; 2 * rule::N];
+                for (c, w) in v.chunks_exact_mut(2).zip(h.rule) {
+                    c.copy_from_slice(&w.to_le_bytes());
+                }
                 put(&v)
             }
             key::PROBE_SETUP => put(&encode_setup(&h.probe)),
@@ -201,6 +210,9 @@ impl<F: BackgroundErase> App<F> {
         if all {
             self.references.load_states(states);
         }
+        if let Some(n) = self.fetch_record(MAX_DIRECTIONS + 1, &mut v) {
+            self.load_rule(v.get(..n).unwrap_or(&[]));
+        }
         settings.or(Some(self.defaults))
     }
 
@@ -258,6 +270,24 @@ impl<F: BackgroundErase> App<F> {
 }
 
 impl<F: BackgroundErase> App<F> {
+    /// The rule record back: holding registers 90–99, in force. Another
+    /// length or a value out of a register's range: nothing changes.
+    fn load_rule(&mut self, b: &[u8]) {
+        let mut regs = [rule::DEFAULT; rule::N];
+        let (words, rest) = b.as_chunks::<2>();
+        if words.len() != rule::N || !rest.is_empty() {
+            return;
+        }
+        for (i, (r, w)) in regs.iter_mut().zip(words).enumerate() {
+            *r = u16::from_le_bytes(*w);
+            if !rule::valid(i, *r) {
+                return;
+            }
+        }
+        self.state.rule = regs;
+        self.rule_in_force();
+    }
+
     /// The ask record back: holding registers 46–48 and the rule's state
     /// (taken up at the first cycle). Another length: nothing changes.
     fn load_ask(&mut self, b: &[u8]) {

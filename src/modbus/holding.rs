@@ -157,6 +157,7 @@ impl Holding {
                     _ => return None,
                 }
             }
+            a @ HR_RULE..=HR_LAST_RULE => rule::in_force(&st.rule, usize::from(a - HR_RULE)),
             HR_KEY_STATE => self.key_state(now_ms, &st.keys),
             // The board never shows an unlock key (HR_NEW_UNLOCK_KEY included).
             a if (HR_KEY_STATE..=HR_LAST_KEYS).contains(&a) => 0,
@@ -308,6 +309,7 @@ impl Holding {
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_PROBE_DIRECTION..=HR_ASK_SPEED_STEP).contains(&a)
+            || (HR_RULE..=HR_LAST_RULE).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
     }
 
@@ -328,6 +330,7 @@ impl Holding {
             || in_block(a, HR_CLAMP, MAX_DIRECTIONS).is_some()
             || in_block(a, HR_RATE, MAX_DIRECTIONS).is_some()
             || (HR_PROBE_DIRECTION..=HR_ASK_SPEED_STEP).contains(&a)
+            || (HR_RULE..=HR_LAST_RULE).contains(&a)
             || (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a)
             || Self::key_register(a);
         if !writable {
@@ -365,6 +368,7 @@ impl Holding {
             HR_PROBE_TEMP_CHANNEL => {
                 v == REGISTER_NONE || usize::from(v) < thermocomp_protocol::MAX_CHANNELS
             }
+            a @ HR_RULE..=HR_LAST_RULE => rule::valid(usize::from(a - HR_RULE), v),
             _ => true,
         };
         if ok {
@@ -458,6 +462,12 @@ impl Holding {
                     _ => p.speed_step_rpm = v,
                 }
                 return Ok(Command::AskChanged);
+            }
+            a @ HR_RULE..=HR_LAST_RULE => {
+                // check() let only a value in the register's range through.
+                let r = st.rule.get_mut(usize::from(a - HR_RULE));
+                *r.ok_or(WriteError::Address)? = v;
+                return Ok(Command::RuleChanged);
             }
             a if (HR_STAGING..HR_STAGING + STAGING_REGS).contains(&a) => {
                 let i = usize::from(a - HR_STAGING) * 2;
