@@ -189,15 +189,31 @@ fn clamp_i128(v: i128, bound: i64) -> i64 {
 // Not inlined: i128 arithmetic expands to long sequences on a Cortex-M4
 // (flash size; the result is the same).
 #[inline(never)]
+#[allow(
+    clippy::cast_possible_wrap,
+    reason = "n + d/2 < 2^127 where the i128 form did not overflow: the quotient fits an i128"
+)]
 fn div_round(n: i128, d: i128) -> i128 {
     if d <= 0 {
         return 0;
     }
+    let half = d.unsigned_abs() / 2;
+    let q = udiv_u128(n.unsigned_abs() + half, d.unsigned_abs()) as i128;
     if n >= 0 {
-        (n + d / 2) / d
+        q
     } else {
-        -((-n + d / 2) / d)
+        -q
     }
+}
+
+/// `n / d` (`d > 0`): the one 128-bit division of this module. A Cortex-M4
+/// has no 128-bit division routine to call, so LLVM expands every `/` on
+/// u128/i128 into a long inline loop (≈ 0.5–0.9 KB each); the module's
+/// divisions all come here so the board carries that loop once (flash
+/// size; the quotient is the same).
+#[inline(never)]
+fn udiv_u128(n: u128, d: u128) -> u128 {
+    n / d
 }
 
 /// exp(−num/den) in Q30 (0 ≤ result ≤ 2^30); den = 0 → 1.
@@ -210,7 +226,7 @@ pub fn exp_neg_q30(num: u64, den: u64) -> u32 {
         return 1 << 30;
     }
     // ratio in Q30; ≥ 40 gives < 2^-57: 0 in Q30.
-    let r = (u128::from(num) << 30) / u128::from(den);
+    let r = udiv_u128(u128::from(num) << 30, u128::from(den));
     if r >= 40 << 30 {
         return 0;
     }
@@ -293,7 +309,8 @@ fn isqrt(v: i128) -> i64 {
     let mut y = (x + 1) / 2;
     while y < x {
         x = y;
-        y = (x + v / x) / 2;
+        // 0 < x ≤ v: both non-negative, so the unsigned quotient is v / x.
+        y = (x + udiv_u128(v.unsigned_abs(), x.unsigned_abs()) as i128) / 2;
     }
     x.min(i128::from(i64::MAX)) as i64
 }
@@ -506,6 +523,65 @@ mod tests {
     use super::*;
 
     const H: u64 = 3_600_000;
+
+    /// The signed formula `div_round` stood for before its one shared
+    /// unsigned division: rounding to nearest, ties away from zero.
+    fn div_round_signed(n: i128, d: i128) -> i128 {
+        if n >= 0 {
+            (n + d / 2) / d
+        } else {
+            -((-n + d / 2) / d)
+        }
+    }
+
+    #[test]
+    fn shared_division_gives_the_signed_quotients() {
+        let ns = [
+            0,
+            1,
+            -1,
+            5,
+            -5,
+            7,
+            -7,
+            1799,
+            -1800,
+            1800,
+            123_456_789_012_345,
+        ];
+        let ds = [1, 2, 3, 100, 1600, 3_600_000, 12_960_000_000_000, 1 << 70];
+        for &n in &ns {
+            for &d in &ds {
+                for n in [n, n * 1_000_003, n << 60] {
+                    assert_eq!(div_round(n, d), div_round_signed(n, d), "{n} / {d}");
+                }
+            }
+        }
+        assert_eq!(div_round(5, 2), 3);
+        assert_eq!(div_round(-5, 2), -3);
+        assert_eq!(div_round(7, 0), 0);
+        // isqrt: the largest x with x² ≤ v, up to v near 2^80.
+        for v in [
+            1i128,
+            2,
+            3,
+            4,
+            15,
+            16,
+            17,
+            1 << 40,
+            (1 << 80) - 1,
+            999_999_999_999_999,
+        ] {
+            let x = i128::from(isqrt(v));
+            assert!(x * x <= v && (x + 1) * (x + 1) > v, "isqrt({v}) = {x}");
+        }
+        // exp(−r) in Q30 at ratios that use the 128-bit quotient's full width.
+        assert_eq!(exp_neg_q30(0, 7), 1 << 30);
+        assert_eq!(exp_neg_q30(u64::MAX, 1), 0);
+        let e1 = f64::from(exp_neg_q30(H, H)) / f64::from(1u32 << 30);
+        assert!((e1 - (-1f64).exp()).abs() < 1e-8, "{e1}");
+    }
 
     /// Bias only, σ_b 6 µm, τ_b 4 h (the tests' figures assume these, not the tuned defaults).
     fn params() -> ReferenceParams {
