@@ -7,6 +7,7 @@
 mod candidate;
 mod drift_family;
 mod effect_fit;
+pub(crate) mod lag_specific;
 pub(crate) mod open_effects;
 mod optim;
 mod periodic;

@@ -345,6 +345,10 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
             at_bound.push(format!("tau_s = {tau} (short end of the search)"));
         }
         let tau_lower_bound = ti == LAG_GRID.len() - 1;
+        // where the body map supports a lag, whether the sensor's own
+        // reading shows one (`lag_specific`)
+        let own_reading = (gain >= LAG_MIN_FIT_REL && run_gain >= LAG_MIN_RUN_REL)
+            .then(|| super::lag_specific::signature(p, &disp, s));
         out.push((
             Candidate {
                 name: "sensor_lag",
@@ -359,6 +363,7 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
                     "tau_s_is_lower_bound": tau_lower_bound,
                     "fit_rel_gain_least_run": r4(run_gain),
                     "shortest_tau_seen_s": shortest_seen,
+                    "own_reading": own_reading,
                     "reference": "body map: each displacement as a static linear map of the sensor rises; with every signal seen through a first-order lag of tau_s (reference) against the same with this sensor taken as read (it already lags its body by tau_s)",
                 }),
             },

@@ -10,6 +10,7 @@ use serde_json::{json, Value};
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
 use super::reach;
+use crate::diagnose::effects::lag_specific;
 use crate::diagnose::effects::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
@@ -140,6 +141,7 @@ fn claim(
             && c.evidence["fit_rel_gain_least_run"]
                 .as_f64()
                 .is_some_and(|g| g >= LAG_MIN_RUN_REL)
+            && lag_specific::is_specific(&c.evidence)
     } else {
         m_b - m_a >= FIT_MIN_ABS
     };
@@ -623,6 +625,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     rank(&mut scored);
     let mut untestable = untestable(&p, &lag_reach, speed_kept, ambient_kept);
     untestable.extend(speed_law_inconclusive(&scored));
+    untestable.extend(lag_specific::untestable(scored.iter().map(|s| &s.finding)));
     let mut findings = claimed_findings(&scored);
     let selected = scored.iter().find(|s| s.claimed).map(|s| {
         selected_gaps(
@@ -700,6 +703,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         ambiguous,
         ranking_rule: fit_ranking_rule(opt)
             + &crate::diagnose::effects::periodic_claim::rule()
+            + &lag_specific::rule()
             + &untestable_rule(),
     })
 }
