@@ -719,7 +719,7 @@ fn a_steeper_speed_law_on_a_machine_the_switched_reference_misfits_is_named_agai
 #[test]
 fn clean_runs_of_another_simulators_machine_name_nothing() {
     // cases 9-11 of the cross-model column: clean pairs on both machines
-    for i in [9, 10] {
+    for i in [9, 10, 11] {
         let case = cross_case(i);
         assert_eq!(case.kind, None);
         let d = diagnose_fit(&case.runs, &Options::default()).unwrap();
