@@ -7,11 +7,10 @@ pub const MAX_FRAME: usize = 256;
 /// Most registers one FC16 request may write (Modbus application protocol §6.12).
 pub const MAX_WRITE_REGISTERS: usize = 123;
 
-const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
-
-/// CRC-16/MODBUS of `bytes` (sent low byte first).
+/// CRC-16/MODBUS of `bytes` (sent low byte first): the core's, beside its
+/// CRC-8 and CRC-32 (one small-table implementation for the three).
 pub fn crc16(bytes: &[u8]) -> u16 {
-    CRC16.checksum(bytes)
+    thermocomp_core::crc::crc16_modbus(bytes)
 }
 
 /// Length of the RTU request that starts with `head`, once its first bytes
