@@ -4,7 +4,11 @@
 The board's UART0 is a TCP socket carrying RTU frames (QEMU -serial tcp:...),
 so pymodbus talks RTU framing over TCP. Each subcommand prints one JSON object.
 
-  read     --port P [--unit U]           snapshot: sequence, sample time, status, corrections
+  read     --port P [--unit U] [--degraded] [--envelope]
+                                         snapshot: sequence, sample time, status, corrections;
+                                         --degraded adds 150-157, --envelope 360-371 (the
+                                         steps beyond the envelope) with the sequence read
+                                         again after them ("envelope_same_snapshot")
   upload   --port P --image F [--corrupt] [--length N] [--watch S]
                                          stage, commit; the reply time, the time until the
                                          background write is done, the outcome; with --watch
@@ -50,6 +54,7 @@ from pymodbus.pdu import ExceptionResponse
 UNIT = 1
 IR_SEQUENCE, IR_SAMPLE_TIME, IR_MODEL_VERSION = 4, 10, 12
 IR_CORRECTIONS = 30
+IR_ENVELOPE_STEPS = 360
 HR_UNLOCK, HR_COMMAND, HR_RESULT, HR_STAGED_LEN, HR_STAGING = 0, 1, 2, 32, 1000
 CMD_COMMIT = 1
 COMMIT_IN_PROGRESS = 23
@@ -128,7 +133,7 @@ class Master:
         return link
 
 
-def snapshot(m, degraded=False):
+def snapshot(m, degraded=False, envelope=False):
     # One request from the status register to the last prediction: one snapshot.
     r = m.call("read_input_registers", 0, count=54)
     if r is None or r.isError():
@@ -141,6 +146,15 @@ def snapshot(m, degraded=False):
         if e is None or e.isError():
             return {"error": str(e)}
         extra = {"active": e.registers[0:6], "degraded_directions": e.registers[6], "held_directions": e.registers[7]}
+    if envelope:
+        # Steps beyond the envelope (360-371, u32 per direction), then the
+        # sequence again: unchanged, the counts belong to this snapshot.
+        e = m.call("read_input_registers", IR_ENVELOPE_STEPS, count=12)
+        q = m.call("read_input_registers", IR_SEQUENCE, count=2)
+        if e is None or e.isError() or q is None or q.isError():
+            return {"error": str(e if e is None or e.isError() else q)}
+        extra["envelope_steps"] = [u32(e.registers[2 * d], e.registers[2 * d + 1]) for d in range(6)]
+        extra["envelope_same_snapshot"] = u32(*q.registers) == u32(w[IR_SEQUENCE], w[IR_SEQUENCE + 1])
     return {**extra,
         "pattern": u32(w[0], w[1]),
         "status": w[3],
@@ -156,7 +170,7 @@ def snapshot(m, degraded=False):
 
 def cmd_read(a):
     m = Master(a.port, unit=a.unit, timeout=a.timeout)
-    out = [snapshot(m, a.degraded) for _ in range(a.samples)]
+    out = [snapshot(m, a.degraded, a.envelope) for _ in range(a.samples)]
     m.close()
     print(json.dumps(out))
 
@@ -497,6 +511,7 @@ def main():
     r = sub.add_parser("read"); r.add_argument("--port", type=int, required=True); r.add_argument("--samples", type=int, default=1)
     r.add_argument("--unit", type=int, default=UNIT); r.add_argument("--timeout", type=float, default=3.0)
     r.add_argument("--degraded", action="store_true")
+    r.add_argument("--envelope", action="store_true")
     u = sub.add_parser("upload"); u.add_argument("--port", type=int, required=True); u.add_argument("--image", required=True); u.add_argument("--corrupt", action="store_true")
     u.add_argument("--length", type=int, default=None, help="stage this length instead of the image's")
     u.add_argument("--watch", type=float, default=0.0, help="seconds of sequence polling before and after the commit")
