@@ -11,6 +11,12 @@
 # whose served 40 % is 2 K warmer or at spindle speeds never trained on
 # (3 seeds each). Headline: on how many cases the default is worse than the
 # ridge by more than 5 % and worse than the raw error after a re-zero.
+# Issue 50 item 4 ("a re-zero is a promise"): per case, a re-zero (command 2,
+# as `tcomp replay --reference-at`) at the start of every steady block of the
+# served part (spindle unchanged, median temperature rate < 1 K/h over 15
+# min, >= 30 min), the board's residual against the raw error about it over
+# the block; blocks worse by MAE / RMS, by how much, with their envelope
+# share and the inputs outside their training range.
 # Usage: scripts/bench-extrapolation.sh [--json]   (about a minute or two)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -26,7 +26,16 @@
 //! --split-chrono 0.6,1`). Each case states the share of served rows with
 //! an input outside its training range.
 //!
+//! Per case also "a re-zero is a promise" (issue 50 item 4, [`rezero`]):
+//! a re-zero (command 2) at the start of every steady block of the served
+//! part, the board's served change since against the raw error about it.
+//!
 //! Measures only: nothing here changes how a model is fitted or chosen.
+
+mod report;
+mod rezero;
+
+use report::{headline, one_line, print_table};
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -43,6 +52,7 @@ use tcomp_model::fit::ridge::{all_blocks, choose_penalty, fit_ridge};
 use tcomp_model::fit::{
     metrics, ranged_specs, FeatureKind, FeatureSpec, Metrics, Model, Segment, SeriesCache,
 };
+use tcomp_model::replay::ReplayRow;
 use tcomp_thermal::sim::{sim_run, Duty, Machine, SimOptions};
 
 /// "Worse than ridge" means more than this fraction above it.
@@ -149,6 +159,7 @@ fn run() -> Result<()> {
         "network_budget": {"ensemble": args.ensemble, "population": args.population,
             "generations": args.generations, "lm_iters": args.lm_iters,
             "tcomp_fit_default": args.budget_is_default()},
+        "steady_rezero_rule": rezero::rule(),
         "headline": headline,
         "cases": cases,
         "seconds": t0.elapsed().as_secs_f64(),
@@ -354,11 +365,17 @@ fn score_fitted(
     let shipped = shipped_specs(report, ch, &chosen);
     let env_default = envelope_share(&plan, served, ch, &shipped)?;
     let env_all = envelope_share(&plan, served, ch, &all_input_specs(&plan, train, ch)?)?;
+    let outside = |block: std::ops::Range<usize>| inputs_outside(&plan, block, ch, &shipped);
+    let replay = board
+        .replay
+        .as_ref()
+        .map(|(r, d, m)| (r.as_slice(), *d, *m));
+    let promise = rezero::score_case(&plan.runs[0], y, served_rows.clone(), replay, &outside);
 
     let models = json!({
-        "default": board.as_ref().map(|b| fig(&b.0)),
+        "default": fig(&board.served),
         "default_float": default_float,
-        "default_rezero": board.as_ref().map(|b| fig(&b.1)),
+        "default_rezero": fig(&board.rezero),
         "ridge": ridge,
         "ridge_all": ridge_all,
         "mlr": model_fig("mlr"),
@@ -397,6 +414,7 @@ fn score_fitted(
             "mae": worse("default", "raw_rezero", "mae_um", 0.0),
             "rms": worse("default", "raw_rezero", "rms_um", 0.0),
         },
+        "rezero_promise": promise,
     }))
 }
 
@@ -431,17 +449,26 @@ fn rezeroed(
     metrics(&shifted, &vec![0.0; shifted.len()])
 }
 
+/// The board's figures on the served rows: as served, re-zeroed at the
+/// first served row, and the replay itself (every row of the run, the
+/// channel's direction, its largest correction; `None`: the board serves 0).
+struct Board {
+    served: Metrics,
+    rezero: Metrics,
+    replay: Option<(Vec<ReplayRow>, usize, i32)>,
+}
+
 /// What `tcomp export` (defaults, no `--use`) ships, replayed through the
 /// board's fixed-point core over the whole run: the channel's residual on
-/// the served rows, as served and re-zeroed at the first served row. None
-/// when the fit chose no model for any channel (nothing to export: the
-/// board serves 0).
+/// the served rows, as served and re-zeroed at the first served row. When
+/// the fit chose no model for the channel (or for any: nothing to export)
+/// the board serves 0.
 fn board_replay(
     report: &FitReport,
     run: &Run,
     ch: &str,
     rows: std::ops::Range<usize>,
-) -> Result<Option<(Metrics, Metrics)>> {
+) -> Result<Board> {
     let y = run.col(ch).with_context(|| format!("no column {ch}"))?;
     let columns: Vec<String> = run
         .temperature_columns()
@@ -449,13 +476,19 @@ fn board_replay(
         .map(|c| c.to_string())
         .collect();
     let zero = |_: usize| 0.0;
+    let serves_zero = |rows: std::ops::Range<usize>| {
+        let (yy, _) = served_y(y, rows.clone());
+        Board {
+            served: metrics(&yy, &vec![0.0; yy.len()]),
+            rezero: rezeroed(y, rows, zero),
+            replay: None,
+        }
+    };
     let float = match float_model_from_fit(&report.model_file, &columns, &ExportOptions::default())
     {
         Ok(f) => f,
         Err(_) if report.model_file.chosen.values().all(|c| c == "none") => {
-            let (yy, _) = served_y(y, rows.clone());
-            let plain = metrics(&yy, &vec![0.0; yy.len()]);
-            return Ok(Some((plain, rezeroed(y, rows, zero))));
+            return Ok(serves_zero(rows));
         }
         Err(e) => return Err(e),
     };
@@ -478,17 +511,20 @@ fn board_replay(
         (0..model.directions.len()).find(|&d| format!("d{}_um", model.direction_name(d)) == ch)
     else {
         // The fit chose `none` for this channel: the board serves 0.
-        let (yy, _) = served_y(y, rows.clone());
-        let plain = metrics(&yy, &vec![0.0; yy.len()]);
-        return Ok(Some((plain, rezeroed(y, rows, zero))));
+        return Ok(serves_zero(rows));
     };
+    let max_correction = model.directions[d].max_correction;
     let mut csv = Vec::new();
     run.write_to(&mut csv)?;
     let replayed = tcomp_model::replay::replay(&String::from_utf8(csv)?, model)?;
     let served = |r: usize| f64::from(replayed[r].out.corrections[d]) / 10.0;
     let (yy, rr) = served_y(y, rows.clone());
     let pred: Vec<f64> = rr.iter().map(|&r| served(r)).collect();
-    Ok(Some((metrics(&yy, &pred), rezeroed(y, rows, served))))
+    Ok(Board {
+        served: metrics(&yy, &pred),
+        rezero: rezeroed(y, rows, served),
+        replay: Some((replayed, d, max_correction)),
+    })
 }
 
 /// The inputs (with training ranges) of the model the fit ships for `ch`;
@@ -533,6 +569,37 @@ fn all_kinds(run: &Run) -> Vec<(FeatureKind, Option<f64>)> {
         kinds.push((FeatureKind::Spindle, None));
     }
     kinds
+}
+
+/// Per input of `specs` (name), the percentage of `block`'s rows (with a
+/// target) on which it lies outside its training range, those above 0 only.
+fn inputs_outside(
+    plan: &Plan,
+    block: std::ops::Range<usize>,
+    ch: &str,
+    specs: &[FeatureSpec],
+) -> Value {
+    let seg = [Segment {
+        run: 0,
+        start: block.start,
+        end: block.end,
+    }];
+    let kinds: Vec<_> = specs.iter().map(|s| (s.kind.clone(), s.tau_s)).collect();
+    let idx: Vec<usize> = (0..specs.len()).collect();
+    let Ok(s) =
+        SeriesCache::new(&plan.runs, kinds).and_then(|c| c.samples(&plan.runs, &seg, &idx, ch))
+    else {
+        return Value::Null;
+    };
+    let n = s.y.len().max(1) as f64;
+    let mut out = serde_json::Map::new();
+    for (i, f) in specs.iter().enumerate() {
+        let k = s.x.iter().filter(|r| r[i] < f.min || r[i] > f.max).count();
+        if k > 0 {
+            out.insert(f.name(), json!(100.0 * k as f64 / n));
+        }
+    }
+    Value::Object(out)
 }
 
 /// Percentage of the served rows (with a target) on which any of `specs`'
@@ -590,121 +657,4 @@ fn ridge_all(
     v["penalty"] = json!(lambda);
     v["inputs"] = json!(kinds.len());
     Ok(Some(v))
-}
-
-/// How many cases the default loses, by metric.
-fn headline(cases: &[Value]) -> Value {
-    let count = |key: &str, metric: &str| {
-        cases
-            .iter()
-            .filter(|c| c[key][metric].as_bool() == Some(true))
-            .count()
-    };
-    let scored = |key: &str, metric: &str| {
-        cases
-            .iter()
-            .filter(|c| c[key][metric].as_bool().is_some())
-            .count()
-    };
-    let mut h = serde_json::Map::new();
-    h.insert("cases".into(), json!(cases.len()));
-    for key in [
-        "default_worse_than_ridge",
-        "default_worse_than_ridge_all",
-        "default_worse_than_raw_rezero",
-    ] {
-        h.insert(
-            key.into(),
-            json!({
-                "mae": count(key, "mae"), "rms": count(key, "rms"),
-                "of_mae": scored(key, "mae"), "of_rms": scored(key, "rms"),
-            }),
-        );
-    }
-    Value::Object(h)
-}
-
-fn f2(v: &Value) -> String {
-    v.as_f64().map_or("-".into(), |x| format!("{x:.2}"))
-}
-
-fn one_line(c: &Value) -> String {
-    let m = &c["models"];
-    format!(
-        "{}: chosen {}, outside {}/{} %, MAE default {} ridge {} ridge-all {} mlr {} net {} raw-rezero {}",
-        c["case"].as_str().unwrap_or(""),
-        c["chosen"].as_str().unwrap_or(""),
-        f2(&c["outside_envelope_pct"]["default_inputs"]),
-        f2(&c["outside_envelope_pct"]["all_inputs"]),
-        f2(&m["default"]["mae_um"]),
-        f2(&m["ridge"]["mae_um"]),
-        f2(&m["ridge_all"]["mae_um"]),
-        f2(&m["mlr"]["mae_um"]),
-        f2(&m["ga_bpn"]["mae_um"]),
-        f2(&m["raw_rezero"]["mae_um"]),
-    )
-}
-
-fn print_table(out: &Value) {
-    println!(
-        "served part, MAE / RMS µm (default = fit + export replayed on the board's arithmetic)"
-    );
-    println!(
-        "{:<28} {:<10} {:>6} {:>6}  {:>11} {:>11} {:>11} {:>11} {:>11} {:>11} {:>11}",
-        "case",
-        "chosen",
-        "out%m",
-        "out%a",
-        "default",
-        "ridge",
-        "ridge-all",
-        "mlr",
-        "ga-bpn",
-        "raw-rezero",
-        "def-rezero"
-    );
-    let empty = vec![];
-    for c in out["cases"].as_array().unwrap_or(&empty) {
-        let m = &c["models"];
-        let p = |k: &str| format!("{}/{}", f2(&m[k]["mae_um"]), f2(&m[k]["rms_um"]));
-        println!(
-            "{:<28} {:<10} {:>6} {:>6}  {:>11} {:>11} {:>11} {:>11} {:>11} {:>11} {:>11}",
-            c["case"].as_str().unwrap_or(""),
-            c["chosen"].as_str().unwrap_or(""),
-            f2(&c["outside_envelope_pct"]["default_inputs"]),
-            f2(&c["outside_envelope_pct"]["all_inputs"]),
-            p("default"),
-            p("ridge"),
-            p("ridge_all"),
-            p("mlr"),
-            p("ga_bpn"),
-            p("raw_rezero"),
-            p("default_rezero"),
-        );
-    }
-    let h = &out["headline"];
-    let n = h["cases"].as_u64().unwrap_or(0);
-    for (key, what) in [
-        (
-            "default_worse_than_ridge",
-            "worse than the fit's ridge by > 5 %",
-        ),
-        (
-            "default_worse_than_ridge_all",
-            "worse than a plain ridge on every input by > 5 %",
-        ),
-        (
-            "default_worse_than_raw_rezero",
-            "worse than the raw error after a re-zero",
-        ),
-    ] {
-        println!(
-            "default {what}: MAE {} / RMS {} of {n} cases",
-            h[key]["mae"], h[key]["rms"]
-        );
-    }
-    println!(
-        "(out%m: served rows with a default-model input outside its training range; out%a: any temperature rise or the spindle speed outside; {:.0} s)",
-        out["seconds"].as_f64().unwrap_or(f64::NAN)
-    );
 }
