@@ -369,10 +369,10 @@ fn read_nets(r: &mut Reader<'_>, m: &mut Model, n: u8) -> Result<(), ImageError>
         }
         // n_in ≤ MAX_NET_INPUTS and h ≤ MAX_HIDDEN (checked above): `take` takes exactly.
         for row in net.w1.iter_mut().take(h) {
-            r.i32s(row.iter_mut().take(n_in))?;
+            r.first_i32s(row, n_in)?;
         }
-        r.i32s(net.b1.iter_mut().take(h))?;
-        r.i32s(net.w2.iter_mut().take(h))?;
+        r.first_i32s(&mut net.b1, h)?;
+        r.first_i32s(&mut net.w2, h)?;
         net.b2 = r.i32()?;
         push(&mut m.nets, net)?;
     }

@@ -63,16 +63,20 @@ impl<'a> Reader<'a> {
 
     /// Fill `dst` with i32s. Out of line: inlined, the weight loops (bounded
     /// by the array sizes) are unrolled into the caller, and parsing is not
-    /// hot while flash is scarce.
+    /// hot while flash is scarce. One slice type for every caller, so the
+    /// board carries it once (not once per iterator type).
     #[inline(never)]
-    pub(super) fn i32s<'d>(
-        &mut self,
-        dst: impl Iterator<Item = &'d mut i32>,
-    ) -> Result<(), ImageError> {
+    pub(super) fn i32s(&mut self, dst: &mut [i32]) -> Result<(), ImageError> {
         for v in dst {
             *v = self.i32()?;
         }
         Ok(())
+    }
+
+    /// Fill the first `n` of `dst` (all of it if shorter) with i32s.
+    pub(super) fn first_i32s(&mut self, dst: &mut [i32], n: usize) -> Result<(), ImageError> {
+        let n = n.min(dst.len());
+        self.i32s(dst.get_mut(..n).unwrap_or_default())
     }
 
     /// A one-byte count, refused above `max`.

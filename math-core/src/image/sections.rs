@@ -196,15 +196,18 @@ fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> 
         flags,
         ..FiveAxisSpec::default()
     };
-    r.i32s(s.pivot_a_um.iter_mut().chain(s.offset_c_um.iter_mut()))?;
-    r.i32s(s.a_range_mdeg.iter_mut().chain(s.c_range_mdeg.iter_mut()))?;
-    r.i32s(s.max_correction.iter_mut())?;
+    r.i32s(&mut s.pivot_a_um)?;
+    r.i32s(&mut s.offset_c_um)?;
+    r.i32s(&mut s.a_range_mdeg)?;
+    r.i32s(&mut s.c_range_mdeg)?;
+    r.i32s(&mut s.max_correction)?;
     for row in &mut s.location {
-        r.i32s(row.iter_mut().take(1 + usize::from(n_sensors)))?;
+        r.first_i32s(row, 1 + usize::from(n_sensors))?;
     }
     for axis in &mut s.motion {
         for error in axis.iter_mut() {
-            r.i32s(error.iter_mut().take(usize::from(order)).flatten())?;
+            // The first `order` (sin, cos) pairs, in order.
+            r.first_i32s(error.as_flattened_mut(), 2 * usize::from(order))?;
         }
     }
     m.five_axis = Some(FiveAxis::new(&s)?);
