@@ -67,5 +67,19 @@ fn one_tiny_case_reports_every_model_with_finite_figures() {
         assert!(c["outside_envelope_pct"]["all_inputs"].as_f64().unwrap() > 0.0);
         assert!(c["default_worse_than_raw_rezero"]["mae"].is_boolean());
         assert!(c["served_rows"].as_u64().unwrap() > 0);
+        // A re-zero at each steady block: counts within the blocks, figures finite.
+        let p = &c["rezero_promise"];
+        let blocks = p["steady_blocks"].as_array().unwrap();
+        assert_eq!(p["blocks"].as_u64(), Some(blocks.len() as u64), "{p}");
+        assert!(
+            p["worse_mae"].as_u64().unwrap() <= blocks.len() as u64,
+            "{p}"
+        );
+        for b in blocks {
+            for k in ["mae_um", "rms_um", "raw_mae_um", "raw_rms_um"] {
+                assert!(b[k].as_f64().is_some_and(f64::is_finite), "{k}: {b}");
+            }
+            assert!(b["hours"].as_f64().unwrap() >= 0.5, "{b}");
+        }
     }
 }
