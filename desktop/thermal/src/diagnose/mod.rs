@@ -302,12 +302,17 @@ fn diagnose_core(
     calibration::print_evals("pair", &pair_fits);
     let pair = best_pair(&judge, &tried, &pairs, &pair_fits, best_single)?;
     let mut findings = ranked_findings(pair, &tried, best_single, &singles_ok);
+    let mut released = None;
     if let Some(c) = &cal {
-        sims += merge_releases(&judge, c, m, ps, &mut findings, &mut untestable)?;
+        let (n, r) = merge_releases(&judge, c, m, ps, &mut findings, &mut untestable)?;
+        sims += n;
+        released = r;
     }
     let mut tried: Vec<Finding> = tried.into_iter().map(|t| t.0).collect();
-    // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    effects::periodic_claim::machine(&ev, &res0, &mut findings, &mut tried, &opt.only);
+    // periodic drivers: a line in the residual spectrum (periodic_claim.rs),
+    // ahead of a parameter finding that leaves it (verdict/periodic_first.rs)
+    let (rel, only) = (released.as_ref(), &opt.only);
+    verdict::merge_periodic(&ev, ps, &res0, rel, &mut findings, &mut tried, only);
     Ok(Diagnosis {
         machine: m.spec.name.clone(),
         findings,
@@ -327,7 +332,9 @@ fn diagnose_core(
         selected_gaps: None,
         ambiguous: Vec::new(),
         separate_by: Vec::new(),
-        ranking_rule: RANKING_RULE.to_string() + &effects::periodic_claim::rule(),
+        ranking_rule: RANKING_RULE.to_string()
+            + &effects::periodic_claim::rule()
+            + &verdict::periodic_rule(),
     })
 }
 

@@ -367,6 +367,21 @@ fn related(f: f64, g: f64, width: f64) -> bool {
 /// the residual as read (`raw`) is the line's fundamental; of those within
 /// `TIE` of that, the highest (a line's subharmonics fit it as a harmonic).
 fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Option<Line> {
+    let (grid, spec, lines) = detect_all(pr, raw, search, n_tests);
+    let mut b = lines.into_iter().next()?;
+    refine(pr, &grid, &spec, &mut b, detect_width(pr));
+    Some(b)
+}
+
+fn detect_width(pr: &Prepared) -> f64 {
+    1.0 / pr.t_min.max(1.0)
+}
+
+/// Every channel's line as `detect` picks it (not refined), strongest
+/// (smallest tail probability) first, with the grid and its spectrum.
+type Detected = (Vec<f64>, Vec<(Vec<f64>, usize)>, Vec<Line>);
+
+fn detect_all(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64>) -> Detected {
     let df = 1.0 / (OVERSAMPLE * pr.t_max);
     let (lo, hi) = (search.0 / 4.0, (search.1 * 2.0).max(search.0 * 4.0));
     let n_grid = ((hi - lo) / df).ceil() as usize + 1;
@@ -387,7 +402,7 @@ fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64
         nc as f64 * tried.max(1) as f64
     });
     let ln_level = (ALPHA / n_tests).ln();
-    let width = 1.0 / pr.t_min.max(1.0);
+    let width = detect_width(pr);
     // per channel: (grid index, ln p, χ², dof) of every searched frequency
     let mut tested: Vec<Vec<(usize, f64, f64, usize)>> = vec![Vec::new(); nc];
     for (i, &f) in grid.iter().enumerate() {
@@ -411,7 +426,7 @@ fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64
         p_corrected: (t.1.exp() * n_tests).min(1.0),
         n_tests,
     };
-    let mut best: Option<Line> = None;
+    let mut lines: Vec<Line> = Vec::new();
     for (c, t) in tested.iter().enumerate() {
         let sig: Vec<&(usize, f64, f64, usize)> = t.iter().filter(|x| x.1 < ln_level).collect();
         let pick = if sig.is_empty() {
@@ -429,15 +444,12 @@ fn detect(pr: &Prepared, raw: &Prepared, search: (f64, f64), n_tests: Option<f64
                 .max_by_key(|x| x.0)
         };
         if let Some(x) = pick {
-            let l = line(c, x);
-            if best.as_ref().is_none_or(|b| l.ln_p < b.ln_p) {
-                best = Some(l);
-            }
+            lines.push(line(c, x));
         }
     }
-    let mut b = best?;
-    refine(pr, &grid, &spec, &mut b, width);
-    Some(b)
+    // strongest first; of equals, the first channel (as one pass kept it)
+    lines.sort_by(|a, b| a.ln_p.total_cmp(&b.ln_p));
+    (grid, spec, lines)
 }
 
 /// Share of the largest explained power within which a higher frequency is
@@ -502,6 +514,22 @@ pub fn strongest_line(scan: &Scan) -> Option<Line> {
     let pr = prepare(scan, true);
     let band = band_of(&pr)?;
     detect(&pr, &prepare(scan, false), band, None)
+}
+
+/// Each channel's strongest line over the whole period range, strongest
+/// first (each refined as `strongest_line` refines its one): a weaker
+/// channel's line may pass what the strongest fails (a duty misfit on a
+/// heated node outranks a chiller's line on the coolant sensor).
+pub fn lines_by_channel(scan: &Scan) -> Vec<Line> {
+    let pr = prepare(scan, true);
+    let Some(band) = band_of(&pr) else {
+        return Vec::new();
+    };
+    let (grid, spec, mut lines) = detect_all(&pr, &prepare(scan, false), band, None);
+    for l in lines.iter_mut() {
+        refine(&pr, &grid, &spec, l, detect_width(&pr));
+    }
+    lines
 }
 
 /// The strongest line within ±10 % of `period_s`, corrected for as many

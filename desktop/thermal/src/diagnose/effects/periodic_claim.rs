@@ -9,7 +9,11 @@
 use serde_json::{json, Value};
 
 use super::effect_fit::Evaluator;
-use super::periodic::{self, Chan, Line, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
+pub use super::periodic::Line;
+
+/// A periodic candidate: its finding, its line, whether it is claimed.
+pub type Candidate = (Finding, Line, bool);
+use super::periodic::{self, Chan, Scan, ALPHA, HARMONICS, PERIOD_MAX_S, PERIOD_MIN_S};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::r4;
@@ -148,6 +152,58 @@ fn gap(scan: &Scan, sub: &[Option<Vec<Vec<f64>>>], only: Option<&[usize]>) -> Ga
 /// of its own).
 pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding, Line, bool)> {
     let line = periodic::strongest_line(scan)?;
+    Some(candidate_of(line, scan, gap_scan, None, inputs))
+}
+
+/// `scan` with every residual less its centred moving mean over one
+/// `period_s` (NaN rows left out of the mean; the window shortened at a
+/// run's ends): what is at the line's frequency and above. A line's
+/// waveform averages to zero over its period and stays; a slow misfit
+/// (a level, a drift, the model's lag behind a duty) goes.
+fn high_pass(scan: &Scan, period_s: f64) -> Scan {
+    let mut out = scan.clone();
+    for ch in out.chans.iter_mut() {
+        for (e, t) in ch.resid.iter_mut().zip(&scan.times) {
+            let n = e.len();
+            let dt = if n > 1 {
+                (t[n - 1] - t[0]) / (n - 1) as f64
+            } else {
+                1.0
+            };
+            let half = ((0.5 * period_s / dt.max(1e-9)).round() as usize).max(1);
+            // prefix sums of the finite values and their count
+            let (mut sum, mut cnt) = (vec![0.0; n + 1], vec![0usize; n + 1]);
+            for k in 0..n {
+                let ok = e[k].is_finite();
+                sum[k + 1] = sum[k] + if ok { e[k] } else { 0.0 };
+                cnt[k + 1] = cnt[k] + ok as usize;
+            }
+            for k in 0..n {
+                let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
+                let c = cnt[b] - cnt[a];
+                if e[k].is_finite() && c > 0 {
+                    e[k] -= (sum[b] - sum[a]) / c as f64;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The periodic candidate of one line of `scan` (see [`candidate`]).
+/// `share_scan` (machine-file mode): the residual the line's share of the
+/// held-out gap is judged on — the selected explanation's when there is
+/// one, else the nominal's — high-passed at the line's period, so that
+/// it is judged at its own frequency: a slow misfit (a tank the cycling
+/// chiller holds away from its design level) must not dwarf the line.
+/// None (`diagnose fit`): `gap_scan` as read.
+pub fn candidate_of(
+    line: Line,
+    scan: &Scan,
+    gap_scan: &Scan,
+    share_scan: Option<&Scan>,
+    inputs: &Scan,
+) -> (Finding, Line, bool) {
     // a duty that repeats at the line's period drives the line through the
     // model's misfit of the duty: not a driver of its own
     let ni = inputs.chans.len().max(1) as f64;
@@ -161,6 +217,8 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding
         on.push(line.chan);
     }
     let mut sub: Vec<Option<Vec<Vec<f64>>>> = vec![None; nc];
+    let mut sub_share: Vec<Option<Vec<Vec<f64>>>> = vec![None; nc];
+    let share = share_scan.map(|sh| high_pass(sh, line.period_s));
     let mut chans_json = Vec::new();
     let mut amp_best = 0.0;
     for &c in &on {
@@ -168,6 +226,10 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding
         let (_, held_wave) =
             periodic::waveform(gap_scan, c, line.period_s, &|r, k| !gap_scan.held[r][k]);
         sub[c] = Some(held_wave);
+        if let Some(sh) = &share {
+            let (_, w) = periodic::waveform(sh, c, line.period_s, &|r, k| !sh.held[r][k]);
+            sub_share[c] = Some(w);
+        }
         let ch = &scan.chans[c];
         if c == line.chan {
             amp_best = amp;
@@ -184,9 +246,14 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding
     let after = gap(gap_scan, &sub, None);
     // on the channels it shows on, the line must take a share of the
     // held-out gap away (a line inside what the model misses is no driver)
-    let on_before = gap(gap_scan, &vec![None; nc], Some(&on)).m;
-    let on_after = gap(gap_scan, &sub, Some(&on)).m;
+    let (sh, sh_sub) = match &share {
+        Some(sh) => (sh, &sub_share),
+        None => (gap_scan, &sub),
+    };
+    let on_before = gap(sh, &vec![None; nc], Some(&on)).m;
+    let on_after = gap(sh, sh_sub, Some(&on)).m;
     let held_shrink = 1.0 - on_after / on_before.max(1e-18);
+
     let best = &scan.chans[line.chan];
     let big_enough = amp_best >= MIN_AMP_NOISE * best.noise;
     let no_worse = |b: Option<(f64, f64)>, a: Option<(f64, f64)>| match (b, a) {
@@ -237,6 +304,7 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding
             "significant": line.significant(),
             "duty_repeats_at_period": duty_periodic,
             "held_out_shrink_on_its_channels": r4(held_shrink),
+            "held_out_shrink_of": if share_scan.is_some() { "the selected explanation's residual" } else { "the nominal's residual" },
             "amplitude_over_noise": r4(amp_best / best.noise.max(1e-12)),
             "held_out_norm_gap_before": r4(before.m.sqrt()),
             "held_out_norm_gap_after": r4(after.m.sqrt()),
@@ -244,7 +312,7 @@ pub fn candidate(scan: &Scan, gap_scan: &Scan, inputs: &Scan) -> Option<(Finding
         }),
         params: Some(params),
     };
-    Some((f, line, claimed))
+    (f, line, claimed)
 }
 
 fn set_role(f: &mut Finding, role: &str) {
@@ -347,19 +415,24 @@ pub fn report_md(tried: &[Finding]) -> String {
     )
 }
 
-/// Machine-file mode: scan the nominal residual and merge the candidate
-/// (the line tested again on the residual of the selected effects).
-pub fn machine(
+/// Machine-file mode: the scan of the nominal residual and its periodic
+/// candidate: the first line, strongest first over the channels, that
+/// earns a claim (each channel's line corrected for every channel and
+/// trial frequency, as the strongest is; its share of the held-out gap
+/// judged on `selected`, the residual of the explanation selected so far,
+/// when there is one); none claimed: the strongest line's candidate, for
+/// the report. None when `--only` leaves it out or no line is found.
+pub fn machine_candidate(
     ev: &Evaluator,
     res0: &[Vec<Vec<f64>>],
-    findings: &mut Vec<Finding>,
-    tried: &mut Vec<Finding>,
+    selected: Option<&[Vec<Vec<f64>>]>,
     only: &[String],
-) {
+) -> Option<Candidate> {
     if !wanted(only) {
-        return;
+        return None;
     }
     let scan = scan_machine(ev, res0);
+    let share = selected.map_or_else(|| scan.clone(), |r| scan_machine(ev, r));
     let inputs = Scan {
         chans: ["spindle_rpm", "feed_activity"]
             .iter()
@@ -383,14 +456,65 @@ pub fn machine(
             .collect(),
         ..scan.clone()
     };
-    let cand = candidate(&scan, &scan, &inputs);
-    let sel = findings.first().map(|f| f.effects.clone());
-    merge(findings, tried, cand, |line| match sel {
-        Some(e) if !e.is_empty() => ev
-            .residuals(&e)
-            .map_or(true, |r| line_survives(&scan_machine(ev, &r), line)),
-        _ => true,
+    let mut cand: Option<(Finding, Line, bool)> = None;
+    for (i, line) in periodic::lines_by_channel(&scan).into_iter().enumerate() {
+        // a line that is not significant cannot be claimed (the strongest
+        // is kept for the report)
+        if i > 0 && !line.significant() {
+            break;
+        }
+        let c = candidate_of(line, &scan, &scan, Some(&share), &inputs);
+        if c.2 {
+            cand = Some(c);
+            break;
+        }
+        cand.get_or_insert(c);
+    }
+    cand
+}
+
+/// Machine-file mode: merge the candidate of [`machine_candidate`] (the
+/// line tested again on `selected`, the residual of the selected effects;
+/// None: nothing selected or it has no effects).
+pub fn machine(
+    ev: &Evaluator,
+    cand: Option<(Finding, Line, bool)>,
+    selected: Option<&[Vec<Vec<f64>>]>,
+    findings: &mut Vec<Finding>,
+    tried: &mut Vec<Finding>,
+) {
+    merge(findings, tried, cand, |line| match selected {
+        Some(r) => line_survives(&scan_machine(ev, r), line),
+        None => true,
     });
+}
+
+/// The residual `res` (run → channel → row) with the line's waveform at
+/// `period_s` taken out of the channels named `names`, each fitted on the
+/// fit rows (with a cubic per run for the slow misfit, which stays): what
+/// a model leaves away from the line.
+pub fn minus_line(
+    ev: &Evaluator,
+    res: &[Vec<Vec<f64>>],
+    period_s: f64,
+    names: &[String],
+) -> Vec<Vec<Vec<f64>>> {
+    let scan = scan_machine(ev, res);
+    let mut out = res.to_vec();
+    for (c, ch) in scan.chans.iter().enumerate() {
+        if !names.contains(&ch.name) {
+            continue;
+        }
+        let (_, wave) = periodic::waveform(&scan, c, period_s, &|r, k| !scan.held[r][k]);
+        for (pi, p) in ev.runs.iter().enumerate() {
+            if let Some(ci) = p.channels.iter().position(|x| x.name == ch.name) {
+                for (v, w) in out[pi][ci].iter_mut().zip(&wave[pi]) {
+                    *v -= w;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// `diagnose fit`: scan the nominal's residual and merge the candidate

@@ -105,6 +105,9 @@ fn meaning(group: &str, element: Option<&str>, f: f64) -> String {
     }
 }
 
+/// Residuals: run → channel → row.
+type Residuals = Vec<Vec<Vec<f64>>>;
+
 /// Fit criterion, stats and residuals of one released machine.
 type Judged = (f64, crate::diagnose::effects::Stats, Vec<Vec<Vec<f64>>>);
 
@@ -456,7 +459,9 @@ fn choose(rel: &[Shape], told_apart: impl Fn(usize, usize) -> bool) -> Choice {
 /// the best release is named: the others explain the same gap worse.
 /// Beside a selected effect it must also beat that effect by the same
 /// test. Effects that add nothing on top of the best release inside every
-/// tolerance are listed untestable ([`keep_adding`]).
+/// tolerance are listed untestable ([`keep_adding`]). Returns the
+/// simulations used and, when a release is named (then first), its
+/// held-out residuals (the periodic driver is tested against them).
 pub(crate) fn merge_releases(
     judge: &Judge,
     cal: &CalNull,
@@ -464,7 +469,7 @@ pub(crate) fn merge_releases(
     ps: &[Prepared],
     findings: &mut Vec<Finding>,
     untestable: &mut Vec<(String, String)>,
-) -> Result<usize> {
+) -> Result<(usize, Option<Residuals>)> {
     let null = Null {
         design: cal.design,
         calibrated: m,
@@ -509,7 +514,7 @@ pub(crate) fn merge_releases(
         gate::held_out_z(ps, &supported[a].res, &supported[b].res) >= gate::Z_MIN
     };
     let best = match choose(&shapes, told_apart) {
-        Choice::Nothing => return Ok(sims),
+        Choice::Nothing => return Ok((sims, None)),
         Choice::Name(b) => &supported[b],
         Choice::ExplainedInside { best, by } => {
             let b = &supported[best].finding;
@@ -521,7 +526,7 @@ pub(crate) fn merge_releases(
                     b.m_after,
                 ),
             ));
-            return Ok(sims);
+            return Ok((sims, None));
         }
         Choice::Undecided(all) => {
             let names: Vec<&str> = all
@@ -540,7 +545,7 @@ pub(crate) fn merge_releases(
             // effects must beat (as beside a named release, the effect goes
             // first unless the release beats it: a steeper bearing law read
             // as a bearing's viscous term ×1.6 would otherwise be lost)
-            return Ok(sims);
+            return Ok((sims, None));
         }
     };
     // beside a selected effect the finding must explain the held-out gap
@@ -551,14 +556,14 @@ pub(crate) fn merge_releases(
         let res_top = judge.ev.residuals(&top.effects)?;
         sims += 1;
         if !(gate::held_out_z(ps, &res_top, &best.res) >= gate::Z_MIN) {
-            return Ok(sims);
+            return Ok((sims, None));
         }
     }
     // an effect beside the finding must still add to the released null:
     // otherwise it only absorbed the local misfit the release explains
     let (n, _) = keep_adding(cal, ps, best, findings)?;
     findings.insert(0, with_role(&best.finding, "selected"));
-    Ok(sims + n)
+    Ok((sims + n, Some(best.res.clone())))
 }
 
 #[cfg(test)]
