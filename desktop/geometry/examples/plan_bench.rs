@@ -8,12 +8,21 @@
 //! `score` compares with the tabulated truth and the held-out lines.
 //! Prints per machine and the worst machine: worst-term RMS [µm, µrad],
 //! held-out reduction [%], and pooled over the machines.
-//! `cargo run -p tcomp-geometry --release --example plan_bench [-- MACHINES FIRST_SEED]`
+//! With a method name (`poly`, `smooth`, `dense`, `generic`; default
+//! `smooth`) that identifier is scored; for `poly` and `generic` also the
+//! share of terms × positions (20 per stroke, squareness) whose true error
+//! is within 3 printed σ (the σ's as `identify` prints them: the stated
+//! 0.5 µm noise's posterior × the misfit inflation) and whether the stated
+//! adequacy test passes.
+//! `cargo run -p tcomp-geometry --release --example plan_bench [-- MACHINES FIRST_SEED [METHOD]]`
 
 use anyhow::{bail, Result};
 use std::path::Path;
+use tcomp_geometry::adequacy::StatedNoise;
 use tcomp_geometry::bench_rich::{identify_with, Method};
-use tcomp_geometry::identify::LineObs;
+use tcomp_geometry::errors::{GeometricErrors, Term};
+use tcomp_geometry::identify::{identify, line_adequacy, squareness_sigma, term_sigma, LineObs};
+use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, plan14, LineSpec};
 use tcomp_geometry::plan::rich_lines;
 use tcomp_geometry::score::{read_dir_lines, score, TabulatedTruth};
@@ -49,6 +58,63 @@ fn generate(dir: &Path, plan: &Path, seed: u64) -> Result<()> {
     Ok(())
 }
 
+/// 3σ coverage [%] of the printed σ's and the adequacy verdict (poly and
+/// generic; None for the others).
+fn coverage(
+    method: Method,
+    st: &Structure,
+    obs: &[LineObs],
+    model: &GeometricErrors,
+    truth: &TabulatedTruth,
+) -> Result<Option<(f64, bool)>> {
+    let stroke = truth.stroke_mm;
+    let noise = StatedNoise::new(Some(0.5))?;
+    let line_sigma = vec![0.5 / 2f64.sqrt(); obs.len()];
+    let sigma: Box<dyn Fn(Option<Term>, usize, f64) -> f64>;
+    let adequate;
+    match method {
+        Method::Generic => {
+            let g = tcomp_geometry::generic::identify_generic(st, obs, stroke)?;
+            let adq = g.adequacy(&line_sigma, noise);
+            let f = adq.sigma_inflation;
+            adequate = adq.adequate;
+            sigma = Box::new(move |t, i, q| match t {
+                Some(t) => f * g.sigma(t, q),
+                None => f * g.squareness_sigma(i),
+            });
+        }
+        Method::Poly => {
+            let id = identify(st, obs, Default::default(), stroke)?;
+            let (adq, cov) = line_adequacy(st, obs, &id, &line_sigma, noise)?;
+            let f = adq.sigma_inflation;
+            adequate = adq.adequate;
+            sigma = Box::new(move |t, i, q| match t {
+                Some(t) => f * term_sigma(&id.basis, &cov, t, q),
+                None => f * squareness_sigma(&id.basis, &cov, i),
+            });
+        }
+        _ => return Ok(None),
+    }
+    let (mut inside, mut n) = (0usize, 0usize);
+    for t in Term::all() {
+        let l = stroke[t.axis.index()];
+        let last = if t.is_straightness() { 19 } else { 20 };
+        for k in 1..=last {
+            let q = l * k as f64 / 20.0;
+            let d = (model.value(t, q) - truth.value_ref(t, q)).abs();
+            inside += usize::from(d <= 3.0 * sigma(Some(t), 0, q));
+            n += 1;
+        }
+    }
+    let sr = truth.squareness_ref();
+    for (i, r) in sr.iter().enumerate() {
+        let d = (model.squareness.get(i) - r).abs();
+        inside += usize::from(d <= 3.0 * sigma(None, i, 0.0));
+        n += 1;
+    }
+    Ok(Some((100.0 * inside as f64 / n as f64, adequate)))
+}
+
 struct Row {
     seed: u64,
     wt: f64,
@@ -57,6 +123,7 @@ struct Row {
     after: f64,
     pct: f64,
     unobservable: usize,
+    cover: Option<(f64, bool)>,
 }
 
 fn main() -> Result<()> {
@@ -72,7 +139,10 @@ fn main() -> Result<()> {
         ("14", plan14(STROKE, 100.0, 100.0)),
         ("rich", rich_lines(STROKE, 100.0, 100.0)),
     ];
-    let method = Method::Smooth;
+    let method = std::env::args()
+        .skip(1)
+        .find(|a| a.parse::<u64>().is_err())
+        .map_or(Ok(Method::Smooth), |m| Method::parse(&m))?;
     for (name, lines) in &plans {
         let pf = base.join(format!("plan_{name}.json"));
         write_plan(&pf, lines)?;
@@ -86,6 +156,7 @@ fn main() -> Result<()> {
             let truth = TabulatedTruth::read(&dir.join("truth.json"))?;
             let held = read_dir_lines(&dir.join("heldout"))?;
             let (model, fit) = identify_with(method, &st, &obs, truth.stroke_mm)?;
+            let cover = coverage(method, &st, &obs, &model, &truth)?;
             let s = score(&st, &model, &truth, &held);
             let h = s.heldout.unwrap();
             let row = Row {
@@ -96,9 +167,16 @@ fn main() -> Result<()> {
                 after: h.after_um,
                 pct: h.reduction_pct,
                 unobservable: fit.map_or(0, |f| f.unobservable_terms.len()),
+                cover,
             };
+            let cv = row.cover.map_or(String::new(), |(c, a)| {
+                format!(
+                    ", 3σ covers {c:.1} %, {}",
+                    if a { "adequate" } else { "INADEQUATE" }
+                )
+            });
             println!(
-                "plan {name:4} seed {:3}: worst-term RMS {:5.2} µm / {:5.2} µrad, held-out {:5.1} % ({:.2} → {:.2} µm), undetermined {}",
+                "plan {name:4} seed {:3}: worst-term RMS {:5.2} µm / {:5.2} µrad, held-out {:5.1} % ({:.2} → {:.2} µm), undetermined {}{cv}",
                 row.seed, row.wt, row.wa, row.pct, row.before, row.after, row.unobservable
             );
             let _ = std::fs::remove_dir_all(&dir);
@@ -109,8 +187,19 @@ fn main() -> Result<()> {
         let a2: f64 = rows.iter().map(|r| r.after * r.after).sum();
         let pooled = 100.0 * (1.0 - (a2 / b2).sqrt());
         let worst_pct = rows.iter().map(|r| r.pct).fold(f64::INFINITY, f64::min);
+        let covers: Vec<(f64, bool)> = rows.iter().filter_map(|r| r.cover).collect();
+        let cv = if covers.is_empty() {
+            String::new()
+        } else {
+            let mean = covers.iter().map(|c| c.0).sum::<f64>() / covers.len() as f64;
+            let ok = covers.iter().filter(|c| c.1).count();
+            format!(
+                "; 3σ covers {mean:.1} % (mean over machines), adequate {ok} of {}",
+                covers.len()
+            )
+        };
         println!(
-            "PLAN {name} ({} lines), {} machines (seeds {first}..{}), method {method:?}: worst-term RMS, worst machine {:.2} µm / {:.2} µrad; held-out pooled {:.1} % (worst machine {:.1} %)",
+            "PLAN {name} ({} lines), {} machines (seeds {first}..{}), method {method:?}: worst-term RMS, worst machine {:.2} µm / {:.2} µrad; held-out pooled {:.1} % (worst machine {:.1} %){cv}",
             lines.len(),
             rows.len(),
             first + machines - 1,

@@ -22,6 +22,10 @@ pub enum Method {
     Smooth,
     /// `dense::identify_dense` (values per node, evidence-chosen roughness).
     Dense,
+    /// `generic::identify_generic` (Legendre degree 16, evidence per error
+    /// class and for the lines' scale; `identify`'s default on a plan
+    /// without null directions).
+    Generic,
 }
 
 impl Method {
@@ -30,7 +34,8 @@ impl Method {
             "poly" => Ok(Method::Poly),
             "smooth" => Ok(Method::Smooth),
             "dense" => Ok(Method::Dense),
-            _ => bail!("--method {s:?}: poly, smooth or dense"),
+            "generic" => Ok(Method::Generic),
+            _ => bail!("--method {s:?}: poly, smooth, dense or generic"),
         }
     }
 }
@@ -77,6 +82,10 @@ pub fn identify_with(
         Method::Dense => {
             let f = super::dense::identify_dense(st, obs, super::dense::DEFAULT_NODES, stroke)?;
             Ok((f.errors.clone(), Some(f)))
+        }
+        Method::Generic => {
+            let g = super::generic::identify_generic(st, obs, stroke)?;
+            Ok((g.fit.errors.clone(), Some(g.fit)))
         }
     }
 }

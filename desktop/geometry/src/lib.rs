@@ -25,6 +25,7 @@ pub mod board5;
 pub mod check;
 pub mod dense;
 pub mod five_axis;
+pub mod generic;
 pub mod guard;
 pub mod identify;
 pub mod lines;

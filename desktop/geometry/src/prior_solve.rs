@@ -67,8 +67,9 @@ pub struct SmoothFit {
 }
 
 /// Hyperparameters v = (ln σ, ln τ_pos, ln τ_str, ln τ_ang, the method's
-/// fifth: the Legendre decay or the node prior's ln length scale).
-pub(crate) type V = [f64; 5];
+/// fifth: the Legendre decay or the node prior's ln length scale, and any
+/// further ones a method adds, e.g. `generic`'s ln scale prior).
+pub(crate) type V<const N: usize = 5> = [f64; N];
 
 /// What a column of either method is besides an error-function unknown.
 pub(crate) trait Unknown {
@@ -159,7 +160,7 @@ pub(crate) enum Prior {
 
 impl Prior {
     /// `mm` (the data's precision) plus the prior's.
-    fn add_to(&self, mut mm: DMatrix<f64>) -> DMatrix<f64> {
+    pub(crate) fn add_to(&self, mut mm: DMatrix<f64>) -> DMatrix<f64> {
         match self {
             Prior::Variances(pv) => {
                 for (i, p) in pv.iter().enumerate() {
@@ -197,22 +198,22 @@ fn neg_log_evidence(
 }
 
 /// Where the coordinate search of the evidence starts, its bounds and
-/// first steps.
-pub(crate) struct Search {
-    pub start: V,
-    pub lo: V,
-    pub hi: V,
-    pub step: V,
+/// first steps (a coordinate with step 0 stays where it starts).
+pub(crate) struct Search<const N: usize = 5> {
+    pub start: V<N>,
+    pub lo: V<N>,
+    pub hi: V<N>,
+    pub step: V<N>,
 }
 
 /// Coordinate search of the evidence: each coordinate stepped both ways
 /// while that improves it, the steps halved when none does.
-fn search(f: impl Fn(&V) -> f64, s: &Search) -> V {
+fn search<const N: usize>(f: impl Fn(&V<N>) -> f64, s: &Search<N>) -> V<N> {
     let (mut v, lo, hi, mut step) = (s.start, s.lo, s.hi, s.step);
     let mut best = f(&v);
     for _ in 0..200 {
         let mut moved = false;
-        for k in 0..5 {
+        for k in (0..N).filter(|k| step[*k] > 0.0) {
             for dir in [1.0, -1.0] {
                 let mut w = v;
                 w[k] = (w[k] + dir * step[k]).clamp(lo[k], hi[k]);
@@ -235,8 +236,8 @@ fn search(f: impl Fn(&V) -> f64, s: &Search) -> V {
 }
 
 /// The posterior at the evidence's hyperparameters, with its figures.
-pub(crate) struct Solved {
-    pub v: V,
+pub(crate) struct Solved<const N: usize = 5> {
+    pub v: V<N>,
     /// Posterior mean and covariance of the columns.
     pub x: DVector<f64>,
     pub cov: DMatrix<f64>,
@@ -252,15 +253,15 @@ pub(crate) struct Solved {
 
 /// Choose the hyperparameters by the evidence (`prior` gives the prior at
 /// each; `None` where it does not exist) and solve at them.
-pub(crate) fn solve<C: Unknown>(
+pub(crate) fn solve<C: Unknown, const N: usize>(
     ne: &Normal,
     cols: &[C],
     lines: &[LineObs],
-    prior: impl Fn(&V) -> Option<Prior>,
-    start: &Search,
-) -> Result<Solved> {
+    prior: impl Fn(&V<N>) -> Option<Prior>,
+    start: &Search<N>,
+) -> Result<Solved<N>> {
     let nl = lines.len();
-    let f = |v: &V| {
+    let f = |v: &V<N>| {
         prior(v)
             .and_then(|p| neg_log_evidence(ne, (2.0 * v[0]).exp(), &p, nl))
             .map_or(f64::INFINITY, |r| r.0)
@@ -316,7 +317,7 @@ fn leave_one_line_out(
     ((ss_all / ne.m as f64).sqrt(), per)
 }
 
-impl Solved {
+impl<const N: usize> Solved<N> {
     /// The fit's report: `errors` in the method's words (`basis`,
     /// `degree`), with the per-error posterior standard deviations and the
     /// undetermined errors of [`observability`]. The hyperparameters' fifth

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_check::{check_cmd, CheckArgs};
+use super::geometry_generic::{default_method, identify_generic_cmd, nulls_clause, GenericRequest};
 use super::geometry_identify::{
     combination_text, condition_json, condition_text, identify_poly_cmd, PolyRequest,
 };
@@ -215,11 +216,14 @@ pub struct IdentifyArgs {
     /// the undetermined errors listed under `unobservable_terms`.
     #[arg(long)]
     pub partial: bool,
-    /// `poly`: the polynomial model of the degree options; `smooth`: no
-    /// shape assumed (rich basis, prior chosen from the data; issue 29);
+    /// `generic`: no shape assumed (Legendre degree 16 per error, prior
+    /// sizes and the lines' laser scale chosen by the evidence; issue 49),
+    /// the default when the lines determine the machine (≥ 18 lines, no
+    /// null direction); `poly`: the polynomial model of the degree options,
+    /// the default otherwise; `smooth`: degree-10 Legendre (issue 29);
     /// `dense`: values per node with a roughness prior chosen from the data.
-    #[arg(long, default_value = "poly")]
-    pub method: String,
+    #[arg(long)]
+    pub method: Option<String>,
     /// `--method dense`: values per error function (both ends included).
     #[arg(long, default_value_t = tcomp_geometry::dense::DEFAULT_NODES)]
     pub nodes: usize,
@@ -372,10 +376,26 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--method` picks the model: poly here, smooth and dense in
-/// `geometry_smooth`.
+/// `--method` picks the model: poly here, generic in `geometry_generic`,
+/// smooth and dense in `geometry_smooth`; without it, generic when the
+/// lines determine the machine, else poly (whose refusal then names what
+/// no line sees).
 fn identify_cmd(a: IdentifyArgs) -> Result<()> {
-    match a.method.as_str() {
+    let (method, nulls, lines) = match a.method.as_deref() {
+        Some(m) => (m, Vec::new(), 0),
+        None => default_method(&a.files, a.stroke.as_deref()),
+    };
+    match method {
+        "generic" => identify_generic_cmd(&GenericRequest {
+            files: &a.files,
+            stroke: a.stroke.as_deref(),
+            points: a.points,
+            truth: a.truth.as_deref(),
+            partial: a.partial,
+            noise_um: a.noise_um,
+            accept_inadequate: a.accept_inadequate,
+            json: a.json,
+        }),
         "poly" => identify_poly_cmd(&PolyRequest {
             files: &a.files,
             degrees: a.degrees.degrees()?,
@@ -386,9 +406,16 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
             noise_um: a.noise_um,
             accept_inadequate: a.accept_inadequate,
             json: a.json,
+        })
+        .map_err(|e| {
+            if nulls.is_empty() {
+                e
+            } else {
+                anyhow::anyhow!("{e}; {}", nulls_clause(lines, &nulls))
+            }
         }),
         "smooth" | "dense" => identify_smooth_cmd(&SmoothRequest {
-            dense: (a.method == "dense").then_some(a.nodes),
+            dense: (method == "dense").then_some(a.nodes),
             files: &a.files,
             stroke: a.stroke.as_deref(),
             points: a.points,
@@ -396,7 +423,7 @@ fn identify_cmd(a: IdentifyArgs) -> Result<()> {
             partial: a.partial,
             json: a.json,
         }),
-        m => bail!("--method {m:?}: poly, smooth or dense"),
+        m => bail!("--method {m:?}: generic, poly, smooth or dense"),
     }
 }
 

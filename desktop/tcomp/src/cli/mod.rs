@@ -7,6 +7,7 @@ pub mod fit;
 pub mod geometry;
 pub mod geometry_adequacy;
 pub mod geometry_check;
+pub mod geometry_generic;
 pub mod geometry_identify;
 pub mod geometry_plan;
 pub mod geometry_predict;
