@@ -16,8 +16,8 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 
-pub use super::columns::{RotaryOptions, TermValue};
 use super::columns::{columns, effect, spindle_effect, Col, SPINDLE_NAMES};
+pub use super::columns::{RotaryOptions, TermValue};
 use super::model::{
     reading_sensitivity, Drift, Linear, Location, ReadingSensitivity, RotaryModel, Spindle,
     LOCATION_NAMES, LOCATION_UNITS,
@@ -60,7 +60,6 @@ pub struct JointLinear {
     pub linear_unknowns: usize,
     pub line_readings: usize,
 }
-
 
 #[derive(Clone, Debug, Serialize)]
 pub struct RotaryIdentification {
