@@ -35,12 +35,12 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::adequacy::{chi2_upper, words, Adequacy, StatedNoise, FALSE_REJECT, NOISE_TOLERANCE};
-use super::errors::{GeometricErrors, Poly, Term, SQUARENESS_NAMES};
+use super::errors::{Term, SQUARENESS_NAMES};
 use super::identify::LineObs;
 use super::kinematics::{sensitivity, Structure};
 use super::plan::{CLASS_DEGREE, NULL_TOLERANCE, POSITIONS, PRIOR_SQUARENESS_URAD};
 use super::prior_solve::{normal_equations, solve, Normal, Prior, Search, SmoothFit};
-use super::smooth::{basis_monomials, SCol};
+use super::smooth::{to_errors, SCol};
 
 /// Legendre degree per error function (the plan criterion's class).
 pub const DEGREE: usize = CLASS_DEGREE;
@@ -192,7 +192,7 @@ pub fn identify_generic(st: &Structure, lines: &[LineObs], stroke: [f64; 3]) -> 
     let v = solved.v;
     let pv = prior_var(&cols, &v);
     let hold = hold_out(&ne, &pv, (2.0 * v[0]).exp(), &solved.x, lines)?;
-    let errors = to_errors(&cols, solved.x.as_slice(), stroke);
+    let errors = to_errors(&cols, solved.x.as_slice(), DEGREE, stroke);
     let post = Posterior {
         cov: solved.cov.clone(),
         cols,
@@ -256,30 +256,6 @@ fn hold_out(
         });
     }
     Ok(out)
-}
-
-fn to_errors(cols: &[SCol], x: &[f64], stroke: [f64; 3]) -> GeometricErrors {
-    let mut e = GeometricErrors::zero();
-    for t in Term::all() {
-        e.set(t, Poly::new(stroke[t.axis.index()], vec![0.0; DEGREE]));
-    }
-    for (c, v) in cols.iter().zip(x) {
-        match *c {
-            SCol::Term { term, j } => {
-                let mut p = e.get(term).clone();
-                for (k, m) in basis_monomials(term.is_straightness(), j)
-                    .iter()
-                    .enumerate()
-                {
-                    p.coeffs[k] += v * m;
-                }
-                e.set(term, p);
-            }
-            SCol::Squareness(i) => e.squareness.set(i, *v),
-            SCol::Scale(_) => {}
-        }
-    }
-    e
 }
 
 impl Posterior {
@@ -499,6 +475,7 @@ pub fn null_combinations(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::smooth::basis_monomials;
 
     #[test]
     fn the_recurrence_basis_is_the_monomial_one_to_degree_16() {

@@ -185,7 +185,13 @@ pub fn identify_smooth(
     Ok(fit)
 }
 
-fn to_errors(cols: &[SCol], x: &[f64], degree: usize, stroke: [f64; 3]) -> GeometricErrors {
+/// The error functions of a solved series (monomial coefficients per term).
+pub(crate) fn to_errors(
+    cols: &[SCol],
+    x: &[f64],
+    degree: usize,
+    stroke: [f64; 3],
+) -> GeometricErrors {
     let mut e = GeometricErrors::zero();
     for t in Term::all() {
         e.set(t, Poly::new(stroke[t.axis.index()], vec![0.0; degree]));
