@@ -16,8 +16,12 @@
 //!   trace is acquired and compensated one sample every `pace_ms` (default
 //!   100) while UART0 serves the register map; after the last sample the
 //!   board keeps serving (a host test or the demo script stops QEMU).
-//!   An optional fourth word `swap=<sensor>@<row>` replaces that emulated
-//!   sensor by a new one (another ROM code) at that trace row. A fault in
+//!   Optional further words: `swap=<sensor>@<row>` replaces that emulated
+//!   sensor by a new one (another ROM code) at that trace row; `lockstep`
+//!   holds the trace after a cycle that raised "reference wanted" (input
+//!   register 23) until the PLC's command 12 is pending, so the reference
+//!   is taken at the next sample, as `tcomp replay --reference-when-asked`
+//!   models the PLC. A fault in
 //!   this mode resets the board (fault record, as in the field); the CMSDK
 //!   watchdog runs.
 //! - `bench [golden.bin] [model.img]`: instruction counts (run QEMU with `-icount
@@ -104,10 +108,15 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
             let pace_ms = words.next().and_then(|p| p.parse().ok()).unwrap_or(100);
             // `swap=<sensor>@<row>`: the emulated sensor is replaced by a new
             // one (another ROM code) at that trace row.
-            let swap = words.next().and_then(|w| {
-                let (k, row) = w.strip_prefix("swap=")?.split_once('@')?;
-                Some((k.parse::<usize>().ok()?, row.parse::<u32>().ok()?))
-            });
+            // `lockstep`: the PLC probes at the sample after a request.
+            let (mut swap, mut lockstep) = (None, false);
+            for w in words {
+                lockstep |= w == "lockstep";
+                swap = swap.or_else(|| {
+                    let (k, row) = w.strip_prefix("swap=")?.split_once('@')?;
+                    Some((k.parse::<usize>().ok()?, row.parse::<u32>().ok()?))
+                });
+            }
             // From here on a fault resets the board, as in the field.
             safety::FIELD_MODE.store(true, Ordering::Relaxed);
             serve::start(
@@ -117,6 +126,7 @@ fn dispatch(spawner: Spawner, cmdline: &'static str) {
                     model,
                     pace_ms,
                     swap,
+                    lockstep,
                 },
             );
         }

@@ -49,7 +49,16 @@ pub struct ServeArgs {
     /// `(sensor, row)`: that emulated sensor is replaced by a new one
     /// (another ROM code) at that trace row.
     pub swap: Option<(usize, u32)>,
+    /// The PLC of `tcomp replay --reference-when-asked`, which probes at the
+    /// sample after the one that raised input register 23: while a
+    /// reference is wanted and no command 12 is pending, the trace waits
+    /// (up to [`LOCKSTEP_WAIT_MS`]) before its next row.
+    pub lockstep: bool,
 }
+
+/// Longest wait of the lockstep mode for the PLC's command 12 (then the
+/// trace goes on: a PLC that does not answer does not stop the bench).
+const LOCKSTEP_WAIT_MS: u64 = 20_000;
 
 /// Open the trace, build the app (model, settings and channel map from the
 /// slots; the trace columns' map when none is stored), spawn the tasks.
@@ -140,6 +149,7 @@ async fn measure(
         trace,
         pace_ms: args.pace_ms,
         swap: args.swap,
+        lockstep: args.lockstep.then_some(app),
         rows: 0,
         sample: None,
     };
@@ -182,6 +192,8 @@ struct TraceCycles {
     trace: HostTrace,
     pace_ms: u64,
     swap: Option<(usize, u32)>,
+    /// Lockstep mode ([`ServeArgs::lockstep`]): the app it waits on.
+    lockstep: Option<&'static Shared>,
     /// Rows read so far.
     rows: u32,
     /// The row being measured.
@@ -192,6 +204,9 @@ impl CycleSource<EmulatedBus> for TraceCycles {
     async fn next_cycle(&mut self, bus: &mut EmulatedBus) -> Option<CycleInput> {
         if self.rows > 0 {
             Timer::after(Duration::from_millis(self.pace_ms)).await;
+            if let Some(app) = self.lockstep {
+                wait_for_reference(app).await;
+            }
         }
         let sample = next_sample_or_exit(&mut self.trace)?;
         self.rows += 1;
@@ -252,6 +267,32 @@ impl CycleSource<EmulatedBus> for TraceCycles {
         let value = self.sample.as_ref().and_then(|s| s.probe_tenth_um);
         EmulatedProbe::read(value, reference_samples).await
     }
+}
+
+/// Lockstep mode: while the last cycle raised "reference wanted" (input
+/// register 23) and no command 12 is pending, idle cycles (the watchdog
+/// sees the loop alive) until it comes or [`LOCKSTEP_WAIT_MS`] passed.
+async fn wait_for_reference(app: &'static Shared) {
+    let start = Instant::now();
+    while start.elapsed().as_millis() < LOCKSTEP_WAIT_MS {
+        let waiting = app.lock(|a| {
+            let mut a = a.borrow_mut();
+            let waiting =
+                a.snapshot().reference_wanted != 0 && a.probe_reference_samples().is_none();
+            if waiting {
+                a.idle_cycle();
+            }
+            waiting
+        });
+        if !waiting {
+            return;
+        }
+        Timer::after(Duration::from_millis(1)).await;
+    }
+    log!(
+        "lockstep: no command 12 within {} ms; the trace goes on",
+        LOCKSTEP_WAIT_MS
+    );
 }
 
 #[embassy_executor::task]
