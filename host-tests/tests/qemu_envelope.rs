@@ -32,16 +32,20 @@ const RANGE_HI_K: f64 = 20.0;
 /// T03 came back inside; the trace goes on, so the board is still serving).
 const LAST_ROW: usize = 1000;
 
-/// T03's rise (K) at row `i`: +18 K in 300 rows, +5 K more in 500 rows
-/// (through the edge and the margin slowly, so the reads see every zone),
-/// back to +14 K in 300 rows, then a slow warm-up.
+/// T03's rise (K) at row `i`: +18 K in 300 rows, +2 K in 200 more up to
+/// the range's edge, 250 rows inside the margin (+20.25 K at row 750: the
+/// board replays a row per 40 ms, and a loaded machine's Modbus reads are
+/// a second or more apart, so each zone must last several seconds), on to
+/// +23 K by row 850, back to +14 K by row 1150, then a slow warm-up.
 fn t03_rise(i: u32) -> f64 {
     let i = f64::from(i);
     match i {
         i if i < 300.0 => 0.06 * i,
-        i if i < 800.0 => 18.0 + 0.01 * (i - 300.0),
-        i if i < 1100.0 => 23.0 - 0.03 * (i - 800.0),
-        i => 14.0 + 0.002 * (i - 1100.0),
+        i if i < 500.0 => 18.0 + 0.01 * (i - 300.0),
+        i if i < 750.0 => 20.0 + 0.001 * (i - 500.0),
+        i if i < 850.0 => 20.25 + 0.0275 * (i - 750.0),
+        i if i < 1150.0 => 23.0 - 0.03 * (i - 850.0),
+        i => 14.0 + 0.002 * (i - 1150.0),
     }
 }
 
