@@ -35,7 +35,7 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::adequacy::{chi2_upper, words, Adequacy, StatedNoise, FALSE_REJECT, NOISE_TOLERANCE};
-use super::errors::{Term, SQUARENESS_NAMES};
+use super::errors::{GeometricErrors, Term, SQUARENESS_NAMES};
 use super::identify::LineObs;
 use super::kinematics::{sensitivity, Structure};
 use super::plan::{CLASS_DEGREE, NULL_TOLERANCE, POSITIONS, PRIOR_SQUARENESS_URAD};
@@ -142,6 +142,7 @@ pub struct Generic {
 /// The posterior of the columns and how to read an error from it.
 struct Posterior {
     cols: Vec<SCol>,
+    x: DVector<f64>,
     cov: DMatrix<f64>,
     stroke: [f64; 3],
 }
@@ -194,6 +195,7 @@ pub fn identify_generic(st: &Structure, lines: &[LineObs], stroke: [f64; 3]) -> 
     let hold = hold_out(&ne, &pv, (2.0 * v[0]).exp(), &solved.x, lines)?;
     let errors = to_errors(&cols, solved.x.as_slice(), DEGREE, stroke);
     let post = Posterior {
+        x: solved.x.clone(),
         cov: solved.cov.clone(),
         cols,
         stroke,
@@ -407,6 +409,89 @@ impl Generic {
             weak: Vec::new(),
             failure: parts.join("; "),
         }
+    }
+}
+
+/// The errors' posterior as a prior for a fit with other data (the rotary
+/// joint fit, `rotary::joint_generic`): the columns of the error functions
+/// and the squareness errors, the lines' scales integrated out.
+impl Generic {
+    fn error_cols(&self) -> Vec<usize> {
+        (self.post.cols.iter().enumerate())
+            .filter(|(_, c)| !matches!(c, SCol::Scale(_)))
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    /// Posterior mean and covariance of the error columns (the order of
+    /// [`Generic::error_row`]).
+    pub fn error_posterior(&self) -> (DVector<f64>, DMatrix<f64>) {
+        let idx = self.error_cols();
+        let x = DVector::from_iterator(idx.len(), idx.iter().map(|&i| self.post.x[i]));
+        let cov = DMatrix::from_fn(idx.len(), idx.len(), |r, c| self.post.cov[(idx[r], idx[c])]);
+        (x, cov)
+    }
+
+    /// A reading along `dir` at axis positions `pos` with the tool at
+    /// `tool`: its sensitivity to each error column (first order).
+    pub fn error_row(
+        &self,
+        st: &Structure,
+        dir: [f64; 3],
+        pos: [f64; 3],
+        tool: [f64; 3],
+    ) -> Vec<f64> {
+        let s = sensitivity(st, pos, tool);
+        let d = Vector3::from(dir);
+        let stroke = self.post.stroke;
+        (self.error_cols().into_iter())
+            .map(|i| match self.post.cols[i] {
+                SCol::Term { term, j } => {
+                    let k = term.axis.index();
+                    d.dot(&s.terms[k][term.component.index()])
+                        * basis(term.is_straightness(), j, pos[k] / stroke[k])
+                }
+                SCol::Squareness(q) => d.dot(&s.squareness[q]),
+                SCol::Scale(_) => 0.0,
+            })
+            .collect()
+    }
+
+    /// The errors at the posterior mean plus `delta` on the error columns.
+    pub fn errors_with(&self, delta: &[f64]) -> GeometricErrors {
+        let mut x = self.post.x.clone();
+        for (i, d) in self.error_cols().into_iter().zip(delta) {
+            x[i] += d;
+        }
+        to_errors(&self.post.cols, x.as_slice(), DEGREE, self.post.stroke)
+    }
+
+    /// RMS of the lines' residual [µm] (each line's zero taken out, its
+    /// scale at the posterior mean) with `delta` added to the error columns.
+    pub fn line_residual_rms(&self, st: &Structure, lines: &[LineObs], delta: &[f64]) -> f64 {
+        let idx = self.error_cols();
+        let mut x: Vec<f64> = idx.iter().map(|&i| self.post.x[i]).collect();
+        x.iter_mut().zip(delta).for_each(|(a, d)| *a += d);
+        let (mut ss, mut m) = (0.0, 0usize);
+        for (li, l) in lines.iter().enumerate() {
+            let scale = (self.post.cols.iter())
+                .position(|c| *c == SCol::Scale(li))
+                .map_or(0.0, |k| self.post.x[k]);
+            let p0 = Vector3::from(l.points.first().map_or([0.0; 3], |p| p.pos_mm));
+            let d = Vector3::from(l.direction);
+            let r: Vec<f64> = (l.points.iter())
+                .map(|p| {
+                    let row = self.error_row(st, l.direction, p.pos_mm, l.tool_offset_mm);
+                    let along = d.dot(&(Vector3::from(p.pos_mm) - p0));
+                    let pred: f64 = row.iter().zip(&x).map(|(a, b)| a * b).sum();
+                    p.disp_um - pred - along * 1e-3 * scale
+                })
+                .collect();
+            let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
+            ss += r.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+            m += r.len();
+        }
+        (ss / m.max(1) as f64).sqrt()
     }
 }
 

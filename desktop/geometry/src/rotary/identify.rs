@@ -39,6 +39,10 @@ pub const RANK_TOL: f64 = 1e-4;
 /// What the joint fit (`joint`) did with the linear model.
 #[derive(Clone, Debug, Serialize)]
 pub struct JointLinear {
+    /// The linear model fitted: `poly` (the lines' rows in the problem,
+    /// `joint`) or `generic` (the generic identifier's posterior as prior
+    /// rows, `joint_generic`).
+    pub linear_model: &'static str,
     /// Reading noise of each data set from its own fit [µm]: the lines'
     /// (forward/backward averaged) and the R-test readings'.
     pub sigma_lines_um: f64,
@@ -56,7 +60,8 @@ pub struct JointLinear {
     /// R-test plan's own (as `plan-rotary` shows it).
     pub joint_condition_number: Option<f64>,
     /// Of the identification's `unknowns` and `readings`: the linear
-    /// model's parameters and the lines' readings.
+    /// model's parameters and the lines' readings (generic: its posterior's
+    /// modes and their prior rows, one per mode).
     pub linear_unknowns: usize,
     pub line_readings: usize,
 }
@@ -108,6 +113,9 @@ pub(crate) struct StoredDesign {
     /// and to any rows after them (the lines of a joint fit: 1/σ_L).
     pub weight_r: f64,
     pub weight_l: f64,
+    /// The rows after the R-test ones are a prior in units of its own σ
+    /// (`joint_generic`), kept as they are by the adequacy test.
+    pub prior_rows: bool,
     /// Rows of each file (held out in turn).
     pub groups: Vec<Vec<usize>>,
     /// Error name of each unknown (empty for the files' offsets).
@@ -131,6 +139,8 @@ impl RotaryIdentification {
         for i in 0..m {
             let f = if i < d.rtest_rows {
                 1.0 / (d.weight_r * noise.um)
+            } else if d.prior_rows {
+                1.0
             } else {
                 std::f64::consts::SQRT_2 / (d.weight_l * noise.um)
             };
@@ -545,6 +555,7 @@ fn stored_design(
         rtest_rows,
         weight_r: 1.0 / sigma_r,
         weight_l: 1.0,
+        prior_rows: false,
         groups,
         labels,
         cols: cols.to_vec(),

@@ -165,6 +165,7 @@ pub fn identify_rotary_joint(
         .map(|(r, y)| y - r.iter().zip(delta.iter()).map(|(a, b)| a * b).sum::<f64>())
         .collect();
     id.linear = Some(JointLinear {
+        linear_model: "poly",
         sigma_lines_um: sigma_l,
         sigma_rtest_um: sigma_r,
         change_at_rtest_rms_um: rms(change.as_slice()),

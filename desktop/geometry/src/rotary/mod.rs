@@ -11,7 +11,9 @@
 //!   files cannot see, and why;
 //! * `spindle`: the spindle's direction from several tool lengths, or
 //!   why it is undetermined (`spindle_tests`);
-//! * `joint`: the same fit with the 14 lines as data;
+//! * `joint`: the same fit with the 14 lines as data; `joint_generic`:
+//!   with the generic identifier's posterior (≥ 18 lines, no null
+//!   direction);
 //! * `bias`: the location constants re-optimised on tool-tip readings;
 //! * `check`: the five-axis check over a held-out grid, and the whole
 //!   simulated chain the benchmark runs;
@@ -28,6 +30,7 @@ mod columns;
 pub mod frames;
 pub mod identify;
 pub mod joint;
+pub mod joint_generic;
 pub mod model;
 pub mod sim;
 pub mod spindle;

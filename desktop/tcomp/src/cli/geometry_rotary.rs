@@ -7,14 +7,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::geometry_adequacy::{inadequate_warning, print_adequacy, refuse_inadequate};
+use super::geometry_rotary_linear::{fit_rotary, linear_input, LinearIn};
 use tcomp_geometry::check::figures;
-use tcomp_geometry::identify::{identify, Degrees, Identification, LineObs};
 use tcomp_geometry::kinematics::Structure;
-use tcomp_geometry::lines::{average_runs, LineFile};
 use tcomp_geometry::rotary::bias::{calibration_poses, optimise_rotary_bias, simulate_state};
 use tcomp_geometry::rotary::check::{compare, grid, linear_case, Machine5, CASE_STROKE};
 use tcomp_geometry::rotary::identify::{identify_rotary, RotaryIdentification, RotaryOptions};
-use tcomp_geometry::rotary::joint::{identify_rotary_joint, LinearPrior};
 use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rotary::{Linear, RotaryModel};
 use tcomp_geometry::rtest::RTestFile;
@@ -322,54 +320,6 @@ fn print_conditioning(id: &RotaryIdentification) {
     }
 }
 
-/// The linear axes as the rotary fit takes them.
-enum LinearIn {
-    None,
-    /// An errors JSON: known input.
-    Known(Structure, Box<tcomp_geometry::GeometricErrors>),
-    /// Line files: their identification and the averaged lines.
-    Lines(Structure, Box<Identification>, Vec<LineObs>, [f64; 3]),
-}
-
-/// The linear axes' errors from an errors JSON or line files.
-fn linear_input(paths: &[PathBuf], accept_inadequate: bool) -> Result<LinearIn> {
-    match paths {
-        [] => Ok(LinearIn::None),
-        [p] if p.extension().is_some_and(|e| e == "json") => {
-            let ej = ErrorsJson::read(p)?;
-            if let Some(w) = tcomp_geometry::adequacy::check_model_file(
-                ej.adequate,
-                p,
-                accept_inadequate,
-                ej.adequacy.as_ref().map(|a| a.failure.as_str()),
-            )? {
-                eprintln!("warning: {w}");
-            }
-            if !ej.unobservable_terms.is_empty() {
-                bail!(
-                    "{}: the linear model has unobservable terms ({}); it cannot be known input",
-                    p.display(),
-                    ej.unobservable_terms.join(", ")
-                );
-            }
-            let st = Structure::parse(&ej.structure).with_context(|| p.display().to_string())?;
-            Ok(LinearIn::Known(st, Box::new(ej.to_errors()?)))
-        }
-        _ => {
-            let files: Vec<LineFile> = paths
-                .iter()
-                .map(|p| LineFile::read(p))
-                .collect::<Result<_>>()?;
-            let st = tcomp_geometry::guard::common_structure(&files, paths)?;
-            let obs: Vec<LineObs> = average_runs(&files)?.into_iter().map(|a| a.obs).collect();
-            let stroke = super::geometry_smooth::stroke_from(None, &obs)?;
-            let id = identify(&st, &obs, Degrees::default(), stroke)?;
-            tcomp_geometry::guard::refuse_unobservable(&id, obs.len(), false)?;
-            Ok(LinearIn::Lines(st, Box::new(id), obs, stroke))
-        }
-    }
-}
-
 /// Allowance [µm] for the error of a linear model taken as known input at
 /// the R-test positions (combined with the stated noise in quadrature).
 const KNOWN_LINEAR_UM: f64 = 0.3;
@@ -392,40 +342,16 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
         bail!("--drift: the files have no T_ columns");
     }
     let noise = tcomp_geometry::adequacy::StatedNoise::new(a.noise_um)?;
-    let lin = linear_input(&a.lines, a.accept_inadequate)?;
+    let lin = linear_input(&a.lines, a.accept_inadequate, noise)?;
     let o = RotaryOptions {
         order_c: a.order_c,
         order_a: a.order_a,
         sensors,
     };
-    if a.linear_out.is_some() && (a.linear_fixed || !matches!(lin, LinearIn::Lines(..))) {
+    if a.linear_out.is_some() && (a.linear_fixed || !lin.has_lines()) {
         bail!("--linear-out needs the line files as --lines and no --linear-fixed (only the joint fit changes the linear model)");
     }
-    let fixed = |st: &Structure, e: &tcomp_geometry::GeometricErrors| {
-        let l = Linear {
-            structure: st,
-            errors: e,
-        };
-        identify_rotary(&files, Some(l), &o)
-    };
-    let mut id = match &lin {
-        LinearIn::None => identify_rotary(&files, None, &o)?,
-        LinearIn::Known(st, e) => fixed(st, e)?,
-        LinearIn::Lines(st, idl, ..) if a.linear_fixed => fixed(st, &idl.errors)?,
-        LinearIn::Lines(st, idl, obs, stroke) => {
-            let prior = LinearPrior {
-                structure: st,
-                identification: idl,
-                lines: obs,
-            };
-            let (id, corrected) = identify_rotary_joint(&files, &prior, &o)?;
-            if let Some(p) = &a.linear_out {
-                let ej = ErrorsJson::from_errors(&corrected, st, *stroke, 11);
-                write_json(p, &serde_json::to_value(&ej)?)?;
-            }
-            id
-        }
-    };
+    let mut id = fit_rotary(&files, &lin, &o, a.linear_fixed, a.linear_out.as_ref())?;
     // A linear model taken as known input (an errors JSON, --linear-fixed)
     // is not exact: its own error at the R-test positions (a few tenths of
     // a µm from 14 lines at σ 0.5 µm, docs/geometry.md) adds to the
@@ -539,7 +465,12 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
         id.files, id.nest_positions, id.residual_rms_um
     );
     print_conditioning(id);
-    if let Some(j) = &id.linear {
+    if let Some(j) = id.linear.as_ref().filter(|j| j.linear_model == "generic") {
+        println!(
+            "  linear axes: the lines' generic model (no shape assumed) fitted with the R-test files, its posterior as prior ({} modes; condition number of the whole {:.0}): noise {:.3} µm (lines), {:.3} µm (R-test); its prediction at the R-test readings moved {:.3} µm RMS; lines' residual {:.3} → {:.3} µm",
+            j.linear_unknowns, j.joint_condition_number.unwrap_or(f64::INFINITY), j.sigma_lines_um, j.sigma_rtest_um, j.change_at_rtest_rms_um, j.line_residual_rms_um_before, j.line_residual_rms_um
+        );
+    } else if let Some(j) = &id.linear {
         println!(
             "  linear axes fitted with the lines ({} of the unknowns, {} of the readings; condition number of the whole {:.0}): noise {:.3} µm (lines), {:.3} µm (R-test); their prediction at the R-test readings moved {:.3} µm RMS; lines' residual {:.3} → {:.3} µm",
             j.linear_unknowns, j.line_readings, j.joint_condition_number.unwrap_or(f64::INFINITY), j.sigma_lines_um, j.sigma_rtest_um, j.change_at_rtest_rms_um, j.line_residual_rms_um_before, j.line_residual_rms_um

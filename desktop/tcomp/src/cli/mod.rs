@@ -12,6 +12,7 @@ pub mod geometry_identify;
 pub mod geometry_plan;
 pub mod geometry_predict;
 pub mod geometry_rotary;
+pub mod geometry_rotary_linear;
 pub mod geometry_score;
 pub mod geometry_smooth;
 pub mod geometry_table;
