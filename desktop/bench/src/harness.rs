@@ -3,10 +3,13 @@
 //! `draw` draws the closed-world cases, `closed`, `open` and `cross` run
 //! the three worlds, `tally` scores them; `approx` runs issue 27's columns
 //! (exact file, design file off by σ = 15 % via `perturb`, no file) scored
-//! by `score`.
+//! by `score`; `worlds` runs them on the open, cross and blind third
+//! (`third`, its own generator and scorer) worlds with the worst world per
+//! column (`worst`); `cpu` reads the process's CPU time.
 
 mod approx;
 mod closed;
+mod cpu;
 mod cross;
 mod draw;
 pub mod file_truth;
@@ -15,6 +18,9 @@ mod periodic;
 pub mod perturb;
 pub mod score;
 mod tally;
+pub mod third;
+mod worlds;
+pub mod worst;
 
 pub use approx::{approx_text, run_approx_bench, ApproxConfig, Column, World, HELDOUT_SEEDS};
 pub use closed::run_bench;
@@ -23,3 +29,4 @@ pub use draw::{random_duty, random_effect, BenchConfig};
 pub use open::{names_truth, open_cases, run_open_bench, run_open_machine_bench, OpenCase};
 pub use periodic::{periodic_cases, run_periodic_bench};
 pub use tally::{Visibility, VISIBLE_C, VISIBLE_UM};
+pub use worlds::{default_cases, run_worlds, worlds_text, WorldsConfig};

@@ -28,12 +28,20 @@
 //! `--seed`; never tune on them. One line per case and column on stderr
 //! (wall and CPU seconds). `--threads N`: diagnose on N threads (default:
 //! every core; `--threads 1` for the one-core time).
+//!
+//! Issue 52 item 4: `--worlds open,cross,third` (or `all`; alone it runs
+//! every column) adds the blind third world (`worlds/third/`, frozen: run
+//! by its own gen.py and scorer as `python3` subprocesses, with the
+//! `tcomp` binary beside this one or `--tcomp FILE`), reports per world
+//! and column named / honest / ambiguous / wrong / silent / false alarms,
+//! a `worst` row per column and the CPU seconds per world. `--cases N` is
+//! the cases per world; without it each world draws enough for ≥ 150
+//! effect and 30 clean cases per column (slow: hours on two cores).
 use anyhow::Result;
 use std::path::PathBuf;
 use tcomp_bench::harness::{
-    approx_text, run_approx_bench, run_bench, run_cross_bench, run_open_bench,
-    run_open_machine_bench, run_periodic_bench, ApproxConfig, BenchConfig, Column, World,
-    HELDOUT_SEEDS,
+    run_bench, run_cross_bench, run_open_bench, run_open_machine_bench, run_periodic_bench,
+    run_worlds, worlds_text, ApproxConfig, BenchConfig, Column, World, WorldsConfig, HELDOUT_SEEDS,
 };
 use tcomp_thermal::diagnose::{diagnose, Options};
 use tcomp_thermal::sim::{sim_run, Duty, Effect, Machine, SimOptions};
@@ -50,9 +58,9 @@ fn main() -> std::process::ExitCode {
     after_help = "Examples:\n  bench-diagnose --json                       the closed-world bench (60 cases)\n  bench-diagnose --columns all --cases 10     issue 27's columns, both worlds\n  bench-diagnose --columns fit --worlds open  `diagnose fit` on the open world"
 )]
 struct Args {
-    /// Generated cases (clean cases are added past this count).
-    #[arg(long, default_value_t = 60)]
-    cases: usize,
+    /// Generated cases (clean cases are added past this count) [default: 60; with --worlds/--columns, per world, enough for 150 effect + 30 clean cases]
+    #[arg(long)]
+    cases: Option<usize>,
     /// First case index (to run a slice of a seed's cases).
     #[arg(long = "first-case", default_value_t = 0)]
     first_case: usize,
@@ -92,9 +100,15 @@ struct Args {
     /// Issue 27's columns: `all` or a comma list of exact, design, fit.
     #[arg(long, value_name = "LIST", value_parser = parse_columns)]
     columns: Option<Columns>,
-    /// Worlds of the columns: a comma list of open, cross.
-    #[arg(long, value_name = "LIST", default_value = "open,cross", value_parser = parse_worlds)]
-    worlds: Worlds,
+    /// Worlds of the columns: `all` or a comma list of open, cross, third [default with --columns: open,cross]; alone it runs every column.
+    #[arg(long, value_name = "LIST", value_parser = parse_worlds)]
+    worlds: Option<Worlds>,
+    /// The tcomp binary the third world's scorer runs [default: tcomp beside this binary].
+    #[arg(long, value_name = "FILE")]
+    tcomp: Option<PathBuf>,
+    /// Third-world cases its gen.py already wrote (scored as they are; --cases and --first-case do not apply).
+    #[arg(long = "third-cases", value_name = "DIR")]
+    third_cases: Option<PathBuf>,
     /// Run the held-out seeds (101, 103, 107) instead of --seed; never tune on them.
     #[arg(long)]
     heldout: bool,
@@ -113,8 +127,11 @@ struct Columns(Vec<Column>);
 #[derive(Clone)]
 struct Worlds(Vec<World>);
 
-/// `--worlds LIST`: a comma list of open, cross.
+/// `--worlds LIST`: `all` or a comma list of open, cross, third.
 fn parse_worlds(l: &str) -> Result<Worlds> {
+    if l == "all" {
+        return Ok(Worlds(vec![World::Open, World::Cross, World::Third]));
+    }
     Ok(Worlds(
         l.split(',').map(World::parse).collect::<Result<_>>()?,
     ))
@@ -160,6 +177,8 @@ fn run() -> Result<()> {
         sigma,
         threads,
         first_case,
+        tcomp,
+        third_cases,
     } = parse_args()?;
     let machines = vec![
         Machine::load(&dir.join("turning-center-16.toml"))?,
@@ -168,7 +187,7 @@ fn run() -> Result<()> {
     let threads =
         threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let open_cfg = BenchConfig {
-        cases,
+        cases: cases.unwrap_or(60),
         seed,
         hours: 8.0,
         sample_period_s: 10.0,
@@ -181,7 +200,10 @@ fn run() -> Result<()> {
         calibrate: false,
         ..open_cfg
     };
-    if let Some(columns) = columns {
+    if columns.is_some() || worlds.is_some() {
+        // --worlds alone: every column; --columns alone: the two in-process worlds
+        let columns = columns.unwrap_or(Columns(vec![Column::Exact, Column::Design, Column::Fit]));
+        let worlds = worlds.unwrap_or(Worlds(vec![World::Open, World::Cross]));
         let path = open_machine_file.unwrap_or_else(|| dir.join("vertical-mc-truth.toml"));
         let seeds = if heldout {
             HELDOUT_SEEDS.to_vec()
@@ -195,7 +217,16 @@ fn run() -> Result<()> {
             seeds,
             first_case,
         };
-        return run_columns(&path, &machines, &open_cfg, &acfg, json);
+        let tcomp = match tcomp {
+            Some(t) => t,
+            None => std::env::current_exe()?.with_file_name("tcomp"),
+        };
+        let wcfg = WorldsConfig {
+            cases,
+            tcomp: &tcomp,
+            third_dir: third_cases.as_deref(),
+        };
+        return run_columns(&path, &machines, &open_cfg, &acfg, &wcfg, json);
     }
     if closed_only {
         let v = run_bench(&machines, &closed_cfg)?;
@@ -282,20 +313,22 @@ fn parse_columns(l: &str) -> Result<Columns> {
     ))
 }
 
-/// Issue 27's columns (`--columns`), printed as text or JSON.
+/// Issue 27's columns on issue 52's worlds (`--columns`, `--worlds`), with
+/// the worst world per column, printed as text or JSON.
 fn run_columns(
     path: &std::path::Path,
     machines: &[Machine],
     cfg: &BenchConfig,
     acfg: &ApproxConfig,
+    wcfg: &WorldsConfig,
     json: bool,
 ) -> Result<()> {
-    let mut v = run_approx_bench(&Machine::load(path)?, machines, cfg, acfg)?;
+    let mut v = run_worlds(&Machine::load(path)?, machines, cfg, acfg, wcfg)?;
     v["open_world_machine_file"] = serde_json::json!(path.display().to_string());
     if json {
         println!("{v}");
     } else {
-        print!("{}", approx_text(&v));
+        print!("{}", worlds_text(&v));
     }
     Ok(())
 }

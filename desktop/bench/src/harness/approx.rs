@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use tcomp_thermal::diagnose::{diagnose, fitmode::diagnose_fit, Diagnosis, Options};
 use tcomp_thermal::sim::Machine;
 
+use super::cpu;
 use super::cross::cross_cases;
 use super::draw::BenchConfig;
 use super::file_truth::{is_parameter_finding, judge_finding, FileVerdict};
@@ -58,11 +59,14 @@ impl Column {
     }
 }
 
-/// Which cases: the truth model's (open) or the first simulator's (cross).
+/// Which cases: the truth model's (open), the first simulator's (cross),
+/// or the blind third world's (`worlds/third/`, run by its own generator
+/// and scorer: `third.rs`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum World {
     Open,
     Cross,
+    Third,
 }
 
 impl World {
@@ -70,15 +74,17 @@ impl World {
         match self {
             World::Open => "open_world",
             World::Cross => "cross_model",
+            World::Third => "third_world",
         }
     }
 
-    /// `open` or `cross`.
+    /// `open`, `cross` or `third`.
     pub fn parse(s: &str) -> Result<World> {
         Ok(match s {
             "open" => World::Open,
             "cross" => World::Cross,
-            o => bail!("unknown world `{o}` (open, cross)"),
+            "third" => World::Third,
+            o => bail!("unknown world `{o}` (open, cross, third, or all)"),
         })
     }
 
@@ -86,6 +92,7 @@ impl World {
         match self {
             World::Open => 0,
             World::Cross => 1,
+            World::Third => 2,
         }
     }
 }
@@ -176,6 +183,7 @@ impl Tally {
             "max_seconds_per_case": self.times.iter().copied().fold(0.0, f64::max),
             "mean_cpu_seconds_per_case": mean(&self.cpu),
             "max_cpu_seconds_per_case": self.cpu.iter().copied().fold(0.0, f64::max),
+            "cpu_seconds_total": self.cpu.iter().sum::<f64>(),
             "per_effect": self.per.iter().map(|(k, v)| (k.clone(), json!({"cases": v.iter().sum::<usize>(), "named": v[0], "honest": v[1], "wrong": v[2], "silent": v[3]}))).collect::<serde_json::Map<_, _>>(),
             "misses": self.misses,
         })
@@ -221,21 +229,10 @@ fn world_cases<'a>(
                 exact: &machines[c.machine],
             })
             .collect(),
+        World::Third => bail!(
+            "the third world runs through its own generator and scorer (third.rs), not these cases"
+        ),
     })
-}
-
-/// CPU time (user + system, all threads) of this process so far, seconds
-/// (`/proc/self/stat`; 0 where there is none).
-fn cpu_s() -> f64 {
-    let read = || -> Option<f64> {
-        let s = std::fs::read_to_string("/proc/self/stat").ok()?;
-        let rest = s.get(s.rfind(')')? + 2..)?;
-        let f: Vec<&str> = rest.split_whitespace().collect();
-        let utime: f64 = f.get(11)?.parse().ok()?;
-        let stime: f64 = f.get(12)?.parse().ok()?;
-        Some((utime + stime) / 100.0)
-    };
-    read().unwrap_or(0.0)
 }
 
 /// What one column's diagnosis of a case gave: the diagnosis, wall and CPU
@@ -255,7 +252,7 @@ fn diagnose_column(
     sigma: f64,
     dseed: u64,
 ) -> Result<ColumnRun> {
-    let c0 = cpu_s();
+    let c0 = cpu::own_s();
     let t = std::time::Instant::now();
     let (d, factors) = match col {
         Column::Exact => (diagnose(case.exact, &case.runs, opt)?, None),
@@ -268,7 +265,7 @@ fn diagnose_column(
     Ok(ColumnRun {
         d,
         secs: t.elapsed().as_secs_f64(),
-        cpu: cpu_s() - c0,
+        cpu: cpu::own_s() - c0,
         factors,
     })
 }
