@@ -1,14 +1,20 @@
 //! The lag per input chosen by forward-chaining CV (`fit/lags.rs`,
 //! `FitConfig::lag_grid`): a synthetic run whose error follows one sensor
-//! through a first-order lag gets that lag within a factor of 2, from a
-//! greedy grid that does not hold it; without a grid the lags stay.
+//! through a first-order lag gets that lag within one step of the geometric
+//! grid (a factor of 2), from a greedy grid that does not hold it; an error
+//! that follows the sensor without delay keeps lag 0 (no move); without a
+//! grid the lags stay.
 
 use tcomp_data::runcsv::Run;
 use tcomp_model::fit::lags::LAG_GRID;
 use tcomp_model::fit::pipeline::{fit_plan, FitConfig, Plan};
 
-/// First-order response of `x` with time constant `tau` (s), rows `dt` apart.
+/// First-order response of `x` with time constant `tau` (s), rows `dt`
+/// apart; `x` itself for `tau` 0.
 fn lagged(x: &[f64], tau: f64, dt: f64) -> Vec<f64> {
+    if tau <= 0.0 {
+        return x.to_vec();
+    }
     let a = (-dt / tau).exp();
     let mut out = Vec::with_capacity(x.len());
     let mut y = x[0];
@@ -119,6 +125,19 @@ fn without_a_grid_the_greedy_lags_stay() {
     let rep = fit(900.0, vec![]);
     let (_, lag) = only_lag(&rep);
     assert!(lag == 0.0 || lag == 7200.0, "{lag}");
+    assert!(
+        !rep.notes.iter().any(|n| n.contains("input lags chosen")),
+        "{:?}",
+        rep.notes
+    );
+}
+
+#[test]
+fn an_undelayed_response_gets_no_lag() {
+    let rep = fit(0.0, LAG_GRID.to_vec());
+    let (name, lag) = only_lag(&rep);
+    assert_eq!(name, "T_a", "{:?}", rep.inputs[0].features);
+    assert_eq!(lag, 0.0, "{:?}", rep.notes);
     assert!(
         !rep.notes.iter().any(|n| n.contains("input lags chosen")),
         "{:?}",
