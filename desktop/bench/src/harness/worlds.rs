@@ -57,6 +57,8 @@ struct WorldResult {
     tallies: Vec<(Column, WorldTally)>,
     detail: Value,
     cpu: Value,
+    /// Cases drawn (the third world: scored, summed over seeds).
+    cases: usize,
 }
 
 fn run_in_process(
@@ -96,6 +98,7 @@ fn run_in_process(
         tallies,
         detail: table.clone(),
         cpu: json!({"total": total, "diagnosis_per_column": per_column}),
+        cases: cfg.cases,
     })
 }
 
@@ -106,7 +109,7 @@ fn run_third_world(
 ) -> Result<WorldResult> {
     let mut pooled: BTreeMap<&'static str, (Column, WorldTally)> = BTreeMap::new();
     let (mut gen_cpu, mut col_cpu, mut col_wall) = (0.0, BTreeMap::new(), BTreeMap::new());
-    let (mut per_seed, mut misses) = (serde_json::Map::new(), Vec::new());
+    let (mut per_seed, mut misses, mut cases) = (serde_json::Map::new(), Vec::new(), 0);
     for &seed in &acfg.seeds {
         let r = run_third(&ThirdConfig {
             cases: cfg.cases,
@@ -136,6 +139,7 @@ fn run_third_world(
             json!({"cases": r.cases, "per_effect": r.per_effect}),
         );
         misses.extend(r.misses);
+        cases += r.cases;
     }
     let total = gen_cpu + col_cpu.values().sum::<f64>();
     Ok(WorldResult {
@@ -152,6 +156,7 @@ fn run_third_world(
             "wall_scoring_per_column": col_wall,
             "note": "python3 and the tcomp processes it ran (children CPU time)",
         }),
+        cases,
     })
 }
 
@@ -193,7 +198,7 @@ pub fn run_worlds(
         worlds.insert(w.key().to_string(), Value::Object(cols));
         detail.insert(w.key().to_string(), r.detail);
         cpu_s.insert(w.key().to_string(), r.cpu);
-        cases.insert(w.key().to_string(), json!(n));
+        cases.insert(w.key().to_string(), json!(r.cases));
     }
     let worst: serde_json::Map<String, Value> = acfg
         .columns
@@ -231,18 +236,20 @@ pub fn worlds_text(v: &Value) -> String {
     s += "world        column             effect named honest (amb+) wrong (amb-) silent err clean FA  named%  n+h% wrong%   FA%\n";
     for (w, cols) in v["worlds"].as_object().into_iter().flatten() {
         for (c, t) in cols.as_object().into_iter().flatten() {
+            // serde_json's Display ignores widths: counts as integers
+            let n = |k: &str| t[k].as_u64().unwrap_or(0);
             s += &format!(
                 "{w:12} {c:18} {:6} {:5} {:6} {:6} {:5} {:6} {:6} {:3} {:5} {:2} {} {} {} {}\n",
-                t["effect_cases"],
-                t["named"],
-                t["honest"],
-                t["ambiguous_with_truth"],
-                t["wrong"],
-                t["ambiguous_without_truth"],
-                t["silent"],
-                t["errors"],
-                t["clean_cases"],
-                t["false_alarms"],
+                n("effect_cases"),
+                n("named"),
+                n("honest"),
+                n("ambiguous_with_truth"),
+                n("wrong"),
+                n("ambiguous_without_truth"),
+                n("silent"),
+                n("errors"),
+                n("clean_cases"),
+                n("false_alarms"),
                 pc(&t["named_rate"]),
                 pc(&t["named_or_honest_rate"]),
                 pc(&t["wrong_rate"]),
