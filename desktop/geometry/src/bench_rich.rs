@@ -113,6 +113,10 @@ pub fn one(
     let t0 = std::time::Instant::now();
     let (model, fit) = identify_with(method, &st, &obs, truth.stroke_mm)?;
     let secs = t0.elapsed().as_secs_f64();
+    let cover = match method {
+        Method::Poly => Some(poly_coverage(&st, &obs, &model, &truth)?),
+        _ => None,
+    };
     let s = score(&st, &model, &truth, &held);
     let h = s.heldout.as_ref();
     Ok(serde_json::json!({
@@ -126,11 +130,42 @@ pub fn one(
         "heldout_after_um": h.map(|h| h.after_um),
         "heldout_reduction_pct": h.map(|h| h.reduction_pct),
         "identify_seconds": secs,
+        "coverage_3sigma_pct": cover.map(|(p, f)| serde_json::json!({"poly": p, "shape_free": f})),
         "smooth": fit.as_ref().map(|f| serde_json::json!({
             "effective_parameters": f.effective_parameters, "unknowns": f.unknowns,
             "hyper": f.hyper, "residual_rms_um": f.residual_rms_um, "loo_rms_um": f.loo_rms_um,
             "unobservable_terms": f.unobservable_terms, "warning": f.warning})),
     }))
+}
+
+/// 3σ coverage [%] of the polynomial model's estimate with the σ's of its
+/// own posterior (stated noise 0.5 µm, × its misfit inflation: the σ's
+/// `identify` printed before issue 49 item 2) and with the shape-free σ's
+/// (`shape_free`, what it prints now).
+fn poly_coverage(
+    st: &Structure,
+    obs: &[LineObs],
+    model: &super::errors::GeometricErrors,
+    truth: &TabulatedTruth,
+) -> Result<(f64, f64)> {
+    use super::identify::{line_adequacy, squareness_sigma, term_sigma};
+    use super::shape_free::{coverage_3sigma, ShapeFree};
+    let noise = super::adequacy::StatedNoise::new(Some(0.5))?;
+    let line_sigma = vec![0.5 / std::f64::consts::SQRT_2; obs.len()];
+    let stroke = truth.stroke_mm;
+    let id = identify(st, obs, Degrees::default(), stroke)?;
+    let (adq, cov) = line_adequacy(st, obs, &id, &line_sigma, noise)?;
+    let f = adq.sigma_inflation;
+    let poly = coverage_3sigma(model, truth, |t, i, q| match t {
+        Some(t) => f * term_sigma(&id.basis, &cov, t, q),
+        None => f * squareness_sigma(&id.basis, &cov, i),
+    });
+    let sf = ShapeFree::fit(st, obs, stroke, &line_sigma, noise)?;
+    let free = coverage_3sigma(model, truth, |t, i, q| match t {
+        Some(t) => sf.term_sigma(model, t, q),
+        None => sf.squareness_sigma(model, i),
+    });
+    Ok((poly, free))
 }
 
 /// `seeds` machines per noise level; the worst and best over the machines.
@@ -166,6 +201,8 @@ pub fn run(
             "worst_rms_translational_um": range("worst_rms_translational_um"),
             "worst_rms_angular_urad": range("worst_rms_angular_urad"),
             "heldout_reduction_pct": range("heldout_reduction_pct"),
+            "coverage_3sigma_poly_pct": mean_of(&machines, "poly"),
+            "coverage_3sigma_shape_free_pct": mean_of(&machines, "shape_free"),
             "machines": machines,
         }));
     }
@@ -175,4 +212,13 @@ pub fn run(
         "method": format!("{method:?}").to_lowercase(), "waves": wave,
         "machines_per_level": seeds, "first_seed": first_seed, "rows": rows}),
     )
+}
+
+/// Mean over the machines of `coverage_3sigma_pct.<key>` (None without it).
+fn mean_of(machines: &[serde_json::Value], key: &str) -> Option<f64> {
+    let v: Vec<f64> = machines
+        .iter()
+        .filter_map(|m| m["coverage_3sigma_pct"][key].as_f64())
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }

@@ -36,6 +36,7 @@ mod prior_solve;
 pub mod rotary;
 pub mod rtest;
 pub mod score;
+pub mod shape_free;
 pub mod sim;
 pub mod smooth;
 pub mod study;

@@ -150,12 +150,13 @@ fn table_tooltip_and_export_refuse_an_inadequate_model_unless_accepted() {
     );
 }
 
-/// σ inflation: on machines beyond the class the posterior 3σ of the
-/// stated noise covers the true error rarely; inflated by the measured
-/// misfit it covers it clearly more often (rates measured here, over
-/// every term × tabulated position and the squareness).
+/// On machines beyond the class the polynomial posterior's 3σ covered the
+/// true error at 32.5 % (74.9 % inflated by the misfit); the σ's printed
+/// now come from the class not told the shape (`shape_free`, issue 49
+/// item 2) and cover it at ≥ 95 % of every term × tabulated position and
+/// the squareness.
 #[test]
-fn inflated_sigmas_cover_the_true_error_more_often_on_an_inadequate_model() {
+fn printed_sigmas_cover_the_true_error_on_an_inadequate_model() {
     let (mut n, mut raw, mut infl) = (0usize, 0usize, 0usize);
     for seed in [2, 4] {
         let dir = tempfile::tempdir().unwrap();
@@ -193,12 +194,11 @@ fn inflated_sigmas_cover_the_true_error_more_often_on_an_inadequate_model() {
     }
     let (r, i) = (raw as f64 / n as f64, infl as f64 / n as f64);
     println!(
-        "3σ coverage over {n} term × positions: {:.1} % uninflated, {:.1} % inflated",
+        "3σ coverage over {n} term × positions: {:.1} % without the inflation, {:.1} % printed",
         100.0 * r,
         100.0 * i
     );
-    assert!(r < 0.6, "uninflated covers {r}");
-    assert!(i > r + 0.25, "inflated {i} vs uninflated {r}");
+    assert!(i >= 0.95, "printed 3σ covers {i}");
 }
 
 fn s(v: &[String]) -> Vec<&str> {

@@ -330,6 +330,14 @@ fn rich(args: &Args) -> anyhow::Result<()> {
             f("heldout_reduction_pct", "min"),
             f("heldout_reduction_pct", "max"),
         );
+        if let (Some(p), Some(s)) = (
+            r["coverage_3sigma_poly_pct"].as_f64(),
+            r["coverage_3sigma_shape_free_pct"].as_f64(),
+        ) {
+            println!(
+                "         | 3σ covers the true error (mean over machines): {p:.1} % with the polynomial posterior's σ, {s:.1} % with the shape-free σ (printed)"
+            );
+        }
     }
     Ok(())
 }

@@ -29,6 +29,16 @@ pub fn inadequate_warning(adq: &Adequacy, model: &str) -> Option<String> {
 /// The adequacy verdict, the σ inflation and the weakly determined
 /// combinations in words (identify, identify-rotary).
 pub fn print_adequacy(adq: &Adequacy) {
+    print_verdict(adq);
+    println!(
+        "σ's printed are the posterior standard deviations at the stated noise × {:.2} (the measured misfit)",
+        adq.sigma_inflation
+    );
+}
+
+/// The adequacy verdict and the weakly determined combinations in words
+/// (the σ's line is the caller's when its σ's come from elsewhere).
+pub fn print_verdict(adq: &Adequacy) {
     println!("{}", adq.summary());
     if !adq.weak.is_empty() {
         println!("weakly determined combinations (relative singular value below 1e-2: their σ is over 100× the best-determined direction's):");
@@ -39,8 +49,4 @@ pub fn print_adequacy(adq: &Adequacy) {
             );
         }
     }
-    println!(
-        "σ's printed are the posterior standard deviations at the stated noise × {:.2} (the measured misfit)",
-        adq.sigma_inflation
-    );
 }

@@ -1,23 +1,28 @@
 //! `tcomp geometry identify --method poly`: the polynomial model of the 21
 //! errors from the line files of one temperature state, its stated
-//! adequacy test (refused unless --accept-inadequate, σ's inflated by the
-//! misfit), and the report: as JSON (the errors JSON with the fit's
+//! adequacy test (refused unless --accept-inadequate), the σ's of its
+//! values from the class that is not told the shape
+//! (`tcomp_geometry::shape_free`: the generic Legendre-16 posterior, whose
+//! spread along what no line sees is its prior's; σ = √((value − that
+//! posterior's mean)² + (its misfit inflation × its σ)²) — the polynomial
+//! model's own posterior assumes its degrees and cannot cover a plan's
+//! null directions, issue 49 item 2), and the report: as JSON (the errors JSON with the fit's
 //! figures beside it) or in words. `geometry.rs` parses the arguments.
 
 use anyhow::Result;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::geometry_adequacy::{inadequate_warning, print_adequacy, refuse_inadequate};
+use super::geometry_adequacy::{inadequate_warning, print_verdict, refuse_inadequate};
 use super::geometry_smooth::{read_one_state, recovery_json, recovery_text, stroke_from};
 use tcomp_geometry::adequacy::{Adequacy, StatedNoise};
 use tcomp_geometry::errors::Term;
 use tcomp_geometry::identify::{
-    identify, leave_one_line_out, line_adequacy, squareness_sigma, term_sigma, Degrees,
-    Identification, LeaveOneLineOut, LineObs,
+    identify, leave_one_line_out, line_adequacy, Degrees, Identification, LeaveOneLineOut, LineObs,
 };
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::Averaged;
+use tcomp_geometry::shape_free::ShapeFree;
 use tcomp_geometry::study::{recovery, volumetric_residual, ErrorsJson};
 
 /// `identify --method poly` as given.
@@ -84,8 +89,8 @@ pub fn identify_poly_cmd(r: &PolyRequest) -> Result<()> {
 /// The stated adequacy test's verdict and the σ's it gives.
 struct Stated {
     adequacy: Adequacy,
-    /// The error functions with their σ's: the stated noise's posterior σ
-    /// × the misfit inflation; the model marked adequate or not.
+    /// The error functions with their shape-free σ's; the model marked
+    /// adequate or not.
     errors: ErrorsJson,
     /// σ of EC0Y, EB0Z, EA0Z [µrad], inflated the same way.
     squareness_sigma: Vec<f64>,
@@ -110,22 +115,22 @@ fn assess(
             None => noise.um,
         })
         .collect();
-    let (adq, cov) = line_adequacy(st, obs, id, &line_sigma, noise)?;
+    let (mut adq, _) = line_adequacy(st, obs, id, &line_sigma, noise)?;
+    // The σ's come from the class that is not told the shape (module doc).
+    let sf = ShapeFree::fit(st, obs, stroke, &line_sigma, noise)?;
+    adq.sigma_inflation = sf.inflation;
     let mut ej = ErrorsJson::from_errors(&id.errors, st, stroke, r.points);
     ej.unobservable_terms = id.unobservable_terms.clone();
-    let f = adq.sigma_inflation;
     for t in Term::all() {
         if let Some(tj) = ej.errors.get_mut(&t.name()) {
             tj.sigma = tj
                 .positions_mm
                 .iter()
-                .map(|q| f * term_sigma(&id.basis, &cov, t, *q))
+                .map(|q| sf.term_sigma(&id.errors, t, *q))
                 .collect();
         }
     }
-    let squareness_sigma: Vec<f64> = (0..3)
-        .map(|i| f * squareness_sigma(&id.basis, &cov, i))
-        .collect();
+    let squareness_sigma: Vec<f64> = (0..3).map(|i| sf.squareness_sigma(&id.errors, i)).collect();
     ej.adequate = Some(adq.adequate);
     ej.adequacy = Some(adq.clone());
     Ok(Stated {
@@ -188,6 +193,10 @@ impl Report {
             serde_json::to_value(&self.loo)?,
         );
         o.insert(
+            "sigma_class".into(),
+            serde_json::json!("shape-free: the generic posterior (Legendre degree 16 per error), sqrt((value - its mean)^2 + (adequacy.sigma_inflation x its sigma)^2)"),
+        );
+        o.insert(
             "squareness_sigma_urad".into(),
             serde_json::json!({"EC0Y": sq[0], "EB0Z": sq[1], "EA0Z": sq[2]}),
         );
@@ -208,7 +217,11 @@ impl Report {
     fn print(&self) {
         print_identification(&self.id, &self.obs, self.stroke, &self.st, self.points);
         print_loo(&self.loo);
-        print_adequacy(&self.stated.adequacy);
+        print_verdict(&self.stated.adequacy);
+        println!(
+            "σ's printed are those of a model not told the shape (Legendre degree 16 per error, evidence-chosen prior, its misfit inflation × {:.2}), about these values: what no line sees keeps its prior's spread",
+            self.stated.adequacy.sigma_inflation
+        );
         if !self.id.unobservable_terms.is_empty() {
             println!(
                 "unobservable (not determined by these lines, values meaningless): {}",
