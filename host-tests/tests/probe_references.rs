@@ -173,13 +173,14 @@ fn references_serve_what_the_core_predicts_refusals_change_nothing_and_the_state
                     ReferenceState {
                         refused: 0,
                         last_innovation_nm: 0,
+                        last_refused: false,
                         ..st
                     },
                     ReferenceState {
                         last_innovation_nm: 0,
                         ..before
                     },
-                    "a refused reference changes nothing but its count"
+                    "a refused reference changes nothing but its count and the pending flag"
                 );
             }
         }

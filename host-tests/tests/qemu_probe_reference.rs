@@ -242,6 +242,7 @@ fn probe_references_over_modbus_serve_what_the_desktop_predicts_and_survive_a_re
         ReferenceState {
             refused: 0,
             last_innovation_nm: 0,
+            last_refused: false,
             ..st
         },
         ReferenceState {

@@ -25,7 +25,13 @@
 //! `ν = y − m − b(t)` with variance `S = P_bb(t) + σ_r²` (`σ_r`: the probe's
 //! noise). It is **refused** (state unchanged, refused count + 1) when
 //! `|ν| > gate_abs` or `ν² > (k·√S)²`: a chip on the gauge, a probe out of
-//! range. Otherwise `K = P(t)·Hᵀ/S` with `H = [1, 0]`,
+//! range. **A refused reading confirmed by the next one is a step, not an
+//! outlier**: when the reference before was refused and this one passes
+//! `gate_abs` and agrees with it (`(ν − ν_prev)² ≤ k²·2σ_r²`, two readings
+//! of the same error), the `k·√S` test is waived: after a speed change the
+//! model's error can move by more than `k·√S` (P knows only the time since
+//! the last reference), and without this a clean probe kept being refused
+//! while the model alone would have served better. Otherwise `K = P(t)·Hᵀ/S` with `H = [1, 0]`,
 //! `b ← b(t) + clamp(K_b·ν, ±max_step)`, `s ← s(t) + clamp(K_s·ν, ±max_step per h)`,
 //! then `b`, `s` are clamped to their bounds and
 //! `P ← (I − K·H)·P(t)` (for a scalar observation: `P_bb·σ_r²/S`,
@@ -172,6 +178,9 @@ pub struct ReferenceState {
     pub last_innovation_nm: i32,
     pub accepted: u16,
     pub refused: u16,
+    /// The last reference was refused (its innovation is
+    /// `last_innovation_nm`): the next one may confirm it.
+    pub last_refused: bool,
 }
 
 #[allow(
@@ -391,12 +400,15 @@ impl ReferenceState {
         let (b_t, s_t, [pbb, pbs, pss]) = predict(self, &p, now_ms);
         let nu = (i128::from(reading) - i128::from(model)) * 100 - i128::from(b_t);
         let nu_nm = nu.clamp(i128::from(i32::MIN), i128::from(i32::MAX)) as i32;
-        self.last_innovation_nm = nu_nm;
         let r = i128::from(p.sigma_ref_nm) * i128::from(p.sigma_ref_nm);
         let s = (i128::from(pbb) + r).max(1);
         let k2 = i128::from(p.gate_k_x10) * i128::from(p.gate_k_x10);
+        let d = i128::from(nu_nm) - i128::from(self.last_innovation_nm);
+        let confirmed = self.last_refused && d * d * 100 <= k2 * 2 * r;
         let refused = (p.gate_abs_nm > 0 && nu.abs() > i128::from(p.gate_abs_nm))
-            || (k2 > 0 && nu * nu * 100 > k2 * s);
+            || (k2 > 0 && nu * nu * 100 > k2 * s && !confirmed);
+        self.last_innovation_nm = nu_nm;
+        self.last_refused = refused;
         let innovation = to_01um(nu_nm.into());
         if refused {
             self.refused = self.refused.saturating_add(1);
@@ -438,7 +450,8 @@ impl ReferenceState {
         self.zero_nm = clamp_i128(z, MAX_TERM_NM.into()) as i32;
     }
 
-    /// Little-endian: version, flags (bit 0: `last_ms` present), bias, rate,
+    /// Little-endian: version, flags (bit 0: `last_ms` present, bit 1:
+    /// `last_refused`), bias, rate,
     /// zero, last innovation (i32), P (3 × i64), last_ms (u64), accepted,
     /// refused (u16).
     #[allow(
@@ -448,7 +461,7 @@ impl ReferenceState {
     pub fn to_bytes(&self) -> [u8; STATE_BYTES] {
         let mut o = [0u8; STATE_BYTES];
         o[0] = STATE_VERSION;
-        o[1] = u8::from(self.last_ms.is_some());
+        o[1] = u8::from(self.last_ms.is_some()) | (u8::from(self.last_refused) << 1);
         o[2..6].copy_from_slice(&self.bias_nm.to_le_bytes());
         o[6..10].copy_from_slice(&self.rate_nm_h.to_le_bytes());
         o[10..14].copy_from_slice(&self.zero_nm.to_le_bytes());
@@ -484,7 +497,7 @@ impl ReferenceState {
             u64::from_le_bytes(a)
         };
         let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
-        if b[1] > 1 || (b[1] == 0 && u64_at(42) != 0) || b[54..58].iter().any(|&x| x != 0) {
+        if b[1] > 3 || (b[1] & 1 == 0 && u64_at(42) != 0) || b[54..58].iter().any(|&x| x != 0) {
             return Err(StateError::OutOfBounds);
         }
         let st = ReferenceState {
@@ -493,9 +506,10 @@ impl ReferenceState {
             zero_nm: i32_at(10),
             last_innovation_nm: i32_at(14),
             p: [u64_at(18) as i64, u64_at(26) as i64, u64_at(34) as i64],
-            last_ms: (b[1] == 1).then(|| u64_at(42)),
+            last_ms: (b[1] & 1 == 1).then(|| u64_at(42)),
             accepted: u16_at(50),
             refused: u16_at(52),
+            last_refused: b[1] & 2 == 2,
         };
         let term_ok = |v: i32| (-MAX_TERM_NM..=MAX_TERM_NM).contains(&v);
         let var_ok = |v: i64| (0..=MAX_VAR).contains(&v);
@@ -675,6 +689,7 @@ mod tests {
         let unchanged = |st: &ReferenceState| ReferenceState {
             refused: 0,
             last_innovation_nm: before.last_innovation_nm,
+            last_refused: false,
             ..*st
         };
         assert_eq!(unchanged(&st), before);
