@@ -19,7 +19,9 @@
 # phases, with the number of references each schedule took; on ch3/ch5,
 # references when the board asks (`--reference-when-asked`) against no
 # references, hourly (six phases) and the clock schedule at the same count
-# (six phases), each with its count (issue 51).
+# (six phases), each with its count (issue 51), and on the board's very
+# schedule the rule's information floors (hold exact, hold the noisy reading,
+# interval mean): how much of the gap is the rule and how much the model.
 # Usage: scripts/bench-probe-channels.sh [--json]
 set -euo pipefail
 cd "$(dirname "$0")/.."

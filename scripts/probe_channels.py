@@ -160,6 +160,31 @@ def scored(dump, ch, lo, hi):
     return mae((meas[i], served[i]) for i in idx), refs
 
 
+def asked_floors(dump, ch, lo, hi):
+    """The same schedule as the board's rule (the rows where it accepted a
+    reference), served without the rule: the model plus the error at the
+    reference held until the next, noise-free (hold exact) and as the probe
+    read it (hold reading, what a bias-only rule of gain 1 serves), and the
+    non-causal mean error of each interval; MAE in the block each."""
+    n = len(dump)
+    meas = [num(r[f"{ch}_measured"]) for r in dump]
+    model = [float(r[f"{ch}_model"]) for r in dump]
+    reading = [num(r[f"{ch}_reference"]) for r in dump]
+    refs = [i for i, r in enumerate(dump) if r.get(f"{ch}_accepted") == "1" and meas[i] is not None]
+    exact, held, mean = list(model), list(model), list(model)
+    bounds = [0] + refs + [n]
+    for a, b in zip(bounds, bounds[1:]):
+        seg = [meas[i] - model[i] for i in range(a, b) if meas[i] is not None]
+        avg = sum(seg) / len(seg) if seg else 0.0
+        for i in range(a, b):
+            mean[i] = model[i] + avg
+            if a in refs:
+                exact[i] = model[i] + meas[a] - model[a]
+                held[i] = model[i] + reading[a] - model[a]
+    idx = [i for i in block_rows(dump, lo, hi) if meas[i] is not None]
+    return [mae((meas[i], v[i]) for i in idx) for v in (exact, held, mean)]
+
+
 def equal_count(d):
     """Per channel and block: the clock interval (s) giving the block as many
     references as the board asked for in it (block length / count)."""
@@ -201,6 +226,7 @@ def when_asked(d):
             h_n = sum(n for _, n in h) / 6
             e_mae = sum(v for v, _ in eq) / 6
             target = {"dch3_um": 1.2, "dch5_um": 0.8}[ch]
+            f_exact, f_held, f_mean = asked_floors(asked, ch, lo, hi)
             out.append({
                 "channel": ch, "block": blk,
                 "none_mae_um": round(none, 3), "none_references": 0,
@@ -218,6 +244,9 @@ def when_asked(d):
                 "equal_count_references_by_phase": [n for _, n in eq],
                 "target_asked_mae_um": target,
                 "asked_meets_target": a_mae <= target,
+                "asked_floor_hold_exact_um": round(f_exact, 3),
+                "asked_floor_hold_reading_um": round(f_held, 3),
+                "asked_floor_interval_mean_um": round(f_mean, 3),
                 "asked_no_more_references_than_hourly": a_n <= h_n,
                 "never_worse_than_none": all(v <= none for v in (a_mae, b_mae, h_mae, e_mae)),
             })
@@ -327,14 +356,15 @@ def main():
     print(f"When the board asks ({rule['settle_s'] // 60} min after a change of >= {rule['speed_step_rpm']} rpm, "
           f"at most {rule['max_interval_s'] // 60} min apart, the PLC probing at the next sample); MAE um (references in the block):")
     print()
-    print("| channel | block | none | hourly, 6 phases | when asked | when asked, 5 %:+50 (refused) | clock at the same count, 6 phases (interval) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| channel | block | none | hourly, 6 phases | when asked | when asked, 5 %:+50 (refused) | clock at the same count, 6 phases (interval) | same schedule: hold exact / hold reading / interval mean |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in asked:
         print(
             f"| {r['channel']} | {r['block']} | {r['none_mae_um']:.2f} (0) | {r['hourly_phase_mean_mae_um']:.2f} ({r['hourly_references_phase_mean']:.1f}) | "
             f"{r['asked_mae_um']:.2f} ({r['asked_references']}) | {r['asked_5pct_50um_mae_um']:.2f} ({r['asked_5pct_50um_references']}; "
             f"{r['asked_5pct_50um_corrupted_refused_whole_run']}) | {r['equal_count_phase_mean_mae_um']:.2f} "
-            f"({sum(r['equal_count_references_by_phase']) / 6:.1f}; {r['equal_count_every_s'] / 60:.0f} min) |"
+            f"({sum(r['equal_count_references_by_phase']) / 6:.1f}; {r['equal_count_every_s'] / 60:.0f} min) | "
+            f"{r['asked_floor_hold_exact_um']:.2f} / {r['asked_floor_hold_reading_um']:.2f} / {r['asked_floor_interval_mean_um']:.2f} |"
         )
     print()
     print("| channel | re-zero at 60 %, scored 60-100 %: RMS with the model / raw RMS about the re-zero | never above raw |")
