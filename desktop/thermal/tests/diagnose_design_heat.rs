@@ -145,3 +145,61 @@ fn the_calibration_moves_each_bearing_s_heat_on_its_own() {
         ratio(&cal.machine)
     );
 }
+
+/// Issue 52: a bearing heat is judged by the design heat errors within
+/// tolerance that best reproduce it over the speeds the runs reach — the
+/// viscous term (f0, ∝ n^(5/3), its own calibration knob on the five-axis
+/// head's rear bearing) and the rest of that node's heat (load term ∝ n,
+/// motor), each inside its own tolerance — and barred only when they leave
+/// no more of it than that tolerance. A steep heat (∝ n^1.7) of 70 % of
+/// the viscous term at the top speed is a candidate: f0 ×1.25 and the
+/// rest's n-law cannot follow it. The same law at 15 % of the viscous
+/// term, and a shallow heat (∝ n^1.1) of 35 % of it that the load term
+/// takes, are design errors the null may have: barred.
+#[test]
+fn a_steep_heat_is_measured_against_the_viscous_term_it_mimics() {
+    let m = Machine::load(&examples().join("machines/five-axis-20.toml")).unwrap();
+    let ps = prepare_all(&m, &runs(&m, &[], 71), &Options::default()).unwrap();
+    let top = ps
+        .iter()
+        .flat_map(|p| p.inputs.rpm.iter().copied())
+        .fold(0.0f64, f64::max);
+    let (mut q, n_max) = (vec![0.0; m.n], m.spec.n_max_rpm);
+    m.heat_nominal(top, &mut q);
+    let rear = m.names.iter().position(|n| n == "rear_bearing").unwrap();
+    // the design's viscous heat of the rear bearing at that speed
+    let mut viscous = m.spec.clone();
+    for b in viscous.bearings.iter_mut() {
+        b.f1 = 0.0;
+    }
+    for s in viscous.sources.iter_mut() {
+        s.w_at_nmax = 0.0;
+    }
+    viscous.motor_loss_frac = 0.0;
+    let mv = Machine::compile(viscous).unwrap();
+    let mut qv = vec![0.0; m.n];
+    mv.heat_nominal(top, &mut qv);
+    let at = |share: f64, p: f64| Effect::BearingNonlinear {
+        k_w: share * qv[rear] / (top / n_max).powf(p),
+        p,
+        node: Some("rear_bearing".into()),
+    };
+    // the viscous term is part of the node's heat only (load term, motor)
+    assert!(qv[rear] < 0.8 * q[rear], "{} of {}", qv[rear], q[rear]);
+    // steep, 70 % of the viscous term: f0 ×1.25 and the rest's n-law
+    // within its tolerance leave too much of it
+    assert_eq!(within_tolerance(&m, &ps, &at(0.7, 1.7)), None);
+    // steep but small: f0 within its tolerance reproduces it
+    let why = within_tolerance(&m, &ps, &at(0.15, 1.7)).unwrap_or_default();
+    assert!(why.contains("heat tolerance"), "15 % not barred: {why:?}");
+    assert!(why.contains("rear_bearing viscous term (f0)"), "{why}");
+    // shallow, 35 % of the viscous term: the load term takes it
+    let why = within_tolerance(&m, &ps, &at(0.35, 1.1)).unwrap_or_default();
+    assert!(
+        why.contains("heat tolerance"),
+        "shallow not barred: {why:?}"
+    );
+    // a heat no design law follows (∝ n^4), as large at the top speed as
+    // the barred shallow one: it leaves too much, a candidate
+    assert_eq!(within_tolerance(&m, &ps, &at(0.35, 4.0)), None);
+}
