@@ -5,8 +5,8 @@ use anyhow::Result;
 use serde_json::{json, Value};
 
 use super::gate;
+use crate::diagnose::calibration::Freedom;
 use crate::diagnose::calibration::{design_heat, design_mimic};
-use crate::diagnose::calibration::{Freedom, Knob};
 use crate::diagnose::effects::{params_of, Evaluator, FitResult, Stats};
 use crate::diagnose::runs::Kind;
 use crate::diagnose::signal::{corr, first_order, r4, rms_of};
@@ -180,8 +180,6 @@ pub(crate) struct Judge<'a> {
     pub(crate) opt: &'a Options,
     /// The calibration's freedom (None: the file taken as exact).
     pub(crate) freedom: Option<&'a Freedom>,
-    /// The calibration's knobs (the freedom's θ is per knob, this order).
-    pub(crate) knobs: &'a [Knob],
 }
 
 impl Judge<'_> {
@@ -233,10 +231,9 @@ impl Judge<'_> {
     /// tolerance: a node's heat (`design_heat.rs`), the film coefficients
     /// or levers (`design_mimic.rs`); only against a calibrated file.
     pub(crate) fn barred(&self, f: &Finding) -> Option<String> {
-        let fr = self.freedom?;
-        let used: Vec<(&Knob, f64)> = self.knobs.iter().zip(fr.theta().iter().copied()).collect();
+        self.freedom?;
         f.effects.iter().find_map(|e| {
-            design_heat::within_left_tolerance(self.ev.m, self.ev.runs, e, &used)
+            design_heat::within_tolerance(self.ev.m, self.ev.runs, e)
                 .or_else(|| design_mimic::within_tolerance(self.ev.m, e))
         })
     }
