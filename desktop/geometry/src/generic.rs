@@ -495,22 +495,22 @@ impl Generic {
     }
 }
 
-/// The combinations of the class's errors no line sees (the plan's null
-/// directions for these lines, `plan::null_directions`' tolerance), each
-/// in words ("EAZ − ECZ (with EBZ)") with the errors in it.
-pub fn null_combinations(
+/// The lines' design matrix for `cols` (one row per point; straightness
+/// and angle terms by their Legendre basis, squareness, no scale), each
+/// line's rows centred (its zero is free), at least as many rows as
+/// columns (zero rows pad a short plan).
+pub(crate) fn centred_design(
     st: &Structure,
     lines: &[LineObs],
     stroke: [f64; 3],
-) -> Vec<(String, Vec<String>)> {
-    let cols: Vec<SCol> = columns(0);
+    cols: &[SCol],
+) -> DMatrix<f64> {
     let n = cols.len();
     let m: usize = lines.iter().map(|l| l.points.len()).sum();
     let mut a = DMatrix::zeros(m.max(n), n);
     let mut r = 0;
     for l in lines {
-        let d = Vector3::from(l.direction);
-        let r0 = r;
+        let (d, r0) = (Vector3::from(l.direction), r);
         for p in &l.points {
             let s = sensitivity(st, p.pos_mm, l.tool_offset_mm);
             for (ci, c) in cols.iter().enumerate() {
@@ -532,6 +532,20 @@ pub fn null_combinations(
             c.add_scalar_mut(-mean);
         }
     }
+    a
+}
+
+/// The combinations of the class's errors no line sees (the plan's null
+/// directions for these lines, `plan::null_directions`' tolerance), each
+/// in words ("EAZ − ECZ (with EBZ)") with the errors in it.
+pub fn null_combinations(
+    st: &Structure,
+    lines: &[LineObs],
+    stroke: [f64; 3],
+) -> Vec<(String, Vec<String>)> {
+    let cols: Vec<SCol> = columns(0);
+    let n = cols.len();
+    let mut a = centred_design(st, lines, stroke, &cols);
     for j in 0..n {
         let nn = a.column(j).norm();
         if nn > 0.0 {

@@ -12,13 +12,12 @@
 //! multiplies σ as it does for the generic model's printed σ's.
 
 use anyhow::Result;
-use nalgebra::{DMatrix, Vector3};
 
 use super::adequacy::StatedNoise;
 use super::errors::{GeometricErrors, Term};
-use super::generic::{basis, identify_generic, Generic, DEGREE};
+use super::generic::{centred_design, identify_generic, Generic, DEGREE};
 use super::identify::LineObs;
-use super::kinematics::{sensitivity, Structure};
+use super::kinematics::Structure;
 use super::plan::NULL_TOLERANCE;
 use super::smooth::{to_errors, SCol};
 
@@ -113,32 +112,7 @@ pub fn null_errors(
     }
     cols.extend((0..3).map(SCol::Squareness));
     let n = cols.len();
-    let m: usize = lines.iter().map(|l| l.points.len()).sum();
-    let mut a = DMatrix::zeros(m.max(n), n);
-    let mut r = 0;
-    for l in lines {
-        let (d, r0) = (Vector3::from(l.direction), r);
-        for p in &l.points {
-            let s = sensitivity(st, p.pos_mm, l.tool_offset_mm);
-            for (ci, c) in cols.iter().enumerate() {
-                a[(r, ci)] = match *c {
-                    SCol::Term { term, j } => {
-                        let k = term.axis.index();
-                        d.dot(&s.terms[k][term.component.index()])
-                            * basis(term.is_straightness(), j, p.pos_mm[k] / stroke[k])
-                    }
-                    SCol::Squareness(i) => d.dot(&s.squareness[i]),
-                    SCol::Scale(_) => 0.0,
-                };
-            }
-            r += 1;
-        }
-        for ci in 0..n {
-            let mut c = a.view_mut((r0, ci), (r - r0, 1));
-            let mean = c.mean();
-            c.add_scalar_mut(-mean);
-        }
-    }
+    let mut a = centred_design(st, lines, stroke, &cols);
     let norms: Vec<f64> = (0..n).map(|j| a.column(j).norm()).collect();
     for (j, nn) in norms.iter().enumerate() {
         if *nn > 0.0 {
