@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::columns::{Col, RotaryOptions};
 pub use super::identify::JointLinear;
-use super::identify::{design, solve, RotaryIdentification};
+use super::identify::{design, solve, Design, RotaryIdentification};
 use super::model::Linear;
 use crate::errors::GeometricErrors;
 use crate::identify::{Identification, LineObs};
@@ -71,8 +71,33 @@ fn line_rows(p: &LinearPrior) -> (Vec<Vec<f64>>, Vec<f64>) {
     (rows, rhs)
 }
 
-fn rms(v: &[f64]) -> f64 {
+pub(super) fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// The R-test design with the linear model `lin` as known input, its plain
+/// fit (rank, residual, conditioning) and σ_R: the plain residual RMS
+/// scaled by rows over the degrees of freedom. Both joint fits start here.
+pub(super) fn design_and_noise(
+    files: &[RTestFile],
+    lin: Linear,
+    o: &RotaryOptions,
+) -> Result<(Design, RotaryIdentification, f64)> {
+    let d = design(files, Some(lin), o)?;
+    let mr = d.b.len();
+    let plain = solve(
+        files,
+        o,
+        &d.cols,
+        d.a.clone(),
+        d.b.clone(),
+        &d.reference,
+        mr,
+        1.0,
+    )?;
+    let dof = mr.saturating_sub(plain.rank).max(1) as f64;
+    let sigma_r = plain.residual_rms_um * (mr as f64 / dof).sqrt();
+    Ok((d, plain, sigma_r))
 }
 
 /// Rotary errors and the corrected linear model from the R-test files and
@@ -89,21 +114,9 @@ pub fn identify_rotary_joint(
         structure: prior.structure,
         errors: &idl.errors,
     };
-    let d = design(files, Some(lin), o)?;
-    let mr = d.b.len();
     // σ_R from the fit with the linear model as known input
-    let plain = solve(
-        files,
-        o,
-        &d.cols,
-        d.a.clone(),
-        d.b.clone(),
-        &d.reference,
-        mr,
-        1.0,
-    )?;
-    let dof_r = mr.saturating_sub(plain.rank).max(1) as f64;
-    let sigma_r = plain.residual_rms_um * (mr as f64 / dof_r).sqrt();
+    let (d, plain, sigma_r) = design_and_noise(files, lin, o)?;
+    let mr = d.b.len();
     let (lrows, lrhs) = line_rows(prior);
     let ml = lrows.len();
     let dof_l = ml.saturating_sub(prior.lines.len() + idl.rank).max(1) as f64;

@@ -27,7 +27,8 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector, SymmetricEigen, Vector3};
 
 use super::columns::{Col, RotaryOptions};
-use super::identify::{design, solve, Design, JointLinear, RotaryIdentification};
+use super::identify::{solve, Design, JointLinear, RotaryIdentification};
+use super::joint::{design_and_noise, rms};
 use super::model::Linear;
 use crate::errors::GeometricErrors;
 use crate::generic::Generic;
@@ -42,10 +43,6 @@ pub struct GenericPrior<'a> {
     pub structure: &'a Structure,
     pub generic: &'a Generic,
     pub lines: &'a [LineObs],
-}
-
-fn rms(v: &[f64]) -> f64 {
-    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
 /// L with Σ = L Lᵀ over the modes of Σ above 1e-12 of the largest.
@@ -128,20 +125,9 @@ pub fn identify_rotary_joint_generic(
         structure: p.structure,
         errors: &g.fit.errors,
     };
-    let d = design(files, Some(lin), o)?;
+    let (d, plain, sigma_r0) = design_and_noise(files, lin, o)?;
     let mr = d.b.len();
-    let plain = solve(
-        files,
-        o,
-        &d.cols,
-        d.a.clone(),
-        d.b.clone(),
-        &d.reference,
-        mr,
-        1.0,
-    )?;
     let dof = |rank: usize| mr.saturating_sub(rank).max(1) as f64;
-    let sigma_r0 = plain.residual_rms_um * (mr as f64 / dof(plain.rank)).sqrt();
     if !(sigma_r0 > 0.0) {
         bail!("joint fit: the R-test files fit without residual (noise-free data); take the linear model as known input (identify-rotary --linear-fixed)");
     }
