@@ -7,6 +7,7 @@ pub mod mock_flash;
 pub mod modbus;
 pub mod onewire_emu;
 pub mod qemu;
+pub mod rotary_drift;
 
 pub use keys::TEST_UNLOCK_KEY;
 pub use modbus::commission;

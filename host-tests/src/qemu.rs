@@ -205,6 +205,29 @@ pub fn modbus_master_output(args: &[&str]) -> std::process::Output {
         .expect("python3")
 }
 
+/// The desktop CLI the QEMU tests compare the board with: `$THERMOCOMP_TCOMP`,
+/// else `tcomp` of this test's own profile in the target directory
+/// (`target/debug/tcomp`: `cargo test`'s build of the tcomp crate, which
+/// `scripts/test.sh` makes first, or `cargo build -p tcomp`).
+pub fn tcomp_exe() -> PathBuf {
+    if let Some(p) = std::env::var_os("THERMOCOMP_TCOMP") {
+        return PathBuf::from(p);
+    }
+    // this test binary is target/<profile>/deps/<name>-<hash>
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let profile_dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>");
+    let tcomp = profile_dir.join(format!("tcomp{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        tcomp.exists(),
+        "{} not built: run `cargo build -p tcomp` (scripts/test.sh builds it), or set THERMOCOMP_TCOMP",
+        tcomp.display()
+    );
+    tcomp
+}
+
 /// One request through [`modbus_master_output`]; its JSON answer.
 pub fn modbus_master(args: &[&str]) -> serde_json::Value {
     let out = modbus_master_output(args);

@@ -15,56 +15,11 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use host_tests::qemu::{modbus_master as master, BenchBoard};
-use tcomp_geometry::board::{quantisation_report, quantize, BoardOptions};
-use tcomp_geometry::board5::{predict5, FiveAxisOptions};
-use tcomp_geometry::rotary::board::{add_drift_sensors, rotary_section};
-use tcomp_geometry::rotary::check::{linear_case, CASE_STROKE};
-use tcomp_geometry::rotary::identify::{identify_rotary, RotaryOptions};
-use tcomp_geometry::rotary::sim::{
-    random_rotary, simulate, warmup_temps, CycleSetup, RPlan, RotarySizes, SENSORS,
-};
-use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Linear, Pose};
-use tcomp_geometry::volumetric::build;
-use tcomp_numerics::rng::Rng;
-use thermocomp_core::five_axis::{fstatus, FIVE_AXIS_RTEST_LOCATION};
+use host_tests::rotary_drift::{export, identify, poses, trace};
+use tcomp_geometry::board5::predict5;
+use tcomp_geometry::rotary::{nominal_chain, tool_tip_error, Pose};
+use thermocomp_core::five_axis::fstatus;
 use thermocomp_core::volumetric::vstatus;
-
-const CYCLES: usize = 18;
-/// Hours after the warm-up's end: the held-out cool-down states.
-const COOL_H: [f64; 5] = [0.1, 0.3, 0.6, 1.0, 2.0];
-
-/// The held-out states on T01..T03 (ctable, trunnion, bed), 80 rows each.
-fn trace(path: &std::path::Path) {
-    let end = CYCLES as f64 * CycleSetup::default().cycle_period_s;
-    let mut csv = String::from("time_s,spindle_rpm,T01,T02,T03\n");
-    for (k, h) in COOL_H.iter().enumerate() {
-        let t = warmup_temps(end + h * 3600.0, Some(end));
-        for i in 0..80 {
-            csv += &format!("{},6000", (80 * k + i) * 15);
-            for v in &t {
-                csv += &format!(",{v:.4}");
-            }
-            csv += "\n";
-        }
-    }
-    std::fs::write(path, csv).unwrap();
-}
-
-/// 20 poses: x, y, z, tool (µm), A, C (0.001°).
-fn poses() -> Vec<[i32; 6]> {
-    (0..20i32)
-        .map(|i| {
-            [
-                100_000 + 31_000 * i,
-                600_000 - 23_000 * i,
-                80_000 + 21_000 * i,
-                60_000 + 7_000 * i,
-                -90_000 + 9_473 * i,
-                (17_321 * i + 5_000) % 360_000,
-            ]
-        })
-        .collect()
-}
 
 #[test]
 #[ignore = "needs the QEMU firmware, qemu-system-arm and pymodbus: scripts/test.sh"]
@@ -74,58 +29,11 @@ fn an_exported_drifting_rotary_model_is_served_bit_for_bit() {
     let (t, m) = (dir.join("trace.csv"), dir.join("model.img"));
     trace(&t);
 
-    // The machine, its lines and warm-up R-test cycles, identified with drift.
-    let mut rng = Rng::new(331);
-    let (st, lin_truth, lin_id) = linear_case(CASE_STROKE, 0.5, &mut rng).unwrap();
-    let plan = RPlan::default_plan();
-    let truth = random_rotary(&plan, &RotarySizes::default(), true, &mut rng);
-    let lt = Linear {
-        structure: &st,
-        errors: &lin_truth,
-    };
-    let li = Linear {
-        structure: &st,
-        errors: &lin_id,
-    };
-    let setup = CycleSetup {
-        thermal_cycles: CYCLES,
-        ..Default::default()
-    };
-    let files = simulate(&truth, Some(lt), &plan, &setup, &mut rng).unwrap();
-    let names: Vec<String> = SENSORS.iter().map(|s| s.0.to_string()).collect();
-    let o = RotaryOptions {
-        sensors: names.clone(),
-        ..Default::default()
-    };
-    let id = identify_rotary(&files, Some(li), &o).unwrap();
-    assert!(id.model.unobservable.is_empty() && id.model.drift.len() == 3);
-
-    // The export: the drift sensors on channels 0, 1, 2 (T01..T03).
-    let mut poly = build(&st, CASE_STROKE, &lin_id, None).unwrap();
-    add_drift_sensors(&mut poly, &id.model).unwrap();
-    assert_eq!(poly.sensors, names);
-    let opts = BoardOptions {
-        channels: vec![0, 1, 2],
-        slots: [0, 1, 2],
-        origin_mm: [0.0; 3],
-        tool_max_mm: 500.0,
-        max_correction_um: 500.0,
-    };
-    let v = quantize(&poly, &opts).unwrap();
-    let report = quantisation_report(&poly, &v, &opts);
-    let five_opts = FiveAxisOptions {
-        max_correction_um: 500.0,
-        ..Default::default()
-    };
-    let five = rotary_section(&id.model, &v, &poly.sensors, &five_opts, false).unwrap();
-    assert_eq!(
-        (five.0.flags, five.0.n_sensors),
-        (FIVE_AXIS_RTEST_LOCATION, 3)
-    );
-    assert!(five.1.max_error_um <= five.1.bound_um, "{:?}", five.1);
-    let float = thermocomp_core::float::demo_model(1);
-    tcomp_model::export::export_five(&float, Some((v, report)), Some(five), &m, None).unwrap();
-    let model = thermocomp_core::Model::parse(&std::fs::read(&m).unwrap()).unwrap();
+    // The machine, its lines and warm-up R-test cycles, identified with
+    // drift; the export with the drift sensors on channels 0, 1, 2 (T01..T03).
+    let case = identify();
+    let (truth, names, lt) = (&case.truth, &case.sensors, case.linear_truth());
+    let model = export(&case, &m);
     let refs: Vec<Option<i32>> = (model.volumetric.as_ref().unwrap().sensors.iter())
         .map(|s| Some(s.sensor.ref_temp))
         .collect();
@@ -194,7 +102,7 @@ fn an_exported_drifting_rotary_model_is_served_bit_for_bit() {
                 tool_mm: [0.0, 0.0, f64::from(at[3]) / 1e3],
             };
             let rot = nominal_chain(truth.pivot_a_mm, truth.offset_c_mm, ad, cd).rotation;
-            let e = rot * tool_tip_error(&truth, &loc, Some(lt), &pose);
+            let e = rot * tool_tip_error(truth, &loc, Some(lt), &pose);
             let frozen = predict5(&model, &positions, at[3], [at[4], at[5]], &refs).unwrap();
             for d in 0..3 {
                 before += e[d] * e[d];
