@@ -123,6 +123,27 @@ pub(crate) struct StoredDesign {
     pub cols: Vec<Col>,
 }
 
+impl StoredDesign {
+    /// The problem in units of the stated noise `noise_um` of one R-test
+    /// reading: R-test rows at that σ, the lines of a joint fit (averaged
+    /// runs) at σ / √2, prior rows as they are (in units of their own σ).
+    pub(crate) fn at_noise(&self, noise_um: f64) -> (DMatrix<f64>, DVector<f64>) {
+        let (mut a, mut b) = (self.a.clone(), self.b.clone());
+        for i in 0..a.nrows() {
+            let f = if i < self.rtest_rows {
+                1.0 / (self.weight_r * noise_um)
+            } else if self.prior_rows {
+                1.0
+            } else {
+                std::f64::consts::SQRT_2 / (self.weight_l * noise_um)
+            };
+            a.row_mut(i).scale_mut(f);
+            b[i] *= f;
+        }
+        (a, b)
+    }
+}
+
 impl RotaryIdentification {
     /// The stated adequacy test (`adequacy::assess`, each file held out in
     /// turn) at the stated noise of one R-test reading; the lines of a
@@ -133,20 +154,7 @@ impl RotaryIdentification {
         let Some(d) = self.design.as_ref() else {
             bail!("internal: identification without its design");
         };
-        let (m, _) = d.a.shape();
-        let mut a = d.a.clone();
-        let mut b = d.b.clone();
-        for i in 0..m {
-            let f = if i < d.rtest_rows {
-                1.0 / (d.weight_r * noise.um)
-            } else if d.prior_rows {
-                1.0
-            } else {
-                std::f64::consts::SQRT_2 / (d.weight_l * noise.um)
-            };
-            a.row_mut(i).scale_mut(f);
-            b[i] *= f;
-        }
+        let (a, b) = d.at_noise(noise.um);
         let p = crate::adequacy::Problem {
             a: &a,
             b: &b,

@@ -9,6 +9,8 @@
 //!   known input (`identify_tests`: its tests); `columns`: the fit's
 //!   unknowns and what each does to a reading; `unobservable`: what the
 //!   files cannot see, and why;
+//! * `orders`: the harmonic order of each axis's error motions chosen by
+//!   the evidence (`--order-a auto`);
 //! * `spindle`: the spindle's direction from several tool lengths, or
 //!   why it is undetermined (`spindle_tests`);
 //! * `joint`: the same fit with the 14 lines as data; `joint_generic`:
@@ -32,6 +34,7 @@ pub mod identify;
 pub mod joint;
 pub mod joint_generic;
 pub mod model;
+pub mod orders;
 pub mod sim;
 pub mod spindle;
 mod unobservable;
