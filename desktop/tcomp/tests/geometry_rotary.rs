@@ -78,6 +78,15 @@ fn simulate_identify_and_check_the_rotary_axes() {
         "{j}"
     );
     assert_eq!(v["unobservable_terms"].as_array().unwrap().len(), 0);
+    // the orders by the evidence (default `auto`): the simulated machine's
+    // own, harmonics 1–3 on C and 1–2 on A, each candidate's evidence listed
+    let orders = v["orders"].as_array().unwrap();
+    for (axis, truth) in [("A", 2), ("C", 3)] {
+        let o = orders.iter().find(|o| o["axis"] == axis).unwrap();
+        assert_eq!(o["chosen_by"], "evidence", "{o}");
+        assert_eq!(o["order"], truth, "{o}");
+        assert_eq!(o["candidates"].as_array().unwrap().len(), 7, "{o}");
+    }
     for (name, e) in v["recovery"]["location_error"].as_object().unwrap() {
         let tol = if name.starts_with('X') || name.starts_with('Y') || name.starts_with('Z') {
             1.5

@@ -13,6 +13,7 @@ use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::rotary::bias::{calibration_poses, optimise_rotary_bias, simulate_state};
 use tcomp_geometry::rotary::check::{compare, grid, linear_case, Machine5, CASE_STROKE};
 use tcomp_geometry::rotary::identify::{identify_rotary, RotaryIdentification, RotaryOptions};
+use tcomp_geometry::rotary::orders::{choose_orders, Order, OrderChoice};
 use tcomp_geometry::rotary::sim::{random_rotary, simulate, CycleSetup, RPlan, RotarySizes};
 use tcomp_geometry::rotary::{Linear, RotaryModel};
 use tcomp_geometry::rtest::RTestFile;
@@ -95,10 +96,13 @@ pub struct IdentifyRotaryArgs {
     /// (errors JSON, for `geometry table` and the export).
     #[arg(long)]
     pub linear_out: Option<PathBuf>,
-    #[arg(long, default_value_t = 3)]
-    pub order_c: usize,
-    #[arg(long, default_value_t = 2)]
-    pub order_a: usize,
+    /// Harmonics of C's error motions: `auto` (chosen by the evidence of
+    /// the fit at the stated noise, orders 0–6 tried) or a number 0–6.
+    #[arg(long, default_value = "auto")]
+    pub order_c: Order,
+    /// Harmonics of A's error motions: `auto` or a number 0–6.
+    #[arg(long, default_value = "auto")]
+    pub order_a: Order,
     /// Fit each location error's drift with these sensors (comma-separated
     /// names without T_, or `all` for every T_ column of the files).
     #[arg(long)]
@@ -343,15 +347,9 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
     }
     let noise = tcomp_geometry::adequacy::StatedNoise::new(a.noise_um)?;
     let lin = linear_input(&a.lines, a.accept_inadequate, noise)?;
-    let o = RotaryOptions {
-        order_c: a.order_c,
-        order_a: a.order_a,
-        sensors,
-    };
     if a.linear_out.is_some() && (a.linear_fixed || !lin.has_lines()) {
         bail!("--linear-out needs the line files as --lines and no --linear-fixed (only the joint fit changes the linear model)");
     }
-    let mut id = fit_rotary(&files, &lin, &o, a.linear_fixed, a.linear_out.as_ref())?;
     // A linear model taken as known input (an errors JSON, --linear-fixed)
     // is not exact: its own error at the R-test positions (a few tenths of
     // a µm from 14 lines at σ 0.5 µm, docs/geometry.md) adds to the
@@ -366,6 +364,14 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
     } else {
         noise
     };
+    let base = RotaryOptions {
+        sensors,
+        ..Default::default()
+    };
+    // the orders (`auto`: by the evidence at the noise the adequacy test states)
+    let trial = |o: &RotaryOptions| fit_rotary(&files, &lin, o, a.linear_fixed, None);
+    let (o, orders) = choose_orders(trial, &base, a.order_c, a.order_a, noise)?;
+    let mut id = fit_rotary(&files, &lin, &o, a.linear_fixed, a.linear_out.as_ref())?;
     id.assess(noise)?;
     let adq = id
         .adequacy
@@ -390,12 +396,15 @@ pub fn identify_rotary_cmd(a: IdentifyRotaryArgs) -> Result<()> {
     }
     if a.json {
         let mut v = serde_json::to_value(&id)?;
-        if let (Some(t), Some(o)) = (&truth, v.as_object_mut()) {
-            o.insert("recovery".into(), recovery_json(&id, t));
+        if let Some(o) = v.as_object_mut() {
+            o.insert("orders".into(), serde_json::to_value(&orders)?);
+            if let Some(t) = &truth {
+                o.insert("recovery".into(), recovery_json(&id, t));
+            }
         }
         println!("{v}");
     } else {
-        print_identification(&id, truth.as_ref());
+        print_identification(&id, truth.as_ref(), &orders);
         print_adequacy(&adq);
     }
     if let Some(w) = inadequate_warning(&adq, "rotary model").filter(|_| a.accept_inadequate) {
@@ -459,12 +468,17 @@ fn spindle_recovery(id: &RotaryIdentification, t: &RotaryModel) -> Option<[f64; 
     ])
 }
 
-fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) {
+fn print_identification(
+    id: &RotaryIdentification,
+    truth: Option<&RotaryModel>,
+    orders: &[OrderChoice],
+) {
     println!(
         "{} files, {} nest positions, residual RMS {:.3} µm",
         id.files, id.nest_positions, id.residual_rms_um
     );
     print_conditioning(id);
+    print_orders(orders);
     if let Some(j) = id.linear.as_ref().filter(|j| j.linear_model == "generic") {
         println!(
             "  linear axes: the lines' generic model (no shape assumed) fitted with the R-test files, its posterior as prior ({} modes; condition number of the whole {:.0}): noise {:.3} µm (lines), {:.3} µm (R-test); its prediction at the R-test readings moved {:.3} µm RMS; lines' residual {:.3} → {:.3} µm",
@@ -510,6 +524,29 @@ fn print_identification(id: &RotaryIdentification, truth: Option<&RotaryModel>) 
             (Some(v), Some(s)) => println!("    {:32} {v:8.3} ± {s:.3} {}", t.name, t.unit),
             _ => println!("    {:32} unobservable", t.name),
         }
+    }
+}
+
+/// Each axis's harmonic order and, when the evidence chose it, the ln
+/// evidence of every candidate relative to order 0.
+fn print_orders(orders: &[OrderChoice]) {
+    for c in orders {
+        if c.candidates.is_empty() {
+            println!("  harmonic order of {}: {} (given)", c.axis, c.order);
+            continue;
+        }
+        let ev: Vec<String> = (c.candidates.iter())
+            .map(|k| {
+                let mark = if k.order == c.order { "*" } else { "" };
+                format!("{} {:.1}{mark}", k.order, k.ln_evidence)
+            })
+            .collect();
+        println!(
+            "  harmonic order of {}: {} by the evidence (ln evidence vs order 0 at the stated noise: {})",
+            c.axis,
+            c.order,
+            ev.join(", ")
+        );
     }
 }
 
