@@ -144,6 +144,8 @@ struct Posterior {
     cols: Vec<SCol>,
     x: DVector<f64>,
     cov: DMatrix<f64>,
+    /// The prior variance of each column at the evidence's choice.
+    pv: Vec<f64>,
     stroke: [f64; 3],
 }
 
@@ -198,6 +200,7 @@ pub fn identify_generic(st: &Structure, lines: &[LineObs], stroke: [f64; 3]) -> 
         x: solved.x.clone(),
         cov: solved.cov.clone(),
         cols,
+        pv: pv.clone(),
         stroke,
     };
     let (sd, ratio) = post.term_figures(&pv);
@@ -336,6 +339,12 @@ impl Generic {
     /// Posterior σ of squareness `i` (EC0Y, EB0Z, EA0Z) [µrad].
     pub fn squareness_sigma(&self, i: usize) -> f64 {
         self.post.squareness_sigma(i)
+    }
+
+    /// The posterior's columns and each one's prior variance at the
+    /// evidence's choice (`shape_free`'s prior along the null directions).
+    pub(crate) fn columns_and_prior(&self) -> (&[SCol], &[f64]) {
+        (&self.post.cols, &self.post.pv)
     }
 
     /// Leave-one-line-out RMS [µm], per line.
