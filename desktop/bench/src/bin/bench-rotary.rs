@@ -1,5 +1,6 @@
 //! `bench-rotary [--json] [--seeds N] [--first-seed S] [--noise-um S]
-//! [--thermal-cycles K] [--bias-states B] [--linear joint|fixed|known]`:
+//! [--thermal-cycles K] [--bias-states B] [--linear joint|fixed|known]
+//! [--orders simulator|auto]`:
 //! the five-axis chain of issue 31 on N random machines (default 10, seeds
 //! S…S+N−1, default 1001; σ = 0.5 µm on every reading): linear errors
 //! identified from 14 simulated lines, R-test files of the default plan (3
@@ -15,6 +16,9 @@
 //! scored at four held-out states of the cool-down; `--bias-states B`
 //! (with drift): the location constants re-optimised on tool-tip readings
 //! at B other cool-down states, scored beside the model without it.
+//! `--orders auto`: the harmonic orders chosen by the evidence
+//! (`rotary::orders`, identify-rotary's default) instead of the simulator's
+//! own C 3, A 2; `orders_c_a` lists them per machine.
 use tcomp_geometry::rotary::check::{run_case, CaseFigures, CaseOptions, LinearInput};
 
 /// The command line (clap: `--help` lists every flag).
@@ -51,6 +55,16 @@ struct Args {
     /// The linear errors: fitted with the R-test files in one problem, the 14-line model as known input, or the true ones.
     #[arg(long, value_enum, default_value_t = Linear::Joint)]
     linear: Linear,
+    /// The harmonic orders: the simulator's own (C 3, A 2) or chosen by the evidence as `identify-rotary`'s default `auto` does.
+    #[arg(long, value_enum, default_value_t = Orders::Simulator)]
+    orders: Orders,
+}
+
+/// `--orders`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Orders {
+    Simulator,
+    Auto,
 }
 
 /// `--linear`.
@@ -82,6 +96,7 @@ fn main() -> std::process::ExitCode {
                 Linear::Known => LinearInput::Known,
             },
             bias_states: args.bias_states,
+            auto_orders: args.orders == Orders::Auto,
         };
         let mut cases = Vec::new();
         for seed in first..first + seeds {
@@ -116,6 +131,8 @@ fn main() -> std::process::ExitCode {
             "location_worst_bias_urad": bias(|c| c.worst_bias.map(|w| -w.1)).map(|v| -v),
             "grid_bias_measured_reduction_pct_least": bias(|c| c.grid_bias.as_ref().map(|f| f.reduction_pct)),
             "unobservable": cases.iter().flat_map(|c| c.unobservable.clone()).collect::<Vec<_>>(),
+            "orders_auto": o.auto_orders,
+            "orders_c_a": cases.iter().map(|c| c.orders).collect::<Vec<_>>(),
         });
         if json {
             println!(

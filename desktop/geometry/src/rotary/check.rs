@@ -13,6 +13,7 @@ use super::bias::{calibration_poses, optimise_rotary_bias, simulate_state};
 use super::identify::{identify_rotary, RotaryOptions};
 use super::joint::{identify_rotary_joint, LinearPrior};
 use super::model::{tool_tip_error, Linear, RotaryModel, COMPONENT_NAMES, LOCATION_NAMES};
+use super::orders::{choose_orders, Order};
 use super::sim::{
     axis_of, random_rotary, simulate, warmup_temps, CycleSetup, RPlan, RotarySizes, SENSORS,
 };
@@ -146,6 +147,9 @@ pub struct CaseFigures {
     pub worst_bias: Option<(f64, f64)>,
     /// Joint fit: what it did to the linear model.
     pub joint: Option<super::joint::JointLinear>,
+    /// The harmonic orders fitted, C then A (the simulator's own 3 and 2,
+    /// or those the evidence chose with `CaseOptions::auto_orders`).
+    pub orders: [usize; 2],
 }
 
 /// How the rotary fit takes the linear axes.
@@ -219,6 +223,9 @@ pub struct CaseOptions {
     /// With drift: tool-tip readings at this many other states of the
     /// cool-down (0.25 h, 1.5 h, 4 h, 6 h … after the stop) for the bias step.
     pub bias_states: usize,
+    /// Choose the harmonic orders by the evidence (`orders`, the CLI's
+    /// default) instead of fitting the simulator's own (C 3, A 2).
+    pub auto_orders: bool,
 }
 
 impl Default for CaseOptions {
@@ -228,6 +235,7 @@ impl Default for CaseOptions {
             thermal_cycles: 0,
             linear: LinearInput::Joint,
             bias_states: 0,
+            auto_orders: false,
         }
     }
 }
@@ -268,10 +276,15 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
     } else {
         vec![]
     };
-    let ro = RotaryOptions {
+    let mut ro = RotaryOptions {
         sensors,
         ..Default::default()
     };
+    if o.auto_orders {
+        let noise = crate::adequacy::StatedNoise::new(Some(noise_um))?;
+        let trial = |r: &RotaryOptions| fit(&files, &lc, lt, o.linear, r).map(|f| f.0);
+        ro = choose_orders(trial, &ro, Order::Auto, Order::Auto, noise)?.0;
+    }
     let (id, lin_model) = fit(&files, &lc, lt, o.linear, &ro)?;
     let li = Linear {
         structure: st,
@@ -384,6 +397,7 @@ pub fn run_case(seed: u64, o: &CaseOptions) -> Result<CaseFigures> {
         grid_bias: biased.as_ref().map(|_| fig(&sets[4])),
         worst_bias,
         joint: id.linear.clone(),
+        orders: [ro.order_c, ro.order_a],
     })
 }
 
