@@ -348,7 +348,7 @@ pub fn sensor_lags(p: &Problem) -> Vec<(Candidate, ModelFit)> {
         // where the body map supports a lag, whether the sensor's own
         // reading shows one (`lag_specific`)
         let own_reading = (gain >= LAG_MIN_FIT_REL && run_gain >= LAG_MIN_RUN_REL)
-            .then(|| super::lag_specific::signature(p, &disp, s));
+            .then(|| super::lag_specific::signature(p, &disp, s, tau, tau_lower_bound));
         out.push((
             Candidate {
                 name: "sensor_lag",
