@@ -19,6 +19,66 @@ pub struct RotaryOptions {
     /// Drift of each location error with these sensors (names without
     /// `T_`; every file must have them); empty: none.
     pub sensors: Vec<String>,
+    /// The Gaussian prior on an axis's harmonic coefficients that the
+    /// evidence chose its order with (`orders::choose_orders` sets it for
+    /// an `auto` axis): the fit is then that order's posterior, its σ's the
+    /// posterior covariance's. None for an axis (a given order): plain
+    /// least squares.
+    pub harmonic_prior: Vec<HarmonicPrior>,
+}
+
+/// An axis's harmonic coefficients a priori: harmonic k's coefficients
+/// N(0, (τ ρ^(k−1))²), τ per unit group (`orders` module doc).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HarmonicPrior {
+    pub axis: Axis5,
+    /// τ of the translations [µm] and of the rotations [µrad]
+    /// (infinite: the axis has no such coefficient).
+    pub tau_um: f64,
+    pub tau_urad: f64,
+    /// ρ, the size of each harmonic over the one before.
+    pub ratio: f64,
+    /// The stated noise of one R-test reading the evidence was judged at
+    /// [µm]: the prior's weight against the readings.
+    pub noise_um: f64,
+}
+
+impl HarmonicPrior {
+    /// The prior σ of a coefficient of harmonic `h` (µrad: `urad`).
+    pub fn sd(&self, h: usize, urad: bool) -> f64 {
+        let tau = if urad { self.tau_urad } else { self.tau_um };
+        tau * self.ratio.powi(h as i32 - 1)
+    }
+}
+
+/// The harmonic and unit (true: µrad) of a column of `ax`'s error motions.
+pub(crate) fn harmonic(col: &Col, ax: Axis5) -> Option<(usize, bool)> {
+    match *col {
+        Col::Comp(a, k, h, _) if a == ax => Some((h, k >= 3)),
+        Col::Whirl(a, p, _) if a == ax => Some((1, p == 1)),
+        _ => None,
+    }
+}
+
+/// The prior rows of `o.harmonic_prior` in the units of R-test rows
+/// weighted by `weight_r` (1/σ of the solve): one per harmonic
+/// coefficient, (column, weight_r · σ_stated / σ_prior), right side 0.
+/// Whitened at the stated noise (every row × 1/(weight_r σ_stated), as
+/// `StoredDesign::at_noise` does to R-test rows) each is 1/σ_prior: the
+/// evidence's prior exactly.
+pub(crate) fn prior_rows(o: &RotaryOptions, cols: &[Col], weight_r: f64) -> Vec<(usize, f64)> {
+    let mut rows = Vec::new();
+    for p in &o.harmonic_prior {
+        for (j, c) in cols.iter().enumerate() {
+            if let Some((h, urad)) = harmonic(c, p.axis) {
+                let sd = p.sd(h, urad);
+                if sd.is_finite() && sd > 0.0 {
+                    rows.push((j, weight_r * p.noise_um / sd));
+                }
+            }
+        }
+    }
+    rows
 }
 
 impl Default for RotaryOptions {
@@ -27,6 +87,7 @@ impl Default for RotaryOptions {
             order_c: 3,
             order_a: 2,
             sensors: Vec::new(),
+            harmonic_prior: Vec::new(),
         }
     }
 }

@@ -16,8 +16,8 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::columns::{columns, effect, spindle_effect, Col, SPINDLE_NAMES};
-pub use super::columns::{RotaryOptions, TermValue};
+use super::columns::{columns, effect, prior_rows, spindle_effect, Col, SPINDLE_NAMES};
+pub use super::columns::{HarmonicPrior, RotaryOptions, TermValue};
 use super::model::{
     reading_sensitivity, Drift, Linear, Location, ReadingSensitivity, RotaryModel, Spindle,
     LOCATION_NAMES, LOCATION_UNITS,
@@ -116,6 +116,9 @@ pub(crate) struct StoredDesign {
     /// The rows after the R-test ones are a prior in units of its own σ
     /// (`joint_generic`), kept as they are by the adequacy test.
     pub prior_rows: bool,
+    /// The last rows: the harmonic coefficients' prior (`prior_rows` of
+    /// `columns`), weighted as R-test rows and never held out.
+    pub harmonic_rows: usize,
     /// Rows of each file (held out in turn).
     pub groups: Vec<Vec<usize>>,
     /// Error name of each unknown (empty for the files' offsets).
@@ -129,8 +132,9 @@ impl StoredDesign {
     /// runs) at σ / √2, prior rows as they are (in units of their own σ).
     pub(crate) fn at_noise(&self, noise_um: f64) -> (DMatrix<f64>, DVector<f64>) {
         let (mut a, mut b) = (self.a.clone(), self.b.clone());
+        let first_harmonic = a.nrows() - self.harmonic_rows;
         for i in 0..a.nrows() {
-            let f = if i < self.rtest_rows {
+            let f = if i < self.rtest_rows || i >= first_harmonic {
                 1.0 / (self.weight_r * noise_um)
             } else if self.prior_rows {
                 1.0
@@ -313,7 +317,11 @@ pub(crate) fn design(
 
 /// Solve the weighted problem: the first `rtest_rows` rows are R-test
 /// readings divided by `sigma_r` (1: unweighted), any rows after them other
-/// data (the lines of a joint fit) in the same units of σ.
+/// data (the lines of a joint fit) in the same units of σ. With a harmonic
+/// prior (`o.harmonic_prior`, an order chosen by the evidence) its rows
+/// are appended (`columns::prior_rows`) and the values are the posterior
+/// mean; rank, conditioning and the unobservable directions stay the
+/// readings' own.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve(
     files: &[RTestFile],
@@ -326,13 +334,34 @@ pub(crate) fn solve(
     sigma_r: f64,
 ) -> Result<RotaryIdentification> {
     let (m, n) = a.shape();
+    // what the readings alone see: rank, conditioning, unobservable
+    // directions (a prior does not make a direction observable)
     let mut sol = least_squares(&a, &b, rtest_rows, sigma_r)?;
+    // the harmonic coefficients' prior (an `auto` order): the values and
+    // σ's are the posterior's
+    let prior = prior_rows(o, cols, 1.0 / sigma_r);
+    let (a, b) = if prior.is_empty() {
+        (a, b)
+    } else {
+        let rows = m + prior.len();
+        let (mut a, b) = (
+            a.resize_vertically(rows, 0.0),
+            b.resize_vertically(rows, 0.0),
+        );
+        for (i, (j, w)) in prior.iter().enumerate() {
+            a[(m + i, *j)] = *w;
+        }
+        let post = least_squares(&a, &b, rtest_rows, sigma_r)?;
+        (sol.x, sol.sigma, sol.residual_rms_um) = (post.x, post.sigma, post.residual_rms_um);
+        (a, b)
+    };
     let (nests, _, _) = nest_spread(files);
     let null = std::mem::take(&mut sol.null);
     let (unobservable, unobs_terms, unobs_cols) = describe_null(files, o, cols, null);
     let mut v = values(files, o, cols, reference, &sol, &unobs_cols);
     v.model.unobservable = unobs_terms.iter().cloned().collect();
-    let design = stored_design(files, o, cols, a, b, rtest_rows, sigma_r);
+    let mut design = stored_design(files, o, cols, a, b, rtest_rows, sigma_r);
+    design.harmonic_rows = prior.len();
     let spindle = SpindleReport::new(files, v.spindle, &unobs_terms);
     Ok(RotaryIdentification {
         spindle,
@@ -564,6 +593,7 @@ fn stored_design(
         weight_r: 1.0 / sigma_r,
         weight_l: 1.0,
         prior_rows: false,
+        harmonic_rows: 0,
         groups,
         labels,
         cols: cols.to_vec(),

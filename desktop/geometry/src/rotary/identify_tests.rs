@@ -107,7 +107,7 @@ fn location_errors_alone_on_the_c_axis_see_only_the_combinations() {
     let o = RotaryOptions {
         order_c: 0,
         order_a: 0,
-        sensors: vec![],
+        ..Default::default()
     };
     let id = identify_rotary(&files, None, &o).unwrap();
     let why: Vec<&str> = id.unobservable.iter().map(|u| u.why.as_str()).collect();

@@ -276,7 +276,7 @@ pub fn plan_rotary_cmd(a: PlanRotaryArgs) -> Result<()> {
     let o = RotaryOptions {
         order_c: a.order_c,
         order_a: a.order_a,
-        sensors: vec![],
+        ..Default::default()
     };
     let id = identify_rotary(&files, None, &o)?;
     if a.json {
