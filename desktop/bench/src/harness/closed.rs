@@ -55,10 +55,9 @@ pub fn run_bench(machines: &[Machine], cfg: &BenchConfig) -> Result<Value> {
         threads: cfg.threads,
         ..Options::default()
     };
-    let (mut ok_single, mut ok_pair, mut n_s, mut n_p, mut false_alarms) = (0, 0, 0, 0, 0);
-    let mut physics_single = 0;
-    let mut shrinks = Vec::new();
-    let mut shrinks_um = Vec::new();
+    let (mut ok_single, mut ok_pair, mut n_s, mut n_p) = (0, 0, 0, 0);
+    let (mut false_alarms, mut physics_single) = (0, 0);
+    let (mut shrinks, mut shrinks_um) = (Vec::new(), Vec::new());
     let mut per: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
     let mut misses = Vec::new();
     let t_all = std::time::Instant::now();

@@ -648,6 +648,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         &mut tried,
         &opt.only,
     );
+    super::coolant_line::confirm(&p, &mut findings, &mut untestable);
     // a periodic line the selected effect leaves is named first by its own
     // test; otherwise an ambiguous answer names nothing (the claimed
     // candidates stay among `tried`)

@@ -3,6 +3,7 @@
 //! against the identified nominal; `fit_nominal` reports that nominal,
 //! `fit_untestable` and `reach` what the runs cannot test, and why.
 
+mod coolant_line;
 mod fit_nominal;
 mod fit_untestable;
 pub mod fitmode;
