@@ -317,6 +317,13 @@ fn a_chiller_with_a_line_in_its_sensor_is_named_coolant_with_that_line() {
     let (pc, pl) = (per(c).unwrap(), per(l).unwrap());
     assert!((1.0 / pc - 1.0 / pl).abs() < 1.0 / 28_800.0, "{pc} vs {pl}");
     assert_eq!(c.params_json()["sensor"], l.params_json()["channel"]);
+    // `--only coolant` still runs the line test that confirms it
+    let only = Options {
+        only: vec!["coolant".into()],
+        ..Options::default()
+    };
+    let d = diagnose_fit(&runs, &only).unwrap();
+    assert_eq!(named(&d).first().map(|n| n.0), Some("coolant"));
 }
 
 #[test]

@@ -370,7 +370,7 @@ fn print_text(
     threads: usize,
 ) {
     println!(
-        "bench-diagnose: {} cases ({} single, {} pair, {} clean): top-1 {:.1} % (single {:.1} %, pair {:.1} %; with a parameter finding that names the effect's physics {:.1} %), held-out gap shrink {:.1} % (µm channels {:.1} %), false alarms {}/{}; 8 h @ 1 s full diagnosis {:.2} s ({} threads)",
+        "bench-diagnose: {} cases ({} single, {} pair, {} clean): top-1 {:.1} % (single {:.1} %, pair {:.1} %), {:.1} % of effect cases counting a parameter finding that names the effect's physics, held-out gap shrink {:.1} % (µm channels {:.1} %), false alarms {}/{}; 8 h @ 1 s full diagnosis {:.2} s ({} threads)",
         v["cases"], v["single_cases"], v["pair_cases"], v["clean_cases"],
         v["top1_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,
         v["top1_single_rate"].as_f64().unwrap_or(f64::NAN) * 100.0,

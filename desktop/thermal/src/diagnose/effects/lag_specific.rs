@@ -231,6 +231,7 @@ pub fn signature(p: &Problem, disp: &[usize], s: usize, found_tau: f64, at_end: 
     json!({
         "specific": why.is_empty(),
         "implied_tau_s": median(&pooled).map(r4),
+        "implied_tau_s_max": pooled.iter().copied().reduce(f64::max).map(r4),
         "bands": table.iter().map(|(t, a, pr)| json!({
             "transient_tau_s": r4(*t),
             "implied_tau_s": a.map(r4),
@@ -369,6 +370,14 @@ pub fn untestable<'a>(lags: impl Iterator<Item = &'a Finding>) -> Vec<(String, S
 #[cfg(test)]
 mod tests {
     use super::{disagrees, verdict_of, Band};
+
+    #[test]
+    fn the_grid_step_is_the_body_maps() {
+        for w in crate::diagnose::effects::open_effects::LAG_GRID.windows(2) {
+            let r = w[1] / w[0];
+            assert!((r / super::GRID_STEP - 1.0).abs() < 0.02, "{w:?}");
+        }
+    }
 
     #[test]
     fn the_reading_and_the_body_map_must_measure_one_delay() {

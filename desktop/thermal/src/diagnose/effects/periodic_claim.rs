@@ -517,20 +517,16 @@ pub fn minus_line(
     out
 }
 
-/// `diagnose fit`: scan the nominal's residual and merge the candidate
-/// (the line tested again on the selected effect's fit).
-pub fn fit(
-    p: &Problem,
-    st: &Structure,
-    nominal: &ModelFit,
-    selected: Option<&ModelFit>,
-    findings: &mut Vec<Finding>,
-    tried: &mut Vec<Finding>,
-    only: &[String],
-) {
-    if !wanted(only) {
-        return;
-    }
+/// The strongest line of the nominal's residual (the nominal's structure
+/// fitted on every row; the input channels searched beside it) with its
+/// finding and whether the periodic test claims it. It does not depend on
+/// any selected effect: `diagnose fit` asks it before choosing one (a
+/// `coolant` candidate needs a line at its period, `coolant_line.rs`) and
+/// merges it after ([`merge_line`]). `None` when the all-rows fit fails
+/// (the test cannot run), `Some(None)` when the residual has no line.
+pub type LineCand = Option<(Finding, Line, bool)>;
+
+pub fn line(p: &Problem, st: &Structure, nominal: &ModelFit) -> Option<LineCand> {
     // the nominal's structure fitted on every row: the residual searched
     let mut all_rows = p.ds.clone();
     for r in all_rows.runs.iter_mut() {
@@ -538,29 +534,44 @@ pub fn fit(
     }
     let pa = Problem::new(&all_rows);
     let fa = pa.fit(st, None, None);
-    let cand = if fa.outs.iter().any(|o| o.failed) {
-        None
-    } else {
-        let scan = scan_fit(&pa, &fa, &fa);
-        let runs = &p.ds.runs;
-        let inputs = Scan {
-            chans: [
-                |r: &crate::diagnose::runs::RunData| r.rpm.clone(),
-                |r: &crate::diagnose::runs::RunData| r.feed.clone(),
-            ]
-            .iter()
-            .filter(|get| runs.iter().all(|r| get(r).is_some()))
-            .map(|get| Chan {
-                name: "input".into(),
-                is_disp: false,
-                noise: 1.0,
-                resid: runs.iter().map(|r| get(r).unwrap_or_default()).collect(),
-            })
-            .collect(),
-            ..scan.clone()
-        };
-        candidate(&scan, &scan_fit(p, nominal, nominal), &inputs)
+    if fa.outs.iter().any(|o| o.failed) {
+        return None;
+    }
+    let scan = scan_fit(&pa, &fa, &fa);
+    let runs = &p.ds.runs;
+    let inputs = Scan {
+        chans: [
+            |r: &crate::diagnose::runs::RunData| r.rpm.clone(),
+            |r: &crate::diagnose::runs::RunData| r.feed.clone(),
+        ]
+        .iter()
+        .filter(|get| runs.iter().all(|r| get(r).is_some()))
+        .map(|get| Chan {
+            name: "input".into(),
+            is_disp: false,
+            noise: 1.0,
+            resid: runs.iter().map(|r| get(r).unwrap_or_default()).collect(),
+        })
+        .collect(),
+        ..scan.clone()
     };
+    Some(candidate(&scan, &scan_fit(p, nominal, nominal), &inputs))
+}
+
+/// Periodic drivers in `diagnose fit`: the [`line`] merged into the
+/// findings (unless `--only` leaves it out); beside a `selected` effect's
+/// fit it must survive that effect's residual to be named first.
+pub fn merge_line(
+    p: &Problem,
+    nominal: &ModelFit,
+    selected: Option<&ModelFit>,
+    cand: LineCand,
+    (findings, tried): (&mut Vec<Finding>, &mut Vec<Finding>),
+    only: &[String],
+) {
+    if !wanted(only) {
+        return;
+    }
     merge(findings, tried, cand, |line| match selected {
         Some(s) => line_survives(&scan_fit(p, s, nominal), line),
         None => true,
@@ -568,6 +579,6 @@ pub fn fit(
 }
 
 /// Whether `--only` leaves the periodic scan in.
-fn wanted(only: &[String]) -> bool {
+pub fn wanted(only: &[String]) -> bool {
     only.is_empty() || only.iter().any(|o| o == "periodic")
 }

@@ -7,14 +7,19 @@
 //! on the project's open world every `coolant` named on a case without a
 //! cycling chiller (one wrong, two false alarms in 180 cases) came without
 //! a spectral line, while 27 of 28 true chillers were also named by the
-//! periodic line test. A cycling chiller is a periodic driver: some
-//! sensor's residual carries a line at its period, significant against
-//! the local background after correction for the number of periods and
-//! channels tried (`periodic_claim`). So `coolant` stays claimed only when
-//! that test claims a line at its period, within the periodogram's
-//! resolution (1/T in frequency, T the shortest run); otherwise it is
-//! listed untestable with why.
+//! periodic line test. A cycling chiller is a periodic driver: a sensor's
+//! residual carries a line at its period, significant against the local
+//! background after correction for the number of periods and channels
+//! tried (`periodic_claim`). So a `coolant` candidate keeps its claim only
+//! when that test claims its line (the residual's strongest) at the
+//! candidate's period, within the periodogram's resolution (1/T in
+//! frequency, T the shortest run); otherwise it is not claimed — before
+//! any effect is selected or the ambiguity test runs — and is listed
+//! untestable with why. (Only the strongest line is tested: a chiller
+//! whose line is weaker than another line of the residual is listed, not
+//! named.)
 
+use crate::diagnose::effects::periodic_claim::LineCand;
 use crate::diagnose::ident::Problem;
 use crate::diagnose::types::Finding;
 
@@ -31,43 +36,53 @@ fn same_line(a: f64, b: f64, df: f64) -> bool {
     (1.0 / a - 1.0 / b).abs() <= df
 }
 
-/// Takes every claimed `coolant` without a claimed periodic line at its
-/// period out of `findings` and lists it under `untestable`.
-pub(super) fn confirm(
-    p: &Problem,
-    findings: &mut Vec<Finding>,
-    untestable: &mut Vec<(String, String)>,
-) {
+/// Why a `coolant` candidate is not confirmed by the periodic test's
+/// line `line` (`None`: the test could not run), or None when it is.
+fn unconfirmed(p: &Problem, f: &Finding, line: Option<&LineCand>) -> Option<String> {
+    let Some(pc) = period(f) else {
+        return Some("the fitted cycle has no finite period".into());
+    };
+    let Some(cand) = line else {
+        return Some(format!(
+            "a cycle of {pc:.0} s fits the residual, but the periodic line test could not run (the identified model fitted on every row failed), so no line confirms it"
+        ));
+    };
     let t =
         p.ds.runs
             .iter()
             .map(|r| r.rows() as f64 * r.dt)
             .fold(f64::INFINITY, f64::min);
-    if !(t.is_finite() && t > 0.0) {
-        return;
-    }
-    let lines: Vec<f64> = findings
-        .iter()
-        .filter(|f| f.name == "periodic")
-        .filter_map(period)
-        .collect();
-    let mut kept = Vec::with_capacity(findings.len());
-    for f in findings.drain(..) {
-        let unconfirmed = f.name == "coolant"
-            && period(&f).is_none_or(|pc| !lines.iter().any(|&pl| same_line(pc, pl, 1.0 / t)));
-        if unconfirmed {
-            untestable.push((
-                "coolant (no spectral line)".into(),
-                format!(
-                    "a cycle of {:.0} s fits the residual, but no sensor's residual shows a line at that period by the periodic test: the duty's own rhythm or a misfit of the identified model reads as a chiller; a sensor on the coolant circuit, or runs with another duty, would separate them",
-                    period(&f).unwrap_or(f64::NAN)
-                ),
-            ));
-        } else {
-            kept.push(f);
+    let df = if t.is_finite() && t > 0.0 {
+        1.0 / t
+    } else {
+        0.0
+    };
+    let confirmed = cand
+        .as_ref()
+        .is_some_and(|(_, l, claimed)| *claimed && same_line(pc, l.period_s, df));
+    (!confirmed).then(|| format!(
+        "a cycle of {pc:.0} s fits the residual, but the periodic test claims no line at that period in any sensor's residual: the duty's own rhythm or a misfit of the identified model reads as a chiller; a sensor on the coolant circuit, or runs with another duty, would separate them"
+    ))
+}
+
+/// Takes the claim from every claimed `coolant` candidate the periodic
+/// test's line does not confirm; returns their `untestable` entries.
+pub(super) fn demote<'a>(
+    p: &Problem,
+    line: Option<&LineCand>,
+    claims: impl Iterator<Item = (&'a Finding, &'a mut bool)>,
+) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for (f, claimed) in claims {
+        if f.name != "coolant" || !*claimed {
+            continue;
+        }
+        if let Some(why) = unconfirmed(p, f, line) {
+            *claimed = false;
+            out.push(("coolant (no spectral line)".into(), why));
         }
     }
-    *findings = kept;
+    out
 }
 
 #[cfg(test)]

@@ -9,9 +9,9 @@ use serde_json::{json, Value};
 
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
-use super::reach;
-use crate::diagnose::effects::lag_specific;
+use super::{coolant_line, reach};
 use crate::diagnose::effects::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
+use crate::diagnose::effects::{lag_specific, periodic_claim};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
 use crate::diagnose::signal::r4;
 use crate::diagnose::types::{Diagnosis, Finding, Options, SelectedGaps};
@@ -622,8 +622,18 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         .into_iter()
         .map(|(c, b)| score(&p, c, b, &fit, opt))
         .collect();
+    // the residual's line (periodic_claim.rs); coolant needs it (coolant_line.rs)
+    let line = (only("coolant") || only("periodic"))
+        .then(|| periodic_claim::line(&p, &st, &fit))
+        .flatten();
+    let no_line = coolant_line::demote(
+        &p,
+        line.as_ref(),
+        scored.iter_mut().map(|s| (&s.finding, &mut s.claimed)),
+    );
     rank(&mut scored);
     let mut untestable = untestable(&p, &lag_reach, speed_kept, ambient_kept);
+    untestable.extend(no_line);
     untestable.extend(speed_law_inconclusive(&scored));
     untestable.extend(lag_specific::untestable(scored.iter().map(|s| &s.finding)));
     let mut findings = claimed_findings(&scored);
@@ -635,23 +645,13 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
             &s.fit,
         )
     });
-    let sel_fit = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
+    let sel = scored.iter().find(|s| s.claimed).map(|s| s.fit.clone());
     let ambiguous = ambiguous_names(&scored);
     let mut tried: Vec<Finding> = scored.into_iter().map(|s| s.finding).collect();
-    // periodic drivers: a line in the residual spectrum (periodic_claim.rs)
-    crate::diagnose::effects::periodic_claim::fit(
-        &p,
-        &st,
-        &fit,
-        sel_fit.as_ref(),
-        &mut findings,
-        &mut tried,
-        &opt.only,
-    );
-    super::coolant_line::confirm(&p, &mut findings, &mut untestable);
+    let (sel, line) = (sel.as_ref(), line.flatten());
+    periodic_claim::merge_line(&p, &fit, sel, line, (&mut findings, &mut tried), &opt.only);
     // a periodic line the selected effect leaves is named first by its own
-    // test; otherwise an ambiguous answer names nothing (the claimed
-    // candidates stay among `tried`)
+    // test; otherwise an ambiguous answer names nothing (claims stay tried)
     let ambiguous = if findings.first().is_some_and(|f| f.name == "periodic") {
         Vec::new()
     } else {
