@@ -26,6 +26,7 @@ use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, plan14, LineSpec};
 use tcomp_geometry::plan::rich_lines;
 use tcomp_geometry::score::{read_dir_lines, score, TabulatedTruth};
+use tcomp_geometry::shape_free::coverage_3sigma;
 
 const STROKE: [f64; 3] = [800.0, 500.0, 400.0];
 
@@ -95,24 +96,7 @@ fn coverage(
         }
         _ => return Ok(None),
     }
-    let (mut inside, mut n) = (0usize, 0usize);
-    for t in Term::all() {
-        let l = stroke[t.axis.index()];
-        let last = if t.is_straightness() { 19 } else { 20 };
-        for k in 1..=last {
-            let q = l * k as f64 / 20.0;
-            let d = (model.value(t, q) - truth.value_ref(t, q)).abs();
-            inside += usize::from(d <= 3.0 * sigma(Some(t), 0, q));
-            n += 1;
-        }
-    }
-    let sr = truth.squareness_ref();
-    for (i, r) in sr.iter().enumerate() {
-        let d = (model.squareness.get(i) - r).abs();
-        inside += usize::from(d <= 3.0 * sigma(None, i, 0.0));
-        n += 1;
-    }
-    Ok(Some((100.0 * inside as f64 / n as f64, adequate)))
+    Ok(Some((coverage_3sigma(model, truth, sigma), adequate)))
 }
 
 struct Row {

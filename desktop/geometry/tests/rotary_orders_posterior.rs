@@ -17,44 +17,16 @@ use tcomp_geometry::rotary::identify::{
     identify_rotary, HarmonicPrior, RotaryIdentification, RotaryOptions,
 };
 use tcomp_geometry::rotary::orders::{choose_orders, Order, OrderChoice};
-use tcomp_geometry::rotary::sim::{
-    axis_of, random_rotary, simulate, CycleSetup, RPlan, RotarySizes,
-};
 use tcomp_geometry::rotary::{Axis5, RotaryModel, LOCATION_NAMES};
 use tcomp_geometry::rtest::RTestFile;
-use tcomp_numerics::rng::Rng;
 
-const NOISE_UM: f64 = 0.5;
+mod common;
+use common::NOISE_UM;
 
 /// Harmonics 1–2 on both axes (the simulator's sizes) and a third on A up
 /// to ±0.5 µm / ±1.5 µrad; default-plan R-test files at σ 0.5 µm.
 fn machine(seed: u64) -> (RotaryModel, Vec<RTestFile>) {
-    let mut rng = Rng::new(seed);
-    let plan = RPlan::default_plan();
-    let sizes = RotarySizes {
-        order_c: 2,
-        order_a: 2,
-        ..Default::default()
-    };
-    let mut truth = random_rotary(&plan, &sizes, false, &mut rng);
-    for (name, f) in truth.components.iter_mut() {
-        if axis_of(name) != Axis5::A {
-            continue;
-        }
-        let size = if ["EXA", "EYA", "EZA"].contains(&name.as_str()) {
-            0.5
-        } else {
-            1.5
-        };
-        f.cos.push(rng.range(-size, size));
-        f.sin.push(rng.range(-size, size));
-    }
-    let setup = CycleSetup {
-        noise_um: NOISE_UM,
-        ..Default::default()
-    };
-    let files = simulate(&truth, None, &plan, &setup, &mut rng).unwrap();
-    (truth, files)
+    common::machine(seed, &[Axis5::A], 0.5, 1.5)
 }
 
 fn noise() -> StatedNoise {
