@@ -9,7 +9,7 @@ use host_tests::modbus::{self, encode, read_inputs, SLOT};
 use host_tests::onewire_emu::{block_on, bus_with_sensors, master, MS};
 use thermocomp::acquisition::channel_map::ChannelMap;
 use thermocomp::acquisition::temperature::{AcquisitionConfig, TemperatureAcquisition};
-use thermocomp_core::image::EnvelopePolicy;
+use thermocomp_core::image::{EnvelopeMode, EnvelopePolicy};
 use thermocomp_protocol::registers::{IR_ENVELOPE_STEPS, IR_MAP_VERSION, MAP_VERSION};
 
 /// Margin of the image's policy, 1/16 °C (1 °C).
@@ -25,7 +25,7 @@ fn image() -> Vec<u8> {
     assert_eq!(m.inputs[2].max, 320);
     m.envelope = Some(
         [EnvelopePolicy {
-            fallback: false,
+            mode: EnvelopeMode::Hold,
             margin: MARGIN,
         }; 6],
     );

@@ -20,7 +20,7 @@ use host_tests::qemu::{modbus_master, one_board, BenchBoard};
 use tcomp_model::replay::ReplayRow;
 use thermocomp_core::compensator::status;
 use thermocomp_core::float::{demo_model, FloatFallback, FloatTerm};
-use thermocomp_core::image::EnvelopePolicy;
+use thermocomp_core::image::{EnvelopeMode, EnvelopePolicy};
 
 const ROWS: u32 = 1600;
 const ROW_S: u32 = 15;
@@ -97,7 +97,11 @@ fn image(path: &Path, fallback: bool) {
         },
     ];
     let policy = EnvelopePolicy {
-        fallback,
+        mode: if fallback {
+            EnvelopeMode::Fallback
+        } else {
+            EnvelopeMode::Hold
+        },
         margin: MARGIN,
     };
     tcomp_model::export::export_enveloped(&fm, (None, None), Some([policy; 6]), path, None)

@@ -14,7 +14,8 @@
 //!    one), lag filters advanced in whole model steps (`step_ms`) with the
 //!    newest sample held over the elapsed steps (exact for any gap length).
 //! 4. **Training envelope**: every input and position is held at the edge of
-//!    the range seen in training (no extrapolation past it);
+//!    the range seen in training (no extrapolation past it, unless the
+//!    direction's policy is `extrapolate`, below);
 //!    `OUT_OF_ENVELOPE` says so. The model's output at the edge is the last
 //!    value it was trained to produce, so it cannot run away. Per direction
 //!    the image's envelope policy (section kind 5, format v3; older images:
@@ -27,6 +28,15 @@
 //!    reads count as faulted for that direction, which is then served by
 //!    its first fallback (image order) that reads none of them nor an
 //!    invalid sensor, as in rule 6 (`DEGRADED`); none: held at the edge.
+//!    Under `extrapolate` (format v4; the parser admits it only for a
+//!    direction every model of which is linear) the inputs of the model
+//!    serving the direction (main or the fallback in force) are normalised
+//!    over the extended span [lo − W·(hi − lo), hi + W·(hi − lo)], W =
+//!    [`EXTRAPOLATE_WIDTHS`] = 2: the linear function continues up to two
+//!    training widths beyond each edge and is held at that outer edge
+//!    beyond (a stated bound); counted and flagged as under hold. It is
+//!    computed only when an input is outside its range and the image has
+//!    such a direction; other directions are served exactly as before.
 //! 5. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
@@ -43,7 +53,7 @@
 
 use crate::eval::{AxisPair, Evaluation};
 use crate::features::FeatureState;
-use crate::image::Model;
+use crate::image::{EnvelopeMode, Model};
 use crate::limits::*;
 
 /// Kept here for its old path; defined with the other limits.
@@ -348,6 +358,7 @@ impl Compensator {
         }
         if eval.out_of_envelope {
             out.status |= status::OUT_OF_ENVELOPE;
+            extrapolate_rule(model, features, active, &mut eval.corrections);
         }
         if input.now_ms.saturating_sub(reference_ms) < u64::from(model.warmup_s) * 1000 {
             out.status |= status::WARMING_UP;
@@ -453,11 +464,42 @@ fn envelope_rule(
         *count = count.saturating_add(1);
         out.envelope |= 1 << d;
         out.status |= status::OUT_OF_ENVELOPE;
-        if policy.fallback && *act == 0 {
+        if policy.mode == EnvelopeMode::Fallback && *act == 0 {
             let ok = valid & !model.sensor_closure(beyond);
             if let Some(k) = first_fallback(model, d, ok) {
                 *act = k;
             }
         }
+    }
+}
+
+/// Rule 4 under `extrapolate`: some input lies outside its range, so each
+/// extrapolating direction served by a model (main or fallback) is
+/// evaluated again with its inputs over the extended span (linear up to
+/// [`EXTRAPOLATE_WIDTHS`] training widths beyond each edge, held there).
+/// Nothing is computed for an image without such a direction.
+fn extrapolate_rule(
+    model: &Model,
+    features: &[i32],
+    active: &[u8],
+    corrections: &mut [i32; MAX_DIRECTIONS],
+) {
+    let mask = model.extrapolate_mask();
+    if mask == 0 {
+        return;
+    }
+    let n = model.normalise_extended(features);
+    if !n.outside {
+        return; // only a position was outside: the held values stand
+    }
+    for (d, (c, &a)) in corrections.iter_mut().zip(active).enumerate() {
+        if mask & (1 << d) == 0 {
+            continue;
+        }
+        *c = match a {
+            0 => model.static_correction(d, &n),
+            ACTIVE_NONE => continue,
+            k => model.fallback_correction(usize::from(k) - 1, &n),
+        };
     }
 }

@@ -178,6 +178,43 @@ impl Model {
             .fold(mask, |m, (i, _)| m | (1 << i))
     }
 
+    /// The inputs normalised over their extended spans (envelope policy
+    /// `extrapolate`, [`crate::fixed::Span::normalise_extended`]: Q24 within
+    /// ±(1 + 2·[`EXTRAPOLATE_WIDTHS`])); positions left at 0, as the models
+    /// such a direction may have read none (checked at parse).
+    pub fn normalise_extended(&self, features_q8: &[i32]) -> Normalised {
+        let mut n = Normalised {
+            x: [0; MAX_INPUTS],
+            p: [0; MAX_AXES],
+            p_ref: self.axis_ref_q24,
+            outside: false,
+        };
+        for ((x, &v), span) in
+            n.x.iter_mut()
+                .zip(features_q8)
+                .zip(&self.input_span)
+                .take(self.inputs.len())
+        {
+            *x = span.normalise_extended(v);
+            n.outside |= v < span.lo || v > span.hi;
+        }
+        n
+    }
+
+    /// Direction `d`'s main correction (0.1 µm) from its static tables
+    /// alone, rounded as [`Model::evaluate`] rounds it: the whole main model
+    /// of an extrapolating direction (no network, no axis table: checked at
+    /// parse), so on the same inputs the very same value.
+    pub fn static_correction(&self, d: usize, n: &Normalised) -> i32 {
+        let acc: i64 = self
+            .tables
+            .iter()
+            .filter(|t| usize::from(t.direction) == d)
+            .map(|t| round_shift(eval_table_static(&t.terms, &n.x), 7))
+            .sum();
+        sat_i32(round_shift(acc, 25))
+    }
+
     /// Fallback `k`'s correction (0.1 µm), rounded once as the main model's.
     pub fn fallback_correction(&self, k: usize, n: &Normalised) -> i32 {
         let value = eval_table_static(self.fallback_terms_of(k), &n.x);

@@ -46,9 +46,22 @@
 //! the envelope happens before anything saturates matters. The envelope
 //! mapping ([`Span`]) multiplies a value < 2^32 by a gain ≤ 2^26.
 //!
+//! A direction under the envelope policy `extrapolate` (image format v4)
+//! has its inputs normalised over the extended span
+//! ([`Span::normalise_extended`]): |x| ≤ (1 + 2W)·2^24 = 5·2^24 < 2^27
+//! (W = [`EXTRAPOLATE_WIDTHS`] = 2). The parser lets such a direction be
+//! served only by linear static tables (input power ≤ 1, position power 0),
+//! so each term is coef·x with no Q24 product of two extended values: one
+//! term ≤ 2^31·5·2^24 < 2^58.4, and MAX_TERMS = 32 of them < 5·2^60 < 2^63
+//! even for coefficients at i32's limit (the prediction bound, checked over
+//! the extended span, keeps the sum far lower: ≤ 2^25·2^24 = 2^49). The
+//! tables' Q32 → Q25 rounding and the per-direction sum are then as above.
+//!
 //! The volumetric section (image kind 3) has its own formats and overflow
 //! argument in [`crate::volumetric`]: Q24 variables in [0, 1], coefficients
 //! in pm, an i64 accumulator in 1/16 pm bounded by 2^52.
+
+use crate::limits::EXTRAPOLATE_WIDTHS;
 
 include!(concat!(env!("OUT_DIR"), "/sigmoid_table.rs"));
 
@@ -151,6 +164,30 @@ impl Span {
         let d = (c.wrapping_sub(self.lo) as u32) << self.pre_shift; // < 2^32
         let x = ((u64::from(d) * u64::from(self.gain) + (1 << 31)) >> 32) as i32 - ONE_Q24;
         (x.clamp(-ONE_Q24, ONE_Q24), outside)
+    }
+
+    /// [`Span::normalise`]'s mapping over the extended span [lo − W·(hi − lo),
+    /// hi + W·(hi − lo)], W = [`EXTRAPOLATE_WIDTHS`]: the line continues
+    /// beyond the range and is held at that outer edge, so the result is
+    /// Q24 within ±(1 + 2W). Within [lo, hi] it is `normalise`'s value bit
+    /// for bit. Outside, d = v − lo is clamped to [−W·span, (1 + W)·span]
+    /// and scaled like `normalise`'s d' (span << (32 − L) < 2^32), so
+    /// |d'| < (1 + W)·2^32 < 2^34 and |d'·gain| < 2^60: no overflow in i64.
+    #[allow(
+        clippy::cast_possible_truncation,
+        reason = "clamped to ±(1 + 2W)·2^24 first"
+    )]
+    pub fn normalise_extended(&self, v: i32) -> i32 {
+        if (self.lo..=self.hi).contains(&v) {
+            return self.normalise(v).0;
+        }
+        let lo = i64::from(self.lo);
+        let span = i64::from(self.hi) - lo;
+        let reach = i64::from(EXTRAPOLATE_WIDTHS) * span;
+        let d = (i64::from(v) - lo).clamp(-reach, span + reach) << self.pre_shift;
+        let x = ((d * i64::from(self.gain) + (1 << 31)) >> 32) - i64::from(ONE_Q24);
+        let bound = i64::from(ONE_Q24) * (1 + 2 * i64::from(EXTRAPOLATE_WIDTHS));
+        x.clamp(-bound, bound) as i32
     }
 }
 

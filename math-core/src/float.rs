@@ -3,7 +3,8 @@
 //! fixed-vs-float deviation over the admissible input range.
 
 use crate::image::{
-    self, Axis, Direction, InputKind, InputSpec, Lag, Model, Net, SensorRef, Table, Term, NONE,
+    self, Axis, Direction, EnvelopeMode, EnvelopePolicy, InputKind, InputSpec, Lag, Model, Net,
+    SensorRef, Table, Term, NONE,
 };
 use crate::limits::*;
 
@@ -125,6 +126,15 @@ fn normalise(v: f64, min: f64, max: f64) -> f64 {
     2.0 * (v.clamp(min, max) - min) / (max - min) - 1.0
 }
 
+/// [`normalise`] over the extended span of the envelope policy
+/// `extrapolate`: the line continues [`EXTRAPOLATE_WIDTHS`] widths beyond
+/// each edge and is held there (within ±(1 + 2W)), as
+/// [`crate::fixed::Span::normalise_extended`].
+fn normalise_extended(v: f64, min: f64, max: f64) -> f64 {
+    let reach = f64::from(EXTRAPOLATE_WIDTHS) * (max - min);
+    2.0 * (v.clamp(min - reach, max + reach) - min) / (max - min) - 1.0
+}
+
 // Host-side f64 reference: a float model's indices come from the fit and
 // are checked by `FloatModel::quantize` (through `Model::parse`); an
 // inconsistent one is the caller's bug and panics on the desktop (the
@@ -196,6 +206,51 @@ impl FloatModel {
             y[usize::from(n.direction)] += n.evaluate_um(&x);
         }
         for t in &self.tables {
+            let p = self.position_norm(t.axis, positions);
+            y[usize::from(t.direction)] += t.evaluate_um(&x, p, false);
+        }
+        y
+    }
+
+    /// [`FloatModel::evaluate_um`] under the image's envelope policy per
+    /// direction (`None`: every direction holds, as an image without the
+    /// section): a direction under `extrapolate` is evaluated with its
+    /// inputs over the extended span (the compensator's rule 4), the others
+    /// with every input held at the edge of its range.
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "directions of nets and tables are below directions.len()"
+    )]
+    pub fn evaluate_um_with_policy(
+        &self,
+        features: &[f64],
+        positions: &[f64],
+        policies: Option<&[EnvelopePolicy]>,
+    ) -> Vec<f64> {
+        let mut y = self.evaluate_um(features, positions);
+        let extrapolates = |d: u8| {
+            policies
+                .and_then(|p| p.get(usize::from(d)))
+                .is_some_and(|p| p.mode == EnvelopeMode::Extrapolate)
+        };
+        if !(0..self.directions.len()).any(|d| u8::try_from(d).is_ok_and(extrapolates)) {
+            return y;
+        }
+        let x: Vec<f64> = self
+            .inputs
+            .iter()
+            .zip(features)
+            .map(|(i, &v)| normalise_extended(v, i.min, i.max))
+            .collect();
+        for (d, yd) in (0u8..).zip(y.iter_mut()) {
+            if extrapolates(d) {
+                *yd = 0.0;
+            }
+        }
+        for n in self.nets.iter().filter(|n| extrapolates(n.direction)) {
+            y[usize::from(n.direction)] += n.evaluate_um(&x);
+        }
+        for t in self.tables.iter().filter(|t| extrapolates(t.direction)) {
             let p = self.position_norm(t.axis, positions);
             y[usize::from(t.direction)] += t.evaluate_um(&x, p, false);
         }

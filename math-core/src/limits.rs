@@ -71,3 +71,12 @@ pub const MAX_WARMUP_S: u32 = 86_400;
 /// Longest lag time constant, s (7 days: the slowest machine-hall
 /// temperature cycles are hours).
 pub const MAX_TAU_S: u32 = 604_800;
+
+/// Envelope policy `extrapolate` (image section kind 5, code 2, format v4):
+/// the linear model of such a direction continues this many training widths
+/// (hi − lo of each input) beyond each edge of the input's range, and is
+/// held at that outer edge beyond: its normalised inputs stay within
+/// ±(1 + 2·`EXTRAPOLATE_WIDTHS`) (±5), the bound the parser's prediction
+/// check and the evaluation's overflow argument (`crate::eval`) use. Beyond
+/// the margin the step still counts and is flagged, as under hold.
+pub const EXTRAPOLATE_WIDTHS: i32 = 2;

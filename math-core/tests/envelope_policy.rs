@@ -98,7 +98,7 @@ fn step(c: &mut Compensator, s: u64, r0: i32, r1: i32) -> StepOutput {
 }
 
 const FALLBACK: EnvelopePolicy = EnvelopePolicy {
-    fallback: true,
+    mode: EnvelopeMode::Fallback,
     margin: 16,
 };
 
@@ -150,7 +150,7 @@ fn beyond_the_margin_the_fallback_serves_within_it_the_edge_holds() {
 #[test]
 fn hold_counts_the_same_steps_and_keeps_the_main_model() {
     let hold = EnvelopePolicy {
-        fallback: false,
+        mode: EnvelopeMode::Hold,
         margin: 16,
     };
     let mut c = Compensator::new(Some(model(Some(hold))));
@@ -216,11 +216,11 @@ fn a_format_3_image_is_refused_cleanly_by_the_previous_format() {
         })
     );
     // A later format is refused by this build's check the same way.
-    let mut v4 = b;
-    v4[4..6].copy_from_slice(&4u16.to_le_bytes());
+    let mut v5 = b;
+    v5[4..6].copy_from_slice(&5u16.to_le_bytes());
     assert_eq!(
-        Model::parse(&reseal(v4)),
-        Err(ImageError::UnsupportedVersion(4))
+        Model::parse(&reseal(v5)),
+        Err(ImageError::UnsupportedVersion(5))
     );
 }
 
@@ -245,5 +245,8 @@ fn bad_envelope_sections_are_refused() {
         "policy"
     );
     assert!(matches!(bad(9, 1), Err(ImageError::BadValue { .. })), "pad");
-    assert!(!bad(8, ENVELOPE_HOLD).unwrap().envelope.unwrap()[0].fallback);
+    assert_eq!(
+        bad(8, ENVELOPE_HOLD).unwrap().envelope.unwrap()[0].mode,
+        EnvelopeMode::Hold
+    );
 }

@@ -3,12 +3,12 @@
 
 use super::error::EncodeError;
 use super::format::{
-    crc32, CRC_LEN, ENVELOPE_FALLBACK, ENVELOPE_HOLD, FORMAT_VERSION, HEADER_LEN, MAGIC,
-    SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC,
-    UNITS_V1,
+    crc32, CRC_LEN, ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION,
+    EXTRAPOLATE_VERSION, HEADER_LEN, MAGIC, SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS,
+    SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
 };
 use super::model::Model;
-use super::types::{InputKind, Term};
+use super::types::{EnvelopeMode, InputKind, Term};
 use crate::five_axis::FiveAxis;
 use crate::volumetric::Volumetric;
 use heapless::Vec;
@@ -83,8 +83,10 @@ impl Model {
     fn write_header(&self, w: &mut Writer<'_>, len: usize) {
         w.put(&MAGIC);
         // The oldest version that holds the model (format.rs).
-        let version: u16 = if self.envelope.is_some() {
-            FORMAT_VERSION
+        let version: u16 = if self.extrapolate_mask() != 0 {
+            EXTRAPOLATE_VERSION
+        } else if self.envelope.is_some() {
+            ENVELOPE_VERSION
         } else if self.sections_len() > 0 {
             SECTIONS_VERSION
         } else {
@@ -205,10 +207,10 @@ impl Model {
             w.put(&len_u16(payload).to_le_bytes());
             w.put(&[count_u8(&self.directions), 0, 0, 0]);
             for p in policies.iter().take(self.directions.len()) {
-                let code = if p.fallback {
-                    ENVELOPE_FALLBACK
-                } else {
-                    ENVELOPE_HOLD
+                let code = match p.mode {
+                    EnvelopeMode::Hold => ENVELOPE_HOLD,
+                    EnvelopeMode::Fallback => ENVELOPE_FALLBACK,
+                    EnvelopeMode::Extrapolate => ENVELOPE_EXTRAPOLATE,
                 };
                 w.put(&[code, 0]);
                 w.put(&p.margin.to_le_bytes());

@@ -7,11 +7,16 @@ pub use crate::crc::{crc32, crc8_maxim as rom_crc8};
 
 pub const MAGIC: [u8; 4] = *b"TCMI";
 /// The newest format this build reads and writes (it also reads versions 1
-/// and 2). The encoder writes the oldest version that holds the model: 1
-/// without sections, [`SECTIONS_VERSION`] with sections, 3 only with the
-/// envelope policy (section kind 5), so a build that reads 1 and 2 refuses
+/// to 3). The encoder writes the oldest version that holds the model: 1
+/// without sections, [`SECTIONS_VERSION`] with sections, [`ENVELOPE_VERSION`]
+/// with the envelope policy (section kind 5), 4 only when some direction's
+/// policy is [`ENVELOPE_EXTRAPOLATE`], so a build that reads up to 3 refuses
 /// such an image by its version check, before anything else.
-pub const FORMAT_VERSION: u16 = 3;
+pub const FORMAT_VERSION: u16 = 4;
+/// The format that added the envelope policy (section kind 5, codes 0 and 1).
+pub const ENVELOPE_VERSION: u16 = 3;
+/// The format that added the policy code [`ENVELOPE_EXTRAPOLATE`].
+pub const EXTRAPOLATE_VERSION: u16 = 4;
 /// The format that added the sections (kinds 1, 3, 4).
 pub const SECTIONS_VERSION: u16 = 2;
 /// Section kind: fallback models (degraded-mode compensation).
@@ -21,13 +26,16 @@ pub const SECTION_VOLUMETRIC: u8 = 3;
 /// Section kind: the five-axis part of the volumetric correction (issue 31,
 /// [`crate::five_axis`]); needs a kind-3 section.
 pub const SECTION_FIVE_AXIS: u8 = 4;
-/// Section kind: the envelope policy per direction (issue 50, format v3 only).
+/// Section kind: the envelope policy per direction (issue 50, format v3 and later).
 pub const SECTION_ENVELOPE: u8 = 5;
 /// Envelope policy codes (section kind 5): hold every input at the edge of
-/// its training range, or serve the direction from its fallback without an
-/// input beyond the margin.
+/// its training range, serve the direction from its fallback without an
+/// input beyond the margin, or (format v4 only) continue the linear model up
+/// to [`EXTRAPOLATE_WIDTHS`](crate::limits::EXTRAPOLATE_WIDTHS) training
+/// widths beyond each edge.
 pub const ENVELOPE_HOLD: u8 = 0;
 pub const ENVELOPE_FALLBACK: u8 = 1;
+pub const ENVELOPE_EXTRAPOLATE: u8 = 2;
 /// Units code 1: corrections 0.1 µm, temperatures 1/16 °C, speed rpm, positions µm.
 pub const UNITS_V1: u8 = 1;
 /// Flag: use the stored reference temperatures instead of the first valid sample.

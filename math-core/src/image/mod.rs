@@ -3,8 +3,9 @@
 //! [`Model::parse`] accepts only a fully valid image and never panics; any
 //! defect is an [`ImageError`].
 //!
-//! Layout (format version 3; version 2 is the same without section kind 5,
-//! version 1 the same without the sections; every count is bounded by [`crate::limits`]):
+//! Layout (format version 4; version 3 is the same without the envelope
+//! policy code 2, version 2 the same without section kind 5, version 1 the
+//! same without the sections; every count is bounded by [`crate::limits`]):
 //!
 //! ```text
 //! header   32 B  "TCMI", format u16, flags u16, total_len u32, model_version u32,
@@ -25,7 +26,7 @@
 //! table         direction u8, axis u8 (0xFF: none), n_terms u8, 0,
 //!               term × n_terms: coef i32 (Q8 of 0.1 µm), input u8 (0xFF: none),
 //!               input_power u8, position_power u8, 0
-//! sections      (v2 and v3) n_sections u8, 3 × 0, then per section:
+//! sections      (v2 and later) n_sections u8, 3 × 0, then per section:
 //!               kind u8, 0, len u16, payload (len bytes)
 //! crc32   4 B   CRC-32/ISO-HDLC of every byte before it
 //! ```
@@ -37,10 +38,11 @@
 //! kind 1  fallback models: n u8, 3 × 0, then per fallback (priority order):
 //!         direction u8, excluded sensor a u8, excluded sensor b u8 (0xFF: none),
 //!         n_terms u8, term × n_terms (the table term encoding; position power 0)
-//! kind 5  envelope policy (issue 50; format v3 only, in a v2 image unknown):
+//! kind 5  envelope policy (issue 50; format v3 and later, in a v2 image unknown):
 //!         n u8 (= n_directions), 3 × 0, then per direction (image order):
-//!         policy u8 (0 hold, 1 fallback), 0, margin u16 (raw units of each
-//!         input: 1/16 °C for temperatures, rpm for the spindle speed)
+//!         policy u8 (0 hold, 1 fallback, 2 extrapolate: format v4 only), 0,
+//!         margin u16 (raw units of each input: 1/16 °C for temperatures,
+//!         rpm for the spindle speed)
 //! kind 3  volumetric correction (issue 14, crate::volumetric):
 //!         n_sensors u8, 0, n_terms u16, position slot of X, Y, Z u8 × 3
 //!         (index into HR_POSITIONS), 0, tool_max i32 (µm),
@@ -98,16 +100,27 @@
 //! reads as `hold`, margin 0); `fallback` treats the sensors that input reads
 //! as faulted for that direction and serves it from its first fallback (kind
 //! 1, image order) that reads none of them, as degraded mode does (held at the
-//! edge when there is none). Either way the step is counted per direction
+//! edge when there is none); `extrapolate` (format v4) normalises the inputs
+//! of the model serving the direction (main or the fallback in force) over
+//! the extended span [min − W·(max − min), max + W·(max − min)], W =
+//! [`EXTRAPOLATE_WIDTHS`](crate::limits::EXTRAPOLATE_WIDTHS) = 2: the linear
+//! model continues up to two training widths beyond each edge and is held at
+//! that outer edge beyond. Whichever policy, the step is counted per direction
 //! (input registers 360–371) and status bit 6 is set. The encoder writes
-//! version 3 only with this section (8 B + 4 B per direction), so a build
-//! that reads versions 1 and 2 refuses such an image by its version check
-//! (result 8, unsupported format) and keeps its model; without it the image
-//! is byte-identical to a v2 (or v1) build's. The parser refuses a count
-//! other than the image's directions, a policy code other than 0 or 1 and
-//! non-zero padding (`BadValue`, result 13).
+//! version 3 only with this section (8 B + 4 B per direction) and version 4
+//! only when some direction extrapolates, so a build that reads versions 1
+//! and 2 refuses the former, one that reads up to 3 the latter, by its
+//! version check (result 8, unsupported format) and keeps its model; without
+//! the section the image is byte-identical to a v2 (or v1) build's. The
+//! parser refuses a count other than the image's directions, a policy code
+//! other than 0 or 1 (or 2 in a v4 image) and non-zero padding (`BadValue`,
+//! result 13), and an extrapolating direction that is not linear in every
+//! model that can serve it: a network, a table bound to an axis, a term of
+//! its tables or fallbacks of input power above 1 or position power above 0
+//! (`BadValue`); its prediction bound is checked over the extended span
+//! (`semantic`).
 //!
-//!//! A fallback is one static polynomial table over the image's inputs that
+//! A fallback is one static polynomial table over the image's inputs that
 //! serves its direction without the excluded sensor(s): it may not use an
 //! input that reads them. The encoder writes version 1 when there are no
 //! sections, so such images (and the golden vectors) are byte-identical to
@@ -144,13 +157,14 @@ pub(crate) mod types;
 
 pub use error::{EncodeError, ImageError};
 pub use format::{
-    crc32, rom_crc8, ENVELOPE_FALLBACK, ENVELOPE_HOLD, FIVE_AXIS_FLAGS, FIVE_AXIS_RTEST_LOCATION,
-    FLAG_FIXED_REFERENCE, FORMAT_VERSION, HEADER_LEN, MAGIC, NONE, SECTIONS_VERSION,
-    SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
+    crc32, rom_crc8, ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION,
+    EXTRAPOLATE_VERSION, FIVE_AXIS_FLAGS, FIVE_AXIS_RTEST_LOCATION, FLAG_FIXED_REFERENCE,
+    FORMAT_VERSION, HEADER_LEN, MAGIC, NONE, SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS,
+    SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
 };
 pub use model::Model;
 pub use signed::{split_signed, SignedImage, MAX_SIGNED_BYTES};
 pub use types::{
-    name8, Axis, Direction, EnvelopePolicy, Fallback, InputKind, InputSpec, Lag, Net, SensorRef,
-    Table, Term,
+    name8, Axis, Direction, EnvelopeMode, EnvelopePolicy, Fallback, InputKind, InputSpec, Lag, Net,
+    SensorRef, Table, Term,
 };

@@ -3,7 +3,8 @@
 
 use super::error::{push, ImageError};
 use super::types::{
-    name_str, Axis, Direction, EnvelopePolicy, Fallback, InputSpec, Net, SensorRef, Table, Term,
+    name_str, Axis, Direction, EnvelopeMode, EnvelopePolicy, Fallback, InputSpec, Net, SensorRef,
+    Table, Term,
 };
 use crate::five_axis::FiveAxis;
 use crate::fixed::Span;
@@ -154,6 +155,21 @@ impl Model {
                 input_mask: input_mask(terms.iter().map(|t| t.input)),
             },
         )
+    }
+
+    /// Bit d: direction d's envelope policy is
+    /// [`EnvelopeMode::Extrapolate`](super::types::EnvelopeMode) (0 without
+    /// the policy section).
+    pub fn extrapolate_mask(&self) -> u8 {
+        let Some(policies) = &self.envelope else {
+            return 0;
+        };
+        policies
+            .iter()
+            .take(self.directions.len())
+            .enumerate()
+            .filter(|(_, p)| p.mode == EnvelopeMode::Extrapolate)
+            .fold(0, |m, (d, _)| m | (1 << d))
     }
 
     /// Directions' names as text (ASCII, zero padding dropped).

@@ -1,16 +1,16 @@
 //! The typed sections after the tables (format v2): the section list, and
 //! one reader per kind (1: fallback models, 3: volumetric correction, 4:
-//! five-axis part, 5: envelope policy, format v3 only).
+//! five-axis part, 5: envelope policy, format v3 and later).
 
 use super::error::{push, ImageError};
 use super::format::{
-    ENVELOPE_FALLBACK, ENVELOPE_HOLD, NONE, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
-    SECTION_VOLUMETRIC,
+    ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION, EXTRAPOLATE_VERSION,
+    NONE, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC,
 };
 use super::model::Model;
 use super::reader::Reader;
 use super::terms::{read_terms, TermRule};
-use super::types::{EnvelopePolicy, InputKind, SensorRef};
+use super::types::{EnvelopeMode, EnvelopePolicy, InputKind, SensorRef};
 use crate::five_axis::{FiveAxis, FiveAxisSpec, MAX_FOURIER_ORDER};
 use crate::limits::{MAX_FALLBACKS, MAX_SECTIONS, MAX_TERMS, MAX_VOL_SENSORS, MAX_VOL_TERMS};
 use crate::volumetric::{VolSensor, VolTerm, Volumetric};
@@ -18,8 +18,9 @@ use heapless::Vec;
 
 /// The v2 sections after the tables (see the module docs): each kind at
 /// most once, each payload read exactly to its declared length. Kind 5
-/// only in a version-3 image: in a version-2 one it is unknown, as it is to
-/// a build that reads only versions 1 and 2.
+/// only in a version-3 (or later) image: in a version-2 one it is unknown,
+/// as it is to a build that reads only versions 1 and 2; its code 2
+/// (extrapolate) only in a version-4 image.
 pub(super) fn parse_sections(
     r: &mut Reader<'_>,
     m: &mut Model,
@@ -34,7 +35,7 @@ pub(super) fn parse_sections(
         let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
         let known = [SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind)
-            || (kind == SECTION_ENVELOPE && version >= 3);
+            || (kind == SECTION_ENVELOPE && version >= ENVELOPE_VERSION);
         if !known {
             return Err(ImageError::UnknownSection { kind });
         }
@@ -45,7 +46,7 @@ pub(super) fn parse_sections(
         let parsed = match kind {
             SECTION_VOLUMETRIC => parse_volumetric(&mut payload, m),
             SECTION_FIVE_AXIS => parse_five_axis(&mut payload, m),
-            SECTION_ENVELOPE => parse_envelope(&mut payload, m),
+            SECTION_ENVELOPE => parse_envelope(&mut payload, m, version),
             _ => parse_fallbacks(&mut payload, m),
         };
         parsed.map_err(|e| match e {
@@ -215,8 +216,10 @@ fn parse_five_axis(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> 
 }
 
 /// Section kind 5: the envelope policy, one 4-byte entry per direction
-/// (policy u8, 0, margin u16 raw units).
-fn parse_envelope(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+/// (policy u8, 0, margin u16 raw units); code 2 (extrapolate) only from
+/// format v4 on. Whether an extrapolating direction is linear is checked
+/// with the semantic limits, once every record is read.
+fn parse_envelope(r: &mut Reader<'_>, m: &mut Model, version: u16) -> Result<(), ImageError> {
     let [n, pad @ ..] = r.array::<4>()?;
     if usize::from(n) != m.directions.len() {
         return Err(ImageError::BadValue {
@@ -227,9 +230,15 @@ fn parse_envelope(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
     for p in policies.iter_mut().take(usize::from(n)) {
         let [policy, pad2] = r.array()?;
         p.margin = r.u16()?;
-        p.fallback = match policy {
-            ENVELOPE_HOLD => false,
-            ENVELOPE_FALLBACK => true,
+        p.mode = match policy {
+            ENVELOPE_HOLD => EnvelopeMode::Hold,
+            ENVELOPE_FALLBACK => EnvelopeMode::Fallback,
+            ENVELOPE_EXTRAPOLATE if version >= EXTRAPOLATE_VERSION => EnvelopeMode::Extrapolate,
+            ENVELOPE_EXTRAPOLATE => {
+                return Err(ImageError::BadValue {
+                    what: "envelope policy extrapolate (format v4 or later only)",
+                })
+            }
             _ => {
                 return Err(ImageError::BadValue {
                     what: "envelope policy",

@@ -14,10 +14,24 @@
 //! and tables, and for each fallback the sum of its terms, must stay
 //! within ±[`MAX_PREDICTION`]: a sound bound (no input can leave it), not
 //! a tight one (hidden units that cancel are counted apart).
+//!
+//! **Extrapolating directions** (envelope policy `extrapolate`, format v4):
+//! their inputs are normalised over the extended span (each input's range
+//! widened by [`EXTRAPOLATE_WIDTHS`] training widths on either side, held at
+//! its outer edge beyond), so they reach ±(1 + 2W) = ±5 instead of ±1. Such
+//! a direction must be linear in every model that can serve it: no network,
+//! no table bound to an axis, every term of its tables and of its fallbacks
+//! of input power ≤ 1 and position power 0 (refused otherwise, `BadValue`).
+//! The bound then counts a term that reads an input at (1 + 2W)·|coef|
+//! (a constant term at |coef|).
 
 use super::error::ImageError;
+use super::format::NONE;
 use super::model::Model;
-use crate::limits::{MAX_DIRECTIONS, MAX_NET_WEIGHT_Q16, MAX_PREDICTION, MAX_TAU_S, MAX_WARMUP_S};
+use super::types::Term;
+use crate::limits::{
+    EXTRAPOLATE_WIDTHS, MAX_DIRECTIONS, MAX_NET_WEIGHT_Q16, MAX_PREDICTION, MAX_TAU_S, MAX_WARMUP_S,
+};
 
 /// Every semantic limit, in the order the module docs give them.
 pub(crate) fn check(m: &Model) -> Result<(), ImageError> {
@@ -46,7 +60,59 @@ pub(crate) fn check(m: &Model) -> Result<(), ImageError> {
             return Err(ImageError::CoefficientRange { net });
         }
     }
+    check_extrapolate_linear(m)?;
     check_prediction_bound(m)
+}
+
+const NOT_LINEAR: ImageError = ImageError::BadValue {
+    what: "envelope policy extrapolate on a direction whose model is not linear (a network, an axis table, an input power above 1 or a position power)",
+};
+
+/// Every model that can serve an extrapolating direction is linear in its
+/// inputs (the module docs).
+fn check_extrapolate_linear(m: &Model) -> Result<(), ImageError> {
+    let mask = m.extrapolate_mask();
+    if mask == 0 {
+        return Ok(());
+    }
+    let extrapolates = |d: u8| u32::from(mask) & 1u32.checked_shl(u32::from(d)).unwrap_or(0) != 0;
+    let linear = |terms: &[Term]| {
+        terms
+            .iter()
+            .all(|t| t.input_power <= 1 && t.position_power == 0)
+    };
+    let nets_ok = !m.nets.iter().any(|n| extrapolates(n.direction));
+    let tables_ok = m
+        .tables
+        .iter()
+        .filter(|t| extrapolates(t.direction))
+        .all(|t| t.axis == NONE && linear(&t.terms));
+    let fallbacks_ok = (0..m.fallbacks.len())
+        .zip(&m.fallbacks)
+        .filter(|(_, f)| extrapolates(f.direction))
+        .all(|(k, _)| linear(m.fallback_terms_of(k)));
+    if nets_ok && tables_ok && fallbacks_ok {
+        Ok(())
+    } else {
+        Err(NOT_LINEAR)
+    }
+}
+
+/// Σ |coef| of `terms` (Q8 of 0.1 µm) over the inputs' reach: a term
+/// reading an input counts `reach` times (1 within the envelope, 1 + 2W
+/// for an extrapolating direction), a constant once.
+fn terms_bound(terms: &[Term], reach: i64) -> i64 {
+    terms
+        .iter()
+        .map(|t| {
+            let k = if t.input != NONE && t.input_power > 0 {
+                reach
+            } else {
+                1
+            };
+            i64::from(t.coef.unsigned_abs()) * k
+        })
+        .sum()
 }
 
 /// The analytic bound of the module docs, in Q8 of 0.1 µm (i64: at most
@@ -67,13 +133,17 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
             *h += i64::from(n.b2) + pos;
         }
     }
+    let mask = m.extrapolate_mask();
+    let reach = |d: u8| {
+        if u32::from(mask) & 1u32.checked_shl(u32::from(d)).unwrap_or(0) != 0 {
+            1 + 2 * i64::from(EXTRAPOLATE_WIDTHS)
+        } else {
+            1
+        }
+    };
     for t in &m.tables {
         let d = usize::from(t.direction);
-        let sum: i64 = t
-            .terms
-            .iter()
-            .map(|x| i64::from(x.coef.unsigned_abs()))
-            .sum();
+        let sum = terms_bound(&t.terms, reach(t.direction));
         if let (Some(l), Some(h)) = (lo.get_mut(d), hi.get_mut(d)) {
             *l -= sum;
             *h += sum;
@@ -88,11 +158,7 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
         return Err(ImageError::PredictionBound { direction });
     }
     for (k, f) in m.fallbacks.iter().enumerate() {
-        let sum: i64 = m
-            .fallback_terms_of(k)
-            .iter()
-            .map(|x| i64::from(x.coef.unsigned_abs()))
-            .sum();
+        let sum = terms_bound(m.fallback_terms_of(k), reach(f.direction));
         if over(-sum, sum) {
             return Err(ImageError::PredictionBound {
                 direction: f.direction,

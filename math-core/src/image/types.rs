@@ -96,19 +96,45 @@ pub struct Fallback {
 }
 
 /// What a direction serves when an input its model reads leaves the
-/// training envelope (section kind 5, format v3; images without it: hold,
-/// margin 0, the rule before the section existed).
+/// training envelope (section kind 5, format v3, and v4 for
+/// [`EnvelopeMode::Extrapolate`]; images without it: hold, margin 0, the
+/// rule before the section existed).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct EnvelopePolicy {
-    /// `false`: every input held at the edge of its range (hold). `true`:
-    /// an input beyond its range by more than `margin` is treated as a
-    /// faulted sensor: the direction is served by its first fallback without
-    /// the sensors that input reads (held as before when there is none).
-    pub fallback: bool,
+    pub mode: EnvelopeMode,
     /// Raw units of each input (1/16 °C for temperatures, rpm for the
     /// spindle speed) an input may leave its range by before it counts as
     /// beyond the envelope.
     pub margin: u16,
+}
+
+/// A direction's envelope policy (section kind 5's code).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EnvelopeMode {
+    /// Code 0: every input held at the edge of its range.
+    #[default]
+    Hold,
+    /// Code 1: an input beyond its range by more than the margin is treated
+    /// as a faulted sensor: the direction is served by its first fallback
+    /// without the sensors that input reads (held as before when there is none).
+    Fallback,
+    /// Code 2 (format v4): the inputs of the (linear) model serving the
+    /// direction continue linearly up to
+    /// [`EXTRAPOLATE_WIDTHS`](crate::limits::EXTRAPOLATE_WIDTHS) training
+    /// widths beyond each edge of their range and are held at that outer edge
+    /// beyond; the step counts and is flagged as under hold.
+    Extrapolate,
+}
+
+impl EnvelopeMode {
+    /// The policy's name as the fit file and the reports spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            EnvelopeMode::Hold => "hold",
+            EnvelopeMode::Fallback => "fallback",
+            EnvelopeMode::Extrapolate => "extrapolate",
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -2,7 +2,7 @@
 //! evidence ([`crate::fit::envelope`] computes it at fit time).
 
 use thermocomp_core::float::FloatModel;
-use thermocomp_core::image::EnvelopePolicy;
+use thermocomp_core::image::{EnvelopeMode, EnvelopePolicy};
 use thermocomp_core::limits::MAX_DIRECTIONS;
 
 use crate::fit::envelope::DEFAULT_MARGIN_RAW;
@@ -28,14 +28,14 @@ pub fn policies(
         match file.envelope.get(&ch) {
             Some(ev) => {
                 *p = EnvelopePolicy {
-                    fallback: ev.policy == "fallback",
+                    mode: mode(&ev.policy),
                     margin: ev.margin_raw,
                 };
                 lines.push(format!("envelope {ch}: {}", ev.why()));
             }
             None => {
                 *p = EnvelopePolicy {
-                    fallback: false,
+                    mode: EnvelopeMode::Hold,
                     margin: DEFAULT_MARGIN_RAW,
                 };
                 lines.push(format!(
@@ -45,4 +45,15 @@ pub fn policies(
         }
     }
     (Some(out), lines)
+}
+
+/// The fit file's policy name → the image's mode: "extrapolate" and
+/// "fallback" as named, anything else hold (the rule of images without a
+/// policy).
+pub fn mode(policy: &str) -> EnvelopeMode {
+    match policy {
+        "extrapolate" => EnvelopeMode::Extrapolate,
+        "fallback" => EnvelopeMode::Fallback,
+        _ => EnvelopeMode::Hold,
+    }
 }
