@@ -356,10 +356,7 @@ impl Compensator {
                 }
             }
         }
-        if eval.out_of_envelope {
-            out.status |= status::OUT_OF_ENVELOPE;
-            extrapolate_rule(model, features, active, &mut eval.corrections);
-        }
+        out.status |= outside_rule(model, features, active, &mut eval);
         if input.now_ms.saturating_sub(reference_ms) < u64::from(model.warmup_s) * 1000 {
             out.status |= status::WARMING_UP;
         }
@@ -473,26 +470,25 @@ fn envelope_rule(
     }
 }
 
-/// Rule 4 under `extrapolate`: some input lies outside its range, so each
-/// extrapolating direction served by a model (main or fallback) is
-/// evaluated again with its inputs over the extended span (linear up to
+/// Rule 4 when some input or position lies outside its range: the status
+/// bit `OUT_OF_ENVELOPE` (returned; 0 inside), and under `extrapolate` each
+/// extrapolating direction served by a model (main or fallback) evaluated
+/// again with its inputs over the extended span (linear up to
 /// [`EXTRAPOLATE_WIDTHS`] training widths beyond each edge, held there).
-/// Nothing is computed for an image without such a direction.
-fn extrapolate_rule(
-    model: &Model,
-    features: &[i32],
-    active: &[u8],
-    corrections: &mut [i32; MAX_DIRECTIONS],
-) {
+/// Nothing more is computed for an image without such a direction.
+fn outside_rule(model: &Model, features: &[i32], active: &[u8], eval: &mut Evaluation) -> u16 {
+    if !eval.out_of_envelope {
+        return 0;
+    }
     let mask = model.extrapolate_mask();
     if mask == 0 {
-        return;
+        return status::OUT_OF_ENVELOPE;
     }
     let n = model.normalise_extended(features);
     if !n.outside {
-        return; // only a position was outside: the held values stand
+        return status::OUT_OF_ENVELOPE; // only a position was outside: held values stand
     }
-    for (d, (c, &a)) in corrections.iter_mut().zip(active).enumerate() {
+    for (d, (c, &a)) in eval.corrections.iter_mut().zip(active).enumerate() {
         if mask & (1 << d) == 0 {
             continue;
         }
@@ -502,4 +498,5 @@ fn extrapolate_rule(
             k => model.fallback_correction(usize::from(k) - 1, &n),
         };
     }
+    status::OUT_OF_ENVELOPE
 }
