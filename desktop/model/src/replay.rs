@@ -207,6 +207,11 @@ pub struct Residual {
     /// registers 360–371), and their share of the scored rows.
     pub out_of_envelope_rows: usize,
     pub out_of_envelope_share: f64,
+    /// The image's envelope policy for this direction ("hold", "fallback"
+    /// or "extrapolate"; "hold" without the section) and its margin (raw
+    /// units: 1/16 °C, rpm).
+    pub envelope_policy: &'static str,
+    pub envelope_margin_raw: u16,
     /// MAE (µm, about the run's reference) over those rows; `None` without any.
     pub out_of_envelope_mae_um: Option<f64>,
     /// MAE over the other scored rows; `None` without any.
@@ -305,6 +310,10 @@ pub fn residuals(
             (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
         };
         let n_out = outside.iter().filter(|&&o| o).count();
+        let policy = model
+            .envelope
+            .and_then(|p| p.get(d).copied())
+            .unwrap_or_default();
         let (r_rms, m_rms) = (rms(&res), rms(&meas));
         let (r_rms0, m_rms0) = (rms(&demeaned(&res)), rms(&demeaned(&meas)));
         out.push(Residual {
@@ -322,6 +331,8 @@ pub fn residuals(
             never_worse_about_mean: r_rms0 <= m_rms0 * (1.0 + 1e-12),
             out_of_envelope_rows: n_out,
             out_of_envelope_share: n_out as f64 / n,
+            envelope_policy: policy.mode.name(),
+            envelope_margin_raw: policy.margin,
             out_of_envelope_mae_um: mae_where(true),
             in_envelope_mae_um: mae_where(false),
         });

@@ -1,7 +1,7 @@
 //! The image's envelope policy section (issue 50 item 3) from a fit file's
 //! evidence ([`crate::fit::envelope`] computes it at fit time).
 
-use thermocomp_core::float::FloatModel;
+use thermocomp_core::float::{FloatModel, FloatTerm};
 use thermocomp_core::image::{EnvelopeMode, EnvelopePolicy};
 use thermocomp_core::limits::MAX_DIRECTIONS;
 
@@ -23,15 +23,22 @@ pub fn policies(
     }
     let mut out = [EnvelopePolicy::default(); MAX_DIRECTIONS];
     let mut lines = Vec::new();
-    for (p, d) in out.iter_mut().zip(&float.directions) {
+    for ((p, d), dir) in out.iter_mut().zip(&float.directions).zip(0u8..) {
         let ch = format!("d{}_um", d.name);
         match file.envelope.get(&ch) {
             Some(ev) => {
+                let mut m = mode(&ev.policy);
+                let mut why = ev.why();
+                if m == EnvelopeMode::Extrapolate && !linear(float, dir) {
+                    // The board refuses it (image parser): say so, hold.
+                    m = EnvelopeMode::Hold;
+                    why.push_str("; but extrapolate needs a linear model (no network, no position term, powers <= 1, fallbacks too) and this channel's is not: the image holds");
+                }
                 *p = EnvelopePolicy {
-                    mode: mode(&ev.policy),
+                    mode: m,
                     margin: ev.margin_raw,
                 };
-                lines.push(format!("envelope {ch}: {}", ev.why()));
+                lines.push(format!("envelope {ch}: {why}"));
             }
             None => {
                 *p = EnvelopePolicy {
@@ -56,4 +63,26 @@ pub fn mode(policy: &str) -> EnvelopeMode {
         "fallback" => EnvelopeMode::Fallback,
         _ => EnvelopeMode::Hold,
     }
+}
+
+/// Whether every model that can serve `direction` is linear in its inputs,
+/// as the image parser requires of a direction under `extrapolate`: no
+/// network, no table bound to an axis, every term of its tables and
+/// fallbacks of input power ≤ 1 and position power 0.
+pub fn linear(float: &FloatModel, direction: u8) -> bool {
+    let terms_linear = |t: &[FloatTerm]| {
+        t.iter()
+            .all(|t| t.input_power <= 1 && t.position_power == 0)
+    };
+    !float.nets.iter().any(|n| n.direction == direction)
+        && float
+            .tables
+            .iter()
+            .filter(|t| t.direction == direction)
+            .all(|t| t.axis.is_none() && terms_linear(&t.terms))
+        && float
+            .fallbacks
+            .iter()
+            .filter(|f| f.direction == direction)
+            .all(|f| terms_linear(&f.terms))
 }

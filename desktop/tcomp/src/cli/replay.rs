@@ -206,8 +206,10 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
             );
             let mae = |v: Option<f64>| v.map_or("-".to_string(), |m| format!("{m:.2} µm"));
             println!(
-                "  {}: beyond the training envelope (an input of the serving model past its range by more than the image's margin): {} rows ({:.1} %), MAE there {}; inside: MAE {}",
+                "  {}: beyond the training envelope (an input of the serving model past its range by more than the image's margin, {} raw; policy {}): {} rows ({:.1} %), MAE there {}; inside: MAE {}",
                 r.column,
+                r.envelope_margin_raw,
+                r.envelope_policy,
                 r.out_of_envelope_rows,
                 100.0 * r.out_of_envelope_share,
                 mae(r.out_of_envelope_mae_um),
