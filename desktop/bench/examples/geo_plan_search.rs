@@ -128,6 +128,8 @@ fn main() {
                     length_mm: len,
                     tool_offset_mm: *t,
                     purpose: String::new(),
+                    kind: Default::default(),
+                    sense: d.map(|x| x / len),
                 });
             }
         }
@@ -140,6 +142,8 @@ fn main() {
             .map(|l| tcomp_geometry::identify::LineObs {
                 id: l.id.clone(),
                 direction: l.direction,
+                sense: l.sense,
+                kind: l.kind,
                 tool_offset_mm: l.tool_offset_mm,
                 points: l
                     .targets(21)
@@ -224,6 +228,8 @@ fn main() {
             tcomp_geometry::identify::LineObs {
                 id: l.id.clone(),
                 direction: l.direction,
+                sense: l.sense,
+                kind: l.kind,
                 tool_offset_mm: l.tool_offset_mm,
                 points: l
                     .targets(21)

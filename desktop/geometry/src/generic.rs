@@ -13,7 +13,11 @@
 //!   the machine): a free zero (the interferometer reads relative
 //!   displacement) and a laser scale error (wavelength compensation and
 //!   the beam's cosine misalignment, which reads as a scale), both
-//!   integrated out. A reflector a millimetre off its stated offset moves
+//!   integrated out. A straightness-optics line (`LineKind::Straightness`)
+//!   reads the error along its `sense`, perpendicular to the travel, up to
+//!   an offset and a slope (the optic's alignment): the same two columns,
+//!   the slope with the wide prior [`SLOPE_PRIOR_URAD`] instead of the
+//!   laser scale's. A reflector a millimetre off its stated offset moves
 //!   a reading by the angles × 1 mm (0.03 µm at 30 µrad): below the noise,
 //!   left to it.
 //! * **Posterior**: each error's σ at any position; an error is
@@ -36,9 +40,11 @@ use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::adequacy::{chi2_upper, words, Adequacy, StatedNoise, FALSE_REJECT, NOISE_TOLERANCE};
 use super::errors::{GeometricErrors, Term, SQUARENESS_NAMES};
-use super::identify::LineObs;
+use super::identify::{LineKind, LineObs};
 use super::kinematics::{sensitivity, Structure};
-use super::plan::{CLASS_DEGREE, NULL_TOLERANCE, POSITIONS, PRIOR_SQUARENESS_URAD};
+use super::plan::{
+    CLASS_DEGREE, NULL_TOLERANCE, POSITIONS, PRIOR_SQUARENESS_URAD, SLOPE_PRIOR_URAD,
+};
 use super::prior_solve::{normal_equations, solve, Normal, Prior, Search, SmoothFit};
 use super::smooth::{to_errors, SCol};
 
@@ -90,7 +96,7 @@ fn columns(lines: usize) -> Vec<SCol> {
     cols
 }
 
-fn prior_var(cols: &[SCol], v: &V) -> Vec<f64> {
+fn prior_var(cols: &[SCol], kinds: &[LineKind], v: &V) -> Vec<f64> {
     cols.iter()
         .map(|c| match *c {
             SCol::Term { term, j } => {
@@ -104,6 +110,9 @@ fn prior_var(cols: &[SCol], v: &V) -> Vec<f64> {
                 (tau.exp() * (j as f64).powf(-v[4])).powi(2)
             }
             SCol::Squareness(_) => PRIOR_SQUARENESS_URAD.powi(2),
+            SCol::Scale(i) if kinds.get(i) == Some(&LineKind::Straightness) => {
+                SLOPE_PRIOR_URAD.powi(2)
+            }
             SCol::Scale(_) => (2.0 * v[5]).exp(),
         })
         .collect()
@@ -190,10 +199,11 @@ pub fn identify_generic(st: &Structure, lines: &[LineObs], stroke: [f64; 3]) -> 
         ],
         step: [1.0, 1.0, 1.0, 1.0, 0.5, 1.0],
     };
-    let prior = |v: &V| Some(Prior::Variances(prior_var(&cols, v)));
+    let kinds: Vec<LineKind> = lines.iter().map(|l| l.kind).collect();
+    let prior = |v: &V| Some(Prior::Variances(prior_var(&cols, &kinds, v)));
     let solved = solve(&ne, &cols, lines, prior, &start)?;
     let v = solved.v;
-    let pv = prior_var(&cols, &v);
+    let pv = prior_var(&cols, &kinds, &v);
     let hold = hold_out(&ne, &pv, (2.0 * v[0]).exp(), &solved.x, lines)?;
     let errors = to_errors(&cols, solved.x.as_slice(), DEGREE, stroke);
     let post = Posterior {
@@ -490,7 +500,7 @@ impl Generic {
             let d = Vector3::from(l.direction);
             let r: Vec<f64> = (l.points.iter())
                 .map(|p| {
-                    let row = self.error_row(st, l.direction, p.pos_mm, l.tool_offset_mm);
+                    let row = self.error_row(st, l.sense, p.pos_mm, l.tool_offset_mm);
                     let along = d.dot(&(Vector3::from(p.pos_mm) - p0));
                     let pred: f64 = row.iter().zip(&x).map(|(a, b)| a * b).sum();
                     p.disp_um - pred - along * 1e-3 * scale
@@ -506,7 +516,8 @@ impl Generic {
 
 /// The lines' design matrix for `cols` (one row per point; straightness
 /// and angle terms by their Legendre basis, squareness, no scale), each
-/// line's rows centred (its zero is free), at least as many rows as
+/// line's rows centred (its zero is free) and a straightness line's also
+/// free of its slope (the optic's alignment), at least as many rows as
 /// columns (zero rows pad a short plan).
 pub(crate) fn centred_design(
     st: &Structure,
@@ -519,7 +530,7 @@ pub(crate) fn centred_design(
     let mut a = DMatrix::zeros(m.max(n), n);
     let mut r = 0;
     for l in lines {
-        let (d, r0) = (Vector3::from(l.direction), r);
+        let (d, r0) = (Vector3::from(l.sense), r);
         for p in &l.points {
             let s = sensitivity(st, p.pos_mm, l.tool_offset_mm);
             for (ci, c) in cols.iter().enumerate() {
@@ -540,8 +551,33 @@ pub(crate) fn centred_design(
             let mean = c.mean();
             c.add_scalar_mut(-mean);
         }
+        if l.kind == LineKind::Straightness {
+            let slope = centred_travel(l);
+            for ci in 0..n {
+                let mut c = a.view_mut((r0, ci), (r - r0, 1));
+                let k = slope.dot(&c);
+                c -= &slope * k;
+            }
+        }
     }
     a
+}
+
+/// The line's travel from its first target at each target, centred and
+/// of unit norm (a straightness line's slope direction in reading space).
+fn centred_travel(l: &LineObs) -> DVector<f64> {
+    let t = Vector3::from(l.direction);
+    let p0 = Vector3::from(l.points.first().map_or([0.0; 3], |p| p.pos_mm));
+    let mut s = DVector::from_iterator(
+        l.points.len(),
+        (l.points.iter()).map(|p| t.dot(&(Vector3::from(p.pos_mm) - p0))),
+    );
+    s.add_scalar_mut(-s.mean());
+    let n = s.norm();
+    if n > 0.0 {
+        s /= n;
+    }
+    s
 }
 
 /// The combinations of the class's errors no line sees (the plan's null

@@ -39,17 +39,83 @@ pub const NULL_WEIGHT: f64 = 0.05;
 #[derive(Clone, Debug)]
 pub struct Observation {
     pub pos_mm: [f64; 3],
-    /// Reading [µm] along `direction` (first target of the line = 0).
+    /// Reading [µm] along the line's `sense` (a displacement line: first target = 0).
     pub disp_um: f64,
+}
+
+/// What a line's instrument reads (docs/formats/displacement-lines.md,
+/// `measures`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LineKind {
+    /// Laser interferometer: the tool point's error along the travel, up to
+    /// a free zero and a laser scale error.
+    #[default]
+    Displacement,
+    /// Straightness optics (or a straightedge with a probe): the error
+    /// along `sense`, perpendicular to the travel, up to an unknown offset
+    /// and slope (the optic's alignment); no laser scale.
+    Straightness,
+}
+
+impl LineKind {
+    /// The metadata value (`measures: …`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LineKind::Displacement => "displacement",
+            LineKind::Straightness => "straightness",
+        }
+    }
 }
 
 /// One line ready for identification (forward/backward already averaged).
 #[derive(Clone, Debug)]
 pub struct LineObs {
     pub id: String,
+    /// Unit vector of travel.
     pub direction: [f64; 3],
+    /// Unit vector the reading is the error along: `direction` for a
+    /// displacement line, perpendicular to it for a straightness line.
+    pub sense: [f64; 3],
+    pub kind: LineKind,
     pub tool_offset_mm: [f64; 3],
     pub points: Vec<Observation>,
+}
+
+impl LineObs {
+    /// A displacement line (the reading along the travel).
+    pub fn displacement(
+        id: String,
+        direction: [f64; 3],
+        tool_offset_mm: [f64; 3],
+        points: Vec<Observation>,
+    ) -> LineObs {
+        LineObs {
+            id,
+            direction,
+            sense: direction,
+            kind: LineKind::Displacement,
+            tool_offset_mm,
+            points,
+        }
+    }
+}
+
+/// Refuse straightness-optics lines for a method that reads every line as
+/// a displacement along its travel (`what` names the method).
+pub fn displacement_only(lines: &[LineObs], what: &str) -> anyhow::Result<()> {
+    let s: Vec<&str> = (lines.iter())
+        .filter(|l| l.kind == LineKind::Straightness)
+        .map(|l| l.id.as_str())
+        .collect();
+    if !s.is_empty() {
+        anyhow::bail!(
+            "{what} reads every line as a displacement along its travel; line{} {} {} straightness-optics (use the generic model: --method generic, 18 lines or more)",
+            if s.len() > 1 { "s" } else { "" },
+            s.join(", "),
+            if s.len() > 1 { "are" } else { "is" }
+        );
+    }
+    Ok(())
 }
 
 /// Polynomial degree per group of terms. Fourteen lines of one-dimensional
@@ -243,6 +309,7 @@ pub fn identify(
     stroke_mm: [f64; 3],
 ) -> anyhow::Result<Identification> {
     let basis = Basis::new(degrees, stroke_mm);
+    displacement_only(lines, "the polynomial model")?;
     if lines.iter().all(|l| l.points.len() < 2) {
         anyhow::bail!("no line with at least two targets: nothing to identify from");
     }

@@ -31,6 +31,7 @@ pub mod identify;
 pub mod lines;
 pub mod plan;
 pub mod plan_design;
+pub mod plan_optics;
 pub mod predict;
 mod prior_solve;
 pub mod rotary;

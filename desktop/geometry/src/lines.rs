@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::identify::{LineObs, Observation};
+use super::identify::{LineKind, LineObs, Observation};
 use super::kinematics::Structure;
 
 /// Forward or backward run of a line.
@@ -29,6 +29,11 @@ pub struct LineSpec {
     pub tool_offset_mm: [f64; 3],
     /// What the line is for (docs, `tcomp geometry plan`).
     pub purpose: String,
+    /// What the instrument reads: displacement along the travel (laser
+    /// interferometer) or straightness along `sense`.
+    pub kind: LineKind,
+    /// Unit vector the reading is along (`direction` for displacement).
+    pub sense: [f64; 3],
 }
 
 impl LineSpec {
@@ -60,6 +65,8 @@ fn line(id: usize, from: [f64; 3], to: [f64; 3], tool: [f64; 3], purpose: &str) 
         length_mm: len,
         tool_offset_mm: tool,
         purpose: purpose.to_string(),
+        kind: LineKind::Displacement,
+        sense: unit(d),
     }
 }
 
@@ -235,6 +242,7 @@ impl LineFile {
             Some((n, r)) => bail!("{p}:{n}: run must be 'forward' or 'backward', got `{r}`"),
         };
         let temperature_state = meta.get("temperature_state").map(|(_, v)| v.clone());
+        let (kind, sense) = measures(&meta, path, direction)?;
 
         let Some((hn, cols)) = header else {
             bail!("{p}: no column header (s_mm,pos_x,pos_y,pos_z,disp_um)");
@@ -264,6 +272,8 @@ impl LineFile {
                 length_mm: 0.0,
                 tool_offset_mm,
                 purpose: String::new(),
+                kind,
+                sense,
             },
             structure,
             run,
@@ -346,6 +356,10 @@ impl LineFile {
         let _ = writeln!(out, "# direction: {}", t(self.spec.direction));
         let _ = writeln!(out, "# tool_offset_mm: {}", t(self.spec.tool_offset_mm));
         let _ = writeln!(out, "# structure: {}", self.structure);
+        if self.spec.kind == LineKind::Straightness {
+            let _ = writeln!(out, "# measures: straightness");
+            let _ = writeln!(out, "# sense: {}", t(self.spec.sense));
+        }
         match self.run {
             Run::Forward => {
                 let _ = writeln!(out, "# run: forward");
@@ -382,6 +396,48 @@ impl LineFile {
 
     pub fn write(&self, path: &Path) -> Result<()> {
         std::fs::write(path, self.to_text()).with_context(|| format!("writing {}", path.display()))
+    }
+}
+
+/// The line's `measures` and `sense` metadata: displacement (sense = the
+/// travel) unless `measures: straightness`, whose `sense` is a unit vector
+/// perpendicular to the travel.
+fn measures(
+    meta: &BTreeMap<String, (usize, String)>,
+    path: &Path,
+    direction: [f64; 3],
+) -> Result<(LineKind, [f64; 3])> {
+    let p = path.display();
+    let kind = match meta.get("measures") {
+        None => LineKind::Displacement,
+        Some((_, v)) if v == "displacement" => LineKind::Displacement,
+        Some((_, v)) if v == "straightness" => LineKind::Straightness,
+        Some((n, v)) => {
+            bail!("{p}:{n}: measures must be 'displacement' or 'straightness', got `{v}`")
+        }
+    };
+    match (kind, meta.get("sense")) {
+        (LineKind::Displacement, None) => Ok((kind, direction)),
+        (LineKind::Displacement, Some((n, _))) => {
+            bail!("{p}:{n}: sense is for a straightness line; add '# measures: straightness' or remove it")
+        }
+        (LineKind::Straightness, None) => {
+            bail!("{p}: a straightness line needs '# sense: x,y,z' (the unit vector its reading is along)")
+        }
+        (LineKind::Straightness, Some((n, v))) => {
+            let s = triple(path, *n, "sense", v)?;
+            let norm = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            if !((norm - 1.0).abs() < 1e-6) {
+                bail!("{p}:{n}: sense `{v}` is not a unit vector (length {norm:.7})");
+            }
+            let dot: f64 = (0..3).map(|k| s[k] * direction[k]).sum();
+            if !(dot.abs() < 1e-6) {
+                bail!(
+                    "{p}:{n}: sense `{v}` is not perpendicular to the direction (cosine {dot:.2e})"
+                );
+            }
+            Ok((kind, s.map(|c| c / norm)))
+        }
     }
 }
 
@@ -432,6 +488,9 @@ pub fn average_runs(files: &[LineFile]) -> Result<Vec<Averaged>> {
                 || f.spec.tool_offset_mm != first.spec.tool_offset_mm
             {
                 bail!("line {id}: its runs differ in direction or tool offset");
+            }
+            if f.spec.kind != first.spec.kind || f.spec.sense != first.spec.sense {
+                bail!("line {id}: its runs differ in what they measure (measures, sense)");
             }
         }
         if fs.len() > 1 && fs.iter().any(|f| f.run == Run::Single) {
@@ -488,6 +547,8 @@ pub fn average_runs(files: &[LineFile]) -> Result<Vec<Averaged>> {
             obs: LineObs {
                 id: id.clone(),
                 direction: first.spec.direction,
+                sense: first.spec.sense,
+                kind: first.spec.kind,
                 tool_offset_mm: first.spec.tool_offset_mm,
                 points: (0..n)
                     .map(|i| Observation {

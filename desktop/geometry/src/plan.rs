@@ -18,7 +18,9 @@
 //!   [`PRIOR_STRAIGHTNESS_UM`], [`PRIOR_ANGULAR_URAD`]; squareness
 //!   [`PRIOR_SQUARENESS_URAD`].
 //! * **Nuisance per line**: its zero (free) and its laser scale
-//!   ([`SCALE_PPM`] standard deviation), both integrated out.
+//!   ([`SCALE_PPM`] standard deviation), both integrated out; a
+//!   straightness-optics line reads along its `sense` with a free offset
+//!   and a slope of [`SLOPE_PRIOR_URAD`] in place of the scale.
 //! * **Noise**: σ per reading of one run; a line's reading is the mean of
 //!   its forward and backward runs (σ/√2), [`TARGETS`] targets per line.
 //! * **Criterion**: the posterior standard deviation of each of the 21
@@ -45,6 +47,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::Serialize;
 
 use super::errors::{Term, SQUARENESS_NAMES};
+use super::identify::LineKind;
 use super::kinematics::{sensitivity, Structure};
 use super::lines::{plan14, LineSpec};
 use super::smooth::{DETERMINED_UM, DETERMINED_URAD};
@@ -64,6 +67,10 @@ pub const PRIOR_SQUARENESS_URAD: f64 = 200.0;
 /// Per-line laser scale error, standard deviation [ppm] (beam misalignment
 /// cosine error, wavelength compensation).
 pub const SCALE_PPM: f64 = 0.5;
+/// Prior standard deviation of a straightness optic's slope against the
+/// travel [µrad] (its alignment, 1 mm/m: far above any machine angle, so
+/// the line's slope is in effect free; `generic` uses the same).
+pub const SLOPE_PRIOR_URAD: f64 = 1000.0;
 /// Targets per line, both ends included (what `geometry simulate` writes).
 pub const TARGETS: usize = 41;
 /// Positions per stroke at which each error's σ is taken (its worst).
@@ -134,8 +141,9 @@ fn prior_sd(c: &Col) -> f64 {
     }
 }
 
-/// A line's rows for the class, each column centred (the line's free zero
-/// removed), and its laser-scale column (µm per ppm), centred.
+/// A line's rows for the class (the error along the line's sense), each
+/// column centred (the line's free zero removed), and its laser-scale
+/// column (µm per ppm; a straightness line's slope, µm per µrad), centred.
 pub(crate) fn line_rows(
     st: &Structure,
     stroke: [f64; 3],
@@ -143,7 +151,7 @@ pub(crate) fn line_rows(
     l: &LineSpec,
 ) -> (DMatrix<f64>, DVector<f64>) {
     let tg = l.targets(TARGETS);
-    let d = Vector3::from(l.direction);
+    let d = Vector3::from(l.sense);
     let mut a = DMatrix::zeros(tg.len(), cols.len());
     let mut sc = DVector::zeros(tg.len());
     for (r, (s_mm, p)) in tg.iter().enumerate() {
@@ -169,10 +177,25 @@ pub(crate) fn line_rows(
     (a, sc)
 }
 
+/// Prior standard deviation of the line's scale column: its laser scale
+/// [ppm], or a straightness optic's slope [µrad].
+pub(crate) fn nuisance_sd(l: &LineSpec) -> f64 {
+    match l.kind {
+        LineKind::Displacement => SCALE_PPM,
+        LineKind::Straightness => SLOPE_PRIOR_URAD,
+    }
+}
+
 /// The line's information in whitened form B (BᵀB), its zero and laser
-/// scale integrated out: BᵀB = Ãᵀ(σ²I + s²ããᵀ)⁻¹Ã on the centred rows.
-pub(crate) fn whitened(a: &DMatrix<f64>, sc: &DVector<f64>, sigma: f64) -> DMatrix<f64> {
-    let s2 = SCALE_PPM * SCALE_PPM;
+/// scale (of prior σ `nuisance_sd`, [`nuisance_sd`]) integrated out:
+/// BᵀB = Ãᵀ(σ²I + s²ããᵀ)⁻¹Ã on the centred rows.
+pub(crate) fn whitened(
+    a: &DMatrix<f64>,
+    sc: &DVector<f64>,
+    sigma: f64,
+    nuisance_sd: f64,
+) -> DMatrix<f64> {
+    let s2 = nuisance_sd * nuisance_sd;
     let n2 = sc.norm_squared();
     let mut b = a / sigma;
     if n2 > 0.0 {
@@ -340,7 +363,13 @@ pub fn design_singular_values(
     let rows: usize = plan.len() * TARGETS;
     let mut a = DMatrix::zeros(rows.max(n), n);
     for (li, l) in plan.iter().enumerate() {
-        let (al, _) = line_rows(st, stroke, &cols, l);
+        let (mut al, sc) = line_rows(st, stroke, &cols, l);
+        if l.kind == LineKind::Straightness && sc.norm() > 0.0 {
+            // The optic's slope is free: what it sees is orthogonal to it.
+            let u = &sc / sc.norm();
+            let k = u.transpose() * &al;
+            al -= u * k;
+        }
         a.view_mut((li * TARGETS, 0), (al.nrows(), n))
             .copy_from(&al);
     }
@@ -386,7 +415,7 @@ pub fn evaluate(st: &Structure, stroke: [f64; 3], plan: &[LineSpec], noise_um: f
         .iter()
         .map(|l| {
             let (a, sc) = line_rows(st, stroke, &s.cols, l);
-            whitened(&a, &sc, sigma)
+            whitened(&a, &sc, sigma, nuisance_sd(l))
         })
         .collect();
     let c = posterior_cov(&s, &bs);
@@ -566,6 +595,8 @@ impl GridLine {
             length_mm: len,
             tool_offset_mm: self.offset.mm(tool, side),
             purpose: self.purpose(),
+            kind: Default::default(),
+            sense: d.map(|c| c / len),
         }
     }
 }

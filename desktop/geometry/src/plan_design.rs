@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 use crate::kinematics::Structure;
 use crate::lines::LineSpec;
 use crate::plan::{
-    line_rows, objective, posterior_cov, reading_sigma, setup, variances, whitened,
+    line_rows, nuisance_sd, objective, posterior_cov, reading_sigma, setup, variances, whitened,
     worst_variances, CLASS_DEGREE,
 };
 
@@ -29,7 +29,7 @@ pub fn design(
     let sigma = reading_sigma(noise_um);
     let white = |l: &LineSpec| {
         let (a, sc) = line_rows(st, stroke, &s.cols, l);
-        whitened(&a, &sc, sigma)
+        whitened(&a, &sc, sigma, nuisance_sd(l))
     };
     let base_b: Vec<DMatrix<f64>> = base.iter().map(white).collect();
     let cand: Vec<DMatrix<f64>> = pool.iter().map(white).collect();

@@ -106,18 +106,22 @@ pub(crate) fn normal_equations<C: Unknown>(
     let (mut yy, mut m) = (0.0, 0);
     let mut per_line = Vec::new();
     for (li, l) in lines.iter().enumerate() {
-        let d = Vector3::from(l.direction);
+        // The reading is the error along the line's sense (its travel for a
+        // displacement line); the scale column is µm per ppm of the travel
+        // for a laser, per µrad of slope for a straightness optic.
+        let d = Vector3::from(l.sense);
+        let t = Vector3::from(l.direction);
         let p0 = l.points.first().map(|p| p.pos_mm).unwrap_or([0.0; 3]);
         let k = l.points.len();
         let mut a = DMatrix::zeros(k, n);
         let mut y = DVector::zeros(k);
         for (r, p) in l.points.iter().enumerate() {
             let s = sensitivity(st, p.pos_mm, l.tool_offset_mm);
-            let along = d.dot(&(Vector3::from(p.pos_mm) - Vector3::from(p0)));
+            let along = t.dot(&(Vector3::from(p.pos_mm) - Vector3::from(p0)));
             for (ci, c) in cols.iter().enumerate() {
                 a[(r, ci)] = match (c.squareness(), c.scale()) {
                     (Some(i), _) => d.dot(&s.squareness[i]),
-                    // ppm × mm = nm: µm per ppm is along/1e3.
+                    // ppm (µrad) × mm = nm: µm per ppm is along/1e3.
                     (_, Some(i)) if i == li => along * 1e-3,
                     (_, Some(_)) => 0.0,
                     (None, None) => term_value(ci, p.pos_mm, &s, &d),

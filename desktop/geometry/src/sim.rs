@@ -8,7 +8,7 @@
 //! the identifier uses the first-order sensitivities of the nominal setup.
 
 use super::errors::{GeometricErrors, Poly, Squareness, Term};
-use super::identify::Degrees;
+use super::identify::{Degrees, LineKind};
 use super::kinematics::{tool_tip_error_exact, Structure};
 use super::lines::{LineFile, LineSpec, Run};
 use tcomp_numerics::rng::Rng;
@@ -107,6 +107,9 @@ impl Default for MeasurementSetup {
 /// Forward and backward run of one line on the machine `truth`.
 /// The backward run keeps the forward run's zero (one bidirectional
 /// measurement), so forward − backward is the lost motion along the beam.
+/// A straightness line (`spec.kind`) reads the tool point's motion along
+/// its sense, the optic tilted towards the travel by the beam misalignment
+/// (a slope) and set at an arbitrary offset; no laser scale.
 pub fn measure_line(
     st: &Structure,
     truth: &GeometricErrors,
@@ -119,11 +122,21 @@ pub fn measure_line(
     // plan says and the beam is not quite along the line.
     let reflector =
         [0, 1, 2].map(|k| spec.tool_offset_mm[k] + setup.reflector_offset_mm * rng.normal());
-    let beam = tilt(
-        spec.direction,
-        setup.beam_misalignment_urad * 1e-6 * rng.normal(),
-        setup.beam_misalignment_urad * 1e-6 * rng.normal(),
-    );
+    let straight = spec.kind == LineKind::Straightness;
+    let beam = if straight {
+        // The optic's reference turned about the normal of (travel, sense).
+        let a = setup.beam_misalignment_urad * 1e-6 * rng.normal();
+        let v = [0, 1, 2].map(|k| spec.sense[k] + a * spec.direction[k]);
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        v.map(|c| c / n)
+    } else {
+        tilt(
+            spec.direction,
+            setup.beam_misalignment_urad * 1e-6 * rng.normal(),
+            setup.beam_misalignment_urad * 1e-6 * rng.normal(),
+        )
+    };
+    let offset_um = if straight { 5.0 * rng.normal() } else { 0.0 };
     let targets = spec.targets(setup.targets);
     let point = |pos: [f64; 3]| -> [f64; 3] {
         let e = tool_tip_error_exact(st, truth, pos, reflector);
@@ -140,7 +153,8 @@ pub fn measure_line(
             .map(|(s, pos)| {
                 let p = point(*pos);
                 let along: f64 = (0..3).map(|k| beam[k] * (p[k] - p0[k])).sum();
-                let d = (along - s) * 1e3 + setup.noise_um * rng.normal();
+                let nominal = if straight { 0.0 } else { *s };
+                let d = (along - nominal) * 1e3 + offset_um + setup.noise_um * rng.normal();
                 if run == Run::Backward {
                     d - lost
                 } else {

@@ -162,6 +162,7 @@ pub fn identify_smooth(
     degree: usize,
     stroke: [f64; 3],
 ) -> Result<SmoothFit> {
+    crate::identify::displacement_only(lines, "the smooth model")?;
     if lines.iter().filter(|l| l.points.len() >= 2).count() < 2 {
         bail!("fewer than two lines with at least two targets: nothing to identify from");
     }

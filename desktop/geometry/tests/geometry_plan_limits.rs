@@ -12,6 +12,8 @@ fn plan_obs() -> Vec<LineObs> {
         .map(|l| LineObs {
             id: l.id.clone(),
             direction: l.direction,
+            sense: l.sense,
+            kind: l.kind,
             tool_offset_mm: l.tool_offset_mm,
             points: l
                 .targets(41)

@@ -147,6 +147,8 @@ fn zero_obs(stroke: [f64; 3]) -> Vec<LineObs> {
         .map(|l| LineObs {
             id: l.id.clone(),
             direction: l.direction,
+            sense: l.sense,
+            kind: l.kind,
             tool_offset_mm: l.tool_offset_mm,
             points: l
                 .targets(41)

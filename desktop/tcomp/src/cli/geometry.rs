@@ -25,7 +25,7 @@ use super::geometry_smooth::{identify_smooth_cmd, SmoothRequest};
 use super::geometry_table::{
     parse_triple, table_cmd, table_json, tooltip_cmd, TableArgs, TooltipArgs,
 };
-use tcomp_geometry::identify::{identify, Degrees, LineObs};
+use tcomp_geometry::identify::{identify, Degrees, LineKind, LineObs};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, LineFile};
 use tcomp_geometry::sim::{measure_line, random_errors, ErrorSizes, MeasurementSetup};
@@ -433,11 +433,16 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
     let degrees = a.degrees.degrees()?;
     let plan = plan_lines(&a.plan, stroke, a.volume.tool, a.volume.side)?;
     let crit = criterion(&st, stroke, &plan, a.noise_um)?;
+    // The polynomial model's rank and conditioning: of the displacement
+    // lines (it reads no straightness line; the criterion uses them all).
     let obs: Vec<LineObs> = plan
         .iter()
+        .filter(|l| l.kind == LineKind::Displacement)
         .map(|l| LineObs {
             id: l.id.clone(),
             direction: l.direction,
+            sense: l.sense,
+            kind: l.kind,
             tool_offset_mm: l.tool_offset_mm,
             points: l
                 .targets(41)
@@ -464,10 +469,15 @@ fn plan_cmd(a: PlanArgs) -> Result<()> {
         println!("{}", line_words(l));
     }
     println!(
-        "{} unknowns, rank {}, condition number {}",
+        "{} unknowns, rank {}, condition number {}{}",
         id.basis.columns.len(),
         id.rank,
-        condition_text(id.condition_number)
+        condition_text(id.condition_number),
+        if obs.len() < plan.len() {
+            format!(" (polynomial model, its {} displacement lines)", obs.len())
+        } else {
+            String::new()
+        }
     );
     for u in &id.unobservable {
         println!("  not observable: {}", combination_text(&u.combination));

@@ -1,4 +1,4 @@
-//! `tcomp geometry plan --plan 14|rich` and `simulate --plan` (issue 49
+//! `tcomp geometry plan --plan 14|rich|rich-optics` and `simulate --plan` (issue 49
 //! item 1): which plan's lines, and the stated criterion a plan is judged
 //! by (`tcomp_geometry::plan`: posterior worst-term σ under a class that is
 //! not told the error shape, null directions, fewest lines without one),
@@ -6,18 +6,21 @@
 
 use anyhow::{bail, Result};
 
+use tcomp_geometry::identify::LineKind;
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{plan14, LineSpec};
 use tcomp_geometry::plan::{evaluate, rich_lines, Criterion, CLASS_DEGREE};
+use tcomp_geometry::plan_optics::rich_optics_lines;
 
 /// The plans `--plan` names.
-pub const PLAN_NAMES: &str = "14 or rich";
+pub const PLAN_NAMES: &str = "14, rich or rich-optics";
 
 /// The lines of the plan `name` for a volume.
 pub fn plan_lines(name: &str, stroke: [f64; 3], tool: f64, side: f64) -> Result<Vec<LineSpec>> {
     match name {
         "14" => Ok(plan14(stroke, tool, side)),
         "rich" => Ok(rich_lines(stroke, tool, side)),
+        "rich-optics" => Ok(rich_optics_lines(stroke, tool, side)),
         n => bail!("--plan {n:?}: {PLAN_NAMES}"),
     }
 }
@@ -57,9 +60,14 @@ pub fn line_words(l: &LineSpec) -> String {
 /// A line as JSON (start, end, direction, length, reflector, purpose).
 pub fn line_json(l: &LineSpec) -> serde_json::Value {
     let e = [0, 1, 2].map(|k| l.start_mm[k] + l.length_mm * l.direction[k]);
-    serde_json::json!({"line": l.id, "start_mm": l.start_mm, "end_mm": e,
+    let mut v = serde_json::json!({"line": l.id, "start_mm": l.start_mm, "end_mm": e,
         "direction": l.direction, "length_mm": l.length_mm,
-        "tool_offset_mm": l.tool_offset_mm, "purpose": l.purpose})
+        "tool_offset_mm": l.tool_offset_mm, "purpose": l.purpose});
+    if l.kind == LineKind::Straightness {
+        v["measures"] = serde_json::json!("straightness");
+        v["sense"] = serde_json::json!(l.sense);
+    }
+    v
 }
 
 /// The criterion in words, labelled with units.

@@ -33,6 +33,11 @@ With --plan FILE the lines are those of FILE instead (a JSON list of
 `tcomp geometry plan --plan rich --json` prints under "lines"); the machine
 is the same for the same seed, and the held-out lines are drawn from a
 stream of their own, so two plans are scored on the same held-out lines.
+A plan line with "sense": [x, y, z] (unit, perpendicular to the travel) is
+a straightness-optics line (our format extension, `measures: straightness`):
+it reads the tool point's motion along the sense, the optic turned towards
+the travel by N(0, 200 urad) (a slope) and set at an offset N(0, 5 um), the
+lost motion projected on the sense, no laser scale.
 
 usage: geometry_rich_gen.py --seed N [--noise-um S] [--scale-ppm P]
                             [--wave 1|0] [--plan FILE] --out DIR
@@ -162,7 +167,7 @@ def tilt(d, rng, sigma):
     return [x / n for x in v]
 
 
-def write_line(path, line, start, d, offset, run, rows):
+def write_line(path, line, start, d, offset, run, rows, sense=None):
     head = [
         "# line: " + line,
         "# start_mm: %.6g,%.6g,%.6g" % tuple(start),
@@ -170,6 +175,8 @@ def write_line(path, line, start, d, offset, run, rows):
         "# tool_offset_mm: %.6g,%.6g,%.6g" % tuple(offset),
         "# structure: XY/Z",
     ]
+    if sense is not None:
+        head += ["# measures: straightness", "# sense: %.15g,%.15g,%.15g" % tuple(sense)]
     if run:
         head.append("# run: " + run)
     head += ["# source: simulated", "s_mm,pos_x,pos_y,pos_z,disp_um"]
@@ -177,7 +184,9 @@ def write_line(path, line, start, d, offset, run, rows):
         f.write("\n".join(head + rows) + "\n")
 
 
-def measure(terms, sq, start, end, reflector, beam, scale, noise, rng, lost):
+def measure(terms, sq, start, end, reflector, beam, scale, noise, rng, lost, straight=None):
+    """Rows per run. For a straightness line `straight` is the optic's offset
+    [um] and `beam` its (tilted) sense: no nominal travel is subtracted."""
     length = math.sqrt(sum((end[k] - start[k]) ** 2 for k in range(3)))
     d = [(end[k] - start[k]) / length for k in range(3)]
     s_list = [length * i / (TARGETS - 1) for i in range(TARGETS)]
@@ -189,7 +198,8 @@ def measure(terms, sq, start, end, reflector, beam, scale, noise, rng, lost):
         rows = []
         for s, p, pt in zip(s_list, pos, pts):
             along = sum(beam[k] * (pt[k] - pts[0][k]) for k in range(3)) * (1 + scale)
-            disp = (along - s) * 1e3 + (rng.gauss(0, noise) if noise > 0 else 0.0) - run_lost
+            disp = (along - s) * 1e3 if straight is None else along * 1e3 + straight
+            disp += (rng.gauss(0, noise) if noise > 0 else 0.0) - run_lost
             rows.append("%.3f,%.4f,%.4f,%.4f,%.4f" % (s, p[0], p[1], p[2], disp))
         out.append(rows)
     return d, out
@@ -209,22 +219,35 @@ def main():
     os.makedirs(os.path.join(a.out, "heldout"), exist_ok=True)
     if a.plan:
         with open(a.plan) as f:
-            plan = [(l["line"], l["start_mm"], l["end_mm"], l["tool_offset_mm"]) for l in json.load(f)]
+            plan = [(l["line"], l["start_mm"], l["end_mm"], l["tool_offset_mm"], l.get("sense"))
+                    for l in json.load(f)]
     else:
         plan = [(line, [f0[k] * STROKE[k] for k in range(3)], [f1[k] * STROKE[k] for k in range(3)],
-                 offset) for line, f0, f1, offset in PLAN]
-    for line, start, end, offset in plan:
+                 offset, None) for line, f0, f1, offset in PLAN]
+    for line, start, end, offset, sense in plan:
         d0 = [end[k] - start[k] for k in range(3)]
         n0 = math.sqrt(sum(x * x for x in d0))
-        beam = tilt([x / n0 for x in d0], rng, 200e-6)
+        u0 = [x / n0 for x in d0]
+        straight = None
+        if sense is None:
+            beam = tilt(u0, rng, 200e-6)
+        else:
+            slope = rng.gauss(0, 200e-6)
+            v = [sense[k] + slope * u0[k] for k in range(3)]
+            beam = [x / math.sqrt(sum(y * y for y in v)) for x in v]
+            straight = rng.gauss(0, 5.0)
         reflector = [offset[k] + rng.gauss(0, 1.0) for k in range(3)]
-        scale = rng.gauss(0, a.scale_ppm * 1e-6)
-        lost = sum(LOST_MOTION_UM[k] * abs(d0[k]) / n0 for k in range(3))
+        scale = rng.gauss(0, a.scale_ppm * 1e-6) if sense is None else 0.0
+        if sense is None:
+            lost = sum(LOST_MOTION_UM[k] * abs(d0[k]) / n0 for k in range(3))
+        else:  # each moving axis's lost motion, seen along the optic's sense
+            lost = sum(LOST_MOTION_UM[k] * math.copysign(1.0, d0[k]) * beam[k]
+                       for k in range(3) if abs(d0[k]) > 1e-9)
         d, runs = measure(terms, sq, start, end, reflector, beam, scale, a.noise_um, rng,
-                          (0.0, lost))
+                          (0.0, lost), straight)
         for run, rows in zip(("forward", "backward"), runs):
             write_line(os.path.join(a.out, "%s_%s.csv" % (line, run)), line, start, d,
-                       offset, run, rows)
+                       offset, run, rows, sense)
     if a.plan:
         rng = random.Random(7919 * a.seed + 29)
     for i in range(HELDOUT):
