@@ -14,17 +14,22 @@
 //! is within 3 printed σ (the σ's as `identify` prints them: the stated
 //! 0.5 µm noise's posterior × the misfit inflation) and whether the stated
 //! adequacy test passes.
-//! `cargo run -p tcomp-geometry --release --example plan_bench [-- MACHINES FIRST_SEED [METHOD]]`
+//! `plans=NAME,NAME` picks the plans (`14`, `rich`, `rich-optics`: the rich
+//! plan with one straightness-optics line, `plan_optics`; default 14,rich).
+//! `cargo run -p tcomp-geometry --release --example plan_bench [-- MACHINES FIRST_SEED [METHOD] [plans=…]]`
 
 use anyhow::{bail, Result};
 use std::path::Path;
 use tcomp_geometry::adequacy::StatedNoise;
 use tcomp_geometry::bench_rich::{identify_with, Method};
 use tcomp_geometry::errors::{GeometricErrors, Term};
-use tcomp_geometry::identify::{identify, line_adequacy, squareness_sigma, term_sigma, LineObs};
+use tcomp_geometry::identify::{
+    identify, line_adequacy, squareness_sigma, term_sigma, LineKind, LineObs,
+};
 use tcomp_geometry::kinematics::Structure;
 use tcomp_geometry::lines::{average_runs, plan14, LineSpec};
 use tcomp_geometry::plan::rich_lines;
+use tcomp_geometry::plan_optics::rich_optics_lines;
 use tcomp_geometry::score::{read_dir_lines, score, TabulatedTruth};
 use tcomp_geometry::shape_free::coverage_3sigma;
 
@@ -35,8 +40,12 @@ fn write_plan(path: &Path, lines: &[LineSpec]) -> Result<()> {
         .iter()
         .map(|l| {
             let e = [0, 1, 2].map(|k| l.start_mm[k] + l.length_mm * l.direction[k]);
-            serde_json::json!({"line": l.id, "start_mm": l.start_mm, "end_mm": e,
-                "tool_offset_mm": l.tool_offset_mm})
+            let mut v = serde_json::json!({"line": l.id, "start_mm": l.start_mm, "end_mm": e,
+                "tool_offset_mm": l.tool_offset_mm});
+            if l.kind == LineKind::Straightness {
+                v["sense"] = serde_json::json!(l.sense);
+            }
+            v
         })
         .collect();
     std::fs::write(path, serde_json::to_string(&v)?)?;
@@ -119,13 +128,23 @@ fn main() -> Result<()> {
     let first = args.get(1).copied().unwrap_or(101);
     let base = std::env::temp_dir().join(format!("plan-bench-{}", std::process::id()));
     std::fs::create_dir_all(&base)?;
-    let plans = [
-        ("14", plan14(STROKE, 100.0, 100.0)),
-        ("rich", rich_lines(STROKE, 100.0, 100.0)),
-    ];
+    let names = std::env::args()
+        .skip(1)
+        .find_map(|a| a.strip_prefix("plans=").map(str::to_string))
+        .unwrap_or_else(|| "14,rich".into());
+    let mut plans = Vec::new();
+    for n in names.split(',') {
+        let lines = match n {
+            "14" => plan14(STROKE, 100.0, 100.0),
+            "rich" => rich_lines(STROKE, 100.0, 100.0),
+            "rich-optics" => rich_optics_lines(STROKE, 100.0, 100.0),
+            _ => bail!("plans={n}: 14, rich or rich-optics"),
+        };
+        plans.push((n, lines));
+    }
     let method = std::env::args()
         .skip(1)
-        .find(|a| a.parse::<u64>().is_err())
+        .find(|a| a.parse::<u64>().is_err() && !a.starts_with("plans="))
         .map_or(Ok(Method::Smooth), |m| Method::parse(&m))?;
     for (name, lines) in &plans {
         let pf = base.join(format!("plan_{name}.json"));
