@@ -475,7 +475,9 @@ fn envelope_rule(
 /// extrapolating direction served by a model (main or fallback) evaluated
 /// again with its inputs over the extended span (linear up to
 /// [`EXTRAPOLATE_WIDTHS`] training widths beyond each edge, held there).
-/// Nothing more is computed for an image without such a direction.
+/// Nothing more is computed for an image without such a direction. Out of
+/// line: the common case (inside) costs the step one test and a call.
+#[inline(never)]
 fn outside_rule(model: &Model, features: &[i32], active: &[u8], eval: &mut Evaluation) -> u16 {
     if !eval.out_of_envelope {
         return 0;

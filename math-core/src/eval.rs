@@ -210,15 +210,14 @@ impl Model {
             .tables
             .iter()
             .filter(|t| usize::from(t.direction) == d)
-            .map(|t| round_shift(eval_table_static(&t.terms, &n.x), 7))
+            .map(|t| static_q25(&t.terms, &n.x))
             .sum();
         sat_i32(round_shift(acc, 25))
     }
 
     /// Fallback `k`'s correction (0.1 µm), rounded once as the main model's.
     pub fn fallback_correction(&self, k: usize, n: &Normalised) -> i32 {
-        let value = eval_table_static(self.fallback_terms_of(k), &n.x);
-        sat_i32(round_shift(round_shift(value, 7), 25))
+        sat_i32(round_shift(static_q25(self.fallback_terms_of(k), &n.x), 25))
     }
 
     /// Per axis, the TEMP_COMP pair of its position-dependent tables: the
@@ -305,6 +304,14 @@ fn eval_table_static(terms: &[crate::image::Term], x: &[i32; MAX_INPUTS]) -> i64
         value += i64::from(term.coef) * i64::from(xpow);
     }
     value
+}
+
+/// A static table's value rounded to the Q25 accumulator (0.1 µm), as
+/// [`Model::evaluate`] adds it: fallbacks and extrapolating directions.
+/// Out of line: one copy for both (flash).
+#[inline(never)]
+fn static_q25(terms: &[crate::image::Term], x: &[i32; MAX_INPUTS]) -> i64 {
+    round_shift(eval_table_static(terms, x), 7)
 }
 
 /// Powers 0..=3 of a Q24 value.

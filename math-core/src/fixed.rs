@@ -170,24 +170,27 @@ impl Span {
     /// hi + W·(hi − lo)], W = [`EXTRAPOLATE_WIDTHS`]: the line continues
     /// beyond the range and is held at that outer edge, so the result is
     /// Q24 within ±(1 + 2W). Within [lo, hi] it is `normalise`'s value bit
-    /// for bit. Outside, d = v − lo is clamped to [−W·span, (1 + W)·span]
-    /// and scaled like `normalise`'s d' (span << (32 − L) < 2^32), so
-    /// |d'| < (1 + W)·2^32 < 2^34 and |d'·gain| < 2^60: no overflow in i64.
+    /// for bit (the same product, non-negative, and the same clamp to ±1).
+    /// d = v − lo is clamped to [−W·span, (1 + W)·span] and scaled like
+    /// `normalise`'s d' (span << (32 − L) < 2^32), so |d'| < (1 + W)·2^32
+    /// < 2^34 and |d'·gain| < 2^60: no overflow in i64.
     #[allow(
         clippy::cast_possible_truncation,
         reason = "clamped to ±(1 + 2W)·2^24 first"
     )]
     pub fn normalise_extended(&self, v: i32) -> i32 {
-        if (self.lo..=self.hi).contains(&v) {
-            return self.normalise(v).0;
-        }
-        let lo = i64::from(self.lo);
-        let span = i64::from(self.hi) - lo;
+        let span = i64::from(self.hi) - i64::from(self.lo);
+        let d = i64::from(v) - i64::from(self.lo);
         let reach = i64::from(EXTRAPOLATE_WIDTHS) * span;
-        let d = (i64::from(v) - lo).clamp(-reach, span + reach) << self.pre_shift;
+        let bound = if (0..=span).contains(&d) {
+            i64::from(ONE_Q24)
+        } else {
+            i64::from(ONE_Q24) * (1 + 2 * i64::from(EXTRAPOLATE_WIDTHS))
+        };
+        // max/min rather than clamp: no panic path even for a span no parser made.
+        let d = d.max(-reach).min(span + reach) << self.pre_shift;
         let x = ((d * i64::from(self.gain) + (1 << 31)) >> 32) - i64::from(ONE_Q24);
-        let bound = i64::from(ONE_Q24) * (1 + 2 * i64::from(EXTRAPOLATE_WIDTHS));
-        x.clamp(-bound, bound) as i32
+        x.max(-bound).min(bound) as i32
     }
 }
 

@@ -60,68 +60,51 @@ pub(crate) fn check(m: &Model) -> Result<(), ImageError> {
             return Err(ImageError::CoefficientRange { net });
         }
     }
-    check_extrapolate_linear(m)?;
     check_prediction_bound(m)
 }
 
 const NOT_LINEAR: ImageError = ImageError::BadValue {
-    what: "envelope policy extrapolate on a direction whose model is not linear (a network, an axis table, an input power above 1 or a position power)",
+    what: "envelope policy extrapolate: the direction's model is not linear",
 };
 
-/// Every model that can serve an extrapolating direction is linear in its
-/// inputs (the module docs).
-fn check_extrapolate_linear(m: &Model) -> Result<(), ImageError> {
-    let mask = m.extrapolate_mask();
-    if mask == 0 {
-        return Ok(());
-    }
-    let extrapolates = |d: u8| u32::from(mask) & 1u32.checked_shl(u32::from(d)).unwrap_or(0) != 0;
-    let linear = |terms: &[Term]| {
-        terms
-            .iter()
-            .all(|t| t.input_power <= 1 && t.position_power == 0)
-    };
-    let nets_ok = !m.nets.iter().any(|n| extrapolates(n.direction));
-    let tables_ok = m
-        .tables
-        .iter()
-        .filter(|t| extrapolates(t.direction))
-        .all(|t| t.axis == NONE && linear(&t.terms));
-    let fallbacks_ok = (0..m.fallbacks.len())
-        .zip(&m.fallbacks)
-        .filter(|(_, f)| extrapolates(f.direction))
-        .all(|(k, _)| linear(m.fallback_terms_of(k)));
-    if nets_ok && tables_ok && fallbacks_ok {
-        Ok(())
-    } else {
-        Err(NOT_LINEAR)
-    }
-}
-
 /// Σ |coef| of `terms` (Q8 of 0.1 µm) over the inputs' reach: a term
-/// reading an input counts `reach` times (1 within the envelope, 1 + 2W
-/// for an extrapolating direction), a constant once.
-fn terms_bound(terms: &[Term], reach: i64) -> i64 {
-    terms
-        .iter()
-        .map(|t| {
-            let k = if t.input != NONE && t.input_power > 0 {
-                reach
-            } else {
-                1
-            };
-            i64::from(t.coef.unsigned_abs()) * k
-        })
-        .sum()
+/// reading an input counts once within the envelope, 1 + 2W times for an
+/// extrapolating direction, a constant once; `None` when the direction
+/// extrapolates and a term is not linear (input power > 1, a position).
+fn terms_bound(terms: &[Term], extrapolates: bool) -> Option<i64> {
+    let reach = if extrapolates {
+        1 + 2 * i64::from(EXTRAPOLATE_WIDTHS)
+    } else {
+        1
+    };
+    let mut sum = 0i64;
+    for t in terms {
+        if extrapolates && (t.input_power > 1 || t.position_power != 0) {
+            return None;
+        }
+        let k = if t.input != NONE && t.input_power > 0 {
+            reach
+        } else {
+            1
+        };
+        sum += i64::from(t.coef.unsigned_abs()) * k;
+    }
+    Some(sum)
 }
 
 /// The analytic bound of the module docs, in Q8 of 0.1 µm (i64: at most
-/// 8 nets · 17 values and 8 · 32 + 256 terms of < 2^31: far below 2^63).
+/// 8 nets · 17 values and 8 · 32 + 256 terms of < 2^31, times 5 at most:
+/// far below 2^63). With it, an extrapolating direction's linearity.
 fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
     let limit = i64::from(MAX_PREDICTION) << 8;
     let mut lo = [0i64; MAX_DIRECTIONS];
     let mut hi = [0i64; MAX_DIRECTIONS];
+    let mask = m.extrapolate_mask();
+    let extrapolates = |d: u8| u32::from(mask) & 1u32.checked_shl(u32::from(d)).unwrap_or(0) != 0;
     for n in &m.nets {
+        if extrapolates(n.direction) {
+            return Err(NOT_LINEAR);
+        }
         let d = usize::from(n.direction);
         let w2 =
             n.w2.iter()
@@ -133,17 +116,13 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
             *h += i64::from(n.b2) + pos;
         }
     }
-    let mask = m.extrapolate_mask();
-    let reach = |d: u8| {
-        if u32::from(mask) & 1u32.checked_shl(u32::from(d)).unwrap_or(0) != 0 {
-            1 + 2 * i64::from(EXTRAPOLATE_WIDTHS)
-        } else {
-            1
-        }
-    };
     for t in &m.tables {
         let d = usize::from(t.direction);
-        let sum = terms_bound(&t.terms, reach(t.direction));
+        let ext = extrapolates(t.direction);
+        if ext && t.axis != NONE {
+            return Err(NOT_LINEAR);
+        }
+        let sum = terms_bound(&t.terms, ext).ok_or(NOT_LINEAR)?;
         if let (Some(l), Some(h)) = (lo.get_mut(d), hi.get_mut(d)) {
             *l -= sum;
             *h += sum;
@@ -158,7 +137,8 @@ fn check_prediction_bound(m: &Model) -> Result<(), ImageError> {
         return Err(ImageError::PredictionBound { direction });
     }
     for (k, f) in m.fallbacks.iter().enumerate() {
-        let sum = terms_bound(m.fallback_terms_of(k), reach(f.direction));
+        let sum =
+            terms_bound(m.fallback_terms_of(k), extrapolates(f.direction)).ok_or(NOT_LINEAR)?;
         if over(-sum, sum) {
             return Err(ImageError::PredictionBound {
                 direction: f.direction,
