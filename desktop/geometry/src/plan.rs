@@ -479,7 +479,7 @@ pub fn class_words() -> String {
         "each error a Legendre series of degree {CLASS_DEGREE} (zero at the axis zero, straightness also at the stroke's end), \
          prior coefficient j: {PRIOR_POSITIONING_UM} µm (positioning), {PRIOR_STRAIGHTNESS_UM} µm (straightness), \
          {PRIOR_ANGULAR_URAD} µrad (angles) × j^-{PRIOR_DECAY}, squareness {PRIOR_SQUARENESS_URAD} µrad; \
-         per line a free zero and a laser scale of {SCALE_PPM} ppm; {TARGETS} targets per line, \
+         per line a free zero and a laser scale of {SCALE_PPM} ppm (a straightness line: a slope of {SLOPE_PRIOR_URAD} µrad); {TARGETS} targets per line, \
          forward and backward runs averaged; σ of each error worst over {POSITIONS} positions of its stroke"
     )
 }

@@ -40,15 +40,15 @@ pub struct GeometryArgs {
 
 #[derive(clap::Subcommand, Debug)]
 pub enum GeometryCommand {
-    /// Write the line files of a plan (forward and backward runs; --plan 14
-    /// or rich) of a machine with random smooth errors (or the errors of
+    /// Write the line files of a plan (forward and backward runs; --plan 14,
+    /// rich or rich-optics) of a machine with random smooth errors (or the errors of
     /// --errors), and its errors as JSON.
     #[command(alias = "sim")]
     Simulate(SimulateArgs),
     /// Identify the 21 errors from line files; prints the error functions,
     /// the conditioning and what the lines cannot see.
     Identify(IdentifyArgs),
-    /// Print a line plan (--plan 14 or rich) for a working volume, its
+    /// Print a line plan (--plan 14, rich or rich-optics) for a working volume, its
     /// conditioning and the stated criterion (worst-term posterior σ, null
     /// directions).
     Plan(PlanArgs),
@@ -161,8 +161,9 @@ pub struct SimulateArgs {
     pub degrees: DegreeArgs,
     #[arg(long, default_value = "XY/Z")]
     pub structure: String,
-    /// Which lines: `14` (today's plan) or `rich` (the recommended 28 lines
-    /// that pin the machine down; `geometry plan --plan rich`).
+    /// Which lines: `14` (today's plan), `rich` (the recommended 28 lines
+    /// that pin the machine down; `geometry plan --plan rich`) or
+    /// `rich-optics` (rich with one straightness-optics line).
     #[arg(long, default_value = "14")]
     pub plan: String,
     /// Errors to simulate (JSON as written by simulate or identify) instead of random ones.
@@ -247,8 +248,9 @@ pub struct PlanArgs {
     pub degrees: DegreeArgs,
     #[arg(long, default_value = "XY/Z")]
     pub structure: String,
-    /// Which lines: `14` (today's plan) or `rich` (the recommended 28
-    /// displacement-only lines, no null direction).
+    /// Which lines: `14` (today's plan), `rich` (the recommended 28
+    /// displacement-only lines, no null direction) or `rich-optics` (rich
+    /// with one line exchanged for a straightness-optics line).
     #[arg(long, default_value = "14")]
     pub plan: String,
     /// Noise of one reading of one run [µm] the criterion is computed for.
