@@ -1,7 +1,9 @@
 //! The envelope policy's evidence (issue 50 item 3): per channel, whether
 //! the board should serve from the fallback without an input that has left
-//! its training range (`fallback`) or hold that input at the range's edge
-//! (`hold`, the rule before the policy existed).
+//! its training range (`fallback`), hold that input at the range's edge
+//! (`hold`, the rule before the policy existed), or let a linear model
+//! continue beyond the range (`extrapolate`, up to
+//! [`EXTRAPOLATE_WIDTHS`] training widths past each edge, as the board).
 //!
 //! The evidence comes from the training rows alone, forward in time: the
 //! training rows are cut into the fit's time blocks, and each of the later
@@ -12,9 +14,17 @@
 //! the fit rows' range by more than [`DEFAULT_MARGIN_RAW`], it compares the
 //! absolute error of holding those inputs at the edge with the board's
 //! fallback choice there (the first fallback in the board's priority order
-//! that reads none of the sensors beyond; none: held as well). `fallback`
-//! when that error is lower, `hold` otherwise or when no fold leaves the
-//! range. The chosen model is refitted as a linear model on its own inputs
+//! that reads none of the sensors beyond; none: held as well) and, for a
+//! linear chosen model (`mlr`, `mlr-static`, `ridge`: the board extrapolates
+//! only tables of degree 1), with the refitted model continued past the
+//! edge. The policy with the lowest error wins; `hold` on a tie or when no
+//! fold leaves the range (the conservative rule: nothing past the range
+//! without evidence for it). Why a third policy: thermal expansion is linear
+//! in temperature, so a linear model held at the edge freezes its
+//! correction while the machine keeps moving (a blind world measured the
+//! hold as most of the loss beyond the envelope); what the hold guards
+//! against (a collinear pair of inputs amplifying a small excursion) shows
+//! in these folds as a larger extrapolation error, and then `hold` wins. The chosen model is refitted as a linear model on its own inputs
 //! (exact for `mlr` and `mlr-static`; for `ridge`, networks and blends a
 //! linear stand-in on the same inputs: the folds judge extrapolation, not
 //! the fit).
@@ -32,6 +42,10 @@ use super::model::{
 use super::ridge::{all_blocks, forward_folds};
 use super::samples::{ranged_specs, SeriesCache};
 use super::split::Segment;
+
+/// Training widths past each edge a linear model continues on the board
+/// before it is held (the core's bound; the fit judges the same function).
+pub const EXTRAPOLATE_WIDTHS: f64 = thermocomp_core::limits::EXTRAPOLATE_WIDTHS as f64;
 
 /// The margin the fit judges and `tcomp export` writes, raw units of each
 /// input: 8/16 °C = 0.5 K for temperatures (8 rpm for the spindle speed).
@@ -93,6 +107,10 @@ pub fn evidence(
         let Some(main) = chosen_features(file, ch) else {
             continue;
         };
+        let linear = matches!(
+            file.chosen.get(ch).map(String::as_str),
+            Some("mlr" | "mlr-static" | "ridge")
+        );
         let fbs = fallbacks_of(file, ch);
         let mut kinds: Vec<Kind> = main.iter().map(kind_of).collect();
         for f in fbs.iter().flat_map(|f| &f.params.features) {
@@ -108,7 +126,10 @@ pub fn evidence(
         };
         let main_idx = idx_of(main);
         let fb_idx: Vec<Vec<usize>> = fbs.iter().map(|f| idx_of(&f.params.features)).collect();
-        let mut ev = Tally::default();
+        let mut ev = Tally {
+            linear,
+            ..Tally::default()
+        };
         for (fit, val) in &folds {
             ev.fold(
                 &cache,
@@ -132,6 +153,24 @@ struct Tally {
     rows_with_fallback: usize,
     hold: f64,
     fallback: f64,
+    /// The chosen model is linear (the board may extrapolate it).
+    linear: bool,
+    extrapolate: f64,
+}
+
+/// A linear model's prediction with its inputs clamped to
+/// [min − W·span, max + W·span] instead of [min, max] (the board's
+/// `extrapolate` policy, W = [`EXTRAPOLATE_WIDTHS`]).
+fn predict_extrapolated(m: &MlrParams, x: &[f64]) -> f64 {
+    let terms = m.features.iter().zip(x).zip(&m.coef).map(|((f, &v), c)| {
+        let span = f.max - f.min;
+        if span <= 0.0 {
+            return 0.0;
+        }
+        let w = EXTRAPOLATE_WIDTHS * span;
+        c * (2.0 * (v.clamp(f.min - w, f.max + w) - f.min) / span - 1.0)
+    });
+    m.c0 + terms.sum::<f64>()
 }
 
 impl Tally {
@@ -178,6 +217,7 @@ impl Tally {
             self.rows_beyond += 1;
             let hold = (y - main.predict_raw(x)).abs();
             self.hold += hold;
+            self.extrapolate += (y - predict_extrapolated(&main, x)).abs();
             // As the board: the sensors beyond count as faulted; a spindle
             // input beyond rules out that input itself.
             let affected = |f: &FeatureSpec| {
@@ -213,9 +253,19 @@ impl Tally {
         let n = self.rows_beyond as f64;
         let mae = |s: f64| (self.rows_beyond > 0).then(|| s / n);
         let (hold, fallback) = (mae(self.hold), mae(self.fallback));
-        let better = matches!((hold, fallback), (Some(h), Some(f)) if f < h);
+        let extrapolate = mae(self.extrapolate).filter(|_| self.linear);
+        let mut policy = "hold";
+        if let Some(h) = hold {
+            let f = fallback.unwrap_or(f64::INFINITY);
+            let e = extrapolate.unwrap_or(f64::INFINITY);
+            if f < h && f <= e {
+                policy = "fallback";
+            } else if e < h && e < f {
+                policy = "extrapolate";
+            }
+        }
         EnvelopeEvidence {
-            policy: if better { "fallback" } else { "hold" }.into(),
+            policy: policy.into(),
             margin_raw,
             folds,
             folds_beyond: self.folds_beyond,
@@ -223,6 +273,7 @@ impl Tally {
             rows_beyond: self.rows_beyond,
             hold_mae_um: hold,
             fallback_mae_um: fallback,
+            extrapolate_mae_um: extrapolate,
             rows_with_fallback: self.rows_with_fallback,
         }
     }

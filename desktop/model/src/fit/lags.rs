@@ -101,7 +101,7 @@ pub struct LagScore {
 /// Each held-out row's anchor: the first row of its window of `window_s`
 /// seconds (a new window at each new run, backwards step in time, or once
 /// `window_s` has passed since the anchor).
-fn anchors(runs: &[Run], s: &Samples, window_s: f64) -> Vec<usize> {
+pub(super) fn anchors(runs: &[Run], s: &Samples, window_s: f64) -> Vec<usize> {
     let mut out = Vec::with_capacity(s.rows.len());
     let mut a = 0usize;
     for (k, &(run, r)) in s.rows.iter().enumerate() {
@@ -189,14 +189,14 @@ impl ForwardRows {
 
 /// The held-out errors of one set of inputs, fold by fold (mean squared, µm²).
 #[derive(Clone, Debug, Default, PartialEq)]
-struct FoldScores {
-    plain: Vec<f64>,
-    anchored: Vec<f64>,
-    rows: Vec<usize>,
+pub(super) struct FoldScores {
+    pub(super) plain: Vec<f64>,
+    pub(super) anchored: Vec<f64>,
+    pub(super) rows: Vec<usize>,
 }
 
 impl FoldScores {
-    fn pooled(&self) -> LagScore {
+    pub(super) fn pooled(&self) -> LagScore {
         let n: usize = self.rows.iter().sum();
         let w = |v: &[f64]| {
             v.iter()
@@ -215,7 +215,7 @@ impl FoldScores {
 /// The paired per-fold changes of an error, new against old, as log
 /// ratios: each fold weighs the same whatever its scale (one fold the old
 /// inputs extrapolate badly must not decide alone).
-fn log_ratios(new: &[f64], old: &[f64]) -> Vec<f64> {
+pub(super) fn log_ratios(new: &[f64], old: &[f64]) -> Vec<f64> {
     new.iter()
         .zip(old)
         .map(|(n, o)| (n.max(f64::MIN_POSITIVE) / o.max(f64::MIN_POSITIVE)).ln())
@@ -225,7 +225,7 @@ fn log_ratios(new: &[f64], old: &[f64]) -> Vec<f64> {
 /// The gain (minus the mean log ratio) when the paired per-fold changes
 /// `d` are a gain beyond the fold-to-fold noise: larger than [`MIN_GAIN`]
 /// and than [`NOISE_Z`] standard errors of their mean across folds.
-fn gain_beyond_noise(d: &[f64]) -> Option<f64> {
+pub(super) fn gain_beyond_noise(d: &[f64]) -> Option<f64> {
     let f = d.len();
     if f < 2 {
         return None;
@@ -240,7 +240,7 @@ fn gain_beyond_noise(d: &[f64]) -> Option<f64> {
 /// errors both lower by more than [`MIN_GAIN`], and the per-fold log ratios
 /// of each a gain beyond the fold-to-fold noise ([`gain_beyond_noise`]).
 /// Returns the anchored gain (the mean log ratio).
-fn sound_gain(new: &FoldScores, old: &FoldScores) -> Option<f64> {
+pub(super) fn sound_gain(new: &FoldScores, old: &FoldScores) -> Option<f64> {
     if new.rows != old.rows {
         return None;
     }

@@ -21,6 +21,7 @@ pub mod lags;
 pub mod mlr;
 pub mod model;
 pub mod net;
+pub mod output_lag;
 pub mod pipeline;
 pub mod plan;
 pub mod progress;

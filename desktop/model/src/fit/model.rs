@@ -92,6 +92,11 @@ pub struct ModelFile {
     /// [`super::envelope`]): what `export` writes in the image's policy section.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub envelope: std::collections::BTreeMap<String, EnvelopeEvidence>,
+    /// Per channel, the time constant (s) of the low-pass on the served
+    /// correction that the forward folds chose ([`super::output_lag`]);
+    /// channels without one are absent.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub output_lag_s: std::collections::BTreeMap<String, f64>,
 }
 
 /// Model names, simplest first (the order ties are broken in): `none` (no
@@ -349,7 +354,7 @@ pub struct FallbackParams {
 /// One channel's evidence, as `tcomp fit --out` stores it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EnvelopeEvidence {
-    /// `hold` or `fallback`.
+    /// `hold`, `fallback` or `extrapolate`.
     pub policy: String,
     /// Margin judged, raw units (1/16 °C, rpm).
     pub margin_raw: u16,
@@ -363,6 +368,10 @@ pub struct EnvelopeEvidence {
     /// the board's fallback choice (µm).
     pub hold_mae_um: Option<f64>,
     pub fallback_mae_um: Option<f64>,
+    /// On the same rows: MAE with a linear chosen model continued past the
+    /// edge (None: the model is not linear, or no row beyond).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extrapolate_mae_um: Option<f64>,
     /// Rows beyond where some fallback could serve.
     pub rows_with_fallback: usize,
 }
@@ -373,8 +382,14 @@ impl EnvelopeEvidence {
         let k = self.margin_raw;
         match (self.hold_mae_um, self.fallback_mae_um) {
             (Some(h), Some(f)) => format!(
-                "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one)",
-                self.policy, self.rows_beyond, self.rows, self.folds_beyond, self.rows_with_fallback
+                "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one){}",
+                self.policy,
+                self.rows_beyond,
+                self.rows,
+                self.folds_beyond,
+                self.rows_with_fallback,
+                self.extrapolate_mae_um
+                    .map_or(String::new(), |e| format!(", continuing the linear model {e:.2} µm"))
             ),
             _ => format!(
                 "{}: no training row of the {} forward fold(s) leaves the earlier blocks' range by > {k}/16 K",

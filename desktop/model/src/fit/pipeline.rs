@@ -25,6 +25,7 @@ use super::model::{
     feature_name, Blend, FeatureKind, FeatureSpec, Hybrid, MlrParams, Model, ModelFile,
     NetEnsemble, MODEL_NAMES,
 };
+use super::output_lag;
 pub use super::plan::{Candidates, FeatureChoice, FitConfig, Plan};
 pub use super::progress::{Progress, Silent};
 pub use super::report::{
@@ -148,6 +149,17 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         &acc.file,
         envelope::DEFAULT_MARGIN_RAW,
     )?;
+    // The output low-pass (issue 51 item 1), on the same forward folds.
+    for (ch, lag) in output_lag::choose(&plan.runs, &plan.train, &acc.file)? {
+        acc.notes.push(format!(
+            "{ch}: output low-pass {}: forward-CV RMS {:.2} -> {:.2} µm, about each hour's anchor {:.2} -> {:.2} µm",
+            if lag.tau_s > 0.0 { format!("{:.0} s", lag.tau_s) } else { "none".into() },
+            lag.before.0, lag.after.0, lag.before.1, lag.after.1
+        ));
+        if lag.tau_s > 0.0 {
+            acc.file.output_lag_s.insert(ch, lag.tau_s);
+        }
+    }
     let selection = candidates.selection;
     let shipped = shipped(first, cfg, selection.as_ref(), &acc.file);
     Ok(FitReport {
