@@ -112,6 +112,8 @@ struct Row {
     seed: u64,
     wt: f64,
     wa: f64,
+    /// The errors with the worst RMS (translational, angular).
+    worst_terms: (String, String),
     before: f64,
     after: f64,
     pct: f64,
@@ -162,10 +164,17 @@ fn main() -> Result<()> {
             let cover = coverage(method, &st, &obs, &model, &truth)?;
             let s = score(&st, &model, &truth, &held);
             let h = s.heldout.unwrap();
+            let worst_of = |angular: bool| {
+                (s.terms.iter())
+                    .filter(|(n, _)| n[1..2].contains(['A', 'B', 'C']) == angular)
+                    .max_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
+                    .map_or(String::new(), |(n, _)| n.clone())
+            };
             let row = Row {
                 seed,
                 wt: s.worst_rms_translational_um,
                 wa: s.worst_rms_angular_urad,
+                worst_terms: (worst_of(false), worst_of(true)),
                 before: h.before_um,
                 after: h.after_um,
                 pct: h.reduction_pct,
@@ -179,8 +188,8 @@ fn main() -> Result<()> {
                 )
             });
             println!(
-                "plan {name:4} seed {:3}: worst-term RMS {:5.2} µm / {:5.2} µrad, held-out {:5.1} % ({:.2} → {:.2} µm), undetermined {}{cv}",
-                row.seed, row.wt, row.wa, row.pct, row.before, row.after, row.unobservable
+                "plan {name:4} seed {:3}: worst-term RMS {:5.2} µm ({}) / {:5.2} µrad ({}), held-out {:5.1} % ({:.2} → {:.2} µm), undetermined {}{cv}",
+                row.seed, row.wt, row.worst_terms.0, row.wa, row.worst_terms.1, row.pct, row.before, row.after, row.unobservable
             );
             let _ = std::fs::remove_dir_all(&dir);
             rows.push(row);
