@@ -9,8 +9,9 @@ fuzz_target!(|data: &[u8]| {
     let mut bytes = data.to_vec();
     if bytes.len() >= 36 && bytes[0] & 1 == 1 {
         bytes[0..4].copy_from_slice(b"TCMI");
-        // Both formats: v1, and v2 with its typed sections after the tables.
-        let version: u16 = if data[0] & 2 == 2 { 2 } else { 1 };
+        // Every format: v1, v2 with its typed sections after the tables, v3
+        // with the envelope policy, v4 with its code 2 (extrapolate).
+        let version: u16 = 1 + u16::from((data[0] >> 1) & 3);
         bytes[4..6].copy_from_slice(&version.to_le_bytes());
         let n = bytes.len() as u32;
         bytes[8..12].copy_from_slice(&n.to_le_bytes());
