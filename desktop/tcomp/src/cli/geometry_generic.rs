@@ -17,7 +17,7 @@ use tcomp_geometry::errors::Term;
 use tcomp_geometry::generic::{
     identify_generic, null_combinations, Generic, MIN_LINES, UNDETERMINED_RATIO,
 };
-use tcomp_geometry::identify::LineObs;
+use tcomp_geometry::identify::{LineKind, LineObs};
 use tcomp_geometry::study::{recovery, ErrorsJson};
 
 /// `identify --method generic` as given.
@@ -168,7 +168,7 @@ pub fn identify_generic_cmd(r: &GenericRequest) -> Result<()> {
         }
         println!("{v}");
     } else {
-        print_generic(&g, stroke);
+        print_generic(&g, &obs, stroke);
         print_adequacy(&adq);
         for t in Term::all() {
             let tj = &ej.errors[&t.name()];
@@ -194,7 +194,7 @@ pub fn identify_generic_cmd(r: &GenericRequest) -> Result<()> {
     Ok(())
 }
 
-fn print_generic(g: &Generic, stroke: [f64; 3]) {
+fn print_generic(g: &Generic, obs: &[LineObs], stroke: [f64; 3]) {
     let f = &g.fit;
     println!(
         "{} lines ({} readings), strokes {:.0}×{:.0}×{:.0} mm; generic model, no shape assumed: {} per error, {} unknowns, {:.1} effective parameters",
@@ -214,12 +214,23 @@ fn print_generic(g: &Generic, stroke: [f64; 3]) {
         "residual RMS {:.3} µm; leave-one-line-out prediction RMS {:.3} µm",
         f.residual_rms_um, f.loo_rms_um
     );
-    let sc: Vec<String> = f
-        .line_scale_ppm
-        .iter()
+    // A straightness line's column is its optic's slope [µrad], not a scale.
+    let optic = |id: &str| (obs.iter()).any(|o| o.id == id && o.kind == LineKind::Straightness);
+    let sc: Vec<String> = (f.line_scale_ppm.iter())
+        .filter(|(l, _)| !optic(l))
         .map(|(l, v)| format!("{l} {v:+.2}"))
         .collect();
     println!("laser scale per line [ppm]: {}", sc.join(", "));
+    let sl: Vec<String> = (f.line_scale_ppm.iter())
+        .filter(|(l, _)| optic(l))
+        .map(|(l, v)| format!("{l} {v:+.1}"))
+        .collect();
+    if !sl.is_empty() {
+        println!(
+            "straightness optic slope per line [µrad]: {}",
+            sl.join(", ")
+        );
+    }
     if !f.unobservable_terms.is_empty() {
         println!(
             "undetermined (posterior σ above {UNDETERMINED_RATIO} of the prior's; values are mostly the prior's): {}",
