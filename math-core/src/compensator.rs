@@ -37,7 +37,18 @@
 //!    beyond (a stated bound); counted and flagged as under hold. It is
 //!    computed only when an input is outside its range and the image has
 //!    such a direction; other directions are served exactly as before.
-//! 5. **Clamp** to ± max correction (`CLAMPED`), then **rate limit** to
+//! 5. **Output low-pass** (section kind 6, format v5; older images and
+//!    directions with decay 0: none, bit for bit as before): the final
+//!    prediction of a served direction (model, fallback or extrapolated) is
+//!    filtered by a causal first-order lag, y ← u + dⁿ (y − u), d =
+//!    exp(−step/τ) in Q30, n the whole model steps (`step_ms`) since the
+//!    filter's last update, the newest prediction held over them (exact for
+//!    any gap length, as the input lags). The first served step after a
+//!    load, restart or new reference starts it at the prediction (no ramp
+//!    from 0); a direction not served (held, rule 2 or 6) does not advance
+//!    and on its next served step advances over the whole gap.
+//!    [`StepOutput::predicted`] is the filtered value. Then **clamp** to
+//!    ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
 //!    (`RATE_LIMITED`). The first served value ramps up from 0.
 //! 6. **Degraded mode** (images with fallback models, format v2): when a
@@ -53,6 +64,7 @@
 
 use crate::eval::{AxisPair, Evaluation};
 use crate::features::FeatureState;
+use crate::fixed::{decay_pow_q30, lag_update, round_shift};
 use crate::image::{EnvelopeMode, Model};
 use crate::limits::*;
 
@@ -101,7 +113,8 @@ pub struct StepInput<'a> {
 pub struct StepOutput {
     /// Served correction per direction, 0.1 µm (after clamp and rate limit).
     pub corrections: [i32; MAX_DIRECTIONS],
-    /// The model's prediction before limits, 0.1 µm.
+    /// The model's prediction before limits (after the output low-pass,
+    /// rule 5), 0.1 µm.
     pub predicted: [i32; MAX_DIRECTIONS],
     pub axes: [AxisPair; MAX_AXES],
     pub status: u16,
@@ -130,6 +143,85 @@ pub struct Compensator {
     /// Per direction, the steps served beyond the envelope (rule 4) since
     /// the model was loaded, saturating.
     envelope_steps: [u32; MAX_DIRECTIONS],
+    /// The output low-pass's state (rule 5).
+    output: OutputFilter,
+}
+
+/// Rule 5's state: per direction the filtered prediction (Q16 of 0.1 µm),
+/// the filter clock (ms, on the model's step grid from the direction's
+/// first served step) and, bit d, whether direction d's filter has started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct OutputFilter {
+    y_q16: [i64; MAX_DIRECTIONS],
+    clock_ms: [u64; MAX_DIRECTIONS],
+    started: u8,
+}
+
+impl OutputFilter {
+    const NEW: Self = OutputFilter {
+        y_q16: [0; MAX_DIRECTIONS],
+        clock_ms: [0; MAX_DIRECTIONS],
+        started: 0,
+    };
+
+    /// Filter each served direction (`active` not [`ACTIVE_NONE`]) that has
+    /// a decay, in place. Overflow: |u| ≤ 2^31 (an i32), so u and y, a
+    /// convex combination of past u's (`lag_update` rounds within them),
+    /// stay within 2^31·2^16 = 2^47 and y − u within 2^48, far inside the
+    /// 2^62 that `lag_update`'s product allows; the rounded y/2^16 is then
+    /// in the i32 range (clamped all the same).
+    #[inline(always)]
+    fn apply(
+        &mut self,
+        model: &Model,
+        now_ms: u64,
+        active: &[u8],
+        corrections: &mut [i32; MAX_DIRECTIONS],
+    ) {
+        if let Some(decays) = &model.output_decay_q30 {
+            self.filter(decays, model.step_ms, now_ms, active, corrections);
+        }
+    }
+
+    #[inline(never)]
+    fn filter(
+        &mut self,
+        decays: &[u32; MAX_DIRECTIONS],
+        step_ms: u32,
+        now_ms: u64,
+        active: &[u8],
+        corrections: &mut [i32; MAX_DIRECTIONS],
+    ) {
+        // step_ms ≥ 1 (the parser refuses 0); max(1) keeps the division total.
+        let step_ms = u64::from(step_ms.max(1));
+        let per_direction = corrections.iter_mut().zip(active).zip(decays);
+        let state = self.y_q16.iter_mut().zip(self.clock_ms.iter_mut());
+        for (d, (((c, &a), &decay), (y, clock))) in per_direction.zip(state).enumerate() {
+            if decay == 0 || a == ACTIVE_NONE {
+                continue;
+            }
+            let u = i64::from(*c) << 16;
+            let bit = 1u8 << (d % 8);
+            if self.started & bit == 0 {
+                self.started |= bit;
+                *y = u;
+                *clock = now_ms;
+            } else {
+                let steps = now_ms.saturating_sub(*clock) / step_ms;
+                *clock += steps * step_ms;
+                if steps > 0 {
+                    *y = lag_update(*y, u, decay_pow_q30(decay, steps));
+                }
+            }
+            #[allow(
+                clippy::cast_possible_truncation,
+                reason = "clamped to the i32 range first"
+            )]
+            {
+                *c = round_shift(*y, 16).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
+            }
+        }
+    }
 }
 
 impl Default for Compensator {
@@ -159,6 +251,7 @@ impl Compensator {
             limit_override: [(i32::MAX, i32::MAX); MAX_DIRECTIONS],
             main_mask: [0; MAX_DIRECTIONS],
             envelope_steps: [0; MAX_DIRECTIONS],
+            output: OutputFilter::NEW,
         }
     }
 
@@ -173,6 +266,7 @@ impl Compensator {
         self.limit_override = [(i32::MAX, i32::MAX); MAX_DIRECTIONS];
         self.main_mask = [0; MAX_DIRECTIONS];
         self.envelope_steps = [0; MAX_DIRECTIONS];
+        self.output.started = 0;
     }
 
     /// Per direction, the steps served with an input beyond the envelope
@@ -241,9 +335,11 @@ impl Compensator {
         self.rereference();
     }
 
-    /// Take a new reference sample at the next step (e.g. machine cold again).
+    /// Take a new reference sample at the next step (e.g. machine cold
+    /// again); the output low-pass restarts there too (rule 5).
     pub fn rereference(&mut self) {
         self.features.rereference();
+        self.output.started = 0;
     }
 
     /// Restart from this reference sample (per model sensor, 1/16 °C;
@@ -252,6 +348,7 @@ impl Compensator {
     /// reference ([`FeatureState::preset_reference`]).
     pub fn preset_reference(&mut self, refs: &[Option<i32>]) {
         self.features.preset_reference(refs);
+        self.output.started = 0;
     }
 
     /// The reference temperatures (1/16 °C) per model sensor, once taken.
@@ -357,6 +454,8 @@ impl Compensator {
             }
         }
         out.status |= outside_rule(model, features, active, &mut eval);
+        self.output
+            .apply(model, input.now_ms, active, &mut eval.corrections);
         if input.now_ms.saturating_sub(reference_ms) < u64::from(model.warmup_s) * 1000 {
             out.status |= status::WARMING_UP;
         }

@@ -254,7 +254,7 @@ fn version_4_only_with_extrapolate_and_the_round_trip() {
     let mut m = model(EnvelopeMode::Extrapolate);
     let b = encode(&mut m);
     assert_eq!(version(&b), 4);
-    assert_eq!(version(&b), FORMAT_VERSION);
+    assert_eq!(version(&b), EXTRAPOLATE_VERSION);
     let back = Model::parse(&b).unwrap();
     assert_eq!(back, m);
     assert_eq!(back.envelope.unwrap()[0], policy(EnvelopeMode::Extrapolate));

@@ -4,8 +4,9 @@
 use super::error::EncodeError;
 use super::format::{
     crc32, CRC_LEN, ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION,
-    EXTRAPOLATE_VERSION, HEADER_LEN, MAGIC, SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS,
-    SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
+    EXTRAPOLATE_VERSION, HEADER_LEN, MAGIC, OUTPUT_FILTER_VERSION, SECTIONS_VERSION,
+    SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_OUTPUT_FILTER,
+    SECTION_VOLUMETRIC, UNITS_V1,
 };
 use super::model::Model;
 use super::types::{EnvelopeMode, InputKind, Term};
@@ -20,10 +21,17 @@ impl Model {
         let volumetric = self.volumetric.as_ref().map_or(0, |v| 4 + v.encoded_len());
         let five_axis = self.five_axis.as_ref().map_or(0, |f| 4 + f.encoded_len());
         let envelope = self.envelope_payload_len().map_or(0, |n| 4 + n);
-        if fallbacks + volumetric + five_axis + envelope == 0 {
+        let filter = self.output_filter_payload_len().map_or(0, |n| 4 + n);
+        let all = fallbacks + volumetric + five_axis + envelope + filter;
+        if all == 0 {
             return 0;
         }
-        4 + fallbacks + volumetric + five_axis + envelope
+        4 + all
+    }
+
+    /// Section kind 6: 4 B, then 4 B per direction.
+    fn output_filter_payload_len(&self) -> Option<usize> {
+        self.output_decay_q30.map(|_| 4 + 4 * self.directions.len())
     }
 
     /// Section kind 5: 4 B, then 4 B per direction.
@@ -83,7 +91,9 @@ impl Model {
     fn write_header(&self, w: &mut Writer<'_>, len: usize) {
         w.put(&MAGIC);
         // The oldest version that holds the model (format.rs).
-        let version: u16 = if self.extrapolate_mask() != 0 {
+        let version: u16 = if self.output_decay_q30.is_some() {
+            OUTPUT_FILTER_VERSION
+        } else if self.extrapolate_mask() != 0 {
             EXTRAPOLATE_VERSION
         } else if self.envelope.is_some() {
             ENVELOPE_VERSION
@@ -182,7 +192,8 @@ impl Model {
             let n = u8::from(!self.fallbacks.is_empty())
                 + u8::from(self.volumetric.is_some())
                 + u8::from(self.five_axis.is_some())
-                + u8::from(self.envelope.is_some());
+                + u8::from(self.envelope.is_some())
+                + u8::from(self.output_decay_q30.is_some());
             w.put(&[n, 0, 0, 0]);
         }
         if let Some(payload) = self.fallbacks_payload_len() {
@@ -214,6 +225,16 @@ impl Model {
                 };
                 w.put(&[code, 0]);
                 w.put(&p.margin.to_le_bytes());
+            }
+        }
+        if let (Some(payload), Some(decays)) =
+            (self.output_filter_payload_len(), &self.output_decay_q30)
+        {
+            w.put(&[SECTION_OUTPUT_FILTER, 0]);
+            w.put(&len_u16(payload).to_le_bytes());
+            w.put(&[count_u8(&self.directions), 0, 0, 0]);
+            for d in decays.iter().take(self.directions.len()) {
+                w.put(&d.to_le_bytes());
             }
         }
     }

@@ -7,16 +7,19 @@ pub use crate::crc::{crc32, crc8_maxim as rom_crc8};
 
 pub const MAGIC: [u8; 4] = *b"TCMI";
 /// The newest format this build reads and writes (it also reads versions 1
-/// to 3). The encoder writes the oldest version that holds the model: 1
+/// to 4). The encoder writes the oldest version that holds the model: 1
 /// without sections, [`SECTIONS_VERSION`] with sections, [`ENVELOPE_VERSION`]
-/// with the envelope policy (section kind 5), 4 only when some direction's
-/// policy is [`ENVELOPE_EXTRAPOLATE`], so a build that reads up to 3 refuses
+/// with the envelope policy (section kind 5), [`EXTRAPOLATE_VERSION`] when
+/// some direction's policy is [`ENVELOPE_EXTRAPOLATE`], 5 only with the
+/// output filter (section kind 6), so a build that reads up to 4 refuses
 /// such an image by its version check, before anything else.
-pub const FORMAT_VERSION: u16 = 4;
+pub const FORMAT_VERSION: u16 = 5;
 /// The format that added the envelope policy (section kind 5, codes 0 and 1).
 pub const ENVELOPE_VERSION: u16 = 3;
 /// The format that added the policy code [`ENVELOPE_EXTRAPOLATE`].
 pub const EXTRAPOLATE_VERSION: u16 = 4;
+/// The format that added the output filter (section kind 6).
+pub const OUTPUT_FILTER_VERSION: u16 = 5;
 /// The format that added the sections (kinds 1, 3, 4).
 pub const SECTIONS_VERSION: u16 = 2;
 /// Section kind: fallback models (degraded-mode compensation).
@@ -28,6 +31,8 @@ pub const SECTION_VOLUMETRIC: u8 = 3;
 pub const SECTION_FIVE_AXIS: u8 = 4;
 /// Section kind: the envelope policy per direction (issue 50, format v3 and later).
 pub const SECTION_ENVELOPE: u8 = 5;
+/// Section kind: the output low-pass per direction (issue 51, format v5 and later).
+pub const SECTION_OUTPUT_FILTER: u8 = 6;
 /// Envelope policy codes (section kind 5): hold every input at the edge of
 /// its training range, serve the direction from its fallback without an
 /// input beyond the margin, or (format v4 only) continue the linear model up

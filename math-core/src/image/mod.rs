@@ -3,9 +3,10 @@
 //! [`Model::parse`] accepts only a fully valid image and never panics; any
 //! defect is an [`ImageError`].
 //!
-//! Layout (format version 4; version 3 is the same without the envelope
-//! policy code 2, version 2 the same without section kind 5, version 1 the
-//! same without the sections; every count is bounded by [`crate::limits`]):
+//! Layout (format version 5; version 4 is the same without section kind 6,
+//! version 3 the same without the envelope policy code 2, version 2 the
+//! same without section kind 5, version 1 the same without the sections;
+//! every count is bounded by [`crate::limits`]):
 //!
 //! ```text
 //! header   32 B  "TCMI", format u16, flags u16, total_len u32, model_version u32,
@@ -43,6 +44,9 @@
 //!         policy u8 (0 hold, 1 fallback, 2 extrapolate: format v4 only), 0,
 //!         margin u16 (raw units of each input: 1/16 °C for temperatures,
 //!         rpm for the spindle speed)
+//! kind 6  output filter (issue 51; format v5 and later, in an older image unknown):
+//!         n u8 (= n_directions), 3 × 0, then per direction (image order):
+//!         decay_q30 u32 = exp(−step_ms/τ) · 2^30 per model step (0: none; < 2^30)
 //! kind 3  volumetric correction (issue 14, crate::volumetric):
 //!         n_sensors u8, 0, n_terms u16, position slot of X, Y, Z u8 × 3
 //!         (index into HR_POSITIONS), 0, tool_max i32 (µm),
@@ -120,6 +124,15 @@
 //! (`BadValue`); its prediction bound is checked over the extended span
 //! (`semantic`).
 //!
+//! The output filter (section kind 6) low-passes each direction's
+//! prediction (after the envelope rule, before clamp and rate limit) by a
+//! causal first-order lag of time constant τ, advanced in whole model steps
+//! like the input lags (`crate::compensator` rule 5). The encoder writes
+//! version 5 only with this section (8 B + 4 B per direction), so a build
+//! that reads up to version 4 refuses such an image by its version check
+//! (result 8) and keeps its model. The parser refuses a count other than the
+//! image's directions, a decay ≥ 2^30 and non-zero padding (`BadValue`).
+//!
 //! A fallback is one static polynomial table over the image's inputs that
 //! serves its direction without the excluded sensor(s): it may not use an
 //! input that reads them. The encoder writes version 1 when there are no
@@ -159,8 +172,9 @@ pub use error::{EncodeError, ImageError};
 pub use format::{
     crc32, rom_crc8, ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION,
     EXTRAPOLATE_VERSION, FIVE_AXIS_FLAGS, FIVE_AXIS_RTEST_LOCATION, FLAG_FIXED_REFERENCE,
-    FORMAT_VERSION, HEADER_LEN, MAGIC, NONE, SECTIONS_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS,
-    SECTION_FIVE_AXIS, SECTION_VOLUMETRIC, UNITS_V1,
+    FORMAT_VERSION, HEADER_LEN, MAGIC, NONE, OUTPUT_FILTER_VERSION, SECTIONS_VERSION,
+    SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_OUTPUT_FILTER,
+    SECTION_VOLUMETRIC, UNITS_V1,
 };
 pub use model::Model;
 pub use signed::{split_signed, SignedImage, MAX_SIGNED_BYTES};

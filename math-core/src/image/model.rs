@@ -38,6 +38,10 @@ pub struct Model {
     /// The envelope policy per direction (section kind 5, format v3); `None`
     /// in older images: every direction holds, margin 0.
     pub envelope: Option<[EnvelopePolicy; MAX_DIRECTIONS]>,
+    /// The output low-pass per direction (section kind 6, format v5): the
+    /// per-step decay exp(−step_ms/τ) in Q30, 0 = none (< 2^30); `None` in
+    /// older images: no direction is filtered.
+    pub output_decay_q30: Option<[u32; MAX_DIRECTIONS]>,
     /// Precomputed from the ranges at parse time (not stored in the image).
     /// Each input's envelope in Q8 of its raw unit, with its Q24 mapping.
     pub(crate) input_span: [Span; MAX_INPUTS],
@@ -71,6 +75,7 @@ impl Model {
             volumetric: None,
             five_axis: None,
             envelope: None,
+            output_decay_q30: None,
             input_span: [Span::default(); MAX_INPUTS],
             axis_span: [Span::default(); MAX_AXES],
             axis_ref_q24: [0; MAX_AXES],
@@ -95,6 +100,7 @@ impl Model {
         self.volumetric = None;
         self.five_axis = None;
         self.envelope = None;
+        self.output_decay_q30 = None;
         self.input_span = [Span::default(); MAX_INPUTS];
         self.axis_span = [Span::default(); MAX_AXES];
         self.axis_ref_q24 = [0; MAX_AXES];

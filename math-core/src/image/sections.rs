@@ -1,11 +1,13 @@
 //! The typed sections after the tables (format v2): the section list, and
 //! one reader per kind (1: fallback models, 3: volumetric correction, 4:
-//! five-axis part, 5: envelope policy, format v3 and later).
+//! five-axis part, 5: envelope policy, format v3 and later, 6: output
+//! filter, format v5 and later).
 
 use super::error::{push, ImageError};
 use super::format::{
     ENVELOPE_EXTRAPOLATE, ENVELOPE_FALLBACK, ENVELOPE_HOLD, ENVELOPE_VERSION, EXTRAPOLATE_VERSION,
-    NONE, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS, SECTION_VOLUMETRIC,
+    NONE, OUTPUT_FILTER_VERSION, SECTION_ENVELOPE, SECTION_FALLBACKS, SECTION_FIVE_AXIS,
+    SECTION_OUTPUT_FILTER, SECTION_VOLUMETRIC,
 };
 use super::model::Model;
 use super::reader::Reader;
@@ -20,7 +22,8 @@ use heapless::Vec;
 /// most once, each payload read exactly to its declared length. Kind 5
 /// only in a version-3 (or later) image: in a version-2 one it is unknown,
 /// as it is to a build that reads only versions 1 and 2; its code 2
-/// (extrapolate) only in a version-4 image.
+/// (extrapolate) only in a version-4 image. Kind 6 likewise only in a
+/// version-5 (or later) image.
 pub(super) fn parse_sections(
     r: &mut Reader<'_>,
     m: &mut Model,
@@ -35,7 +38,8 @@ pub(super) fn parse_sections(
         let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
         let known = [SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind)
-            || (kind == SECTION_ENVELOPE && version >= ENVELOPE_VERSION);
+            || (kind == SECTION_ENVELOPE && version >= ENVELOPE_VERSION)
+            || (kind == SECTION_OUTPUT_FILTER && version >= OUTPUT_FILTER_VERSION);
         if !known {
             return Err(ImageError::UnknownSection { kind });
         }
@@ -47,6 +51,7 @@ pub(super) fn parse_sections(
             SECTION_VOLUMETRIC => parse_volumetric(&mut payload, m),
             SECTION_FIVE_AXIS => parse_five_axis(&mut payload, m),
             SECTION_ENVELOPE => parse_envelope(&mut payload, m, version),
+            SECTION_OUTPUT_FILTER => parse_output_filter(&mut payload, m),
             _ => parse_fallbacks(&mut payload, m),
         };
         parsed.map_err(|e| match e {
@@ -252,6 +257,33 @@ fn parse_envelope(r: &mut Reader<'_>, m: &mut Model, version: u16) -> Result<(),
         }
     }
     m.envelope = Some(policies);
+    Ok(())
+}
+
+/// Section kind 6: the output low-pass, one decay u32 (Q30, per model step;
+/// 0: none) per direction, each below 2^30.
+fn parse_output_filter(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
+    let [n, pad @ ..] = r.array::<4>()?;
+    if usize::from(n) != m.directions.len() {
+        return Err(ImageError::BadValue {
+            what: "output filter count (one per direction)",
+        });
+    }
+    if pad != [0; 3] {
+        return Err(ImageError::BadValue {
+            what: "output filter section padding",
+        });
+    }
+    let mut decays = [0u32; crate::limits::MAX_DIRECTIONS];
+    for d in decays.iter_mut().take(usize::from(n)) {
+        *d = r.u32()?;
+        if *d >= 1 << 30 {
+            return Err(ImageError::BadValue {
+                what: "output filter decay (must be below 2^30)",
+            });
+        }
+    }
+    m.output_decay_q30 = Some(decays);
     Ok(())
 }
 
