@@ -37,10 +37,14 @@ pub(super) fn parse_sections(
         let len = usize::from(r.u16()?);
         let mut payload = r.take(len).ok_or(ImageError::SectionLength { kind })?;
         let bit = 1u32 << (kind % 32);
-        let known = [SECTION_FALLBACKS, SECTION_VOLUMETRIC, SECTION_FIVE_AXIS].contains(&kind)
-            || (kind == SECTION_ENVELOPE && version >= ENVELOPE_VERSION)
-            || (kind == SECTION_OUTPUT_FILTER && version >= OUTPUT_FILTER_VERSION);
-        if !known {
+        // The format each kind came with (unknown in older images).
+        let since = match kind {
+            SECTION_FALLBACKS | SECTION_VOLUMETRIC | SECTION_FIVE_AXIS => 0,
+            SECTION_ENVELOPE => ENVELOPE_VERSION,
+            SECTION_OUTPUT_FILTER => OUTPUT_FILTER_VERSION,
+            _ => u16::MAX,
+        };
+        if version < since {
             return Err(ImageError::UnknownSection { kind });
         }
         if seen & bit != 0 {
@@ -262,19 +266,17 @@ fn parse_envelope(r: &mut Reader<'_>, m: &mut Model, version: u16) -> Result<(),
 
 /// Section kind 6: the output low-pass, one decay u32 (Q30, per model step;
 /// 0: none) per direction, each below 2^30.
+#[inline(never)]
 fn parse_output_filter(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageError> {
     let [n, pad @ ..] = r.array::<4>()?;
-    if usize::from(n) != m.directions.len() {
+    if usize::from(n) != m.directions.len() || pad != [0; 3] {
         return Err(ImageError::BadValue {
-            what: "output filter count (one per direction)",
+            what: "output filter count (one per direction) or padding",
         });
     }
-    if pad != [0; 3] {
-        return Err(ImageError::BadValue {
-            what: "output filter section padding",
-        });
-    }
-    let mut decays = [0u32; crate::limits::MAX_DIRECTIONS];
+    let decays = m
+        .output_decay_q30
+        .insert([0; crate::limits::MAX_DIRECTIONS]);
     for d in decays.iter_mut().take(usize::from(n)) {
         *d = r.u32()?;
         if *d >= 1 << 30 {
@@ -283,7 +285,6 @@ fn parse_output_filter(r: &mut Reader<'_>, m: &mut Model) -> Result<(), ImageErr
             });
         }
     }
-    m.output_decay_q30 = Some(decays);
     Ok(())
 }
 
