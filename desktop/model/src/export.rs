@@ -7,10 +7,12 @@
 
 pub mod envelope_policy;
 pub mod float_model;
+pub mod output_filter;
 pub mod summary;
 
 pub use envelope_policy::policies;
 pub use float_model::*;
+pub use output_filter::decays;
 pub use summary::{print_summary, ExportSummary, Wire};
 
 use anyhow::{Context, Result};
@@ -74,6 +76,10 @@ pub fn export_five(
 pub type EnvelopeSection =
     [thermocomp_core::image::EnvelopePolicy; thermocomp_core::limits::MAX_DIRECTIONS];
 
+/// Per direction, the output low-pass's decay per model step in Q30
+/// (section kind 6, format v5; 0: none).
+pub type OutputFilterSection = [u32; thermocomp_core::limits::MAX_DIRECTIONS];
+
 /// [`export_five`] with the envelope policy section when `envelope` is
 /// given (`tcomp export` from a fit file with envelope evidence,
 /// [`envelope_policy::policies`]).
@@ -81,6 +87,19 @@ pub fn export_enveloped(
     model: &FloatModel,
     (geometry, five): (Option<GeometrySection>, Option<FiveAxisSection>),
     envelope: Option<EnvelopeSection>,
+    out: &Path,
+    sign: Option<&ed25519_compact::SecretKey>,
+) -> Result<ExportSummary> {
+    export_sections(model, (geometry, five), (envelope, None), out, sign)
+}
+
+/// [`export_enveloped`] with the output filter section when `output` is
+/// given (`tcomp export` from a fit file with `output_lag_s`,
+/// [`output_filter::decays`]).
+pub fn export_sections(
+    model: &FloatModel,
+    (geometry, five): (Option<GeometrySection>, Option<FiveAxisSection>),
+    (envelope, output): (Option<EnvelopeSection>, Option<OutputFilterSection>),
     out: &Path,
     sign: Option<&ed25519_compact::SecretKey>,
 ) -> Result<ExportSummary> {
@@ -92,6 +111,7 @@ pub fn export_enveloped(
         fixed.volumetric = geometry.as_ref().map(|(v, _)| v.clone());
         fixed.five_axis = five.as_ref().map(|(f, _)| f.clone());
         fixed.envelope = envelope;
+        fixed.output_decay_q30 = output;
         Ok((fixed, report))
     };
     let (mut fixed, mut report) = quantize(model)?;

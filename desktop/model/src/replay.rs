@@ -212,6 +212,9 @@ pub struct Residual {
     /// units: 1/16 °C, rpm).
     pub envelope_policy: &'static str,
     pub envelope_margin_raw: u16,
+    /// The time constant (s) of the image's output low-pass on this
+    /// direction (section kind 6); `None` without one.
+    pub output_lag_s: Option<f64>,
     /// MAE (µm, about the run's reference) over those rows; `None` without any.
     pub out_of_envelope_mae_um: Option<f64>,
     /// MAE over the other scored rows; `None` without any.
@@ -333,6 +336,10 @@ pub fn residuals(
             out_of_envelope_share: n_out as f64 / n,
             envelope_policy: policy.mode.name(),
             envelope_margin_raw: policy.margin,
+            output_lag_s: model
+                .output_decay_q30
+                .and_then(|q| q.get(d).copied())
+                .and_then(|q| crate::export::output_filter::tau_s(model.step_ms, q)),
             out_of_envelope_mae_um: mae_where(true),
             in_envelope_mae_um: mae_where(false),
         });

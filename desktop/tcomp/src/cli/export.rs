@@ -138,7 +138,7 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         .transpose()?;
     let run_for_geometry = run.clone();
     let mut columns: Vec<String> = Vec::new();
-    let mut envelope = None;
+    let (mut envelope, mut output) = (None, None);
     let float = match (demo, model) {
         (true, _) => {
             let mut demo = thermocomp_core::float::demo_model(seed);
@@ -175,6 +175,10 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
             let (policy, lines) = tcomp_model::export::policies(&file, &float);
             lines.iter().for_each(|l| eprintln!("{l}"));
             envelope = policy;
+            // The output low-pass per direction the fit chose: one line each.
+            let (decays, lines) = tcomp_model::export::decays(&file, &float);
+            lines.iter().for_each(|l| eprintln!("{l}"));
+            output = decays;
             float
         }
         (false, None) => {
@@ -209,10 +213,10 @@ pub fn main(args: ExportArgs) -> anyhow::Result<()> {
         )?),
         _ => None,
     };
-    let mut summary = tcomp_model::export::export_enveloped(
+    let mut summary = tcomp_model::export::export_sections(
         &float,
         (section, five),
-        envelope,
+        (envelope, output),
         &out,
         sign.as_ref(),
     )?;

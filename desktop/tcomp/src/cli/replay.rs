@@ -215,6 +215,9 @@ pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
                 mae(r.out_of_envelope_mae_um),
                 mae(r.in_envelope_mae_um)
             );
+            if let Some(tau) = r.output_lag_s {
+                println!("  {}: output low-pass {tau:.0} s (image)", r.column);
+            }
             println!(
                 "  {}: never worse than no compensation: {}",
                 r.column,
