@@ -10,8 +10,9 @@ fuzz_target!(|data: &[u8]| {
     if bytes.len() >= 36 && bytes[0] & 1 == 1 {
         bytes[0..4].copy_from_slice(b"TCMI");
         // Every format: v1, v2 with its typed sections after the tables, v3
-        // with the envelope policy, v4 with its code 2 (extrapolate).
-        let version: u16 = 1 + u16::from((data[0] >> 1) & 3);
+        // with the envelope policy, v4 with its code 2 (extrapolate), v5
+        // with the output filter (section kind 6).
+        let version: u16 = 1 + u16::from((data[0] >> 1) % 5);
         bytes[4..6].copy_from_slice(&version.to_le_bytes());
         let n = bytes.len() as u32;
         bytes[8..12].copy_from_slice(&n.to_le_bytes());

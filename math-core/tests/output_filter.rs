@@ -316,3 +316,13 @@ fn bad_output_filter_sections_are_refused_in_one_line() {
     let e = Model::parse(&encode(&mut m)).unwrap_err();
     assert!(e.to_string().contains("below 2^30"), "{e}");
 }
+
+#[test]
+fn the_fuzz_seed_is_this_model() {
+    let seed = include_bytes!("../../fuzz/seeds/model_image/output-filter.img");
+    assert_eq!(&seed[..], &encode(&mut filtered())[..]);
+    assert_eq!(
+        Model::parse(seed).unwrap().output_decay_q30.unwrap()[0],
+        decay_q30(TAU_S)
+    );
+}
