@@ -160,6 +160,9 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
         // slow modes can absorb it there (the held-out rows then decide)
         let fit_rows_after = (start..run.rows()).filter(|&k| !run.held[k]).count();
         let few_fit_rows_after = fit_rows_after * crate::diagnose::runs::BLOCKS <= run.rows();
+        // an onset inside a held-out block shows on the fit rows only as a
+        // level change between fit blocks (`fit_mode::undecided`)
+        let onset_held = run.held[start];
         let fit = with_outputs(nom, vec![(o, of)]);
         out.push(Candidate {
             name: "sensor_offset",
@@ -169,7 +172,7 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             // size + location (run, time)
             k_extra: 3,
             at_bound: Vec::new(),
-            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "fit_rows_after": fit_rows_after, "few_fit_rows_after": few_fit_rows_after, "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
+            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "fit_rows_after": fit_rows_after, "few_fit_rows_after": few_fit_rows_after, "onset_held": onset_held, "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
         });
     }
     out

@@ -9,7 +9,8 @@ use serde_json::{json, Value};
 
 use super::fit_nominal::{no_effect_evidence, nominal_json, run_phases, where_of};
 pub use super::fit_untestable::untestable;
-use super::{coolant_line, reach};
+pub use super::margins::*;
+use super::{coolant_line, reach, undecided};
 use crate::diagnose::effects::open_effects::{self, Candidate, LAG_MIN_FIT_REL, LAG_MIN_RUN_REL};
 use crate::diagnose::effects::{lag_specific, periodic_claim};
 use crate::diagnose::ident::{ModelFit, Problem, Structure};
@@ -367,30 +368,6 @@ fn selected_gaps(p: &Problem, name: &str, before: &ModelFit, after: &ModelFit) -
     }
 }
 
-/// A periodic drive must stand this far above the median of the residual
-/// spectrum (sum over sensors) to be claimed.
-pub const PERIODIC_MIN_PEAK: f64 = 8.0;
-
-/// Held-out gap after / before at which a sensor step is claimed without its
-/// fit-row BIC (see `bic_ok`).
-pub const STEP_HELD_REL: f64 = 0.5;
-
-/// Held-out gap after / the nominal's at which the speed law is claimed
-/// without its fit-row BIC (see `nominal_halved`).
-pub const SPEED_HELD_REL: f64 = 0.5;
-
-/// Held-out gap after / before at most for the speed law (either form) to
-/// be claimed (see `steep_enough`); between this and `1 − FIT_MIN_REL` it
-/// is listed untestable (`speed_law_inconclusive`).
-pub const SPEED_CLAIM_REL: f64 = 0.45;
-
-/// Relative held-out shrink (noise units, affected outputs) to claim an effect.
-pub const FIT_MIN_REL: f64 = 0.3;
-/// Relative held-out shrink to claim a sensor step or lag (see `score`).
-pub const SENSOR_MIN_REL: f64 = 0.4;
-/// Absolute held-out shrink (noise-variance units) to claim an effect.
-pub const FIT_MIN_ABS: f64 = 1.0;
-
 /// Candidates, each with the reference it is scored against (`None`: the
 /// nominal; the lag against the body map).
 fn fit_candidates(
@@ -626,6 +603,15 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     let line = (only("coolant") || only("periodic"))
         .then(|| periodic_claim::line(&p, &st, &fit))
         .flatten();
+    // what the runs show but cannot decide (undecided.rs), on the claims
+    // before the line confirms any coolant
+    let claims = || scored.iter().map(|s| (&s.finding, s.claimed));
+    let mut undecided = undecided::steps_with_held_onset(claims());
+    undecided.extend(undecided::cycling_not_stationary(
+        line.as_ref(),
+        claims(),
+        opt.min_dbic,
+    ));
     let no_line = coolant_line::demote(
         &p,
         line.as_ref(),
@@ -634,6 +620,7 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
     rank(&mut scored);
     let mut untestable = untestable(&p, &lag_reach, speed_kept, ambient_kept);
     untestable.extend(no_line);
+    untestable.extend(undecided);
     untestable.extend(speed_law_inconclusive(&scored));
     untestable.extend(lag_specific::untestable(scored.iter().map(|s| &s.finding)));
     let mut findings = claimed_findings(&scored);
@@ -705,7 +692,8 @@ pub fn diagnose_fit(runs: &[(String, Run)], opt: &Options) -> Result<Diagnosis> 
         ranking_rule: fit_ranking_rule(opt)
             + &crate::diagnose::effects::periodic_claim::rule()
             + &lag_specific::rule()
-            + &untestable_rule(),
+            + &untestable_rule()
+            + &undecided::rule(),
     })
 }
 
