@@ -147,3 +147,25 @@ fn a_linear_expansion_beyond_the_range_is_continued_and_a_stop_is_held() {
     assert_eq!(ev.policy, "hold", "{}", ev.why());
     assert!(ev.extrapolate_mae_um.unwrap() > ev.hold_mae_um.unwrap());
 }
+
+#[test]
+fn without_evidence_a_stable_linear_model_continues_by_the_prior() {
+    // Sensor `a` swings inside the same range in every block: no fold row
+    // leaves the earlier blocks' range, so the prior decides.
+    let dt = 60.0;
+    let t: Vec<f64> = (0..1800).map(|k| k as f64 * dt).collect();
+    let a: Vec<f64> = t
+        .iter()
+        .map(|tk| 20.0 + 2.0 * (tk / 7_200.0 * std::f64::consts::TAU).sin())
+        .collect();
+    let b = t
+        .iter()
+        .map(|tk| 21.0 + 0.5 * (tk / 17_000.0).sin())
+        .collect();
+    let y = a.iter().map(|v| 3.0 * (v - a[0])).collect();
+    let rep = fit(run(t, a, b, y));
+    let ev = &rep.model_file.envelope["dx_um"];
+    assert_eq!(ev.policy, "extrapolate", "{}", ev.why());
+    assert!(!ev.by_evidence, "{}", ev.why());
+    assert!(ev.why().contains("the prior"), "{}", ev.why());
+}

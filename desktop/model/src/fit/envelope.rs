@@ -17,9 +17,10 @@
 //! that reads none of the sensors beyond; none: held as well) and, for a
 //! linear chosen model (`mlr`, `mlr-static`, `ridge`: the board extrapolates
 //! only tables of degree 1), with the refitted model continued past the
-//! edge. The policy with the lowest error wins; `hold` on a tie or when no
-//! fold leaves the range (the conservative rule: nothing past the range
-//! without evidence for it). Why a third policy: thermal expansion is linear
+//! edge. The physical prior decides unless the folds say otherwise beyond
+//! their noise ([`decisive`]: hour-long batch means of the paired errors):
+//! a linear model whose coefficients held across the CV folds continues,
+//! anything else is held. Why a third policy, and why the prior: thermal expansion is linear
 //! in temperature, so a linear model held at the edge freezes its
 //! correction while the machine keeps moving (a blind world measured the
 //! hold as most of the loss beyond the envelope); what the hold guards
@@ -94,11 +95,14 @@ fn margin_in(kind: &FeatureKind, margin_raw: u16) -> f64 {
 
 /// Evidence per fitted channel. `runs` are the fit's runs (errors as
 /// rises, as the fit read them), `train` its training segments.
+/// `stable`: per channel, whether the chosen model's coefficients held
+/// across the CV folds (the stability guard, [`super::stability`]).
 pub fn evidence(
     runs: &[Run],
     train: &[Segment],
     file: &ModelFile,
     margin_raw: u16,
+    stable: &BTreeMap<String, bool>,
 ) -> Result<BTreeMap<String, EnvelopeEvidence>> {
     let blocks = all_blocks(&blocked_folds(runs, train, BLOCKS));
     let folds = forward_folds(&blocks);
@@ -128,6 +132,7 @@ pub fn evidence(
         let fb_idx: Vec<Vec<usize>> = fbs.iter().map(|f| idx_of(&f.params.features)).collect();
         let mut ev = Tally {
             linear,
+            stable: stable.get(ch).copied().unwrap_or(false),
             ..Tally::default()
         };
         for (fit, val) in &folds {
@@ -151,11 +156,47 @@ struct Tally {
     rows: usize,
     rows_beyond: usize,
     rows_with_fallback: usize,
-    hold: f64,
-    fallback: f64,
-    /// The chosen model is linear (the board may extrapolate it).
+    /// Per row beyond, in fold and time order: the absolute error holding,
+    /// serving the fallback choice, and continuing the model.
+    hold: Vec<f64>,
+    fallback: Vec<f64>,
+    extrapolate: Vec<f64>,
+    /// Per row beyond, its batch ([`BATCH_S`] of time within one fold and
+    /// run), and where the open batch started (fold, run, time).
+    batch: Vec<usize>,
+    batch_start: Option<(usize, usize, f64)>,
+    /// The chosen model is linear (the board may extrapolate it) and its
+    /// coefficients held across the folds.
     linear: bool,
-    extrapolate: f64,
+    stable: bool,
+}
+
+/// Batches of the rows beyond span this long at least (the anchor window
+/// of the lag rule, one hour): a thermal error a minute apart is not a new
+/// witness, errors an hour apart nearly are.
+const BATCH_S: f64 = super::lags::ANCHOR_S;
+/// Batches needed before the evidence may decide (fewer: too thin).
+const MIN_BATCHES: usize = 4;
+
+/// Whether errors `a` are lower than `b` (paired, the rows beyond in fold
+/// and time order, `batch` each row's batch) beyond the noise: the mean of
+/// the batch means of `b − a` exceeds `NOISE_Z` standard errors of them
+/// (the per-input lag rule's level), over at least [`MIN_BATCHES`].
+fn decisive(a: &[f64], b: &[f64], batch: &[usize]) -> bool {
+    let k = batch.last().map_or(0, |&l| l + 1);
+    if k < MIN_BATCHES {
+        return false;
+    }
+    let mut sum = vec![0.0; k];
+    let mut cnt = vec![0usize; k];
+    for ((x, y), &j) in a.iter().zip(b).zip(batch) {
+        sum[j] += y - x;
+        cnt[j] += 1;
+    }
+    let means: Vec<f64> = sum.iter().zip(&cnt).map(|(s, &c)| s / c as f64).collect();
+    let m = means.iter().sum::<f64>() / k as f64;
+    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (k - 1) as f64;
+    m > super::lags::NOISE_Z * (var / k as f64).sqrt()
 }
 
 /// A linear model's prediction with its inputs clamped to
@@ -215,9 +256,21 @@ impl Tally {
             }
             any = true;
             self.rows_beyond += 1;
+            let t = runs[run].time_s()[r];
+            let same = |&(f, ru, t0): &(usize, usize, f64)| {
+                f == self.folds_beyond && ru == run && t >= t0 && t - t0 < BATCH_S
+            };
+            if !self.batch_start.as_ref().is_some_and(same) {
+                let next = self.batch.last().map_or(0, |&b| b + 1);
+                self.batch_start = Some((self.folds_beyond, run, t));
+                self.batch.push(next);
+            } else {
+                self.batch.push(self.batch.last().copied().unwrap_or(0));
+            }
             let hold = (y - main.predict_raw(x)).abs();
-            self.hold += hold;
-            self.extrapolate += (y - predict_extrapolated(&main, x)).abs();
+            self.hold.push(hold);
+            self.extrapolate
+                .push((y - predict_extrapolated(&main, x)).abs());
             // As the board: the sensors beyond count as faulted; a spindle
             // input beyond rules out that input itself.
             let affected = |f: &FeatureSpec| {
@@ -243,29 +296,50 @@ impl Tally {
             if served.is_some() {
                 self.rows_with_fallback += 1;
             }
-            self.fallback += served.unwrap_or(hold);
+            self.fallback.push(served.unwrap_or(hold));
         }
         self.folds_beyond += usize::from(any);
         Ok(())
     }
 
+    /// The policy: the physical prior (a linear model whose coefficients
+    /// held across the folds continues past the edge, as thermal expansion
+    /// does; anything else is held), unless the folds' rows beyond show
+    /// another policy lower than the prior's beyond their noise
+    /// ([`decisive`]): thin or noisy evidence does not decide.
     fn finish(self, folds: usize, margin_raw: u16) -> EnvelopeEvidence {
-        let n = self.rows_beyond as f64;
-        let mae = |s: f64| (self.rows_beyond > 0).then(|| s / n);
-        let (hold, fallback) = (mae(self.hold), mae(self.fallback));
-        let extrapolate = mae(self.extrapolate).filter(|_| self.linear);
-        let mut policy = "hold";
-        if let Some(h) = hold {
-            let f = fallback.unwrap_or(f64::INFINITY);
-            let e = extrapolate.unwrap_or(f64::INFINITY);
-            if f < h && f <= e {
-                policy = "fallback";
-            } else if e < h && e < f {
-                policy = "extrapolate";
+        let n = self.hold.len() as f64;
+        let mae = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / n);
+        let (hold, fallback) = (mae(&self.hold), mae(&self.fallback));
+        let extrapolate = mae(&self.extrapolate).filter(|_| self.linear);
+        let prior = if self.linear && self.stable {
+            "extrapolate"
+        } else {
+            "hold"
+        };
+        let errors = |p: &str| match p {
+            "extrapolate" => &self.extrapolate,
+            "fallback" => &self.fallback,
+            _ => &self.hold,
+        };
+        let candidates = [
+            ("hold", hold),
+            ("fallback", fallback),
+            ("extrapolate", extrapolate),
+        ];
+        let best = candidates
+            .iter()
+            .filter_map(|&(p, m)| Some((p, m?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let (policy, by_evidence) = match best {
+            Some((p, _)) if p != prior && decisive(errors(p), errors(prior), &self.batch) => {
+                (p, true)
             }
-        }
+            _ => (prior, false),
+        };
         EnvelopeEvidence {
             policy: policy.into(),
+            by_evidence,
             margin_raw,
             folds,
             folds_beyond: self.folds_beyond,

@@ -356,6 +356,10 @@ pub struct FallbackParams {
 pub struct EnvelopeEvidence {
     /// `hold`, `fallback` or `extrapolate`.
     pub policy: String,
+    /// The folds' rows beyond decided it against the physical prior
+    /// (`false`: the prior, [`super::envelope`]).
+    #[serde(default)]
+    pub by_evidence: bool,
     /// Margin judged, raw units (1/16 °C, rpm).
     pub margin_raw: u16,
     /// Forward folds examined, and those with validation rows beyond.
@@ -380,7 +384,14 @@ impl EnvelopeEvidence {
     /// One line: which policy and why.
     pub fn why(&self) -> String {
         let k = self.margin_raw;
-        match (self.hold_mae_um, self.fallback_mae_um) {
+        let how = if self.by_evidence {
+            "by the folds' evidence beyond their noise"
+        } else if self.policy == "extrapolate" {
+            "the prior for a linear model whose coefficients held across the folds, no policy lower beyond the noise"
+        } else {
+            "the prior (the model is not linear or its coefficients moved across the folds), no policy lower beyond the noise"
+        };
+        let text = match (self.hold_mae_um, self.fallback_mae_um) {
             (Some(h), Some(f)) => format!(
                 "{}: on the {} of {} training rows of {} forward fold(s) beyond the earlier blocks' range by > {k}/16 K, holding at the edge {h:.2} µm MAE, the fallback {f:.2} µm ({} rows had one){}",
                 self.policy,
@@ -395,6 +406,7 @@ impl EnvelopeEvidence {
                 "{}: no training row of the {} forward fold(s) leaves the earlier blocks' range by > {k}/16 K",
                 self.policy, self.folds
             ),
-        }
+        };
+        format!("{text}; {how}")
     }
 }

@@ -143,11 +143,20 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         .collect();
     // The envelope policy's evidence (issue 50 item 3), on the training
     // rows' forward folds: what `export` writes in the image.
+    let stable = acc
+        .inputs
+        .iter()
+        .filter_map(|i| {
+            let chosen = acc.file.chosen.get(&i.channel)?;
+            Some((i.channel.clone(), i.stability.get(chosen)?.stable))
+        })
+        .collect();
     acc.file.envelope = envelope::evidence(
         &plan.runs,
         &plan.train,
         &acc.file,
         envelope::DEFAULT_MARGIN_RAW,
+        &stable,
     )?;
     // The output low-pass (issue 51 item 1), on the same forward folds.
     for (ch, lag) in output_lag::choose(&plan.runs, &plan.train, &acc.file)? {

@@ -395,6 +395,7 @@ fn score_fitted(
         "train_rows": info.map(|i| i.train_rows),
         "served_rows": served_rows.len(),
         "chosen": chosen,
+        "envelope_policy": report.model_file.envelope.get(ch).map(|e| e.policy.clone()),
         "inputs": shipped.iter().map(FeatureSpec::name).collect::<Vec<_>>(),
         "cv_rms_um": info.map(|i| i.cv.iter().map(|(k, v)| (k.clone(), v.rms_um)).collect::<BTreeMap<_, _>>()),
         "outside_envelope_pct": {
@@ -492,9 +493,17 @@ fn board_replay(
         }
         Err(e) => return Err(e),
     };
+    // As `export`: the envelope policy per direction from the fit's
+    // evidence, and the output low-pass the fit chose.
+    let (envelope, _) = tcomp_model::export::policies(&report.model_file, &float);
+    let (output, _) = tcomp_model::export::decays(&report.model_file, &float);
     let quantize = |m: &thermocomp_core::float::FloatModel| {
         m.quantize()
-            .map(|(fixed, _)| fixed)
+            .map(|(mut fixed, _)| {
+                fixed.envelope = envelope;
+                fixed.output_decay_q30 = output;
+                fixed
+            })
             .map_err(|e| anyhow::anyhow!("{e}"))
     };
     // As `export`: the fallbacks, last first, until the image fits.
