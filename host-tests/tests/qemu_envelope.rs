@@ -11,7 +11,11 @@
 //! 360–371 equal the number of replayed rows up to that sample whose
 //! direction was beyond the envelope. The status bit `OUT_OF_ENVELOPE` is
 //! set on every counted row and on the rows within the margin (rule 4: an
-//! input held at its edge), and clear inside.
+//! input held at its edge), and clear inside. A third image, the same
+//! sensors with linear tables only, `extrapolate` on every direction and
+//! a 600 s output low-pass on Z (format v5), is compared the same way:
+//! beyond the range it serves the linear continuation (not the held edge)
+//! and the filter's state runs on the board as in the replay.
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -19,6 +23,7 @@ use std::time::{Duration, Instant};
 use host_tests::qemu::{modbus_master, one_board, BenchBoard};
 use tcomp_model::replay::ReplayRow;
 use thermocomp_core::compensator::status;
+use thermocomp_core::float::FloatTable;
 use thermocomp_core::float::{demo_model, FloatFallback, FloatTerm};
 use thermocomp_core::image::{EnvelopeMode, EnvelopePolicy};
 
@@ -84,18 +89,7 @@ fn term(coef_um: f64, input: Option<u8>) -> FloatTerm {
 /// no T03, exported with `policy` on every direction.
 fn image(path: &Path, fallback: bool) {
     let mut fm = demo_model(1);
-    fm.fallbacks = vec![
-        FloatFallback {
-            direction: 0,
-            excluded: vec![2],
-            terms: vec![term(8.0, Some(0)), term(4.0, Some(1)), term(2.0, Some(4))],
-        },
-        FloatFallback {
-            direction: 2,
-            excluded: vec![2],
-            terms: vec![term(-3.0, Some(3)), term(1.5, None)],
-        },
-    ];
+    image_fallbacks(&mut fm);
     let policy = EnvelopePolicy {
         mode: if fallback {
             EnvelopeMode::Fallback
@@ -108,6 +102,66 @@ fn image(path: &Path, fallback: bool) {
         .unwrap();
 }
 
+/// Fallbacks for Z (direction 0) and Y (2) that read no T03.
+fn image_fallbacks(fm: &mut thermocomp_core::float::FloatModel) {
+    fm.fallbacks = vec![
+        FloatFallback {
+            direction: 0,
+            excluded: vec![2],
+            terms: vec![term(8.0, Some(0)), term(4.0, Some(1)), term(2.0, Some(4))],
+        },
+        FloatFallback {
+            direction: 2,
+            excluded: vec![2],
+            terms: vec![term(-3.0, Some(3)), term(1.5, None)],
+        },
+    ];
+}
+
+/// The demo model's sensors and inputs with linear static tables only
+/// (Z and Y read T03, X does not), its fallbacks as in [`image`], policy
+/// `mode` on every direction; with `low_pass`, a 600 s output low-pass on Z.
+fn linear_image(path: &Path, mode: EnvelopeMode, low_pass: bool) {
+    let mut fm = demo_model(1);
+    fm.nets.clear();
+    let table = |direction: u8, terms: Vec<FloatTerm>| FloatTable {
+        direction,
+        axis: None,
+        terms,
+    };
+    fm.tables = vec![
+        table(
+            0,
+            vec![
+                term(6.0, Some(0)),
+                term(-3.0, Some(1)),
+                term(9.0, Some(2)),
+                term(2.0, Some(4)),
+            ],
+        ),
+        table(1, vec![term(4.0, Some(0)), term(-2.0, Some(3))]),
+        table(
+            2,
+            vec![term(-5.0, Some(2)), term(1.0, Some(3)), term(1.5, None)],
+        ),
+    ];
+    image_fallbacks(&mut fm);
+    let policy = EnvelopePolicy {
+        mode,
+        margin: MARGIN,
+    };
+    let decay = tcomp_model::export::output_filter::decay_q30(fm.step_ms, 600.0).unwrap();
+    let output = low_pass.then_some([decay, 0, 0, 0, 0, 0]);
+    tcomp_model::export::export_sections(
+        &fm,
+        (None, None),
+        (Some([policy; 6]), output),
+        path,
+        None,
+    )
+    .unwrap();
+}
+
 /// Where T03's rise lies at row `i`: 0 inside its range, 1 within the
 /// margin, 2 beyond it (from the trace's own values, 1/16 °C as the board
 /// reads them).
@@ -117,6 +171,12 @@ fn zone(i: usize) -> usize {
     let rise = q(20.0 + t03_rise(i as u32)) - q(20.0);
     let hi = RANGE_HI_K * 16.0;
     usize::from(rise > hi) + usize::from(rise > hi + f64::from(MARGIN))
+}
+
+/// T03's rise beyond its range at row `i`, 1/16 °C (0 inside).
+fn zone_excess(i: usize) -> i64 {
+    let rise = t03_rise(i as u32) - RANGE_HI_K;
+    (rise.max(0.0) * 16.0).round() as i64
 }
 
 /// Serve `img` on the trace, read snapshots until one past [`LAST_ROW`]
@@ -246,7 +306,27 @@ fn the_envelope_policy_and_its_counts_over_modbus_equal_the_desktop_replay() {
         assert_eq!(held[i].out, fell[i].out, "row {i}");
     }
 
+    // The linear image: continued beyond the range (Z and Y read T03; X
+    // does not), low-passed on Z; against the same tables held at the edge.
+    let (lin, lin_hold) = (dir.join("extrapolate.img"), dir.join("linear-hold.img"));
+    linear_image(&lin, EnvelopeMode::Extrapolate, true);
+    linear_image(&lin_hold, EnvelopeMode::Hold, true);
+    let ext = tcomp_model::replay::replay_files(&t, &lin).unwrap();
+    let lh = tcomp_model::replay::replay_files(&t, &lin_hold).unwrap();
+    for &i in &beyond {
+        assert_ne!(ext[i].out.status & status::OUT_OF_ENVELOPE, 0, "row {i}");
+        assert_eq!(ext[i].out.predicted[1], lh[i].out.predicted[1], "row {i}");
+    }
+    // Y (−5 µm per normalised unit of T03, no filter) moves on past the
+    // edge: further from the held value the further T03 is beyond.
+    let peak = *beyond.iter().max_by_key(|&&i| zone_excess(i)).unwrap();
+    assert!(
+        ext[peak].out.predicted[2] < lh[peak].out.predicted[2] - 5,
+        "row {peak}"
+    );
     let zones_hold = serve_and_compare(&t, &hold, &held);
     let zones_fallback = serve_and_compare(&t, &fallback, &fell);
-    eprintln!("compared samples (inside, margin, beyond): hold {zones_hold:?}, fallback {zones_fallback:?}");
+    let zones_ext = serve_and_compare(&t, &lin, &ext);
+    eprintln!("compared samples (inside, margin, beyond): hold {zones_hold:?}, fallback {zones_fallback:?}, extrapolate + low-pass {zones_ext:?}");
+    assert!(zones_ext[2] > 0, "{zones_ext:?}");
 }
