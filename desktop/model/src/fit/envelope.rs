@@ -18,7 +18,7 @@
 //! linear chosen model (`mlr`, `mlr-static`, `ridge`: the board extrapolates
 //! only tables of degree 1), with the refitted model continued past the
 //! edge. The physical prior decides unless the folds say otherwise beyond
-//! their noise ([`decisive`]: hour-long batch means of the paired errors):
+//! their noise ([`decisive`]: one witness per fold, all agreeing):
 //! a linear model whose coefficients held across the CV folds continues,
 //! anything else is held. Why a third policy, and why the prior: thermal expansion is linear
 //! in temperature, so a linear model held at the edge freezes its
@@ -28,7 +28,7 @@
 //! in these folds as a larger extrapolation error, and then `hold` wins. The chosen model is refitted as a linear model on its own inputs
 //! (exact for `mlr` and `mlr-static`; for `ridge`, networks and blends a
 //! linear stand-in on the same inputs: the folds judge extrapolation, not
-//! the fit).
+//! the fit; a `ridge` is refitted as a ridge with its chosen penalty).
 
 use std::collections::BTreeMap;
 
@@ -40,7 +40,7 @@ use super::mlr::fit_mlr;
 use super::model::{
     EnvelopeEvidence, FallbackParams, FeatureKind, FeatureSpec, MlrParams, Model, ModelFile,
 };
-use super::ridge::{all_blocks, forward_folds};
+use super::ridge::{all_blocks, fit_ridge, forward_folds};
 use super::samples::{ranged_specs, SeriesCache};
 use super::split::Segment;
 
@@ -95,14 +95,14 @@ fn margin_in(kind: &FeatureKind, margin_raw: u16) -> f64 {
 
 /// Evidence per fitted channel. `runs` are the fit's runs (errors as
 /// rises, as the fit read them), `train` its training segments.
-/// `stable`: per channel, whether the chosen model's coefficients held
-/// across the CV folds (the stability guard, [`super::stability`]).
+/// `chosen`: per channel, what the choice knew of the chosen model (its
+/// coefficients' stability across the CV folds, a ridge's penalty).
 pub fn evidence(
     runs: &[Run],
     train: &[Segment],
     file: &ModelFile,
     margin_raw: u16,
-    stable: &BTreeMap<String, bool>,
+    chosen: &BTreeMap<String, ChosenInfo>,
 ) -> Result<BTreeMap<String, EnvelopeEvidence>> {
     let blocks = all_blocks(&blocked_folds(runs, train, BLOCKS));
     let folds = forward_folds(&blocks);
@@ -132,7 +132,8 @@ pub fn evidence(
         let fb_idx: Vec<Vec<usize>> = fbs.iter().map(|f| idx_of(&f.params.features)).collect();
         let mut ev = Tally {
             linear,
-            stable: stable.get(ch).copied().unwrap_or(false),
+            stable: chosen.get(ch).is_some_and(|c| c.stable),
+            ridge_penalty: chosen.get(ch).and_then(|c| c.ridge_penalty),
             ..Tally::default()
         };
         for (fit, val) in &folds {
@@ -161,42 +162,61 @@ struct Tally {
     hold: Vec<f64>,
     fallback: Vec<f64>,
     extrapolate: Vec<f64>,
-    /// Per row beyond, its batch ([`BATCH_S`] of time within one fold and
-    /// run), and where the open batch started (fold, run, time).
-    batch: Vec<usize>,
-    batch_start: Option<(usize, usize, f64)>,
+    /// Per row beyond, its fold (index among the folds with rows beyond)
+    /// and time (s), for [`decisive`].
+    fold_of: Vec<usize>,
+    time_s: Vec<f64>,
     /// The chosen model is linear (the board may extrapolate it) and its
     /// coefficients held across the folds.
     linear: bool,
     stable: bool,
+    /// The chosen ridge's penalty: the folds refit the main model with it.
+    ridge_penalty: Option<f64>,
 }
 
-/// Batches of the rows beyond span this long at least (the anchor window
-/// of the lag rule, one hour): a thermal error a minute apart is not a new
-/// witness, errors an hour apart nearly are.
-const BATCH_S: f64 = super::lags::ANCHOR_S;
-/// Batches needed before the evidence may decide (fewer: too thin).
-const MIN_BATCHES: usize = 4;
+/// What the choice knew of a channel's chosen model.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ChosenInfo {
+    /// Its coefficients held across the CV folds ([`super::stability`]).
+    pub stable: bool,
+    /// For `ridge`, its penalty (the folds refit the ridge itself, not a
+    /// least-squares stand-in).
+    pub ridge_penalty: Option<f64>,
+}
 
-/// Whether errors `a` are lower than `b` (paired, the rows beyond in fold
-/// and time order, `batch` each row's batch) beyond the noise: the mean of
-/// the batch means of `b − a` exceeds `NOISE_Z` standard errors of them
-/// (the per-input lag rule's level), over at least [`MIN_BATCHES`].
-fn decisive(a: &[f64], b: &[f64], batch: &[usize]) -> bool {
-    let k = batch.last().map_or(0, |&l| l + 1);
-    if k < MIN_BATCHES {
+/// A fold's rows beyond must span this long to be a witness (the lag
+/// rule's anchor window, one hour): minutes of rows are one observation.
+const WITNESS_S: f64 = super::lags::ANCHOR_S;
+/// Witness folds needed before the evidence may decide.
+const MIN_WITNESSES: usize = 2;
+
+/// Whether errors `a` are lower than `b` (paired rows beyond, `fold` and
+/// `time` per row) beyond the noise. Each fold is one witness (its rows
+/// share one refitted model, so they are not independent): its mean of
+/// `b − a`. At least [`MIN_WITNESSES`] folds whose rows span
+/// [`WITNESS_S`], every one of them lower, and their mean beyond `NOISE_Z`
+/// standard errors (the per-input lag rule's level).
+fn decisive(a: &[f64], b: &[f64], (fold, time): (&[usize], &[f64])) -> bool {
+    let k = fold.last().map_or(0, |&l| l + 1);
+    let mut means = Vec::new();
+    for f in 0..k {
+        let rows: Vec<usize> = (0..fold.len()).filter(|&i| fold[i] == f).collect();
+        let span = |r: &[usize]| -> f64 {
+            let ts = r.iter().map(|&i| time[i]);
+            ts.clone().fold(f64::MIN, f64::max) - ts.fold(f64::MAX, f64::min)
+        };
+        if rows.is_empty() || span(&rows) < WITNESS_S {
+            continue;
+        }
+        means.push(rows.iter().map(|&i| b[i] - a[i]).sum::<f64>() / rows.len() as f64);
+    }
+    let n = means.len();
+    if n < MIN_WITNESSES || means.iter().any(|&d| d <= 0.0) {
         return false;
     }
-    let mut sum = vec![0.0; k];
-    let mut cnt = vec![0usize; k];
-    for ((x, y), &j) in a.iter().zip(b).zip(batch) {
-        sum[j] += y - x;
-        cnt[j] += 1;
-    }
-    let means: Vec<f64> = sum.iter().zip(&cnt).map(|(s, &c)| s / c as f64).collect();
-    let m = means.iter().sum::<f64>() / k as f64;
-    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (k - 1) as f64;
-    m > super::lags::NOISE_Z * (var / k as f64).sqrt()
+    let m = means.iter().sum::<f64>() / n as f64;
+    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64;
+    m > super::lags::NOISE_Z * (var / n as f64).sqrt()
 }
 
 /// A linear model's prediction with its inputs clamped to
@@ -225,18 +245,25 @@ impl Tally {
         (main_idx, fb_idx): (&[usize], &[Vec<usize>]),
         margin_raw: u16,
     ) -> Result<()> {
-        let refit = |idx: &[usize]| -> Result<Option<MlrParams>> {
+        let refit = |idx: &[usize], penalty: Option<f64>| -> Result<Option<MlrParams>> {
             let tr = cache.samples(runs, fit, idx, ch)?;
             if tr.y.len() < 2 * idx.len() + 2 {
                 return Ok(None);
             }
             let kinds: Vec<Kind> = idx.iter().map(|&i| cache.kinds[i].clone()).collect();
-            fit_mlr(ranged_specs(&kinds, &tr), &tr, ch).map(Some)
+            let specs = ranged_specs(&kinds, &tr);
+            match penalty {
+                Some(l) => fit_ridge(specs, &tr, l, ch).map(Some),
+                None => fit_mlr(specs, &tr, ch).map(Some),
+            }
         };
-        let Some(main) = refit(main_idx)? else {
+        let Some(main) = refit(main_idx, self.ridge_penalty)? else {
             return Ok(());
         };
-        let fbs: Vec<Option<MlrParams>> = fb_idx.iter().map(|i| refit(i)).collect::<Result<_>>()?;
+        let fbs: Vec<Option<MlrParams>> = fb_idx
+            .iter()
+            .map(|i| refit(i, None))
+            .collect::<Result<_>>()?;
         let va = cache.samples(runs, val, main_idx, ch)?;
         let mut any = false;
         for (x, (&y, &(run, r))) in va.x.iter().zip(va.y.iter().zip(&va.rows)) {
@@ -256,17 +283,8 @@ impl Tally {
             }
             any = true;
             self.rows_beyond += 1;
-            let t = runs[run].time_s()[r];
-            let same = |&(f, ru, t0): &(usize, usize, f64)| {
-                f == self.folds_beyond && ru == run && t >= t0 && t - t0 < BATCH_S
-            };
-            if !self.batch_start.as_ref().is_some_and(same) {
-                let next = self.batch.last().map_or(0, |&b| b + 1);
-                self.batch_start = Some((self.folds_beyond, run, t));
-                self.batch.push(next);
-            } else {
-                self.batch.push(self.batch.last().copied().unwrap_or(0));
-            }
+            self.fold_of.push(self.folds_beyond);
+            self.time_s.push(runs[run].time_s()[r]);
             let hold = (y - main.predict_raw(x)).abs();
             self.hold.push(hold);
             self.extrapolate
@@ -332,7 +350,10 @@ impl Tally {
             .filter_map(|&(p, m)| Some((p, m?)))
             .min_by(|a, b| a.1.total_cmp(&b.1));
         let (policy, by_evidence) = match best {
-            Some((p, _)) if p != prior && decisive(errors(p), errors(prior), &self.batch) => {
+            Some((p, _))
+                if p != prior
+                    && decisive(errors(p), errors(prior), (&self.fold_of, &self.time_s)) =>
+            {
                 (p, true)
             }
             _ => (prior, false),

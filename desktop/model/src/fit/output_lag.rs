@@ -12,8 +12,8 @@
 //!
 //! The rule is the per-input lag search's ([`super::lags`]): on the
 //! training rows' forward folds (fit on the blocks before, validate on the
-//! next) the chosen inputs' linear model (exact for `mlr`, `mlr-static`; a
-//! least-squares stand-in on the same inputs for `ridge`) is validated with
+//! next) the chosen inputs' linear model (`mlr`, `mlr-static`; a `ridge`
+//! refitted with its chosen penalty) is validated with
 //! its output low-passed at each candidate time constant; a candidate is
 //! kept only when the error about each hour's anchor (what a reference
 //! leaves) is lower by more than 1 % pooled and, fold by fold, beyond 2
@@ -30,11 +30,12 @@ use std::collections::BTreeMap;
 use anyhow::Result;
 use tcomp_data::runcsv::Run;
 
+use super::envelope::ChosenInfo;
 use super::greedy::blocked_folds;
 use super::lags::{anchors, gain_beyond_noise, log_ratios, FoldScores, ANCHOR_S, MIN_GAIN};
 use super::mlr::fit_mlr;
 use super::model::{FeatureSpec, MlrParams, Model, ModelFile};
-use super::ridge::{all_blocks, forward_folds};
+use super::ridge::{all_blocks, fit_ridge, forward_folds};
 use super::samples::{ranged_specs, Samples, SeriesCache};
 use super::split::Segment;
 
@@ -71,6 +72,7 @@ pub fn choose(
     runs: &[Run],
     train: &[Segment],
     file: &ModelFile,
+    chosen: &BTreeMap<String, ChosenInfo>,
 ) -> Result<BTreeMap<String, OutputLag>> {
     let blocks = all_blocks(&blocked_folds(runs, train, BLOCKS));
     let folds = forward_folds(&blocks);
@@ -89,7 +91,11 @@ pub fn choose(
             if tr.y.len() < 2 * idx.len() + 2 || va.y.is_empty() {
                 continue;
             }
-            let m = fit_mlr(ranged_specs(&kinds, &tr), &tr, ch)?;
+            let specs = ranged_specs(&kinds, &tr);
+            let m = match chosen.get(ch).and_then(|c| c.ridge_penalty) {
+                Some(l) => fit_ridge(specs, &tr, l, ch)?,
+                None => fit_mlr(specs, &tr, ch)?,
+            };
             let pred: Vec<f64> = va.x.iter().map(|x| m.predict_raw(x)).collect();
             rows.push((va, pred));
         }

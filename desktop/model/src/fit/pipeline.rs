@@ -143,12 +143,18 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         .collect();
     // The envelope policy's evidence (issue 50 item 3), on the training
     // rows' forward folds: what `export` writes in the image.
-    let stable = acc
+    let chosen: BTreeMap<String, envelope::ChosenInfo> = acc
         .inputs
         .iter()
         .filter_map(|i| {
-            let chosen = acc.file.chosen.get(&i.channel)?;
-            Some((i.channel.clone(), i.stability.get(chosen)?.stable))
+            let name = acc.file.chosen.get(&i.channel)?;
+            let info = envelope::ChosenInfo {
+                stable: i.stability.get(name).is_some_and(|s| s.stable),
+                ridge_penalty: (name == "ridge")
+                    .then(|| i.cv.get("ridge").and_then(|c| c.penalty))
+                    .flatten(),
+            };
+            Some((i.channel.clone(), info))
         })
         .collect();
     acc.file.envelope = envelope::evidence(
@@ -156,10 +162,10 @@ pub fn fit_plan_with(plan: &Plan, cfg: &FitConfig, progress: &dyn Progress) -> R
         &plan.train,
         &acc.file,
         envelope::DEFAULT_MARGIN_RAW,
-        &stable,
+        &chosen,
     )?;
     // The output low-pass (issue 51 item 1), on the same forward folds.
-    for (ch, lag) in output_lag::choose(&plan.runs, &plan.train, &acc.file)? {
+    for (ch, lag) in output_lag::choose(&plan.runs, &plan.train, &acc.file, &chosen)? {
         acc.notes.push(format!(
             "{ch}: output low-pass {}: forward-CV RMS {:.2} -> {:.2} µm, about each hour's anchor {:.2} -> {:.2} µm",
             if lag.tau_s > 0.0 { format!("{:.0} s", lag.tau_s) } else { "none".into() },
