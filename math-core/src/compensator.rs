@@ -46,7 +46,10 @@
 //!    any gap length, as the input lags). The first served step after a
 //!    load, restart or new reference starts it at the prediction (no ramp
 //!    from 0); a direction not served (held, rule 2 or 6) does not advance
-//!    and on its next served step advances over the whole gap.
+//!    and on its next served step advances over the whole gap. A switch
+//!    between the main model and a fallback (rule 6, or the envelope's
+//!    `fallback`) keeps the state: the switch is smoothed like any change
+//!    (the fit chose τ on the main model).
 //!    [`StepOutput::predicted`] is the filtered value. Then **clamp** to
 //!    ± max correction (`CLAMPED`), then **rate limit** to
 //!    max rate × elapsed time from the previously served value
@@ -193,7 +196,8 @@ impl OutputFilter {
         corrections: &mut [i32; MAX_DIRECTIONS],
     ) {
         // step_ms ≥ 1 (the parser refuses 0); max(1) keeps the division total.
-        let step_ms = u64::from(step_ms.max(1));
+        let step_ms32 = step_ms.max(1);
+        let step_ms = u64::from(step_ms32);
         let per_direction = corrections.iter_mut().zip(active).zip(decays);
         let state = self.y_q16.iter_mut().zip(self.clock_ms.iter_mut());
         for (d, (((c, &a), &decay), (y, clock))) in per_direction.zip(state).enumerate() {
@@ -207,7 +211,13 @@ impl OutputFilter {
                 *y = u;
                 *clock = now_ms;
             } else {
-                let steps = now_ms.saturating_sub(*clock) / step_ms;
+                // u32 division (hardware UDIV) for any gap under 49 days,
+                // the 64-bit routine beyond (as the feature filters).
+                let elapsed = now_ms.saturating_sub(*clock);
+                let steps = match u32::try_from(elapsed) {
+                    Ok(e) => u64::from(e / step_ms32),
+                    Err(_) => elapsed / step_ms,
+                };
                 *clock += steps * step_ms;
                 if steps > 0 {
                     *y = lag_update(*y, u, decay_pow_q30(decay, steps));

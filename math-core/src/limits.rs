@@ -79,4 +79,9 @@ pub const MAX_TAU_S: u32 = 604_800;
 /// ±(1 + 2·`EXTRAPOLATE_WIDTHS`) (±5), the bound the parser's prediction
 /// check and the evaluation's overflow argument (`crate::eval`) use. Beyond
 /// the margin the step still counts and is flagged, as under hold.
+/// Why 2: a stated bound, not a fitted one. The served runs the project
+/// knows leave their training range by at most about one width (FL_THERMAL's
+/// test block, the extrapolation bench's +2 K and unseen speeds); two
+/// leaves room for that while keeping a linear model's reach, and so its
+/// worst output, at most five times its output over the training range.
 pub const EXTRAPOLATE_WIDTHS: i32 = 2;
