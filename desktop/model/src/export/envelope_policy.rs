@@ -11,6 +11,9 @@ use crate::fit::model::ModelFile;
 /// The image's policy per direction from a fit file's evidence, and a line
 /// per direction saying which and why; `None` (no section: every direction
 /// holds, margin 0, as before) when the fit file carries no evidence.
+/// Whether an `extrapolate` direction is linear enough for it is judged by
+/// [`super::build_image`] on the fallbacks the image keeps (it holds one
+/// that is not, and says so).
 pub fn policies(
     file: &ModelFile,
     float: &FloatModel,
@@ -23,22 +26,15 @@ pub fn policies(
     }
     let mut out = [EnvelopePolicy::default(); MAX_DIRECTIONS];
     let mut lines = Vec::new();
-    for ((p, d), dir) in out.iter_mut().zip(&float.directions).zip(0u8..) {
+    for (p, d) in out.iter_mut().zip(&float.directions) {
         let ch = format!("d{}_um", d.name);
         match file.envelope.get(&ch) {
             Some(ev) => {
-                let mut m = mode(&ev.policy);
-                let mut why = ev.why();
-                if m == EnvelopeMode::Extrapolate && !linear(float, dir) {
-                    // The board refuses it (image parser): say so, hold.
-                    m = EnvelopeMode::Hold;
-                    why.push_str("; but extrapolate needs a linear model (no network, no position term, powers <= 1, fallbacks too) and this channel's is not: the image holds");
-                }
                 *p = EnvelopePolicy {
-                    mode: m,
+                    mode: mode(&ev.policy),
                     margin: ev.margin_raw,
                 };
-                lines.push(format!("envelope {ch}: {why}"));
+                lines.push(format!("envelope {ch}: {}", ev.why()));
             }
             None => {
                 *p = EnvelopePolicy {

@@ -494,28 +494,19 @@ fn board_replay(
         Err(e) => return Err(e),
     };
     // As `export`: the envelope policy per direction from the fit's
-    // evidence, and the output low-pass the fit chose.
-    let (envelope, _) = tcomp_model::export::policies(&report.model_file, &float);
-    let (output, _) = tcomp_model::export::decays(&report.model_file, &float);
-    let quantize = |m: &thermocomp_core::float::FloatModel| {
-        m.quantize()
-            .map(|(mut fixed, _)| {
-                fixed.envelope = envelope;
-                fixed.output_decay_q30 = output;
-                fixed
-            })
-            .map_err(|e| anyhow::anyhow!("{e}"))
+    // evidence and the output low-pass the fit chose, built into the image
+    // by the very function `export` writes (fallbacks left out to fit, its
+    // refusals, extrapolate judged on what the image holds).
+    let sections = tcomp_model::export::Sections {
+        envelope: tcomp_model::export::policies(&report.model_file, &float).0,
+        output: tcomp_model::export::decays(&report.model_file, &float).0,
+        ..Default::default()
     };
-    // As `export`: the fallbacks, last first, until the image fits.
-    let mut trimmed = float.clone();
-    let mut fixed = quantize(&trimmed)?;
-    while fixed.encoded_len() > thermocomp_core::limits::MAX_IMAGE_BYTES
-        && trimmed.fallbacks.pop().is_some()
-    {
-        fixed = quantize(&trimmed)?;
-    }
-    let bytes = tcomp_model::export::encode(&mut fixed)?;
-    let model = thermocomp_core::Model::parse(&bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let built = tcomp_model::export::build_image(&float, &sections)
+        .with_context(|| format!("{ch}: the image `tcomp export` would ship"))?;
+    built.notes.iter().for_each(|n| eprintln!("{ch}: {n}"));
+    // The board's model is the one its parser reads from these bytes.
+    let model = thermocomp_core::Model::parse(&built.bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
     let Some(d) =
         (0..model.directions.len()).find(|&d| format!("d{}_um", model.direction_name(d)) == ch)
     else {
