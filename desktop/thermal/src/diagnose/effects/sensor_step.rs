@@ -125,6 +125,13 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
         let Some((_, r, start)) = best else {
             continue;
         };
+        // the onset positions the search weighed inside held-out rows: an
+        // onset found there was chosen on the rows that then judge it
+        // (`fit_mode::undecided` corrects its held-out test for them)
+        let onsets_held = jumps
+            .iter()
+            .filter(|&&(rr, k, _, _)| ds.runs[rr].held[k])
+            .count();
         let run = &ds.runs[r];
         let extra = move |oo: usize, rr: usize| -> Vec<Vec<f64>> {
             if oo != o {
@@ -172,7 +179,7 @@ pub fn sensor_steps(p: &Problem, st: &Structure, nom: &ModelFit) -> Vec<Candidat
             // size + location (run, time)
             k_extra: 3,
             at_bound: Vec::new(),
-            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "fit_rows_after": fit_rows_after, "few_fit_rows_after": few_fit_rows_after, "onset_held": onset_held, "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
+            evidence: json!({"channel": output.name, "run": run.name, "from_s": r4(t_s), "fit_rows_after": fit_rows_after, "few_fit_rows_after": few_fit_rows_after, "onset_held": onset_held, "onsets_searched_held": onsets_held, "onsets_searched": jumps.len(), "step_over_misfit_rms": r4(step.abs() / misfit.max(1e-12)), "located_by": "sharpest jump of the sensor's nominal residual (3 rows after vs 3 before, all rows, away from input changes): the time only; the size is fitted on the fit rows, and the jump must be at least half of it"}),
         });
     }
     out

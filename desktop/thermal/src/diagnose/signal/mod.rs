@@ -8,6 +8,6 @@ pub mod stats;
 
 pub use lag::{held, held_rise, lag, lag_signal};
 pub use stats::{
-    corr, first_order, ljung_box, mean_finite, moves, phases, phases_from_temperatures, r4, rms_of,
-    unusable_channel, where_json, ResidualView,
+    corr, first_order, ljung_box, mean_finite, moves, normal_sf, phases, phases_from_temperatures,
+    r4, rms_of, unusable_channel, where_json, ResidualView,
 };

@@ -294,6 +294,11 @@ pub fn chi2_sf(x: f64, k: f64) -> f64 {
     0.5 * erfc(z / std::f64::consts::SQRT_2)
 }
 
+/// Upper tail of the standard normal, P(Z > z) (through `erfc`).
+pub fn normal_sf(z: f64) -> f64 {
+    0.5 * erfc(z / std::f64::consts::SQRT_2)
+}
+
 /// Complementary error function (Numerical Recipes' erfcc, |error| < 1.2e-7).
 fn erfc(x: f64) -> f64 {
     let z = x.abs();
