@@ -169,6 +169,15 @@ impl Run {
         self.col_index(name).map(|i| self.data[i].as_slice())
     }
 
+    /// `time_s` of row `r` (NaN where missing or past the end), without
+    /// copying the column (for loops over rows).
+    pub fn time_at(&self, r: usize) -> f64 {
+        self.data
+            .first()
+            .and_then(|c| c.get(r).copied().flatten())
+            .unwrap_or(f64::NAN)
+    }
+
     /// `time_s` as plain numbers (never empty, checked by the reader).
     pub fn time_s(&self) -> Vec<f64> {
         self.data[0].iter().map(|v| v.unwrap_or(f64::NAN)).collect()

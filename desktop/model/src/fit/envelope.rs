@@ -284,7 +284,7 @@ impl Tally {
             any = true;
             self.rows_beyond += 1;
             self.fold_of.push(self.folds_beyond);
-            self.time_s.push(runs[run].time_s()[r]);
+            self.time_s.push(runs[run].time_at(r));
             let hold = (y - main.predict_raw(x)).abs();
             self.hold.push(hold);
             self.extrapolate

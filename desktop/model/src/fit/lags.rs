@@ -105,9 +105,9 @@ pub(super) fn anchors(runs: &[Run], s: &Samples, window_s: f64) -> Vec<usize> {
     let mut out = Vec::with_capacity(s.rows.len());
     let mut a = 0usize;
     for (k, &(run, r)) in s.rows.iter().enumerate() {
-        let t = runs[run].time_s()[r];
+        let t = runs[run].time_at(r);
         let (ar, arow) = s.rows[a];
-        let ta = runs[ar].time_s()[arow];
+        let ta = runs[ar].time_at(arow);
         if k == 0 || ar != run || t < ta || t - ta >= window_s {
             a = k;
         }

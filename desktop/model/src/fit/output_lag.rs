@@ -150,7 +150,7 @@ pub fn low_pass(runs: &[Run], s: &Samples, pred: &[f64], tau_s: f64) -> Vec<f64>
     let mut out = Vec::with_capacity(pred.len());
     let mut prev: Option<(usize, f64, f64)> = None;
     for (&(run, r), &p) in s.rows.iter().zip(pred) {
-        let t = runs[run].time_s()[r];
+        let t = runs[run].time_at(r);
         let v = match prev {
             Some((pr, pt, pv)) if tau_s > 0.0 && pr == run && t >= pt => {
                 pv + (1.0 - (-(t - pt) / tau_s).exp()) * (p - pv)
